@@ -1,0 +1,296 @@
+//! BFT decoder: replays the frontier of [`super`] from the command stream.
+//!
+//! Every read is checked: a command the frontier cannot carry out (too short for `RF0`, an
+//! offset past its end), a position outside the quantization grid, a slot index out of
+//! range, a stream that ends early or counts that disagree with the header all return a
+//! [`BftError`]; no input makes the decoder panic, and its loops are bounded by the
+//! header's counts and the stream lengths.
+
+use std::path::Path;
+
+use super::format::{self, corrupt, get_varint, BftError, Header};
+use super::frontier::{Frontier, NONE};
+use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::Command;
+use crate::mesh::{Mesh, Quantization};
+use crate::rangecoder::Decoder;
+
+/// A decoded `.bft` file, at slot level: quantized positions per slot, triangles over
+/// slots, and the duplicate table that maps repeated slots back to their first slot.
+#[derive(Clone, Debug)]
+pub struct Decoded {
+    pub header: Header,
+    pub positions: Vec<[u32; 3]>,
+    pub triangles: Vec<[u32; 3]>,
+    /// `(slot, source)`: `slot` is the same input vertex as the earlier slot `source`.
+    pub duplicates: Vec<(u32, u32)>,
+}
+
+impl Decoded {
+    pub fn quantization(&self) -> Quantization {
+        Quantization { bits: self.header.quant_bits, min: self.header.bbox_min, step: self.header.step }
+    }
+
+    /// The decoded mesh with duplicate slots welded back: one vertex per input vertex
+    /// that a triangle used, float positions.
+    pub fn to_mesh(&self) -> Mesh {
+        let q = self.quantization();
+        let n = self.positions.len();
+        let mut target: Vec<u32> = (0..n as u32).collect();
+        for &(slot, source) in &self.duplicates {
+            target[slot as usize] = target[source as usize];
+        }
+        let mut remap = vec![NONE; n];
+        let mut positions = Vec::with_capacity(n - self.duplicates.len());
+        for s in 0..n {
+            if target[s] as usize == s {
+                remap[s] = positions.len() as u32;
+                positions.push(q.dequantize(self.positions[s]));
+            }
+        }
+        let triangles =
+            self.triangles.iter().map(|t| t.map(|s| remap[target[s as usize] as usize])).collect();
+        Mesh { positions, triangles }
+    }
+}
+
+/// Reads and decodes a `.bft` file.
+pub fn decode_file(path: &Path) -> Result<Decoded, BftError> {
+    let bytes = std::fs::read(path).map_err(|e| BftError::Corrupt(format!("cannot read {}: {e}", path.display())))?;
+    decode(&bytes)
+}
+
+/// Decodes `.bft` bytes.
+pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
+    let parts = format::parse(bytes)?;
+    let h = parts.header;
+    let [conn, geom, dup_bytes, loose_bytes] = parts.sections;
+
+    let mut duplicates = Vec::new();
+    let mut pos = 0usize;
+    let count = get_varint(dup_bytes, &mut pos, "duplicate table")?;
+    if count != h.duplicates as u64 {
+        return Err(corrupt("duplicate table size disagrees with the header"));
+    }
+    let mut last = 0u64;
+    for i in 0..count {
+        let gap = get_varint(dup_bytes, &mut pos, "duplicate table")?;
+        let source = get_varint(dup_bytes, &mut pos, "duplicate table")?;
+        let slot = last + gap;
+        if (i > 0 && gap == 0) || slot >= h.slots as u64 || source >= slot {
+            return Err(corrupt(format!("duplicate entry {i} ({slot} of {source}) is out of order or range")));
+        }
+        duplicates.push((slot as u32, source as u32));
+        last = slot;
+    }
+    if pos != dup_bytes.len() {
+        return Err(corrupt("trailing bytes in the duplicate table"));
+    }
+
+    // Capacities come from the header, capped, so a forged count cannot allocate wildly.
+    const CAP: usize = 1 << 22;
+    let mut st = State {
+        cd: Decoder::new(conn),
+        gd: Decoder::new(geom),
+        cmodel: CommandModel::default(),
+        gmodel: GeometryModel::default(),
+        f: Frontier::default(),
+        positions: Vec::with_capacity((h.slots as usize).min(CAP)),
+        deg: Vec::with_capacity((h.slots as usize).min(CAP)),
+        triangles: Vec::with_capacity((h.triangles as usize).min(CAP)),
+        dups: &duplicates,
+        next_dup: 0,
+        max: (1u32 << h.quant_bits) - 1,
+        slots: h.slots,
+    };
+    st.f.entries.reserve((h.triangles as usize).min(CAP));
+    st.run(h.commands, h.triangles - h.loose_triangles)?;
+    for _ in 0..h.tail_slots {
+        let prev = st.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
+        st.new_slot(Prediction::Previous, [prev, NONE, NONE])?;
+    }
+    if st.positions.len() != h.slots as usize {
+        return Err(corrupt(format!("decoded {} vertex slots, header says {}", st.positions.len(), h.slots)));
+    }
+    if st.cd.overrun() > 0 {
+        return Err(BftError::Truncated("connectivity stream"));
+    }
+    if st.gd.overrun() > 0 {
+        return Err(BftError::Truncated("geometry stream"));
+    }
+
+    let mut pos = 0usize;
+    for _ in 0..h.loose_triangles {
+        let mut t = [0u32; 3];
+        for v in &mut t {
+            let s = get_varint(loose_bytes, &mut pos, "loose triangles")?;
+            if s >= h.slots as u64 {
+                return Err(corrupt(format!("loose triangle uses slot {s} of {}", h.slots)));
+            }
+            *v = s as u32;
+        }
+        st.triangles.push(t);
+    }
+    if pos != loose_bytes.len() {
+        return Err(corrupt("trailing bytes in the loose triangle section"));
+    }
+    Ok(Decoded { header: h, positions: st.positions, triangles: st.triangles, duplicates })
+}
+
+struct State<'a> {
+    cd: Decoder<'a>,
+    gd: Decoder<'a>,
+    cmodel: CommandModel,
+    gmodel: GeometryModel,
+    f: Frontier,
+    positions: Vec<[u32; 3]>,
+    deg: Vec<u8>,
+    triangles: Vec<[u32; 3]>,
+    dups: &'a [(u32, u32)],
+    next_dup: usize,
+    max: u32,
+    slots: u32,
+}
+
+impl State<'_> {
+    #[inline]
+    fn slot_pos(&self, slot: u32) -> [u32; 3] {
+        if slot == NONE {
+            [self.max / 2 + 1; 3]
+        } else {
+            self.positions[slot as usize]
+        }
+    }
+
+    #[inline]
+    fn new_slot(&mut self, kind: Prediction, basis: [u32; 3]) -> Result<u32, BftError> {
+        let s = self.positions.len() as u32;
+        if s >= self.slots {
+            return Err(corrupt(format!("more vertex slots than the header's {}", self.slots)));
+        }
+        let p = match self.dups.get(self.next_dup) {
+            Some(&(slot, source)) if slot == s => {
+                self.next_dup += 1;
+                self.positions[source as usize]
+            }
+            _ => {
+                let pred =
+                    predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
+                self.gmodel
+                    .decode(&mut self.gd, kind, pred, self.max)
+                    .ok_or_else(|| corrupt(format!("position of vertex {s} is outside the quantization grid")))?
+            }
+        };
+        self.positions.push(p);
+        self.deg.push(0);
+        Ok(s)
+    }
+
+    #[inline]
+    fn emit(&mut self, t: [u32; 3]) {
+        for s in t {
+            let d = &mut self.deg[s as usize];
+            *d = d.saturating_add(1);
+        }
+        self.triangles.push(t);
+    }
+
+    fn need(&self, n: usize, cmd: Command) -> Result<(), BftError> {
+        if self.f.len() < n {
+            return Err(corrupt(format!("{cmd:?} on a frontier of {} vertices", self.f.len())));
+        }
+        Ok(())
+    }
+
+    fn offset(&mut self, cmd: Command, limit: usize) -> Result<usize, BftError> {
+        let k = self.cmodel.decode_offset(&mut self.cd, cmd).ok_or_else(|| corrupt("bad offset code"))? as usize;
+        if k >= limit {
+            return Err(corrupt(format!("{cmd:?} offset {k} past the frontier ({} vertices)", self.f.len())));
+        }
+        Ok(k)
+    }
+
+    fn run(&mut self, commands: u32, triangles: u32) -> Result<(), BftError> {
+        let mut prev = Command::Seed;
+        for _ in 0..commands {
+            let len = self.f.len();
+            let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
+            let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
+            let ctx = command_context(prev, dl, dr);
+            let cmd = self.cmodel.decode(&mut self.cd, ctx).ok_or_else(|| corrupt("invalid command code"))?;
+            match cmd {
+                Command::New => {
+                    self.need(2, cmd)?;
+                    let (l, r) = (self.f.at(0), self.f.at(1));
+                    let kind = if l.apex != NONE { Prediction::Parallelogram } else { Prediction::Midpoint };
+                    let s = self.new_slot(kind, [l.slot, r.slot, l.apex])?;
+                    self.f.insert(s);
+                    self.emit([l.slot, r.slot, s]);
+                }
+                Command::Rf0 => {
+                    self.need(3, cmd)?;
+                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(2).slot];
+                    self.f.remove_right(true);
+                    self.emit(t);
+                }
+                Command::Lf0 => {
+                    self.need(3, cmd)?;
+                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(len - 1).slot];
+                    self.f.remove_left(true);
+                    self.emit(t);
+                }
+                Command::Rf | Command::Lf => {
+                    self.need(3, cmd)?;
+                    let k = self.offset(cmd, len - 2)?;
+                    let i = if cmd == Command::Rf { 2 + k } else { len - 1 - k };
+                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
+                    self.f.insert(t[2]);
+                    self.emit(t);
+                }
+                Command::Null => {
+                    self.need(1, cmd)?;
+                    self.f.skip();
+                }
+                Command::Dl => {
+                    self.need(1, cmd)?;
+                    self.f.remove_left(false);
+                }
+                Command::Dr => {
+                    self.need(2, cmd)?;
+                    self.f.remove_right(false);
+                }
+                Command::AddNew => {
+                    let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
+                    let s = self.new_slot(Prediction::Previous, [prev_slot, NONE, NONE])?;
+                    self.f.add(s);
+                }
+                Command::AddRef => {
+                    self.need(1, cmd)?;
+                    let k = self.offset(cmd, len)?;
+                    let x = self.f.at(len - 1 - k).slot;
+                    self.f.add(x);
+                }
+                Command::Seed => {
+                    let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
+                    let s = self.new_slot(Prediction::Previous, [prev_slot, NONE, NONE])?;
+                    self.new_slot(Prediction::Previous, [s, NONE, NONE])?;
+                    self.new_slot(Prediction::Midpoint, [s, s + 1, NONE])?;
+                    self.f.seed(s);
+                    self.emit([s, s + 2, s + 1]);
+                }
+                Command::Clear => self.f.clear(),
+            }
+            if self.triangles.len() > triangles as usize {
+                return Err(corrupt("more triangles than the header says"));
+            }
+            if self.cd.overrun() > 8 {
+                return Err(BftError::Truncated("connectivity stream"));
+            }
+            prev = cmd;
+        }
+        if self.triangles.len() != triangles as usize {
+            return Err(corrupt(format!("decoded {} triangles, header says {triangles}", self.triangles.len())));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,459 @@
+//! BFT encoder: one breadth-first traversal that codes commands and positions as it goes.
+//!
+//! The traversal follows the frontier semantics of [`super`]; the choices it makes are:
+//! the third vertex is looked up among the unvisited triangles on the directed current edge
+//! (a CSR adjacency, no hashing); an existing third vertex takes the frontier occurrence
+//! with the smallest offset, preferring `RF0`/`LF0`; a null edge deletes a vertex whose
+//! triangles are all visited (`DL` before `DR`), else it is skipped (`NULL`); a full
+//! rotation without a triangle, or a frontier without unvisited triangles, starts a `SEED`
+//! at the next unvisited triangle in input order.
+
+use super::format::{self, put_varint, Header};
+use super::frontier::{Frontier, NONE};
+use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::Command;
+use crate::mesh::{Mesh, MeshError, Quantization};
+use crate::rangecoder::Encoder;
+
+/// Encoder settings.
+#[derive(Clone, Copy, Debug)]
+pub struct EncodeOptions {
+    /// Bits per quantized coordinate, 8 to 24.
+    pub quant_bits: u8,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions { quant_bits: Quantization::DEFAULT_BITS }
+    }
+}
+
+/// What the encoder did, for reports and tests.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EncodeStats {
+    pub triangles: usize,
+    pub unused_vertices: usize,
+    pub duplicates: usize,
+    pub loose_triangles: usize,
+    pub seeds: usize,
+    pub commands: usize,
+    /// Commands per kind, indexed by `Command as usize`.
+    pub command_counts: [usize; 12],
+}
+
+/// An encoded mesh.
+#[derive(Clone, Debug)]
+pub struct Encoded {
+    pub bytes: Vec<u8>,
+    pub header: Header,
+    pub stats: EncodeStats,
+    /// The input vertex each decoded slot stands for (duplicates included).
+    pub slot_vertex: Vec<u32>,
+}
+
+/// Encodes a mesh into `.bft` bytes.
+pub fn encode(mesh: &Mesh, options: EncodeOptions) -> Result<Encoded, MeshError> {
+    encode_with_progress(mesh, options, &mut |_, _| {})
+}
+
+/// As [`encode`], calling `progress(triangles_done, triangles_total)` now and then.
+pub fn encode_with_progress(
+    mesh: &Mesh,
+    options: EncodeOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Encoded, MeshError> {
+    mesh.validate()?;
+    let used = mesh.used_vertices();
+    let quant = Quantization::fit(&mesh.positions, Some(&used), options.quant_bits)?;
+    let q: Vec<[u32; 3]> =
+        mesh.positions.iter().zip(&used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
+    let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
+
+    let mut tr = Traversal::new(mesh, q, quant.max_level(), &loose);
+    tr.run(progress);
+
+    // Vertices that only loose triangles use get slots after the traversal.
+    let mut tail_slots = 0u32;
+    let mut loose_bytes = Vec::new();
+    let loose_count = loose.iter().filter(|&&l| l).count();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        if !loose[t] {
+            continue;
+        }
+        for &v in tri {
+            if tr.slot_of[v as usize] == NONE {
+                let prev = tr.vertex_of.len().checked_sub(1).map_or(NONE, |s| s as u32);
+                tr.new_slot(v, Prediction::Previous, [prev, NONE, NONE]);
+                tail_slots += 1;
+            }
+            put_varint(&mut loose_bytes, tr.slot_of[v as usize] as u64);
+        }
+    }
+    let mut dup_bytes = Vec::new();
+    put_varint(&mut dup_bytes, tr.dups.len() as u64);
+    let mut last = 0u32;
+    for &(slot, source) in &tr.dups {
+        put_varint(&mut dup_bytes, (slot - last) as u64);
+        put_varint(&mut dup_bytes, source as u64);
+        last = slot;
+    }
+
+    let used_count = used.iter().filter(|&&u| u).count();
+    let mut bbox_max = [0.0f32; 3];
+    for (a, m) in bbox_max.iter_mut().enumerate() {
+        *m = quant.min[a] + quant.step * tr.max_q[a] as f32;
+    }
+    let header = Header {
+        input_vertices: mesh.positions.len() as u32,
+        slots: tr.vertex_of.len() as u32,
+        triangles: mesh.triangles.len() as u32,
+        loose_triangles: loose_count as u32,
+        commands: tr.commands as u32,
+        seeds: tr.seeds as u32,
+        duplicates: tr.dups.len() as u32,
+        tail_slots,
+        quant_bits: quant.bits,
+        bbox_min: quant.min,
+        step: quant.step,
+        bbox_max,
+    };
+    let stats = EncodeStats {
+        triangles: mesh.triangles.len(),
+        unused_vertices: mesh.positions.len() - used_count,
+        duplicates: tr.dups.len(),
+        loose_triangles: loose_count,
+        seeds: tr.seeds,
+        commands: tr.commands,
+        command_counts: tr.command_counts,
+    };
+    let Traversal { conn, geom, vertex_of, .. } = tr;
+    let (conn, geom) = (conn.finish(), geom.finish());
+    let bytes = format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes]);
+    Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of })
+}
+
+/// One directed edge `a -> target` of triangle `tri`, whose remaining vertex is `third`.
+#[derive(Clone, Copy)]
+struct HalfEdge {
+    target: u32,
+    tri: u32,
+    third: u32,
+}
+
+struct Traversal<'a> {
+    triangles: &'a [[u32; 3]],
+    loose: &'a [bool],
+    q: Vec<[u32; 3]>,
+    max: u32,
+    max_q: [u32; 3],
+    /// CSR: outgoing half-edges of vertex `v` are `edges[start[v]..start[v + 1]]`.
+    start: Vec<u32>,
+    edges: Vec<HalfEdge>,
+    visited: Vec<bool>,
+    /// Unvisited non-loose triangles per vertex.
+    remaining: Vec<u32>,
+    slot_of: Vec<u32>,
+    vertex_of: Vec<u32>,
+    deg: Vec<u8>,
+    frontier: Frontier,
+    /// Per frontier position: the previous position holding the same vertex (a chain).
+    prev_same: Vec<u32>,
+    last_entry: Vec<u32>,
+    entry_count: Vec<u32>,
+    /// Frontier entries whose vertex still has unvisited triangles.
+    incomplete: usize,
+    conn: Encoder,
+    geom: Encoder,
+    commands_model: CommandModel,
+    geometry_model: GeometryModel,
+    prev: Command,
+    dups: Vec<(u32, u32)>,
+    commands: usize,
+    command_counts: [usize; 12],
+    seeds: usize,
+    done: usize,
+}
+
+impl<'a> Traversal<'a> {
+    fn new(mesh: &'a Mesh, q: Vec<[u32; 3]>, max: u32, loose: &'a [bool]) -> Self {
+        let n = mesh.positions.len();
+        let mut start = vec![0u32; n + 1];
+        let mut remaining = vec![0u32; n];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            if loose[t] {
+                continue;
+            }
+            for &v in tri {
+                start[v as usize + 1] += 1;
+                remaining[v as usize] += 1;
+            }
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut edges = vec![HalfEdge { target: 0, tri: 0, third: 0 }; start[n] as usize];
+        for (t, &[a, b, c]) in mesh.triangles.iter().enumerate() {
+            if loose[t] {
+                continue;
+            }
+            for (from, to, third) in [(a, b, c), (b, c, a), (c, a, b)] {
+                let i = &mut fill[from as usize];
+                edges[*i as usize] = HalfEdge { target: to, tri: t as u32, third };
+                *i += 1;
+            }
+        }
+        Traversal {
+            triangles: &mesh.triangles,
+            loose,
+            q,
+            max,
+            max_q: [0; 3],
+            start,
+            edges,
+            visited: vec![false; mesh.triangles.len()],
+            remaining,
+            slot_of: vec![NONE; n],
+            vertex_of: Vec::with_capacity(n),
+            deg: Vec::with_capacity(n),
+            frontier: Frontier::default(),
+            prev_same: Vec::new(),
+            last_entry: vec![NONE; n],
+            entry_count: vec![0; n],
+            incomplete: 0,
+            conn: Encoder::new(),
+            geom: Encoder::new(),
+            commands_model: CommandModel::default(),
+            geometry_model: GeometryModel::default(),
+            prev: Command::Seed,
+            dups: Vec::new(),
+            commands: 0,
+            command_counts: [0; 12],
+            seeds: 0,
+            done: 0,
+        }
+    }
+
+    fn run(&mut self, progress: &mut dyn FnMut(usize, usize)) {
+        let total = self.triangles.len();
+        let mut cursor = 0usize;
+        let mut null_run = 0usize;
+        let mut next_report = 1 << 16;
+        loop {
+            if self.done >= next_report {
+                progress(self.done, total);
+                next_report = self.done + (1 << 16);
+            }
+            let len = self.frontier.len();
+            if self.incomplete == 0 || len < 2 || null_run > len {
+                while cursor < total && (self.visited[cursor] || self.loose[cursor]) {
+                    cursor += 1;
+                }
+                if cursor == total {
+                    break;
+                }
+                self.seed(cursor);
+                null_run = 0;
+                continue;
+            }
+            let l = self.frontier.at(0);
+            let r = self.frontier.at(1);
+            let (lv, rv) = (self.vertex_of[l.slot as usize], self.vertex_of[r.slot as usize]);
+            if let Some((t, x)) = self.find(lv, rv) {
+                null_run = 0;
+                self.triangle(t, x);
+            } else if self.remaining[lv as usize] == 0 {
+                null_run = 0;
+                self.code(Command::Dl);
+                self.on_remove(l.slot);
+                self.frontier.remove_left(false);
+            } else if self.remaining[rv as usize] == 0 {
+                null_run = 0;
+                self.code(Command::Dr);
+                self.on_remove(r.slot);
+                self.frontier.remove_right(false);
+            } else {
+                null_run += 1;
+                self.code(Command::Null);
+                self.on_remove(l.slot);
+                self.frontier.skip();
+                self.on_push(self.frontier.back_pos() - 1);
+            }
+        }
+        progress(self.done, total);
+    }
+
+    /// An unvisited triangle on the directed edge `l -> r`, and its third vertex.
+    #[inline]
+    fn find(&self, l: u32, r: u32) -> Option<(u32, u32)> {
+        let range = self.start[l as usize] as usize..self.start[l as usize + 1] as usize;
+        self.edges[range].iter().find(|e| e.target == r && !self.visited[e.tri as usize]).map(|e| (e.tri, e.third))
+    }
+
+    /// Codes `cmd` in the context the decoder will see before reading it.
+    #[inline]
+    fn code(&mut self, cmd: Command) {
+        let f = &self.frontier;
+        let dl = if !f.is_empty() { self.deg[f.at(0).slot as usize] } else { 0 };
+        let dr = if f.len() >= 2 { self.deg[f.at(1).slot as usize] } else { 0 };
+        let ctx = command_context(self.prev, dl, dr);
+        self.commands_model.encode(&mut self.conn, ctx, cmd);
+        self.prev = cmd;
+        self.commands += 1;
+        self.command_counts[cmd as usize] += 1;
+    }
+
+    #[inline]
+    fn slot_pos(&self, slot: u32) -> [u32; 3] {
+        if slot == NONE {
+            [self.max / 2 + 1; 3]
+        } else {
+            self.q[self.vertex_of[slot as usize] as usize]
+        }
+    }
+
+    /// Gives vertex `v` a new slot; codes its position, or records it as a duplicate.
+    fn new_slot(&mut self, v: u32, kind: Prediction, basis: [u32; 3]) -> u32 {
+        let s = self.vertex_of.len() as u32;
+        self.vertex_of.push(v);
+        self.deg.push(0);
+        let first = self.slot_of[v as usize];
+        if first != NONE {
+            self.dups.push((s, first));
+        } else {
+            self.slot_of[v as usize] = s;
+            let pred = predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
+            let actual = self.q[v as usize];
+            for a in 0..3 {
+                self.max_q[a] = self.max_q[a].max(actual[a]);
+            }
+            self.geometry_model.encode(&mut self.geom, kind, actual, pred);
+        }
+        s
+    }
+
+    #[inline]
+    fn on_push(&mut self, pos: usize) {
+        let v = self.vertex_of[self.frontier.entries[pos].slot as usize] as usize;
+        if self.prev_same.len() <= pos {
+            self.prev_same.resize(pos + 1, NONE);
+        }
+        self.prev_same[pos] = self.last_entry[v];
+        self.last_entry[v] = pos as u32;
+        self.entry_count[v] += 1;
+        if self.remaining[v] > 0 {
+            self.incomplete += 1;
+        }
+    }
+
+    #[inline]
+    fn on_remove(&mut self, slot: u32) {
+        let v = self.vertex_of[slot as usize] as usize;
+        self.entry_count[v] -= 1;
+        if self.remaining[v] > 0 {
+            self.incomplete -= 1;
+        }
+    }
+
+    fn visit(&mut self, t: u32, slots: [u32; 3]) {
+        self.visited[t as usize] = true;
+        self.done += 1;
+        for s in slots {
+            let v = self.vertex_of[s as usize] as usize;
+            self.remaining[v] -= 1;
+            if self.remaining[v] == 0 {
+                self.incomplete -= self.entry_count[v] as usize;
+            }
+            let d = &mut self.deg[s as usize];
+            *d = d.saturating_add(1);
+        }
+    }
+
+    fn seed(&mut self, t: usize) {
+        let [a, b, c] = self.triangles[t];
+        self.code(Command::Seed);
+        self.seeds += 1;
+        for i in 0..self.frontier.len() {
+            let slot = self.frontier.at(i).slot;
+            self.on_remove(slot);
+        }
+        // Frontier [a, c, b] = slots [s, s+1, s+2]; the triangle (a, b, c) is (s, s+2, s+1).
+        let prev = self.vertex_of.len().checked_sub(1).map_or(NONE, |s| s as u32);
+        let s = self.new_slot(a, Prediction::Previous, [prev, NONE, NONE]);
+        self.new_slot(c, Prediction::Previous, [s, NONE, NONE]);
+        self.new_slot(b, Prediction::Midpoint, [s, s + 1, NONE]);
+        self.frontier.seed(s);
+        let end = self.frontier.back_pos();
+        for pos in end - 3..end {
+            self.on_push(pos);
+        }
+        self.visit(t as u32, [s, s + 2, s + 1]);
+    }
+
+    /// Codes the triangle `t` found across the current edge, with third vertex `x`.
+    fn triangle(&mut self, t: u32, x: u32) {
+        let l = self.frontier.at(0);
+        let r = self.frontier.at(1);
+        let len = self.frontier.len();
+        let head = self.frontier.head;
+        // The frontier occurrence of `x` with the cheapest code: RF0/LF0, else the smallest offset.
+        let mut best: Option<(usize, u32)> = None;
+        if self.slot_of[x as usize] != NONE {
+            let mut pos = self.last_entry[x as usize];
+            while pos != NONE && pos as usize >= head + 2 {
+                let p = pos as usize;
+                if self.vertex_of[self.frontier.entries[p].slot as usize] != x {
+                    break;
+                }
+                let i = p - head;
+                let cost = if i == 2 || i == len - 1 { 0 } else { (i - 2).min(len - 1 - i) as u32 };
+                if best.is_none_or(|(_, c)| cost < c) {
+                    best = Some((i, cost));
+                }
+                if cost == 0 {
+                    break;
+                }
+                pos = self.prev_same[p];
+            }
+        }
+        match best {
+            None => {
+                self.code(Command::New);
+                let kind = if l.apex != NONE { Prediction::Parallelogram } else { Prediction::Midpoint };
+                let s = self.new_slot(x, kind, [l.slot, r.slot, l.apex]);
+                self.on_remove(l.slot);
+                self.frontier.insert(s);
+                let end = self.frontier.back_pos();
+                self.on_push(end - 2);
+                self.on_push(end - 1);
+                self.visit(t, [l.slot, r.slot, s]);
+            }
+            Some((2, _)) => {
+                let xs = self.frontier.at(2).slot;
+                self.code(Command::Rf0);
+                self.on_remove(r.slot);
+                self.frontier.remove_right(true);
+                self.visit(t, [l.slot, r.slot, xs]);
+            }
+            Some((i, _)) if i == len - 1 => {
+                let xs = self.frontier.at(i).slot;
+                self.code(Command::Lf0);
+                self.on_remove(l.slot);
+                self.frontier.remove_left(true);
+                self.visit(t, [l.slot, r.slot, xs]);
+            }
+            Some((i, _)) => {
+                let xs = self.frontier.at(i).slot;
+                let (cmd, k) = if i - 2 <= len - 1 - i { (Command::Rf, i - 2) } else { (Command::Lf, len - 1 - i) };
+                self.code(cmd);
+                self.commands_model.encode_offset(&mut self.conn, cmd, k as u32);
+                self.on_remove(l.slot);
+                self.frontier.insert(xs);
+                let end = self.frontier.back_pos();
+                self.on_push(end - 2);
+                self.on_push(end - 1);
+                self.visit(t, [l.slot, r.slot, xs]);
+            }
+        }
+    }
+}

@@ -1,0 +1,263 @@
+//! The `.bft` file: a magic number, a version, a checksummed header and four checksummed
+//! sections.
+//!
+//! ```text
+//! offset  size  field
+//! 0       8     magic  b"TESSBFT\x1a"
+//! 8       2     version (u16 LE), currently 1
+//! 10      2     header length H in bytes (u16 LE)
+//! 12      H     header (little-endian, see `Header`)
+//! 12+H    4     CRC-32 of the header bytes
+//! then four sections, in this order: CONN, GEOM, DUPS, LOOS, each
+//!         4     tag (ASCII)
+//!         4     payload length N (u32 LE)
+//!         N     payload
+//!         4     CRC-32 of the payload
+//! ```
+//! `CONN` and `GEOM` are range-coded streams ([`crate::rangecoder`]); `DUPS` is the duplicate
+//! table (LEB128: count, then per entry the slot's gap from the previous entry and the
+//! source slot); `LOOS` holds loose triangles (LEB128: three slots each). Nothing may follow
+//! the last section.
+
+use thiserror::Error;
+
+pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
+pub const VERSION: u16 = 1;
+const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
+pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
+
+/// Everything that can be wrong with `.bft` bytes.
+#[derive(Debug, Error, PartialEq)]
+pub enum BftError {
+    #[error("not a .bft file (bad magic number)")]
+    BadMagic,
+    #[error("unsupported .bft version {0} (this build reads version {VERSION})")]
+    UnsupportedVersion(u16),
+    #[error("file is truncated: {0}")]
+    Truncated(&'static str),
+    #[error("checksum mismatch in {0}: the file is corrupt")]
+    Checksum(&'static str),
+    #[error("{0} trailing bytes after the last section")]
+    TrailingBytes(usize),
+    #[error("corrupt .bft data: {0}")]
+    Corrupt(String),
+}
+
+pub(crate) fn corrupt(msg: impl Into<String>) -> BftError {
+    BftError::Corrupt(msg.into())
+}
+
+/// The fixed header: counts, quantization and bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Header {
+    /// Vertices in the input mesh, used or not.
+    pub input_vertices: u32,
+    /// Decoded vertex slots, duplicates included.
+    pub slots: u32,
+    /// Triangles, loose ones included.
+    pub triangles: u32,
+    pub loose_triangles: u32,
+    pub commands: u32,
+    /// `SEED` commands: connected pieces the traversal started.
+    pub seeds: u32,
+    pub duplicates: u32,
+    /// Slots created after the traversal for vertices only loose triangles use.
+    pub tail_slots: u32,
+    pub quant_bits: u8,
+    pub bbox_min: [f32; 3],
+    pub step: f32,
+    pub bbox_max: [f32; 3],
+}
+
+impl Header {
+    pub fn unique_vertices(&self) -> u32 {
+        self.slots - self.duplicates
+    }
+
+    fn to_bytes(self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(HEADER_LEN);
+        for v in [
+            self.input_vertices,
+            self.slots,
+            self.triangles,
+            self.loose_triangles,
+            self.commands,
+            self.seeds,
+            self.duplicates,
+            self.tail_slots,
+            0,
+            0,
+        ] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&[self.quant_bits, 0, 0, 0]);
+        for v in self.bbox_min.iter().chain(&[self.step]).chain(&self.bbox_max) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        debug_assert_eq!(b.len(), HEADER_LEN);
+        b
+    }
+
+    fn from_bytes(b: &[u8]) -> Result<Self, BftError> {
+        if b.len() != HEADER_LEN {
+            return Err(corrupt(format!("header is {} bytes, expected {HEADER_LEN}", b.len())));
+        }
+        let u = |i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap());
+        let f = |off: usize| f32::from_le_bytes(b[off..off + 4].try_into().unwrap());
+        let h = Header {
+            input_vertices: u(0),
+            slots: u(1),
+            triangles: u(2),
+            loose_triangles: u(3),
+            commands: u(4),
+            seeds: u(5),
+            duplicates: u(6),
+            tail_slots: u(7),
+            quant_bits: b[40],
+            bbox_min: [f(44), f(48), f(52)],
+            step: f(56),
+            bbox_max: [f(60), f(64), f(68)],
+        };
+        if !(8..=24).contains(&h.quant_bits) {
+            return Err(corrupt(format!("quantization of {} bits is outside 8..=24", h.quant_bits)));
+        }
+        if !(h.step.is_finite() && h.step > 0.0) || !h.bbox_min.iter().all(|v| v.is_finite()) {
+            return Err(corrupt("non-finite quantization parameters"));
+        }
+        if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
+            return Err(corrupt("inconsistent counts in header"));
+        }
+        Ok(h)
+    }
+}
+
+/// The parts of a `.bft` file, borrowed from its bytes.
+pub(crate) struct Parts<'a> {
+    pub header: Header,
+    pub sections: [&'a [u8]; 4],
+}
+
+pub(crate) fn write(header: &Header, sections: [&[u8]; 4]) -> Vec<u8> {
+    let hb = header.to_bytes();
+    let mut out = Vec::with_capacity(hb.len() + sections.iter().map(|s| s.len() + 12).sum::<usize>() + 16);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&(hb.len() as u16).to_le_bytes());
+    out.extend_from_slice(&hb);
+    out.extend_from_slice(&crc32fast::hash(&hb).to_le_bytes());
+    for (tag, s) in SECTION_TAGS.iter().zip(sections) {
+        out.extend_from_slice(tag);
+        out.extend_from_slice(&(s.len() as u32).to_le_bytes());
+        out.extend_from_slice(s);
+        out.extend_from_slice(&crc32fast::hash(s).to_le_bytes());
+    }
+    out
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], BftError> {
+        if self.b.len() - self.pos < n {
+            return Err(BftError::Truncated(what));
+        }
+        let s = &self.b[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u32(&mut self, what: &'static str) -> Result<u32, BftError> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().unwrap()))
+    }
+}
+
+pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
+    let mut r = Reader { b: bytes, pos: 0 };
+    let magic = r.take(8, "magic number").map_err(|_| {
+        if MAGIC.starts_with(bytes) { BftError::Truncated("magic number") } else { BftError::BadMagic }
+    })?;
+    if magic != MAGIC {
+        return Err(BftError::BadMagic);
+    }
+    let version = u16::from_le_bytes(r.take(2, "version")?.try_into().unwrap());
+    if version != VERSION {
+        return Err(BftError::UnsupportedVersion(version));
+    }
+    let hlen = u16::from_le_bytes(r.take(2, "header length")?.try_into().unwrap()) as usize;
+    let hb = r.take(hlen, "header")?;
+    if r.u32("header checksum")? != crc32fast::hash(hb) {
+        return Err(BftError::Checksum("header"));
+    }
+    let header = Header::from_bytes(hb)?;
+    let names = ["connectivity section", "geometry section", "duplicate table", "loose triangles"];
+    let mut sections: [&[u8]; 4] = [&[]; 4];
+    for (i, tag) in SECTION_TAGS.iter().enumerate() {
+        let t = r.take(4, names[i])?;
+        if t != tag {
+            return Err(corrupt(format!("expected section {}, found {:?}", String::from_utf8_lossy(tag), t)));
+        }
+        let n = r.u32(names[i])? as usize;
+        let s = r.take(n, names[i])?;
+        if r.u32(names[i])? != crc32fast::hash(s) {
+            return Err(BftError::Checksum(names[i]));
+        }
+        sections[i] = s;
+    }
+    if r.pos != bytes.len() {
+        return Err(BftError::TrailingBytes(bytes.len() - r.pos));
+    }
+    Ok(Parts { header, sections })
+}
+
+/// Sizes and rates of a `.bft` file, as `tessera stats` reports them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stats {
+    pub header: Header,
+    pub bytes: usize,
+    pub connectivity_bytes: usize,
+    pub geometry_bytes: usize,
+}
+
+impl Stats {
+    pub fn of(bytes: &[u8]) -> Result<Stats, BftError> {
+        let p = parse(bytes)?;
+        Ok(Stats {
+            header: p.header,
+            bytes: bytes.len(),
+            connectivity_bytes: p.sections[0].len() + p.sections[2].len() + p.sections[3].len(),
+            geometry_bytes: p.sections[1].len(),
+        })
+    }
+
+    /// Connectivity (commands, offsets, duplicate table, loose triangles) per triangle.
+    pub fn connectivity_bits_per_triangle(&self) -> f64 {
+        self.connectivity_bytes as f64 * 8.0 / self.header.triangles.max(1) as f64
+    }
+
+    pub fn geometry_bits_per_vertex(&self) -> f64 {
+        self.geometry_bytes as f64 * 8.0 / self.header.unique_vertices().max(1) as f64
+    }
+}
+
+pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, BftError> {
+    let mut v = 0u64;
+    for shift in (0..64).step_by(7) {
+        let byte = *b.get(*pos).ok_or(BftError::Truncated(what))?;
+        *pos += 1;
+        v |= ((byte & 0x7f) as u64) << shift;
+        if byte & 0x80 == 0 {
+            return Ok(v);
+        }
+    }
+    Err(corrupt(format!("overlong integer in {what}")))
+}

@@ -1,0 +1,228 @@
+//! Context models for the two BFT streams. Encoder, decoder and tile sort share them, so a
+//! context is computed one way only.
+
+use super::Command;
+use crate::rangecoder::{BitTree, Decoder, Encoder, UIntCoder, PROB_INIT};
+
+/// Visited degrees above this share a context.
+const DEG_CAP: u8 = 6;
+const DEG_CTX: usize = DEG_CAP as usize + 1;
+/// Previous-command classes: 0 = triangle opening (`NEW`, `RF<k>`, `LF<k>`, `SEED`),
+/// 1 = closing (`RF0`, `LF0`), 2 = anything else.
+const PREV_CTX: usize = 3;
+pub const COMMAND_CONTEXTS: usize = PREV_CTX * DEG_CTX * DEG_CTX;
+
+/// The context of the next command: the previous command's class and the visited degrees
+/// (triangles coded so far) of the current edge's vertices.
+#[inline]
+pub fn command_context(prev: Command, deg_l: u8, deg_r: u8) -> usize {
+    let class = match prev {
+        Command::New | Command::Rf | Command::Lf | Command::Seed => 0,
+        Command::Rf0 | Command::Lf0 => 1,
+        _ => 2,
+    };
+    (class * DEG_CTX + deg_l.min(DEG_CAP) as usize) * DEG_CTX + deg_r.min(DEG_CAP) as usize
+}
+
+/// Binary decomposition of [`Command`], per context:
+/// node 0: triangle-producing (0) or not (1);
+/// node 1: `NEW` (0) or an existing third vertex (1); node 2: closing (0) or generic (1);
+/// node 3: `RF0`/`LF0`; node 4: `RF`/`LF`; nodes 8..16: a 3-bit tree over the others.
+const OTHERS: [Command; 7] =
+    [Command::Null, Command::Dl, Command::Dr, Command::AddNew, Command::AddRef, Command::Seed, Command::Clear];
+
+pub struct CommandModel {
+    probs: Vec<[u16; 5]>,
+    others: Vec<BitTree<8>>,
+    /// Offsets of `RF<k>`, `LF<k>`, `ADD<k>`.
+    offsets: [UIntCoder; 3],
+}
+
+impl Default for CommandModel {
+    fn default() -> Self {
+        CommandModel {
+            probs: vec![[PROB_INIT; 5]; COMMAND_CONTEXTS],
+            others: vec![BitTree::default(); COMMAND_CONTEXTS],
+            offsets: Default::default(),
+        }
+    }
+}
+
+impl CommandModel {
+    #[inline]
+    pub fn encode(&mut self, enc: &mut Encoder, ctx: usize, cmd: Command) {
+        let p = &mut self.probs[ctx];
+        match cmd {
+            Command::New => {
+                enc.bit(&mut p[0], false);
+                enc.bit(&mut p[1], false);
+            }
+            Command::Rf0 | Command::Lf0 => {
+                enc.bit(&mut p[0], false);
+                enc.bit(&mut p[1], true);
+                enc.bit(&mut p[2], false);
+                enc.bit(&mut p[3], cmd == Command::Lf0);
+            }
+            Command::Rf | Command::Lf => {
+                enc.bit(&mut p[0], false);
+                enc.bit(&mut p[1], true);
+                enc.bit(&mut p[2], true);
+                enc.bit(&mut p[4], cmd == Command::Lf);
+            }
+            other => {
+                enc.bit(&mut p[0], true);
+                let i = OTHERS.iter().position(|&c| c == other).expect("every command is coded") as u32;
+                self.others[ctx].encode(enc, i);
+            }
+        }
+    }
+
+    /// Decodes a command; `None` for the one unused code.
+    #[inline]
+    pub fn decode(&mut self, dec: &mut Decoder, ctx: usize) -> Option<Command> {
+        let p = &mut self.probs[ctx];
+        if !dec.bit(&mut p[0]) {
+            if !dec.bit(&mut p[1]) {
+                return Some(Command::New);
+            }
+            Some(if !dec.bit(&mut p[2]) {
+                if dec.bit(&mut p[3]) { Command::Lf0 } else { Command::Rf0 }
+            } else if dec.bit(&mut p[4]) {
+                Command::Lf
+            } else {
+                Command::Rf
+            })
+        } else {
+            OTHERS.get(self.others[ctx].decode(dec) as usize).copied()
+        }
+    }
+
+    #[inline]
+    fn offset_index(cmd: Command) -> usize {
+        match cmd {
+            Command::Rf => 0,
+            Command::Lf => 1,
+            _ => 2,
+        }
+    }
+
+    #[inline]
+    pub fn encode_offset(&mut self, enc: &mut Encoder, cmd: Command, k: u32) {
+        self.offsets[Self::offset_index(cmd)].encode(enc, k);
+    }
+
+    #[inline]
+    pub fn decode_offset(&mut self, dec: &mut Decoder, cmd: Command) -> Option<u32> {
+        self.offsets[Self::offset_index(cmd)].decode(dec)
+    }
+}
+
+/// How a new vertex's position was predicted; part of the residual context.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Prediction {
+    /// `l + r - apex` across the current edge.
+    Parallelogram,
+    /// The midpoint of the current edge, when the edge has no apex.
+    Midpoint,
+    /// The previous slot's position (seeds, adds, loose-only vertices).
+    Previous,
+}
+
+/// Predicts a quantized position. Inputs are positions of already decoded slots.
+#[inline]
+pub fn predict(kind: Prediction, a: [u32; 3], b: [u32; 3], c: [u32; 3], max: u32) -> [u32; 3] {
+    match kind {
+        Prediction::Parallelogram => {
+            let f = |i: usize| (a[i] as i64 + b[i] as i64 - c[i] as i64).clamp(0, max as i64) as u32;
+            [f(0), f(1), f(2)]
+        }
+        Prediction::Midpoint => {
+            let f = |i: usize| ((a[i] as u64 + b[i] as u64) / 2) as u32;
+            [f(0), f(1), f(2)]
+        }
+        Prediction::Previous => a,
+    }
+}
+
+const CLASS_CTX: usize = 4;
+
+/// Residual coder: per axis, the bit length of `|residual|` through a bit tree (context:
+/// prediction kind and the previous residual's length on that axis), then the sign, the
+/// bit below the leading one adaptively, and the rest as direct bits.
+pub struct GeometryModel {
+    class: Vec<BitTree<32>>,
+    sign: [u16; 3],
+    second: [[u16; 32]; 3],
+    prev_class: [u32; 3],
+}
+
+impl Default for GeometryModel {
+    fn default() -> Self {
+        GeometryModel {
+            class: vec![BitTree::default(); 3 * 3 * CLASS_CTX],
+            sign: [PROB_INIT; 3],
+            second: [[PROB_INIT; 32]; 3],
+            prev_class: [0; 3],
+        }
+    }
+}
+
+impl GeometryModel {
+    #[inline]
+    fn ctx(&self, kind: Prediction, axis: usize) -> usize {
+        let k = kind as usize;
+        let p = (self.prev_class[axis] as usize / 3).min(CLASS_CTX - 1);
+        (k * 3 + axis) * CLASS_CTX + p
+    }
+
+    #[inline]
+    pub fn encode(&mut self, enc: &mut Encoder, kind: Prediction, actual: [u32; 3], pred: [u32; 3]) {
+        for axis in 0..3 {
+            let r = actual[axis] as i64 - pred[axis] as i64;
+            let m = r.unsigned_abs() as u32;
+            let class = 32 - m.leading_zeros();
+            let ctx = self.ctx(kind, axis);
+            self.class[ctx].encode(enc, class);
+            if class > 0 {
+                enc.bit(&mut self.sign[axis], r < 0);
+                if class >= 2 {
+                    let rest = class - 1;
+                    enc.bit(&mut self.second[axis][class as usize], (m >> (rest - 1)) & 1 != 0);
+                    enc.direct_bits(m, rest - 1);
+                }
+            }
+            self.prev_class[axis] = class;
+        }
+    }
+
+    /// Decodes a position; `None` if it falls outside `0..=max`.
+    #[inline]
+    pub fn decode(&mut self, dec: &mut Decoder, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
+        let mut out = [0u32; 3];
+        for axis in 0..3 {
+            let ctx = self.ctx(kind, axis);
+            let class = self.class[ctx].decode(dec);
+            let mut m: u32 = 0;
+            let mut neg = false;
+            if class > 0 {
+                if class > 25 {
+                    return None;
+                }
+                neg = dec.bit(&mut self.sign[axis]);
+                m = 1 << (class - 1);
+                if class >= 2 {
+                    let rest = class - 1;
+                    let top = dec.bit(&mut self.second[axis][class as usize]) as u32;
+                    m |= top << (rest - 1) | dec.direct_bits(rest - 1);
+                }
+            }
+            let v = pred[axis] as i64 + if neg { -(m as i64) } else { m as i64 };
+            if v < 0 || v > max as i64 {
+                return None;
+            }
+            out[axis] = v as u32;
+            self.prev_class[axis] = class;
+        }
+        Some(out)
+    }
+}

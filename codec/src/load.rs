@@ -1,0 +1,302 @@
+//! Mesh loaders: OBJ (`tobj`), PLY (`ply-rs-bw`: ASCII and binary, face lists and
+//! triangle strips) and STL (`stl_io`), each optionally gzip-compressed (`flate2`).
+//!
+//! The format comes from the file name (`.obj`, `.ply`, `.stl`, each optionally followed by
+//! `.gz`); gzip is recognised by its magic bytes, whatever the name says. Polygons are
+//! fan-triangulated; strips are unrolled with alternating orientation and their
+//! zero-area stitching triangles (a repeated index) dropped, as strip writers intend.
+//! An OBJ file with several objects or groups is merged into one mesh by concatenation.
+//! Every error names the file and what is wrong; no input makes a loader panic.
+
+use std::io::{BufRead, BufReader, Cursor, Read};
+use std::path::{Path, PathBuf};
+
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{DefaultElement, Property, PropertyAccess};
+use thiserror::Error;
+
+use crate::mesh::Mesh;
+
+/// A file that could not be read as a mesh.
+#[derive(Debug, Error)]
+#[error("{}: {message}", path.display())]
+pub struct LoadError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+fn err(path: &Path, message: impl Into<String>) -> LoadError {
+    LoadError { path: path.to_path_buf(), message: message.into() }
+}
+
+/// Mesh file formats Tessera reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Obj,
+    Ply,
+    Stl,
+}
+
+impl Format {
+    /// The format named by a file's extension, looking through a trailing `.gz`.
+    pub fn from_path(path: &Path) -> Option<Format> {
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        let name = name.strip_suffix(".gz").unwrap_or(&name);
+        match Path::new(name).extension()?.to_str()? {
+            "obj" => Some(Format::Obj),
+            "ply" => Some(Format::Ply),
+            "stl" => Some(Format::Stl),
+            _ => None,
+        }
+    }
+}
+
+/// Reads a mesh file, decompressing gzip if the bytes start with its magic number.
+pub fn load_path(path: &Path) -> Result<Mesh, LoadError> {
+    let format = Format::from_path(path)
+        .ok_or_else(|| err(path, "unknown mesh format: expected .obj, .ply or .stl, optionally .gz"))?;
+    let raw = std::fs::read(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
+    load_bytes(path, &raw, format)
+}
+
+/// Parses mesh bytes (gzip or plain) in the given format; `path` is used in error messages.
+pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadError> {
+    let bytes = if raw.starts_with(&[0x1f, 0x8b]) {
+        let mut out = Vec::with_capacity(raw.len() * 4);
+        flate2::read::MultiGzDecoder::new(raw)
+            .read_to_end(&mut out)
+            .map_err(|e| err(path, format!("corrupt gzip data: {e}")))?;
+        out
+    } else {
+        raw.to_vec()
+    };
+    let mesh = match format {
+        Format::Obj => load_obj(path, &bytes)?,
+        Format::Ply => load_ply(path, &bytes)?,
+        Format::Stl => load_stl(path, &bytes)?,
+    };
+    if let Some(bad) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= mesh.positions.len()) {
+        return Err(err(
+            path,
+            format!("a face uses vertex {bad}, but the file has only {} vertices", mesh.positions.len()),
+        ));
+    }
+    Ok(mesh)
+}
+
+fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
+    let options = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
+    let mut reader = BufReader::new(Cursor::new(bytes));
+    // Materials are irrelevant to geometry; a missing .mtl must not fail the load.
+    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| {
+        Err(tobj::LoadError::OpenFileFailed)
+    })
+    .map_err(|e| err(path, format!("malformed OBJ: {e}")))?;
+    let mut mesh = Mesh::default();
+    for model in models {
+        let m = model.mesh;
+        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
+            return Err(err(path, "malformed OBJ: ragged position or index arrays"));
+        }
+        let base = mesh.positions.len() as u32;
+        let count = m.positions.len() / 3;
+        mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        for t in m.indices.chunks_exact(3) {
+            if t.iter().any(|&i| i as usize >= count) {
+                return Err(err(path, format!("object '{}' has a face index out of range", model.name)));
+            }
+            mesh.triangles.push([base + t[0], base + t[1], base + t[2]]);
+        }
+    }
+    Ok(mesh)
+}
+
+/// A PLY vertex: `x`, `y`, `z` of any numeric type; other properties are ignored.
+#[derive(Default)]
+struct PlyVertex([f32; 3]);
+
+/// A PLY face or strip: its index list, whatever the integer type.
+#[derive(Default)]
+struct PlyIndices(Vec<i64>);
+
+fn scalar(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::Char(v) => v as f64,
+        Property::UChar(v) => v as f64,
+        Property::Short(v) => v as f64,
+        Property::UShort(v) => v as f64,
+        Property::Int(v) => v as f64,
+        Property::UInt(v) => v as f64,
+        Property::Float(v) => v as f64,
+        Property::Double(v) => v,
+        _ => return None,
+    })
+}
+
+impl PropertyAccess for PlyVertex {
+    fn new() -> Self {
+        PlyVertex::default()
+    }
+    fn set_property(&mut self, name: String, property: Property) {
+        let axis = match name.as_str() {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            _ => return,
+        };
+        if let Some(v) = scalar(&property) {
+            self.0[axis] = v as f32;
+        }
+    }
+}
+
+impl PropertyAccess for PlyIndices {
+    fn new() -> Self {
+        PlyIndices::default()
+    }
+    fn set_property(&mut self, name: String, property: Property) {
+        if name != "vertex_indices" && name != "vertex_index" {
+            return;
+        }
+        self.0 = match property {
+            Property::ListChar(v) => v.into_iter().map(i64::from).collect(),
+            Property::ListUChar(v) => v.into_iter().map(i64::from).collect(),
+            Property::ListShort(v) => v.into_iter().map(i64::from).collect(),
+            Property::ListUShort(v) => v.into_iter().map(i64::from).collect(),
+            Property::ListInt(v) => v.into_iter().map(i64::from).collect(),
+            Property::ListUInt(v) => v.into_iter().map(i64::from).collect(),
+            _ => return,
+        };
+    }
+}
+
+fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
+    let mut reader = BufReader::new(Cursor::new(bytes));
+    let header = Parser::<DefaultElement>::new()
+        .read_header(&mut reader)
+        .map_err(|e| err(path, format!("malformed PLY header: {e}")))?;
+    let vertex_parser = Parser::<PlyVertex>::new();
+    let index_parser = Parser::<PlyIndices>::new();
+    let skip_parser = Parser::<DefaultElement>::new();
+    let mut mesh = Mesh::default();
+    let mut saw_vertices = false;
+    for (name, def) in &header.elements {
+        let bad = |e: std::io::Error| err(path, format!("malformed PLY element '{name}': {e}"));
+        match name.as_str() {
+            "vertex" => {
+                let verts = vertex_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
+                mesh.positions = verts.into_iter().map(|v| v.0).collect();
+                saw_vertices = true;
+            }
+            "face" => {
+                let faces = index_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
+                for f in faces {
+                    fan(path, &f.0, &mut mesh.triangles)?;
+                }
+            }
+            "tristrips" => {
+                let strips = index_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
+                for s in strips {
+                    unroll_strip(path, &s.0, &mut mesh.triangles)?;
+                }
+            }
+            _ => {
+                skip_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
+            }
+        }
+    }
+    if !saw_vertices {
+        return Err(err(path, "PLY file has no 'vertex' element"));
+    }
+    let mut rest = [0u8; 1];
+    let _ = reader.fill_buf();
+    let _ = reader.read(&mut rest);
+    Ok(mesh)
+}
+
+fn index(path: &Path, i: i64) -> Result<u32, LoadError> {
+    u32::try_from(i).map_err(|_| err(path, format!("vertex index {i} is out of range")))
+}
+
+/// Fan-triangulates one polygon: (v0, v1, v2), (v0, v2, v3), ...
+fn fan(path: &Path, poly: &[i64], out: &mut Vec<[u32; 3]>) -> Result<(), LoadError> {
+    if poly.len() < 3 {
+        return Ok(());
+    }
+    let v0 = index(path, poly[0])?;
+    for w in poly[1..].windows(2) {
+        out.push([v0, index(path, w[0])?, index(path, w[1])?]);
+    }
+    Ok(())
+}
+
+/// Unrolls a triangle strip; a negative index restarts the strip.
+fn unroll_strip(path: &Path, strip: &[i64], out: &mut Vec<[u32; 3]>) -> Result<(), LoadError> {
+    for run in strip.split(|&i| i < 0) {
+        for (k, w) in run.windows(3).enumerate() {
+            let (a, b, c) = (index(path, w[0])?, index(path, w[1])?, index(path, w[2])?);
+            if a == b || b == c || a == c {
+                continue;
+            }
+            out.push(if k % 2 == 0 { [a, b, c] } else { [b, a, c] });
+        }
+    }
+    Ok(())
+}
+
+fn load_stl(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
+    let indexed = stl_io::read_stl(&mut Cursor::new(bytes)).map_err(|e| err(path, format!("malformed STL: {e}")))?;
+    let positions = indexed.vertices.iter().map(|v| [v[0], v[1], v[2]]).collect();
+    let mut triangles = Vec::with_capacity(indexed.faces.len());
+    for f in &indexed.faces {
+        let [a, b, c] = f.vertices;
+        let conv = |i: usize| u32::try_from(i).map_err(|_| err(path, "too many STL vertices"));
+        triangles.push([conv(a)?, conv(b)?, conv(c)?]);
+    }
+    Ok(Mesh { positions, triangles })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn format_from_name() {
+        assert_eq!(Format::from_path(Path::new("a/b.OBJ")), Some(Format::Obj));
+        assert_eq!(Format::from_path(Path::new("dragon.ply.gz")), Some(Format::Ply));
+        assert_eq!(Format::from_path(Path::new("x.stl")), Some(Format::Stl));
+        assert_eq!(Format::from_path(Path::new("x.gz")), None);
+        assert_eq!(Format::from_path(Path::new("x.off")), None);
+    }
+
+    #[test]
+    fn strips_alternate_and_skip_stitches() {
+        let mut out = vec![];
+        unroll_strip(Path::new("s"), &[0, 1, 2, 3, 3, 4, -1, 5, 6, 7], &mut out).unwrap();
+        assert_eq!(out, vec![[0, 1, 2], [2, 1, 3], [5, 6, 7]]);
+        assert!(out.iter().all(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]));
+    }
+
+    #[test]
+    fn ascii_ply_polygons_are_fanned() {
+        let ply = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
+        let m = load_bytes(Path::new("q.ply"), ply, Format::Ply).unwrap();
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(m.positions[2], [1.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn malformed_files_name_the_file() {
+        let bad_ply = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n0\n";
+        let e = load_bytes(Path::new("broken.ply"), bad_ply, Format::Ply).unwrap_err();
+        assert!(e.to_string().starts_with("broken.ply: "), "{e}");
+        let out_of_range = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n";
+        let e = load_bytes(Path::new("o.obj"), out_of_range, Format::Obj).unwrap_err();
+        assert!(e.to_string().contains("o.obj"), "{e}");
+        let e = load_bytes(Path::new("t.stl"), b"solid x\nfacet", Format::Stl).unwrap_err();
+        assert!(e.to_string().contains("t.stl"), "{e}");
+        let e = load_bytes(Path::new("g.obj"), &[0x1f, 0x8b, 0, 1, 2], Format::Obj).unwrap_err();
+        assert!(e.to_string().contains("gzip"), "{e}");
+    }
+}

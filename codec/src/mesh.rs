@@ -1,0 +1,164 @@
+//! The indexed triangle mesh every part of Tessera passes around, and its quantization.
+
+use thiserror::Error;
+
+/// An indexed triangle mesh: positions and counter-clockwise triangles.
+///
+/// Nothing is assumed about the topology: triangles may share vertices in non-manifold
+/// ways, repeat, or be degenerate, and vertices may be unused.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    pub positions: Vec<[f32; 3]>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Why a mesh cannot be encoded.
+#[derive(Debug, Error, PartialEq)]
+pub enum MeshError {
+    #[error("triangle {triangle} uses vertex {index}, but the mesh has only {vertices} vertices")]
+    IndexOutOfRange { triangle: usize, index: u32, vertices: usize },
+    #[error("vertex {vertex} has a non-finite coordinate {value:?}")]
+    NonFinite { vertex: usize, value: [f32; 3] },
+    #[error("the mesh has {0} vertices; at most 2^31 are supported")]
+    TooManyVertices(usize),
+    #[error("the mesh has {0} triangles; at most 2^31 are supported")]
+    TooManyTriangles(usize),
+    #[error("quantization must be 8 to 24 bits per coordinate, not {0}")]
+    QuantBits(u8),
+}
+
+impl Mesh {
+    /// Checks that indices are in range and that every vertex a triangle uses is finite.
+    /// Unused vertices may hold anything: they are not encoded.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        if self.positions.len() > (1 << 31) {
+            return Err(MeshError::TooManyVertices(self.positions.len()));
+        }
+        if self.triangles.len() > (1 << 31) {
+            return Err(MeshError::TooManyTriangles(self.triangles.len()));
+        }
+        let n = self.positions.len();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for &i in tri {
+                let Some(p) = self.positions.get(i as usize) else {
+                    return Err(MeshError::IndexOutOfRange { triangle: t, index: i, vertices: n });
+                };
+                if !p.iter().all(|c| c.is_finite()) {
+                    return Err(MeshError::NonFinite { vertex: i as usize, value: *p });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Marks the vertices some triangle uses.
+    pub fn used_vertices(&self) -> Vec<bool> {
+        let mut used = vec![false; self.positions.len()];
+        for tri in &self.triangles {
+            for &i in tri {
+                used[i as usize] = true;
+            }
+        }
+        used
+    }
+}
+
+/// Uniform quantization of positions over the bounding box of the used vertices.
+///
+/// One step size serves all three axes (the largest extent over `2^bits - 1` steps), as in
+/// Draco, so the error is isotropic: at most half a step per coordinate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantization {
+    pub bits: u8,
+    pub min: [f32; 3],
+    pub step: f32,
+}
+
+impl Quantization {
+    pub const DEFAULT_BITS: u8 = 16;
+
+    /// Fits a quantization to the vertices flagged in `used` (all vertices if `None`).
+    pub fn fit(positions: &[[f32; 3]], used: Option<&[bool]>, bits: u8) -> Result<Self, MeshError> {
+        if !(8..=24).contains(&bits) {
+            return Err(MeshError::QuantBits(bits));
+        }
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for (i, p) in positions.iter().enumerate() {
+            if used.is_some_and(|u| !u[i]) {
+                continue;
+            }
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        if lo[0] > hi[0] {
+            return Ok(Quantization { bits, min: [0.0; 3], step: 1.0 });
+        }
+        let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max);
+        let levels = ((1u32 << bits) - 1) as f32;
+        let step = if extent > 0.0 { extent / levels } else { 1.0 };
+        Ok(Quantization { bits, min: lo, step })
+    }
+
+    pub fn max_level(&self) -> u32 {
+        (1u32 << self.bits) - 1
+    }
+
+    #[inline]
+    pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
+        let max = self.max_level() as f32;
+        let q = |a: usize| (((p[a] - self.min[a]) / self.step).round().clamp(0.0, max)) as u32;
+        [q(0), q(1), q(2)]
+    }
+
+    #[inline]
+    pub fn dequantize(&self, q: [u32; 3]) -> [f32; 3] {
+        [
+            self.min[0] + q[0] as f32 * self.step,
+            self.min[1] + q[1] as f32 * self.step,
+            self.min[2] + q[2] as f32 * self.step,
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_the_problem() {
+        let mut m = Mesh { positions: vec![[0.0; 3]; 3], triangles: vec![[0, 1, 3]] };
+        assert_eq!(
+            m.validate(),
+            Err(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 })
+        );
+        m.triangles[0] = [0, 1, 2];
+        m.positions[1][2] = f32::NAN;
+        assert!(matches!(m.validate(), Err(MeshError::NonFinite { vertex: 1, .. })));
+        // An unused NaN vertex is fine.
+        m.positions.push([f32::NAN; 3]);
+        m.positions[1][2] = 0.0;
+        assert_eq!(m.validate(), Ok(()));
+    }
+
+    #[test]
+    fn quantization_error_is_half_a_step() {
+        let pts: Vec<[f32; 3]> = (0..1000).map(|i| {
+            let f = i as f32;
+            [f.sin() * 3.0, f.cos() * 0.5, (f * 0.37).sin() - 2.0]
+        }).collect();
+        for bits in [8u8, 14, 16, 24] {
+            let q = Quantization::fit(&pts, None, bits).unwrap();
+            for p in &pts {
+                let r = q.dequantize(q.quantize(*p));
+                for a in 0..3 {
+                    assert!((r[a] - p[a]).abs() <= q.step * 0.5 + 1e-5 * (1.0 + p[a].abs()));
+                }
+            }
+        }
+        assert!(Quantization::fit(&pts, None, 7).is_err());
+        assert!(Quantization::fit(&pts, None, 25).is_err());
+    }
+}

@@ -1,0 +1,86 @@
+//! Helpers shared by the codec's integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use codec::bft::{self, EncodeOptions, Encoded};
+use codec::{Mesh, Quantization};
+
+/// `../shared/meshes`, next to the repository.
+pub fn shared_meshes() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes")
+}
+
+/// Every mesh file under `shared/meshes`, sorted.
+pub fn all_shared_meshes() -> Vec<PathBuf> {
+    let mut out = vec![];
+    for dir in std::fs::read_dir(shared_meshes()).expect("shared/meshes is next to the repo") {
+        let dir = dir.unwrap().path();
+        if !dir.is_dir() {
+            continue;
+        }
+        for f in std::fs::read_dir(&dir).unwrap() {
+            let f = f.unwrap().path();
+            if codec::load::Format::from_path(&f).is_some() {
+                out.push(f);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A triangle rotated so its smallest index comes first: equal for equal triangles with
+/// equal orientation.
+pub fn canonical(t: [u32; 3]) -> [u32; 3] {
+    let m = (0..3).min_by_key(|&i| t[i]).unwrap();
+    [t[m], t[(m + 1) % 3], t[(m + 2) % 3]]
+}
+
+pub fn sorted_canonical(tris: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
+    let mut v: Vec<_> = tris.into_iter().map(canonical).collect();
+    v.sort_unstable();
+    v
+}
+
+/// Encodes, decodes, and checks the round trip exactly: the decoded triangles, mapped back
+/// to input vertex indices, are the input's multiset with orientation kept; every slot's
+/// position is its input vertex quantized; the welded mesh has the same triangles by position.
+pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
+    let enc = bft::encode(mesh, EncodeOptions { quant_bits: bits }).expect("encodes");
+    let dec = bft::decode(&enc.bytes).expect("decodes");
+    assert_eq!(dec.triangles.len(), mesh.triangles.len());
+    let back = dec.triangles.iter().map(|t| t.map(|s| enc.slot_vertex[s as usize]));
+    assert!(
+        sorted_canonical(back) == sorted_canonical(mesh.triangles.iter().copied()),
+        "triangle multiset differs after the round trip"
+    );
+    let used = mesh.used_vertices();
+    let q = Quantization::fit(&mesh.positions, Some(&used), bits).unwrap();
+    assert_eq!(dec.quantization(), q);
+    for (slot, p) in dec.positions.iter().enumerate() {
+        assert_eq!(*p, q.quantize(mesh.positions[enc.slot_vertex[slot] as usize]), "slot {slot}");
+    }
+    for &(slot, source) in &dec.duplicates {
+        assert_eq!(enc.slot_vertex[slot as usize], enc.slot_vertex[source as usize]);
+    }
+    // The welded mesh: one vertex per used input vertex, triangles equal by position.
+    let welded = dec.to_mesh();
+    assert_eq!(welded.positions.len(), used.iter().filter(|&&u| u).count());
+    let key = |m: &Mesh, t: [u32; 3]| t.map(|i| m.positions[i as usize].map(f32::to_bits));
+    let mut a: Vec<_> = welded.triangles.iter().map(|&t| rotate_min(key(&welded, t))).collect();
+    let mut b: Vec<_> = mesh
+        .triangles
+        .iter()
+        .map(|&t| rotate_min(t.map(|i| q.dequantize(q.quantize(mesh.positions[i as usize])).map(f32::to_bits))))
+        .collect();
+    a.sort_unstable();
+    b.sort_unstable();
+    assert!(a == b, "welded mesh differs by position");
+    enc
+}
+
+/// The lexicographically smallest rotation: canonical even when entries repeat.
+fn rotate_min<T: Ord + Copy>(t: [T; 3]) -> [T; 3] {
+    [[t[0], t[1], t[2]], [t[1], t[2], t[0]], [t[2], t[0], t[1]]].into_iter().min().unwrap()
+}

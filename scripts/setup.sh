@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs every system package Tessera needs, idempotently, on Debian (as root, or with sudo).
+#   Open MPI (mpirun + headers) for the cluster path, libclang for the `mpi` crate's bindgen,
+#   Mesa's Vulkan drivers (lavapipe) so wgpu runs headless without a GPU.
+# Safe to run again: packages already present are skipped and nothing is reinstalled.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential pkg-config
+  openmpi-bin libopenmpi-dev
+  libclang-dev clang
+  mesa-vulkan-drivers libvulkan1 vulkan-tools
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup: all system packages present"
+else
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  echo "setup: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "setup: cargo not found; install the Rust toolchain with rustup (https://rustup.rs)" >&2
+  exit 1
+fi
