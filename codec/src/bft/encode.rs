@@ -39,6 +39,8 @@ pub struct EncodeStats {
     pub commands: usize,
     /// Commands per kind, indexed by `Command as usize`.
     pub command_counts: [usize; 12],
+    /// Offsets of generic `RF<k>`/`LF<k>`: how many were `k = 1, 2, 3, 4..7, 8..`.
+    pub offset_histogram: [usize; 5],
 }
 
 /// An encoded mesh.
@@ -125,6 +127,7 @@ pub fn encode_with_progress(
         seeds: tr.seeds,
         commands: tr.commands,
         command_counts: tr.command_counts,
+        offset_histogram: tr.offset_histogram,
     };
     let Traversal { conn, geom, vertex_of, .. } = tr;
     let (conn, geom) = (conn.finish(), geom.finish());
@@ -170,6 +173,7 @@ struct Traversal<'a> {
     dups: Vec<(u32, u32)>,
     commands: usize,
     command_counts: [usize; 12],
+    offset_histogram: [usize; 5],
     seeds: usize,
     done: usize,
 }
@@ -229,6 +233,7 @@ impl<'a> Traversal<'a> {
             dups: Vec::new(),
             commands: 0,
             command_counts: [0; 12],
+            offset_histogram: [0; 5],
             seeds: 0,
             done: 0,
         }
@@ -261,7 +266,16 @@ impl<'a> Traversal<'a> {
             let (lv, rv) = (self.vertex_of[l.slot as usize], self.vertex_of[r.slot as usize]);
             if let Some((t, x)) = self.find(lv, rv) {
                 null_run = 0;
-                self.triangle(t, x);
+                if !self.defer(x, len) {
+                    self.triangle(t, x);
+                    continue;
+                }
+                // Skip the edge: the next one closes `Q[2]` with RF0, and this triangle then
+                // comes back as an LF0 instead of splitting the frontier with RF<1>.
+                self.code(Command::Null);
+                self.on_remove(l.slot);
+                self.frontier.skip();
+                self.on_push(self.frontier.back_pos() - 1);
             } else if self.remaining[lv as usize] == 0 {
                 null_run = 0;
                 self.code(Command::Dl);
@@ -281,6 +295,19 @@ impl<'a> Traversal<'a> {
             }
         }
         progress(self.done, total);
+    }
+
+    /// Whether to skip the current edge rather than code its triangle `(l, r, x)`: when `x`
+    /// is `Q[3]` (an `RF<1>`, which would split the frontier) and the next edge `(r, Q[2])`
+    /// has the triangle `(r, Q[2], x)`, skipping gives `NULL, RF0, LF0` and no split.
+    #[inline]
+    fn defer(&self, x: u32, len: usize) -> bool {
+        if len < 5 {
+            return false;
+        }
+        let f = &self.frontier;
+        let at = |i: usize| self.vertex_of[f.at(i).slot as usize];
+        at(3) == x && at(2) != x && self.find(at(1), at(2)).is_some_and(|(_, third)| third == x)
     }
 
     /// An unvisited triangle on the directed edge `l -> r`, and its third vertex.
@@ -447,6 +474,13 @@ impl<'a> Traversal<'a> {
                 let (cmd, k) = if i - 2 <= len - 1 - i { (Command::Rf, i - 2) } else { (Command::Lf, len - 1 - i) };
                 self.code(cmd);
                 self.commands_model.encode_offset(&mut self.conn, cmd, k as u32);
+                self.offset_histogram[match k {
+                    0 | 1 => 0,
+                    2 => 1,
+                    3 => 2,
+                    4..=7 => 3,
+                    _ => 4,
+                }] += 1;
                 self.on_remove(l.slot);
                 self.frontier.insert(xs);
                 let end = self.frontier.back_pos();
