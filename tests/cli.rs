@@ -1,1 +1,129 @@
+//! End-to-end tests of the `tessera` binary on real files.
 
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tessera(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).output().expect("runs tessera")
+}
+
+fn mesh(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes").join(rel)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn encode_stats_decode_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let bft = dir.path().join("bunny.bft");
+    let o = tessera(&["encode", s(&input), "-o", s(&bft), "--quant-bits", "14"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let o = tessera(&["stats", s(&bft), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["triangles"], 69_451);
+    assert_eq!(j["quant_bits"], 14);
+    assert_eq!(j["bytes"], std::fs::metadata(&bft).unwrap().len());
+    // The scan's 1,113 unreferenced vertices are not coded: 35,947 - 1,113.
+    assert_eq!(j["vertices"], 34_834);
+    assert!(j["components"].as_u64().unwrap() >= 1);
+    let conn = j["connectivity_bits_per_triangle"].as_f64().unwrap();
+    assert!(conn > 0.0 && conn <= 2.0, "connectivity {conn} bits/triangle");
+    assert!(j["geometry_bits_per_vertex"].as_f64().unwrap() > 0.0);
+
+    let original = codec::load_path(&input).unwrap();
+    for ext in ["ply", "obj"] {
+        let out = dir.path().join(format!("bunny.{ext}"));
+        let o = tessera(&["decode", s(&bft), "-o", s(&out)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let back = codec::load_path(&out).unwrap();
+        assert_eq!(back.triangles.len(), original.triangles.len());
+        assert_eq!(back.positions.len(), 34_834);
+        // Exactly the input's triangles, by position, once the input is quantized to 14 bits.
+        let used = original.used_vertices();
+        let q = codec::Quantization::fit(&original.positions, Some(&used), 14).unwrap();
+        let key = |m: &codec::Mesh, t: [u32; 3], quantize: bool| {
+            let c = t.map(|i| {
+                let p = m.positions[i as usize];
+                (if quantize { q.dequantize(q.quantize(p)) } else { p }).map(f32::to_bits)
+            });
+            [[c[0], c[1], c[2]], [c[1], c[2], c[0]], [c[2], c[0], c[1]]].into_iter().min().unwrap()
+        };
+        let mut a: Vec<_> = back.triangles.iter().map(|&t| key(&back, t, false)).collect();
+        let mut b: Vec<_> = original.triangles.iter().map(|&t| key(&original, t, true)).collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        assert!(a == b, "decoded {ext} differs from the quantized input");
+    }
+
+    let o = tessera(&["stats", s(&bft)]);
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("connectivity"));
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+
+    let o = tessera(&["encode", s(&d.join("missing.obj")), "-o", s(&d.join("x.bft"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("missing.obj"), "{}", stderr(&o));
+
+    let nan = d.join("nan.obj");
+    std::fs::write(&nan, "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let o = tessera(&["encode", s(&nan), "-o", s(&d.join("nan.bft"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("non-finite"), "{}", stderr(&o));
+    assert!(!d.join("nan.bft").exists());
+
+    let oob = d.join("oob.obj");
+    std::fs::write(&oob, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap();
+    let o = tessera(&["encode", s(&oob), "-o", s(&d.join("oob.bft"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("oob.obj"), "{}", stderr(&o));
+
+    let o = tessera(&["encode", s(&mesh("classic/cow.obj")), "-o", s(&d.join("c.bft")), "--quant-bits", "30"]);
+    assert_eq!(o.status.code(), Some(2), "clap rejects the flag");
+
+    // A corrupt .bft must not replace an existing output.
+    let bft = d.join("cow.bft");
+    assert!(tessera(&["encode", s(&mesh("classic/cow.obj")), "-o", s(&bft)]).status.success());
+    let mut bytes = std::fs::read(&bft).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    let bad = d.join("bad.bft");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = d.join("out.ply");
+    std::fs::write(&out, "old").unwrap();
+    let o = tessera(&["decode", s(&bad), "-o", s(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("checksum"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "old");
+
+    std::fs::write(&bad, &std::fs::read(&bft).unwrap()[..40]).unwrap();
+    let o = tessera(&["stats", s(&bad)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("truncated"), "{}", stderr(&o));
+
+    let o = tessera(&["decode", s(&bft), "-o", s(&d.join("out.xyz"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains(".ply or .obj"), "{}", stderr(&o));
+
+    // No temporary files are left behind by failed writes.
+    let leftovers: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".tessera-"))
+        .collect();
+    assert!(leftovers.is_empty());
+}

@@ -17,6 +17,7 @@ pub mod bft;
 pub mod load;
 pub mod mesh;
 pub mod rangecoder;
+pub mod save;
 
 pub use load::{load_path, LoadError};
 pub use mesh::{Mesh, MeshError, Quantization};

@@ -63,6 +63,8 @@ pub struct Header {
     pub duplicates: u32,
     /// Slots created after the traversal for vertices only loose triangles use.
     pub tail_slots: u32,
+    /// Connected components (triangles joined through shared vertices).
+    pub components: u32,
     pub quant_bits: u8,
     pub bbox_min: [f32; 3],
     pub step: f32,
@@ -85,7 +87,7 @@ impl Header {
             self.seeds,
             self.duplicates,
             self.tail_slots,
-            0,
+            self.components,
             0,
         ] {
             b.extend_from_slice(&v.to_le_bytes());
@@ -113,6 +115,7 @@ impl Header {
             seeds: u(5),
             duplicates: u(6),
             tail_slots: u(7),
+            components: u(8),
             quant_bits: b[40],
             bbox_min: [f(44), f(48), f(52)],
             step: f(56),

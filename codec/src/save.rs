@@ -1,0 +1,81 @@
+//! Mesh writers: binary little-endian PLY and OBJ.
+//!
+//! Written by hand because both formats are a few lines to emit, and `ply-rs-bw`'s writer
+//! wants one `DefaultElement` map per vertex and per face, an allocation each.
+
+use std::io::{self, Write};
+use std::path::Path;
+
+use crate::mesh::Mesh;
+
+/// Writes `mesh` as binary little-endian PLY with float positions.
+pub fn write_ply(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
+    write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\ncomment written by tessera\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\nelement face {}\n\
+         property list uchar uint vertex_indices\nend_header\n",
+        mesh.positions.len(),
+        mesh.triangles.len()
+    )?;
+    let mut buf = Vec::with_capacity(mesh.positions.len() * 12 + mesh.triangles.len() * 13);
+    for p in &mesh.positions {
+        for c in p {
+            buf.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for t in &mesh.triangles {
+        buf.push(3);
+        for i in t {
+            buf.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    out.write_all(&buf)
+}
+
+/// Writes `mesh` as OBJ (`v` and 1-based `f` lines). Rust's float formatting prints the
+/// shortest string that reads back to the same `f32`, so positions survive exactly.
+pub fn write_obj(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
+    let mut w = io::BufWriter::new(out);
+    writeln!(w, "# written by tessera: {} vertices, {} triangles", mesh.positions.len(), mesh.triangles.len())?;
+    for p in &mesh.positions {
+        writeln!(w, "v {} {} {}", p[0], p[1], p[2])?;
+    }
+    for t in &mesh.triangles {
+        writeln!(w, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1)?;
+    }
+    w.flush()
+}
+
+/// The writer for a path's extension (`.ply` or `.obj`), or `None`.
+pub fn writer_for(path: &Path) -> Option<fn(&Mesh, &mut dyn Write) -> io::Result<()>> {
+    match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+        "ply" => Some(|m, w| write_ply(m, &mut { w })),
+        "obj" => Some(|m, w| write_obj(m, &mut { w })),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::load::{load_bytes, Format};
+
+    fn sample() -> Mesh {
+        Mesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.5, -2.25, 1e-7], [0.1, 0.2, 0.3], [3.0, 1.0, -1.0]],
+            triangles: vec![[0, 1, 2], [2, 1, 3]],
+        }
+    }
+
+    #[test]
+    fn ply_and_obj_read_back_exactly() {
+        let m = sample();
+        let mut ply = vec![];
+        write_ply(&m, &mut ply).unwrap();
+        assert_eq!(load_bytes(Path::new("m.ply"), &ply, Format::Ply).unwrap(), m);
+        let mut obj = vec![];
+        write_obj(&m, &mut obj).unwrap();
+        assert_eq!(load_bytes(Path::new("m.obj"), &obj, Format::Obj).unwrap(), m);
+    }
+}

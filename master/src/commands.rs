@@ -1,0 +1,144 @@
+//! The file commands of `tessera`: `encode`, `decode` and `stats`.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use codec::bft::{self, EncodeOptions, Stats};
+use codec::Mesh;
+use serde::Serialize;
+
+use crate::output::{write_atomic, write_bytes};
+use crate::progress;
+
+/// Loads a mesh file (OBJ, PLY, STL, optionally gzipped), with a spinner while it parses.
+pub fn load_mesh(path: &Path) -> Result<Mesh> {
+    let pb = progress::spinner(format!("loading {}", path.display()));
+    let mesh = codec::load_path(path);
+    pb.finish_and_clear();
+    Ok(mesh?)
+}
+
+/// `tessera encode IN -o OUT.bft [--quant-bits N]`.
+pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
+    if !(8..=24).contains(&quant_bits) {
+        bail!("--quant-bits must be 8 to 24, not {quant_bits}");
+    }
+    let mesh = load_mesh(input)?;
+    let start = Instant::now();
+    let pb = progress::bar(mesh.triangles.len() as u64, "encoding");
+    let enc = bft::encode_with_progress(&mesh, EncodeOptions { quant_bits }, &mut |done, _| pb.set_position(done as u64))
+        .with_context(|| format!("cannot encode {}", input.display()))?;
+    pb.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    write_bytes(output, &enc.bytes)?;
+    let stats = Stats::of(&enc.bytes)?;
+    println!(
+        "{} -> {}: {} triangles, {} vertices, {} bytes ({:.3} bits/triangle connectivity, {:.2} bits/vertex geometry at {} bits), {:.0} ms",
+        input.display(),
+        output.display(),
+        stats.header.triangles,
+        stats.header.unique_vertices(),
+        stats.bytes,
+        stats.connectivity_bits_per_triangle(),
+        stats.geometry_bits_per_vertex(),
+        quant_bits,
+        secs * 1e3
+    );
+    Ok(())
+}
+
+fn read_bft(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// `tessera decode IN.bft -o OUT.ply|OUT.obj`.
+pub fn decode(input: &Path, output: &Path) -> Result<()> {
+    let writer = codec::save::writer_for(output)
+        .with_context(|| format!("{}: the output must end in .ply or .obj", output.display()))?;
+    let bytes = read_bft(input)?;
+    let start = Instant::now();
+    let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
+    let mesh = decoded.to_mesh();
+    let secs = start.elapsed().as_secs_f64();
+    write_atomic(output, |w| writer(&mesh, w))?;
+    println!(
+        "{} -> {}: {} triangles, {} vertices, decoded in {:.1} ms",
+        input.display(),
+        output.display(),
+        mesh.triangles.len(),
+        mesh.positions.len(),
+        secs * 1e3
+    );
+    Ok(())
+}
+
+/// The numbers `tessera stats --json` prints.
+#[derive(Debug, Serialize)]
+pub struct StatsReport {
+    pub triangles: u32,
+    /// Distinct vertices after welding duplicate slots.
+    pub vertices: u32,
+    pub components: u32,
+    pub bytes: usize,
+    pub connectivity_bits_per_triangle: f64,
+    pub geometry_bits_per_vertex: f64,
+    pub quant_bits: u8,
+    pub connectivity_bytes: usize,
+    pub geometry_bytes: usize,
+    pub input_vertices: u32,
+    pub slots: u32,
+    pub duplicate_slots: u32,
+    pub loose_triangles: u32,
+    pub seeds: u32,
+    pub commands: u32,
+    pub bbox_min: [f32; 3],
+    pub bbox_max: [f32; 3],
+}
+
+impl StatsReport {
+    pub fn of(bytes: &[u8]) -> Result<Self> {
+        let s = Stats::of(bytes)?;
+        let h = s.header;
+        Ok(StatsReport {
+            triangles: h.triangles,
+            vertices: h.unique_vertices(),
+            components: h.components,
+            bytes: s.bytes,
+            connectivity_bits_per_triangle: s.connectivity_bits_per_triangle(),
+            geometry_bits_per_vertex: s.geometry_bits_per_vertex(),
+            quant_bits: h.quant_bits,
+            connectivity_bytes: s.connectivity_bytes,
+            geometry_bytes: s.geometry_bytes,
+            input_vertices: h.input_vertices,
+            slots: h.slots,
+            duplicate_slots: h.duplicates,
+            loose_triangles: h.loose_triangles,
+            seeds: h.seeds,
+            commands: h.commands,
+            bbox_min: h.bbox_min,
+            bbox_max: h.bbox_max,
+        })
+    }
+}
+
+/// `tessera stats IN.bft [--json]`. The whole file is decoded too, so a file whose
+/// sections pass their checksums but whose streams are inconsistent is reported as corrupt.
+pub fn stats(input: &Path, json: bool) -> Result<()> {
+    let bytes = read_bft(input)?;
+    let report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
+    bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let r = &report;
+        println!("{}", input.display());
+        println!("  triangles      {:>12}   ({} components, {} loose)", r.triangles, r.components, r.loose_triangles);
+        println!("  vertices       {:>12}   ({} slots, {} duplicated)", r.vertices, r.slots, r.duplicate_slots);
+        println!("  bytes          {:>12}", r.bytes);
+        println!("  connectivity   {:>12.3} bits/triangle ({} bytes)", r.connectivity_bits_per_triangle, r.connectivity_bytes);
+        println!("  geometry       {:>12.2} bits/vertex at {} bits ({} bytes)", r.geometry_bits_per_vertex, r.quant_bits, r.geometry_bytes);
+        println!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64);
+    }
+    Ok(())
+}
