@@ -264,3 +264,32 @@ pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
     }
     Err(corrupt(format!("overlong integer in {what}")))
 }
+
+/// Wraps arbitrary bytes in a well-formed container (small counts from the first bytes,
+/// the rest split into the four sections, checksums computed), so that a fuzzer reaches
+/// the stream decoders instead of stopping at a checksum. Not a file format.
+#[doc(hidden)]
+pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
+    let byte = |i: usize| data.get(i).copied().unwrap_or(0) as u32;
+    let small = |i: usize| byte(i) | (byte(i + 1) << 8);
+    let header = Header {
+        input_vertices: small(0),
+        slots: small(2),
+        triangles: small(4),
+        loose_triangles: byte(6) % 4,
+        commands: small(7),
+        seeds: 0,
+        duplicates: byte(9) % 4,
+        tail_slots: byte(10) % 4,
+        components: 0,
+        quant_bits: 8 + (byte(11) % 17) as u8,
+        bbox_min: [0.0; 3],
+        step: 1.0,
+        bbox_max: [1.0; 3],
+    };
+    let rest = data.get(12..).unwrap_or(&[]);
+    let (conn, rest) = rest.split_at(rest.len() / 2);
+    let (geom, rest) = rest.split_at(rest.len() * 3 / 4);
+    let (dups, loose) = rest.split_at(rest.len() / 2);
+    write(&header, [conn, geom, dups, loose])
+}

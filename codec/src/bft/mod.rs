@@ -87,7 +87,7 @@ mod model;
 
 pub use decode::{decode, decode_file, Decoded};
 pub use encode::{encode, encode_with_progress, EncodeOptions, EncodeStats, Encoded};
-pub use format::{BftError, Header, Stats, MAGIC, VERSION};
+pub use format::{wrap_for_fuzzing, BftError, Header, Stats, MAGIC, VERSION};
 
 /// The commands of the BFT stream, with `ADD` split by operand form and the paper's
 /// offsets carried beside `Rf`, `Lf` and `AddRef`.
