@@ -287,6 +287,33 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0
     }
 
     #[test]
+    fn stl_ascii_binary_and_gzip_load_alike() {
+        let ascii = b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n\
+facet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n";
+        let m = load_bytes(Path::new("t.stl"), ascii, Format::Stl).unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        assert_eq!(m.positions.len(), 4, "stl_io welds the shared corners");
+
+        let tris: Vec<stl_io::Triangle> = m
+            .triangles
+            .iter()
+            .map(|t| stl_io::Triangle {
+                normal: stl_io::Normal::new([0.0, 0.0, 1.0]),
+                vertices: t.map(|i| stl_io::Vertex::new(m.positions[i as usize])),
+            })
+            .collect();
+        let mut binary = Vec::new();
+        stl_io::write_stl(&mut binary, tris.iter()).unwrap();
+        let b = load_bytes(Path::new("t.stl"), &binary, Format::Stl).unwrap();
+        assert_eq!(b, m);
+
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut gz, &binary).unwrap();
+        let g = load_bytes(Path::new("t.stl.gz"), &gz.finish().unwrap(), Format::Stl).unwrap();
+        assert_eq!(g, m);
+    }
+
+    #[test]
     fn malformed_files_name_the_file() {
         let bad_ply = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n0\n";
         let e = load_bytes(Path::new("broken.ply"), bad_ply, Format::Ply).unwrap_err();
