@@ -1,1 +1,295 @@
-fn main(){}
+//! Tessera's BFT codec against meshopt and draco-core, on the same meshes, in one run.
+//!
+//! Every peer is set up the way its users would run it at 14-bit positions:
+//! - BFT: `codec::bft::encode` with `quant_bits: 14`.
+//! - meshopt: positions quantized to 14-bit integers (u16 x, y, z plus a pad, since the
+//!   vertex codec wants a multiple of 4 bytes), vertex-cache then vertex-fetch optimised,
+//!   then the index and vertex codecs. No general-purpose compressor on top.
+//! - Draco: compression level 7 (the `draco_encoder` CLI default, speed 3), 14-bit positions.
+//!
+//! Criterion measures decode (and our encode) in triangles/s; afterwards a plain summary
+//! table, timed here with `Instant`, gives sizes, rates and ratios against the targets.
+//! `TESSERA_BENCH_QUICK=1` restricts the run to the bunny for a fast smoke test.
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, SamplingMode, Throughput};
+use draco_core::{
+    DataType, DecoderBuffer, EncoderBuffer, EncoderOptions, GeometryAttributeType, MeshDecoder, MeshEncoder,
+    PointAttribute,
+};
+
+const QUANT_BITS: u8 = 14;
+const DRACO_COMPRESSION_LEVEL: i32 = 7;
+/// Runs per codec behind each median in the summary table.
+const SUMMARY_RUNS: usize = 5;
+const SUMMARY_RUN_MIN: Duration = Duration::from_millis(50);
+
+/// Project targets, printed next to the measured values.
+const TARGET_SIZE_VS_DRACO: f64 = 1.25;
+const TARGET_DECODE_VS_MESHOPT: f64 = 0.5;
+const TARGET_ENCODE_MTRI_S: f64 = 2.0;
+const TARGET_CONNECTIVITY_BITS_PER_TRIANGLE: f64 = 2.0;
+
+/// (name in reports, path under the shared mesh folder)
+const MESHES: [(&str, &str); 2] =
+    [("dragon", "stanford/dragon_vrip.ply.gz"), ("bunny", "stanford/bunny_zipper_c3d.obj.gz")];
+
+fn mesh_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/meshes"))
+}
+
+/// meshopt's encoded streams plus the counts its decoder has to be told.
+struct Meshopt {
+    indices: Vec<u8>,
+    vertices: Vec<u8>,
+    index_count: usize,
+    vertex_count: usize,
+}
+
+/// One mesh with every peer's encoding of it.
+struct Prepared {
+    name: &'static str,
+    mesh: codec::Mesh,
+    bft: Vec<u8>,
+    meshopt: Meshopt,
+    draco: Vec<u8>,
+    /// Draco's EdgeBreaker leaves out triangles with a repeated vertex; BFT and meshopt keep them.
+    draco_triangles: usize,
+}
+
+impl Prepared {
+    fn new(name: &'static str, mesh: codec::Mesh) -> Prepared {
+        let bft = codec::bft::encode(&mesh, codec::bft::EncodeOptions { quant_bits: QUANT_BITS })
+            .unwrap_or_else(|e| panic!("{name}: BFT encode failed: {e}"))
+            .bytes;
+        let meshopt = encode_meshopt(&mesh);
+        let draco = encode_draco(name, &mesh);
+        let draco_triangles =
+            mesh.triangles.iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).count();
+        let prepared = Prepared { name, mesh, bft, meshopt, draco, draco_triangles };
+        prepared.check_round_trips();
+        prepared
+    }
+
+    fn triangles(&self) -> usize {
+        self.mesh.triangles.len()
+    }
+
+    /// Each peer must give back the mesh it was handed, or its speed means nothing.
+    fn check_round_trips(&self) {
+        let ours = decode_bft(&self.bft);
+        assert_eq!(ours.triangles.len(), self.triangles(), "{}: BFT triangle count", self.name);
+
+        let (indices, vertices) = decode_meshopt(&self.meshopt);
+        assert_eq!(indices.len() / 3, self.triangles(), "{}: meshopt triangle count", self.name);
+        assert_eq!(vertices.len(), self.meshopt.vertex_count, "{}: meshopt vertex count", self.name);
+
+        let draco = decode_draco(&self.draco);
+        assert_eq!(draco.num_faces(), self.draco_triangles, "{}: Draco triangle count", self.name);
+    }
+}
+
+fn encode_meshopt(mesh: &codec::Mesh) -> Meshopt {
+    let quant = codec::Quantization::fit(&mesh.positions, None, QUANT_BITS).expect("14 bits is a valid quantization");
+    let quantized: Vec<[u16; 4]> = mesh
+        .positions
+        .iter()
+        .map(|&p| {
+            let [x, y, z] = quant.quantize(p);
+            [x as u16, y as u16, z as u16, 0]
+        })
+        .collect();
+    let flat: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    let mut indices = meshopt::optimize_vertex_cache(&flat, quantized.len());
+    // Also drops vertices no triangle uses, as a real pipeline would.
+    let vertices = meshopt::optimize_vertex_fetch(&mut indices, &quantized);
+    Meshopt {
+        indices: meshopt::encode_index_buffer(&indices, vertices.len()).expect("meshopt index encode"),
+        vertices: meshopt::encode_vertex_buffer(&vertices).expect("meshopt vertex encode"),
+        index_count: indices.len(),
+        vertex_count: vertices.len(),
+    }
+}
+
+fn encode_draco(name: &str, mesh: &codec::Mesh) -> Vec<u8> {
+    let mut position = PointAttribute::new();
+    position.init(GeometryAttributeType::Position, 3, DataType::Float32, false, mesh.positions.len());
+    let bytes: Vec<u8> = mesh.positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    position.buffer_mut().write(0, &bytes);
+
+    let mut draco_mesh = draco_core::Mesh::new();
+    let position_id = draco_mesh.add_attribute(position);
+    draco_mesh.set_num_faces(mesh.triangles.len());
+    let flat: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    draco_mesh.set_faces_from_flat_indices(&flat);
+
+    let mut options = EncoderOptions::new();
+    options.set_compression_level(DRACO_COMPRESSION_LEVEL);
+    options.set_attribute_quantization(position_id, QUANT_BITS.into());
+
+    let mut encoder = MeshEncoder::new();
+    encoder.set_mesh(draco_mesh);
+    let mut out = EncoderBuffer::new();
+    encoder.encode(&options, &mut out).unwrap_or_else(|e| panic!("{name}: Draco encode failed: {e}"));
+    out.data().to_vec()
+}
+
+fn decode_bft(bytes: &[u8]) -> codec::bft::Decoded {
+    codec::bft::decode(bytes).expect("BFT decode")
+}
+
+fn decode_meshopt(m: &Meshopt) -> (Vec<u32>, Vec<[u16; 4]>) {
+    let indices = meshopt::decode_index_buffer::<u32>(&m.indices, m.index_count).expect("meshopt index decode");
+    let vertices = meshopt::decode_vertex_buffer::<[u16; 4]>(&m.vertices, m.vertex_count).expect("meshopt vertex decode");
+    (indices, vertices)
+}
+
+/// Note Draco's decoder also dequantizes positions back to f32; it has no switch to skip that.
+fn decode_draco(bytes: &[u8]) -> draco_core::Mesh {
+    let mut mesh = draco_core::Mesh::new();
+    MeshDecoder::new().decode(&mut DecoderBuffer::new(bytes), &mut mesh).expect("Draco decode");
+    mesh
+}
+
+fn bench_mesh(c: &mut Criterion, p: &Prepared) {
+    let triangles = p.triangles() as u64;
+
+    let mut group = c.benchmark_group(format!("decode/{}", p.name));
+    group.throughput(Throughput::Elements(triangles));
+    // A dragon decode takes tens of milliseconds or more: flat sampling keeps criterion from
+    // asking for the 55x-sample iteration ramp that linear sampling would need.
+    group.sampling_mode(SamplingMode::Flat);
+    group.bench_function("bft", |b| b.iter(|| decode_bft(black_box(&p.bft))));
+    group.bench_function("meshopt", |b| b.iter(|| decode_meshopt(black_box(&p.meshopt))));
+    group.bench_function("draco", |b| b.iter(|| decode_draco(black_box(&p.draco))));
+    group.finish();
+
+    let mut group = c.benchmark_group(format!("encode/{}", p.name));
+    group.throughput(Throughput::Elements(triangles));
+    group.sampling_mode(SamplingMode::Flat);
+    let options = codec::bft::EncodeOptions { quant_bits: QUANT_BITS };
+    group.bench_function("bft", |b| b.iter(|| codec::bft::encode(black_box(&p.mesh), options).expect("BFT encode")));
+    group.finish();
+}
+
+/// Median per-call wall time over `SUMMARY_RUNS` runs, independent of criterion's estimates.
+/// Each run repeats the call enough times to last `SUMMARY_RUN_MIN`, so a bunny decode of a
+/// few milliseconds is not at the mercy of timer and scheduler noise.
+fn median_time<T>(mut f: impl FnMut() -> T) -> Duration {
+    let start = Instant::now();
+    black_box(f());
+    let once = start.elapsed().max(Duration::from_micros(1));
+    let calls = SUMMARY_RUN_MIN.as_nanos().div_ceil(once.as_nanos()).max(1) as u32;
+    let mut times: Vec<Duration> = (0..SUMMARY_RUNS)
+        .map(|_| {
+            let start = Instant::now();
+            for _ in 0..calls {
+                black_box(f());
+            }
+            start.elapsed() / calls
+        })
+        .collect();
+    times.sort();
+    times[SUMMARY_RUNS / 2]
+}
+
+fn mtri_per_s(triangles: usize, t: Duration) -> f64 {
+    triangles as f64 / t.as_secs_f64() / 1e6
+}
+
+fn verdict(ok: bool) -> &'static str {
+    if ok {
+        "ok"
+    } else {
+        "MISSED"
+    }
+}
+
+fn print_summary(p: &Prepared) {
+    let n = p.triangles();
+    let stats = codec::bft::Stats::of(&p.bft).expect("BFT stats");
+    let bft_t = median_time(|| decode_bft(&p.bft));
+    let meshopt_t = median_time(|| decode_meshopt(&p.meshopt));
+    let draco_t = median_time(|| decode_draco(&p.draco));
+    let options = codec::bft::EncodeOptions { quant_bits: QUANT_BITS };
+    let encode_t = median_time(|| codec::bft::encode(&p.mesh, options).expect("BFT encode"));
+
+    let meshopt_bytes = p.meshopt.indices.len() + p.meshopt.vertices.len();
+    let bits_per_tri = |bytes: usize| bytes as f64 * 8.0 / n as f64;
+    let (bft_rate, meshopt_rate, draco_rate) = (mtri_per_s(n, bft_t), mtri_per_s(n, meshopt_t), mtri_per_s(n, draco_t));
+    let encode_rate = mtri_per_s(n, encode_t);
+    let size_vs_draco = p.bft.len() as f64 / p.draco.len() as f64;
+    let decode_vs_meshopt = bft_rate / meshopt_rate;
+    let conn_bpt = stats.connectivity_bits_per_triangle();
+
+    println!();
+    println!(
+        "== {}: {} triangles, {} vertices, {QUANT_BITS}-bit positions (medians of {SUMMARY_RUNS} runs) ==",
+        p.name,
+        n,
+        p.mesh.positions.len()
+    );
+    println!("{:<9} {:>10} {:>10} {:>14}", "codec", "bytes", "bits/tri", "decode Mtri/s");
+    for (codec, bytes, rate) in [
+        ("bft", p.bft.len(), bft_rate),
+        ("meshopt", meshopt_bytes, meshopt_rate),
+        ("draco", p.draco.len(), draco_rate),
+    ] {
+        println!("{codec:<9} {bytes:>10} {:>10.3} {rate:>14.2}", bits_per_tri(bytes));
+    }
+    if p.draco_triangles != n {
+        println!("(draco dropped {} degenerate triangles; its rates still count all {n})", n - p.draco_triangles);
+    }
+    println!(
+        "size    ours/draco   {size_vs_draco:.3}  (target <= {TARGET_SIZE_VS_DRACO})  {}",
+        verdict(size_vs_draco <= TARGET_SIZE_VS_DRACO)
+    );
+    println!("size    ours/meshopt {:.3}", p.bft.len() as f64 / meshopt_bytes as f64);
+    println!(
+        "decode  ours/meshopt {decode_vs_meshopt:.3}  (goal >= {TARGET_DECODE_VS_MESHOPT})  {}",
+        verdict(decode_vs_meshopt >= TARGET_DECODE_VS_MESHOPT)
+    );
+    println!("decode  ours/draco   {:.3}", bft_rate / draco_rate);
+    println!(
+        "encode  ours         {encode_rate:.2} Mtri/s  (target >= {TARGET_ENCODE_MTRI_S})  {}",
+        verdict(encode_rate >= TARGET_ENCODE_MTRI_S)
+    );
+    println!(
+        "bft     connectivity {conn_bpt:.3} bits/tri  (target <= {TARGET_CONNECTIVITY_BITS_PER_TRIANGLE})  {}",
+        verdict(conn_bpt <= TARGET_CONNECTIVITY_BITS_PER_TRIANGLE)
+    );
+    println!("bft     geometry     {:.3} bits/vertex", stats.geometry_bits_per_vertex());
+}
+
+fn main() {
+    let quick = std::env::var("TESSERA_BENCH_QUICK").is_ok_and(|v| v == "1");
+    let selected: Vec<_> = MESHES.iter().filter(|(name, _)| !quick || *name == "bunny").collect();
+
+    let prepared: Vec<Prepared> = selected
+        .iter()
+        .map(|&&(name, file)| {
+            let path = mesh_dir().join(file);
+            let mesh = codec::load_path(&path).unwrap_or_else(|e| panic!("cannot load {}: {e}", path.display()));
+            Prepared::new(name, mesh)
+        })
+        .collect();
+
+    // Small samples and short windows: the dragon alone is ~1M triangles per iteration, and the
+    // whole run has to fit in a few minutes on two cores.
+    let mut c = Criterion::default()
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3))
+        .configure_from_args();
+    for p in &prepared {
+        bench_mesh(&mut c, p);
+    }
+    c.final_summary();
+
+    for p in &prepared {
+        print_summary(p);
+    }
+}
