@@ -60,8 +60,24 @@ pub fn decode_file(path: &Path) -> Result<Decoded, BftError> {
     decode(&bytes)
 }
 
+/// One command of a stream, with its offset (`RF<k>`, `LF<k>`, `ADD<k>`; 0 otherwise).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Op {
+    pub cmd: Command,
+    pub offset: u32,
+}
+
 /// Decodes `.bft` bytes.
 pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
+    decode_inner(bytes, false).map(|(d, _)| d)
+}
+
+/// Decodes `.bft` bytes and also returns the command stream, for the tile sort.
+pub fn decode_ops(bytes: &[u8]) -> Result<(Decoded, Vec<Op>), BftError> {
+    decode_inner(bytes, true)
+}
+
+fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftError> {
     let parts = format::parse(bytes)?;
     let h = parts.header;
     let [conn, geom, dup_bytes, loose_bytes] = parts.sections;
@@ -102,6 +118,8 @@ pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
         next_dup: 0,
         max: (1u32 << h.quant_bits) - 1,
         slots: h.slots,
+        ops: if record { Vec::with_capacity((h.commands as usize).min(CAP)) } else { Vec::new() },
+        record,
     };
     st.f.entries.reserve((h.triangles as usize).min(CAP));
     st.run(h.commands, h.triangles - h.loose_triangles)?;
@@ -134,7 +152,8 @@ pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
     if pos != loose_bytes.len() {
         return Err(corrupt("trailing bytes in the loose triangle section"));
     }
-    Ok(Decoded { header: h, positions: st.positions, triangles: st.triangles, duplicates })
+    let State { positions, triangles, ops, .. } = st;
+    Ok((Decoded { header: h, positions, triangles, duplicates }, ops))
 }
 
 struct State<'a> {
@@ -150,6 +169,8 @@ struct State<'a> {
     next_dup: usize,
     max: u32,
     slots: u32,
+    ops: Vec<Op>,
+    record: bool,
 }
 
 impl State<'_> {
@@ -218,6 +239,7 @@ impl State<'_> {
             let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
             let ctx = command_context(prev, dl, dr);
             let cmd = self.cmodel.decode(&mut self.cd, ctx).ok_or_else(|| corrupt("invalid command code"))?;
+            let mut offset = 0;
             match cmd {
                 Command::New => {
                     self.need(2, cmd)?;
@@ -242,6 +264,7 @@ impl State<'_> {
                 Command::Rf | Command::Lf => {
                     self.need(3, cmd)?;
                     let k = self.offset(cmd, len - 2)?;
+                    offset = k;
                     let i = if cmd == Command::Rf { 2 + k } else { len - 1 - k };
                     let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
                     self.f.insert(t[2]);
@@ -267,6 +290,7 @@ impl State<'_> {
                 Command::AddRef => {
                     self.need(1, cmd)?;
                     let k = self.offset(cmd, len)?;
+                    offset = k;
                     let x = self.f.at(len - 1 - k).slot;
                     self.f.add(x);
                 }
@@ -279,6 +303,9 @@ impl State<'_> {
                     self.emit([s, s + 2, s + 1]);
                 }
                 Command::Clear => self.f.clear(),
+            }
+            if self.record {
+                self.ops.push(Op { cmd, offset: offset as u32 });
             }
             if self.triangles.len() > triangles as usize {
                 return Err(corrupt("more triangles than the header says"));

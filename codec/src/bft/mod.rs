@@ -84,8 +84,10 @@ mod encode;
 mod format;
 mod frontier;
 mod model;
+pub mod tile_sort;
+mod tile_writer;
 
-pub use decode::{decode, decode_file, Decoded};
+pub use decode::{decode, decode_file, decode_ops, Decoded, Op};
 pub use encode::{encode, encode_with_progress, EncodeOptions, EncodeStats, Encoded};
 pub use format::{wrap_for_fuzzing, BftError, Header, Stats, MAGIC, VERSION};
 

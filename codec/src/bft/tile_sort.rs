@@ -1,0 +1,395 @@
+//! Compression-domain tile sort: one BFT submesh per screen tile, in one pass over the
+//! command stream.
+//!
+//! This work is based on: T. Mitra and T. Chiueh, "Compression-Domain Parallel Rendering",
+//! section 3 (`shared/papers/bft-compression-domain-sort-first.txt`): vertex bounding boxes
+//! (3.2), the modification rules of Table 2 with the `Add` command (3.1.4), and offsets
+//! rewritten from counters of unclipped frontier entries (3.1.3).
+//!
+//! Per frame:
+//! 1. project every vertex slot (rayon);
+//! 2. pass 1: the pixel box of every triangle clipped to the frustum gives its tile box
+//!    `[t]`; a vertex's box `[v]` is the union of its triangles' boxes;
+//! 3. pass 2: replay the model's commands on its frontier once; each command is rewritten
+//!    for every tile in the boxes of its vertices by [`rewrite`] (Table 2) and coded into
+//!    that tile's stream by a [`TileWriter`], which holds the state the ordinary decoder
+//!    will have for the tile. Offsets come from the paper's counters: every frontier entry
+//!    remembers, per tile of its vertex's box, its index in that tile's frontier, so an
+//!    offset is a subtraction, never a scan.
+//!
+//! A tile's submesh then decodes, with the ordinary decoder, to exactly the triangles `t`
+//! with the tile in `[t]`, orientation kept: a vertex is unclipped for tile `b` iff `b` is
+//! in `[v]`, and a triangle is emitted iff `b` is in `[t]`, never merely because its three
+//! vertices are unclipped.
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+use thiserror::Error;
+
+use super::decode::{decode_ops, Decoded, Op};
+use super::format::BftError;
+use super::frontier::Frontier;
+use super::tile_writer::TileWriter;
+use super::Command;
+use crate::view::{clipped_pixel_box, TileBox, TileGrid};
+
+/// Why a tile sort failed.
+#[derive(Debug, Error)]
+pub enum SortError {
+    #[error(transparent)]
+    Bft(#[from] BftError),
+    #[error("the model's command stream holds {0:?}, which only tile streams may contain")]
+    TileCommand(Command),
+}
+
+/// A model ready for sorting: its decoded slots and triangles, float positions, and its
+/// command stream. Loaded once; sorted every frame.
+pub struct TileModel {
+    pub decoded: Decoded,
+    pub ops: Vec<Op>,
+    pub positions: Vec<[f32; 3]>,
+}
+
+impl TileModel {
+    pub fn from_bytes(bytes: &[u8]) -> Result<TileModel, SortError> {
+        let (decoded, ops) = decode_ops(bytes)?;
+        if let Some(op) = ops.iter().find(|o| matches!(o.cmd, Command::AddNew | Command::AddRef | Command::Clear)) {
+            return Err(SortError::TileCommand(op.cmd));
+        }
+        let q = decoded.quantization();
+        let positions = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
+        Ok(TileModel { decoded, ops, positions })
+    }
+
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.decoded.triangles
+    }
+}
+
+/// One non-empty tile of a sorted frame.
+#[derive(Clone, Debug)]
+pub struct Tile {
+    /// `row * cols + col`.
+    pub index: usize,
+    /// The tile's submesh as a `.bft` stream.
+    pub bytes: Vec<u8>,
+    pub triangles: u32,
+    /// The model slot of each of the tile's vertices, in the tile's slot order.
+    pub slots: Vec<u32>,
+}
+
+/// Pass 1: the tile box of every triangle and every vertex slot.
+pub struct Boxes {
+    pub triangles: Vec<TileBox>,
+    pub vertices: Vec<TileBox>,
+}
+
+/// Projects the slots and computes `[t]` and `[v]`.
+pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
+    let clip: Vec<_> =
+        model.positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
+    let triangles: Vec<TileBox> = model
+        .decoded
+        .triangles
+        .par_iter()
+        .with_min_len(4096)
+        .map(|t| match clipped_pixel_box(t.map(|s| clip[s as usize]), grid.width, grid.height) {
+            Some(b) => grid.tiles_of(&b),
+            None => TileBox::EMPTY,
+        })
+        .collect();
+    let mut vertices = vec![TileBox::EMPTY; model.positions.len()];
+    for (t, b) in model.decoded.triangles.iter().zip(&triangles) {
+        if !b.is_empty() {
+            for &s in t {
+                vertices[s as usize] = vertices[s as usize].union(b);
+            }
+        }
+    }
+    Boxes { triangles, vertices }
+}
+
+/// What a command becomes in one tile: Table 2 of the paper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rewrite {
+    /// The input command itself (offsets rewritten).
+    Same,
+    Null,
+    /// `ADD` of the third vertex (a new vertex, or one on the frontier).
+    Add,
+    /// `<Null, Add>`.
+    NullAdd,
+    Dl,
+    Dr,
+    /// No output.
+    Nothing,
+}
+
+/// Table 2 (Mitra & Chiueh): the rewrite of input command `c` for a tile, given whether
+/// the left, right and third vertices are unclipped for the tile (the tile is in their
+/// vertex boxes) and whether the triangle is (the tile is in `[t]`).
+///
+/// ```text
+/// c            tile                     v_l  v_r  v_x  t    c'
+/// New/RF/LF    [t]                      NC   NC   NC   NC   New/RF/LF
+/// New/RF/LF    ([v_l] ∩ [v_x]) − [t]    NC   X    NC   C    <Null, Add>
+/// New/RF/LF    ([v_l] − [v_x]) − [t]    NC   X    C    C    Null
+/// New/RF/LF    ([v_x] − [v_l]) − [t]    C    X    NC   C    Add
+/// RF0          [t]                      NC   NC   NC   NC   RF0
+/// RF0          ([v_r] ∩ [v_l]) − [t]    NC   NC   X    C    DR
+/// RF0          ([v_r] − [v_l]) − [t]    C    NC   X    C    DL
+/// DR           [v_r] ∩ [v_l]            NC   NC   -    -    DR
+/// DR           [v_r] − [v_l]            C    NC   -    -    DL
+/// LF0          [t]                      NC   NC   NC   NC   LF0
+/// LF0          [v_l] − [t]              NC   X    X    C    DL
+/// DL           [v_l]                    NC   X    -    -    DL
+/// Null         [v_l]                    NC   X    -    -    Null
+/// other combinations                                        (nothing)
+/// ```
+/// `SEED` (not in the paper) becomes `SEED` in `[t]`; elsewhere the tile's frontier is
+/// cleared and each unclipped vertex of the seed added; see [`sort`].
+#[inline]
+pub fn rewrite(c: Command, l: bool, r: bool, x: bool, t: bool) -> Rewrite {
+    use Rewrite::*;
+    match c {
+        Command::New | Command::Rf | Command::Lf => match (t, l, x) {
+            (true, _, _) => Same,
+            (false, true, true) => NullAdd,
+            (false, true, false) => Null,
+            (false, false, true) => Add,
+            (false, false, false) => Nothing,
+        },
+        Command::Rf0 if t => Same,
+        Command::Rf0 | Command::Dr => match (l, r) {
+            (true, true) => Dr,
+            (false, true) => Dl,
+            _ => Nothing,
+        },
+        Command::Lf0 if t => Same,
+        Command::Lf0 | Command::Dl => {
+            if l {
+                Dl
+            } else {
+                Nothing
+            }
+        }
+        Command::Null => {
+            if l {
+                Null
+            } else {
+                Nothing
+            }
+        }
+        Command::Seed | Command::AddNew | Command::AddRef | Command::Clear => Nothing,
+    }
+}
+
+/// Where each frontier entry of the model sits in each tile's frontier: for the entry at
+/// absolute position `p`, the tile indices of the tiles in its vertex's box, row-major,
+/// start at `starts[p]` in `indices`. These are the paper's clipped-vertex counters,
+/// kept per tile as the count of unclipped entries pushed before.
+#[derive(Default)]
+struct EntryIndex {
+    starts: Vec<u32>,
+    indices: Vec<u32>,
+}
+
+impl EntryIndex {
+    /// Reserves room for a new entry of a vertex with tile box `b`; returns its start.
+    fn push(&mut self, b: &TileBox) -> u32 {
+        let start = self.indices.len() as u32;
+        self.starts.push(start);
+        self.indices.resize(self.indices.len() + b.area(), u32::MAX);
+        start
+    }
+
+    /// The absolute position, in tile `(c, r)`'s frontier, of the model entry at `pos`
+    /// whose vertex has tile box `b`.
+    #[inline]
+    fn tile_index(&self, pos: usize, b: &TileBox, c: u16, r: u16) -> usize {
+        self.indices[self.starts[pos] as usize + b.index_of(c, r)] as usize
+    }
+}
+
+/// Sorts the model into tiles for one view. Returns the non-empty tiles, by index.
+pub fn sort(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
+    let bx = boxes(model, view_proj, grid);
+    sort_with_boxes(model, &bx, grid)
+}
+
+/// Pass 2 of [`sort`], given pass 1's boxes.
+pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
+    let d = &model.decoded;
+    let q = &d.positions;
+    let cols = grid.cols as usize;
+    let mut writers: Vec<Option<Box<TileWriter>>> = (0..grid.tiles()).map(|_| None).collect();
+    let mut f = Frontier::default();
+    let mut at = EntryIndex::default();
+    let mut next_slot = 0u32;
+    let mut next_tri = 0usize;
+    let bits = d.header.quant_bits;
+
+    // Runs `body(writer, tile column, tile row)` for every tile in `rect`.
+    macro_rules! for_tiles {
+        ($rect:expr, |$w:ident, $c:ident, $r:ident| $body:block) => {{
+            let rect: TileBox = $rect;
+            if !rect.is_empty() {
+                for $r in rect.r0..=rect.r1 {
+                    for $c in rect.c0..=rect.c1 {
+                        let $w = writers[$r as usize * cols + $c as usize]
+                            .get_or_insert_with(|| Box::new(TileWriter::new(bits)));
+                        $body
+                    }
+                }
+            }
+        }};
+    }
+
+    for op in &model.ops {
+        match op.cmd {
+            Command::New | Command::Rf | Command::Lf => {
+                let len = f.len();
+                let (l, r) = (f.at(0), f.at(1));
+                let (xs, x_pos) = match op.cmd {
+                    Command::New => {
+                        next_slot += 1;
+                        (next_slot - 1, None)
+                    }
+                    Command::Rf => (f.at(2 + op.offset as usize).slot, Some(f.head + 2 + op.offset as usize)),
+                    _ => (f.at(len - 1 - op.offset as usize).slot, Some(f.head + len - 1 - op.offset as usize)),
+                };
+                let (vl, vr, vx, bt) = (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize], bx.vertices[xs as usize], bx.triangles[next_tri]);
+                next_tri += 1;
+                let (al, ax) = (at.push(&vl), at.push(&vx));
+                for_tiles!(vl.union(&vx), |w, c, rw| {
+                    let (ln, xn) = (vl.contains(c, rw), vx.contains(c, rw));
+                    match rewrite(op.cmd, ln, vr.contains(c, rw), xn, bt.contains(c, rw)) {
+                        Rewrite::Same => {
+                            if op.cmd == Command::New {
+                                w.new_vertex(xs, q[xs as usize]);
+                            } else {
+                                let p = x_pos.expect("RF/LF have a frontier vertex");
+                                w.existing(at.tile_index(p, &vx, c, rw) - w.f.head);
+                            }
+                        }
+                        Rewrite::NullAdd | Rewrite::Null => {
+                            w.null();
+                        }
+                        _ => {}
+                    }
+                    let back = w.f.back_pos() as u32;
+                    if ln {
+                        // `l` was pushed last by Null, or second to last by New/RF/LF.
+                        let l_back = if bt.contains(c, rw) { back - 2 } else { back - 1 };
+                        at.indices[al as usize + vl.index_of(c, rw)] = l_back;
+                    }
+                    if xn && !bt.contains(c, rw) {
+                        if op.cmd == Command::New {
+                            w.add_new(xs, q[xs as usize]);
+                        } else {
+                            let p = x_pos.expect("RF/LF have a frontier vertex");
+                            w.add_ref(at.tile_index(p, &vx, c, rw) - w.f.head);
+                        }
+                    }
+                    if xn {
+                        at.indices[ax as usize + vx.index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                    }
+                });
+                f.insert(xs);
+            }
+            Command::Rf0 | Command::Lf0 | Command::Dr | Command::Dl | Command::Null => {
+                let (l, r) = (f.at(0), if f.len() >= 2 { f.at(1) } else { f.at(0) });
+                let (vl, vr) = (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize]);
+                let bt = if matches!(op.cmd, Command::Rf0 | Command::Lf0) {
+                    next_tri += 1;
+                    bx.triangles[next_tri - 1]
+                } else {
+                    TileBox::EMPTY
+                };
+                let rect = if matches!(op.cmd, Command::Rf0 | Command::Dr) { vl.union(&vr) } else { vl };
+                let al = (op.cmd == Command::Null).then(|| at.push(&vl));
+                for_tiles!(rect, |w, c, rw| {
+                    match rewrite(op.cmd, vl.contains(c, rw), vr.contains(c, rw), false, bt.contains(c, rw)) {
+                        Rewrite::Same if op.cmd == Command::Rf0 => w.rf0(),
+                        Rewrite::Same => w.lf0(),
+                        Rewrite::Dr => w.dr(),
+                        Rewrite::Dl => w.dl(),
+                        Rewrite::Null => {
+                            w.null();
+                            at.indices[al.unwrap() as usize + vl.index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                        }
+                        _ => {}
+                    }
+                });
+                match op.cmd {
+                    Command::Rf0 => f.remove_right(true),
+                    Command::Lf0 => f.remove_left(true),
+                    Command::Dr => f.remove_right(false),
+                    Command::Dl => f.remove_left(false),
+                    _ => f.skip(),
+                }
+            }
+            Command::Seed => {
+                let s = next_slot;
+                next_slot += 3;
+                let bt = bx.triangles[next_tri];
+                next_tri += 1;
+                let v = [0, 1, 2].map(|j| bx.vertices[(s + j) as usize]);
+                // The model's frontier is cleared: so is every tile's that does not get the seed.
+                for (b, w) in writers.iter_mut().enumerate() {
+                    if let Some(w) = w {
+                        let (c, rw) = ((b % cols) as u16, (b / cols) as u16);
+                        if !w.f.is_empty() && !bt.contains(c, rw) {
+                            w.clear();
+                        }
+                    }
+                }
+                let a = v.map(|b| at.push(&b));
+                for_tiles!(v[0].union(&v[1]).union(&v[2]), |w, c, rw| {
+                    if bt.contains(c, rw) {
+                        w.seed([s, s + 1, s + 2], [0, 1, 2].map(|j| q[(s + j) as usize]));
+                        let back = w.f.back_pos() as u32;
+                        for j in 0..3 {
+                            at.indices[a[j] as usize + v[j].index_of(c, rw)] = back - 3 + j as u32;
+                        }
+                    } else {
+                        for j in 0..3 {
+                            if v[j].contains(c, rw) {
+                                w.add_new(s + j as u32, q[(s + j as u32) as usize]);
+                                at.indices[a[j] as usize + v[j].index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                            }
+                        }
+                    }
+                });
+                f.seed(s);
+            }
+            Command::AddNew | Command::AddRef | Command::Clear => return Err(SortError::TileCommand(op.cmd)),
+        }
+    }
+
+    // After the commands: vertices only loose triangles use, then the loose triangles.
+    for s in next_slot..q.len() as u32 {
+        for_tiles!(bx.vertices[s as usize], |w, _c, _r| {
+            w.tail_vertex(s, q[s as usize]);
+        });
+    }
+    for (t, tri) in d.triangles.iter().enumerate().skip(next_tri) {
+        for_tiles!(bx.triangles[t], |w, _c, _r| {
+            w.loose(*tri);
+        });
+    }
+
+    let header = d.header;
+    let tiles: Vec<Tile> = writers
+        .into_par_iter()
+        .enumerate()
+        .filter_map(|(index, w)| {
+            let w = w?;
+            (w.triangles > 0).then(|| {
+                let (triangles, slots) = (w.triangles, w.global.clone());
+                Tile { index, bytes: w.finish(&header), triangles, slots }
+            })
+        })
+        .collect();
+    Ok(tiles)
+}

@@ -1,0 +1,222 @@
+//! One tile's output stream during the tile sort.
+//!
+//! A `TileWriter` keeps exactly the state the ordinary decoder will have when it reads the
+//! tile (its frontier, visited degrees, positions, context models), so it can code each
+//! rewritten command in the decoder's context and predict each new vertex as the decoder
+//! will. It is the decoder of `decode.rs` run forwards: same frontier methods, same models,
+//! same predictions, encoding where the decoder decodes.
+
+use super::format::{self, put_varint, Header};
+use super::frontier::{Frontier, NONE};
+use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::Command;
+use crate::rangecoder::Encoder;
+
+pub(crate) struct TileWriter {
+    pub f: Frontier,
+    deg: Vec<u8>,
+    positions: Vec<[u32; 3]>,
+    /// Tile slot -> the model's slot (ascending: tile slots are created in model order).
+    pub global: Vec<u32>,
+    conn: Encoder,
+    geom: Encoder,
+    cmodel: CommandModel,
+    gmodel: GeometryModel,
+    prev: Command,
+    max: u32,
+    commands: u32,
+    seeds: u32,
+    pub triangles: u32,
+    tail_slots: u32,
+    loose: Vec<[u32; 3]>,
+}
+
+impl TileWriter {
+    pub fn new(quant_bits: u8) -> Self {
+        TileWriter {
+            f: Frontier::default(),
+            deg: Vec::new(),
+            positions: Vec::new(),
+            global: Vec::new(),
+            conn: Encoder::new(),
+            geom: Encoder::new(),
+            cmodel: CommandModel::default(),
+            gmodel: GeometryModel::default(),
+            prev: Command::Seed,
+            max: (1u32 << quant_bits) - 1,
+            commands: 0,
+            seeds: 0,
+            triangles: 0,
+            tail_slots: 0,
+            loose: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn code(&mut self, cmd: Command) {
+        let len = self.f.len();
+        let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
+        let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
+        self.cmodel.encode(&mut self.conn, command_context(self.prev, dl, dr), cmd);
+        self.prev = cmd;
+        self.commands += 1;
+    }
+
+    #[inline]
+    fn slot_pos(&self, slot: u32) -> [u32; 3] {
+        if slot == NONE {
+            [self.max / 2 + 1; 3]
+        } else {
+            self.positions[slot as usize]
+        }
+    }
+
+    fn new_slot(&mut self, global: u32, q: [u32; 3], kind: Prediction, basis: [u32; 3]) -> u32 {
+        let pred = predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
+        self.gmodel.encode(&mut self.geom, kind, q, pred);
+        let s = self.positions.len() as u32;
+        self.positions.push(q);
+        self.deg.push(0);
+        self.global.push(global);
+        s
+    }
+
+    fn prev_slot(&self) -> u32 {
+        self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32)
+    }
+
+    #[inline]
+    fn emit(&mut self, t: [u32; 3]) {
+        for s in t {
+            let d = &mut self.deg[s as usize];
+            *d = d.saturating_add(1);
+        }
+        self.triangles += 1;
+    }
+
+    /// `NEW` with the model's slot `global` at position `q`.
+    pub fn new_vertex(&mut self, global: u32, q: [u32; 3]) {
+        self.code(Command::New);
+        let (l, r) = (self.f.at(0), self.f.at(1));
+        let kind = if l.apex != NONE { Prediction::Parallelogram } else { Prediction::Midpoint };
+        let s = self.new_slot(global, q, kind, [l.slot, r.slot, l.apex]);
+        self.f.insert(s);
+        self.emit([l.slot, r.slot, s]);
+    }
+
+    pub fn rf0(&mut self) {
+        self.code(Command::Rf0);
+        let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(2).slot];
+        self.f.remove_right(true);
+        self.emit(t);
+    }
+
+    pub fn lf0(&mut self) {
+        self.code(Command::Lf0);
+        let len = self.f.len();
+        let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(len - 1).slot];
+        self.f.remove_left(true);
+        self.emit(t);
+    }
+
+    /// A generic `RF<k>`/`LF<k>` to the tile frontier position `i >= 2`, whichever offset is
+    /// smaller (both change the frontier alike).
+    pub fn existing(&mut self, i: usize) {
+        let len = self.f.len();
+        debug_assert!(i >= 2 && i < len);
+        let (cmd, k) = if i - 2 <= len - 1 - i { (Command::Rf, i - 2) } else { (Command::Lf, len - 1 - i) };
+        self.code(cmd);
+        self.cmodel.encode_offset(&mut self.conn, cmd, k as u32);
+        let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
+        self.f.insert(t[2]);
+        self.emit(t);
+    }
+
+    pub fn null(&mut self) {
+        self.code(Command::Null);
+        self.f.skip();
+    }
+
+    pub fn dl(&mut self) {
+        self.code(Command::Dl);
+        self.f.remove_left(false);
+    }
+
+    pub fn dr(&mut self) {
+        self.code(Command::Dr);
+        self.f.remove_right(false);
+    }
+
+    pub fn add_new(&mut self, global: u32, q: [u32; 3]) {
+        self.code(Command::AddNew);
+        let prev = self.prev_slot();
+        let s = self.new_slot(global, q, Prediction::Previous, [prev, NONE, NONE]);
+        self.f.add(s);
+    }
+
+    /// `ADD<k>` of the vertex at tile frontier position `i`.
+    pub fn add_ref(&mut self, i: usize) {
+        let len = self.f.len();
+        self.code(Command::AddRef);
+        self.cmodel.encode_offset(&mut self.conn, Command::AddRef, (len - 1 - i) as u32);
+        let x = self.f.at(i).slot;
+        self.f.add(x);
+    }
+
+    pub fn seed(&mut self, global: [u32; 3], q: [[u32; 3]; 3]) {
+        self.code(Command::Seed);
+        self.seeds += 1;
+        let prev = self.prev_slot();
+        let s = self.new_slot(global[0], q[0], Prediction::Previous, [prev, NONE, NONE]);
+        self.new_slot(global[1], q[1], Prediction::Previous, [s, NONE, NONE]);
+        self.new_slot(global[2], q[2], Prediction::Midpoint, [s, s + 1, NONE]);
+        self.f.seed(s);
+        self.emit([s, s + 2, s + 1]);
+    }
+
+    pub fn clear(&mut self) {
+        self.code(Command::Clear);
+        self.f.clear();
+    }
+
+    /// A vertex only loose triangles use, after the command stream.
+    pub fn tail_vertex(&mut self, global: u32, q: [u32; 3]) {
+        let prev = self.prev_slot();
+        self.new_slot(global, q, Prediction::Previous, [prev, NONE, NONE]);
+        self.tail_slots += 1;
+    }
+
+    /// A loose triangle over model slots, all of which this tile has.
+    pub fn loose(&mut self, t: [u32; 3]) {
+        let local = t.map(|g| self.global.binary_search(&g).expect("tile has every vertex of its triangles") as u32);
+        self.loose.push(local);
+        self.triangles += 1;
+    }
+
+    /// The tile's `.bft` bytes: the model's quantization, this tile's counts and streams.
+    pub fn finish(self, model: &Header) -> Vec<u8> {
+        let slots = self.positions.len() as u32;
+        let header = Header {
+            input_vertices: slots,
+            slots,
+            triangles: self.triangles,
+            loose_triangles: self.loose.len() as u32,
+            commands: self.commands,
+            seeds: self.seeds,
+            duplicates: 0,
+            tail_slots: self.tail_slots,
+            components: 0,
+            quant_bits: model.quant_bits,
+            bbox_min: model.bbox_min,
+            step: model.step,
+            bbox_max: model.bbox_max,
+        };
+        let mut dups = Vec::new();
+        put_varint(&mut dups, 0);
+        let mut loose = Vec::new();
+        for s in self.loose.iter().flatten() {
+            put_varint(&mut loose, *s as u64);
+        }
+        format::write(&header, [&self.conn.finish(), &self.geom.finish(), &dups, &loose])
+    }
+}

@@ -1,0 +1,333 @@
+//! Camera, screen and tile-grid conventions (written in `DESIGN.md` and the README), and the
+//! screen box of a triangle clipped to the view frustum.
+//!
+//! - Right-handed world; projection `Mat4::perspective_rh(fovy, W/H, near, far)` (depth 0..1)
+//!   times `Mat4::look_at_rh(eye, target, up)`.
+//! - Pixels: `px = (x_ndc + 1) / 2 * W`, `py = (1 - y_ndc) / 2 * H`, origin top-left.
+//! - Tile `(i, j)` of a `C x R` grid covers pixels `[i*W/C, (i+1)*W/C) x [j*H/R, (j+1)*H/R)`
+//!   (integer division); its index is `j*C + i`. The column of pixel `p` is therefore
+//!   `((p + 1) * C - 1) / W`, the largest `i` with `i*W/C <= p`.
+
+use glam::{Mat4, Vec3, Vec4};
+use thiserror::Error;
+
+/// Why a view or grid is unusable.
+#[derive(Debug, Error, PartialEq)]
+pub enum ViewError {
+    #[error("screen size {0}x{1} must be at least 1x1")]
+    ZeroSize(u32, u32),
+    #[error("a {cols}x{rows} tile grid does not fit a {width}x{height} screen (at most one tile per pixel)")]
+    GridTooLarge { cols: u32, rows: u32, width: u32, height: u32 },
+    #[error("tile grid {0}x{1} must be at least 1x1")]
+    ZeroGrid(u32, u32),
+    #[error("camera eye and target are the same point")]
+    EyeIsTarget,
+    #[error("camera up vector is zero or parallel to the view direction")]
+    BadUp,
+    #[error("vertical field of view must be in (0, 180) degrees, not {0}")]
+    Fovy(f32),
+    #[error("clip planes must satisfy 0 < near < far, not near {0}, far {1}")]
+    ClipPlanes(f32, f32),
+    #[error("camera values must be finite")]
+    NonFinite,
+}
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub fovy: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Camera {
+    pub const DEFAULT_FOVY: f32 = 45.0;
+
+    /// The default camera: looks down -Z at the center of the bounding box's sphere, far
+    /// enough back that the whole sphere is in view at this aspect ratio (width / height).
+    pub fn framing(bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32) -> Camera {
+        let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));
+        let center = (lo + hi) * 0.5;
+        let radius = ((hi - lo).length() * 0.5).max(1e-6);
+        let half_v = (Self::DEFAULT_FOVY * 0.5).to_radians();
+        let half_h = (half_v.tan() * aspect).atan();
+        let dist = radius / half_v.min(half_h).sin();
+        Camera {
+            eye: center + Vec3::Z * dist,
+            target: center,
+            up: Vec3::Y,
+            fovy: Self::DEFAULT_FOVY,
+            near: (dist - radius) * 0.5,
+            far: dist + radius * 2.0,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), ViewError> {
+        let vals = [self.eye.to_array(), self.target.to_array(), self.up.to_array()];
+        if !vals.iter().flatten().chain(&[self.fovy, self.near, self.far]).all(|v| v.is_finite()) {
+            return Err(ViewError::NonFinite);
+        }
+        let dir = self.target - self.eye;
+        if dir.length_squared() == 0.0 {
+            return Err(ViewError::EyeIsTarget);
+        }
+        if self.up.cross(dir).length_squared() <= 1e-12 * dir.length_squared() * self.up.length_squared() {
+            return Err(ViewError::BadUp);
+        }
+        if !(self.fovy > 0.0 && self.fovy < 180.0) {
+            return Err(ViewError::Fovy(self.fovy));
+        }
+        if !(self.near > 0.0 && self.far > self.near) {
+            return Err(ViewError::ClipPlanes(self.near, self.far));
+        }
+        Ok(())
+    }
+
+    pub fn view_proj(&self, aspect: f32) -> Mat4 {
+        Mat4::perspective_rh(self.fovy.to_radians(), aspect, self.near, self.far)
+            * Mat4::look_at_rh(self.eye, self.target, self.up)
+    }
+}
+
+/// A screen of `width x height` pixels cut into `cols x rows` tiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileGrid {
+    pub width: u32,
+    pub height: u32,
+    pub cols: u32,
+    pub rows: u32,
+}
+
+impl TileGrid {
+    pub fn new(width: u32, height: u32, cols: u32, rows: u32) -> Result<TileGrid, ViewError> {
+        if width == 0 || height == 0 {
+            return Err(ViewError::ZeroSize(width, height));
+        }
+        if cols == 0 || rows == 0 {
+            return Err(ViewError::ZeroGrid(cols, rows));
+        }
+        if cols > width || rows > height || cols > u16::MAX as u32 || rows > u16::MAX as u32 {
+            return Err(ViewError::GridTooLarge { cols, rows, width, height });
+        }
+        Ok(TileGrid { width, height, cols, rows })
+    }
+
+    pub fn tiles(&self) -> usize {
+        (self.cols * self.rows) as usize
+    }
+
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+
+    /// Pixel rectangle `[x0, x1) x [y0, y1)` of tile `index`.
+    pub fn tile_rect(&self, index: usize) -> [u32; 4] {
+        let (i, j) = (index as u64 % self.cols as u64, index as u64 / self.cols as u64);
+        let (w, h, c, r) = (self.width as u64, self.height as u64, self.cols as u64, self.rows as u64);
+        [(i * w / c) as u32, (j * h / r) as u32, ((i + 1) * w / c) as u32, ((j + 1) * h / r) as u32]
+    }
+
+    /// The tile column of a pixel x coordinate (clamped to the screen).
+    #[inline]
+    fn col(&self, px: f32) -> u16 {
+        let p = (px.floor().max(0.0) as u64).min(self.width as u64 - 1);
+        (((p + 1) * self.cols as u64 - 1) / self.width as u64) as u16
+    }
+
+    #[inline]
+    fn row(&self, py: f32) -> u16 {
+        let p = (py.floor().max(0.0) as u64).min(self.height as u64 - 1);
+        (((p + 1) * self.rows as u64 - 1) / self.height as u64) as u16
+    }
+
+    /// The tiles covered by a pixel-space box.
+    #[inline]
+    pub fn tiles_of(&self, b: &PixelBox) -> TileBox {
+        TileBox { c0: self.col(b.xmin), c1: self.col(b.xmax), r0: self.row(b.ymin), r1: self.row(b.ymax) }
+    }
+}
+
+/// A box in pixel coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelBox {
+    pub xmin: f32,
+    pub xmax: f32,
+    pub ymin: f32,
+    pub ymax: f32,
+}
+
+/// An inclusive rectangle of tiles: columns `c0..=c1`, rows `r0..=r1`; empty if `c0 > c1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileBox {
+    pub c0: u16,
+    pub c1: u16,
+    pub r0: u16,
+    pub r1: u16,
+}
+
+impl TileBox {
+    pub const EMPTY: TileBox = TileBox { c0: 1, c1: 0, r0: 1, r1: 0 };
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.c0 > self.c1 || self.r0 > self.r1
+    }
+
+    #[inline]
+    pub fn contains(&self, c: u16, r: u16) -> bool {
+        c >= self.c0 && c <= self.c1 && r >= self.r0 && r <= self.r1
+    }
+
+    #[inline]
+    pub fn union(&self, o: &TileBox) -> TileBox {
+        if self.is_empty() {
+            return *o;
+        }
+        if o.is_empty() {
+            return *self;
+        }
+        TileBox { c0: self.c0.min(o.c0), c1: self.c1.max(o.c1), r0: self.r0.min(o.r0), r1: self.r1.max(o.r1) }
+    }
+
+    #[inline]
+    pub fn area(&self) -> usize {
+        if self.is_empty() {
+            0
+        } else {
+            (self.c1 - self.c0 + 1) as usize * (self.r1 - self.r0 + 1) as usize
+        }
+    }
+
+    /// Position of tile `(c, r)` in this box's row-major order.
+    #[inline]
+    pub fn index_of(&self, c: u16, r: u16) -> usize {
+        (r - self.r0) as usize * (self.c1 - self.c0 + 1) as usize + (c - self.c0) as usize
+    }
+}
+
+/// The pixel box of a triangle (clip-space corners) clipped to the view frustum, or `None`
+/// when nothing of it is inside. Corners wholly inside take the fast path; the rest are
+/// clipped against the six planes in homogeneous coordinates (Sutherland-Hodgman).
+pub fn clipped_pixel_box(c: [Vec4; 3], width: u32, height: u32) -> Option<PixelBox> {
+    // Plane distances, >= 0 inside: x+w, w-x, y+w, w-y, z, w-z (depth 0..1).
+    let d = |v: Vec4| [v.w + v.x, v.w - v.x, v.w + v.y, v.w - v.y, v.z, v.w - v.z];
+    let ds = c.map(d);
+    let mut inside = true;
+    for p in 0..6 {
+        if ds.iter().all(|d| d[p] < 0.0) {
+            return None;
+        }
+        inside &= ds.iter().all(|d| d[p] >= 0.0);
+    }
+    let mut poly: [Vec4; 9] = [Vec4::ZERO; 9];
+    let mut n = 3;
+    poly[..3].copy_from_slice(&c);
+    if !inside {
+        let mut next = [Vec4::ZERO; 9];
+        for p in 0..6 {
+            let mut m = 0;
+            for i in 0..n {
+                let (a, b) = (poly[i], poly[(i + 1) % n]);
+                let (da, db) = (d(a)[p], d(b)[p]);
+                if da >= 0.0 {
+                    next[m] = a;
+                    m += 1;
+                }
+                if (da >= 0.0) != (db >= 0.0) {
+                    next[m] = a + (b - a) * (da / (da - db));
+                    m += 1;
+                }
+            }
+            n = m;
+            poly[..n].copy_from_slice(&next[..n]);
+            if n == 0 {
+                return None;
+            }
+        }
+    }
+    let mut b = PixelBox { xmin: f32::INFINITY, xmax: f32::NEG_INFINITY, ymin: f32::INFINITY, ymax: f32::NEG_INFINITY };
+    for v in &poly[..n] {
+        if v.w <= 0.0 {
+            continue;
+        }
+        let px = (v.x / v.w + 1.0) * 0.5 * width as f32;
+        let py = (1.0 - v.y / v.w) * 0.5 * height as f32;
+        b.xmin = b.xmin.min(px);
+        b.xmax = b.xmax.max(px);
+        b.ymin = b.ymin.min(py);
+        b.ymax = b.ymax.max(py);
+    }
+    (b.xmin <= b.xmax && b.ymin <= b.ymax).then_some(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_cover_every_pixel_once_for_uneven_sizes() {
+        for (w, h, c, r) in [(1920, 1080, 8, 8), (1000, 7, 3, 7), (17, 13, 5, 4), (64, 64, 64, 64), (100, 1, 1, 1)] {
+            let g = TileGrid::new(w, h, c, r).unwrap();
+            for x in 0..w {
+                let col = g.col(x as f32 + 0.5) as u32;
+                let rect = g.tile_rect(col as usize);
+                assert!(rect[0] <= x && x < rect[2], "pixel {x} in column {col} of {w}/{c}");
+            }
+            for y in 0..h {
+                let row = g.row(y as f32 + 0.25) as u32;
+                let rect = g.tile_rect((row * c) as usize);
+                assert!(rect[1] <= y && y < rect[3]);
+            }
+        }
+    }
+
+    #[test]
+    fn grid_and_camera_errors() {
+        assert_eq!(TileGrid::new(0, 10, 1, 1), Err(ViewError::ZeroSize(0, 10)));
+        assert!(matches!(TileGrid::new(8, 8, 16, 1), Err(ViewError::GridTooLarge { .. })));
+        assert_eq!(TileGrid::new(8, 8, 0, 1), Err(ViewError::ZeroGrid(0, 1)));
+        let mut cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);
+        assert_eq!(cam.validate(), Ok(()));
+        cam.target = cam.eye;
+        assert_eq!(cam.validate(), Err(ViewError::EyeIsTarget));
+        let mut cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);
+        cam.up = cam.target - cam.eye;
+        assert_eq!(cam.validate(), Err(ViewError::BadUp));
+    }
+
+    #[test]
+    fn default_camera_sees_the_whole_box() {
+        let (lo, hi) = ([-1.0, 2.0, 0.5], [3.0, 2.5, 4.0]);
+        for aspect in [0.5, 1.0, 16.0 / 9.0] {
+            let cam = Camera::framing(lo, hi, aspect);
+            let vp = cam.view_proj(aspect);
+            for i in 0..8 {
+                let p = Vec3::new(
+                    if i & 1 == 0 { lo[0] } else { hi[0] },
+                    if i & 2 == 0 { lo[1] } else { hi[1] },
+                    if i & 4 == 0 { lo[2] } else { hi[2] },
+                );
+                let c = vp * p.extend(1.0);
+                let n = c / c.w;
+                assert!(n.x.abs() <= 1.0 && n.y.abs() <= 1.0 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn clipping_a_triangle_through_the_near_plane() {
+        let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fovy: 90.0, near: 1.0, far: 100.0 };
+        let vp = cam.view_proj(1.0);
+        let tri = [Vec3::new(0.0, 0.0, 0.5), Vec3::new(0.5, 0.0, -2.0), Vec3::new(0.0, 0.5, -2.0)];
+        let c = tri.map(|p| vp * p.extend(1.0));
+        let b = clipped_pixel_box(c, 100, 100).expect("partly visible");
+        // The near-plane cut keeps only the part at depth >= 1: x and y within the far corners' spread.
+        assert!(b.xmin >= 49.9 && b.xmax <= 100.0 && b.ymin >= 0.0 && b.ymax <= 50.1, "{b:?}");
+        let behind = [Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+        assert_eq!(clipped_pixel_box(behind.map(|p| vp * p.extend(1.0)), 100, 100), None);
+    }
+}
