@@ -18,6 +18,7 @@ pub mod load;
 pub mod mesh;
 pub mod rangecoder;
 pub mod save;
+pub mod tri_sort;
 pub mod view;
 
 pub use load::{load_path, LoadError};

@@ -9,7 +9,7 @@ use std::path::Path;
 use crate::mesh::Mesh;
 
 /// Writes `mesh` as binary little-endian PLY with float positions.
-pub fn write_ply(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
+pub fn write_ply<W: Write + ?Sized>(mesh: &Mesh, out: &mut W) -> io::Result<()> {
     write!(
         out,
         "ply\nformat binary_little_endian 1.0\ncomment written by tessera\nelement vertex {}\n\
@@ -35,7 +35,7 @@ pub fn write_ply(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
 
 /// Writes `mesh` as OBJ (`v` and 1-based `f` lines). Rust's float formatting prints the
 /// shortest string that reads back to the same `f32`, so positions survive exactly.
-pub fn write_obj(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
+pub fn write_obj<W: Write + ?Sized>(mesh: &Mesh, out: &mut W) -> io::Result<()> {
     let mut w = io::BufWriter::new(out);
     writeln!(w, "# written by tessera: {} vertices, {} triangles", mesh.positions.len(), mesh.triangles.len())?;
     for p in &mesh.positions {
@@ -50,8 +50,8 @@ pub fn write_obj(mesh: &Mesh, out: &mut impl Write) -> io::Result<()> {
 /// The writer for a path's extension (`.ply` or `.obj`), or `None`.
 pub fn writer_for(path: &Path) -> Option<fn(&Mesh, &mut dyn Write) -> io::Result<()>> {
     match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
-        "ply" => Some(|m, w| write_ply(m, &mut { w })),
-        "obj" => Some(|m, w| write_obj(m, &mut { w })),
+        "ply" => Some(|m, w| write_ply(m, w)),
+        "obj" => Some(|m, w| write_obj(m, w)),
         _ => None,
     }
 }

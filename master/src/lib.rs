@@ -2,6 +2,8 @@
 //! lives here (the frame loop arrives with the cluster pipeline); so do the file commands
 //! `encode`, `decode` and `stats`.
 
+pub mod args;
 pub mod commands;
 pub mod output;
 pub mod progress;
+pub mod sort;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use master::args::{CameraArgs, GridArgs};
 use master::commands;
 
 #[derive(Parser)]
@@ -31,6 +32,21 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Sort a model into one compressed BFT submesh per screen tile (one frame).
+    Sort {
+        /// A .bft file, or a mesh file (encoded on load at 16 bits).
+        model: PathBuf,
+        #[command(flatten)]
+        grid: GridArgs,
+        #[command(flatten)]
+        camera: CameraArgs,
+        /// Write DIR/tile-<index>.ply for every non-empty tile, and DIR/summary.json.
+        #[arg(long)]
+        dump: Option<PathBuf>,
+        /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print sizes and rates of a .bft file.
     Stats {
         input: PathBuf,
@@ -46,6 +62,7 @@ fn main() -> ExitCode {
         Command::Encode { input, output, quant_bits } => commands::encode(input, output, *quant_bits),
         Command::Decode { input, output } => commands::decode(input, output),
         Command::Stats { input, json } => commands::stats(input, *json),
+        Command::Sort { model, grid, camera, dump, json } => master::sort::run(model, grid, camera, dump.as_ref(), *json),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

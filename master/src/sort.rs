@@ -1,0 +1,172 @@
+//! `tessera sort`: one frame of the compression-domain tile sort, with a per-tile report,
+//! the Tiled Tri baseline beside it, and optionally every tile's decoded submesh on disk.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use codec::bft::tile_sort::{self, Tile, TileModel};
+use codec::bft::{self, EncodeOptions};
+use codec::tri_sort;
+use codec::view::{Camera, TileGrid};
+use serde::Serialize;
+
+use crate::args::{CameraArgs, GridArgs};
+use crate::commands::load_mesh;
+use crate::output::{write_atomic, write_bytes};
+
+/// A model held by the master: its `.bft` bytes and the sort-ready form.
+pub struct Model {
+    pub bytes: Vec<u8>,
+    pub tiles: TileModel,
+}
+
+/// Loads a `.bft` file, or encodes a mesh file (OBJ, PLY, STL) on load at 16 bits.
+pub fn load_model(path: &Path) -> Result<Model> {
+    let is_bft = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bft"));
+    let bytes = if is_bft {
+        std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?
+    } else {
+        let mesh = load_mesh(path)?;
+        bft::encode(&mesh, EncodeOptions::default()).with_context(|| format!("cannot encode {}", path.display()))?.bytes
+    };
+    let tiles = TileModel::from_bytes(&bytes).with_context(|| format!("{}", path.display()))?;
+    Ok(Model { bytes, tiles })
+}
+
+impl Model {
+    pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+        let h = self.tiles.decoded.header;
+        args.camera(h.bbox_min, h.bbox_max, grid.aspect())
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct TileSummary {
+    pub index: usize,
+    pub col: u32,
+    pub row: u32,
+    pub triangles: u32,
+    pub vertices: usize,
+    pub bytes: usize,
+    /// Bytes the same triangles need as independent triangles.
+    pub tri_bytes: usize,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Totals {
+    pub triangles: usize,
+    /// Triangles with a non-empty clipped screen box.
+    pub visible_triangles: usize,
+    /// Triangles summed over tiles (a triangle counts once per tile it overlaps).
+    pub tiled_triangles: usize,
+    pub nonempty_tiles: usize,
+    /// The whole model as one BFT stream (the paper's "BFT").
+    pub bft_bytes: usize,
+    /// The visible triangles as independent triangles, 36 bytes each ("Tri").
+    pub tri_bytes: usize,
+    pub tiled_bft_bytes: usize,
+    pub tiled_tri_bytes: usize,
+}
+
+#[derive(Debug, Serialize)]
+pub struct SortSummary {
+    pub model: String,
+    pub size: [u32; 2],
+    pub tiles: [u32; 2],
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: [f32; 3],
+    pub fovy: f32,
+    pub near: f32,
+    pub far: f32,
+    pub sort_ms: f64,
+    pub tri_sort_ms: f64,
+    pub totals: Totals,
+    pub per_tile: Vec<TileSummary>,
+}
+
+/// Sorts one frame with both sorts and summarises it.
+pub fn sort_frame(model: &Model, name: &str, cam: &Camera, grid: &TileGrid) -> Result<(SortSummary, Vec<Tile>)> {
+    let vp = cam.view_proj(grid.aspect());
+    let start = Instant::now();
+    let boxes = tile_sort::boxes(&model.tiles, vp, grid);
+    let tiles = tile_sort::sort_with_boxes(&model.tiles, &boxes, grid)?;
+    let sort_ms = start.elapsed().as_secs_f64() * 1e3;
+    let start = Instant::now();
+    let tri = tri_sort::sort(&model.tiles.positions, model.tiles.triangles(), vp, grid);
+    let tri_sort_ms = start.elapsed().as_secs_f64() * 1e3;
+
+    let per_tile: Vec<TileSummary> = tiles
+        .iter()
+        .map(|t| TileSummary {
+            index: t.index,
+            col: t.index as u32 % grid.cols,
+            row: t.index as u32 / grid.cols,
+            triangles: t.triangles,
+            vertices: t.slots.len(),
+            bytes: t.bytes.len(),
+            tri_bytes: tri[t.index].len(),
+        })
+        .collect();
+    let visible = boxes.triangles.iter().filter(|b| !b.is_empty()).count();
+    let totals = Totals {
+        triangles: model.tiles.triangles().len(),
+        visible_triangles: visible,
+        tiled_triangles: per_tile.iter().map(|t| t.triangles as usize).sum(),
+        nonempty_tiles: tiles.len(),
+        bft_bytes: model.bytes.len(),
+        tri_bytes: visible * tri_sort::TRIANGLE_BYTES,
+        tiled_bft_bytes: tiles.iter().map(|t| t.bytes.len()).sum(),
+        tiled_tri_bytes: tri.iter().map(Vec::len).sum(),
+    };
+    let summary = SortSummary {
+        model: name.to_string(),
+        size: [grid.width, grid.height],
+        tiles: [grid.cols, grid.rows],
+        eye: cam.eye.to_array(),
+        target: cam.target.to_array(),
+        up: cam.up.to_array(),
+        fovy: cam.fovy,
+        near: cam.near,
+        far: cam.far,
+        sort_ms,
+        tri_sort_ms,
+        totals,
+        per_tile,
+    };
+    Ok((summary, tiles))
+}
+
+/// `tessera sort MODEL --size WxH --tiles CxR [camera] [--dump DIR] [--json]`.
+pub fn run(path: &Path, grid: &GridArgs, camera: &CameraArgs, dump: Option<&PathBuf>, json: bool) -> Result<()> {
+    let grid = grid.grid()?;
+    let model = load_model(path)?;
+    let cam = model.camera(camera, &grid)?;
+    let (summary, tiles) = sort_frame(&model, &path.display().to_string(), &cam, &grid)?;
+    if let Some(dir) = dump {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for t in &tiles {
+            let mesh = bft::decode(&t.bytes).with_context(|| format!("tile {} does not decode", t.index))?.to_mesh();
+            write_atomic(&dir.join(format!("tile-{}.ply", t.index)), |w| codec::save::write_ply(&mesh, w))?;
+        }
+        write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        let t = &summary.totals;
+        println!(
+            "{}: {}x{} tiles on {}x{}, {} of {} triangles visible, {} non-empty tiles",
+            summary.model, grid.cols, grid.rows, grid.width, grid.height, t.visible_triangles, t.triangles, t.nonempty_tiles
+        );
+        println!("  BFT        {:>12} bytes   (whole model)", t.bft_bytes);
+        println!("  Tiled BFT  {:>12} bytes   sort {:.1} ms", t.tiled_bft_bytes, summary.sort_ms);
+        println!("  Tri        {:>12} bytes", t.tri_bytes);
+        println!("  Tiled Tri  {:>12} bytes   sort {:.1} ms", t.tiled_tri_bytes, summary.tri_sort_ms);
+        if let Some(dir) = dump {
+            println!("  wrote {} tiles and summary.json to {}", tiles.len(), dir.display());
+        }
+    }
+    Ok(())
+}
