@@ -211,33 +211,91 @@ impl EntryIndex {
     }
 }
 
+/// One rewritten command for one tile, recorded by the sequential replay and coded later,
+/// in parallel across tiles, by that tile's [`TileWriter`]. Positions are tile frontier
+/// positions (0 = the tile's left vertex); slots and triangles are the model's.
+#[derive(Clone, Copy, Debug)]
+enum TileOp {
+    New(u32),
+    Existing(u32),
+    Rf0,
+    Lf0,
+    Null,
+    Dl,
+    Dr,
+    AddNew(u32),
+    AddRef(u32),
+    Seed(u32),
+    Clear,
+    Tail(u32),
+    Loose(u32),
+}
+
+/// A tile during the replay: its frontier reduced to the two counters offsets need (the
+/// absolute positions of its front and back, exactly as the tile decoder's frontier will
+/// have them), and its rewritten commands.
+#[derive(Default)]
+struct TileTrack {
+    head: u32,
+    back: u32,
+    ops: Vec<TileOp>,
+}
+
+impl TileTrack {
+    #[inline]
+    fn push(&mut self, op: TileOp) {
+        use TileOp::*;
+        match op {
+            New(_) | Existing(_) => {
+                self.head += 1;
+                self.back += 2;
+            }
+            Rf0 | Lf0 | Dl | Dr => self.head += 1,
+            Null => {
+                self.head += 1;
+                self.back += 1;
+            }
+            AddNew(_) | AddRef(_) => self.back += 1,
+            Seed(_) => {
+                self.head = self.back;
+                self.back += 3;
+            }
+            Clear => self.head = self.back,
+            Tail(_) | Loose(_) => {}
+        }
+        self.ops.push(op);
+    }
+
+    fn len(&self) -> u32 {
+        self.back - self.head
+    }
+}
+
 /// Sorts the model into tiles for one view. Returns the non-empty tiles, by index.
 pub fn sort(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
     let bx = boxes(model, view_proj, grid);
     sort_with_boxes(model, &bx, grid)
 }
 
-/// Pass 2 of [`sort`], given pass 1's boxes.
+/// Pass 2 of [`sort`], given pass 1's boxes: a sequential replay that rewrites every
+/// command for the tiles it touches, then the coding of each tile's stream, in parallel.
 pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
     let d = &model.decoded;
-    let q = &d.positions;
     let cols = grid.cols as usize;
-    let mut writers: Vec<Option<Box<TileWriter>>> = (0..grid.tiles()).map(|_| None).collect();
+    let mut tracks: Vec<TileTrack> = (0..grid.tiles()).map(|_| TileTrack::default()).collect();
     let mut f = Frontier::default();
     let mut at = EntryIndex::default();
     let mut next_slot = 0u32;
     let mut next_tri = 0usize;
-    let bits = d.header.quant_bits;
 
-    // Runs `body(writer, tile column, tile row)` for every tile in `rect`.
+    // Runs `body(track, tile column, tile row)` for every tile in `rect`.
     macro_rules! for_tiles {
         ($rect:expr, |$w:ident, $c:ident, $r:ident| $body:block) => {{
             let rect: TileBox = $rect;
             if !rect.is_empty() {
                 for $r in rect.r0..=rect.r1 {
                     for $c in rect.c0..=rect.c1 {
-                        let $w = writers[$r as usize * cols + $c as usize]
-                            .get_or_insert_with(|| Box::new(TileWriter::new(bits)));
+                        let $w = &mut tracks[$r as usize * cols + $c as usize];
                         $body
                     }
                 }
@@ -253,46 +311,38 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
                 let (xs, x_pos) = match op.cmd {
                     Command::New => {
                         next_slot += 1;
-                        (next_slot - 1, None)
+                        (next_slot - 1, 0)
                     }
-                    Command::Rf => (f.at(2 + op.offset as usize).slot, Some(f.head + 2 + op.offset as usize)),
-                    _ => (f.at(len - 1 - op.offset as usize).slot, Some(f.head + len - 1 - op.offset as usize)),
+                    Command::Rf => (f.at(2 + op.offset as usize).slot, f.head + 2 + op.offset as usize),
+                    _ => (f.at(len - 1 - op.offset as usize).slot, f.head + len - 1 - op.offset as usize),
                 };
-                let (vl, vr, vx, bt) = (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize], bx.vertices[xs as usize], bx.triangles[next_tri]);
+                let (vl, vr, vx, bt) =
+                    (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize], bx.vertices[xs as usize], bx.triangles[next_tri]);
                 next_tri += 1;
                 let (al, ax) = (at.push(&vl), at.push(&vx));
                 for_tiles!(vl.union(&vx), |w, c, rw| {
-                    let (ln, xn) = (vl.contains(c, rw), vx.contains(c, rw));
-                    match rewrite(op.cmd, ln, vr.contains(c, rw), xn, bt.contains(c, rw)) {
-                        Rewrite::Same => {
-                            if op.cmd == Command::New {
-                                w.new_vertex(xs, q[xs as usize]);
-                            } else {
-                                let p = x_pos.expect("RF/LF have a frontier vertex");
-                                w.existing(at.tile_index(p, &vx, c, rw) - w.f.head);
-                            }
-                        }
-                        Rewrite::NullAdd | Rewrite::Null => {
-                            w.null();
-                        }
+                    let (ln, xn, tn) = (vl.contains(c, rw), vx.contains(c, rw), bt.contains(c, rw));
+                    match rewrite(op.cmd, ln, vr.contains(c, rw), xn, tn) {
+                        Rewrite::Same if op.cmd == Command::New => w.push(TileOp::New(xs)),
+                        Rewrite::Same => w.push(TileOp::Existing(at.tile_index(x_pos, &vx, c, rw) as u32 - w.head)),
+                        Rewrite::Null | Rewrite::NullAdd => w.push(TileOp::Null),
                         _ => {}
                     }
-                    let back = w.f.back_pos() as u32;
                     if ln {
                         // `l` was pushed last by Null, or second to last by New/RF/LF.
-                        let l_back = if bt.contains(c, rw) { back - 2 } else { back - 1 };
-                        at.indices[al as usize + vl.index_of(c, rw)] = l_back;
+                        at.indices[al as usize + vl.index_of(c, rw)] = w.back - if tn { 2 } else { 1 };
                     }
-                    if xn && !bt.contains(c, rw) {
-                        if op.cmd == Command::New {
-                            w.add_new(xs, q[xs as usize]);
+                    if xn && !tn {
+                        // Where x sits in this tile's frontier now, after the Null.
+                        let add = if op.cmd == Command::New {
+                            TileOp::AddNew(xs)
                         } else {
-                            let p = x_pos.expect("RF/LF have a frontier vertex");
-                            w.add_ref(at.tile_index(p, &vx, c, rw) - w.f.head);
-                        }
+                            TileOp::AddRef(at.tile_index(x_pos, &vx, c, rw) as u32 - w.head)
+                        };
+                        w.push(add);
                     }
                     if xn {
-                        at.indices[ax as usize + vx.index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                        at.indices[ax as usize + vx.index_of(c, rw)] = w.back - 1;
                     }
                 });
                 f.insert(xs);
@@ -310,13 +360,13 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
                 let al = (op.cmd == Command::Null).then(|| at.push(&vl));
                 for_tiles!(rect, |w, c, rw| {
                     match rewrite(op.cmd, vl.contains(c, rw), vr.contains(c, rw), false, bt.contains(c, rw)) {
-                        Rewrite::Same if op.cmd == Command::Rf0 => w.rf0(),
-                        Rewrite::Same => w.lf0(),
-                        Rewrite::Dr => w.dr(),
-                        Rewrite::Dl => w.dl(),
+                        Rewrite::Same if op.cmd == Command::Rf0 => w.push(TileOp::Rf0),
+                        Rewrite::Same => w.push(TileOp::Lf0),
+                        Rewrite::Dr => w.push(TileOp::Dr),
+                        Rewrite::Dl => w.push(TileOp::Dl),
                         Rewrite::Null => {
-                            w.null();
-                            at.indices[al.unwrap() as usize + vl.index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                            w.push(TileOp::Null);
+                            at.indices[al.expect("Null allocates") as usize + vl.index_of(c, rw)] = w.back - 1;
                         }
                         _ => {}
                     }
@@ -336,27 +386,23 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
                 next_tri += 1;
                 let v = [0, 1, 2].map(|j| bx.vertices[(s + j) as usize]);
                 // The model's frontier is cleared: so is every tile's that does not get the seed.
-                for (b, w) in writers.iter_mut().enumerate() {
-                    if let Some(w) = w {
-                        let (c, rw) = ((b % cols) as u16, (b / cols) as u16);
-                        if !w.f.is_empty() && !bt.contains(c, rw) {
-                            w.clear();
-                        }
+                for (b, w) in tracks.iter_mut().enumerate() {
+                    if w.len() > 0 && !bt.contains((b % cols) as u16, (b / cols) as u16) {
+                        w.push(TileOp::Clear);
                     }
                 }
                 let a = v.map(|b| at.push(&b));
                 for_tiles!(v[0].union(&v[1]).union(&v[2]), |w, c, rw| {
                     if bt.contains(c, rw) {
-                        w.seed([s, s + 1, s + 2], [0, 1, 2].map(|j| q[(s + j) as usize]));
-                        let back = w.f.back_pos() as u32;
+                        w.push(TileOp::Seed(s));
                         for j in 0..3 {
-                            at.indices[a[j] as usize + v[j].index_of(c, rw)] = back - 3 + j as u32;
+                            at.indices[a[j] as usize + v[j].index_of(c, rw)] = w.back - 3 + j as u32;
                         }
                     } else {
                         for j in 0..3 {
                             if v[j].contains(c, rw) {
-                                w.add_new(s + j as u32, q[(s + j as u32) as usize]);
-                                at.indices[a[j] as usize + v[j].index_of(c, rw)] = w.f.back_pos() as u32 - 1;
+                                w.push(TileOp::AddNew(s + j as u32));
+                                at.indices[a[j] as usize + v[j].index_of(c, rw)] = w.back - 1;
                             }
                         }
                     }
@@ -368,28 +414,48 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
     }
 
     // After the commands: vertices only loose triangles use, then the loose triangles.
-    for s in next_slot..q.len() as u32 {
+    for s in next_slot..d.positions.len() as u32 {
         for_tiles!(bx.vertices[s as usize], |w, _c, _r| {
-            w.tail_vertex(s, q[s as usize]);
+            w.push(TileOp::Tail(s));
         });
     }
-    for (t, tri) in d.triangles.iter().enumerate().skip(next_tri) {
+    for t in next_tri..d.triangles.len() {
         for_tiles!(bx.triangles[t], |w, _c, _r| {
-            w.loose(*tri);
+            w.push(TileOp::Loose(t as u32));
         });
     }
 
-    let header = d.header;
-    let tiles: Vec<Tile> = writers
-        .into_par_iter()
-        .enumerate()
-        .filter_map(|(index, w)| {
-            let w = w?;
-            (w.triangles > 0).then(|| {
-                let (triangles, slots) = (w.triangles, w.global.clone());
-                Tile { index, bytes: w.finish(&header), triangles, slots }
-            })
-        })
-        .collect();
-    Ok(tiles)
+    // Each tile's stream is independent of the others': code them in parallel.
+    Ok(tracks.into_par_iter().enumerate().filter_map(|(index, track)| code_tile(d, index, &track.ops)).collect())
+}
+
+/// Codes one tile's rewritten commands; `None` if the tile has no triangle.
+fn code_tile(d: &Decoded, index: usize, ops: &[TileOp]) -> Option<Tile> {
+    if ops.is_empty() {
+        return None;
+    }
+    let q = &d.positions;
+    let mut w = TileWriter::new(d.header.quant_bits);
+    for &op in ops {
+        match op {
+            TileOp::New(s) => w.new_vertex(s, q[s as usize]),
+            TileOp::Existing(i) => w.existing(i as usize),
+            TileOp::Rf0 => w.rf0(),
+            TileOp::Lf0 => w.lf0(),
+            TileOp::Null => w.null(),
+            TileOp::Dl => w.dl(),
+            TileOp::Dr => w.dr(),
+            TileOp::AddNew(s) => w.add_new(s, q[s as usize]),
+            TileOp::AddRef(i) => w.add_ref(i as usize),
+            TileOp::Seed(s) => w.seed([s, s + 1, s + 2], [q[s as usize], q[s as usize + 1], q[s as usize + 2]]),
+            TileOp::Clear => w.clear(),
+            TileOp::Tail(s) => w.tail_vertex(s, q[s as usize]),
+            TileOp::Loose(t) => w.loose(d.triangles[t as usize]),
+        }
+    }
+    if w.triangles == 0 {
+        return None;
+    }
+    let (triangles, slots) = (w.triangles, w.global.clone());
+    Some(Tile { index, bytes: w.finish(&d.header), triangles, slots })
 }
