@@ -3,25 +3,16 @@
 //! its clipped screen box overlaps. Same projection, same boxes as the BFT tile sort, so
 //! the two sorts differ only in what they emit.
 
-use glam::{Mat4, Vec3};
-use rayon::prelude::*;
+use glam::Mat4;
 
-use crate::view::{clipped_pixel_box, TileBox, TileGrid};
+use crate::view::{triangle_tile_boxes, TileGrid};
 
 /// Bytes of one independent triangle: three `[f32; 3]` positions.
 pub const TRIANGLE_BYTES: usize = 36;
 
 /// Sorts independent triangles into per-tile buffers of `TRIANGLE_BYTES` each.
 pub fn sort(positions: &[[f32; 3]], triangles: &[[u32; 3]], view_proj: Mat4, grid: &TileGrid) -> Vec<Vec<u8>> {
-    let clip: Vec<_> = positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
-    let boxes: Vec<TileBox> = triangles
-        .par_iter()
-        .with_min_len(4096)
-        .map(|t| match clipped_pixel_box(t.map(|s| clip[s as usize]), grid.width, grid.height) {
-            Some(b) => grid.tiles_of(&b),
-            None => TileBox::EMPTY,
-        })
-        .collect();
+    let boxes = triangle_tile_boxes(positions, triangles, view_proj, grid);
     let mut tiles = vec![Vec::new(); grid.tiles()];
     for (t, b) in triangles.iter().zip(&boxes) {
         if b.is_empty() {

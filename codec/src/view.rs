@@ -9,6 +9,7 @@
 //!   `((p + 1) * C - 1) / W`, the largest `i` with `i*W/C <= p`.
 
 use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
 use thiserror::Error;
 
 /// Why a view or grid is unusable.
@@ -193,6 +194,17 @@ impl TileBox {
         TileBox { c0: self.c0.min(o.c0), c1: self.c1.max(o.c1), r0: self.r0.min(o.r0), r1: self.r1.max(o.r1) }
     }
 
+    /// The tiles in both boxes.
+    #[inline]
+    pub fn intersect(&self, o: &TileBox) -> TileBox {
+        let b = TileBox { c0: self.c0.max(o.c0), c1: self.c1.min(o.c1), r0: self.r0.max(o.r0), r1: self.r1.min(o.r1) };
+        if b.is_empty() {
+            TileBox::EMPTY
+        } else {
+            b
+        }
+    }
+
     #[inline]
     pub fn area(&self) -> usize {
         if self.is_empty() {
@@ -262,6 +274,22 @@ pub fn clipped_pixel_box(c: [Vec4; 3], width: u32, height: u32) -> Option<PixelB
         b.ymax = b.ymax.max(py);
     }
     (b.xmin <= b.xmax && b.ymin <= b.ymax).then_some(b)
+}
+
+/// The tile box `[t]` of every triangle: vertices projected, each triangle clipped to the
+/// frustum and its pixel box mapped to tiles; empty for triangles wholly outside. This is
+/// pass 1 shared by the BFT tile sort, the independent-triangle sort and the benchmarks.
+pub fn triangle_tile_boxes(positions: &[[f32; 3]], triangles: &[[u32; 3]], view_proj: Mat4, grid: &TileGrid) -> Vec<TileBox> {
+    let clip: Vec<Vec4> =
+        positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
+    triangles
+        .par_iter()
+        .with_min_len(4096)
+        .map(|t| {
+            clipped_pixel_box(t.map(|s| clip[s as usize]), grid.width, grid.height)
+                .map_or(TileBox::EMPTY, |b| grid.tiles_of(&b))
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! `encode`, `decode` and `stats`.
 
 pub mod args;
+pub mod bandwidth;
 pub mod commands;
 pub mod output;
 pub mod progress;

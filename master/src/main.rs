@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use master::args::{CameraArgs, GridArgs};
+use master::args::{parse_pair, CameraArgs, GridArgs};
 use master::commands;
 
 #[derive(Parser)]
@@ -54,6 +54,37 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Experiments from the paper.
+    Bench {
+        #[command(subcommand)]
+        bench: Bench,
+    },
+}
+
+#[derive(Subcommand)]
+enum Bench {
+    /// Bytes per frame against tile size (Figure 8): Tri, Tiled Tri, BFT, Tiled BFT, and
+    /// per-tile Draco and meshopt, with sort times; a CSV and a PNG plot.
+    Bandwidth {
+        /// .bft files, or mesh files (encoded on load at --quant-bits).
+        #[arg(required = true)]
+        models: Vec<PathBuf>,
+        /// Tile grids, COLSxROWS, comma-separated.
+        #[arg(long, value_parser = parse_pair, value_delimiter = ',', default_value = "1x1,2x2,4x4,8x8,16x16,32x32")]
+        tiles: Vec<(u32, u32)>,
+        /// Frame size in pixels, WIDTHxHEIGHT.
+        #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+        size: (u32, u32),
+        /// Bits per quantized coordinate for mesh inputs (8 to 24).
+        #[arg(long, default_value_t = 14, value_parser = clap::value_parser!(u8).range(8..=24))]
+        quant_bits: u8,
+        /// The CSV report.
+        #[arg(long)]
+        out: PathBuf,
+        /// The PNG plot.
+        #[arg(long)]
+        plot: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -63,6 +94,9 @@ fn main() -> ExitCode {
         Command::Decode { input, output } => commands::decode(input, output),
         Command::Stats { input, json } => commands::stats(input, *json),
         Command::Sort { model, grid, camera, dump, json } => master::sort::run(model, grid, camera, dump.as_ref(), *json),
+        Command::Bench { bench: Bench::Bandwidth { models, tiles, size, quant_bits, out, plot } } => {
+            master::bandwidth::run(models, *size, tiles, *quant_bits, out, plot)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

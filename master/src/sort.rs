@@ -21,14 +21,14 @@ pub struct Model {
     pub tiles: TileModel,
 }
 
-/// Loads a `.bft` file, or encodes a mesh file (OBJ, PLY, STL) on load at 16 bits.
-pub fn load_model(path: &Path) -> Result<Model> {
+/// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL) on load with `options`.
+pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     let is_bft = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bft"));
     let bytes = if is_bft {
         std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?
     } else {
         let mesh = load_mesh(path)?;
-        bft::encode(&mesh, EncodeOptions::default()).with_context(|| format!("cannot encode {}", path.display()))?.bytes
+        bft::encode(&mesh, options).with_context(|| format!("cannot encode {}", path.display()))?.bytes
     };
     let tiles = TileModel::from_bytes(&bytes).with_context(|| format!("{}", path.display()))?;
     Ok(Model { bytes, tiles })
@@ -141,7 +141,7 @@ pub fn sort_frame(model: &Model, name: &str, cam: &Camera, grid: &TileGrid) -> R
 /// `tessera sort MODEL --size WxH --tiles CxR [camera] [--dump DIR] [--json]`.
 pub fn run(path: &Path, grid: &GridArgs, camera: &CameraArgs, dump: Option<&PathBuf>, json: bool) -> Result<()> {
     let grid = grid.grid()?;
-    let model = load_model(path)?;
+    let model = load_model(path, EncodeOptions::default())?;
     let cam = model.camera(camera, &grid)?;
     let (summary, tiles) = sort_frame(&model, &path.display().to_string(), &cam, &grid)?;
     if let Some(dir) = dump {

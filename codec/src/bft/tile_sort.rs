@@ -22,7 +22,7 @@
 //! in `[v]`, and a triangle is emitted iff `b` is in `[t]`, never merely because its three
 //! vertices are unclipped.
 
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 use rayon::prelude::*;
 use thiserror::Error;
 
@@ -31,7 +31,7 @@ use super::format::BftError;
 use super::frontier::Frontier;
 use super::tile_writer::TileWriter;
 use super::Command;
-use crate::view::{clipped_pixel_box, TileBox, TileGrid};
+use crate::view::{triangle_tile_boxes, TileBox, TileGrid};
 
 /// Why a tile sort failed.
 #[derive(Debug, Error)]
@@ -86,18 +86,7 @@ pub struct Boxes {
 
 /// Projects the slots and computes `[t]` and `[v]`.
 pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
-    let clip: Vec<_> =
-        model.positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
-    let triangles: Vec<TileBox> = model
-        .decoded
-        .triangles
-        .par_iter()
-        .with_min_len(4096)
-        .map(|t| match clipped_pixel_box(t.map(|s| clip[s as usize]), grid.width, grid.height) {
-            Some(b) => grid.tiles_of(&b),
-            None => TileBox::EMPTY,
-        })
-        .collect();
+    let triangles = triangle_tile_boxes(&model.positions, &model.decoded.triangles, view_proj, grid);
     let mut vertices = vec![TileBox::EMPTY; model.positions.len()];
     for (t, b) in model.decoded.triangles.iter().zip(&triangles) {
         if !b.is_empty() {
