@@ -405,14 +405,7 @@ fn render_plot(panels: &[&[Row]], size: (u32, u32), quant_bits: u8) -> Result<Ve
         }
         root.present()?;
     }
-    let mut png = Vec::new();
-    let mut encoder = png::Encoder::new(&mut png, w, h);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    let mut writer = encoder.write_header()?;
-    writer.write_image_data(&pixels)?;
-    writer.finish()?;
-    Ok(png)
+    crate::composite::encode_png(w, h, png::ColorType::Rgb, &pixels)
 }
 
 /// One model's panel: a line per series over tile width, both axes logarithmic, ticks at

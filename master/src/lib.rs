@@ -5,6 +5,8 @@
 pub mod args;
 pub mod bandwidth;
 pub mod commands;
+pub mod composite;
 pub mod output;
 pub mod progress;
+pub mod render;
 pub mod sort;

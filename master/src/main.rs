@@ -47,6 +47,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Render a model sort-first: rank 0 sorts it into compressed tiles, ranks 1.. render them.
+    /// Run under mpirun for a cluster; alone, it runs the master and one worker in-process.
+    Render(master::render::RenderArgs),
     /// Print sizes and rates of a .bft file.
     Stats {
         input: PathBuf,
@@ -93,6 +96,7 @@ fn main() -> ExitCode {
         Command::Encode { input, output, quant_bits } => commands::encode(input, output, *quant_bits),
         Command::Decode { input, output } => commands::decode(input, output),
         Command::Stats { input, json } => commands::stats(input, *json),
+        Command::Render(args) => master::render::run(args),
         Command::Sort { model, grid, camera, dump, json } => master::sort::run(model, grid, camera, dump.as_ref(), *json),
         Command::Bench { bench: Bench::Bandwidth { models, tiles, size, quant_bits, out, plot } } => {
             master::bandwidth::run(models, *size, tiles, *quant_bits, out, plot)

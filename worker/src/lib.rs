@@ -1,6 +1,11 @@
 //! Tessera's worker side (MPI ranks >= 1): turn a decoded BFT (sub)mesh into the vertex and
-//! index buffers the renderer draws. The wgpu renderer and the GPU progressive-mesh
-//! adaptation build on this crate.
+//! index buffers the renderer draws, and render them headless with wgpu ([`render`]). The GPU
+//! progressive-mesh adaptation builds on this crate.
+
+pub mod node;
+pub mod protocol;
+pub mod render;
+pub mod transport;
 
 use codec::bft::Decoded;
 use glam::Vec3;

@@ -1,0 +1,456 @@
+//! `tessera render`: the sort-first frame loop of rank 0.
+//!
+//! Per frame: place the camera, sort the model into compressed tile submeshes, assign the
+//! tiles to workers, send each worker its tiles (non-blocking, all at once), receive the
+//! tile pixels, stitch them, write the PNG (or one per display of a tile wall) and a stats
+//! line per rank. Without `mpirun` the same loop drives one worker thread over channels.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use codec::bft::tile_sort::{self, Boxes, Tile};
+use codec::view::{Camera, TileBox, TileGrid};
+use glam::Quat;
+use serde::Serialize;
+use worker::protocol::{FrameJob, TileJob, ToMaster, ToWorker};
+use worker::transport::{self, RecvError, Transport};
+
+use crate::args::{parse_pair, CameraArgs};
+use crate::composite::{Image, Wall};
+use crate::output::write_bytes;
+use crate::sort::{load_model, Model};
+
+/// Flags of `tessera render`.
+#[derive(Args, Clone, Debug)]
+pub struct RenderArgs {
+    /// A .bft file, or a mesh file (OBJ, PLY, STL; encoded on load).
+    pub model: PathBuf,
+    /// Frame size in pixels, WIDTHxHEIGHT (ignored with --wall, which sets it).
+    #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+    pub size: (u32, u32),
+    /// Tile grid, COLSxROWS.
+    #[arg(long, value_parser = parse_pair, default_value = "4x4")]
+    pub tiles: (u32, u32),
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// Frames to render.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub frames: u32,
+    /// Orbit the camera once around the model over the frames.
+    #[arg(long)]
+    pub orbit: bool,
+    /// Output PNG; with several frames, frame-0001.png and so on beside it.
+    #[arg(long, default_value = "frame.png")]
+    pub out: PathBuf,
+    /// Write one JSON line per frame per rank.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Reassign tiles every frame from the costs measured the frame before.
+    #[arg(long)]
+    pub balance: bool,
+    /// A tile wall description (TOML): one PNG per display plus an overview.
+    #[arg(long)]
+    pub wall: Option<PathBuf>,
+    /// Seconds to wait for a worker before declaring it dead.
+    #[arg(long, default_value_t = 60.0)]
+    pub timeout: f64,
+}
+
+/// Everything checked before any rank talks to another.
+struct Plan {
+    grid: TileGrid,
+    wall: Option<Wall>,
+    timeout: Duration,
+}
+
+fn plan(args: &RenderArgs) -> Result<Plan> {
+    let wall = args.wall.as_deref().map(Wall::load).transpose()?;
+    let (w, h) = wall.as_ref().map_or(args.size, Wall::frame_size);
+    let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
+    if !args.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        bail!("{}: the output must be a .png file", args.out.display());
+    }
+    if !(args.timeout > 0.0 && args.timeout.is_finite()) {
+        bail!("--timeout must be a positive number of seconds");
+    }
+    Ok(Plan { grid, wall, timeout: Duration::from_secs_f64(args.timeout) })
+}
+
+/// Runs `tessera render` in whichever role this process has.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let plan = plan(args)?;
+    if transport::launched_by_mpirun() {
+        let mpi = transport::Mpi::init().context("MPI is already initialized")?;
+        if mpi.rank() > 0 {
+            return worker::node::run(&mpi).map_err(anyhow::Error::msg);
+        }
+        if mpi.size() < 2 {
+            bail!("run with at least 2 ranks: rank 0 sorts and composites, ranks 1.. render");
+        }
+        // Rank 0: any error must end every rank, not leave the workers waiting.
+        if let Err(e) = master(&mpi, args, &plan) {
+            eprintln!("error: {e:#}");
+            mpi.abort(1);
+        }
+        Ok(())
+    } else {
+        let mut ranks = transport::local_ranks(2);
+        let worker_end = ranks.pop().expect("two ranks");
+        let handle = std::thread::spawn(move || worker::node::run(&worker_end));
+        let result = master(&ranks[0], args, &plan);
+        drop(ranks);
+        let worker_result = handle.join().map_err(|_| anyhow::anyhow!("the worker thread panicked"))?;
+        result?;
+        worker_result.map_err(anyhow::Error::msg)
+    }
+}
+
+/// One stats line of rank 0.
+#[derive(Serialize)]
+struct MasterStats {
+    frame: u32,
+    rank: usize,
+    sort_ms: f64,
+    send_ms: f64,
+    wait_ms: f64,
+    composite_ms: f64,
+    write_ms: f64,
+    tiles: Vec<TileStats>,
+}
+
+#[derive(Serialize)]
+struct TileStats {
+    index: u32,
+    worker: usize,
+    triangles: u32,
+    bytes: usize,
+    /// Bytes the tile's triangles need as independent triangles (36 each).
+    tri_bytes: usize,
+    /// Bytes of border normals sent with the tile.
+    normal_bytes: usize,
+}
+
+/// One stats line of a worker, as reported back to rank 0.
+#[derive(Serialize)]
+struct WorkerStats {
+    frame: u32,
+    rank: usize,
+    decode_ms: f64,
+    upload_ms: f64,
+    render_ms: f64,
+    readback_ms: f64,
+    tiles: Vec<WorkerTileStats>,
+}
+
+#[derive(Serialize)]
+struct WorkerTileStats {
+    index: u32,
+    triangles: u32,
+    decode_ms: f64,
+    upload_ms: f64,
+    render_ms: f64,
+    readback_ms: f64,
+}
+
+fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
+    let model = load_model(&args.model, codec::bft::EncodeOptions::default())?;
+    let grid = &plan.grid;
+    let cam = model.camera(&args.camera, grid)?;
+    let workers = t.size() - 1;
+    let adapters = handshake(t, plan.timeout)?;
+    eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
+
+    let normals = worker::RenderMesh::from_decoded(&model.tiles.decoded).normals;
+    let source = source_slots(&model);
+    let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
+    let mut stats_lines = Vec::new();
+    for k in 0..args.frames {
+        let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
+        let vp = cam_k.view_proj(grid.aspect());
+
+        let start = Instant::now();
+        let boxes = tile_sort::boxes(&model.tiles, vp, grid);
+        let tiles = tile_sort::sort_with_boxes(&model.tiles, &boxes, grid)?;
+        let borders = border_normals(&model, &boxes, &tiles, grid, &normals, &source);
+        let sort_ms = ms(start);
+
+        let owner = assign(&tiles, workers, args.balance.then_some(&costs[..]));
+        let mut jobs: Vec<FrameJob> = (0..workers)
+            .map(|_| FrameJob { frame: k, width: grid.width, height: grid.height, view_proj: vp.to_cols_array(), tiles: vec![] })
+            .collect();
+        let mut tile_stats = Vec::with_capacity(tiles.len());
+        for ((tile, normals), &w) in tiles.iter().zip(borders).zip(&owner) {
+            tile_stats.push(TileStats {
+                index: tile.index as u32,
+                worker: w,
+                triangles: tile.triangles,
+                bytes: tile.bytes.len(),
+                tri_bytes: tile.triangles as usize * codec::tri_sort::TRIANGLE_BYTES,
+                normal_bytes: normals.len() * 16,
+            });
+            jobs[w - 1].tiles.push(TileJob {
+                index: tile.index as u32,
+                rect: grid.tile_rect(tile.index),
+                bft: tile.bytes.clone(),
+                normals,
+            });
+        }
+        let start = Instant::now();
+        let msgs: Vec<(usize, Vec<u8>)> =
+            jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect();
+        t.send_many(&msgs);
+        let send_ms = ms(start);
+
+        let start = Instant::now();
+        let mut frame = Image::new(grid.width, grid.height);
+        let mut composite_ms = 0.0;
+        let mut worker_lines = Vec::new();
+        for _ in 0..workers {
+            let (rank, pixels) = receive_pixels(t, k, plan.timeout)?;
+            let c = Instant::now();
+            for p in &pixels {
+                frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+                costs[p.index as usize] = p.times.total_ms();
+            }
+            composite_ms += ms(c);
+            worker_lines.push(worker_stats(k, rank, &pixels));
+        }
+        let wait_ms = ms(start) - composite_ms;
+
+        let start = Instant::now();
+        let out = frame_path(&args.out, k, args.frames);
+        match &plan.wall {
+            None => frame.save_png(&out)?,
+            Some(wall) => save_wall(wall, &frame, &out)?,
+        }
+        let write_ms = ms(start);
+        eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tiles.len(), sort_ms, out.display());
+
+        let line = MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
+        stats_lines.push(serde_json::to_string(&line)?);
+        worker_lines.sort_by_key(|l| l.rank);
+        for l in worker_lines {
+            stats_lines.push(serde_json::to_string(&l)?);
+        }
+    }
+    let shutdown = ToWorker::Shutdown.encode();
+    t.send_many(&(1..=workers).map(|w| (w, shutdown.clone())).collect::<Vec<_>>());
+    if let Some(path) = &args.stats {
+        write_bytes(path, (stats_lines.join("\n") + "\n").as_bytes())?;
+    }
+    Ok(())
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// Waits for every worker's `Ready`; a `Failed` or silence ends the run with its reason.
+fn handshake(t: &dyn Transport, timeout: Duration) -> Result<Vec<String>> {
+    let mut adapters = vec![String::new(); t.size()];
+    let mut ready = vec![false; t.size()];
+    ready[0] = true;
+    while ready.iter().any(|r| !r) {
+        let (rank, bytes) = match t.recv(timeout) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => bail!("{} did not start within {:.0} s", missing(&ready), timeout.as_secs_f64()),
+            Err(RecvError::Disconnected) => bail!("{} exited before it was ready", missing(&ready)),
+        };
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            ToMaster::Ready { adapter } => {
+                ready[rank] = true;
+                adapters[rank] = format!("rank {rank}: {adapter}");
+            }
+            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            other => bail!("rank {rank} sent {other:?} before it was ready"),
+        }
+    }
+    Ok(adapters.split_off(1))
+}
+
+fn missing(flags: &[bool]) -> String {
+    let ranks: Vec<String> = flags.iter().enumerate().filter(|(_, &f)| !f).map(|(r, _)| r.to_string()).collect();
+    format!("rank {}", ranks.join(", rank "))
+}
+
+fn receive_pixels(
+    t: &dyn Transport,
+    frame: u32,
+    timeout: Duration,
+) -> Result<(usize, Vec<worker::protocol::TilePixels>)> {
+    let (rank, bytes) = match t.recv(timeout) {
+        Ok(m) => m,
+        Err(RecvError::Timeout) => bail!("no worker answered frame {} within {:.0} s", frame + 1, timeout.as_secs_f64()),
+        Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
+    };
+    match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+        ToMaster::Pixels { frame: f, tiles } if f == frame => Ok((rank, tiles)),
+        ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
+        ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+        ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
+    }
+}
+
+fn worker_stats(frame: u32, rank: usize, pixels: &[worker::protocol::TilePixels]) -> WorkerStats {
+    let sum = |f: fn(&worker::protocol::TileTimes) -> f64| pixels.iter().map(|p| f(&p.times)).sum();
+    WorkerStats {
+        frame,
+        rank,
+        decode_ms: sum(|t| t.decode_ms),
+        upload_ms: sum(|t| t.upload_ms),
+        render_ms: sum(|t| t.render_ms),
+        readback_ms: sum(|t| t.readback_ms),
+        tiles: pixels
+            .iter()
+            .map(|p| WorkerTileStats {
+                index: p.index,
+                triangles: p.triangles,
+                decode_ms: p.times.decode_ms,
+                upload_ms: p.times.upload_ms,
+                render_ms: p.times.render_ms,
+                readback_ms: p.times.readback_ms,
+            })
+            .collect(),
+    }
+}
+
+/// The camera of frame `k` of `n` on a full orbit around the target, about the up axis.
+pub fn orbit(cam: &Camera, k: u32, n: u32) -> Camera {
+    let angle = std::f32::consts::TAU * k as f32 / n as f32;
+    let rot = Quat::from_axis_angle(cam.up.normalize(), angle);
+    Camera { eye: cam.target + rot * (cam.eye - cam.target), ..*cam }
+}
+
+/// `frame.png` for one frame; `frame-0001.png`, ... for several.
+pub fn frame_path(out: &Path, k: u32, frames: u32) -> PathBuf {
+    if frames == 1 {
+        return out.to_path_buf();
+    }
+    let stem = out.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
+    out.with_file_name(format!("{stem}-{:04}.png", k + 1))
+}
+
+fn save_wall(wall: &Wall, frame: &Image, out: &Path) -> Result<()> {
+    let (displays, overview) = wall.split(frame);
+    let stem = out.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
+    for (i, d) in displays.iter().enumerate() {
+        let (c, r) = (i as u32 % wall.columns, i as u32 / wall.columns);
+        d.save_png(&out.with_file_name(format!("{stem}-display-{c}-{r}.png")))?;
+    }
+    overview.save_png(out)
+}
+
+/// Tiles to workers (ranks `1..=workers`), one entry per tile in `tiles`' order. By
+/// default tile `i` goes to worker `1 + i % workers`, so each worker keeps its tiles from
+/// frame to frame. With `costs` (last frame's per-tile time), tiles go longest first to
+/// the least loaded worker, in the manner of Equalizer's load equalizer; a tile without a
+/// cost yet counts as the mean.
+pub fn assign(tiles: &[Tile], workers: usize, costs: Option<&[f64]>) -> Vec<usize> {
+    let Some(costs) = costs else {
+        return tiles.iter().map(|t| 1 + t.index % workers).collect();
+    };
+    let known: Vec<f64> = tiles.iter().map(|t| costs[t.index]).filter(|&c| c > 0.0).collect();
+    let mean = if known.is_empty() { 1.0 } else { known.iter().sum::<f64>() / known.len() as f64 };
+    let cost = |t: &Tile| if costs[t.index] > 0.0 { costs[t.index] } else { mean };
+    let mut order: Vec<usize> = (0..tiles.len()).collect();
+    order.sort_by(|&a, &b| cost(&tiles[b]).total_cmp(&cost(&tiles[a])).then(a.cmp(&b)));
+    let mut load = vec![0.0f64; workers];
+    let mut owner = vec![0; tiles.len()];
+    for i in order {
+        let w = (0..workers).min_by(|&a, &b| load[a].total_cmp(&load[b])).expect("at least one worker");
+        load[w] += cost(&tiles[i]);
+        owner[i] = w + 1;
+    }
+    owner
+}
+
+/// For every model slot, the first slot of its input vertex (duplicate slots share it).
+fn source_slots(model: &Model) -> Vec<u32> {
+    let d = &model.tiles.decoded;
+    let mut source: Vec<u32> = (0..d.positions.len() as u32).collect();
+    for &(slot, src) in &d.duplicates {
+        source[slot as usize] = source[src as usize];
+    }
+    source
+}
+
+/// The normals each tile needs from the whole mesh: a worker computes a vertex's normal
+/// from the tile's triangles, which is the whole mesh's normal only when every triangle of
+/// the vertex lies in the tile and the vertex has a single slot. The rest are sent.
+fn border_normals(
+    model: &Model,
+    boxes: &Boxes,
+    tiles: &[Tile],
+    grid: &TileGrid,
+    normals: &[[f32; 3]],
+    source: &[u32],
+) -> Vec<Vec<(u32, [f32; 3])>> {
+    let d = &model.tiles.decoded;
+    // The tiles every triangle of a vertex lies in: the intersection of their boxes.
+    let full = TileBox { c0: 0, c1: (grid.cols - 1) as u16, r0: 0, r1: (grid.rows - 1) as u16 };
+    let mut inside = vec![full; d.positions.len()];
+    for (t, b) in d.triangles.iter().zip(&boxes.triangles) {
+        for &s in t {
+            let i = &mut inside[source[s as usize] as usize];
+            *i = i.intersect(b);
+        }
+    }
+    let mut duplicated = vec![false; d.positions.len()];
+    for &(slot, src) in &d.duplicates {
+        duplicated[slot as usize] = true;
+        duplicated[src as usize] = true;
+    }
+    tiles
+        .iter()
+        .map(|tile| {
+            let (c, r) = ((tile.index % grid.cols as usize) as u16, (tile.index / grid.cols as usize) as u16);
+            tile.slots
+                .iter()
+                .enumerate()
+                .filter(|(_, &s)| duplicated[s as usize] || !inside[source[s as usize] as usize].contains(c, r))
+                .map(|(i, &s)| (i as u32, normals[s as usize]))
+                .collect()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tile(index: usize) -> Tile {
+        Tile { index, bytes: vec![], triangles: 1, slots: vec![] }
+    }
+
+    #[test]
+    fn round_robin_and_balanced_assignment() {
+        let tiles: Vec<Tile> = [0, 1, 2, 5, 6].into_iter().map(tile).collect();
+        assert_eq!(assign(&tiles, 2, None), vec![1, 2, 1, 2, 1]);
+        // More workers than tiles: the extra ones get nothing.
+        assert_eq!(assign(&tiles[..2], 4, None), vec![1, 2]);
+        let mut costs = vec![0.0; 8];
+        costs[0] = 10.0;
+        costs[1] = 1.0;
+        costs[2] = 1.0;
+        costs[5] = 1.0;
+        costs[6] = 7.0;
+        // LPT: 10 -> w1, 7 -> w2, then the ones fill w2 (7 + 1 + 1 + 1 = 10).
+        assert_eq!(assign(&tiles, 2, Some(&costs)), vec![1, 2, 2, 2, 2]);
+    }
+
+    #[test]
+    fn frames_are_numbered() {
+        assert_eq!(frame_path(Path::new("out/f.png"), 0, 1), PathBuf::from("out/f.png"));
+        assert_eq!(frame_path(Path::new("out/f.png"), 2, 10), PathBuf::from("out/f-0003.png"));
+    }
+
+    #[test]
+    fn orbit_keeps_distance_and_returns() {
+        let cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);
+        let half = orbit(&cam, 2, 4);
+        assert!((half.eye.distance(cam.target) - cam.eye.distance(cam.target)).abs() < 1e-4);
+        assert!(half.eye.distance(cam.eye) > 1.0);
+    }
+}

@@ -1,0 +1,198 @@
+//! End-to-end tests of `tessera render`: under `mpirun` and alone, stitched tiles against
+//! a single-process render of the whole frame as one tile, tile walls, and faults.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_tessera")
+}
+
+fn mesh(rel: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes").join(rel).to_string_lossy().into_owned()
+}
+
+fn env(cmd: &mut Command) -> &mut Command {
+    let xdg = std::env::temp_dir().join("tessera-xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    cmd.env("XDG_RUNTIME_DIR", xdg)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+}
+
+/// `tessera ARGS` without mpirun: the master and one in-process worker.
+fn alone(args: &[&str]) -> Output {
+    env(&mut Command::new(bin())).args(args).output().expect("runs tessera")
+}
+
+/// `mpirun -np N tessera ARGS`.
+fn mpirun(n: usize, extra_env: &[(&str, &str)], args: &[&str]) -> Output {
+    let mut cmd = Command::new("mpirun");
+    env(&mut cmd).args(["--oversubscribe", "-np", &n.to_string()]);
+    for (k, v) in extra_env {
+        cmd.args(["-x", &format!("{k}={v}")]);
+    }
+    cmd.arg(bin()).args(args).output().expect("mpirun is installed (scripts/setup.sh)")
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "failed: {}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+}
+
+/// Decoded RGBA pixels of a PNG.
+fn pixels(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+/// Pixels differing by more than 2/255 in some channel.
+fn differing(a: &Path, b: &Path) -> usize {
+    let (pa, pb) = (pixels(a), pixels(b));
+    assert_eq!((pa.0, pa.1), (pb.0, pb.1));
+    pa.2.chunks(4).zip(pb.2.chunks(4)).filter(|(x, y)| x.iter().zip(*y).any(|(u, v)| u.abs_diff(*v) > 2)).count()
+}
+
+fn covered(path: &Path) -> usize {
+    let (_, _, px) = pixels(path);
+    assert!(px.chunks(4).all(|p| p[3] == 0 || p[3] == 255), "alpha is 0 or 255");
+    px.chunks(4).filter(|p| p[3] == 255).count()
+}
+
+/// The reference: the whole frame as one tile, in one process.
+fn reference(model: &str, size: &str, dir: &Path) -> PathBuf {
+    let out = dir.join("reference.png");
+    ok(&alone(&["render", model, "--size", size, "--tiles", "1x1", "--out", out.to_str().unwrap()]));
+    out
+}
+
+#[test]
+fn mpirun_tiles_equal_the_single_process_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    for (model, size) in [(mesh("stanford/bunny_zipper_c3d.obj.gz"), "400x300"), (mesh("odedstein/plane_holes.obj.gz"), "333x201")] {
+        let reference = reference(&model, size, dir.path());
+        assert!(covered(&reference) > 1000, "{model}: the model is in view");
+        for (np, flags) in [(2, vec!["--tiles", "4x3"]), (3, vec!["--tiles", "5x4"]), (3, vec!["--tiles", "3x3", "--balance", "--frames", "2"])] {
+            let out = dir.path().join("tiled.png");
+            let mut args = vec!["render", &model, "--size", size, "--out", out.to_str().unwrap()];
+            args.extend(&flags);
+            ok(&mpirun(np, &[], &args));
+            // With --frames 2 the first frame is numbered; without --orbit it is the same view.
+            let produced = if flags.contains(&"--frames") { dir.path().join("tiled-0001.png") } else { out.clone() };
+            assert_eq!(differing(&produced, &reference), 0, "{model}, -np {np} {flags:?}");
+        }
+    }
+}
+
+#[test]
+fn alone_more_workers_than_tiles_and_orbit() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/cow.obj");
+    let reference = reference(&model, "320x240", dir.path());
+    let out = dir.path().join("t.png");
+    ok(&alone(&["render", &model, "--size", "320x240", "--tiles", "2x2", "--out", out.to_str().unwrap()]));
+    assert_eq!(differing(&out, &reference), 0);
+    // Four workers, two tiles: two workers idle.
+    ok(&mpirun(5, &[], &["render", &model, "--size", "320x240", "--tiles", "2x1", "--out", out.to_str().unwrap()]));
+    assert_eq!(differing(&out, &reference), 0);
+    let stats = dir.path().join("s.jsonl");
+    let orbit = dir.path().join("o.png");
+    ok(&alone(&[
+        "render", &model, "--size", "160x120", "--tiles", "2x2", "--frames", "3", "--orbit",
+        "--out", orbit.to_str().unwrap(), "--stats", stats.to_str().unwrap(),
+    ]));
+    let frames: Vec<_> = (1..=3).map(|k| dir.path().join(format!("o-{k:04}.png"))).collect();
+    assert!(frames.iter().all(|f| f.exists()));
+    assert!(differing(&frames[0], &frames[1]) > 0, "the camera moved");
+    // One line per frame per rank, with every stage time.
+    let lines: Vec<serde_json::Value> =
+        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 6);
+    for l in &lines {
+        let keys: &[&str] = if l["rank"] == 0 {
+            &["sort_ms", "send_ms", "composite_ms"]
+        } else {
+            &["decode_ms", "upload_ms", "render_ms", "readback_ms"]
+        };
+        for k in keys {
+            assert!(l[k].as_f64().is_some(), "{k} in {l}");
+        }
+    }
+    let tile = &lines[0]["tiles"][0];
+    assert!(tile["bytes"].as_u64().unwrap() > 0 && tile["tri_bytes"].as_u64().unwrap() == 36 * tile["triangles"].as_u64().unwrap());
+}
+
+#[test]
+fn tile_wall_writes_each_display_and_an_overview() {
+    let dir = tempfile::tempdir().unwrap();
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(&wall, "columns = 3\nrows = 2\ndisplay_width = 120\ndisplay_height = 90\nbezel_x = 12\nbezel_y = 10\n").unwrap();
+    let out = dir.path().join("wall.png");
+    let model = mesh("classic/spot.obj");
+    ok(&mpirun(3, &[], &["render", &model, "--wall", wall.to_str().unwrap(), "--tiles", "3x3", "--out", out.to_str().unwrap()]));
+    let (w, h, overview) = pixels(&out);
+    assert_eq!((w, h), (3 * 120 + 2 * 12, 2 * 90 + 10));
+    // The same frame rendered whole: each display is its crop, the bezels are hidden.
+    let whole = dir.path().join("whole.png");
+    ok(&alone(&["render", &model, "--size", &format!("{w}x{h}"), "--tiles", "1x1", "--out", whole.to_str().unwrap()]));
+    let (_, _, full) = pixels(&whole);
+    for r in 0..2u32 {
+        for c in 0..3u32 {
+            let (dw, dh, d) = pixels(&dir.path().join(format!("wall-display-{c}-{r}.png")));
+            assert_eq!((dw, dh), (120, 90));
+            for y in 0..dh {
+                let (fx, fy) = (c * 132, r * 100 + y);
+                let row = &full[((fy * w + fx) * 4) as usize..((fy * w + fx + dw) * 4) as usize];
+                assert_eq!(&d[(y * dw * 4) as usize..((y + 1) * dw * 4) as usize], row, "display {c},{r} row {y}");
+            }
+        }
+    }
+    let bezel = ((50 * w + 125) * 4) as usize;
+    assert_eq!(&overview[bezel..bezel + 4], &[0, 0, 0, 255]);
+}
+
+fn assert_fast_failure(o: &Output, started: Instant, needle: &str) {
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "must fail");
+    assert!(started.elapsed() < Duration::from_secs(10), "took {:?}", started.elapsed());
+    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
+}
+
+#[test]
+fn a_dying_or_failing_worker_ends_every_rank() {
+    let model = mesh("classic/cow.obj");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f.png");
+    let args = ["render", &model, "--size", "160x120", "--tiles", "2x2", "--out", out.to_str().unwrap()];
+    let started = Instant::now();
+    let o = mpirun(3, &[("TESSERA_FAULT", "fail:2")], &args);
+    assert_fast_failure(&o, started, "rank 2 failed: injected failure");
+    let started = Instant::now();
+    let o = mpirun(3, &[("TESSERA_FAULT", "die:1")], &args);
+    assert_fast_failure(&o, started, "rank 1");
+    assert!(!out.exists(), "no frame from a failed run");
+}
+
+#[test]
+fn bad_input_is_reported_before_any_traffic() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    let started = Instant::now();
+    let o = mpirun(2, &[], &["render", "/nonexistent/model.obj", "--out", out.to_str().unwrap()]);
+    assert_fast_failure(&o, started, "model.obj");
+    let o = alone(&["render", &mesh("classic/cow.obj"), "--size", "10x10", "--tiles", "20x1", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("does not fit"));
+    let o = alone(&["render", &mesh("classic/cow.obj"), "--eye", "1,1,1", "--target", "1,1,1", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("eye and target"));
+    let wall = dir.path().join("bad.toml");
+    std::fs::write(&wall, "columns = 0\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\n").unwrap();
+    let o = alone(&["render", &mesh("classic/cow.obj"), "--wall", wall.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("bad.toml"));
+    assert!(!out.exists());
+}

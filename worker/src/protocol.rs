@@ -1,0 +1,375 @@
+//! The master-worker protocol: every message between rank 0 and the workers, with its
+//! byte layout. Both transports (MPI, and channels for a run without mpirun) carry these
+//! same bytes, and every receive checks what it got.
+//!
+//! All integers are little-endian. A message starts with the 4-byte magic `TSRM` and a
+//! 1-byte kind; lengths are `u32` and precede what they count.
+//!
+//! ```text
+//! master -> worker
+//!   kind 1 Frame     frame u32, width u32, height u32, view_proj 16 x f32 (column-major),
+//!                    tile count u32, then per tile:
+//!                      index u32, rect 4 x u32 (x0 y0 x1 y1), bft length u32 + bytes,
+//!                      normal count u32, then per normal: slot u32, 3 x f32
+//!   kind 2 Shutdown  (nothing)
+//! worker -> master
+//!   kind 3 Ready     adapter name length u32 + UTF-8 bytes
+//!   kind 4 Pixels    frame u32, tile count u32, then per tile:
+//!                      index u32, rect 4 x u32, decode/upload/render/readback ms 4 x f64,
+//!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4)
+//!   kind 5 Failed    reason length u32 + UTF-8 bytes
+//! ```
+//! The normals of a tile are those of its vertices that have triangles outside the tile:
+//! the worker computes every other normal from the tile's own triangles, and these make
+//! the shading at tile borders the same as in a whole-frame render.
+
+use thiserror::Error;
+
+const MAGIC: &[u8; 4] = b"TSRM";
+
+/// A message that does not parse.
+#[derive(Debug, Error, PartialEq)]
+pub enum ProtocolError {
+    #[error("message is truncated (while reading {0})")]
+    Truncated(&'static str),
+    #[error("message does not start with the protocol's magic number")]
+    BadMagic,
+    #[error("unknown message kind {0}")]
+    UnknownKind(u8),
+    #[error("unexpected message: {0}")]
+    Unexpected(String),
+    #[error("{0} trailing bytes after the message")]
+    Trailing(usize),
+    #[error("invalid message: {0}")]
+    Invalid(String),
+}
+
+/// One tile of a frame, as the master sends it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileJob {
+    pub index: u32,
+    pub rect: [u32; 4],
+    /// The tile's compressed submesh (a `.bft` stream).
+    pub bft: Vec<u8>,
+    /// `(tile slot, unit normal)` for vertices with triangles outside the tile.
+    pub normals: Vec<(u32, [f32; 3])>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameJob {
+    pub frame: u32,
+    pub width: u32,
+    pub height: u32,
+    pub view_proj: [f32; 16],
+    pub tiles: Vec<TileJob>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum ToWorker {
+    Frame(FrameJob),
+    Shutdown,
+}
+
+/// Stage times of one tile on a worker, in milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TileTimes {
+    pub decode_ms: f64,
+    pub upload_ms: f64,
+    pub render_ms: f64,
+    pub readback_ms: f64,
+}
+
+impl TileTimes {
+    pub fn total_ms(&self) -> f64 {
+        self.decode_ms + self.upload_ms + self.render_ms + self.readback_ms
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct TilePixels {
+    pub index: u32,
+    pub rect: [u32; 4],
+    pub times: TileTimes,
+    pub triangles: u32,
+    pub rgba: Vec<u8>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum ToMaster {
+    Ready { adapter: String },
+    Pixels { frame: u32, tiles: Vec<TilePixels> },
+    Failed { reason: String },
+}
+
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn new(kind: u8) -> Writer {
+        let mut v = Vec::with_capacity(64);
+        v.extend_from_slice(MAGIC);
+        v.push(kind);
+        Writer(v)
+    }
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f32(&mut self, v: f32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn bytes(&mut self, b: &[u8]) {
+        self.u32(b.len() as u32);
+        self.0.extend_from_slice(b);
+    }
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    /// Checks the magic number and returns the kind.
+    fn open(b: &'a [u8]) -> Result<(Reader<'a>, u8), ProtocolError> {
+        if b.len() < 5 {
+            return Err(ProtocolError::Truncated("header"));
+        }
+        if &b[..4] != MAGIC {
+            return Err(ProtocolError::BadMagic);
+        }
+        Ok((Reader { b, pos: 5 }, b[4]))
+    }
+    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], ProtocolError> {
+        if self.b.len() - self.pos < n {
+            return Err(ProtocolError::Truncated(what));
+        }
+        self.pos += n;
+        Ok(&self.b[self.pos - n..self.pos])
+    }
+    fn u32(&mut self, what: &'static str) -> Result<u32, ProtocolError> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().unwrap()))
+    }
+    fn f32(&mut self, what: &'static str) -> Result<f32, ProtocolError> {
+        Ok(f32::from_le_bytes(self.take(4, what)?.try_into().unwrap()))
+    }
+    fn f64(&mut self, what: &'static str) -> Result<f64, ProtocolError> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().unwrap()))
+    }
+    fn bytes(&mut self, what: &'static str) -> Result<&'a [u8], ProtocolError> {
+        let n = self.u32(what)? as usize;
+        self.take(n, what)
+    }
+    /// A count of items of at least `min_size` bytes each, checked against what is left, so
+    /// a corrupt count cannot make the reader allocate wildly.
+    fn count(&mut self, min_size: usize, what: &'static str) -> Result<usize, ProtocolError> {
+        let n = self.u32(what)? as usize;
+        if n.saturating_mul(min_size) > self.b.len() - self.pos {
+            return Err(ProtocolError::Truncated(what));
+        }
+        Ok(n)
+    }
+    fn string(&mut self, what: &'static str) -> Result<String, ProtocolError> {
+        String::from_utf8(self.bytes(what)?.to_vec()).map_err(|_| ProtocolError::Invalid(format!("{what} is not UTF-8")))
+    }
+    fn rect(&mut self) -> Result<[u32; 4], ProtocolError> {
+        let r = [self.u32("rect")?, self.u32("rect")?, self.u32("rect")?, self.u32("rect")?];
+        if r[0] > r[2] || r[1] > r[3] {
+            return Err(ProtocolError::Invalid(format!("tile rectangle {r:?} is inverted")));
+        }
+        Ok(r)
+    }
+    fn end(self) -> Result<(), ProtocolError> {
+        match self.b.len() - self.pos {
+            0 => Ok(()),
+            n => Err(ProtocolError::Trailing(n)),
+        }
+    }
+}
+
+impl ToWorker {
+    pub fn encode(&self) -> Vec<u8> {
+        match self {
+            ToWorker::Frame(f) => {
+                let mut w = Writer::new(1);
+                for v in [f.frame, f.width, f.height] {
+                    w.u32(v);
+                }
+                for v in f.view_proj {
+                    w.f32(v);
+                }
+                w.u32(f.tiles.len() as u32);
+                for t in &f.tiles {
+                    w.u32(t.index);
+                    t.rect.iter().for_each(|&v| w.u32(v));
+                    w.bytes(&t.bft);
+                    w.u32(t.normals.len() as u32);
+                    for (slot, n) in &t.normals {
+                        w.u32(*slot);
+                        n.iter().for_each(|&c| w.f32(c));
+                    }
+                }
+                w.0
+            }
+            ToWorker::Shutdown => Writer::new(2).0,
+        }
+    }
+
+    pub fn decode(b: &[u8]) -> Result<ToWorker, ProtocolError> {
+        let (mut r, kind) = Reader::open(b)?;
+        let msg = match kind {
+            1 => {
+                let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
+                let mut view_proj = [0.0f32; 16];
+                for v in &mut view_proj {
+                    *v = r.f32("view_proj")?;
+                }
+                let n = r.count(24, "tiles")?;
+                let mut tiles = Vec::with_capacity(n);
+                for _ in 0..n {
+                    let index = r.u32("tile index")?;
+                    let rect = r.rect()?;
+                    let bft = r.bytes("tile submesh")?.to_vec();
+                    let m = r.count(16, "normals")?;
+                    let mut normals = Vec::with_capacity(m);
+                    for _ in 0..m {
+                        normals.push((r.u32("normal slot")?, [r.f32("normal")?, r.f32("normal")?, r.f32("normal")?]));
+                    }
+                    tiles.push(TileJob { index, rect, bft, normals });
+                }
+                ToWorker::Frame(FrameJob { frame, width, height, view_proj, tiles })
+            }
+            2 => ToWorker::Shutdown,
+            k => return Err(ProtocolError::UnknownKind(k)),
+        };
+        r.end()?;
+        Ok(msg)
+    }
+}
+
+impl ToMaster {
+    pub fn encode(&self) -> Vec<u8> {
+        match self {
+            ToMaster::Ready { adapter } => {
+                let mut w = Writer::new(3);
+                w.bytes(adapter.as_bytes());
+                w.0
+            }
+            ToMaster::Pixels { frame, tiles } => {
+                let mut w = Writer::new(4);
+                w.u32(*frame);
+                w.u32(tiles.len() as u32);
+                for t in tiles {
+                    w.u32(t.index);
+                    t.rect.iter().for_each(|&v| w.u32(v));
+                    for v in [t.times.decode_ms, t.times.upload_ms, t.times.render_ms, t.times.readback_ms] {
+                        w.f64(v);
+                    }
+                    w.u32(t.triangles);
+                    w.bytes(&t.rgba);
+                }
+                w.0
+            }
+            ToMaster::Failed { reason } => {
+                let mut w = Writer::new(5);
+                w.bytes(reason.as_bytes());
+                w.0
+            }
+        }
+    }
+
+    pub fn decode(b: &[u8]) -> Result<ToMaster, ProtocolError> {
+        let (mut r, kind) = Reader::open(b)?;
+        let msg = match kind {
+            3 => ToMaster::Ready { adapter: r.string("adapter name")? },
+            4 => {
+                let frame = r.u32("frame")?;
+                let n = r.count(60, "tiles")?;
+                let mut tiles = Vec::with_capacity(n);
+                for _ in 0..n {
+                    let index = r.u32("tile index")?;
+                    let rect = r.rect()?;
+                    let times = TileTimes {
+                        decode_ms: r.f64("times")?,
+                        upload_ms: r.f64("times")?,
+                        render_ms: r.f64("times")?,
+                        readback_ms: r.f64("times")?,
+                    };
+                    let triangles = r.u32("triangles")?;
+                    let rgba = r.bytes("pixels")?.to_vec();
+                    let expected = (rect[2] - rect[0]) as usize * (rect[3] - rect[1]) as usize * 4;
+                    if rgba.len() != expected {
+                        return Err(ProtocolError::Invalid(format!(
+                            "tile {index} has {} bytes of pixels, its rectangle needs {expected}",
+                            rgba.len()
+                        )));
+                    }
+                    tiles.push(TilePixels { index, rect, times, triangles, rgba });
+                }
+                ToMaster::Pixels { frame, tiles }
+            }
+            5 => ToMaster::Failed { reason: r.string("failure reason")? },
+            k => return Err(ProtocolError::UnknownKind(k)),
+        };
+        r.end()?;
+        Ok(msg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame() -> ToWorker {
+        ToWorker::Frame(FrameJob {
+            frame: 7,
+            width: 640,
+            height: 480,
+            view_proj: std::array::from_fn(|i| i as f32 * 0.5),
+            tiles: vec![
+                TileJob { index: 3, rect: [0, 0, 80, 60], bft: vec![1, 2, 3], normals: vec![(5, [0.0, 1.0, 0.0])] },
+                TileJob { index: 9, rect: [80, 60, 160, 120], bft: vec![], normals: vec![] },
+            ],
+        })
+    }
+
+    #[test]
+    fn messages_round_trip() {
+        let f = frame();
+        assert_eq!(ToWorker::decode(&f.encode()), Ok(f));
+        assert_eq!(ToWorker::decode(&ToWorker::Shutdown.encode()), Ok(ToWorker::Shutdown));
+        let p = ToMaster::Pixels {
+            frame: 7,
+            tiles: vec![TilePixels {
+                index: 3,
+                rect: [0, 0, 2, 1],
+                times: TileTimes { decode_ms: 1.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
+                triangles: 12,
+                rgba: vec![9; 8],
+            }],
+        };
+        assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
+        for m in [ToMaster::Ready { adapter: "llvmpipe".into() }, ToMaster::Failed { reason: "no adapter".into() }] {
+            assert_eq!(ToMaster::decode(&m.encode()), Ok(m));
+        }
+    }
+
+    #[test]
+    fn bad_messages_are_errors() {
+        let bytes = frame().encode();
+        for len in 0..bytes.len() {
+            assert!(ToWorker::decode(&bytes[..len]).is_err(), "truncated to {len}");
+        }
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert_eq!(ToWorker::decode(&extra), Err(ProtocolError::Trailing(1)));
+        assert_eq!(ToWorker::decode(b"XXXX\x01"), Err(ProtocolError::BadMagic));
+        assert_eq!(ToMaster::decode(b"TSRM\x09"), Err(ProtocolError::UnknownKind(9)));
+        let wrong_size = ToMaster::Pixels {
+            frame: 1,
+            tiles: vec![TilePixels { index: 0, rect: [0, 0, 2, 2], times: TileTimes::default(), triangles: 0, rgba: vec![0; 3] }],
+        };
+        assert!(matches!(ToMaster::decode(&wrong_size.encode()), Err(ProtocolError::Invalid(_))));
+    }
+}

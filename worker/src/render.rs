@@ -1,0 +1,500 @@
+//! Headless wgpu tile renderer: draws a [`RenderMesh`] into one rectangle of a frame and
+//! reads the pixels back as tightly packed RGBA8 rows.
+//!
+//! Tiles are pixel-exact crops of the full frame because a tile is the full frame's draw,
+//! limited by a scissor rect: the render target has the frame's size, and the pipeline state,
+//! viewport and `view_proj` are the full frame's, so every pixel inside the tile is computed
+//! by the same arithmetic. A first draw under the scissor clears the tile (a load-op clear
+//! would clear the whole frame); the copy to the readback buffer takes only the tile. This
+//! costs a frame-sized color and depth buffer per renderer (8 bytes a pixel, zero-filled once
+//! by wgpu), but neither a per-call whole-frame clear nor rasterization outside the tile.
+//!
+//! The cheaper-looking alternatives, a tile-sized target with the viewport moved to
+//! `(-x0, -y0, W, H)` (which wgpu 30 accepts) or a sub-frustum projection, are not exact on
+//! lavapipe: moving the origin changes the magnitude, hence the rounding, of the window
+//! coordinates and of the interpolation set up from them. Measured on the bunny at 1920x1080
+//! in 3x2 tiles, the moved viewport gave the same coverage but 32 of 266,459 covered pixels
+//! one level off in color; the sub-frustum also flipped the coverage of some pixels.
+//!
+//! The shading is `shaders/render.wgsl`: a light grey, two-sided Lambert plus ambient under a
+//! headlight, on a transparent background; there is no culling, as meshes may be
+//! inconsistently oriented.
+
+use std::sync::mpsc;
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec4};
+use thiserror::Error;
+
+use crate::RenderMesh;
+
+const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+const BYTES_PER_PIXEL: u32 = 4;
+/// Byte size of one position or normal.
+const VEC3_BYTES: u64 = std::mem::size_of::<[f32; 3]>() as u64;
+const POSITION_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+const NORMAL_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 => Float32x3];
+
+/// Why the renderer could not start or render.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    #[error(
+        "no GPU adapter found ({0}); without a GPU, wgpu needs Mesa's lavapipe: install \
+         mesa-vulkan-drivers (scripts/setup.sh does)"
+    )]
+    NoAdapter(String),
+    #[error("adapter {adapter} refused a device: {source}")]
+    Device { adapter: String, source: wgpu::RequestDeviceError },
+    #[error("rect {rect:?} is not a non-empty part of the {width}x{height} frame")]
+    BadRect { rect: [u32; 4], width: u32, height: u32 },
+    #[error("frame {width}x{height} exceeds the adapter's largest texture side, {max}")]
+    FrameTooLarge { width: u32, height: u32, max: u32 },
+    #[error("mesh has {positions} positions but {normals} normals")]
+    NormalCount { positions: usize, normals: usize },
+    #[error("the mesh's {what} buffer needs {bytes} bytes; the adapter allows {max}")]
+    MeshTooLarge { what: &'static str, bytes: u64, max: u64 },
+    #[error("GPU error: {0}")]
+    Gpu(String),
+}
+
+/// Wall-clock milliseconds of the three stages of [`Renderer::render`], each waited for
+/// on the device before the next starts so that they can be told apart.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderTimes {
+    /// Mesh and uniform writes until the device has them.
+    pub upload_ms: f64,
+    /// Clear, draw, and wait for the draw to finish.
+    pub render_ms: f64,
+    /// Texture-to-buffer copy, map, and removal of the row padding.
+    pub readback_ms: f64,
+}
+
+/// The uniform block of `render.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct FrameUniform {
+    view_proj: [[f32; 4]; 4],
+    eye: [f32; 4],
+}
+
+/// A GPU buffer that is replaced by a larger one only when the data outgrows it.
+struct GrowBuffer {
+    label: &'static str,
+    usage: wgpu::BufferUsages,
+    buffer: Option<wgpu::Buffer>,
+}
+
+impl GrowBuffer {
+    fn new(label: &'static str, usage: wgpu::BufferUsages) -> GrowBuffer {
+        GrowBuffer { label, usage: usage | wgpu::BufferUsages::COPY_DST, buffer: None }
+    }
+
+    /// Queues `data` for upload (nothing for empty data). Capacity grows to the next power of
+    /// two, capped at `max`, so a worker whose tile mesh grows slowly reallocates rarely.
+    fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, data: &[u8], max: u64) -> Result<(), RenderError> {
+        let len = data.len() as u64;
+        if len == 0 {
+            return Ok(());
+        }
+        if len > max {
+            return Err(RenderError::MeshTooLarge { what: self.label, bytes: len, max });
+        }
+        if self.buffer.as_ref().is_none_or(|b| b.size() < len) {
+            self.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(self.label),
+                size: len.next_power_of_two().min(max),
+                usage: self.usage,
+                mapped_at_creation: false,
+            }));
+        }
+        queue.write_buffer(self.buffer.as_ref().expect("allocated above"), 0, data);
+        Ok(())
+    }
+
+    /// The first `len` bytes (`len > 0`, and written by [`GrowBuffer::write`]).
+    fn slice(&self, len: u64) -> wgpu::BufferSlice<'_> {
+        self.buffer.as_ref().expect("written before drawing").slice(..len)
+    }
+}
+
+/// Frame-sized color and depth attachments, kept while the frame size stays the same.
+struct FrameTarget {
+    size: (u32, u32),
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+}
+
+impl FrameTarget {
+    fn new(device: &wgpu::Device, (width, height): (u32, u32)) -> FrameTarget {
+        let texture = |label, format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let color = texture(
+            "render: color target",
+            COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let depth = texture("render: depth buffer", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        let color_view = color.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("render: color target view"),
+            ..Default::default()
+        });
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("render: depth buffer view"),
+            ..Default::default()
+        });
+        FrameTarget { size: (width, height), color, color_view, depth_view }
+    }
+}
+
+/// A wgpu device with the tile pipelines, and the buffers and targets it reuses across
+/// calls: a worker renders the same tiles of the same frame size every frame, so after the
+/// first frame a call allocates only when its mesh or tile outgrows the previous ones.
+pub struct Renderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter_name: String,
+    limits: wgpu::Limits,
+    clear_pipeline: wgpu::RenderPipeline,
+    mesh_pipeline: wgpu::RenderPipeline,
+    uniform: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    positions: GrowBuffer,
+    normals: GrowBuffer,
+    indices: GrowBuffer,
+    frame_target: Option<FrameTarget>,
+    /// The mappable buffer tiles are copied into, rows padded to `COPY_BYTES_PER_ROW_ALIGNMENT`.
+    readback: Option<wgpu::Buffer>,
+}
+
+impl Renderer {
+    /// Opens a headless device: a hardware adapter if there is one, otherwise a fallback
+    /// (software) adapter such as lavapipe. `WGPU_BACKEND` and the other `WGPU_*` variables
+    /// wgpu reads can narrow the choice. The device gets the adapter's full limits, so large
+    /// meshes and frames fit whatever the adapter can hold.
+    pub fn new() -> Result<Renderer, RenderError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let request = |force_fallback_adapter| {
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter,
+                ..Default::default()
+            }))
+        };
+        let adapter = request(false).or_else(|_| request(true)).map_err(|e| RenderError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let adapter_name = info.name.clone();
+        log::info!("render: adapter {adapter_name} ({:?}, {:?})", info.backend, info.device_type);
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("render: device"),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|source| RenderError::Device { adapter: adapter_name.clone(), source })?;
+
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("render: shader"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/render.wgsl").into()),
+        });
+        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("render: frame uniform layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FrameUniform>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let depth_stencil = |depth_compare| wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(depth_compare),
+            stencil: Default::default(),
+            bias: Default::default(),
+        };
+        let color_targets = [Some(COLOR_FORMAT.into())];
+        let clear_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("render: clear pipeline layout"),
+            bind_group_layouts: &[],
+            immediate_size: 0,
+        });
+        let clear_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("render: clear pipeline"),
+            layout: Some(&clear_layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("clear_vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Always)),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("clear_fs"),
+                compilation_options: Default::default(),
+                targets: &color_targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("render: mesh pipeline layout"),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let vec3_layout = |attributes| wgpu::VertexBufferLayout {
+            array_stride: VEC3_BYTES,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes,
+        };
+        let mesh_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("render: mesh pipeline"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                // Positions and normals stay in separate buffers, uploaded straight from the
+                // RenderMesh vectors without interleaving.
+                buffers: &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Less)),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &color_targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("upload: frame uniform"),
+            size: std::mem::size_of::<FrameUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("render: frame uniform"),
+            layout: &bind_group_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
+        });
+        Ok(Renderer {
+            device,
+            queue,
+            adapter_name,
+            limits,
+            clear_pipeline,
+            mesh_pipeline,
+            uniform,
+            bind_group,
+            positions: GrowBuffer::new("upload: positions", wgpu::BufferUsages::VERTEX),
+            normals: GrowBuffer::new("upload: normals", wgpu::BufferUsages::VERTEX),
+            indices: GrowBuffer::new("upload: indices", wgpu::BufferUsages::INDEX),
+            frame_target: None,
+            readback: None,
+        })
+    }
+
+    /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
+    pub fn adapter_name(&self) -> &str {
+        &self.adapter_name
+    }
+
+    /// Renders the part `rect = [x0, y0, x1, y1]` (pixels, half-open, origin top-left) of a
+    /// `frame.0 x frame.1` frame seen through `view_proj`, and returns its RGBA8 pixels, rows
+    /// top first, `(x1 - x0) * 4` bytes each. `rect = [0, 0, W, H]` is the whole frame; any
+    /// other rect gives exactly the same bytes as cropping the whole frame. Uncovered pixels
+    /// are `(0, 0, 0, 0)`, covered ones opaque.
+    ///
+    /// Indices are not checked against the vertex count: out-of-range ones read defined but
+    /// unspecified values (wgpu's robust buffer access), not other memory.
+    pub fn render(
+        &mut self,
+        mesh: &RenderMesh,
+        view_proj: Mat4,
+        frame: (u32, u32),
+        rect: [u32; 4],
+    ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
+        let (width, height) = frame;
+        let [x0, y0, x1, y1] = rect;
+        if !(x0 < x1 && x1 <= width && y0 < y1 && y1 <= height) {
+            return Err(RenderError::BadRect { rect, width, height });
+        }
+        // The frame is a texture.
+        let max = self.limits.max_texture_dimension_2d;
+        if width > max || height > max {
+            return Err(RenderError::FrameTooLarge { width, height, max });
+        }
+        if mesh.normals.len() != mesh.positions.len() {
+            return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
+        }
+        // Validation and out-of-memory errors are captured and returned instead of reaching
+        // wgpu's default handler, which panics. The scopes are popped in reverse order.
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = self.render_unscoped(mesh, view_proj, frame, rect);
+        for scope in [validation, oom] {
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(RenderError::Gpu(e.to_string()));
+            }
+        }
+        result
+    }
+
+    fn render_unscoped(
+        &mut self,
+        mesh: &RenderMesh,
+        view_proj: Mat4,
+        (width, height): (u32, u32),
+        [x0, y0, x1, y1]: [u32; 4],
+    ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
+        let size = (x1 - x0, y1 - y0);
+        let start = Instant::now();
+        let max = self.limits.max_buffer_size;
+        let (device, queue) = (&self.device, &self.queue);
+        self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
+        self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
+        self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
+        // The eye is the point the projection sends to infinity: clip (0, 0, 1, 0) back in
+        // world space, up to a scale (see `Frame::eye` in render.wgsl).
+        let eye = view_proj.inverse() * Vec4::Z;
+        let uniform = FrameUniform { view_proj: view_proj.to_cols_array_2d(), eye: eye.to_array() };
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
+        // An empty submission flushes the queued writes.
+        self.wait(queue.submit([]))?;
+        let upload_ms = ms_since(start);
+
+        let start = Instant::now();
+        if self.frame_target.as_ref().is_none_or(|t| t.size != (width, height)) {
+            self.frame_target = Some(FrameTarget::new(device, (width, height)));
+        }
+        let target = self.frame_target.as_ref().expect("created above");
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("render: draw") });
+        {
+            // Load, not clear: a load-op clear would clear the whole frame, and only the
+            // tile is drawn (and cleared, by the first draw) under the scissor.
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("render: pass"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &target.color_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &target.depth_view,
+                    // Stored: a discarded depth buffer would be zero-filled, whole, by wgpu
+                    // before the next load.
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_scissor_rect(x0, y0, size.0, size.1);
+            pass.set_pipeline(&self.clear_pipeline);
+            pass.draw(0..3, 0..1);
+            let index_count = mesh.indices.len() as u32;
+            if index_count > 0 {
+                let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
+                pass.set_pipeline(&self.mesh_pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
+                pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
+                pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..index_count, 0, 0..1);
+            }
+        }
+        self.wait(queue.submit([encoder.finish()]))?;
+        let render_ms = ms_since(start);
+
+        let start = Instant::now();
+        let padded_row = (size.0 * BYTES_PER_PIXEL).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let bytes = padded_row as u64 * size.1 as u64;
+        // Kept while large enough: a worker's tiles of an uneven grid differ by a pixel or so.
+        if self.readback.as_ref().is_none_or(|b| b.size() < bytes) {
+            self.readback = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback: pixels"),
+                size: bytes,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }));
+        }
+        let readback = self.readback.as_ref().expect("created above");
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback: copy") });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &target.color,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: x0, y: y0, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded_row),
+                    rows_per_image: None,
+                },
+            },
+            wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
+        );
+        queue.submit([encoder.finish()]);
+        let (tx, rx) = mpsc::channel();
+        readback.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
+        rx.recv()
+            .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
+            .map_err(|e| RenderError::Gpu(e.to_string()))?;
+        let row = (size.0 * BYTES_PER_PIXEL) as usize;
+        let mut pixels = Vec::with_capacity(row * size.1 as usize);
+        {
+            let mapped = readback.get_mapped_range(..bytes).map_err(|e| RenderError::Gpu(e.to_string()))?;
+            for padded in mapped.chunks_exact(padded_row as usize) {
+                pixels.extend_from_slice(&padded[..row]);
+            }
+        }
+        readback.unmap();
+        let readback_ms = ms_since(start);
+        Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
+    }
+
+    /// Blocks until submission `index` has finished on the device.
+    fn wait(&self, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+            .map(drop)
+            .map_err(|e| RenderError::Gpu(e.to_string()))
+    }
+}
+
+fn ms_since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}

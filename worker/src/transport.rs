@@ -1,0 +1,172 @@
+//! How ranks exchange protocol messages: MPI under `mpirun`, or in-process channels when
+//! the binary runs alone (the master and one worker thread). Both carry the same bytes.
+
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::time::{Duration, Instant};
+
+use mpi::topology::{Communicator, SimpleCommunicator};
+use mpi::traits::*;
+
+/// A receive that did not deliver.
+#[derive(Debug, PartialEq)]
+pub enum RecvError {
+    /// Nothing arrived before the deadline.
+    Timeout,
+    /// The other side is gone (only channels can tell).
+    Disconnected,
+}
+
+/// Point-to-point messaging between ranks.
+pub trait Transport {
+    fn rank(&self) -> usize;
+    fn size(&self) -> usize;
+    fn send(&self, to: usize, msg: &[u8]);
+    /// Sends each `(rank, message)`, all in flight at once, and waits for them.
+    fn send_many(&self, msgs: &[(usize, Vec<u8>)]);
+    /// The next message from any rank, as `(source, bytes)`.
+    fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError>;
+    /// Ends every rank of the job with a non-zero status.
+    fn abort(&self, code: i32) -> !;
+}
+
+/// Whether this process was started by an MPI launcher (Open MPI, MPICH/Hydra, PMIx).
+pub fn launched_by_mpirun() -> bool {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "PMI_RANK"].iter().any(|v| std::env::var_os(v).is_some())
+}
+
+/// MPI's `COMM_WORLD`. Dropping it finalizes MPI.
+pub struct Mpi {
+    world: SimpleCommunicator,
+    _universe: mpi::environment::Universe,
+}
+
+impl Mpi {
+    /// Initializes MPI; `None` if it was already initialized.
+    pub fn init() -> Option<Mpi> {
+        let universe = mpi::initialize()?;
+        Some(Mpi { world: universe.world(), _universe: universe })
+    }
+}
+
+impl Transport for Mpi {
+    fn rank(&self) -> usize {
+        self.world.rank() as usize
+    }
+
+    fn size(&self) -> usize {
+        self.world.size() as usize
+    }
+
+    fn send(&self, to: usize, msg: &[u8]) {
+        self.world.process_at_rank(to as i32).send(msg);
+    }
+
+    fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
+        mpi::request::scope(|scope| {
+            let requests: Vec<_> =
+                msgs.iter().map(|(to, m)| self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..])).collect();
+            for r in requests {
+                r.wait();
+            }
+        });
+    }
+
+    fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError> {
+        // MPI has no receive with a deadline: probe, and sleep briefly between probes.
+        let deadline = Instant::now() + timeout;
+        let mut spins = 0u32;
+        loop {
+            if let Some(probed) = self.world.any_process().immediate_matched_probe() {
+                let (bytes, status) = probed.matched_receive_vec::<u8>();
+                return Ok((status.source_rank() as usize, bytes));
+            }
+            if Instant::now() >= deadline {
+                return Err(RecvError::Timeout);
+            }
+            spins += 1;
+            if spins > 1000 {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+    }
+
+    fn abort(&self, code: i32) -> ! {
+        self.world.abort(code)
+    }
+}
+
+/// One endpoint of a set of in-process channels.
+pub struct Local {
+    rank: usize,
+    /// Senders to the other endpoints' inboxes; none to our own, so that our inbox reports
+    /// `Disconnected` once every other endpoint is dropped.
+    peers: Vec<Option<Sender<(usize, Vec<u8>)>>>,
+    inbox: Receiver<(usize, Vec<u8>)>,
+}
+
+/// `n` fully connected in-process endpoints, ranks `0..n`.
+pub fn local_ranks(n: usize) -> Vec<Local> {
+    let (senders, receivers): (Vec<_>, Vec<_>) = (0..n).map(|_| channel()).unzip();
+    receivers
+        .into_iter()
+        .enumerate()
+        .map(|(rank, inbox)| {
+            let peers = senders.iter().enumerate().map(|(r, s)| (r != rank).then(|| s.clone())).collect();
+            Local { rank, peers, inbox }
+        })
+        .collect()
+}
+
+impl Transport for Local {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+
+    fn size(&self) -> usize {
+        self.peers.len()
+    }
+
+    fn send(&self, to: usize, msg: &[u8]) {
+        // A peer that has exited drops its inbox; the receive side reports that.
+        if let Some(peer) = &self.peers[to] {
+            let _ = peer.send((self.rank, msg.to_vec()));
+        }
+    }
+
+    fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
+        for (to, m) in msgs {
+            self.send(*to, m);
+        }
+    }
+
+    fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError> {
+        self.inbox.recv_timeout(timeout).map_err(|e| match e {
+            RecvTimeoutError::Timeout => RecvError::Timeout,
+            RecvTimeoutError::Disconnected => RecvError::Disconnected,
+        })
+    }
+
+    fn abort(&self, code: i32) -> ! {
+        std::process::exit(code)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn local_ranks_exchange_messages() {
+        let mut ranks = local_ranks(3);
+        let (r2, r1, r0) = (ranks.pop().unwrap(), ranks.pop().unwrap(), ranks.pop().unwrap());
+        r0.send_many(&[(1, vec![1]), (2, vec![2, 2])]);
+        assert_eq!(r1.recv(Duration::from_secs(1)), Ok((0, vec![1])));
+        assert_eq!(r2.recv(Duration::from_secs(1)), Ok((0, vec![2, 2])));
+        r2.send(0, &[7]);
+        assert_eq!(r0.recv(Duration::from_secs(1)), Ok((2, vec![7])));
+        assert_eq!(r0.recv(Duration::from_millis(10)), Err(RecvError::Timeout));
+        // Once the others are gone, a receive says so instead of waiting.
+        drop((r1, r2));
+        assert_eq!(r0.recv(Duration::from_secs(60)), Err(RecvError::Disconnected));
+    }
+}
