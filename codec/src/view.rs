@@ -135,13 +135,14 @@ impl TileGrid {
     /// The tile column of a pixel x coordinate (clamped to the screen).
     #[inline]
     fn col(&self, px: f32) -> u16 {
-        let p = (px.floor().max(0.0) as u64).min(self.width as u64 - 1);
+        // Clamped to >= 0 first, so the truncating cast is the floor (without a libm call).
+        let p = (px.max(0.0) as u64).min(self.width as u64 - 1);
         (((p + 1) * self.cols as u64 - 1) / self.width as u64) as u16
     }
 
     #[inline]
     fn row(&self, py: f32) -> u16 {
-        let p = (py.floor().max(0.0) as u64).min(self.height as u64 - 1);
+        let p = (py.max(0.0) as u64).min(self.height as u64 - 1);
         (((p + 1) * self.rows as u64 - 1) / self.height as u64) as u16
     }
 

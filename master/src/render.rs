@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use codec::bft::tile_sort::{self, Boxes, Tile};
-use codec::view::{Camera, TileBox, TileGrid};
+use codec::view::{Camera, TileGrid};
 use glam::Quat;
 use serde::Serialize;
 use worker::protocol::{FrameJob, TileJob, ToMaster, ToWorker};
@@ -163,8 +163,8 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
 
     let normals = worker::RenderMesh::from_decoded(&model.tiles.decoded).normals;
-    let source = source_slots(&model);
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
+    let mut sorter = tile_sort::Sorter::default();
     let mut stats_lines = Vec::new();
     for k in 0..args.frames {
         let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
@@ -172,8 +172,8 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
 
         let start = Instant::now();
         let boxes = tile_sort::boxes(&model.tiles, vp, grid);
-        let tiles = tile_sort::sort_with_boxes(&model.tiles, &boxes, grid)?;
-        let borders = border_normals(&model, &boxes, &tiles, grid, &normals, &source);
+        let tiles = sorter.sort(&model.tiles, &boxes, grid)?;
+        let borders = border_normals(&model, &boxes, &tiles, grid, &normals);
         let sort_ms = ms(start);
 
         let owner = assign(&tiles, workers, args.balance.then_some(&costs[..]));
@@ -366,16 +366,6 @@ pub fn assign(tiles: &[Tile], workers: usize, costs: Option<&[f64]>) -> Vec<usiz
     owner
 }
 
-/// For every model slot, the first slot of its input vertex (duplicate slots share it).
-fn source_slots(model: &Model) -> Vec<u32> {
-    let d = &model.tiles.decoded;
-    let mut source: Vec<u32> = (0..d.positions.len() as u32).collect();
-    for &(slot, src) in &d.duplicates {
-        source[slot as usize] = source[src as usize];
-    }
-    source
-}
-
 /// The normals each tile needs from the whole mesh: a worker computes a vertex's normal
 /// from the tile's triangles, which is the whole mesh's normal only when every triangle of
 /// the vertex lies in the tile and the vertex has a single slot. The rest are sent.
@@ -385,18 +375,8 @@ fn border_normals(
     tiles: &[Tile],
     grid: &TileGrid,
     normals: &[[f32; 3]],
-    source: &[u32],
 ) -> Vec<Vec<(u32, [f32; 3])>> {
     let d = &model.tiles.decoded;
-    // The tiles every triangle of a vertex lies in: the intersection of their boxes.
-    let full = TileBox { c0: 0, c1: (grid.cols - 1) as u16, r0: 0, r1: (grid.rows - 1) as u16 };
-    let mut inside = vec![full; d.positions.len()];
-    for (t, b) in d.triangles.iter().zip(&boxes.triangles) {
-        for &s in t {
-            let i = &mut inside[source[s as usize] as usize];
-            *i = i.intersect(b);
-        }
-    }
     let mut duplicated = vec![false; d.positions.len()];
     for &(slot, src) in &d.duplicates {
         duplicated[slot as usize] = true;
@@ -409,7 +389,7 @@ fn border_normals(
             tile.slots
                 .iter()
                 .enumerate()
-                .filter(|(_, &s)| duplicated[s as usize] || !inside[source[s as usize] as usize].contains(c, r))
+                .filter(|(_, &s)| duplicated[s as usize] || !boxes.whole_fan[s as usize].contains(c, r))
                 .map(|(i, &s)| (i as u32, normals[s as usize]))
                 .collect()
         })
