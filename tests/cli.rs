@@ -143,9 +143,23 @@ fn bench_bandwidth_writes_the_figure_8_table_and_plot() {
     assert_eq!(
         header,
         [
-            "model", "triangles", "width", "height", "cols", "rows", "tile_width", "tile_height", "tri_bytes",
-            "tiled_tri_bytes", "bft_bytes", "tiled_bft_bytes", "draco_per_tile_bytes", "meshopt_per_tile_bytes",
-            "bft_sort_ms", "tri_sort_ms", "draco_retile_ms"
+            "model",
+            "triangles",
+            "width",
+            "height",
+            "cols",
+            "rows",
+            "tile_width",
+            "tile_height",
+            "tri_bytes",
+            "tiled_tri_bytes",
+            "bft_bytes",
+            "tiled_bft_bytes",
+            "draco_per_tile_bytes",
+            "meshopt_per_tile_bytes",
+            "bft_sort_ms",
+            "tri_sort_ms",
+            "draco_retile_ms"
         ]
     );
     let rows: Vec<std::collections::HashMap<&str, &str>> =

@@ -38,7 +38,12 @@ fn mpirun(n: usize, extra_env: &[(&str, &str)], args: &[&str]) -> Output {
 }
 
 fn ok(o: &Output) {
-    assert!(o.status.success(), "failed: {}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "failed: {}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 /// Decoded RGBA pixels of a PNG.
@@ -75,10 +80,16 @@ fn reference(model: &str, size: &str, dir: &Path) -> PathBuf {
 #[test]
 fn mpirun_tiles_equal_the_single_process_frame() {
     let dir = tempfile::tempdir().unwrap();
-    for (model, size) in [(mesh("stanford/bunny_zipper_c3d.obj.gz"), "400x300"), (mesh("odedstein/plane_holes.obj.gz"), "333x201")] {
+    for (model, size) in
+        [(mesh("stanford/bunny_zipper_c3d.obj.gz"), "400x300"), (mesh("odedstein/plane_holes.obj.gz"), "333x201")]
+    {
         let reference = reference(&model, size, dir.path());
         assert!(covered(&reference) > 1000, "{model}: the model is in view");
-        for (np, flags) in [(2, vec!["--tiles", "4x3"]), (3, vec!["--tiles", "5x4"]), (3, vec!["--tiles", "3x3", "--balance", "--frames", "2"])] {
+        for (np, flags) in [
+            (2, vec!["--tiles", "4x3"]),
+            (3, vec!["--tiles", "5x4"]),
+            (3, vec!["--tiles", "3x3", "--balance", "--frames", "2"]),
+        ] {
             let out = dir.path().join("tiled.png");
             let mut args = vec!["render", &model, "--size", size, "--out", out.to_str().unwrap()];
             args.extend(&flags);
@@ -104,8 +115,19 @@ fn alone_more_workers_than_tiles_and_orbit() {
     let stats = dir.path().join("s.jsonl");
     let orbit = dir.path().join("o.png");
     ok(&alone(&[
-        "render", &model, "--size", "160x120", "--tiles", "2x2", "--frames", "3", "--orbit",
-        "--out", orbit.to_str().unwrap(), "--stats", stats.to_str().unwrap(),
+        "render",
+        &model,
+        "--size",
+        "160x120",
+        "--tiles",
+        "2x2",
+        "--frames",
+        "3",
+        "--orbit",
+        "--out",
+        orbit.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
     ]));
     let frames: Vec<_> = (1..=3).map(|k| dir.path().join(format!("o-{k:04}.png"))).collect();
     assert!(frames.iter().all(|f| f.exists()));
@@ -125,17 +147,28 @@ fn alone_more_workers_than_tiles_and_orbit() {
         }
     }
     let tile = &lines[0]["tiles"][0];
-    assert!(tile["bytes"].as_u64().unwrap() > 0 && tile["tri_bytes"].as_u64().unwrap() == 36 * tile["triangles"].as_u64().unwrap());
+    assert!(
+        tile["bytes"].as_u64().unwrap() > 0
+            && tile["tri_bytes"].as_u64().unwrap() == 36 * tile["triangles"].as_u64().unwrap()
+    );
 }
 
 #[test]
 fn tile_wall_writes_each_display_and_an_overview() {
     let dir = tempfile::tempdir().unwrap();
     let wall = dir.path().join("wall.toml");
-    std::fs::write(&wall, "columns = 3\nrows = 2\ndisplay_width = 120\ndisplay_height = 90\nbezel_x = 12\nbezel_y = 10\n").unwrap();
+    std::fs::write(
+        &wall,
+        "columns = 3\nrows = 2\ndisplay_width = 120\ndisplay_height = 90\nbezel_x = 12\nbezel_y = 10\n",
+    )
+    .unwrap();
     let out = dir.path().join("wall.png");
     let model = mesh("classic/spot.obj");
-    ok(&mpirun(3, &[], &["render", &model, "--wall", wall.to_str().unwrap(), "--tiles", "3x3", "--out", out.to_str().unwrap()]));
+    ok(&mpirun(
+        3,
+        &[],
+        &["render", &model, "--wall", wall.to_str().unwrap(), "--tiles", "3x3", "--out", out.to_str().unwrap()],
+    ));
     let (w, h, overview) = pixels(&out);
     assert_eq!((w, h), (3 * 120 + 2 * 12, 2 * 90 + 10));
     // The same frame rendered whole: each display is its crop, the bezels are hidden.
@@ -186,13 +219,32 @@ fn bad_input_is_reported_before_any_traffic() {
     let started = Instant::now();
     let o = mpirun(2, &[], &["render", "/nonexistent/model.obj", "--out", out.to_str().unwrap()]);
     assert_fast_failure(&o, started, "model.obj");
-    let o = alone(&["render", &mesh("classic/cow.obj"), "--size", "10x10", "--tiles", "20x1", "--out", out.to_str().unwrap()]);
+    let o = alone(&[
+        "render",
+        &mesh("classic/cow.obj"),
+        "--size",
+        "10x10",
+        "--tiles",
+        "20x1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("does not fit"));
-    let o = alone(&["render", &mesh("classic/cow.obj"), "--eye", "1,1,1", "--target", "1,1,1", "--out", out.to_str().unwrap()]);
+    let o = alone(&[
+        "render",
+        &mesh("classic/cow.obj"),
+        "--eye",
+        "1,1,1",
+        "--target",
+        "1,1,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("eye and target"));
     let wall = dir.path().join("bad.toml");
     std::fs::write(&wall, "columns = 0\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\n").unwrap();
-    let o = alone(&["render", &mesh("classic/cow.obj"), "--wall", wall.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o =
+        alone(&["render", &mesh("classic/cow.obj"), "--wall", wall.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("bad.toml"));
     assert!(!out.exists());
 }

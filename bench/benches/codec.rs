@@ -67,8 +67,7 @@ impl Prepared {
             .bytes;
         let meshopt = encode_meshopt(&mesh);
         let draco = encode_draco(name, &mesh);
-        let draco_triangles =
-            mesh.triangles.iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).count();
+        let draco_triangles = mesh.triangles.iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).count();
         let prepared = Prepared { name, mesh, bft, meshopt, draco, draco_triangles };
         prepared.check_round_trips();
         prepared
@@ -143,7 +142,8 @@ fn decode_bft(bytes: &[u8]) -> codec::bft::Decoded {
 
 fn decode_meshopt(m: &Meshopt) -> (Vec<u32>, Vec<[u16; 4]>) {
     let indices = meshopt::decode_index_buffer::<u32>(&m.indices, m.index_count).expect("meshopt index decode");
-    let vertices = meshopt::decode_vertex_buffer::<[u16; 4]>(&m.vertices, m.vertex_count).expect("meshopt vertex decode");
+    let vertices =
+        meshopt::decode_vertex_buffer::<[u16; 4]>(&m.vertices, m.vertex_count).expect("meshopt vertex decode");
     (indices, vertices)
 }
 
@@ -233,11 +233,9 @@ fn print_summary(p: &Prepared) {
         p.mesh.positions.len()
     );
     println!("{:<9} {:>10} {:>10} {:>14}", "codec", "bytes", "bits/tri", "decode Mtri/s");
-    for (codec, bytes, rate) in [
-        ("bft", p.bft.len(), bft_rate),
-        ("meshopt", meshopt_bytes, meshopt_rate),
-        ("draco", p.draco.len(), draco_rate),
-    ] {
+    for (codec, bytes, rate) in
+        [("bft", p.bft.len(), bft_rate), ("meshopt", meshopt_bytes, meshopt_rate), ("draco", p.draco.len(), draco_rate)]
+    {
         println!("{codec:<9} {bytes:>10} {:>10.3} {rate:>14.2}", bits_per_tri(bytes));
     }
     if p.draco_triangles != n {

@@ -10,7 +10,12 @@ fn main() {
         let dt = t.elapsed();
         let s = codec::bft::Stats::of(&enc.bytes).unwrap();
         let names = ["NEW", "RF0", "LF0", "RF", "LF", "NULL", "DL", "DR", "ADDN", "ADDR", "SEED", "CLR"];
-        let counts: Vec<String> = names.iter().zip(enc.stats.command_counts).filter(|(_, c)| *c > 0).map(|(n, c)| format!("{n}={c}")).collect();
+        let counts: Vec<String> = names
+            .iter()
+            .zip(enc.stats.command_counts)
+            .filter(|(_, c)| *c > 0)
+            .map(|(n, c)| format!("{n}={c}"))
+            .collect();
         println!("{arg}\n  {} tris, {} bytes, conn {:.3} bits/tri, geom {:.2} bits/vert (14-bit)\n  encode {:.1} ms ({:.2} Mtri/s), decode {:.1} ms ({:.1} Mtri/s)\n  {}",
             mesh.triangles.len(), s.bytes, s.connectivity_bits_per_triangle(), s.geometry_bits_per_vertex(),
             et.as_secs_f64() * 1e3, mesh.triangles.len() as f64 / et.as_secs_f64() / 1e6,

@@ -88,10 +88,8 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
     let options = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
     let mut reader = BufReader::new(Cursor::new(bytes));
     // Materials are irrelevant to geometry; a missing .mtl must not fail the load.
-    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| {
-        Err(tobj::LoadError::OpenFileFailed)
-    })
-    .map_err(|e| err(path, format!("malformed OBJ: {e}")))?;
+    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| Err(tobj::LoadError::OpenFileFailed))
+        .map_err(|e| err(path, format!("malformed OBJ: {e}")))?;
     let mut mesh = Mesh::default();
     for model in models {
         let m = model.mesh;
@@ -288,7 +286,8 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0
 
     #[test]
     fn stl_ascii_binary_and_gzip_load_alike() {
-        let ascii = b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n\
+        let ascii =
+            b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n\
 facet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n";
         let m = load_bytes(Path::new("t.stl"), ascii, Format::Stl).unwrap();
         assert_eq!(m.triangles.len(), 2);

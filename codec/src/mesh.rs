@@ -130,10 +130,7 @@ mod tests {
     #[test]
     fn validation_names_the_problem() {
         let mut m = Mesh { positions: vec![[0.0; 3]; 3], triangles: vec![[0, 1, 3]] };
-        assert_eq!(
-            m.validate(),
-            Err(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 })
-        );
+        assert_eq!(m.validate(), Err(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 }));
         m.triangles[0] = [0, 1, 2];
         m.positions[1][2] = f32::NAN;
         assert!(matches!(m.validate(), Err(MeshError::NonFinite { vertex: 1, .. })));
@@ -145,10 +142,12 @@ mod tests {
 
     #[test]
     fn quantization_error_is_half_a_step() {
-        let pts: Vec<[f32; 3]> = (0..1000).map(|i| {
-            let f = i as f32;
-            [f.sin() * 3.0, f.cos() * 0.5, (f * 0.37).sin() - 2.0]
-        }).collect();
+        let pts: Vec<[f32; 3]> = (0..1000)
+            .map(|i| {
+                let f = i as f32;
+                [f.sin() * 3.0, f.cos() * 0.5, (f * 0.37).sin() - 2.0]
+            })
+            .collect();
         for bits in [8u8, 14, 16, 24] {
             let q = Quantization::fit(&pts, None, bits).unwrap();
             for p in &pts {

@@ -47,8 +47,11 @@ pub fn write_obj<W: Write + ?Sized>(mesh: &Mesh, out: &mut W) -> io::Result<()> 
     w.flush()
 }
 
+/// A mesh writer: [`write_ply`] or [`write_obj`].
+pub type WriteMesh = fn(&Mesh, &mut dyn Write) -> io::Result<()>;
+
 /// The writer for a path's extension (`.ply` or `.obj`), or `None`.
-pub fn writer_for(path: &Path) -> Option<fn(&Mesh, &mut dyn Write) -> io::Result<()>> {
+pub fn writer_for(path: &Path) -> Option<WriteMesh> {
     match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
         "ply" => Some(|m, w| write_ply(m, w)),
         "obj" => Some(|m, w| write_obj(m, w)),

@@ -280,7 +280,12 @@ pub fn clipped_pixel_box(c: [Vec4; 3], width: u32, height: u32) -> Option<PixelB
 /// The tile box `[t]` of every triangle: vertices projected, each triangle clipped to the
 /// frustum and its pixel box mapped to tiles; empty for triangles wholly outside. This is
 /// pass 1 shared by the BFT tile sort, the independent-triangle sort and the benchmarks.
-pub fn triangle_tile_boxes(positions: &[[f32; 3]], triangles: &[[u32; 3]], view_proj: Mat4, grid: &TileGrid) -> Vec<TileBox> {
+pub fn triangle_tile_boxes(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    view_proj: Mat4,
+    grid: &TileGrid,
+) -> Vec<TileBox> {
     let clip: Vec<Vec4> =
         positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
     triangles

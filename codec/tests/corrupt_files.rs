@@ -51,11 +51,9 @@ fn random_byte_flips_are_detected() {
         // checked field by field.
         match bft::decode(&b) {
             Err(_) => {}
-            Ok(d) => panic!(
-                "a corrupted file decoded ({} triangles vs {})",
-                d.triangles.len(),
-                reference.triangles.len()
-            ),
+            Ok(d) => {
+                panic!("a corrupted file decoded ({} triangles vs {})", d.triangles.len(), reference.triangles.len())
+            }
         }
     }
 }

@@ -81,11 +81,11 @@ fn cameras(model: &TileModel, aspect: f32) -> Vec<Camera> {
 #[test]
 fn shared_meshes_sort_exactly() {
     for rel in [
-        "classic/teapot.obj",                  // holes, non-manifold vertices, 4 components
-        "classic/beetle.obj",                  // non-manifold edges, 23 holes
-        "stanford/dragon_vrip_res4.ply.gz",    // non-manifold, duplicate faces
-        "odedstein/plane_holes.obj.gz",        // 27 holes
-        "classic/ogre.obj.gz",                 // 44 components
+        "classic/teapot.obj",               // holes, non-manifold vertices, 4 components
+        "classic/beetle.obj",               // non-manifold edges, 23 holes
+        "stanford/dragon_vrip_res4.ply.gz", // non-manifold, duplicate faces
+        "odedstein/plane_holes.obj.gz",     // 27 holes
+        "classic/ogre.obj.gz",              // 44 components
         "degenerate/fused_vertices.obj",
         "stanford/bunny_zipper_c3d.obj.gz",
     ] {
@@ -119,8 +119,7 @@ fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
             for t in [[id(x, y), id(x + 1, y), id(x + 1, y + 1)], [id(x, y), id(x + 1, y + 1), id(x, y + 1)]] {
                 if !holes[triangles.len() % holes.len()] {
                     triangles.push(t);
-                }
-                else {
+                } else {
                     triangles.push([u32::MAX; 3]);
                 }
             }

@@ -27,8 +27,9 @@ pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
     let mesh = load_mesh(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.triangles.len() as u64, "encoding");
-    let enc = bft::encode_with_progress(&mesh, EncodeOptions { quant_bits }, &mut |done, _| pb.set_position(done as u64))
-        .with_context(|| format!("cannot encode {}", input.display()))?;
+    let enc =
+        bft::encode_with_progress(&mesh, EncodeOptions { quant_bits }, &mut |done, _| pb.set_position(done as u64))
+            .with_context(|| format!("cannot encode {}", input.display()))?;
     pb.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     write_bytes(output, &enc.bytes)?;
@@ -136,8 +137,14 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         println!("  triangles      {:>12}   ({} components, {} loose)", r.triangles, r.components, r.loose_triangles);
         println!("  vertices       {:>12}   ({} slots, {} duplicated)", r.vertices, r.slots, r.duplicate_slots);
         println!("  bytes          {:>12}", r.bytes);
-        println!("  connectivity   {:>12.3} bits/triangle ({} bytes)", r.connectivity_bits_per_triangle, r.connectivity_bytes);
-        println!("  geometry       {:>12.2} bits/vertex at {} bits ({} bytes)", r.geometry_bits_per_vertex, r.quant_bits, r.geometry_bytes);
+        println!(
+            "  connectivity   {:>12.3} bits/triangle ({} bytes)",
+            r.connectivity_bits_per_triangle, r.connectivity_bytes
+        );
+        println!(
+            "  geometry       {:>12.2} bits/vertex at {} bits ({} bytes)",
+            r.geometry_bits_per_vertex, r.quant_bits, r.geometry_bytes
+        );
         println!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64);
     }
     Ok(())

@@ -109,7 +109,8 @@ pub struct Wall {
 impl Wall {
     pub fn load(path: &Path) -> Result<Wall> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let wall: Wall = toml::from_str(&text).with_context(|| format!("{}: not a valid wall description", path.display()))?;
+        let wall: Wall =
+            toml::from_str(&text).with_context(|| format!("{}: not a valid wall description", path.display()))?;
         wall.validate().with_context(|| format!("{}", path.display()))?;
         Ok(wall)
     }
@@ -177,10 +178,9 @@ mod tests {
 
     #[test]
     fn wall_displays_skip_the_bezels() {
-        let wall: Wall = toml::from_str(
-            "columns = 2\nrows = 2\ndisplay_width = 4\ndisplay_height = 3\nbezel_x = 2\nbezel_y = 1\n",
-        )
-        .unwrap();
+        let wall: Wall =
+            toml::from_str("columns = 2\nrows = 2\ndisplay_width = 4\ndisplay_height = 3\nbezel_x = 2\nbezel_y = 1\n")
+                .unwrap();
         assert_eq!(wall.frame_size(), (10, 7));
         let mut frame = Image::new(10, 7);
         for (i, px) in frame.rgba.chunks_mut(4).enumerate() {
@@ -195,6 +195,7 @@ mod tests {
         assert_eq!(px(4, 0), &[0, 0, 0, 255]);
         assert_eq!(px(0, 3), &[0, 0, 0, 255]);
         assert_eq!(px(6, 4), &[6, 4, 0, 255]);
-        assert!(toml::from_str::<Wall>("columns = 2\nrows = 2\ndisplay_width = 4\ndisplay_height = 3\nbezels = 1\n").is_err());
+        assert!(toml::from_str::<Wall>("columns = 2\nrows = 2\ndisplay_width = 4\ndisplay_height = 3\nbezels = 1\n")
+            .is_err());
     }
 }

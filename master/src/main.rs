@@ -40,7 +40,7 @@ enum Command {
         grid: GridArgs,
         #[command(flatten)]
         camera: CameraArgs,
-        /// Write DIR/tile-<index>.ply for every non-empty tile, and DIR/summary.json.
+        /// Write `DIR/tile-<index>.ply` for every non-empty tile, and `DIR/summary.json`.
         #[arg(long)]
         dump: Option<PathBuf>,
         /// Print the summary as JSON.
@@ -97,7 +97,9 @@ fn main() -> ExitCode {
         Command::Decode { input, output } => commands::decode(input, output),
         Command::Stats { input, json } => commands::stats(input, *json),
         Command::Render(args) => master::render::run(args),
-        Command::Sort { model, grid, camera, dump, json } => master::sort::run(model, grid, camera, dump.as_ref(), *json),
+        Command::Sort { model, grid, camera, dump, json } => {
+            master::sort::run(model, grid, camera, dump.as_ref(), *json)
+        }
         Command::Bench { bench: Bench::Bandwidth { models, tiles, size, quant_bits, out, plot } } => {
             master::bandwidth::run(models, *size, tiles, *quant_bits, out, plot)
         }

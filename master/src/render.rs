@@ -178,7 +178,13 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
 
         let owner = assign(&tiles, workers, args.balance.then_some(&costs[..]));
         let mut jobs: Vec<FrameJob> = (0..workers)
-            .map(|_| FrameJob { frame: k, width: grid.width, height: grid.height, view_proj: vp.to_cols_array(), tiles: vec![] })
+            .map(|_| FrameJob {
+                frame: k,
+                width: grid.width,
+                height: grid.height,
+                view_proj: vp.to_cols_array(),
+                tiles: vec![],
+            })
             .collect();
         let mut tile_stats = Vec::with_capacity(tiles.len());
         for ((tile, normals), &w) in tiles.iter().zip(borders).zip(&owner) {
@@ -228,7 +234,8 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
         let write_ms = ms(start);
         eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tiles.len(), sort_ms, out.display());
 
-        let line = MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
+        let line =
+            MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
         stats_lines.push(serde_json::to_string(&line)?);
         worker_lines.sort_by_key(|l| l.rank);
         for l in worker_lines {
@@ -282,7 +289,9 @@ fn receive_pixels(
 ) -> Result<(usize, Vec<worker::protocol::TilePixels>)> {
     let (rank, bytes) = match t.recv(timeout) {
         Ok(m) => m,
-        Err(RecvError::Timeout) => bail!("no worker answered frame {} within {:.0} s", frame + 1, timeout.as_secs_f64()),
+        Err(RecvError::Timeout) => {
+            bail!("no worker answered frame {} within {:.0} s", frame + 1, timeout.as_secs_f64())
+        }
         Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
     };
     match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {

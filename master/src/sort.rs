@@ -158,7 +158,14 @@ pub fn run(path: &Path, grid: &GridArgs, camera: &CameraArgs, dump: Option<&Path
         let t = &summary.totals;
         println!(
             "{}: {}x{} tiles on {}x{}, {} of {} triangles visible, {} non-empty tiles",
-            summary.model, grid.cols, grid.rows, grid.width, grid.height, t.visible_triangles, t.triangles, t.nonempty_tiles
+            summary.model,
+            grid.cols,
+            grid.rows,
+            grid.width,
+            grid.height,
+            t.visible_triangles,
+            t.triangles,
+            t.nonempty_tiles
         );
         println!("  BFT        {:>12} bytes   (whole model)", t.bft_bytes);
         println!("  Tiled BFT  {:>12} bytes   sort {:.1} ms", t.tiled_bft_bytes, summary.sort_ms);

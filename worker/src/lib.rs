@@ -73,13 +73,7 @@ mod tests {
     fn duplicate_slots_share_the_normal_of_their_vertex() {
         // Two fans sharing only vertex 0 (a non-manifold vertex): the encoder duplicates it.
         let mesh = Mesh {
-            positions: vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [-1.0, 0.0, 0.5],
-                [0.0, -1.0, 0.5],
-            ],
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.5], [0.0, -1.0, 0.5]],
             triangles: vec![[0, 1, 2], [0, 3, 4]],
         };
         let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();

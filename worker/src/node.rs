@@ -66,7 +66,12 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
 }
 
 /// Decodes one tile, applies the border normals the master sent, and renders it.
-fn render_tile(renderer: &mut Renderer, tile: &TileJob, view_proj: Mat4, frame: (u32, u32)) -> Result<TilePixels, String> {
+fn render_tile(
+    renderer: &mut Renderer,
+    tile: &TileJob,
+    view_proj: Mat4,
+    frame: (u32, u32),
+) -> Result<TilePixels, String> {
     let start = Instant::now();
     let decoded = codec::bft::decode(&tile.bft).map_err(|e| format!("cannot decode the submesh: {e}"))?;
     let mut mesh = RenderMesh::from_decoded(&decoded);
@@ -81,7 +86,12 @@ fn render_tile(renderer: &mut Renderer, tile: &TileJob, view_proj: Mat4, frame: 
     Ok(TilePixels {
         index: tile.index,
         rect: tile.rect,
-        times: TileTimes { decode_ms, upload_ms: times.upload_ms, render_ms: times.render_ms, readback_ms: times.readback_ms },
+        times: TileTimes {
+            decode_ms,
+            upload_ms: times.upload_ms,
+            render_ms: times.render_ms,
+            readback_ms: times.readback_ms,
+        },
         triangles: mesh.triangle_count() as u32,
         rgba,
     })

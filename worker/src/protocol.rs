@@ -171,7 +171,8 @@ impl<'a> Reader<'a> {
         Ok(n)
     }
     fn string(&mut self, what: &'static str) -> Result<String, ProtocolError> {
-        String::from_utf8(self.bytes(what)?.to_vec()).map_err(|_| ProtocolError::Invalid(format!("{what} is not UTF-8")))
+        String::from_utf8(self.bytes(what)?.to_vec())
+            .map_err(|_| ProtocolError::Invalid(format!("{what} is not UTF-8")))
     }
     fn rect(&mut self) -> Result<[u32; 4], ProtocolError> {
         let r = [self.u32("rect")?, self.u32("rect")?, self.u32("rect")?, self.u32("rect")?];
@@ -368,7 +369,13 @@ mod tests {
         assert_eq!(ToMaster::decode(b"TSRM\x09"), Err(ProtocolError::UnknownKind(9)));
         let wrong_size = ToMaster::Pixels {
             frame: 1,
-            tiles: vec![TilePixels { index: 0, rect: [0, 0, 2, 2], times: TileTimes::default(), triangles: 0, rgba: vec![0; 3] }],
+            tiles: vec![TilePixels {
+                index: 0,
+                rect: [0, 0, 2, 2],
+                times: TileTimes::default(),
+                triangles: 0,
+                rgba: vec![0; 3],
+            }],
         };
         assert!(matches!(ToMaster::decode(&wrong_size.encode()), Err(ProtocolError::Invalid(_))));
     }

@@ -63,8 +63,10 @@ impl Transport for Mpi {
 
     fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
         mpi::request::scope(|scope| {
-            let requests: Vec<_> =
-                msgs.iter().map(|(to, m)| self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..])).collect();
+            let requests: Vec<_> = msgs
+                .iter()
+                .map(|(to, m)| self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..]))
+                .collect();
             for r in requests {
                 r.wait();
             }
@@ -95,13 +97,16 @@ impl Transport for Mpi {
     }
 }
 
+/// A message in a channel: the sender's rank and the bytes.
+type Envelope = (usize, Vec<u8>);
+
 /// One endpoint of a set of in-process channels.
 pub struct Local {
     rank: usize,
     /// Senders to the other endpoints' inboxes; none to our own, so that our inbox reports
     /// `Disconnected` once every other endpoint is dropped.
-    peers: Vec<Option<Sender<(usize, Vec<u8>)>>>,
-    inbox: Receiver<(usize, Vec<u8>)>,
+    peers: Vec<Option<Sender<Envelope>>>,
+    inbox: Receiver<Envelope>,
 }
 
 /// `n` fully connected in-process endpoints, ranks `0..n`.

@@ -48,8 +48,7 @@ impl Decoded {
                 positions.push(q.dequantize(self.positions[s]));
             }
         }
-        let triangles =
-            self.triangles.iter().map(|t| t.map(|s| remap[target[s as usize] as usize])).collect();
+        let triangles = self.triangles.iter().map(|t| t.map(|s| remap[target[s as usize] as usize])).collect();
         Mesh { positions, triangles }
     }
 }

@@ -372,10 +372,11 @@ impl<'a> Traversal<'a> {
             self.dups.push((s, first));
         } else {
             self.slot_of[v as usize] = s;
-            let pred = predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
+            let pred =
+                predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
             let actual = self.q[v as usize];
-            for a in 0..3 {
-                self.max_q[a] = self.max_q[a].max(actual[a]);
+            for (m, v) in self.max_q.iter_mut().zip(actual) {
+                *m = (*m).max(v);
             }
             self.geometry_model.encode(&mut self.geom, kind, actual, pred);
         }

@@ -124,7 +124,7 @@ impl Header {
         if !(8..=24).contains(&h.quant_bits) {
             return Err(corrupt(format!("quantization of {} bits is outside 8..=24", h.quant_bits)));
         }
-        if !(h.step.is_finite() && h.step > 0.0) || !h.bbox_min.iter().all(|v| v.is_finite()) {
+        if !(h.step.is_finite() && h.step > 0.0 && h.bbox_min.iter().all(|v| v.is_finite())) {
             return Err(corrupt("non-finite quantization parameters"));
         }
         if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
@@ -179,7 +179,11 @@ impl<'a> Reader<'a> {
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
     let mut r = Reader { b: bytes, pos: 0 };
     let magic = r.take(8, "magic number").map_err(|_| {
-        if MAGIC.starts_with(bytes) { BftError::Truncated("magic number") } else { BftError::BadMagic }
+        if MAGIC.starts_with(bytes) {
+            BftError::Truncated("magic number")
+        } else {
+            BftError::BadMagic
+        }
     })?;
     if magic != MAGIC {
         return Err(BftError::BadMagic);

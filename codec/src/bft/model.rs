@@ -86,7 +86,11 @@ impl CommandModel {
                 return Some(Command::New);
             }
             Some(if !dec.bit(&mut p[2]) {
-                if dec.bit(&mut p[3]) { Command::Lf0 } else { Command::Rf0 }
+                if dec.bit(&mut p[3]) {
+                    Command::Lf0
+                } else {
+                    Command::Rf0
+                }
             } else if dec.bit(&mut p[4]) {
                 Command::Lf
             } else {

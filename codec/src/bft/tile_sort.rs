@@ -12,7 +12,7 @@
 //!    `[t]`; a vertex's box `[v]` is the union of its triangles' boxes;
 //! 3. pass 2: replay the model's commands on its frontier once; each command is rewritten
 //!    for every tile in the boxes of its vertices by [`rewrite`] (Table 2) and coded into
-//!    that tile's stream by a [`TileWriter`], which holds the state the ordinary decoder
+//!    that tile's stream by a `TileWriter`, which holds the state the ordinary decoder
 //!    will have for the tile. Offsets come from the paper's counters: every frontier entry
 //!    remembers, per tile of its vertex's box, its index in that tile's frontier, so an
 //!    offset is a subtraction, never a scan.
@@ -361,8 +361,12 @@ fn replay(
                     Command::Rf => (f.at(2 + op.offset as usize).slot, f.head + 2 + op.offset as usize),
                     _ => (f.at(len - 1 - op.offset as usize).slot, f.head + len - 1 - op.offset as usize),
                 };
-                let (vl, vr, vx, bt) =
-                    (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize], bx.vertices[xs as usize], bx.triangles[next_tri]);
+                let (vl, vr, vx, bt) = (
+                    bx.vertices[l.slot as usize],
+                    bx.vertices[r.slot as usize],
+                    bx.vertices[xs as usize],
+                    bx.triangles[next_tri],
+                );
                 next_tri += 1;
                 let (al, ax) = (at.push(&vl), at.push(&vx));
                 for_tiles!(vl.union(&vx), |w, c, rw| {
