@@ -306,6 +306,7 @@ impl State<'_> {
             if self.record {
                 self.ops.push(Op { cmd, offset: offset as u32 });
             }
+            self.f.compact();
             if self.triangles.len() > triangles as usize {
                 return Err(corrupt("more triangles than the header says"));
             }

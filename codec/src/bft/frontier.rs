@@ -104,4 +104,20 @@ impl Frontier {
     pub fn clear(&mut self) {
         self.head = self.entries.len();
     }
+
+    /// Drops the consumed prefix once it is most of the buffer, so the frontier's memory
+    /// stays proportional to its length, not to the stream's (the live frontier of the
+    /// dragon is thousands of entries; the pushes are millions). Positions shift down by
+    /// the returned count, so only callers that keep no positions, or shift their own,
+    /// may call it.
+    #[inline]
+    pub fn compact(&mut self) -> usize {
+        let h = self.head;
+        if h < 4096 || h * 2 < self.entries.len() {
+            return 0;
+        }
+        self.entries.drain(..h);
+        self.head = 0;
+        h
+    }
 }

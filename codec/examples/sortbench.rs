@@ -1,0 +1,44 @@
+//! Steady-state timing of the BFT tile sort against the independent-triangle sort, one
+//! process, alternating runs, medians:
+//! `cargo run --release -p tessera-codec --example sortbench -- MODEL.bft [COLSxROWS] [RUNS]`
+use std::time::Instant;
+
+use codec::bft::tile_sort::{self, Sorter, TileModel};
+use codec::view::{Camera, TileGrid};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let path = args.next().expect("usage: sortbench MODEL.bft [COLSxROWS] [RUNS]");
+    let grid_arg = args.next().unwrap_or_else(|| "8x8".into());
+    let runs: usize = args.next().map_or(15, |r| r.parse().expect("RUNS is a number"));
+    let (c, r) = grid_arg.split_once('x').expect("COLSxROWS");
+    let model = TileModel::from_bytes(&std::fs::read(&path).expect("readable")).expect("a .bft model");
+    let grid = TileGrid::new(1920, 1080, c.parse().unwrap(), r.parse().unwrap()).expect("grid");
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
+    let mut sorter = Sorter::default();
+    let (mut pass1, mut pass2, mut tri) = (vec![], vec![], vec![]);
+    for _ in 0..runs {
+        let t = Instant::now();
+        let b = tile_sort::boxes(&model, vp, &grid);
+        let t1 = t.elapsed().as_secs_f64() * 1e3;
+        let tiles = sorter.sort(&model, &b, &grid).expect("sorts");
+        pass1.push(t1);
+        pass2.push(t.elapsed().as_secs_f64() * 1e3 - t1);
+        std::hint::black_box(tiles);
+        let t = Instant::now();
+        std::hint::black_box(codec::tri_sort::sort(&model.positions, model.triangles(), vp, &grid));
+        tri.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let (p1, p2, tr) = (median(pass1), median(pass2), median(tri));
+    println!(
+        "{path} {grid_arg}: BFT sort {:.1} ms (pass 1 {p1:.1}, pass 2 {p2:.1}), Tri sort {tr:.1} ms, ratio {:.2}",
+        p1 + p2,
+        (p1 + p2) / tr
+    );
+}
