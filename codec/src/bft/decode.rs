@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::format::{self, corrupt, get_varint, BftError, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::model::{basis_position, command_context, predict, CommandModel, GeometryModel, Prediction};
 use super::Command;
 use crate::mesh::{Mesh, Quantization};
 use crate::rangecoder::Decoder;
@@ -175,11 +175,7 @@ struct State<'a> {
 impl State<'_> {
     #[inline]
     fn slot_pos(&self, slot: u32) -> [u32; 3] {
-        if slot == NONE {
-            [self.max / 2 + 1; 3]
-        } else {
-            self.positions[slot as usize]
-        }
+        basis_position(&self.positions, slot, self.max)
     }
 
     #[inline]

@@ -1,6 +1,7 @@
 //! Context models for the two BFT streams. Encoder, decoder and tile sort share them, so a
 //! context is computed one way only.
 
+use super::frontier::NONE;
 use super::Command;
 use crate::rangecoder::{BitTree, Decoder, Encoder, UIntCoder, PROB_INIT};
 
@@ -130,6 +131,17 @@ pub enum Prediction {
     Midpoint,
     /// The previous slot's position (seeds, adds, loose-only vertices).
     Previous,
+}
+
+/// The position a prediction uses for `slot`: the slot's decoded position, or the grid's
+/// center for [`NONE`] (the first vertex of a stream has nothing before it).
+#[inline]
+pub fn basis_position(positions: &[[u32; 3]], slot: u32, max: u32) -> [u32; 3] {
+    if slot == NONE {
+        [max / 2 + 1; 3]
+    } else {
+        positions[slot as usize]
+    }
 }
 
 /// Predicts a quantized position. Inputs are positions of already decoded slots.

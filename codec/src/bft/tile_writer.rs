@@ -8,7 +8,7 @@
 
 use super::format::{self, put_varint, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::model::{basis_position, command_context, predict, CommandModel, GeometryModel, Prediction};
 use super::Command;
 use crate::rangecoder::Encoder;
 
@@ -64,11 +64,7 @@ impl TileWriter {
 
     #[inline]
     fn slot_pos(&self, slot: u32) -> [u32; 3] {
-        if slot == NONE {
-            [self.max / 2 + 1; 3]
-        } else {
-            self.positions[slot as usize]
-        }
+        basis_position(&self.positions, slot, self.max)
     }
 
     fn new_slot(&mut self, global: u32, q: [u32; 3], kind: Prediction, basis: [u32; 3]) -> u32 {
