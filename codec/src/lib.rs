@@ -16,6 +16,7 @@
 pub mod bft;
 pub mod load;
 pub mod mesh;
+pub mod pm;
 pub mod rangecoder;
 pub mod save;
 pub mod tri_sort;

@@ -1,0 +1,276 @@
+//! The progressive mesh builder: refining through every split gives back the input triangles
+//! exactly (multiset, orientation) for every shared mesh and random triangle soups; the FVIDs
+//! are a permutation; every intermediate level is a consistent mesh over the active vertices.
+
+mod common;
+
+use std::time::Instant;
+
+use codec::pm::{build, refine_all, PmError, ProgressiveMesh, Refiner};
+use codec::{Mesh, MeshError};
+use common::{all_shared_meshes, shared_meshes, sorted_canonical};
+use proptest::prelude::*;
+
+/// Connected components of the used vertices (vertices linked by sharing a triangle).
+fn components(mesh: &Mesh) -> usize {
+    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in &mesh.triangles {
+        for k in 1..3 {
+            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[k]));
+            parent[a as usize] = b;
+        }
+    }
+    let used = mesh.used_vertices();
+    (0..parent.len() as u32).filter(|&v| used[v as usize] && find(&mut parent, v) == v).count()
+}
+
+fn all_same(t: [u32; 3]) -> bool {
+    t[0] == t[1] && t[1] == t[2]
+}
+
+fn repeats(t: [u32; 3]) -> bool {
+    t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
+}
+
+/// Builds and checks everything that holds for any input: FVIDs, positions, the base mesh,
+/// the split records, and the exact round trip through `refine_all`.
+fn build_and_check(mesh: &Mesh) -> ProgressiveMesh {
+    let pm = build(mesh).expect("builds");
+    let used = mesh.used_vertices();
+    let n_used = used.iter().filter(|&&u| u).count();
+
+    // FVIDs: a permutation of 0..used over the used vertices; positions follow them.
+    assert_eq!(pm.fvid_of_input.len(), mesh.positions.len());
+    assert_eq!(pm.positions.len(), n_used);
+    let mut input_of_fvid = vec![u32::MAX; n_used];
+    for (v, &f) in pm.fvid_of_input.iter().enumerate() {
+        if !used[v] {
+            assert_eq!(f, u32::MAX, "unused vertex {v} has an FVID");
+            continue;
+        }
+        assert!((f as usize) < n_used, "FVID {f} out of range");
+        assert_eq!(input_of_fvid[f as usize], u32::MAX, "FVID {f} given twice");
+        input_of_fvid[f as usize] = v as u32;
+        assert_eq!(pm.positions[f as usize], mesh.positions[v]);
+    }
+
+    // Collapses run until no edge is left: at least one base vertex per component (the last
+    // faces of a component vanish with their edges), and the base faces are the input faces
+    // that never had two distinct vertices.
+    assert!(pm.base_vertices.windows(2).all(|w| w[0] < w[1]), "base vertices not ascending");
+    assert!(pm.base_vertices.len() >= components(mesh));
+    assert_eq!(pm.base_faces.len(), mesh.triangles.iter().filter(|t| all_same(**t)).count());
+    assert_eq!(pm.base_vertices.len() + pm.splits.len(), n_used);
+    for s in &pm.splits {
+        assert!(s.v < s.v_u, "split {} -> {}: v_u must follow v", s.v, s.v_u);
+        assert!(!s.faces.is_empty(), "split {} -> {} creates no face", s.v, s.v_u);
+    }
+    assert_eq!(pm.base_faces.len() + pm.splits.iter().map(|s| s.faces.len()).sum::<usize>(), mesh.triangles.len());
+
+    let back = refine_all(&pm).into_iter().map(|t| t.map(|f| input_of_fvid[f as usize]));
+    assert!(
+        sorted_canonical(back) == sorted_canonical(mesh.triangles.iter().copied()),
+        "refined triangles differ from the input"
+    );
+    pm
+}
+
+/// Walks every level from the base mesh up: the split vertex is active and `v_u` is not, every
+/// face references active vertices only, a face repeats an index only if its input triangle
+/// did, and the FVID rule agrees with replaying the collapses themselves.
+fn check_every_level(pm: &ProgressiveMesh) {
+    let n = pm.positions.len();
+    let mut r = Refiner::new(pm);
+    let mut finest: Vec<[u32; 3]> = pm.base_faces.clone();
+    loop {
+        let k = r.applied();
+        // Independent replay: after k splits, the collapses of splits[k..] are in effect, and
+        // `v_u -> v` chains lead every finest vertex to its active vertex.
+        let mut parent = vec![u32::MAX; n];
+        for s in &pm.splits[k..] {
+            parent[s.v_u as usize] = s.v;
+        }
+        let rep = |mut f: u32| {
+            while parent[f as usize] != u32::MAX {
+                f = parent[f as usize];
+            }
+            f
+        };
+        let current = r.current_faces();
+        assert_eq!(current.len(), finest.len());
+        for (c, f) in current.iter().zip(&finest) {
+            assert!(c.iter().all(|&v| r.is_active(v)), "level {k}: face {c:?} uses an inactive vertex");
+            assert_eq!(*c, f.map(rep), "level {k}: FVID rule disagrees with the collapses");
+            assert!(!repeats(*c) || repeats(*f), "level {k}: face {f:?} became degenerate as {c:?}");
+        }
+        let Some(s) = pm.splits.get(k) else { break };
+        assert!(r.is_active(s.v) && !r.is_active(s.v_u), "split {k}: {} -> {}", s.v, s.v_u);
+        assert!(r.split_next());
+        finest.extend_from_slice(&s.faces);
+    }
+    assert!(!r.split_next());
+}
+
+#[test]
+fn every_shared_mesh_refines_back_to_its_input() {
+    let files = all_shared_meshes();
+    assert!(files.len() >= 50, "expected the whole shared mesh set, found {}", files.len());
+    for path in files {
+        let mesh = codec::load_path(&path).unwrap_or_else(|e| panic!("{e}"));
+        let name = path.strip_prefix(shared_meshes()).unwrap_or(&path).display().to_string();
+        // The 871k-triangle dragon runs in the ignored speed test.
+        if mesh.triangles.len() > 300_000 {
+            eprintln!("{name:<45} skipped ({} triangles)", mesh.triangles.len());
+            continue;
+        }
+        let start = Instant::now();
+        let pm = build_and_check(&mesh);
+        eprintln!(
+            "{name:<45} {:>7} tris {:>7} splits, base {} vertices {} faces ({:.2}s)",
+            mesh.triangles.len(),
+            pm.splits.len(),
+            pm.base_vertices.len(),
+            pm.base_faces.len(),
+            start.elapsed().as_secs_f64()
+        );
+        if mesh.triangles.len() <= 1000 {
+            check_every_level(&pm);
+        }
+    }
+}
+
+#[test]
+fn tetrahedron_ends_as_two_vertices_and_no_faces() {
+    // The first collapse removes two faces and leaves the other two on one edge; collapsing
+    // that edge removes both, and with them the last edge: two base vertices remain.
+    let mesh = Mesh {
+        positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        triangles: vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]],
+    };
+    let pm = build_and_check(&mesh);
+    assert_eq!((pm.base_vertices.len(), pm.base_faces.len(), pm.splits.len()), (2, 0, 2));
+    assert!(pm.splits.iter().all(|s| s.faces.len() == 2));
+    check_every_level(&pm);
+}
+
+#[test]
+fn degenerate_and_duplicate_triangles_are_kept() {
+    let mesh = Mesh {
+        positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [f32::NAN; 3], [0.0, 0.0, 1.0], [5.0; 3]],
+        triangles: vec![
+            [0, 1, 2],
+            [0, 1, 2],
+            [2, 1, 0],
+            [0, 0, 1],
+            [4, 4, 4],
+            [4, 4, 4],
+            [5, 5, 5],
+            [0, 1, 4],
+            [1, 0, 4],
+            [0, 1, 5],
+        ],
+    };
+    let pm = build_and_check(&mesh);
+    assert_eq!(pm.fvid_of_input[3], u32::MAX);
+    assert_eq!(pm.base_faces.len(), 3);
+    check_every_level(&pm);
+}
+
+#[test]
+fn empty_mesh_builds_an_empty_progressive_mesh() {
+    let pm = build_and_check(&Mesh { positions: vec![[0.0; 3]], triangles: vec![] });
+    assert_eq!(pm, ProgressiveMesh { fvid_of_input: vec![u32::MAX], ..Default::default() });
+    assert!(refine_all(&pm).is_empty());
+}
+
+#[test]
+fn invalid_input_is_an_error() {
+    let bad_index = Mesh { positions: vec![[0.0; 3]; 3], triangles: vec![[0, 1, 3]] };
+    assert_eq!(
+        build(&bad_index),
+        Err(PmError::Mesh(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 }))
+    );
+    let nan = Mesh { positions: vec![[0.0; 3], [0.0, f32::INFINITY, 0.0], [1.0; 3]], triangles: vec![[0, 1, 2]] };
+    assert!(matches!(build(&nan), Err(PmError::Mesh(MeshError::NonFinite { vertex: 1, .. }))));
+}
+
+/// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
+fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut s = seed | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        ((s >> 40) % 4) as f32
+    };
+    (0..n).map(|_| [next(), next(), next()]).collect()
+}
+
+/// A triangle soup over a few vertex blocks (components), with degenerate triangles,
+/// duplicates and reversed duplicates, and fans of triangles around one edge (non-manifold).
+fn soup() -> impl Strategy<Value = Mesh> {
+    (1usize..4, 2usize..24, any::<u64>())
+        .prop_flat_map(|(blocks, per_block, seed)| {
+            let n = (blocks * per_block) as u32;
+            let tri = (0..blocks as u32, 0..per_block as u32, 0..per_block as u32, 0..per_block as u32, 0u8..10);
+            (Just((n, per_block as u32, seed)), proptest::collection::vec(tri, 0..60))
+        })
+        .prop_map(|((n, per_block, seed), raw)| {
+            let mut triangles: Vec<[u32; 3]> = vec![];
+            for (block, a, b, c, kind) in raw {
+                let o = block * per_block;
+                let t = match kind {
+                    0 => [o + a, o + a, o + b],
+                    1 => [o + a, o + a, o + a],
+                    2 if !triangles.is_empty() => triangles[(a + b) as usize % triangles.len()],
+                    3 if !triangles.is_empty() => {
+                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
+                        [z, y, x]
+                    }
+                    4 => [o, o + 1 % per_block, o + c],
+                    _ => [o + a, o + b, o + c],
+                };
+                triangles.push(t);
+            }
+            Mesh { positions: grid_positions(n as usize, seed), triangles }
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_refine_back_to_their_input(mesh in soup()) {
+        let pm = build_and_check(&mesh);
+        check_every_level(&pm);
+    }
+}
+
+/// The speed figure: `cargo test -p tessera-codec --release --test pm_build -- --ignored --nocapture`.
+#[test]
+#[ignore = "builds the 871k-triangle dragon; run in release"]
+fn dragon_speed() {
+    let mesh = codec::load_path(&shared_meshes().join("stanford/dragon_vrip.ply.gz")).unwrap();
+    let start = Instant::now();
+    let pm = build(&mesh).unwrap();
+    let secs = start.elapsed().as_secs_f64();
+    eprintln!(
+        "dragon: {} tris, {} collapses in {:.2}s = {:.0} ops/s; base {} vertices {} faces",
+        mesh.triangles.len(),
+        pm.splits.len(),
+        secs,
+        pm.splits.len() as f64 / secs,
+        pm.base_vertices.len(),
+        pm.base_faces.len()
+    );
+    let start = Instant::now();
+    build_and_check(&mesh);
+    eprintln!("dragon: build + full round-trip check in {:.2}s", start.elapsed().as_secs_f64());
+}
