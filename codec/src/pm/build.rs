@@ -28,10 +28,24 @@
 //!   chronological order (the latest collapse is the root, its right child the last absorbed
 //!   vertex), so numbering leaves left to right is a pre-order walk of that tree. Roots are
 //!   numbered in ascending input index.
+//!
+//! The refinement criteria ([`Criteria`], section 4 and 4.2.3) are computed after the
+//! numbering, bottom-up over the split tree ([`SplitTree`]), in `f64`:
+//!
+//! * a leaf (a finest vertex) has radius and errors zero and the normal cone of its incident
+//!   faces around its own normal; faces without area have no normal and are left out;
+//! * a split's region is the union of its children's: the left child has the same centre and
+//!   normal, the right child (`v_u`) is at distance `d` with normal `n_u`, so the radius is
+//!   `max(r_l, d + r_u)`, the cone angle `max(a_l, angle(n, n_u) + a_u)` and the attribute
+//!   error `max(e_l, |n - n_u| + e_u)`. These are nesting bounds, so monotone by
+//!   construction; the paper's maximum over the neighbours' errors (section 3.2) guards
+//!   against fold-overs and is not applied here.
+//! * the radius and the cone angle get a relative slack of `1e-5` (plus `1e-5` rad) per
+//!   level, so the runtime tests, which recompute the nesting in `f32`, stay monotone.
 
 use thiserror::Error;
 
-use super::{ProgressiveMesh, Split};
+use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::mesh::{Mesh, MeshError};
 
 /// Why a progressive mesh cannot be built.
@@ -364,5 +378,97 @@ pub fn build(mesh: &Mesh) -> Result<ProgressiveMesh, PmError> {
             }
         })
         .collect();
-    Ok(ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input })
+    let finest: Vec<[u32; 3]> = (0..mesh.triangles.len() as u32).map(to_fvid).collect();
+    let mut pm = ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input, ..Default::default() };
+    let (normals, criteria) = criteria(&pm, &finest);
+    pm.normals = normals;
+    pm.criteria = criteria;
+    Ok(pm)
+}
+
+/// Relative slack of the nesting bounds (radius, cone angle) per level.
+const SLACK: f64 = 1e-5;
+
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Angle between two unit vectors (well conditioned); a right angle if either is zero.
+fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
+    if norm(a) == 0.0 || norm(b) == 0.0 {
+        return std::f64::consts::FRAC_PI_2;
+    }
+    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    norm(cross(a, b)).atan2(d)
+}
+
+/// The per-FVID normals and the per-split criteria (see the module docs).
+fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
+    let n = pm.positions.len();
+    let pos: Vec<[f64; 3]> = pm.positions.iter().map(|p| p.map(f64::from)).collect();
+    let face_normal = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|f| pos[f as usize]);
+        cross(sub(b, a), sub(c, a))
+    };
+    let mut normal = vec![[0.0f64; 3]; n];
+    for t in finest {
+        let fnrm = face_normal(t);
+        for (k, &f) in t.iter().enumerate() {
+            if !t[..k].contains(&f) {
+                for a in 0..3 {
+                    normal[f as usize][a] += fnrm[a];
+                }
+            }
+        }
+    }
+    for v in &mut normal {
+        let l = norm(*v);
+        *v = if l > 0.0 && l.is_finite() { v.map(|x| x / l) } else { [0.0; 3] };
+    }
+    // Leaf cones: the angle between a vertex normal and its incident face normals.
+    let mut leaf_alpha = vec![0.0f64; n];
+    for t in finest {
+        let fnrm = face_normal(t);
+        let l = norm(fnrm);
+        if !(l > 0.0 && l.is_finite()) {
+            continue;
+        }
+        let fnrm = fnrm.map(|x| x / l);
+        for &f in t {
+            let a = angle(normal[f as usize], fnrm);
+            leaf_alpha[f as usize] = leaf_alpha[f as usize].max(a);
+        }
+    }
+
+    let tree = SplitTree::new(pm);
+    // Per split, in f64: radius, geometric error, attribute error, cone angle.
+    let mut node = vec![[0.0f64; 4]; pm.splits.len()];
+    let max_angle = std::f64::consts::FRAC_PI_2;
+    for (s, split) in pm.splits.iter().enumerate().rev() {
+        let (v, u) = (split.v as usize, split.v_u as usize);
+        let child = |c: u32, f: usize| if c == NONE { [0.0, 0.0, 0.0, leaf_alpha[f]] } else { node[c as usize] };
+        let [cl, cu] = tree.children[s];
+        let (l, r) = (child(cl, v), child(cu, u));
+        let d = norm(sub(pos[u], pos[v]));
+        let radius = l[0].max(d + r[0]) * (1.0 + SLACK);
+        let geometric = l[1].max(d + r[1]);
+        let attribute = l[2].max(norm(sub(normal[u], normal[v])) + r[2]);
+        let alpha = (l[3].max(angle(normal[v], normal[u]) + r[3]) * (1.0 + SLACK) + SLACK).min(max_angle);
+        let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
+        node[s] = [radius, geometric, attribute, alpha];
+    }
+    let criteria = node
+        .iter()
+        .map(|&[radius, geometric, attribute, alpha]| Criteria {
+            sin_alpha: if alpha >= max_angle { 1.0 } else { alpha.sin() as f32 },
+            geometric_error: geometric as f32,
+            attribute_error: attribute as f32,
+            radius: radius as f32,
+        })
+        .collect();
+    (normal.iter().map(|v| v.map(|x| x as f32)).collect(), criteria)
 }

@@ -13,7 +13,7 @@ use super::ProgressiveMesh;
 
 /// Applies the splits of a progressive mesh one at a time, from the base mesh up.
 ///
-/// It trusts the mesh to come from [`super::build`]: a malformed one gives meaningless faces
+/// It trusts the mesh to come from [`super::build`](fn@super::build): a malformed one gives meaningless faces
 /// (an FVID below every active vertex maps to `u32::MAX`) but never panics.
 #[derive(Clone, Debug)]
 pub struct Refiner<'a> {
@@ -65,7 +65,7 @@ impl<'a> Refiner<'a> {
 }
 
 /// Refines from the base mesh through every split and returns the faces as FVID triples:
-/// for a mesh from [`super::build`], the input triangles renumbered by
+/// for a mesh from [`super::build`](fn@super::build), the input triangles renumbered by
 /// [`ProgressiveMesh::fvid_of_input`].
 pub fn refine_all(pm: &ProgressiveMesh) -> Vec<[u32; 3]> {
     let mut r = Refiner::new(pm);

@@ -1,0 +1,477 @@
+//! CPU reference of the parallel view-dependent adaption (section 5, Algorithms 1 to 5), over
+//! flat buffers as the GPU version will keep them (Table 2), rayon-parallel where the work is
+//! independent.
+//!
+//! State (Table 2): the active vertices sorted by FVID, and per active vertex its *next split*
+//! (the split that refines it, [`NONE`] at the finest level), its *node* in the split tree
+//! (coded as in [`SplitTree`]; a right child `2 s + 1` can collapse, split `s` being its
+//! collapse, with target `splits[s].v`), and the split/collapse cache: the criteria, centre and
+//! normal of both operations, refreshed only when the vertex changes. Faces are kept twice, as
+//! current vertex indices (the index buffer) and as finest FVIDs (the FVID buffer).
+//!
+//! One [`Adapter::adapt`] pass:
+//!
+//! 1. **Vertex state update** (Algorithm 1): each vertex asks for 2 (split), 1 (keep) or 0
+//!    (collapse). A split if its next split's criteria ask for it; a collapse if it is a right
+//!    child whose collapse's criteria do not ask for a split, its predecessor in the sorted
+//!    buffer is its target `v_t` (else `v_t` split further) and its successor's target is not
+//!    itself (else it split further).
+//! 2. **Collapses** (Algorithm 2): a collapse whose target is marked for splitting is
+//!    cancelled; otherwise the target takes the collapse's node and copies the collapsed
+//!    vertex's collapse cache into its split cache. (A target never collapses in the same pass:
+//!    its successor is the collapsing vertex, whose target it is.)
+//! 3. **Memory management** (Algorithm 3): exclusive prefix sums of the vertex counts and the
+//!    new face counts; the vertex buffers are rebuilt in FVID order, collapsed vertices dropped
+//!    and each `v_u` placed right after its split vertex (its FVID follows `v`'s left range).
+//! 4. **Splits** (Algorithm 4): the split vertices are compacted, each writes `v` and `v_u`, and
+//!    each new face gets its indices: corners in `[v, v_u)` are `v`, corners in `v_u`'s range
+//!    are `v_u`, any other one is found by binary search in the new sorted buffer (the active
+//!    vertex with the greatest FVID `<=` the corner's).
+//! 5. **Index update and compaction** (Algorithm 5, section 5.6): every old index moves to its
+//!    vertex's new position, a collapsed vertex's to its target (the previous one), a split
+//!    vertex's to `v_u` (the next one) when the corner's FVID reaches `v_u`; the faces created
+//!    by a performed collapse are dropped, order kept, and the new faces appended.
+//!
+//! Every vertex the criteria ask to split is split in the pass it asks (no split waits for a
+//! neighbour, section 3.2); a collapse joins two vertices only, so coarsening a region takes
+//! one pass per level.
+//!
+//! Decisions where the paper is silent or that differ from it:
+//!
+//! * **Which faces a collapse removes.** The faces of the collapsed split, known by an owner
+//!   buffer (split index per face) rather than by degeneracy: inputs may hold degenerate faces
+//!   (`[a, a, b]`), which are degenerate at every level yet belong to the mesh once their split
+//!   is done. For inputs without them the two rules agree.
+//! * **View tests on the region's bounding sphere** (centre `v`, radius from [`Criteria`]), so
+//!   that they are monotone over the split tree: with nested spheres and cones a child is
+//!   never asked to split when its parent is not, and adaption from any state converges to the
+//!   same mesh, the cut just below the splits whose ancestors all ask to be split.
+//!   - Frustum (section 5.1): nothing is culled; a sphere outside the frustum by a world
+//!     distance `t` (greatest over the six planes, `0` inside) gets the distance
+//!     `d' = d + c_LOD t`. The paper's `(c_LOD (max(|x|,|y|,|z|)/w - 1) + 1) d` is the same up
+//!     to a factor of about `1 / tan(fovy / 2)` in `t`.
+//!   - Back faces (section 5.1, `n . d > sin(alpha)`): culled if every direction from the eye
+//!     into the sphere is within 90 degrees of every normal of the cone, i.e.
+//!     `angle(n, c - eye) + alpha + beta < 90 degrees`, `beta = asin(r / |c - eye|)`.
+//!   - Screen-space error (section 4.2.3): `max(e_g, attribute_scale * e_a)` divided by the
+//!     distance `d'` from the eye to the sphere, in pixels (`height / (2 tan(fovy / 2))` per
+//!     unit at unit distance); split if above `error_px`. The paper's view-direction factor on
+//!     `e_g` is left out (taken as 1, conservative) because it is not monotone.
+//! * **Convergence.** A state is *converged* for a view when a pass performs no split and no
+//!   collapse; a further pass then changes nothing. From any state, repeated passes reach it.
+//! * Prefix sums are chunked parallel scans; the scatters of Algorithms 3 and 4 are
+//!   order-preserving parallel collects whose positions equal those prefix sums.
+
+use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::{Criteria, ProgressiveMesh, SplitTree, NONE};
+use crate::view::Camera;
+
+/// A view for [`Adapter::adapt`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    /// Projection times view matrix (the conventions of [`crate::view`], depth 0..1).
+    pub view_proj: Mat4,
+    pub eye: Vec3,
+    pub width: u32,
+    pub height: u32,
+    /// The screen-space error threshold in pixels (the paper uses 0.5 at 1920x1080).
+    pub error_px: f32,
+    /// Pixels per world unit at unit distance: `height / (2 tan(fovy / 2))`.
+    pub pixels_per_unit: f32,
+    /// The LOD falloff outside the frustum (the paper's `c_LOD`, 100 there).
+    pub c_lod: f32,
+    /// World length per unit of attribute error (normal chord); 0 ignores normals.
+    pub attribute_scale: f32,
+}
+
+impl View {
+    /// The view of `camera` on a `width x height` screen, `c_lod` 100, normals ignored.
+    pub fn new(camera: &Camera, width: u32, height: u32, error_px: f32) -> Self {
+        let h = height.max(1) as f32;
+        View {
+            view_proj: camera.view_proj(width.max(1) as f32 / h),
+            eye: camera.eye,
+            width,
+            height,
+            error_px,
+            pixels_per_unit: h / (2.0 * (camera.fovy.to_radians() * 0.5).tan()),
+            c_lod: 100.0,
+            attribute_scale: 0.0,
+        }
+    }
+
+    /// The frustum planes (left, right, bottom, top, near, far), normalised to world distances,
+    /// positive inside.
+    fn planes(&self) -> [Vec4; 6] {
+        let m = self.view_proj;
+        let (r0, r1, r2, r3) = (m.row(0), m.row(1), m.row(2), m.row(3));
+        [r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2].map(|p| {
+            let l = p.truncate().length();
+            if l > 0.0 {
+                p / l
+            } else {
+                p
+            }
+        })
+    }
+
+    /// Whether the view asks for split `s` of `pm` (the criteria of section 5.1).
+    pub fn needs_split(&self, pm: &ProgressiveMesh, s: usize) -> bool {
+        Eval::new(self).needs(&Cached::of(pm, s as u32))
+    }
+}
+
+/// A view prepared for evaluation.
+struct Eval {
+    view: View,
+    planes: [Vec4; 6],
+}
+
+impl Eval {
+    fn new(view: &View) -> Self {
+        Eval { view: *view, planes: view.planes() }
+    }
+
+    fn needs(&self, c: &Cached) -> bool {
+        let v = &self.view;
+        let r = c.crit.radius;
+        let to = c.center - v.eye;
+        let dist = to.length();
+        if dist > r && c.crit.sin_alpha < 1.0 && c.normal != Vec3::ZERO {
+            let alpha = c.crit.sin_alpha.asin();
+            let beta = r.atan2((dist * dist - r * r).max(0.0).sqrt());
+            let ang = c.normal.cross(to).length().atan2(c.normal.dot(to));
+            if ang + alpha + beta < std::f32::consts::FRAC_PI_2 {
+                return false; // back-facing
+            }
+        }
+        let err = c.crit.geometric_error.max(v.attribute_scale * c.crit.attribute_error);
+        if err.is_nan() || err <= 0.0 {
+            return false;
+        }
+        let outside = self.planes.iter().map(|p| -(p.truncate().dot(c.center) + p.w) - r).fold(0.0f32, f32::max);
+        let d = (dist - r).max(0.0) + v.c_lod * outside;
+        err * v.pixels_per_unit > v.error_px * d
+    }
+}
+
+/// One entry of the split/collapse cache: what a vertex needs to evaluate an operation without
+/// touching the split records.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Cached {
+    center: Vec3,
+    normal: Vec3,
+    crit: Criteria,
+}
+
+impl Cached {
+    fn of(pm: &ProgressiveMesh, s: u32) -> Self {
+        if s == NONE {
+            return Cached::default();
+        }
+        let v = pm.splits[s as usize].v as usize;
+        Cached {
+            center: Vec3::from(pm.positions[v]),
+            normal: Vec3::from(pm.normals.get(v).copied().unwrap_or_default()),
+            crit: pm.criteria.get(s as usize).copied().unwrap_or_default(),
+        }
+    }
+}
+
+/// What one pass did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub splits: usize,
+    pub collapses: usize,
+    /// Collapses cancelled because their target split (Algorithm 2).
+    pub cancelled: usize,
+    /// Active vertices and faces after the pass.
+    pub vertices: usize,
+    pub faces: usize,
+}
+
+impl Stats {
+    /// No split and no collapse: the state is converged for this view.
+    pub fn converged(&self) -> bool {
+        self.splits == 0 && self.collapses == 0
+    }
+}
+
+/// View-dependent adaption of a progressive mesh (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Adapter<'a> {
+    pm: &'a ProgressiveMesh,
+    tree: SplitTree,
+    /// Active vertices, sorted.
+    fvid: Vec<u32>,
+    next: Vec<u32>,
+    node: Vec<u32>,
+    split_cache: Vec<Cached>,
+    collapse_cache: Vec<Cached>,
+    /// Faces: current vertex indices, finest FVIDs, and the split that created them.
+    face_idx: Vec<[u32; 3]>,
+    face_fvid: Vec<[u32; 3]>,
+    face_owner: Vec<u32>,
+}
+
+/// Exclusive prefix sum in parallel chunks; `out.len() == v.len() + 1`, the last entry the total.
+fn exclusive_scan(v: &[u32]) -> Vec<u32> {
+    const CHUNK: usize = 1 << 14;
+    let sums: Vec<u32> = v.par_chunks(CHUNK).map(|c| c.iter().sum()).collect();
+    let mut offsets = Vec::with_capacity(sums.len());
+    let mut acc = 0u32;
+    for s in sums {
+        offsets.push(acc);
+        acc += s;
+    }
+    let mut out = vec![0u32; v.len() + 1];
+    out[..v.len()].par_chunks_mut(CHUNK).zip(v.par_chunks(CHUNK)).zip(offsets).for_each(|((o, c), mut a)| {
+        for (x, &y) in o.iter_mut().zip(c) {
+            *x = a;
+            a += y;
+        }
+    });
+    out[v.len()] = acc;
+    out
+}
+
+impl<'a> Adapter<'a> {
+    /// Starts at the base mesh.
+    pub fn new(pm: &'a ProgressiveMesh) -> Self {
+        let tree = SplitTree::new(pm);
+        let n = pm.base_vertices.len();
+        let next = tree.roots.clone();
+        let split_cache = next.iter().map(|&s| Cached::of(pm, s)).collect();
+        let fvid = pm.base_vertices.clone();
+        let face_idx = pm
+            .base_faces
+            .iter()
+            .map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32))
+            .collect();
+        Adapter {
+            pm,
+            tree,
+            fvid,
+            next,
+            node: vec![NONE; n],
+            split_cache,
+            collapse_cache: vec![Cached::default(); n],
+            face_idx,
+            face_fvid: pm.base_faces.clone(),
+            face_owner: vec![NONE; pm.base_faces.len()],
+        }
+    }
+
+    /// One adaption pass for `view` (Algorithms 1 to 5).
+    pub fn adapt(&mut self, view: &View) -> Stats {
+        let eval = Eval::new(view);
+        self.pass(&|c| eval.needs(c))
+    }
+
+    /// Passes until converged ([`Stats::converged`]), at most `max_passes`; returns the number of
+    /// passes that changed something, or `None` if still not converged.
+    pub fn adapt_until_converged(&mut self, view: &View, max_passes: usize) -> Option<usize> {
+        (0..max_passes).find(|_| self.adapt(view).converged())
+    }
+
+    /// One pass that splits every active vertex that has a split (and collapses nothing).
+    pub fn refine_step(&mut self) -> Stats {
+        self.pass(&|_| true)
+    }
+
+    /// Applies every split: [`Self::refine_step`] until no vertex can split; returns the number
+    /// of passes that split (the depth of the split forest).
+    pub fn refine_fully(&mut self) -> usize {
+        let mut passes = 0;
+        while self.refine_step().splits > 0 {
+            passes += 1;
+        }
+        passes
+    }
+
+    /// Active vertex FVIDs, ascending.
+    pub fn active(&self) -> &[u32] {
+        &self.fvid
+    }
+
+    /// Per active vertex: the split that would refine it next, or [`NONE`].
+    pub fn next_splits(&self) -> &[u32] {
+        &self.next
+    }
+
+    /// Per active vertex: its node in the split tree (coded as in [`SplitTree`]).
+    pub fn nodes(&self) -> &[u32] {
+        &self.node
+    }
+
+    /// The current faces as indices into [`Self::active`] (the index buffer).
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.face_idx
+    }
+
+    /// The current faces as finest-level FVIDs (the FVID buffer).
+    pub fn finest_faces(&self) -> &[[u32; 3]] {
+        &self.face_fvid
+    }
+
+    /// Per current face: the split that created it ([`NONE`] for base faces).
+    pub fn face_owners(&self) -> &[u32] {
+        &self.face_owner
+    }
+
+    /// The current faces as FVID triples of active vertices.
+    pub fn face_fvids(&self) -> Vec<[u32; 3]> {
+        self.face_idx.par_iter().map(|t| t.map(|i| self.fvid[i as usize])).collect()
+    }
+
+    /// The collapse target FVID of a node, if it is a right child.
+    fn target_of(&self, node: u32) -> u32 {
+        if node != NONE && node & 1 == 1 {
+            self.pm.splits[(node >> 1) as usize].v
+        } else {
+            NONE
+        }
+    }
+
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> Stats {
+        let pm = self.pm;
+        let n = self.fvid.len();
+
+        // Algorithm 1: vertex state update.
+        let state: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                if self.next[i] != NONE && need(&self.split_cache[i]) {
+                    return 2;
+                }
+                let target = self.target_of(self.node[i]);
+                if target != NONE
+                    && !need(&self.collapse_cache[i])
+                    && i > 0
+                    && self.fvid[i - 1] == target
+                    && (i + 1 == n || self.target_of(self.node[i + 1]) != self.fvid[i])
+                {
+                    return 0;
+                }
+                1
+            })
+            .collect();
+        // Algorithm 2: collapses whose target splits are cancelled.
+        let cnt: Vec<u32> =
+            (0..n).into_par_iter().map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] }).collect();
+        let splits = cnt.par_iter().filter(|&&c| c == 2).count();
+        let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
+        let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+        if splits == 0 && collapses == 0 {
+            return Stats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() };
+        }
+
+        // Algorithm 3: memory management.
+        let face_cnt: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map(|i| if cnt[i] == 2 { pm.splits[self.next[i] as usize].faces.len() as u32 } else { 0 })
+            .collect();
+        let face_sum = exclusive_scan(&face_cnt);
+        let vertex_sum = exclusive_scan(&cnt);
+        type Vertex = (u32, u32, u32, Cached, Cached);
+        let tree = &self.tree;
+        let vertices: Vec<Vertex> = (0..n)
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let old = (self.fvid[i], self.next[i], self.node[i], self.split_cache[i], self.collapse_cache[i]);
+                let out: [Option<Vertex>; 2] = match cnt[i] {
+                    0 => [None, None],
+                    1 if i + 1 < n && cnt[i + 1] == 0 => {
+                        // Algorithm 2's collapse: the target takes the collapse's node.
+                        let p = self.node[i + 1] >> 1;
+                        let node = tree.parent[p as usize];
+                        let collapse = if node != NONE && node & 1 == 1 { node >> 1 } else { NONE };
+                        [Some((old.0, p, node, self.collapse_cache[i + 1], Cached::of(pm, collapse))), None]
+                    }
+                    1 => [Some(old), None],
+                    _ => {
+                        // Algorithm 4: the split writes v and v_u.
+                        let s = old.1;
+                        let [l, r] = tree.children[s as usize];
+                        let v = (old.0, l, 2 * s, Cached::of(pm, l), Cached::default());
+                        let u = (pm.splits[s as usize].v_u, r, 2 * s + 1, Cached::of(pm, r), old.3);
+                        [Some(v), Some(u)]
+                    }
+                };
+                out.into_iter().flatten()
+            })
+            .collect();
+        debug_assert_eq!(vertices.len(), vertex_sum[n] as usize);
+        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.0).collect();
+        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
+
+        // Algorithm 4: the new faces of the compacted splits.
+        let split_list: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| cnt[i as usize] == 2).collect();
+        let find = |f: u32| new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32;
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = split_list
+            .par_iter()
+            .flat_map_iter(|&i| {
+                let s = self.next[i as usize];
+                let split = &pm.splits[s as usize];
+                let j = vertex_sum[i as usize];
+                let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
+                let find = &find;
+                split.faces.iter().map(move |t| {
+                    let idx = t.map(|f| match f {
+                        f if f >= split.v && f < split.v_u => j,
+                        f if f >= split.v_u && f < end => j + 1,
+                        f => find(f),
+                    });
+                    (idx, *t, s)
+                })
+            })
+            .collect();
+        debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
+
+        // Algorithm 5: index update and compaction of the old faces.
+        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
+            .into_par_iter()
+            .filter_map(|k| {
+                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
+                let mut idx = [0u32; 3];
+                for c in 0..3 {
+                    let i = old[c] as usize;
+                    idx[c] = match cnt[i] {
+                        0 if owner != NONE && self.node[i] >> 1 == owner => return None,
+                        0 => vertex_sum[i] - 1,
+                        1 => vertex_sum[i],
+                        _ => {
+                            let j = vertex_sum[i];
+                            if new_fvid[j as usize + 1] <= fv[c] {
+                                j + 1
+                            } else {
+                                j
+                            }
+                        }
+                    };
+                }
+                Some((idx, fv, owner))
+            })
+            .collect();
+
+        let faces = kept.len() + new_faces.len();
+        let (mut fi, mut ff, mut fo) =
+            (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
+        for (a, b, c) in kept.into_iter().chain(new_faces) {
+            fi.push(a);
+            ff.push(b);
+            fo.push(c);
+        }
+        self.face_idx = fi;
+        self.face_fvid = ff;
+        self.face_owner = fo;
+        self.fvid = new_fvid;
+        self.next = vertices.par_iter().map(|v| v.1).collect();
+        self.node = vertices.par_iter().map(|v| v.2).collect();
+        self.split_cache = vertices.par_iter().map(|v| v.3).collect();
+        self.collapse_cache = vertices.par_iter().map(|v| v.4).collect();
+        Stats { splits, collapses, cancelled, vertices: self.fvid.len(), faces }
+    }
+}

@@ -1,0 +1,420 @@
+//! The view-dependent adaption (`pm::adapt`): refining fully gives back the input, every
+//! adapted mesh is valid and exactly the faces of the applied splits, adapting frame to frame
+//! converges to the same mesh as adapting from the base mesh, one pass performs every split
+//! the criteria ask for, and the criteria are monotone over the split tree.
+
+mod common;
+
+use std::time::Instant;
+
+use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, View, NONE};
+use codec::view::Camera;
+use codec::Mesh;
+use common::{shared_meshes, sorted_canonical};
+use glam::Vec3;
+use proptest::prelude::*;
+
+const MAX_PASSES: usize = 10_000;
+
+fn load(rel: &str) -> Mesh {
+    codec::load_path(&shared_meshes().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn input_of_fvid(pm: &ProgressiveMesh) -> Vec<u32> {
+    let mut inv = vec![u32::MAX; pm.positions.len()];
+    for (v, &f) in pm.fvid_of_input.iter().enumerate() {
+        if f != u32::MAX {
+            inv[f as usize] = v as u32;
+        }
+    }
+    inv
+}
+
+/// Sorted multiset of faces (rotation-canonical, so orientation counts).
+fn canon(faces: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
+    sorted_canonical(faces)
+}
+
+/// Checks everything an adapted state must satisfy: the active set is the base vertices plus
+/// the `v_u` of a set of applied splits closed under parents, the per-vertex state matches the
+/// split tree, every face's indices are in range and equal its finest FVIDs mapped to active
+/// vertices (so orientation is kept), and the faces are exactly those of the base mesh and the
+/// applied splits (so no collapsed face survives and no duplicate appears that the input did
+/// not have).
+fn check_state(pm: &ProgressiveMesh, tree: &SplitTree, a: &Adapter) {
+    let active = a.active();
+    assert!(active.windows(2).all(|w| w[0] < w[1]), "active vertices not sorted");
+    let is_active = |f: u32| active.binary_search(&f).is_ok();
+    let applied: Vec<bool> = pm.splits.iter().map(|s| is_active(s.v_u)).collect();
+    for (s, split) in pm.splits.iter().enumerate() {
+        if applied[s] {
+            assert!(is_active(split.v), "split {s} applied but v {} inactive", split.v);
+            let p = tree.parent[s];
+            assert!(p == NONE || applied[(p >> 1) as usize], "split {s} applied before its parent");
+        }
+    }
+    let expected_active = pm.base_vertices.len() + applied.iter().filter(|&&x| x).count();
+    assert_eq!(active.len(), expected_active, "active set is not base + applied v_u");
+    // Per-vertex state: the node and the next split follow from the applied set.
+    for (i, &f) in active.iter().enumerate() {
+        let node = a.nodes()[i];
+        let next = a.next_splits()[i];
+        let expect_next = if node == NONE {
+            tree.roots[pm.base_vertices.binary_search(&f).expect("root is a base vertex")]
+        } else {
+            let s = (node >> 1) as usize;
+            assert!(applied[s], "vertex {f} is a child of unapplied split {s}");
+            let split = &pm.splits[s];
+            assert_eq!(f, if node & 1 == 0 { split.v } else { split.v_u });
+            tree.children[s][(node & 1) as usize]
+        };
+        assert_eq!(next, expect_next, "vertex {f}: wrong next split");
+        assert!(next == NONE || !applied[next as usize], "vertex {f}: next split {next} already applied");
+    }
+    // Faces.
+    let rep = |f: u32| active[active.partition_point(|&x| x <= f) - 1];
+    assert_eq!(a.faces().len(), a.finest_faces().len());
+    for (k, (idx, fv)) in a.faces().iter().zip(a.finest_faces()).enumerate() {
+        for c in 0..3 {
+            assert!((idx[c] as usize) < active.len(), "face {k}: index out of range");
+            assert_eq!(active[idx[c] as usize], rep(fv[c]), "face {k}: index is not its FVID's active vertex");
+        }
+    }
+    let expected = pm
+        .base_faces
+        .iter()
+        .copied()
+        .chain(pm.splits.iter().zip(&applied).filter(|(_, &ap)| ap).flat_map(|(s, _)| s.faces.iter().copied()));
+    assert!(canon(a.finest_faces().iter().copied()) == canon(expected), "faces are not those of the applied splits");
+}
+
+/// Refines with the adapter, checking every pass, and compares with the input.
+fn check_refine_fully(mesh: &Mesh, pm: &ProgressiveMesh) {
+    let tree = SplitTree::new(pm);
+    let mut a = Adapter::new(pm);
+    check_state(pm, &tree, &a);
+    let inv = input_of_fvid(pm);
+    // Pass by pass: every pass is checked.
+    let mut passes = 0;
+    loop {
+        let before = a.next_splits().iter().filter(|&&s| s != NONE).count();
+        let st = a.refine_step();
+        assert_eq!(st.splits, before, "a refine step splits every vertex that can");
+        check_state(pm, &tree, &a);
+        if st.splits == 0 {
+            break;
+        }
+        passes += 1;
+        assert!(passes < MAX_PASSES);
+    }
+    let mut b = Adapter::new(pm);
+    b.refine_fully();
+    assert!(a.active() == b.active());
+    for x in [&a, &b] {
+        assert_eq!(x.active().len(), pm.positions.len());
+        let back = x.face_fvids().into_iter().map(|t| t.map(|f| inv[f as usize]));
+        assert!(canon(back) == canon(mesh.triangles.iter().copied()), "fully refined faces differ from the input");
+    }
+}
+
+fn bbox(pm: &ProgressiveMesh) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &pm.positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    if pm.positions.is_empty() {
+        return ([0.0; 3], [1.0; 3]);
+    }
+    (lo, hi)
+}
+
+/// A view from which everything that is not back-facing needs splitting when `error_px` is 0.
+fn far_view(pm: &ProgressiveMesh) -> View {
+    let (lo, hi) = bbox(pm);
+    View::new(&Camera::framing(lo, hi, 1.0), 64, 64, 0.0)
+}
+
+/// Frame `k` of a camera path around the mesh: an orbit that zooms in (some frames see only
+/// part of the model, some parts leave the frustum) and out again.
+fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> View {
+    let (lo, hi) = bbox(pm);
+    let (w, h) = (640u32, 480u32);
+    let base = Camera::framing(lo, hi, w as f32 / h as f32);
+    let t = k as f32 / frames as f32;
+    let angle = t * std::f32::consts::TAU * 0.75;
+    let zoom = 1.0 - 0.8 * (t * std::f32::consts::PI).sin();
+    let offset = (base.eye - base.target) * zoom;
+    let rot = glam::Quat::from_rotation_y(angle) * glam::Quat::from_rotation_x(0.4 * (3.0 * t).sin());
+    let size = (Vec3::from(hi) - Vec3::from(lo)).length().max(1e-3);
+    let target = base.target + Vec3::new(0.2 * size * (5.0 * t).sin(), 0.0, 0.0);
+    let cam = Camera { eye: target + rot * offset, target, near: base.near * zoom * 0.1, far: base.far * 2.0, ..base };
+    let mut v = View::new(&cam, w, h, error_px);
+    v.attribute_scale = 0.05 * size;
+    v
+}
+
+/// Checks that one pass splits every active vertex the criteria ask to split.
+fn pass_checked(pm: &ProgressiveMesh, a: &mut Adapter, view: &View) -> codec::pm::Stats {
+    let wanted: Vec<u32> = a
+        .next_splits()
+        .iter()
+        .filter(|&&s| s != NONE && view.needs_split(pm, s as usize))
+        .map(|&s| pm.splits[s as usize].v_u)
+        .collect();
+    let st = a.adapt(view);
+    assert_eq!(st.splits, wanted.len(), "a pass must perform every wanted split");
+    for u in wanted {
+        assert!(a.active().binary_search(&u).is_ok(), "wanted split to {u} not performed in the pass");
+    }
+    st
+}
+
+/// Passes until converged, each checked.
+fn converge(pm: &ProgressiveMesh, tree: &SplitTree, a: &mut Adapter, view: &View) -> usize {
+    for passes in 0..MAX_PASSES {
+        let st = pass_checked(pm, a, view);
+        check_state(pm, tree, a);
+        if st.converged() {
+            return passes;
+        }
+    }
+    panic!("no convergence in {MAX_PASSES} passes");
+}
+
+/// A converged state is the fixpoint: no active vertex asks to split, every collapsible pair's
+/// collapse is asked to stay split, and a further pass changes nothing.
+fn check_converged(pm: &ProgressiveMesh, a: &mut Adapter, view: &View) {
+    let active = a.active().to_vec();
+    for (i, &s) in a.next_splits().iter().enumerate() {
+        assert!(s == NONE || !view.needs_split(pm, s as usize), "vertex {} still wants split {s}", active[i]);
+    }
+    let nodes = a.nodes();
+    let target = |node: u32| if node != NONE && node & 1 == 1 { pm.splits[(node >> 1) as usize].v } else { NONE };
+    for (i, &node) in nodes.iter().enumerate() {
+        // A right child whose sibling and itself are leaves of the cut could collapse; the view
+        // must still ask for that split.
+        let t = target(node);
+        if t != NONE && active[i - 1] == t && (i + 1 == active.len() || target(nodes[i + 1]) != active[i]) {
+            assert!(view.needs_split(pm, (node >> 1) as usize), "pair {} {} could collapse", active[i - 1], active[i]);
+        }
+    }
+    let faces = canon(a.face_fvids());
+    let st = a.adapt(view);
+    assert!(st.converged());
+    assert!(a.active() == &active[..]);
+    assert!(canon(a.face_fvids()) == faces);
+}
+
+/// Adapts frame to frame along a camera path and from the base mesh for every frame; both
+/// must converge to the same mesh. Returns (min, max) faces seen.
+fn check_path(pm: &ProgressiveMesh, frames: usize, error_px: f32) -> (usize, usize) {
+    let tree = SplitTree::new(pm);
+    let mut a = Adapter::new(pm);
+    let (mut lo, mut hi) = (usize::MAX, 0);
+    for k in 0..frames {
+        let view = path_view(pm, k, frames, error_px);
+        converge(pm, &tree, &mut a, &view);
+        check_converged(pm, &mut a, &view);
+        let mut b = Adapter::new(pm);
+        converge(pm, &tree, &mut b, &view);
+        assert!(a.active() == b.active(), "frame {k}: frame-to-frame and from-base active sets differ");
+        assert!(canon(a.face_fvids()) == canon(b.face_fvids()), "frame {k}: faces differ");
+        lo = lo.min(a.faces().len());
+        hi = hi.max(a.faces().len());
+    }
+    (lo, hi)
+}
+
+/// Criteria are monotone: a split's values are at least its children's.
+fn check_monotone(pm: &ProgressiveMesh) {
+    let tree = SplitTree::new(pm);
+    assert_eq!(pm.criteria.len(), pm.splits.len());
+    assert_eq!(pm.normals.len(), pm.positions.len());
+    for (s, c) in pm.criteria.iter().enumerate() {
+        assert!((0.0..=1.0).contains(&c.sin_alpha) && c.geometric_error >= 0.0 && c.attribute_error >= 0.0);
+        assert!(c.radius >= c.geometric_error);
+        for ch in tree.children[s] {
+            if ch != NONE {
+                let d = pm.criteria[ch as usize];
+                assert!(d.sin_alpha <= c.sin_alpha && d.geometric_error <= c.geometric_error, "split {s}");
+                assert!(d.attribute_error <= c.attribute_error && d.radius <= c.radius, "split {s}");
+            }
+        }
+    }
+}
+
+const MESHES: [&str; 5] = [
+    "odedstein/bunny_npm_lowres.obj",
+    "odedstein/spot_low_resolution.obj",
+    "odedstein/plane_holes.obj.gz",
+    "classic/beetle.obj",
+    "classic/spot.obj",
+];
+
+fn find(rel: &str) -> String {
+    // Files live in one of the collection folders; find it by name.
+    let name = rel.rsplit('/').next().unwrap();
+    for dir in std::fs::read_dir(shared_meshes()).unwrap() {
+        let p = dir.unwrap().path().join(name);
+        if p.exists() {
+            return p.strip_prefix(shared_meshes()).unwrap().display().to_string();
+        }
+    }
+    panic!("{rel} not found");
+}
+
+#[test]
+fn shared_meshes_refine_fully_to_their_input() {
+    for rel in MESHES {
+        let rel = find(rel);
+        let mesh = load(&rel);
+        let pm = build(&mesh).unwrap();
+        check_monotone(&pm);
+        check_refine_fully(&mesh, &pm);
+        eprintln!("{rel}: {} triangles, {} splits", mesh.triangles.len(), pm.splits.len());
+    }
+}
+
+#[test]
+fn shared_meshes_frame_to_frame_equals_from_base() {
+    for rel in MESHES {
+        let rel = find(rel);
+        let mesh = load(&rel);
+        let pm = build(&mesh).unwrap();
+        let (lo, hi) = check_path(&pm, 24, 1.0);
+        eprintln!("{rel}: {} triangles; adapted {lo}..{hi} faces over 24 frames", mesh.triangles.len());
+        assert!(hi > 0, "{rel}: the path never shows a face");
+    }
+}
+
+/// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
+fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut s = seed | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        ((s >> 40) % 4) as f32
+    };
+    (0..n).map(|_| [next(), next(), next()]).collect()
+}
+
+/// Triangle soups with degenerate, duplicate, reversed and non-manifold triangles.
+fn soup() -> impl Strategy<Value = Mesh> {
+    (1usize..4, 2usize..24, any::<u64>())
+        .prop_flat_map(|(blocks, per_block, seed)| {
+            let n = (blocks * per_block) as u32;
+            let tri = (0..blocks as u32, 0..per_block as u32, 0..per_block as u32, 0..per_block as u32, 0u8..10);
+            (Just((n, per_block as u32, seed)), proptest::collection::vec(tri, 0..60))
+        })
+        .prop_map(|((n, per_block, seed), raw)| {
+            let mut triangles: Vec<[u32; 3]> = vec![];
+            for (block, a, b, c, kind) in raw {
+                let o = block * per_block;
+                let t = match kind {
+                    0 => [o + a, o + a, o + b],
+                    1 => [o + a, o + a, o + a],
+                    2 if !triangles.is_empty() => triangles[(a + b) as usize % triangles.len()],
+                    3 if !triangles.is_empty() => {
+                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
+                        [z, y, x]
+                    }
+                    4 => [o, o + 1 % per_block, o + c],
+                    _ => [o + a, o + b, o + c],
+                };
+                triangles.push(t);
+            }
+            Mesh { positions: grid_positions(n as usize, seed), triangles }
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_adapt_consistently(mesh in soup(), error_px in 0.5f32..40.0) {
+        let pm = build(&mesh).unwrap();
+        check_monotone(&pm);
+        check_refine_fully(&mesh, &pm);
+        check_path(&pm, 20, error_px);
+    }
+}
+
+#[test]
+fn base_mesh_and_refine_fully_on_a_tetrahedron() {
+    let mesh = Mesh {
+        positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        triangles: vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]],
+    };
+    let pm = build(&mesh).unwrap();
+    let mut a = Adapter::new(&pm);
+    assert_eq!(a.active(), &pm.base_vertices[..]);
+    assert!(a.faces().is_empty());
+    a.refine_fully();
+    assert_eq!(a.faces().len(), 4);
+    // Coarsening everything (a view far behind) goes back to the base mesh.
+    let mut far = far_view(&pm);
+    far.error_px = f32::INFINITY;
+    let passes = a.adapt_until_converged(&far, 100).expect("converges");
+    assert!(passes >= 1);
+    assert_eq!(a.active(), &pm.base_vertices[..]);
+    assert!(a.faces().is_empty());
+}
+
+/// The speed figure: `cargo test -p tessera-codec --release --test pm_adapt -- --ignored --nocapture`.
+#[test]
+#[ignore = "adapts the 70k-triangle bunny along a path; run in release"]
+fn bunny_adaption_speed() {
+    let mesh = load("stanford/bunny_zipper_c3d.obj.gz");
+    let start = Instant::now();
+    let pm = build(&mesh).unwrap();
+    eprintln!("bunny: {} tris, build {:.3}s", mesh.triangles.len(), start.elapsed().as_secs_f64());
+    let mut a = Adapter::new(&pm);
+    let start = Instant::now();
+    let passes = a.refine_fully();
+    let secs = start.elapsed().as_secs_f64();
+    eprintln!(
+        "refine_fully: {} splits in {passes} passes, {:.1} ms = {:.2} M splits/s, {:.2} M faces/s",
+        pm.splits.len(),
+        secs * 1e3,
+        pm.splits.len() as f64 / secs / 1e6,
+        a.faces().len() as f64 / secs / 1e6
+    );
+    let frames = 120;
+    for error_px in [0.5f32, 1.0, 4.0] {
+        let mut a = Adapter::new(&pm);
+        let (mut passes, mut ops, mut faces) = (0usize, 0usize, 0usize);
+        let start = Instant::now();
+        for k in 0..frames {
+            // One pass per frame, as a renderer would do it.
+            let st = a.adapt(&path_view(&pm, k, frames, error_px));
+            passes += 1;
+            ops += st.splits + st.collapses;
+            faces += st.faces;
+        }
+        let secs = start.elapsed().as_secs_f64();
+        eprintln!(
+            "error {error_px} px: {frames} frames (1 pass each) in {:.1} ms = {:.3} ms/pass, {} ops ({:.2} M ops/s), avg {} faces",
+            secs * 1e3,
+            secs * 1e3 / passes as f64,
+            ops,
+            ops as f64 / secs / 1e6,
+            faces / frames
+        );
+        let tree = SplitTree::new(&pm);
+        let view = path_view(&pm, frames / 2, frames, error_px);
+        let start = Instant::now();
+        let mut b = Adapter::new(&pm);
+        let p = b.adapt_until_converged(&view, MAX_PASSES).unwrap();
+        eprintln!(
+            "error {error_px} px: from base to converged at the mid frame: {p} passes, {:.1} ms, {} faces",
+            start.elapsed().as_secs_f64() * 1e3,
+            b.faces().len()
+        );
+        check_state(&pm, &tree, &b);
+    }
+}
