@@ -212,3 +212,49 @@ fn bench_bandwidth_writes_the_figure_8_table_and_plot() {
         assert!(!fresh.0.exists() && !fresh.1.exists());
     }
 }
+
+#[test]
+fn pm_build_stats_adapt_and_corrupt_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = mesh("classic/spot.obj");
+    let dpm = dir.path().join("spot.dpm");
+    let o = tessera(&["pm", "build", s(&input), "-o", s(&dpm)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let o = tessera(&["pm", "stats", s(&dpm), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let bpv = j["bytes_per_vertex"].as_f64().unwrap();
+    assert!(bpv > 0.0 && bpv < 40.0, "{bpv} bytes/vertex");
+    assert_eq!(j["bytes"], std::fs::metadata(&dpm).unwrap().len());
+    for k in ["criteria_per_vertex", "tree_pointers_per_vertex", "connectivity_per_vertex", "geometry_per_vertex"] {
+        assert!(j[k].as_f64().unwrap() > 0.0, "{k}");
+    }
+
+    let original = codec::load_path(&input).unwrap();
+    let full = dir.path().join("full.ply");
+    let o = tessera(&["pm", "adapt", s(&dpm), "--full", "-o", s(&full)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} triangles", original.triangles.len())));
+    assert_eq!(codec::load_path(&full).unwrap().triangles.len(), original.triangles.len());
+
+    let view = dir.path().join("view.ply");
+    let o = tessera(&["pm", "adapt", s(&dpm), "--size", "64x48", "--error-px", "0.5", "-o", s(&view)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let adapted = codec::load_path(&view).unwrap().triangles.len();
+    assert!(adapted > 0 && adapted <= original.triangles.len(), "{adapted} triangles");
+
+    // A flipped byte: a clear error, exit code 1, no output.
+    let mut bytes = std::fs::read(&dpm).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x10;
+    let bad = dir.path().join("bad.dpm");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("bad.ply");
+    for args in [vec!["pm", "stats", s(&bad)], vec!["pm", "adapt", s(&bad), "--full", "-o", s(&out)]] {
+        let o = tessera(&args);
+        assert_eq!(o.status.code(), Some(1));
+        assert!(stderr(&o).contains("corrupt"), "{}", stderr(&o));
+    }
+    assert!(!out.exists());
+}

@@ -7,6 +7,7 @@ pub mod bandwidth;
 pub mod commands;
 pub mod composite;
 pub mod output;
+pub mod pm;
 pub mod progress;
 pub mod render;
 pub mod sort;

@@ -57,10 +57,55 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Dependency-free progressive meshes (.dpm files).
+    Pm {
+        #[command(subcommand)]
+        pm: Pm,
+    },
     /// Experiments from the paper.
     Bench {
         #[command(subcommand)]
         bench: Bench,
+    },
+}
+
+#[derive(Subcommand)]
+enum Pm {
+    /// Build a progressive mesh from a mesh file and compress it into a .dpm file.
+    Build {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Bits per quantized position coordinate (8 to 24).
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u8).range(8..=24))]
+        position_bits: u8,
+        /// Bits per octahedral normal coordinate (4 to 16).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u8).range(4..=16))]
+        normal_bits: u8,
+    },
+    /// Print the size of a .dpm file per vertex, with the breakdown.
+    Stats {
+        input: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Adapt a .dpm file to a view (or refine it fully) and write the mesh as PLY.
+    Adapt {
+        input: PathBuf,
+        #[command(flatten)]
+        camera: CameraArgs,
+        /// Frame size in pixels, WIDTHxHEIGHT.
+        #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+        size: (u32, u32),
+        /// Screen-space error threshold in pixels.
+        #[arg(long, default_value_t = 0.5)]
+        error_px: f32,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Apply every split (ignores the view).
+        #[arg(long)]
+        full: bool,
     },
 }
 
@@ -99,6 +144,15 @@ fn main() -> ExitCode {
         Command::Render(args) => master::render::run(args),
         Command::Sort { model, grid, camera, dump, json } => {
             master::sort::run(model, grid, camera, dump.as_ref(), *json)
+        }
+        Command::Pm { pm: Pm::Build { input, output, position_bits, normal_bits } } => master::pm::build(
+            input,
+            output,
+            codec::pm::DpmOptions { position_bits: *position_bits, normal_bits: *normal_bits },
+        ),
+        Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
+        Command::Pm { pm: Pm::Adapt { input, camera, size, error_px, output, full } } => {
+            master::pm::adapt(input, camera, *size, *error_px, output, *full)
         }
         Command::Bench { bench: Bench::Bandwidth { models, tiles, size, quant_bits, out, plot } } => {
             master::bandwidth::run(models, *size, tiles, *quant_bits, out, plot)

@@ -1,9 +1,11 @@
 //! Dependency-free progressive meshes (Derzapf & Guthe, "Dependency-Free Parallel
 //! Progressive Meshes"): the builder with its refinement criteria (section 4, [`Criteria`]),
 //! a sequential reference refinement ([`refine`]) and the CPU reference of the parallel
-//! view-dependent adaption of section 5 ([`adapt`]). Attribute deltas and the arithmetic
-//! coding of section 4.2 are later slices; the binary tree pointers of Table 1 are derived
-//! from the splits by [`SplitTree::new`].
+//! view-dependent adaption of section 5 ([`adapt`]), and the `.dpm` file ([`mod@format`]): every
+//! operation coded on its own with shared static Huffman tables per field and byte
+//! significance (section 4.2), in tree order with pointers, so that any operation decodes from
+//! its address alone. The binary tree pointers of Table 1 are derived from the splits by
+//! [`SplitTree::new`]. Not yet: the v_l/v_u swap optimisation of section 4.2.4.
 //!
 //! The mesh is simplified by edge collapses until no edge is left (section 3); the original
 //! mesh comes back by applying the inverse vertex splits in reverse order. What makes the
@@ -34,10 +36,13 @@
 
 pub mod adapt;
 pub mod build;
+pub mod format;
+pub mod huffman;
 pub mod refine;
 
 pub use adapt::{Adapter, Stats, View};
 pub use build::{build, PmError};
+pub use format::{DpmError, EncodeOptions as DpmOptions};
 pub use refine::{refine_all, Refiner};
 
 /// "None" in the index buffers of this module (no split, no parent node).

@@ -1,0 +1,236 @@
+//! The `.dpm` format: exact round trips (triangles by FVID, quantized positions and criteria),
+//! every operation decoding from its own address, and corrupt files giving errors.
+
+mod common;
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use codec::pm::format::{self, decode, encode, quantized, Dpm, EncodeOptions, Stats};
+use codec::pm::{build, refine_all, DpmError, ProgressiveMesh};
+use codec::Mesh;
+use common::{shared_meshes, sorted_canonical};
+use proptest::prelude::*;
+
+fn load(rel: &str) -> Mesh {
+    codec::load_path(&shared_meshes().join(rel)).unwrap()
+}
+
+/// Encodes, decodes and checks the round trip against the quantized input.
+fn round_trip(pm: &ProgressiveMesh) -> format::Encoded {
+    let opts = EncodeOptions::default();
+    let enc = encode(pm, opts).expect("encodes");
+    let dec = decode(&enc.bytes).expect("decodes").pm;
+    let q = quantized(pm, opts).unwrap();
+    assert_eq!(dec.positions, q.positions, "positions differ from the quantized input");
+    assert_eq!(dec.normals, q.normals, "normals differ from the quantized input");
+    assert_eq!(dec.base_vertices, pm.base_vertices);
+    assert_eq!(sorted_canonical(dec.base_faces.iter().copied()), sorted_canonical(pm.base_faces.iter().copied()));
+    assert_eq!(dec.splits.len(), pm.splits.len());
+    assert!(sorted_canonical(refine_all(&dec)) == sorted_canonical(refine_all(pm)), "triangles differ");
+    // Per split (by its v_u, unique): same v, same faces, quantized criteria.
+    let by_vu: HashMap<u32, usize> = pm.splits.iter().enumerate().map(|(i, s)| (s.v_u, i)).collect();
+    for (s, c) in dec.splits.iter().zip(&dec.criteria) {
+        let i = by_vu[&s.v_u];
+        assert_eq!(s.v, pm.splits[i].v);
+        assert_eq!(sorted_canonical(s.faces.iter().copied()), sorted_canonical(pm.splits[i].faces.iter().copied()));
+        assert_eq!(*c, q.criteria[i]);
+    }
+    enc
+}
+
+/// Every operation decodes alone from its address and its context, in reverse order.
+fn single_ops(pm: &ProgressiveMesh, enc: &format::Encoded) {
+    let dpm = Dpm::parse(&enc.bytes).unwrap();
+    let q = quantized(pm, EncodeOptions::default()).unwrap();
+    for s in (0..pm.splits.len()).rev() {
+        let op = dpm.decode_op(enc.addresses[s], &enc.contexts[s]).expect("single op decodes");
+        assert_eq!(op.split.v, pm.splits[s].v);
+        assert_eq!(op.split.v_u, pm.splits[s].v_u);
+        assert_eq!(
+            sorted_canonical(op.split.faces.iter().copied()),
+            sorted_canonical(pm.splits[s].faces.iter().copied())
+        );
+        assert_eq!(op.criteria, q.criteria[s]);
+        let h = &enc.header;
+        let p = op.position_u.map(|x| x as f32);
+        let expect = q.positions[pm.splits[s].v_u as usize];
+        for k in 0..3 {
+            assert_eq!(h.bbox_min[k] + p[k] * h.step, expect[k]);
+        }
+    }
+}
+
+#[test]
+fn shared_meshes_round_trip_and_ops_decode_alone() {
+    for rel in [
+        "odedstein/cube.obj",
+        "classic/teapot.obj",
+        "odedstein/plane_holes.obj.gz",
+        "degenerate/non_manifold_face_graph.obj",
+        "degenerate/fused_vertices.obj",
+        "degenerate/all_degen.obj",
+        "classic/spot.obj",
+    ] {
+        let pm = build(&load(rel)).unwrap();
+        let enc = round_trip(&pm);
+        single_ops(&pm, &enc);
+        let st = Stats::of(&enc.bytes).unwrap();
+        eprintln!("{rel}: {} vertices, {:.2} bytes/vertex", st.header.vertices, st.bytes_per_vertex());
+    }
+}
+
+#[test]
+fn empty_and_tiny_meshes() {
+    let pm = build(&Mesh::default()).unwrap();
+    round_trip(&pm);
+    let tri = Mesh { positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], triangles: vec![[0, 1, 2]] };
+    let pm = build(&tri).unwrap();
+    let enc = round_trip(&pm);
+    single_ops(&pm, &enc);
+}
+
+#[test]
+fn every_truncation_of_a_small_file_is_an_error() {
+    let bytes = encode(&build(&load("odedstein/cube.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
+    assert!(decode(&bytes).is_ok());
+    for len in 0..bytes.len() {
+        match decode(&bytes[..len]) {
+            Err(DpmError::Truncated(_)) => {}
+            other => panic!("truncated to {len} of {} bytes: {other:?}", bytes.len()),
+        }
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert_eq!(decode(&longer).unwrap_err(), DpmError::TrailingBytes(1));
+}
+
+#[test]
+fn random_byte_flips_are_detected() {
+    let bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for _ in 0..2000 {
+        let mut b = bytes.clone();
+        for _ in 0..1 + next() % 3 {
+            let i = (next() % b.len() as u64) as usize;
+            b[i] ^= 1 << (next() % 8);
+        }
+        if b != bytes {
+            assert!(decode(&b).is_err(), "a corrupted file decoded");
+            assert!(Stats::of(&b).is_err());
+        }
+    }
+}
+
+#[test]
+fn garbage_behind_valid_checksums_never_panics() {
+    let mut state = 0x1234_5678_9ABC_DEF1u64;
+    for len in 0..400usize {
+        let data: Vec<u8> = (0..len)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                state as u8
+            })
+            .collect();
+        let _ = decode(&format::wrap_for_fuzzing(&data));
+    }
+}
+
+/// A triangle soup over a few vertex blocks with degenerate, duplicate, reversed and
+/// non-manifold triangles.
+fn soup() -> impl Strategy<Value = Mesh> {
+    (
+        1usize..4,
+        2usize..24,
+        proptest::collection::vec((0u32..3, 0u32..24, 0u32..24, 0u32..24, 0u8..8), 0..60),
+        any::<u64>(),
+    )
+        .prop_map(|(blocks, per_block, raw, seed)| {
+            let per = per_block as u32;
+            let mut triangles: Vec<[u32; 3]> = vec![];
+            for (block, a, b, c, kind) in raw {
+                let o = (block % blocks as u32) * per;
+                let (a, b, c) = (a % per, b % per, c % per);
+                let t = match kind {
+                    0 => [o + a, o + a, o + b],
+                    1 => [o + a, o + a, o + a],
+                    2 if !triangles.is_empty() => {
+                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
+                        [z, y, x]
+                    }
+                    3 => [o, o + 1 % per, o + c],
+                    _ => [o + a, o + b, o + c],
+                };
+                triangles.push(t);
+            }
+            let mut s = seed | 1;
+            let positions = (0..blocks * per_block)
+                .map(|_| {
+                    [(); 3].map(|_| {
+                        s ^= s << 13;
+                        s ^= s >> 7;
+                        s ^= s << 17;
+                        ((s >> 40) % 5) as f32
+                    })
+                })
+                .collect();
+            Mesh { positions, triangles }
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_round_trip(mesh in soup()) {
+        let pm = build(&mesh).unwrap();
+        let enc = round_trip(&pm);
+        single_ops(&pm, &enc);
+    }
+}
+
+/// The size figures: `cargo test -p tessera-codec --release --test pm_format -- --ignored --nocapture`.
+#[test]
+#[ignore = "builds the bunny and the 871k-triangle dragon; run in release"]
+fn bunny_and_dragon_sizes() {
+    for rel in ["stanford/bunny_zipper_c3d.obj.gz", "stanford/dragon_vrip.ply.gz"] {
+        let mesh = load(rel);
+        let start = Instant::now();
+        let pm = build(&mesh).unwrap();
+        let build_s = start.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let enc = encode(&pm, EncodeOptions::default()).unwrap();
+        let enc_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        decode(&enc.bytes).unwrap();
+        let dec_s = t.elapsed().as_secs_f64();
+        let st = Stats::of(&enc.bytes).unwrap();
+        eprintln!(
+            "{rel}: {} vertices, {} splits, {} bytes = {:.2} bytes/vertex: criteria {:.2}, tree pointers {:.2}, \
+             connectivity {:.2}, geometry {:.2}, padding {:.2}, base {:.3}, tables {:.3}",
+            st.header.vertices,
+            st.header.splits,
+            st.bytes,
+            st.bytes_per_vertex(),
+            st.per_vertex(st.criteria_bytes),
+            st.per_vertex(st.tree_pointer_bytes),
+            st.per_vertex(st.connectivity_bytes),
+            st.per_vertex(st.geometry_bytes),
+            st.per_vertex(st.padding_bytes),
+            st.per_vertex(st.base_bytes as f64),
+            st.per_vertex(st.table_bytes as f64),
+        );
+        eprintln!(
+            "  build {build_s:.2}s + encode {enc_s:.2}s = {:.0} ops/s; decode {dec_s:.2}s",
+            st.header.splits as f64 / (build_s + enc_s)
+        );
+    }
+}

@@ -1,0 +1,189 @@
+//! `tessera pm`: dependency-free progressive meshes in `.dpm` files (build, stats, adapt).
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use codec::pm::format::{self, EncodeOptions, Stats};
+use codec::pm::{Adapter, View};
+use codec::Mesh;
+use serde::Serialize;
+
+use crate::args::CameraArgs;
+use crate::commands::load_mesh;
+use crate::output::{write_atomic, write_bytes};
+use crate::progress;
+
+/// `tessera pm build IN -o OUT.dpm`.
+pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
+    let mesh = load_mesh(input)?;
+    let start = Instant::now();
+    // The builder reports no progress, so a spinner per stage.
+    let pb = progress::spinner(format!("simplifying {} triangles", mesh.triangles.len()));
+    let pm = codec::pm::build(&mesh).with_context(|| format!("cannot build {}", input.display()))?;
+    pb.finish_and_clear();
+    let build_s = start.elapsed().as_secs_f64();
+    let pb = progress::spinner(format!("compressing {} operations", pm.splits.len()));
+    let t = Instant::now();
+    let enc = format::encode(&pm, opts).context("cannot encode the progressive mesh")?;
+    pb.finish_and_clear();
+    let enc_s = t.elapsed().as_secs_f64();
+    write_bytes(output, &enc.bytes)?;
+    let secs = build_s + enc_s;
+    println!(
+        "{} -> {}: {} triangles, {} vertices, {} operations, {} bytes ({:.2} bytes/vertex), \
+         built in {:.0} ms + compressed in {:.0} ms ({:.0} ops/s)",
+        input.display(),
+        output.display(),
+        enc.header.triangles,
+        enc.header.vertices,
+        enc.header.splits,
+        enc.bytes.len(),
+        enc.bytes.len() as f64 / enc.header.vertices.max(1) as f64,
+        build_s * 1e3,
+        enc_s * 1e3,
+        enc.header.splits as f64 / secs.max(1e-9)
+    );
+    Ok(())
+}
+
+fn read(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// The numbers `tessera pm stats --json` prints; the `*_per_vertex` fields are the paper's
+/// breakdown in bytes per vertex.
+#[derive(Debug, Serialize)]
+pub struct PmStatsReport {
+    pub bytes: usize,
+    pub vertices: u32,
+    pub triangles: u32,
+    pub operations: u32,
+    pub base_vertices: u32,
+    pub base_faces: u32,
+    pub position_bits: u8,
+    pub normal_bits: u8,
+    pub bytes_per_vertex: f64,
+    pub criteria_per_vertex: f64,
+    pub tree_pointers_per_vertex: f64,
+    pub connectivity_per_vertex: f64,
+    pub geometry_per_vertex: f64,
+    pub padding_per_vertex: f64,
+    pub base_mesh_bytes: usize,
+    pub table_bytes: usize,
+    pub framing_bytes: usize,
+}
+
+impl PmStatsReport {
+    pub fn of(bytes: &[u8]) -> Result<Self> {
+        let s = Stats::of(bytes)?;
+        let h = s.header;
+        Ok(PmStatsReport {
+            bytes: s.bytes,
+            vertices: h.vertices,
+            triangles: h.triangles,
+            operations: h.splits,
+            base_vertices: h.base_vertices,
+            base_faces: h.base_faces,
+            position_bits: h.position_bits,
+            normal_bits: h.normal_bits,
+            bytes_per_vertex: s.bytes_per_vertex(),
+            criteria_per_vertex: s.per_vertex(s.criteria_bytes),
+            tree_pointers_per_vertex: s.per_vertex(s.tree_pointer_bytes),
+            connectivity_per_vertex: s.per_vertex(s.connectivity_bytes),
+            geometry_per_vertex: s.per_vertex(s.geometry_bytes),
+            padding_per_vertex: s.per_vertex(s.padding_bytes),
+            base_mesh_bytes: s.base_bytes,
+            table_bytes: s.table_bytes,
+            framing_bytes: s.framing_bytes,
+        })
+    }
+}
+
+/// `tessera pm stats IN.dpm [--json]` (decodes every operation, so corruption is reported).
+pub fn stats(input: &Path, json: bool) -> Result<()> {
+    let bytes = read(input)?;
+    let r = PmStatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!("{}", input.display());
+        println!("  vertices       {:>12}   ({} in the base mesh)", r.vertices, r.base_vertices);
+        println!("  triangles      {:>12}   ({} in the base mesh)", r.triangles, r.base_faces);
+        println!("  operations     {:>12}", r.operations);
+        println!("  bytes          {:>12}   ({:.2} per vertex)", r.bytes, r.bytes_per_vertex);
+        println!("  criteria       {:>12.2} bytes/vertex", r.criteria_per_vertex);
+        println!("  tree pointers  {:>12.2} bytes/vertex", r.tree_pointers_per_vertex);
+        println!("  connectivity   {:>12.2} bytes/vertex", r.connectivity_per_vertex);
+        println!(
+            "  geometry       {:>12.2} bytes/vertex ({} bits positions, {} bits normals)",
+            r.geometry_per_vertex, r.position_bits, r.normal_bits
+        );
+        println!("  padding        {:>12.2} bytes/vertex", r.padding_per_vertex);
+        println!("  base, tables   {:>12} + {} bytes", r.base_mesh_bytes, r.table_bytes);
+    }
+    Ok(())
+}
+
+/// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full]`.
+pub fn adapt(
+    input: &Path,
+    camera: &CameraArgs,
+    size: (u32, u32),
+    error_px: f32,
+    output: &Path,
+    full: bool,
+) -> Result<()> {
+    if size.0 == 0 || size.1 == 0 {
+        bail!("--size must be positive, not {}x{}", size.0, size.1);
+    }
+    if !(error_px.is_finite() && error_px > 0.0) {
+        bail!("--error-px must be a positive number, not {error_px}");
+    }
+    let bytes = read(input)?;
+    let pb = progress::spinner(format!("decoding {}", input.display()));
+    let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
+    pb.finish_and_clear();
+    let pm = decoded?.pm;
+    let start = Instant::now();
+    let mut adapter = Adapter::new(&pm);
+    let passes = if full {
+        adapter.refine_fully()
+    } else {
+        let (lo, hi) = bbox(&pm.positions);
+        let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
+        let view = View::new(&cam, size.0, size.1, error_px);
+        adapter.adapt_until_converged(&view, 10_000).context("the adaption did not converge")?
+    };
+    let secs = start.elapsed().as_secs_f64();
+    let mesh = Mesh {
+        positions: adapter.active().iter().map(|&f| pm.positions[f as usize]).collect(),
+        triangles: adapter.faces().to_vec(),
+    };
+    write_atomic(output, |w| codec::save::write_ply(&mesh, w))?;
+    println!(
+        "{} -> {}: {} triangles, {} vertices ({} passes) in {:.1} ms",
+        input.display(),
+        output.display(),
+        mesh.triangles.len(),
+        mesh.positions.len(),
+        passes,
+        secs * 1e3
+    );
+    Ok(())
+}
+
+fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    if p.is_empty() {
+        return ([0.0; 3], [1.0; 3]);
+    }
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for v in p {
+        for i in 0..3 {
+            lo[i] = lo[i].min(v[i]);
+            hi[i] = hi[i].max(v[i]);
+        }
+    }
+    (lo, hi)
+}
