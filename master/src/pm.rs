@@ -18,9 +18,12 @@ use crate::progress;
 pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
     let mesh = load_mesh(input)?;
     let start = Instant::now();
-    // The builder reports no progress, so a spinner per stage.
-    let pb = progress::spinner(format!("simplifying {} triangles", mesh.triangles.len()));
-    let pm = codec::pm::build(&mesh).with_context(|| format!("cannot build {}", input.display()))?;
+    let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
+    let pm = codec::pm::build_with_progress(&mesh, &mut |done, bound| {
+        pb.set_length(bound as u64);
+        pb.set_position(done as u64);
+    })
+    .with_context(|| format!("cannot build {}", input.display()))?;
     pb.finish_and_clear();
     let build_s = start.elapsed().as_secs_f64();
     let pb = progress::spinner(format!("compressing {} operations", pm.splits.len()));

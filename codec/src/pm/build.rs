@@ -315,8 +315,16 @@ impl Simplifier {
 /// Any topology is accepted (see the module docs); the mesh must only pass
 /// [`Mesh::validate`]: indices in range, finite positions for used vertices.
 pub fn build(mesh: &Mesh) -> Result<ProgressiveMesh, PmError> {
+    build_with_progress(mesh, &mut |_, _| {})
+}
+
+/// As [`build`], calling `progress(collapses_done, bound)` now and then; `bound` is the
+/// number of used vertices, which the collapses (one per vertex that is not a base vertex)
+/// approach but never reach.
+pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) -> Result<ProgressiveMesh, PmError> {
     mesh.validate()?;
     let n = mesh.positions.len();
+    let bound = mesh.used_vertices().iter().filter(|&&u| u).count();
     let mut s = Simplifier::new(mesh);
 
     // Collapse history: (u, t) per collapse, and the faces each removed (CSR over `removed`).
@@ -331,7 +339,11 @@ pub fn build(mesh: &Mesh) -> Result<ProgressiveMesh, PmError> {
         s.collapse(u, t, &mut removed, &mut seen, stamp);
         collapses.push((u, t));
         removed_end.push(removed.len());
+        if collapses.len() % (1 << 16) == 0 {
+            progress(collapses.len(), bound);
+        }
     }
+    progress(collapses.len(), bound);
 
     // The forest: each vertex's children are the vertices it absorbed, chronologically.
     let mut child_start = vec![0usize; n + 1];

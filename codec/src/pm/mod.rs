@@ -41,7 +41,7 @@ pub mod huffman;
 pub mod refine;
 
 pub use adapt::{Adapter, Stats, View};
-pub use build::{build, PmError};
+pub use build::{build, build_with_progress, PmError};
 pub use format::{DpmError, EncodeOptions as DpmOptions};
 pub use refine::{refine_all, Refiner};
 
