@@ -339,7 +339,7 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
         s.collapse(u, t, &mut removed, &mut seen, stamp);
         collapses.push((u, t));
         removed_end.push(removed.len());
-        if collapses.len() % (1 << 16) == 0 {
+        if collapses.len().is_multiple_of(1 << 16) {
             progress(collapses.len(), bound);
         }
     }
