@@ -35,13 +35,17 @@
 //! * a leaf (a finest vertex) has radius and errors zero and the normal cone of its incident
 //!   faces around its own normal; faces without area have no normal and are left out;
 //! * a split's region is the union of its children's: the left child has the same centre and
-//!   normal, the right child (`v_u`) is at distance `d` with normal `n_u`, so the radius is
-//!   `max(r_l, d + r_u)`, the cone angle `max(a_l, angle(n, n_u) + a_u)` and the attribute
-//!   error `max(e_l, |n - n_u| + e_u)`. These are nesting bounds, so monotone by
-//!   construction; the paper's maximum over the neighbours' errors (section 3.2) guards
-//!   against fold-overs and is not applied here.
-//! * the radius and the cone angle get a relative slack of `1e-5` (plus `1e-5` rad) per
-//!   level, so the runtime tests, which recompute the nesting in `f32`, stay monotone.
+//!   normal, the right child (`v_u`) is at distance `d` with normal `n_u`, so the cone angle
+//!   is `max(a_l, angle(n, n_u) + a_u)` and the attribute error `max(e_l, |n - n_u| + e_u)`.
+//!   These are nesting bounds, so monotone by construction.
+//! * the geometric error is computed during the simplification: the farthest finest vertex
+//!   of the region from `v` (the same nesting bound), raised to the maximum of the tracked
+//!   errors of all vertices around the collapse, as section 3.2 prescribes against
+//!   fold-overs; so it can exceed the region's radius, and is still at least both
+//!   children's (`v_t` and `v_u` are among those vertices). Being at least the region's
+//!   farthest vertex from `v`, it is also the region's bounding radius.
+//! * the cone angle gets a relative slack of `1e-5` (plus `1e-5` rad) per level, so the
+//!   runtime tests, which recompute the nesting in `f32`, stay monotone.
 
 use thiserror::Error;
 
@@ -332,7 +336,26 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
     let mut removed: Vec<u32> = Vec::new();
     let mut removed_end: Vec<usize> = Vec::new();
     let mut seen = vec![u32::MAX; n];
+    // Geometric error per collapse (section 3.2): the farthest finest vertex a vertex stands
+    // for (`reach`, a nesting bound), raised to the tracked error of every vertex around the
+    // collapse ("using the maximum of all neighbor's errors as the actual error"), which
+    // keeps the errors locally monotone against fold-overs; the result becomes `t`'s error.
+    let pos64 = |v: u32| mesh.positions[v as usize].map(f64::from);
+    let (mut reach, mut error) = (vec![0.0f64; n], vec![0.0f64; n]);
+    let mut collapse_error: Vec<f64> = Vec::new();
     while let Some((u, t)) = s.next_collapse() {
+        let (ui, ti) = (u as usize, t as usize);
+        reach[ti] = reach[ti].max(norm(sub(pos64(u), pos64(t))) + reach[ui]);
+        let mut e = reach[ti].max(error[ti]).max(error[ui]);
+        for &f in s.vertex_faces[ui].iter().chain(&s.vertex_faces[ti]) {
+            if s.face_alive[f as usize] {
+                for w in s.faces[f as usize] {
+                    e = e.max(error[w as usize]);
+                }
+            }
+        }
+        error[ti] = e;
+        collapse_error.push(e);
         // At most n - 1 < 2^31 collapses, so stamps (from 1, above the initial 0 of
         // `changed`) never reach the initial u32::MAX of `seen`.
         let stamp = collapses.len() as u32 + 1;
@@ -392,7 +415,9 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
         .collect();
     let finest: Vec<[u32; 3]> = (0..mesh.triangles.len() as u32).map(to_fvid).collect();
     let mut pm = ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input, ..Default::default() };
-    let (normals, criteria) = criteria(&pm, &finest);
+    // Splits run coarse to fine, the reverse of the collapses.
+    let geometric: Vec<f64> = collapse_error.iter().rev().copied().collect();
+    let (normals, criteria) = criteria(&pm, &finest, &geometric);
     pm.normals = normals;
     pm.criteria = criteria;
     Ok(pm)
@@ -419,7 +444,7 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The per-FVID normals and the per-split criteria (see the module docs).
-fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
+fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]], geometric: &[f64]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
     let pos: Vec<[f64; 3]> = pm.positions.iter().map(|p| p.map(f64::from)).collect();
     let face_normal = |t: &[u32; 3]| {
@@ -457,7 +482,8 @@ fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]]) -> (Vec<[f32; 3]>, Vec<Cr
     }
 
     let tree = SplitTree::new(pm);
-    // Per split, in f64: radius, geometric error, attribute error, cone angle.
+    // Per split, in f64: radius, geometric error (from the simplification), attribute
+    // error, cone angle.
     let mut node = vec![[0.0f64; 4]; pm.splits.len()];
     let max_angle = std::f64::consts::FRAC_PI_2;
     for (s, split) in pm.splits.iter().enumerate().rev() {
@@ -465,13 +491,14 @@ fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]]) -> (Vec<[f32; 3]>, Vec<Cr
         let child = |c: u32, f: usize| if c == NONE { [0.0, 0.0, 0.0, leaf_alpha[f]] } else { node[c as usize] };
         let [cl, cu] = tree.children[s];
         let (l, r) = (child(cl, v), child(cu, u));
-        let d = norm(sub(pos[u], pos[v]));
-        let radius = l[0].max(d + r[0]) * (1.0 + SLACK);
-        let geometric = l[1].max(d + r[1]);
+        // The geometric error is at least the farthest finest vertex of the region from `v`,
+        // so it serves as the region's bounding radius (conservatively: a larger sphere only
+        // refines more near the frustum's sides), and the radius costs nothing to store.
+        let radius = geometric[s];
         let attribute = l[2].max(norm(sub(normal[u], normal[v])) + r[2]);
         let alpha = (l[3].max(angle(normal[v], normal[u]) + r[3]) * (1.0 + SLACK) + SLACK).min(max_angle);
         let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
-        node[s] = [radius, geometric, attribute, alpha];
+        node[s] = [radius, geometric[s], attribute, alpha];
     }
     let criteria = node
         .iter()

@@ -478,11 +478,13 @@ struct OpData {
     dnrm: [i64; 2],
 }
 
-/// The prediction of criterion `i`: the parent's value, except for the radius, which is
-/// predicted by this operation's geometric error (the radius bounds the same distances).
+/// The prediction of criterion `i`: the parent's value, except for the radius, which is at
+/// most both the parent's radius and this operation's geometric error (the error is the
+/// region's farthest vertex raised to its neighbours' errors) and is predicted by the
+/// smaller of the two.
 fn criteria_prediction(parent: &[u32; 4], this: &[u32; 4], i: usize) -> i64 {
     if i == 3 {
-        this[1] as i64
+        parent[3].min(this[1]) as i64
     } else {
         parent[i] as i64
     }
