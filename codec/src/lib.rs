@@ -14,6 +14,7 @@
 //! ```
 
 pub mod bft;
+mod container;
 pub mod load;
 pub mod mesh;
 pub mod pm;

@@ -21,6 +21,9 @@
 
 use thiserror::Error;
 
+pub(crate) use crate::container::{get_varint, put_varint};
+use crate::container::{ContainerError, Layout};
+
 pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
 pub const VERSION: u16 = 1;
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
@@ -140,82 +143,35 @@ pub(crate) struct Parts<'a> {
     pub sections: [&'a [u8]; 4],
 }
 
-pub(crate) fn write(header: &Header, sections: [&[u8]; 4]) -> Vec<u8> {
-    let hb = header.to_bytes();
-    let mut out = Vec::with_capacity(hb.len() + sections.iter().map(|s| s.len() + 12).sum::<usize>() + 16);
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    out.extend_from_slice(&(hb.len() as u16).to_le_bytes());
-    out.extend_from_slice(&hb);
-    out.extend_from_slice(&crc32fast::hash(&hb).to_le_bytes());
-    for (tag, s) in SECTION_TAGS.iter().zip(sections) {
-        out.extend_from_slice(tag);
-        out.extend_from_slice(&(s.len() as u32).to_le_bytes());
-        out.extend_from_slice(s);
-        out.extend_from_slice(&crc32fast::hash(s).to_le_bytes());
-    }
-    out
-}
+/// The `.bft` container: sections CONN, GEOM, DUPS, LOOS.
+const LAYOUT: Layout<4> = Layout {
+    magic: MAGIC,
+    version: VERSION,
+    tags: SECTION_TAGS,
+    names: ["connectivity section", "geometry section", "duplicate table", "loose triangles"],
+};
 
-struct Reader<'a> {
-    b: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], BftError> {
-        if self.b.len() - self.pos < n {
-            return Err(BftError::Truncated(what));
+impl From<ContainerError> for BftError {
+    fn from(e: ContainerError) -> BftError {
+        match e {
+            ContainerError::BadMagic => BftError::BadMagic,
+            ContainerError::UnsupportedVersion(v) => BftError::UnsupportedVersion(v),
+            ContainerError::Truncated(what) => BftError::Truncated(what),
+            ContainerError::Checksum(what) => BftError::Checksum(what),
+            ContainerError::TrailingBytes(n) => BftError::TrailingBytes(n),
+            ContainerError::WrongSection(name) => corrupt(format!("expected the {name}")),
+            ContainerError::Overlong(what) => corrupt(format!("overlong integer in {what}")),
         }
-        let s = &self.b[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
     }
-    fn u32(&mut self, what: &'static str) -> Result<u32, BftError> {
-        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().unwrap()))
-    }
+}
+
+pub(crate) fn write(header: &Header, sections: [&[u8]; 4]) -> Vec<u8> {
+    LAYOUT.write(&header.to_bytes(), sections)
 }
 
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
-    let mut r = Reader { b: bytes, pos: 0 };
-    let magic = r.take(8, "magic number").map_err(|_| {
-        if MAGIC.starts_with(bytes) {
-            BftError::Truncated("magic number")
-        } else {
-            BftError::BadMagic
-        }
-    })?;
-    if magic != MAGIC {
-        return Err(BftError::BadMagic);
-    }
-    let version = u16::from_le_bytes(r.take(2, "version")?.try_into().unwrap());
-    if version != VERSION {
-        return Err(BftError::UnsupportedVersion(version));
-    }
-    let hlen = u16::from_le_bytes(r.take(2, "header length")?.try_into().unwrap()) as usize;
-    let hb = r.take(hlen, "header")?;
-    if r.u32("header checksum")? != crc32fast::hash(hb) {
-        return Err(BftError::Checksum("header"));
-    }
-    let header = Header::from_bytes(hb)?;
-    let names = ["connectivity section", "geometry section", "duplicate table", "loose triangles"];
-    let mut sections: [&[u8]; 4] = [&[]; 4];
-    for (i, tag) in SECTION_TAGS.iter().enumerate() {
-        let t = r.take(4, names[i])?;
-        if t != tag {
-            return Err(corrupt(format!("expected section {}, found {:?}", String::from_utf8_lossy(tag), t)));
-        }
-        let n = r.u32(names[i])? as usize;
-        let s = r.take(n, names[i])?;
-        if r.u32(names[i])? != crc32fast::hash(s) {
-            return Err(BftError::Checksum(names[i]));
-        }
-        sections[i] = s;
-    }
-    if r.pos != bytes.len() {
-        return Err(BftError::TrailingBytes(bytes.len() - r.pos));
-    }
-    Ok(Parts { header, sections })
+    let (header, sections) = LAYOUT.parse(bytes)?;
+    Ok(Parts { header: Header::from_bytes(header)?, sections })
 }
 
 /// Sizes and rates of a `.bft` file, as `tessera stats` reports them.
@@ -246,27 +202,6 @@ impl Stats {
     pub fn geometry_bits_per_vertex(&self) -> f64 {
         self.geometry_bytes as f64 * 8.0 / self.header.unique_vertices().max(1) as f64
     }
-}
-
-pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push((v as u8) | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
-
-pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, BftError> {
-    let mut v = 0u64;
-    for shift in (0..64).step_by(7) {
-        let byte = *b.get(*pos).ok_or(BftError::Truncated(what))?;
-        *pos += 1;
-        v |= ((byte & 0x7f) as u64) << shift;
-        if byte & 0x80 == 0 {
-            return Ok(v);
-        }
-    }
-    Err(corrupt(format!("overlong integer in {what}")))
 }
 
 /// Wraps arbitrary bytes in a well-formed container (small counts from the first bytes,

@@ -64,12 +64,18 @@ use thiserror::Error;
 
 use super::huffman::{BitReader, BitWriter, Table};
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
+use crate::container::{get_varint, put_varint, ContainerError, Layout};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
 pub const VERSION: u16 = 1;
 const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
-const TAGS: [[u8; 4]; 3] = [*b"TABL", *b"BASE", *b"OPER"];
-const SECTION_NAMES: [&str; 3] = ["tables section", "base mesh section", "operations section"];
+/// The `.dpm` container: sections TABL, BASE, OPER.
+const LAYOUT: Layout<3> = Layout {
+    magic: MAGIC,
+    version: VERSION,
+    tags: [*b"TABL", *b"BASE", *b"OPER"],
+    names: ["tables section", "base mesh section", "operations section"],
+};
 
 /// Everything that can be wrong with `.dpm` bytes (or with a mesh handed to [`encode`]).
 #[derive(Debug, Error, PartialEq)]
@@ -94,6 +100,20 @@ pub enum DpmError {
 
 fn corrupt(msg: impl Into<String>) -> DpmError {
     DpmError::Corrupt(msg.into())
+}
+
+impl From<ContainerError> for DpmError {
+    fn from(e: ContainerError) -> DpmError {
+        match e {
+            ContainerError::BadMagic => DpmError::BadMagic,
+            ContainerError::UnsupportedVersion(v) => DpmError::UnsupportedVersion(v),
+            ContainerError::Truncated(what) => DpmError::Truncated(what),
+            ContainerError::Checksum(what) => DpmError::Checksum(what),
+            ContainerError::TrailingBytes(n) => DpmError::TrailingBytes(n),
+            ContainerError::WrongSection(name) => corrupt(format!("expected the {name}")),
+            ContainerError::Overlong(what) => corrupt(format!("overlong number in {what}")),
+        }
+    }
 }
 
 /// Encoder settings.
@@ -700,28 +720,7 @@ fn classify(v: u32, v_u: u32, v_end: u32, f: [u32; 3]) -> FaceCode {
     FaceCode::General(f.map(|c| c as i64 - v as i64))
 }
 
-// ---- container ------------------------------------------------------------------------------
-
-fn put_varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push(v as u8 | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
-
-fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, DpmError> {
-    let mut v = 0u64;
-    for i in 0..10 {
-        let byte = *b.get(*pos).ok_or(DpmError::Truncated(what))?;
-        *pos += 1;
-        v |= ((byte & 0x7f) as u64) << (7 * i);
-        if byte & 0x80 == 0 {
-            return Ok(v);
-        }
-    }
-    Err(corrupt(format!("overlong number in {what}")))
-}
+// ---- integers in the base mesh section ------------------------------------------------------
 
 fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmError> {
     u32::try_from(get_varint(b, pos, what)?).map_err(|_| corrupt(format!("number out of range in {what}")))
@@ -743,58 +742,11 @@ pub struct Dpm<'a> {
     section_lens: [usize; 3],
 }
 
-struct Reader<'a> {
-    b: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], DpmError> {
-        if self.b.len() - self.pos < n {
-            return Err(DpmError::Truncated(what));
-        }
-        self.pos += n;
-        Ok(&self.b[self.pos - n..self.pos])
-    }
-
-    fn u32(&mut self, what: &'static str) -> Result<u32, DpmError> {
-        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().unwrap()))
-    }
-}
-
 impl<'a> Dpm<'a> {
     /// Checks the container and reads the tables and the base mesh (not the operations).
     pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
-        let mut r = Reader { b: bytes, pos: 0 };
-        let magic = r.take(8, "magic number")?;
-        if magic != MAGIC {
-            return Err(DpmError::BadMagic);
-        }
-        let version = u16::from_le_bytes(r.take(2, "version")?.try_into().unwrap());
-        if version != VERSION {
-            return Err(DpmError::UnsupportedVersion(version));
-        }
-        let hlen = u16::from_le_bytes(r.take(2, "header length")?.try_into().unwrap()) as usize;
-        let hb = r.take(hlen, "header")?;
-        if r.u32("header checksum")? != crc32fast::hash(hb) {
-            return Err(DpmError::Checksum("header"));
-        }
+        let (hb, sections) = LAYOUT.parse(bytes)?;
         let header = Header::from_bytes(hb)?;
-        let mut sections = [&bytes[..0]; 3];
-        for (i, s) in sections.iter_mut().enumerate() {
-            let tag = r.take(4, SECTION_NAMES[i])?;
-            if tag != TAGS[i] {
-                return Err(corrupt(format!("expected section {}", String::from_utf8_lossy(&TAGS[i]))));
-            }
-            let len = r.u32(SECTION_NAMES[i])? as usize;
-            *s = r.take(len, SECTION_NAMES[i])?;
-            if r.u32(SECTION_NAMES[i])? != crc32fast::hash(s) {
-                return Err(DpmError::Checksum(SECTION_NAMES[i]));
-            }
-        }
-        if r.pos != bytes.len() {
-            return Err(DpmError::TrailingBytes(bytes.len() - r.pos));
-        }
         // Tables.
         let tb = sections[0];
         let mut pos = 0;
@@ -1233,19 +1185,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
             put_varint(&mut bb, x as u64);
         }
     }
-    let mut out = Vec::with_capacity(ops.len() + bb.len() + tb.len() + 100);
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    let hb = h.to_bytes();
-    out.extend_from_slice(&(hb.len() as u16).to_le_bytes());
-    out.extend_from_slice(&hb);
-    out.extend_from_slice(&crc32fast::hash(&hb).to_le_bytes());
-    for (tag, s) in TAGS.iter().zip([&tb, &bb, &ops]) {
-        out.extend_from_slice(tag);
-        out.extend_from_slice(&(s.len() as u32).to_le_bytes());
-        out.extend_from_slice(s);
-        out.extend_from_slice(&crc32fast::hash(s).to_le_bytes());
-    }
+    let out = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &ops]);
     Ok(Encoded { bytes: out, header: h, addresses, contexts })
 }
 
@@ -1343,18 +1283,5 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         put_varint(&mut bb, 0);
     }
     put_varint(&mut bb, if data.is_empty() { 0 } else { 1 });
-    let mut out = Vec::new();
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    let hb = h.to_bytes();
-    out.extend_from_slice(&(hb.len() as u16).to_le_bytes());
-    out.extend_from_slice(&hb);
-    out.extend_from_slice(&crc32fast::hash(&hb).to_le_bytes());
-    for (tag, s) in TAGS.iter().zip([&tb[..], &bb[..], data]) {
-        out.extend_from_slice(tag);
-        out.extend_from_slice(&(s.len() as u32).to_le_bytes());
-        out.extend_from_slice(s);
-        out.extend_from_slice(&crc32fast::hash(s).to_le_bytes());
-    }
-    out
+    LAYOUT.write(&h.to_bytes(), [&tb, &bb, data])
 }
