@@ -10,7 +10,7 @@ use std::time::Instant;
 use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, View, NONE};
 use codec::view::Camera;
 use codec::Mesh;
-use common::{shared_meshes, sorted_canonical};
+use common::{shared_meshes, sorted_canonical, soup};
 use glam::Vec3;
 use proptest::prelude::*;
 
@@ -291,47 +291,6 @@ fn shared_meshes_frame_to_frame_equals_from_base() {
         eprintln!("{rel}: {} triangles; adapted {lo}..{hi} faces over 24 frames", mesh.triangles.len());
         assert!(hi > 0, "{rel}: the path never shows a face");
     }
-}
-
-/// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
-fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        ((s >> 40) % 4) as f32
-    };
-    (0..n).map(|_| [next(), next(), next()]).collect()
-}
-
-/// Triangle soups with degenerate, duplicate, reversed and non-manifold triangles.
-fn soup() -> impl Strategy<Value = Mesh> {
-    (1usize..4, 2usize..24, any::<u64>())
-        .prop_flat_map(|(blocks, per_block, seed)| {
-            let n = (blocks * per_block) as u32;
-            let tri = (0..blocks as u32, 0..per_block as u32, 0..per_block as u32, 0..per_block as u32, 0u8..10);
-            (Just((n, per_block as u32, seed)), proptest::collection::vec(tri, 0..60))
-        })
-        .prop_map(|((n, per_block, seed), raw)| {
-            let mut triangles: Vec<[u32; 3]> = vec![];
-            for (block, a, b, c, kind) in raw {
-                let o = block * per_block;
-                let t = match kind {
-                    0 => [o + a, o + a, o + b],
-                    1 => [o + a, o + a, o + a],
-                    2 if !triangles.is_empty() => triangles[(a + b) as usize % triangles.len()],
-                    3 if !triangles.is_empty() => {
-                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
-                        [z, y, x]
-                    }
-                    4 => [o, o + 1 % per_block, o + c],
-                    _ => [o + a, o + b, o + c],
-                };
-                triangles.push(t);
-            }
-            Mesh { positions: grid_positions(n as usize, seed), triangles }
-        })
 }
 
 proptest! {

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use codec::pm::{build, refine_all, PmError, ProgressiveMesh, Refiner};
 use codec::{Mesh, MeshError};
-use common::{all_shared_meshes, shared_meshes, sorted_canonical};
+use common::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
 use proptest::prelude::*;
 
 /// Connected components of the used vertices (vertices linked by sharing a triangle).
@@ -199,48 +199,6 @@ fn invalid_input_is_an_error() {
     );
     let nan = Mesh { positions: vec![[0.0; 3], [0.0, f32::INFINITY, 0.0], [1.0; 3]], triangles: vec![[0, 1, 2]] };
     assert!(matches!(build(&nan), Err(PmError::Mesh(MeshError::NonFinite { vertex: 1, .. }))));
-}
-
-/// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
-fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        ((s >> 40) % 4) as f32
-    };
-    (0..n).map(|_| [next(), next(), next()]).collect()
-}
-
-/// A triangle soup over a few vertex blocks (components), with degenerate triangles,
-/// duplicates and reversed duplicates, and fans of triangles around one edge (non-manifold).
-fn soup() -> impl Strategy<Value = Mesh> {
-    (1usize..4, 2usize..24, any::<u64>())
-        .prop_flat_map(|(blocks, per_block, seed)| {
-            let n = (blocks * per_block) as u32;
-            let tri = (0..blocks as u32, 0..per_block as u32, 0..per_block as u32, 0..per_block as u32, 0u8..10);
-            (Just((n, per_block as u32, seed)), proptest::collection::vec(tri, 0..60))
-        })
-        .prop_map(|((n, per_block, seed), raw)| {
-            let mut triangles: Vec<[u32; 3]> = vec![];
-            for (block, a, b, c, kind) in raw {
-                let o = block * per_block;
-                let t = match kind {
-                    0 => [o + a, o + a, o + b],
-                    1 => [o + a, o + a, o + a],
-                    2 if !triangles.is_empty() => triangles[(a + b) as usize % triangles.len()],
-                    3 if !triangles.is_empty() => {
-                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
-                        [z, y, x]
-                    }
-                    4 => [o, o + 1 % per_block, o + c],
-                    _ => [o + a, o + b, o + c],
-                };
-                triangles.push(t);
-            }
-            Mesh { positions: grid_positions(n as usize, seed), triangles }
-        })
 }
 
 proptest! {

@@ -9,7 +9,7 @@ use std::time::Instant;
 use codec::pm::format::{self, decode, encode, quantized, Dpm, EncodeOptions, Stats};
 use codec::pm::{build, refine_all, DpmError, ProgressiveMesh};
 use codec::Mesh;
-use common::{shared_meshes, sorted_canonical};
+use common::{shared_meshes, sorted_canonical, soup};
 use proptest::prelude::*;
 
 fn load(rel: &str) -> Mesh {
@@ -142,48 +142,6 @@ fn garbage_behind_valid_checksums_never_panics() {
             .collect();
         let _ = decode(&format::wrap_for_fuzzing(&data));
     }
-}
-
-/// A triangle soup over a few vertex blocks with degenerate, duplicate, reversed and
-/// non-manifold triangles.
-fn soup() -> impl Strategy<Value = Mesh> {
-    (
-        1usize..4,
-        2usize..24,
-        proptest::collection::vec((0u32..3, 0u32..24, 0u32..24, 0u32..24, 0u8..8), 0..60),
-        any::<u64>(),
-    )
-        .prop_map(|(blocks, per_block, raw, seed)| {
-            let per = per_block as u32;
-            let mut triangles: Vec<[u32; 3]> = vec![];
-            for (block, a, b, c, kind) in raw {
-                let o = (block % blocks as u32) * per;
-                let (a, b, c) = (a % per, b % per, c % per);
-                let t = match kind {
-                    0 => [o + a, o + a, o + b],
-                    1 => [o + a, o + a, o + a],
-                    2 if !triangles.is_empty() => {
-                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
-                        [z, y, x]
-                    }
-                    3 => [o, o + 1 % per, o + c],
-                    _ => [o + a, o + b, o + c],
-                };
-                triangles.push(t);
-            }
-            let mut s = seed | 1;
-            let positions = (0..blocks * per_block)
-                .map(|_| {
-                    [(); 3].map(|_| {
-                        s ^= s << 13;
-                        s ^= s >> 7;
-                        s ^= s << 17;
-                        ((s >> 40) % 5) as f32
-                    })
-                })
-                .collect();
-            Mesh { positions, triangles }
-        })
 }
 
 proptest! {

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use codec::bft::{self, EncodeOptions, Encoded};
 use codec::{Mesh, Quantization};
+use proptest::prelude::*;
 
 /// `../shared/meshes`, next to the repository.
 pub fn shared_meshes() -> PathBuf {
@@ -83,4 +84,46 @@ pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
 /// The lexicographically smallest rotation: canonical even when entries repeat.
 fn rotate_min<T: Ord + Copy>(t: [T; 3]) -> [T; 3] {
     [[t[0], t[1], t[2]], [t[1], t[2], t[0]], [t[2], t[0], t[1]]].into_iter().min().unwrap()
+}
+
+/// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
+pub fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    let mut s = seed | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        ((s >> 40) % 4) as f32
+    };
+    (0..n).map(|_| [next(), next(), next()]).collect()
+}
+
+/// A triangle soup over a few vertex blocks (components), with degenerate triangles,
+/// duplicates and reversed duplicates, and fans of triangles around one edge (non-manifold).
+pub fn soup() -> impl Strategy<Value = Mesh> {
+    (1usize..4, 2usize..24, any::<u64>())
+        .prop_flat_map(|(blocks, per_block, seed)| {
+            let n = (blocks * per_block) as u32;
+            let tri = (0..blocks as u32, 0..per_block as u32, 0..per_block as u32, 0..per_block as u32, 0u8..10);
+            (Just((n, per_block as u32, seed)), proptest::collection::vec(tri, 0..60))
+        })
+        .prop_map(|((n, per_block, seed), raw)| {
+            let mut triangles: Vec<[u32; 3]> = vec![];
+            for (block, a, b, c, kind) in raw {
+                let o = block * per_block;
+                let t = match kind {
+                    0 => [o + a, o + a, o + b],
+                    1 => [o + a, o + a, o + a],
+                    2 if !triangles.is_empty() => triangles[(a + b) as usize % triangles.len()],
+                    3 if !triangles.is_empty() => {
+                        let [x, y, z] = triangles[(a + c) as usize % triangles.len()];
+                        [z, y, x]
+                    }
+                    4 => [o, o + 1 % per_block, o + c],
+                    _ => [o + a, o + b, o + c],
+                };
+                triangles.push(t);
+            }
+            Mesh { positions: grid_positions(n as usize, seed), triangles }
+        })
 }
