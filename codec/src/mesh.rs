@@ -61,6 +61,30 @@ impl Mesh {
         }
         used
     }
+
+    /// Connected components of the used vertices, vertices being joined by sharing a
+    /// triangle (union-find with path halving). Indices must be in range.
+    pub fn components(&self) -> usize {
+        let mut parent: Vec<u32> = (0..self.positions.len() as u32).collect();
+        fn root(parent: &mut [u32], mut v: u32) -> u32 {
+            while parent[v as usize] != v {
+                parent[v as usize] = parent[parent[v as usize] as usize];
+                v = parent[v as usize];
+            }
+            v
+        }
+        for t in &self.triangles {
+            let a = root(&mut parent, t[0]);
+            for &v in &t[1..] {
+                let b = root(&mut parent, v);
+                if a != b {
+                    parent[b as usize] = a;
+                }
+            }
+        }
+        let used = self.used_vertices();
+        (0..parent.len()).filter(|&v| used[v] && parent[v] == v as u32).count()
+    }
 }
 
 /// Uniform quantization of positions over the bounding box of the used vertices.

@@ -11,26 +11,6 @@ use codec::{Mesh, MeshError};
 use common::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
 use proptest::prelude::*;
 
-/// Connected components of the used vertices (vertices linked by sharing a triangle).
-fn components(mesh: &Mesh) -> usize {
-    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
-    for t in &mesh.triangles {
-        for k in 1..3 {
-            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[k]));
-            parent[a as usize] = b;
-        }
-    }
-    let used = mesh.used_vertices();
-    (0..parent.len() as u32).filter(|&v| used[v as usize] && find(&mut parent, v) == v).count()
-}
-
 fn all_same(t: [u32; 3]) -> bool {
     t[0] == t[1] && t[1] == t[2]
 }
@@ -65,7 +45,7 @@ fn build_and_check(mesh: &Mesh) -> ProgressiveMesh {
     // faces of a component vanish with their edges), and the base faces are the input faces
     // that never had two distinct vertices.
     assert!(pm.base_vertices.windows(2).all(|w| w[0] < w[1]), "base vertices not ascending");
-    assert!(pm.base_vertices.len() >= components(mesh));
+    assert!(pm.base_vertices.len() >= mesh.components());
     assert_eq!(pm.base_faces.len(), mesh.triangles.iter().filter(|t| all_same(**t)).count());
     assert_eq!(pm.base_vertices.len() + pm.splits.len(), n_used);
     for s in &pm.splits {

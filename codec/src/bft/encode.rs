@@ -114,7 +114,7 @@ pub fn encode_with_progress(
         seeds: tr.seeds as u32,
         duplicates: tr.dups.len() as u32,
         tail_slots,
-        components: count_components(mesh, &used),
+        components: mesh.components() as u32,
         quant_bits: quant.bits,
         bbox_min: quant.min,
         step: quant.step,
@@ -134,28 +134,6 @@ pub fn encode_with_progress(
     let (conn, geom) = (conn.finish(), geom.finish());
     let bytes = format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes]);
     Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of })
-}
-
-/// Connected components of the used vertices, joined by triangles (union-find).
-fn count_components(mesh: &Mesh, used: &[bool]) -> u32 {
-    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
-    fn root(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            parent[v as usize] = parent[parent[v as usize] as usize];
-            v = parent[v as usize];
-        }
-        v
-    }
-    for t in &mesh.triangles {
-        let a = root(&mut parent, t[0]);
-        for &v in &t[1..] {
-            let b = root(&mut parent, v);
-            if a != b {
-                parent[b as usize] = a;
-            }
-        }
-    }
-    (0..parent.len()).filter(|&v| used[v] && parent[v] == v as u32).count() as u32
 }
 
 /// One directed edge `a -> target` of triangle `tri`, whose remaining vertex is `third`.
