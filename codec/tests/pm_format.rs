@@ -108,19 +108,7 @@ fn every_truncation_of_a_small_file_is_an_error() {
 #[test]
 fn random_byte_flips_are_detected() {
     let bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
-    for _ in 0..2000 {
-        let mut b = bytes.clone();
-        for _ in 0..1 + next() % 3 {
-            let i = (next() % b.len() as u64) as usize;
-            b[i] ^= 1 << (next() % 8);
-        }
+    for b in common::bit_flipped_copies(&bytes, 2000) {
         if b != bytes {
             assert!(decode(&b).is_err(), "a corrupted file decoded");
             assert!(Stats::of(&b).is_err());

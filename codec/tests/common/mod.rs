@@ -127,3 +127,26 @@ pub fn soup() -> impl Strategy<Value = Mesh> {
             Mesh { positions: grid_positions(n as usize, seed), triangles }
         })
 }
+
+/// `count` copies of `bytes`, each with 1 to 3 random bits flipped (a fixed-seed xorshift,
+/// so the corruptions are the same every run). A copy can equal the original when two
+/// flips cancel.
+pub fn bit_flipped_copies(bytes: &[u8], count: usize) -> Vec<Vec<u8>> {
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    (0..count)
+        .map(|_| {
+            let mut b = bytes.to_vec();
+            for _ in 0..1 + next() % 3 {
+                let i = (next() % b.len() as u64) as usize;
+                b[i] ^= 1 << (next() % 8);
+            }
+            b
+        })
+        .collect()
+}
