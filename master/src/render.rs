@@ -187,7 +187,7 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
             })
             .collect();
         let mut tile_stats = Vec::with_capacity(tiles.len());
-        for ((tile, normals), &w) in tiles.iter().zip(borders).zip(&owner) {
+        for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
             tile_stats.push(TileStats {
                 index: tile.index as u32,
                 worker: w,
@@ -199,7 +199,7 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
             jobs[w - 1].tiles.push(TileJob {
                 index: tile.index as u32,
                 rect: grid.tile_rect(tile.index),
-                bft: tile.bytes.clone(),
+                bft: tile.bytes,
                 normals,
             });
         }
@@ -232,7 +232,7 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
             Some(wall) => save_wall(wall, &frame, &out)?,
         }
         let write_ms = ms(start);
-        eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tiles.len(), sort_ms, out.display());
+        eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
 
         let line =
             MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
