@@ -32,13 +32,34 @@ struct VertexOutput {
     @location(1) normal: vec3<f32>,
 }
 
-@vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> VertexOutput {
+fn transform(position: vec3<f32>, normal: vec3<f32>) -> VertexOutput {
     var out: VertexOutput;
     out.clip = frame.view_proj * vec4<f32>(position, 1.0);
     out.world = position;
     out.normal = normal;
     return out;
+}
+
+@vertex
+fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> VertexOutput {
+    return transform(position, normal);
+}
+
+// The progressive mesh adapted on the GPU (worker/src/pm_gpu.rs), drawn from its own buffers:
+// the index buffer holds active-vertex indices, and each vertex pulls its position and normal
+// through its FVID.
+struct PmPoint {
+    pos: vec4<f32>,
+    nrm: vec4<f32>,
+}
+
+@group(1) @binding(0) var<storage, read> pm_fvid: array<u32>;
+@group(1) @binding(1) var<storage, read> pm_points: array<PmPoint>;
+
+@vertex
+fn vs_pulled(@builtin(vertex_index) i: u32) -> VertexOutput {
+    let p = pm_points[pm_fvid[i]];
+    return transform(p.pos.xyz, p.nrm.xyz);
 }
 
 const BASE: vec3<f32> = vec3<f32>(0.8, 0.8, 0.8);

@@ -3,6 +3,7 @@
 //! progressive-mesh adaptation builds on this crate.
 
 pub mod node;
+pub mod pm_gpu;
 pub mod protocol;
 pub mod render;
 pub mod transport;

@@ -27,7 +27,16 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec4};
 use thiserror::Error;
 
+use crate::pm_gpu::GpuAdapter;
 use crate::RenderMesh;
+
+/// What a tile draws: an uploaded mesh, or a progressive mesh adapted on the GPU, drawn from
+/// its own buffers.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Mesh(&'a RenderMesh),
+    Pm(&'a GpuAdapter),
+}
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -169,6 +178,9 @@ pub struct Renderer {
     limits: wgpu::Limits,
     clear_pipeline: wgpu::RenderPipeline,
     mesh_pipeline: wgpu::RenderPipeline,
+    /// The mesh pipeline with vertices pulled from a [`GpuAdapter`]'s buffers (`vs_pulled`).
+    pulled_pipeline: wgpu::RenderPipeline,
+    pulled_layout: wgpu::BindGroupLayout,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     positions: GrowBuffer,
@@ -289,6 +301,46 @@ impl Renderer {
             multiview_mask: None,
             cache: None,
         });
+        let storage_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let pulled_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("render: pulled vertices layout"),
+            entries: &[storage_entry(0), storage_entry(1)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("render: pulled pipeline layout"),
+            bind_group_layouts: &[Some(&bind_group_layout), Some(&pulled_layout)],
+            immediate_size: 0,
+        });
+        let pulled_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("render: pulled pipeline"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_pulled"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Less)),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &color_targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("upload: frame uniform"),
             size: std::mem::size_of::<FrameUniform>() as u64,
@@ -307,6 +359,8 @@ impl Renderer {
             limits,
             clear_pipeline,
             mesh_pipeline,
+            pulled_pipeline,
+            pulled_layout,
             uniform,
             bind_group,
             positions: GrowBuffer::new("upload: positions", wgpu::BufferUsages::VERTEX),
@@ -315,6 +369,16 @@ impl Renderer {
             frame_target: None,
             readback: None,
         })
+    }
+
+    /// The device, for compute work on the same GPU (the progressive-mesh adaptation).
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The device's queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
     }
 
     /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
@@ -337,6 +401,32 @@ impl Renderer {
         frame: (u32, u32),
         rect: [u32; 4],
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
+        if mesh.normals.len() != mesh.positions.len() {
+            return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
+        }
+        self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
+    }
+
+    /// Renders the mesh `pm` holds now, as [`Renderer::render`] renders a [`RenderMesh`], but
+    /// straight from the adapter's GPU buffers: nothing is uploaded or read back but the pixels
+    /// (its upload time is the frame uniform's). `pm` must live on this renderer's device.
+    pub fn render_pm(
+        &mut self,
+        pm: &GpuAdapter,
+        view_proj: Mat4,
+        frame: (u32, u32),
+        rect: [u32; 4],
+    ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
+        self.render_source(Source::Pm(pm), view_proj, frame, rect)
+    }
+
+    fn render_source(
+        &mut self,
+        source: Source<'_>,
+        view_proj: Mat4,
+        frame: (u32, u32),
+        rect: [u32; 4],
+    ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
         let (width, height) = frame;
         let [x0, y0, x1, y1] = rect;
         if !(x0 < x1 && x1 <= width && y0 < y1 && y1 <= height) {
@@ -347,14 +437,11 @@ impl Renderer {
         if width > max || height > max {
             return Err(RenderError::FrameTooLarge { width, height, max });
         }
-        if mesh.normals.len() != mesh.positions.len() {
-            return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
-        }
         // Validation and out-of-memory errors are captured and returned instead of reaching
         // wgpu's default handler, which panics. The scopes are popped in reverse order.
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = self.render_unscoped(mesh, view_proj, frame, rect);
+        let result = self.render_unscoped(source, view_proj, frame, rect);
         for scope in [validation, oom] {
             if let Some(e) = pollster::block_on(scope.pop()) {
                 return Err(RenderError::Gpu(e.to_string()));
@@ -365,7 +452,7 @@ impl Renderer {
 
     fn render_unscoped(
         &mut self,
-        mesh: &RenderMesh,
+        source: Source<'_>,
         view_proj: Mat4,
         (width, height): (u32, u32),
         [x0, y0, x1, y1]: [u32; 4],
@@ -374,9 +461,25 @@ impl Renderer {
         let start = Instant::now();
         let max = self.limits.max_buffer_size;
         let (device, queue) = (&self.device, &self.queue);
-        self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
-        self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
-        self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
+        let pulled = match source {
+            Source::Mesh(mesh) => {
+                self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
+                self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
+                self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
+                None
+            }
+            Source::Pm(pm) => {
+                let (fvid, points, _, _) = pm.draw_buffers();
+                Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("render: pulled vertices"),
+                    layout: &self.pulled_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: fvid.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: points.as_entire_binding() },
+                    ],
+                }))
+            }
+        };
         // The eye is the point the projection sends to infinity: clip (0, 0, 1, 0) back in
         // world space, up to a scale (see `Frame::eye` in render.wgsl).
         let eye = view_proj.inverse() * Vec4::Z;
@@ -418,15 +521,30 @@ impl Renderer {
             pass.set_scissor_rect(x0, y0, size.0, size.1);
             pass.set_pipeline(&self.clear_pipeline);
             pass.draw(0..3, 0..1);
-            let index_count = mesh.indices.len() as u32;
-            if index_count > 0 {
-                let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
-                pass.set_pipeline(&self.mesh_pipeline);
-                pass.set_bind_group(0, &self.bind_group, &[]);
-                pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
-                pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
-                pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..index_count, 0, 0..1);
+            match (source, &pulled) {
+                (Source::Mesh(mesh), _) => {
+                    let index_count = mesh.indices.len() as u32;
+                    if index_count > 0 {
+                        let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
+                        pass.set_pipeline(&self.mesh_pipeline);
+                        pass.set_bind_group(0, &self.bind_group, &[]);
+                        pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
+                        pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
+                        pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
+                        pass.draw_indexed(0..index_count, 0, 0..1);
+                    }
+                }
+                (Source::Pm(pm), Some(bind_group)) => {
+                    let (_, _, indices, faces) = pm.draw_buffers();
+                    if faces > 0 {
+                        pass.set_pipeline(&self.pulled_pipeline);
+                        pass.set_bind_group(0, &self.bind_group, &[]);
+                        pass.set_bind_group(1, bind_group, &[]);
+                        pass.set_index_buffer(indices.slice(..faces as u64 * 12), wgpu::IndexFormat::Uint32);
+                        pass.draw_indexed(0..faces * 3, 0, 0..1);
+                    }
+                }
+                (Source::Pm(_), None) => unreachable!("the pulled bind group is made for every PM source"),
             }
         }
         self.wait(queue.submit([encoder.finish()]))?;

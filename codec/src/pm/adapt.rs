@@ -104,7 +104,7 @@ impl View {
 
     /// The frustum planes (left, right, bottom, top, near, far), normalised to world distances,
     /// positive inside.
-    fn planes(&self) -> [Vec4; 6] {
+    pub fn planes(&self) -> [Vec4; 6] {
         let m = self.view_proj;
         let (r0, r1, r2, r3) = (m.row(0), m.row(1), m.row(2), m.row(3));
         [r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2].map(|p| {
@@ -134,27 +134,56 @@ impl Eval {
         Eval { view: *view, planes: view.planes() }
     }
 
+    /// The test, written as plain scalar arithmetic in a fixed order (no transcendental
+    /// functions, no fused multiply-adds, no SIMD dot products) so that `shaders/pm/common.wgsl`,
+    /// which repeats it operation for operation, reaches the same decision.
     fn needs(&self, c: &Cached) -> bool {
-        let v = &self.view;
-        let r = c.crit.radius;
-        let to = c.center - v.eye;
-        let dist = to.length();
-        if dist > r && c.crit.sin_alpha < 1.0 && c.normal != Vec3::ZERO {
-            let alpha = c.crit.sin_alpha.asin();
-            let beta = r.atan2((dist * dist - r * r).max(0.0).sqrt());
-            let ang = c.normal.cross(to).length().atan2(c.normal.dot(to));
-            if ang + alpha + beta < std::f32::consts::FRAC_PI_2 {
+        needs_split(&self.view, &self.planes, c.center.to_array(), c.normal.to_array(), &c.crit)
+    }
+}
+
+/// The refinement test of [`View::needs_split`] (see the module docs) for a split whose vertex
+/// lies at `center` with unit normal `normal` (or zero).
+///
+/// Back faces: with `a = angle(n, c - eye)`, `alpha = asin(sin_alpha)` and
+/// `beta = asin(r / |c - eye|)`, all in `[0, 90]` degrees once `n . (c - eye) > 0`, the test
+/// `a + alpha + beta < 90` degrees is decided by the signs of `cos(a + alpha)` and
+/// `cos(a + alpha + beta)`, computed from the sines and cosines by the addition theorems.
+pub fn needs_split(view: &View, planes: &[Vec4; 6], center: [f32; 3], normal: [f32; 3], crit: &Criteria) -> bool {
+    let r = crit.radius;
+    let (tx, ty, tz) = (center[0] - view.eye.x, center[1] - view.eye.y, center[2] - view.eye.z);
+    let dist2 = tx * tx + ty * ty + tz * tz;
+    let dist = dist2.sqrt();
+    let [nx, ny, nz] = normal;
+    let has_normal = nx != 0.0 || ny != 0.0 || nz != 0.0;
+    if dist > r && crit.sin_alpha < 1.0 && has_normal {
+        let nt = nx * tx + ny * ty + nz * tz;
+        if nt > 0.0 {
+            let (cx, cy, cz) = (ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx);
+            let cos_a = nt / dist;
+            let sin_a = (cx * cx + cy * cy + cz * cz).sqrt() / dist;
+            let sin_al = crit.sin_alpha;
+            let cos_al = (1.0 - sin_al * sin_al).max(0.0).sqrt();
+            let sin_b = r / dist;
+            let cos_b = (dist2 - r * r).max(0.0).sqrt() / dist;
+            let cos1 = cos_a * cos_al - sin_a * sin_al;
+            let sin1 = sin_a * cos_al + cos_a * sin_al;
+            if cos1 > 0.0 && cos1 * cos_b - sin1 * sin_b > 0.0 {
                 return false; // back-facing
             }
         }
-        let err = c.crit.geometric_error.max(v.attribute_scale * c.crit.attribute_error);
-        if err.is_nan() || err <= 0.0 {
-            return false;
-        }
-        let outside = self.planes.iter().map(|p| -(p.truncate().dot(c.center) + p.w) - r).fold(0.0f32, f32::max);
-        let d = (dist - r).max(0.0) + v.c_lod * outside;
-        err * v.pixels_per_unit > v.error_px * d
     }
+    let err = crit.geometric_error.max(view.attribute_scale * crit.attribute_error);
+    if err.is_nan() || err <= 0.0 {
+        return false;
+    }
+    let mut outside = 0.0f32;
+    for p in planes {
+        let o = -(p.x * center[0] + p.y * center[1] + p.z * center[2] + p.w) - r;
+        outside = outside.max(o);
+    }
+    let d = (dist - r).max(0.0) + view.c_lod * outside;
+    err * view.pixels_per_unit > view.error_px * d
 }
 
 /// One entry of the split/collapse cache: what a vertex needs to evaluate an operation without

@@ -1,0 +1,103 @@
+// Shared declarations of the progressive-mesh adaptation stages (worker/src/pm_gpu.rs).
+// Every stage file is compiled with this file prepended; the stages mirror the CPU reference
+// codec/src/pm/adapt.rs step for step, and `needs_split` below repeats its refinement test
+// operation for operation (no transcendental functions, no dot() or length() builtins whose
+// evaluation order the compiler picks), so that both reach the same decisions.
+
+const NONE: u32 = 0xffffffffu;
+// Owner of a face removed by this pass's collapses, until the face compaction drops it.
+const DEAD: u32 = 0xfffffffeu;
+const WG: u32 = 256u;
+
+// Per split: the static split record, decoded from the .dpm.
+struct Split {
+    v: u32,
+    v_u: u32,
+    face_off: u32,   // first face in `split_faces`
+    face_cnt: u32,
+    child0: u32,     // split of the left child (keeps v's FVID), NONE at a leaf
+    child1: u32,     // split of the right child (v_u)
+    parent: u32,     // node this split refines: 2 s + side, NONE at a root
+    pad: u32,
+    // sin(alpha), geometric error, attribute error, radius
+    crit: vec4<f32>,
+}
+
+// Per FVID: finest-level position and unit normal (w unused).
+struct Point {
+    pos: vec4<f32>,
+    nrm: vec4<f32>,
+}
+
+struct Params {
+    // Frustum planes (left, right, bottom, top, near, far), world-normalised, positive inside.
+    planes: array<vec4<f32>, 6>,
+    eye: vec4<f32>,
+    pixels_per_unit: f32,
+    error_px: f32,
+    c_lod: f32,
+    attribute_scale: f32,
+    n: u32,        // active vertices before the pass
+    m: u32,        // faces before the pass
+    mode: u32,     // 0: the view decides; 1: split every vertex that can split, collapse none
+    n_new: u32,    // active vertices after the pass
+    f_add: u32,    // faces the splits add
+    m_new: u32,    // faces after the pass
+    splits: u32,   // splits performed
+    pad: u32,
+}
+
+// Counters the stages accumulate with atomics, read back once per pass.
+const STAT_COLLAPSES: u32 = 0u;
+const STAT_CANCELLED: u32 = 1u;
+const STAT_REMOVED_FACES: u32 = 2u;
+const STAT_SPLIT_CURSOR: u32 = 3u;
+const STAT_HOLE_CURSOR: u32 = 4u;
+const STAT_FILL_CURSOR: u32 = 5u;
+
+// The linear thread index of a 1D or 2D dispatch of WG-thread workgroups.
+fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * WG;
+}
+
+// The refinement test of codec::pm::adapt::needs_split, in the same order of operations.
+fn needs_split(p: Params, center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>) -> bool {
+    let r = crit.w;
+    let tx = center.x - p.eye.x;
+    let ty = center.y - p.eye.y;
+    let tz = center.z - p.eye.z;
+    let dist2 = tx * tx + ty * ty + tz * tz;
+    let dist = sqrt(dist2);
+    let has_normal = normal.x != 0.0 || normal.y != 0.0 || normal.z != 0.0;
+    if (dist > r && crit.x < 1.0 && has_normal) {
+        let nt = normal.x * tx + normal.y * ty + normal.z * tz;
+        if (nt > 0.0) {
+            let cx = normal.y * tz - normal.z * ty;
+            let cy = normal.z * tx - normal.x * tz;
+            let cz = normal.x * ty - normal.y * tx;
+            let cos_a = nt / dist;
+            let sin_a = sqrt(cx * cx + cy * cy + cz * cz) / dist;
+            let sin_al = crit.x;
+            let cos_al = sqrt(max(1.0 - sin_al * sin_al, 0.0));
+            let sin_b = r / dist;
+            let cos_b = sqrt(max(dist2 - r * r, 0.0)) / dist;
+            let cos1 = cos_a * cos_al - sin_a * sin_al;
+            let sin1 = sin_a * cos_al + cos_a * sin_al;
+            if (cos1 > 0.0 && cos1 * cos_b - sin1 * sin_b > 0.0) {
+                return false;
+            }
+        }
+    }
+    let err = max(crit.y, p.attribute_scale * crit.z);
+    if (!(err > 0.0)) {
+        return false;
+    }
+    var outside = 0.0;
+    for (var k = 0u; k < 6u; k++) {
+        let q = p.planes[k];
+        let o = -(q.x * center.x + q.y * center.y + q.z * center.z + q.w) - r;
+        outside = max(outside, o);
+    }
+    let d = max(dist - r, 0.0) + p.c_lod * outside;
+    return err * p.pixels_per_unit > p.error_px * d;
+}

@@ -1,0 +1,156 @@
+//! The GPU adaptation (worker::pm_gpu, shaders/pm/*.wgsl) against the CPU reference
+//! (codec::pm::Adapter): after every pass of a camera path, the same active vertices, the
+//! same per-pass statistics and the same triangle set (as FVID triples, orientation kept).
+//! Needs a wgpu adapter; without a GPU that is Mesa's lavapipe.
+//! The dragon's 50 frames take about 20 s on lavapipe (with its PM build).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use codec::pm::{build, Adapter, ProgressiveMesh, View};
+use codec::view::Camera;
+use glam::Vec3;
+use worker::pm_gpu::GpuAdapter;
+use worker::render::Renderer;
+
+fn mesh_path(rel: &str) -> PathBuf {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/meshes")).join(rel)
+}
+
+fn pm_of(rel: &str) -> ProgressiveMesh {
+    let mesh = codec::load_path(&mesh_path(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
+    build(&mesh).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// Rotation-canonical (orientation kept), sorted.
+fn canon(faces: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
+    let mut v: Vec<[u32; 3]> = faces
+        .into_iter()
+        .map(|t| {
+            let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+            [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+fn bbox(pm: &ProgressiveMesh) -> (Vec3, Vec3) {
+    pm.positions.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| (lo.min(Vec3::from(p)), hi.max(Vec3::from(p))))
+}
+
+/// Frame `k` of `frames` of a path that orbits, zooms in until parts of the model leave the
+/// frustum, pans, and zooms out again, at 1920x1080 with normal error counted.
+fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> View {
+    let (lo, hi) = bbox(pm);
+    let (w, h) = (1920u32, 1080u32);
+    let base = Camera::framing(lo.to_array(), hi.to_array(), w as f32 / h as f32);
+    let t = k as f32 / frames as f32;
+    let zoom = 1.0 - 0.8 * (t * std::f32::consts::PI).sin();
+    let rot = glam::Quat::from_rotation_y(t * std::f32::consts::TAU * 0.75)
+        * glam::Quat::from_rotation_x(0.4 * (3.0 * t).sin());
+    let size = (hi - lo).length().max(1e-3);
+    let target = base.target + Vec3::new(0.2 * size * (5.0 * t).sin(), 0.0, 0.0);
+    let cam = Camera {
+        eye: target + rot * ((base.eye - base.target) * zoom),
+        target,
+        near: base.near * zoom * 0.1,
+        far: base.far * 2.0,
+        ..base
+    };
+    let mut v = View::new(&cam, w, h, error_px);
+    v.attribute_scale = 0.05 * size;
+    v
+}
+
+/// One pass on both, then everything compared.
+fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view: Option<&View>, what: &str) {
+    let (c, g) = match view {
+        Some(v) => (cpu.adapt(v), gpu.adapt(v).unwrap()),
+        None => (cpu.refine_step(), gpu.refine_step().unwrap()),
+    };
+    assert_eq!(c, g, "{what}: pass statistics differ");
+    assert_eq!(gpu.active().unwrap(), cpu.active(), "{what}: active vertices differ");
+    let gf = canon(gpu.face_fvids().unwrap());
+    let cf = canon(cpu.face_fvids());
+    if gf != cf {
+        let only_gpu = gf.iter().filter(|t| cf.binary_search(t).is_err()).count();
+        let only_cpu = cf.iter().filter(|t| gf.binary_search(t).is_err()).count();
+        panic!("{what}: triangle sets differ ({only_gpu} only on the GPU, {only_cpu} only on the CPU)");
+    }
+    assert!(pm.positions.len() >= cpu.active().len());
+}
+
+/// Adapts along a path of `frames` frames, one pass per frame, on both.
+fn check_path(rel: &str, frames: usize, error_px: f32, renderer: &Renderer) {
+    let pm = pm_of(rel);
+    let mut cpu = Adapter::new(&pm);
+    let mut gpu = GpuAdapter::new(renderer, &pm, 4096).unwrap();
+    let start = Instant::now();
+    let (mut lo, mut hi) = (usize::MAX, 0);
+    for k in 0..frames {
+        let view = path_view(&pm, k, frames, error_px);
+        pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} frame {k}"));
+        lo = lo.min(cpu.faces().len());
+        hi = hi.max(cpu.faces().len());
+    }
+    eprintln!(
+        "{rel}: {frames} frames equal, {lo}..{hi} faces, {} reallocations, {:.1}s",
+        gpu.reallocations(),
+        start.elapsed().as_secs_f64()
+    );
+    assert!(hi > lo, "{rel}: the path never changes the mesh");
+}
+
+#[test]
+fn bunny_path_matches_the_cpu_reference() {
+    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &renderer);
+}
+
+#[test]
+fn refining_everything_on_the_gpu_matches_the_cpu() {
+    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    // Small meshes with boundaries, non-manifold edges and degenerate faces; a tiny n_alloc
+    // so that buffers are reallocated in most passes.
+    for rel in [
+        "classic/teapot.obj",
+        "degenerate/non_manifold_face_graph.obj",
+        "degenerate/fused_vertices.obj",
+        "odedstein/bunny_oded_6k.obj",
+    ] {
+        let rel = if mesh_path(rel).exists() {
+            rel.to_string()
+        } else {
+            format!("stanford/{}", rel.rsplit('/').next().unwrap())
+        };
+        let pm = pm_of(&rel);
+        let mut cpu = Adapter::new(&pm);
+        let mut gpu = GpuAdapter::new(&renderer, &pm, 16).unwrap();
+        let mut passes = 0;
+        loop {
+            pass_both(&pm, &mut cpu, &mut gpu, None, &format!("{rel} refine pass {passes}"));
+            passes += 1;
+            if cpu.next_splits().iter().all(|&s| s == codec::pm::NONE) {
+                break;
+            }
+        }
+        assert_eq!(cpu.active().len(), pm.positions.len(), "{rel}: not fully refined");
+        // And back down: a far, coarse view collapses what the criteria allow, pass by pass.
+        let (lo, hi) = bbox(&pm);
+        let cam = Camera::framing(lo.to_array(), hi.to_array(), 1.0);
+        let far = Camera { eye: cam.target + (cam.eye - cam.target) * 50.0, far: cam.far * 100.0, ..cam };
+        let view = View::new(&far, 64, 64, 4.0);
+        for k in 0..passes + 2 {
+            pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} coarsen pass {k}"));
+        }
+        assert!(gpu.reallocations() > 2, "{rel}: n_alloc = 16 should force reallocations");
+        eprintln!("{rel}: {passes} refine passes, {} reallocations", gpu.reallocations());
+    }
+}
+
+#[test]
+fn dragon_path_matches_the_cpu_reference() {
+    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &renderer);
+}
