@@ -248,3 +248,92 @@ fn bad_input_is_reported_before_any_traffic() {
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("bad.toml"));
     assert!(!out.exists());
 }
+
+/// Compares a progressive-mesh render with the full mesh's: the fraction of pixels covered in
+/// either image that are covered in both and within `tolerance` in every channel.
+fn matching_fraction(a: &Path, b: &Path, tolerance: u8) -> (f64, usize) {
+    let (pa, pb) = (pixels(a), pixels(b));
+    assert_eq!((pa.0, pa.1), (pb.0, pb.1));
+    let (mut covered, mut matching) = (0usize, 0usize);
+    for (x, y) in pa.2.chunks(4).zip(pb.2.chunks(4)) {
+        if x[3] == 0 && y[3] == 0 {
+            continue;
+        }
+        covered += 1;
+        if x[3] == y[3] && x.iter().zip(y).all(|(u, v)| u.abs_diff(*v) <= tolerance) {
+            matching += 1;
+        }
+    }
+    (matching as f64 / covered.max(1) as f64, covered)
+}
+
+/// Pixels of `a` along the interior tile borders of a `cols x rows` grid (the columns and rows
+/// on both sides of each border) that are uncovered while `b` covers them: cracks.
+fn border_holes(a: &Path, b: &Path, cols: u32, rows: u32) -> usize {
+    let ((w, h, pa), (_, _, pb)) = (pixels(a), pixels(b));
+    let grid = codec::view::TileGrid::new(w, h, cols, rows).unwrap();
+    let mut lines_x = Vec::new();
+    let mut lines_y = Vec::new();
+    for i in 0..grid.tiles() {
+        let [x0, y0, _, _] = grid.tile_rect(i);
+        if x0 > 0 {
+            lines_x.extend([x0 - 1, x0]);
+        }
+        if y0 > 0 {
+            lines_y.extend([y0 - 1, y0]);
+        }
+    }
+    let hole = |x: u32, y: u32| {
+        let k = 4 * (y * w + x) as usize;
+        pa[k + 3] == 0 && pb[k + 3] == 255
+    };
+    let mut n = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if (lines_x.contains(&x) || lines_y.contains(&y)) && hole(x, y) {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+#[test]
+fn progressive_mesh_tiles_match_the_full_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let dpm = dir.path().join("bunny.dpm");
+    ok(&alone(&["pm", "build", &model, "-o", dpm.to_str().unwrap()]));
+    let size = "960x540";
+    let reference = reference(&model, size, dir.path());
+    for (np, tiles, extra) in [(2, "4x3", vec![]), (3, "3x2", vec!["--balance", "--frames", "2"])] {
+        let out = dir.path().join("pm.png");
+        let mut args = vec!["render", dpm.to_str().unwrap(), "--size", size, "--tiles", tiles, "--error-px", "0.5"];
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(&extra);
+        ok(&mpirun(np, &[], &args));
+        let produced = if extra.contains(&"--frames") { dir.path().join("pm-0002.png") } else { out.clone() };
+        let (fraction, covered) = matching_fraction(&produced, &reference, 8);
+        eprintln!("-np {np} --tiles {tiles}: {covered} covered pixels, {:.4} match within 8/255", fraction);
+        assert!(covered > 10_000, "the bunny is in view");
+        assert!(fraction >= 0.99, "-np {np} --tiles {tiles}: only {fraction:.4} of covered pixels match");
+        let (c, r) = tiles.split_once('x').unwrap();
+        let holes = border_holes(&produced, &reference, c.parse().unwrap(), r.parse().unwrap());
+        assert_eq!(holes, 0, "-np {np} --tiles {tiles}: {holes} uncovered pixels at tile borders");
+    }
+}
+
+#[test]
+fn bad_progressive_meshes_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let dpm = dir.path().join("bad.dpm");
+    let mut bytes = b"TESSDPM\x1a".to_vec();
+    bytes.extend([0u8; 40]);
+    std::fs::write(&dpm, &bytes).unwrap();
+    let out = dir.path().join("x.png");
+    let o = alone(&["render", dpm.to_str().unwrap(), "--size", "64x64", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.dpm"), "names the file: {err}");
+    assert!(!out.exists(), "no image is written");
+}

@@ -176,7 +176,8 @@ pub fn adapt(
     Ok(())
 }
 
-fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+/// The bounding box of `p` (the unit cube when empty).
+pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     if p.is_empty() {
         return ([0.0; 3], [1.0; 3]);
     }

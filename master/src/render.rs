@@ -4,6 +4,10 @@
 //! tiles to workers, send each worker its tiles (non-blocking, all at once), receive the
 //! tile pixels, stitch them, write the PNG (or one per display of a tile wall) and a stats
 //! line per rank. Without `mpirun` the same loop drives one worker thread over channels.
+//!
+//! A progressive mesh (`.dpm`) takes another path through the same loop: rank 0 sends the
+//! file to every worker once, then per frame only the camera and each worker's tiles; each
+//! worker adapts the mesh on its GPU to each tile's sub-frustum and renders it.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -14,7 +18,7 @@ use codec::bft::tile_sort::{self, Boxes, Tile};
 use codec::view::{Camera, TileGrid};
 use glam::Quat;
 use serde::Serialize;
-use worker::protocol::{FrameJob, TileJob, ToMaster, ToWorker};
+use worker::protocol::{FrameJob, PmFrameJob, TileJob, ToMaster, ToWorker};
 use worker::transport::{self, RecvError, Transport};
 
 use crate::args::{parse_pair, CameraArgs};
@@ -25,7 +29,8 @@ use crate::sort::{load_model, Model};
 /// Flags of `tessera render`.
 #[derive(Args, Clone, Debug)]
 pub struct RenderArgs {
-    /// A .bft file, or a mesh file (OBJ, PLY, STL; encoded on load).
+    /// A .bft file, a mesh file (OBJ, PLY, STL; encoded on load), or a progressive mesh
+    /// (.dpm, from `tessera pm build`), which the workers adapt per tile on the GPU.
     pub model: PathBuf,
     /// Frame size in pixels, WIDTHxHEIGHT (ignored with --wall, which sets it).
     #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
@@ -56,6 +61,17 @@ pub struct RenderArgs {
     /// Seconds to wait for a worker before declaring it dead.
     #[arg(long, default_value_t = 60.0)]
     pub timeout: f64,
+    /// Progressive meshes: the screen-space error bound in pixels.
+    #[arg(long, default_value_t = 0.5)]
+    pub error_px: f32,
+    /// Progressive meshes: the normal error's weight, as a fraction of the model's bounding
+    /// box diagonal per unit of normal chord (0 ignores normals).
+    #[arg(long, default_value_t = 0.0)]
+    pub normal_weight: f32,
+    /// Progressive meshes: adaptation passes per tile and frame at most; a tile stops as soon
+    /// as a pass changes nothing.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_passes: u32,
 }
 
 /// Everything checked before any rank talks to another.
@@ -74,6 +90,12 @@ fn plan(args: &RenderArgs) -> Result<Plan> {
     }
     if !(args.timeout > 0.0 && args.timeout.is_finite()) {
         bail!("--timeout must be a positive number of seconds");
+    }
+    if !(args.error_px > 0.0 && args.error_px.is_finite()) {
+        bail!("--error-px must be a positive number of pixels, not {}", args.error_px);
+    }
+    if !(args.normal_weight >= 0.0 && args.normal_weight.is_finite()) {
+        bail!("--normal-weight must be zero or positive, not {}", args.normal_weight);
     }
     Ok(Plan { grid, wall, timeout: Duration::from_secs_f64(args.timeout) })
 }
@@ -138,6 +160,7 @@ struct WorkerStats {
     frame: u32,
     rank: usize,
     decode_ms: f64,
+    adapt_ms: f64,
     upload_ms: f64,
     render_ms: f64,
     readback_ms: f64,
@@ -149,63 +172,72 @@ struct WorkerTileStats {
     index: u32,
     triangles: u32,
     decode_ms: f64,
+    adapt_ms: f64,
     upload_ms: f64,
     render_ms: f64,
     readback_ms: f64,
 }
 
+/// What rank 0 renders: a BFT model it sorts every frame, or a progressive mesh the workers
+/// adapt themselves.
+enum Scene {
+    Bft { model: Box<Model>, normals: Vec<[f32; 3]>, sorter: tile_sort::Sorter },
+    Pm { bytes: Vec<u8>, bbox: ([f32; 3], [f32; 3]) },
+}
+
+impl Scene {
+    fn load(path: &Path) -> Result<Scene> {
+        let mut magic = [0u8; 8];
+        let is_dpm = std::fs::File::open(path)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+            .is_ok_and(|()| magic == codec::pm::format::MAGIC);
+        if !is_dpm {
+            let model = load_model(path, codec::bft::EncodeOptions::default())?;
+            let normals = worker::RenderMesh::from_decoded(&model.tiles.decoded).normals;
+            return Ok(Scene::Bft { model: Box::new(model), normals, sorter: tile_sort::Sorter::default() });
+        }
+        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        // Decoded here once, so that a corrupt file fails before any worker sees it.
+        let pm = codec::pm::format::decode(&bytes).with_context(|| format!("{}", path.display()))?.pm;
+        Ok(Scene::Pm { bytes, bbox: crate::pm::bbox(&pm.positions) })
+    }
+
+    fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+        match self {
+            Scene::Bft { model, .. } => model.camera(args, grid),
+            Scene::Pm { bbox: (lo, hi), .. } => args.camera(*lo, *hi, grid.aspect()),
+        }
+    }
+}
+
 fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
-    let model = load_model(&args.model, codec::bft::EncodeOptions::default())?;
+    let mut scene = Scene::load(&args.model)?;
     let grid = &plan.grid;
-    let cam = model.camera(&args.camera, grid)?;
+    let cam = scene.camera(&args.camera, grid)?;
     let workers = t.size() - 1;
     let adapters = handshake(t, plan.timeout)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
+    if let Scene::Pm { bytes, .. } = &scene {
+        let model = ToWorker::Model(bytes.clone()).encode();
+        t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
+    }
 
-    let normals = worker::RenderMesh::from_decoded(&model.tiles.decoded).normals;
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
-    let mut sorter = tile_sort::Sorter::default();
     let mut stats_lines = Vec::new();
     for k in 0..args.frames {
         let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
         let vp = cam_k.view_proj(grid.aspect());
 
         let start = Instant::now();
-        let boxes = tile_sort::boxes(&model.tiles, vp, grid);
-        let tiles = sorter.sort(&model.tiles, &boxes, grid)?;
-        let borders = border_normals(&model, &boxes, &tiles, grid, &normals);
+        let (msgs, mut tile_stats) = match &mut scene {
+            Scene::Bft { model, normals, sorter } => {
+                bft_jobs(model, normals, sorter, vp, grid, k, workers, args, &costs)?
+            }
+            Scene::Pm { bbox: (lo, hi), .. } => pm_jobs(&cam_k, grid, k, workers, args, &costs, *lo, *hi),
+        };
         let sort_ms = ms(start);
 
-        let owner = assign(&tiles, workers, args.balance.then_some(&costs[..]));
-        let mut jobs: Vec<FrameJob> = (0..workers)
-            .map(|_| FrameJob {
-                frame: k,
-                width: grid.width,
-                height: grid.height,
-                view_proj: vp.to_cols_array(),
-                tiles: vec![],
-            })
-            .collect();
-        let mut tile_stats = Vec::with_capacity(tiles.len());
-        for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
-            tile_stats.push(TileStats {
-                index: tile.index as u32,
-                worker: w,
-                triangles: tile.triangles,
-                bytes: tile.bytes.len(),
-                tri_bytes: tile.triangles as usize * codec::tri_sort::TRIANGLE_BYTES,
-                normal_bytes: normals.len() * 16,
-            });
-            jobs[w - 1].tiles.push(TileJob {
-                index: tile.index as u32,
-                rect: grid.tile_rect(tile.index),
-                bft: tile.bytes,
-                normals,
-            });
-        }
         let start = Instant::now();
-        let msgs: Vec<(usize, Vec<u8>)> =
-            jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect();
         t.send_many(&msgs);
         let send_ms = ms(start);
 
@@ -219,6 +251,9 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
             for p in &pixels {
                 frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
                 costs[p.index as usize] = p.times.total_ms();
+                if let Some(s) = tile_stats.iter_mut().find(|s| s.index == p.index) {
+                    s.triangles = p.triangles;
+                }
             }
             composite_ms += ms(c);
             worker_lines.push(worker_stats(k, rank, &pixels));
@@ -248,6 +283,106 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
         write_bytes(path, (stats_lines.join("\n") + "\n").as_bytes())?;
     }
     Ok(())
+}
+
+/// A frame's messages to the workers (by rank) and its tile lines for the stats.
+type FrameJobs = (Vec<(usize, Vec<u8>)>, Vec<TileStats>);
+
+/// One frame of a BFT model: the tile sort, then each worker's tiles with their border
+/// normals, as messages.
+#[allow(clippy::too_many_arguments)]
+fn bft_jobs(
+    model: &Model,
+    normals: &[[f32; 3]],
+    sorter: &mut tile_sort::Sorter,
+    vp: glam::Mat4,
+    grid: &TileGrid,
+    k: u32,
+    workers: usize,
+    args: &RenderArgs,
+    costs: &[f64],
+) -> Result<FrameJobs> {
+    let boxes = tile_sort::boxes(&model.tiles, vp, grid);
+    let tiles = sorter.sort(&model.tiles, &boxes, grid)?;
+    let borders = border_normals(model, &boxes, &tiles, grid, normals);
+    let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
+    let owner = assign(&indices, workers, args.balance.then_some(costs));
+    let mut jobs: Vec<FrameJob> = (0..workers)
+        .map(|_| FrameJob {
+            frame: k,
+            width: grid.width,
+            height: grid.height,
+            view_proj: vp.to_cols_array(),
+            tiles: vec![],
+        })
+        .collect();
+    let mut tile_stats = Vec::with_capacity(tiles.len());
+    for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
+        tile_stats.push(TileStats {
+            index: tile.index as u32,
+            worker: w,
+            triangles: tile.triangles,
+            bytes: tile.bytes.len(),
+            tri_bytes: tile.triangles as usize * codec::tri_sort::TRIANGLE_BYTES,
+            normal_bytes: normals.len() * 16,
+        });
+        jobs[w - 1].tiles.push(TileJob {
+            index: tile.index as u32,
+            rect: grid.tile_rect(tile.index),
+            bft: tile.bytes,
+            normals,
+        });
+    }
+    let msgs = jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect();
+    Ok((msgs, tile_stats))
+}
+
+/// One frame of a progressive mesh: every tile of the grid goes to a worker with the camera;
+/// nothing of the mesh is sent. The tiles' triangle counts come back with the pixels.
+#[allow(clippy::too_many_arguments)]
+fn pm_jobs(
+    cam: &Camera,
+    grid: &TileGrid,
+    k: u32,
+    workers: usize,
+    args: &RenderArgs,
+    costs: &[f64],
+    lo: [f32; 3],
+    hi: [f32; 3],
+) -> FrameJobs {
+    let view = codec::pm::View::new(cam, grid.width, grid.height, args.error_px);
+    let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
+    let indices: Vec<usize> = (0..grid.tiles()).collect();
+    let owner = assign(&indices, workers, args.balance.then_some(costs));
+    let mut jobs: Vec<PmFrameJob> = (0..workers)
+        .map(|_| PmFrameJob {
+            frame: k,
+            width: grid.width,
+            height: grid.height,
+            view_proj: view.view_proj.to_cols_array(),
+            eye: view.eye.to_array(),
+            pixels_per_unit: view.pixels_per_unit,
+            error_px: view.error_px,
+            c_lod: view.c_lod,
+            attribute_scale: args.normal_weight * diagonal,
+            max_passes: args.max_passes,
+            tiles: vec![],
+        })
+        .collect();
+    let mut tile_stats = Vec::with_capacity(indices.len());
+    for (&i, &w) in indices.iter().zip(&owner) {
+        jobs[w - 1].tiles.push((i as u32, grid.tile_rect(i)));
+        tile_stats.push(TileStats {
+            index: i as u32,
+            worker: w,
+            triangles: 0,
+            bytes: 0,
+            tri_bytes: 0,
+            normal_bytes: 0,
+        });
+    }
+    let msgs = jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode())).collect();
+    (msgs, tile_stats)
 }
 
 fn ms(since: Instant) -> f64 {
@@ -308,6 +443,7 @@ fn worker_stats(frame: u32, rank: usize, pixels: &[worker::protocol::TilePixels]
         frame,
         rank,
         decode_ms: sum(|t| t.decode_ms),
+        adapt_ms: sum(|t| t.adapt_ms),
         upload_ms: sum(|t| t.upload_ms),
         render_ms: sum(|t| t.render_ms),
         readback_ms: sum(|t| t.readback_ms),
@@ -317,6 +453,7 @@ fn worker_stats(frame: u32, rank: usize, pixels: &[worker::protocol::TilePixels]
                 index: p.index,
                 triangles: p.triangles,
                 decode_ms: p.times.decode_ms,
+                adapt_ms: p.times.adapt_ms,
                 upload_ms: p.times.upload_ms,
                 render_ms: p.times.render_ms,
                 readback_ms: p.times.readback_ms,
@@ -351,18 +488,18 @@ fn save_wall(wall: &Wall, frame: &Image, out: &Path) -> Result<()> {
     overview.save_png(out)
 }
 
-/// Tiles to workers (ranks `1..=workers`), one entry per tile in `tiles`' order. By
+/// Tiles (by index) to workers (ranks `1..=workers`), one entry per tile in `tiles`' order. By
 /// default tile `i` goes to worker `1 + i % workers`, so each worker keeps its tiles from
 /// frame to frame. With `costs` (last frame's per-tile time), tiles go longest first to
 /// the least loaded worker, in the manner of Equalizer's load equalizer; a tile without a
 /// cost yet counts as the mean.
-pub fn assign(tiles: &[Tile], workers: usize, costs: Option<&[f64]>) -> Vec<usize> {
+pub fn assign(tiles: &[usize], workers: usize, costs: Option<&[f64]>) -> Vec<usize> {
     let Some(costs) = costs else {
-        return tiles.iter().map(|t| 1 + t.index % workers).collect();
+        return tiles.iter().map(|t| 1 + t % workers).collect();
     };
-    let known: Vec<f64> = tiles.iter().map(|t| costs[t.index]).filter(|&c| c > 0.0).collect();
+    let known: Vec<f64> = tiles.iter().map(|&t| costs[t]).filter(|&c| c > 0.0).collect();
     let mean = if known.is_empty() { 1.0 } else { known.iter().sum::<f64>() / known.len() as f64 };
-    let cost = |t: &Tile| if costs[t.index] > 0.0 { costs[t.index] } else { mean };
+    let cost = |&t: &usize| if costs[t] > 0.0 { costs[t] } else { mean };
     let mut order: Vec<usize> = (0..tiles.len()).collect();
     order.sort_by(|&a, &b| cost(&tiles[b]).total_cmp(&cost(&tiles[a])).then(a.cmp(&b)));
     let mut load = vec![0.0f64; workers];
@@ -409,13 +546,9 @@ fn border_normals(
 mod tests {
     use super::*;
 
-    fn tile(index: usize) -> Tile {
-        Tile { index, bytes: vec![], triangles: 1, slots: vec![] }
-    }
-
     #[test]
     fn round_robin_and_balanced_assignment() {
-        let tiles: Vec<Tile> = [0, 1, 2, 5, 6].into_iter().map(tile).collect();
+        let tiles = [0, 1, 2, 5, 6];
         assert_eq!(assign(&tiles, 2, None), vec![1, 2, 1, 2, 1]);
         // More workers than tiles: the extra ones get nothing.
         assert_eq!(assign(&tiles[..2], 4, None), vec![1, 2]);

@@ -35,7 +35,7 @@
 //!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is
 //!   what equals the CPU reference.
 
-use std::sync::mpsc;
+use std::sync::{mpsc, Arc};
 
 use bytemuck::{Pod, Zeroable};
 use codec::pm::{ProgressiveMesh, SplitTree, View, NONE};
@@ -162,6 +162,16 @@ struct VertexSet {
     node: Sized,
 }
 
+impl VertexSet {
+    fn new(device: &wgpu::Device, name: &str, cap: u64) -> VertexSet {
+        VertexSet {
+            fvid: storage(device, &format!("pm: vertex fvid {name}"), cap, 4, VERTEX_USAGE),
+            next: storage(device, &format!("pm: vertex next {name}"), cap, 4, VERTEX_USAGE),
+            node: storage(device, &format!("pm: vertex node {name}"), cap, 4, VERTEX_USAGE),
+        }
+    }
+}
+
 struct FaceSet {
     /// Current vertex indices, 3 per face: the draw's index buffer.
     idx: Sized,
@@ -169,16 +179,23 @@ struct FaceSet {
     owner: Sized,
 }
 
+impl FaceSet {
+    fn new(device: &wgpu::Device, cap: u64) -> FaceSet {
+        FaceSet {
+            idx: storage(device, "pm: face indices", cap, 12, VERTEX_USAGE | wgpu::BufferUsages::INDEX),
+            fvid: storage(device, "pm: face fvids", cap, 12, VERTEX_USAGE),
+            owner: storage(device, "pm: face owners", cap, 4, VERTEX_USAGE),
+        }
+    }
+}
+
 /// The adaptation state of one progressive mesh on the GPU (see the module docs).
 pub struct GpuAdapter {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipelines: Pipelines,
-    max_groups: u32,
+    /// Pipelines and static data, shared by every adapter of the same mesh on this device.
+    shared: Arc<Shared>,
     n_alloc: u32,
-    splits: wgpu::Buffer,
-    split_faces: wgpu::Buffer,
-    points: wgpu::Buffer,
     params: wgpu::Buffer,
     stats: wgpu::Buffer,
     readback: wgpu::Buffer,
@@ -194,8 +211,18 @@ pub struct GpuAdapter {
     /// Active vertices and faces.
     n: u32,
     m: u32,
-    base: (Vec<u32>, Vec<u32>, Vec<[u32; 3]>, Vec<[u32; 3]>),
     reallocations: u64,
+}
+
+/// What adapters of the same progressive mesh share: the pipelines, the static buffers, and
+/// the base mesh.
+struct Shared {
+    pipelines: Pipelines,
+    max_groups: u32,
+    splits: wgpu::Buffer,
+    split_faces: wgpu::Buffer,
+    points: wgpu::Buffer,
+    base: BaseState,
 }
 
 const VERTEX_USAGE: wgpu::BufferUsages =
@@ -211,7 +238,7 @@ fn storage(device: &wgpu::Device, label: &str, elements: u64, element_bytes: u64
 
 fn init(device: &wgpu::Device, label: &str, data: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
     let mut padded;
-    let contents = if data.len() < 16 || data.len() % 4 != 0 {
+    let contents = if data.len() < 16 || !data.len().is_multiple_of(4) {
         padded = data.to_vec();
         padded.resize(data.len().max(16).next_multiple_of(4), 0);
         &padded[..]
@@ -277,55 +304,15 @@ impl GpuAdapter {
         let splits = init(&device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
         let split_faces = init(&device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
         let points = init(&device, "pm: points", bytemuck::cast_slice(&points), read_only);
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pm: params"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let stats = storage(&device, "pm: stats", 8, 4, VERTEX_USAGE).buffer;
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pm: readback"),
-            size: READBACK_BYTES,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let face_usage = VERTEX_USAGE | wgpu::BufferUsages::INDEX;
-        let set = |name: &str| VertexSet {
-            fvid: storage(&device, &format!("pm: vertex fvid {name}"), 0, 4, VERTEX_USAGE),
-            next: storage(&device, &format!("pm: vertex next {name}"), 0, 4, VERTEX_USAGE),
-            node: storage(&device, &format!("pm: vertex node {name}"), 0, 4, VERTEX_USAGE),
-        };
-        let mut adapter = GpuAdapter {
+        let shared = Arc::new(Shared {
             pipelines: Pipelines::new(&device),
             max_groups: limits.max_compute_workgroups_per_dimension,
-            n_alloc: n_alloc.max(1),
             splits,
             split_faces,
             points,
-            params,
-            stats,
-            readback,
-            sets: [set("A"), set("B")],
-            cur: 0,
-            faces: FaceSet {
-                idx: storage(&device, "pm: face indices", 0, 12, face_usage),
-                fvid: storage(&device, "pm: face fvids", 0, 12, VERTEX_USAGE),
-                owner: storage(&device, "pm: face owners", 0, 4, VERTEX_USAGE),
-            },
-            vcnt: storage(&device, "pm: vertex counts", 0, 4, VERTEX_USAGE),
-            fcnt: storage(&device, "pm: face counts", 0, 4, VERTEX_USAGE),
-            list: storage(&device, "pm: split list", 0, 4, VERTEX_USAGE),
-            hole: storage(&device, "pm: face holes", 0, 4, VERTEX_USAGE),
-            levels: Vec::new(),
-            n: 0,
-            m: 0,
             base: base_state(pm, &tree),
-            reallocations: 0,
-            device,
-            queue,
-        };
-        adapter.reset();
+        });
+        let adapter = GpuAdapter::with_shared(device, queue, shared, n_alloc.max(1));
         for scope in [validation, oom] {
             if let Some(e) = pollster::block_on(scope.pop()) {
                 return Err(RenderError::Gpu(e.to_string()));
@@ -334,34 +321,71 @@ impl GpuAdapter {
         Ok(adapter)
     }
 
+    /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
+    /// pipelines and static buffers (a worker keeps one per tile it renders).
+    pub fn sibling(&self) -> GpuAdapter {
+        GpuAdapter::with_shared(self.device.clone(), self.queue.clone(), self.shared.clone(), self.n_alloc)
+    }
+
+    /// A new adapter at the base mesh.
+    fn with_shared(device: wgpu::Device, queue: wgpu::Queue, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
+        let d = &device;
+        let mut adapter = GpuAdapter {
+            shared,
+            n_alloc,
+            params: d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pm: params"),
+                size: std::mem::size_of::<Params>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            stats: storage(d, "pm: stats", 8, 4, VERTEX_USAGE).buffer,
+            readback: d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pm: readback"),
+                size: READBACK_BYTES,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            sets: [VertexSet::new(d, "A", 0), VertexSet::new(d, "B", 0)],
+            cur: 0,
+            faces: FaceSet::new(d, 0),
+            vcnt: storage(d, "pm: vertex counts", 0, 4, VERTEX_USAGE),
+            fcnt: storage(d, "pm: face counts", 0, 4, VERTEX_USAGE),
+            list: storage(d, "pm: split list", 0, 4, VERTEX_USAGE),
+            hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
+            levels: Vec::new(),
+            n: 0,
+            m: 0,
+            reallocations: 0,
+            device,
+            queue,
+        };
+        adapter.reset();
+        adapter
+    }
+
     /// Goes back to the base mesh.
     pub fn reset(&mut self) {
-        let (fvid, next, faces_idx, faces_fvid) = &self.base;
+        let shared = self.shared.clone();
+        let (fvid, next, faces_idx, faces_fvid) = &shared.base;
         let (n, m) = (fvid.len() as u64, faces_idx.len() as u64);
         let node = vec![NONE; fvid.len()];
         let owner = vec![NONE; faces_idx.len()];
         self.cur = 0;
         let na = self.n_alloc as u64;
-        let device = &self.device;
-        let set = &mut self.sets[0];
-        for (s, data, label) in [
-            (&mut set.fvid, fvid, "pm: vertex fvid A"),
-            (&mut set.next, next, "pm: vertex next A"),
-            (&mut set.node, &node, "pm: vertex node A"),
-        ] {
-            if needs_resize(s.cap, n, self.n_alloc) {
-                *s = storage(device, label, n + na, 4, VERTEX_USAGE);
-            }
+        if needs_resize(self.sets[0].fvid.cap, n, self.n_alloc) {
+            self.sets[0] = VertexSet::new(&self.device, "A", n + na);
+        }
+        let set = &self.sets[0];
+        for (s, data) in [(&set.fvid, fvid), (&set.next, next), (&set.node, &node)] {
             if !data.is_empty() {
                 self.queue.write_buffer(&s.buffer, 0, bytemuck::cast_slice(data));
             }
         }
-        let faces = &mut self.faces;
-        if needs_resize(faces.idx.cap, m, self.n_alloc) {
-            faces.idx = storage(device, "pm: face indices", m + na, 12, VERTEX_USAGE | wgpu::BufferUsages::INDEX);
-            faces.fvid = storage(device, "pm: face fvids", m + na, 12, VERTEX_USAGE);
-            faces.owner = storage(device, "pm: face owners", m + na, 4, VERTEX_USAGE);
+        if needs_resize(self.faces.idx.cap, m, self.n_alloc) {
+            self.faces = FaceSet::new(&self.device, m + na);
         }
+        let faces = &self.faces;
         if m > 0 {
             self.queue.write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(faces_idx));
             self.queue.write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(faces_fvid));
@@ -394,7 +418,7 @@ impl GpuAdapter {
     /// Bytes of the static (per progressive mesh) buffers: decoded split records, their faces,
     /// and positions and normals per FVID.
     pub fn static_bytes(&self) -> u64 {
-        self.splits.size() + self.split_faces.size() + self.points.size()
+        self.shared.splits.size() + self.shared.split_faces.size() + self.shared.points.size()
     }
 
     /// One adaptation pass for `view` (Algorithms 1 to 5).
@@ -465,13 +489,13 @@ impl GpuAdapter {
         enc.clear_buffer(&self.stats, 0, None);
         {
             let set = &self.sets[self.cur];
-            let p = &self.pipelines;
+            let p = &self.shared.pipelines;
             let state = self.bind(
                 &p.state,
                 &[
                     &self.params,
-                    &self.splits,
-                    &self.points,
+                    &self.shared.splits,
+                    &self.shared.points,
                     &set.fvid.buffer,
                     &set.next.buffer,
                     &set.node.buffer,
@@ -481,7 +505,14 @@ impl GpuAdapter {
             );
             let collapse = self.bind(
                 &p.collapse,
-                &[&self.params, &self.splits, &set.next.buffer, &set.node.buffer, &self.vcnt.buffer, &self.stats],
+                &[
+                    &self.params,
+                    &self.shared.splits,
+                    &set.next.buffer,
+                    &set.node.buffer,
+                    &self.vcnt.buffer,
+                    &self.stats,
+                ],
             );
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("pm: classify"),
@@ -514,12 +545,7 @@ impl GpuAdapter {
         let dst = 1 - self.cur;
         if needs_resize(self.sets[dst].fvid.cap, n_new as u64, self.n_alloc) {
             let cap = n_new as u64 + na;
-            let name = if dst == 0 { "A" } else { "B" };
-            self.sets[dst] = VertexSet {
-                fvid: storage(&self.device, &format!("pm: vertex fvid {name}"), cap, 4, VERTEX_USAGE),
-                next: storage(&self.device, &format!("pm: vertex next {name}"), cap, 4, VERTEX_USAGE),
-                node: storage(&self.device, &format!("pm: vertex node {name}"), cap, 4, VERTEX_USAGE),
-            };
+            self.sets[dst] = VertexSet::new(&self.device, if dst == 0 { "A" } else { "B" }, cap);
             self.reallocations += 1;
         }
         let total = m as u64 + f_add as u64;
@@ -540,12 +566,12 @@ impl GpuAdapter {
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: apply") });
         {
             let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
-            let (p, f) = (&self.pipelines, &self.faces);
+            let (p, f) = (&self.shared.pipelines, &self.faces);
             let reorganise = self.bind(
                 &p.reorganise,
                 &[
                     &self.params,
-                    &self.splits,
+                    &self.shared.splits,
                     &src.fvid.buffer,
                     &src.next.buffer,
                     &src.node.buffer,
@@ -561,8 +587,8 @@ impl GpuAdapter {
                 &p.split,
                 &[
                     &self.params,
-                    &self.splits,
-                    &self.split_faces,
+                    &self.shared.splits,
+                    &self.shared.split_faces,
                     &src.next.buffer,
                     &self.vcnt.buffer,
                     &self.fcnt.buffer,
@@ -621,11 +647,7 @@ impl GpuAdapter {
     /// Reallocates the face buffers to `cap` faces, keeping the first `keep`.
     fn resize_faces(&mut self, cap: u64, keep: u64) {
         let d = &self.device;
-        let new = FaceSet {
-            idx: storage(d, "pm: face indices", cap, 12, VERTEX_USAGE | wgpu::BufferUsages::INDEX),
-            fvid: storage(d, "pm: face fvids", cap, 12, VERTEX_USAGE),
-            owner: storage(d, "pm: face owners", cap, 4, VERTEX_USAGE),
-        };
+        let new = FaceSet::new(d, cap);
         if keep > 0 {
             let mut enc = d.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: face resize") });
             enc.copy_buffer_to_buffer(&self.faces.idx.buffer, 0, &new.idx.buffer, 0, keep * 12);
@@ -667,7 +689,7 @@ impl GpuAdapter {
 
     /// Exclusive scan of `data` in place over the levels set by [`Self::prepare_scan`].
     fn scan(&self, pass: &mut wgpu::ComputePass<'_>, data: &wgpu::Buffer) {
-        let p = &self.pipelines;
+        let p = &self.shared.pipelines;
         let levels = self.levels.len();
         let mut groups = Vec::with_capacity(levels);
         // Down: scan each level's blocks, the block sums becoming the next level's data.
@@ -734,7 +756,7 @@ impl GpuAdapter {
         if groups == 0 {
             return;
         }
-        let x = groups.min(self.max_groups);
+        let x = groups.min(self.shared.max_groups);
         let y = groups.div_ceil(x);
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, bg, &[]);
@@ -820,12 +842,15 @@ impl GpuAdapter {
     /// For the renderer: the FVID buffer of the active vertices, the per-FVID points, the
     /// face index buffer, and the face count.
     pub(crate) fn draw_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer, u32) {
-        (&self.sets[self.cur].fvid.buffer, &self.points, &self.faces.idx.buffer, self.m)
+        (&self.sets[self.cur].fvid.buffer, &self.shared.points, &self.faces.idx.buffer, self.m)
     }
 }
 
 /// The base mesh as the adapter's initial buffers: FVIDs, next splits, face indices, face FVIDs.
-fn base_state(pm: &ProgressiveMesh, tree: &SplitTree) -> (Vec<u32>, Vec<u32>, Vec<[u32; 3]>, Vec<[u32; 3]>) {
+type BaseState = (Vec<u32>, Vec<u32>, Vec<[u32; 3]>, Vec<[u32; 3]>);
+
+/// Builds the [`BaseState`] of `pm`.
+fn base_state(pm: &ProgressiveMesh, tree: &SplitTree) -> BaseState {
     let fvid = pm.base_vertices.clone();
     let idx =
         pm.base_faces.iter().map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32)).collect();

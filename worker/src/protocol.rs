@@ -12,10 +12,15 @@
 //!                      index u32, rect 4 x u32 (x0 y0 x1 y1), bft length u32 + bytes,
 //!                      normal count u32, then per normal: slot u32, 3 x f32
 //!   kind 2 Shutdown  (nothing)
+//!   kind 6 Model     dpm length u32 + bytes (a .dpm progressive mesh, sent once before
+//!                    its frames)
+//!   kind 7 PmFrame   frame u32, width u32, height u32, view_proj 16 x f32, eye 3 x f32,
+//!                    pixels_per_unit f32, error_px f32, c_lod f32, attribute_scale f32,
+//!                    max_passes u32, tile count u32, then per tile: index u32, rect 4 x u32
 //! worker -> master
 //!   kind 3 Ready     adapter name length u32 + UTF-8 bytes
 //!   kind 4 Pixels    frame u32, tile count u32, then per tile:
-//!                      index u32, rect 4 x u32, decode/upload/render/readback ms 4 x f64,
+//!                      index u32, rect 4 x u32, decode/adapt/upload/render/readback ms 5 x f64,
 //!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4)
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
 //! ```
@@ -64,16 +69,41 @@ pub struct FrameJob {
     pub tiles: Vec<TileJob>,
 }
 
+/// A frame of a progressive mesh: the whole frame's camera and the error bound; each worker
+/// adapts the mesh to every one of its tiles' sub-frusta and renders it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PmFrameJob {
+    pub frame: u32,
+    pub width: u32,
+    pub height: u32,
+    pub view_proj: [f32; 16],
+    pub eye: [f32; 3],
+    pub pixels_per_unit: f32,
+    pub error_px: f32,
+    pub c_lod: f32,
+    pub attribute_scale: f32,
+    /// Adaptation passes per tile and frame at most (each pass performs every split and
+    /// collapse the view asks of the active vertices; the tile stops early when converged).
+    pub max_passes: u32,
+    /// `(tile index, rect)`.
+    pub tiles: Vec<(u32, [u32; 4])>,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub enum ToWorker {
     Frame(FrameJob),
     Shutdown,
+    /// The progressive mesh (`.dpm` bytes) that the following `PmFrame`s show.
+    Model(Vec<u8>),
+    PmFrame(PmFrameJob),
 }
 
 /// Stage times of one tile on a worker, in milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TileTimes {
     pub decode_ms: f64,
+    /// Progressive-mesh adaptation (zero for BFT tiles).
+    pub adapt_ms: f64,
     pub upload_ms: f64,
     pub render_ms: f64,
     pub readback_ms: f64,
@@ -81,7 +111,7 @@ pub struct TileTimes {
 
 impl TileTimes {
     pub fn total_ms(&self) -> f64 {
-        self.decode_ms + self.upload_ms + self.render_ms + self.readback_ms
+        self.decode_ms + self.adapt_ms + self.upload_ms + self.render_ms + self.readback_ms
     }
 }
 
@@ -214,6 +244,30 @@ impl ToWorker {
                 w.0
             }
             ToWorker::Shutdown => Writer::new(2).0,
+            ToWorker::Model(dpm) => {
+                let mut w = Writer::new(6);
+                w.bytes(dpm);
+                w.0
+            }
+            ToWorker::PmFrame(f) => {
+                let mut w = Writer::new(7);
+                for v in [f.frame, f.width, f.height] {
+                    w.u32(v);
+                }
+                for v in f.view_proj.iter().chain(&f.eye) {
+                    w.f32(*v);
+                }
+                for v in [f.pixels_per_unit, f.error_px, f.c_lod, f.attribute_scale] {
+                    w.f32(v);
+                }
+                w.u32(f.max_passes);
+                w.u32(f.tiles.len() as u32);
+                for (index, rect) in &f.tiles {
+                    w.u32(*index);
+                    rect.iter().for_each(|&v| w.u32(v));
+                }
+                w.0
+            }
         }
     }
 
@@ -242,6 +296,36 @@ impl ToWorker {
                 ToWorker::Frame(FrameJob { frame, width, height, view_proj, tiles })
             }
             2 => ToWorker::Shutdown,
+            6 => ToWorker::Model(r.bytes("model")?.to_vec()),
+            7 => {
+                let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
+                let mut view_proj = [0.0f32; 16];
+                for v in &mut view_proj {
+                    *v = r.f32("view_proj")?;
+                }
+                let eye = [r.f32("eye")?, r.f32("eye")?, r.f32("eye")?];
+                let (pixels_per_unit, error_px) = (r.f32("pixels per unit")?, r.f32("error")?);
+                let (c_lod, attribute_scale) = (r.f32("c_lod")?, r.f32("attribute scale")?);
+                let max_passes = r.u32("max passes")?;
+                let n = r.count(20, "tiles")?;
+                let mut tiles = Vec::with_capacity(n);
+                for _ in 0..n {
+                    tiles.push((r.u32("tile index")?, r.rect()?));
+                }
+                ToWorker::PmFrame(PmFrameJob {
+                    frame,
+                    width,
+                    height,
+                    view_proj,
+                    eye,
+                    pixels_per_unit,
+                    error_px,
+                    c_lod,
+                    attribute_scale,
+                    max_passes,
+                    tiles,
+                })
+            }
             k => return Err(ProtocolError::UnknownKind(k)),
         };
         r.end()?;
@@ -264,7 +348,8 @@ impl ToMaster {
                 for t in tiles {
                     w.u32(t.index);
                     t.rect.iter().for_each(|&v| w.u32(v));
-                    for v in [t.times.decode_ms, t.times.upload_ms, t.times.render_ms, t.times.readback_ms] {
+                    let times = &t.times;
+                    for v in [times.decode_ms, times.adapt_ms, times.upload_ms, times.render_ms, times.readback_ms] {
                         w.f64(v);
                     }
                     w.u32(t.triangles);
@@ -286,13 +371,14 @@ impl ToMaster {
             3 => ToMaster::Ready { adapter: r.string("adapter name")? },
             4 => {
                 let frame = r.u32("frame")?;
-                let n = r.count(60, "tiles")?;
+                let n = r.count(68, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
                 for _ in 0..n {
                     let index = r.u32("tile index")?;
                     let rect = r.rect()?;
                     let times = TileTimes {
                         decode_ms: r.f64("times")?,
+                        adapt_ms: r.f64("times")?,
                         upload_ms: r.f64("times")?,
                         render_ms: r.f64("times")?,
                         readback_ms: r.f64("times")?,
@@ -335,17 +421,37 @@ mod tests {
         })
     }
 
+    fn pm_frame() -> ToWorker {
+        ToWorker::PmFrame(PmFrameJob {
+            frame: 2,
+            width: 640,
+            height: 480,
+            view_proj: std::array::from_fn(|i| i as f32 - 3.0),
+            eye: [1.0, 2.0, 3.0],
+            pixels_per_unit: 500.0,
+            error_px: 0.5,
+            c_lod: 100.0,
+            attribute_scale: 0.01,
+            max_passes: 64,
+            tiles: vec![(0, [0, 0, 320, 240]), (3, [320, 240, 640, 480])],
+        })
+    }
+
     #[test]
     fn messages_round_trip() {
         let f = frame();
         assert_eq!(ToWorker::decode(&f.encode()), Ok(f));
         assert_eq!(ToWorker::decode(&ToWorker::Shutdown.encode()), Ok(ToWorker::Shutdown));
+        let model = ToWorker::Model(vec![4, 5, 6]);
+        assert_eq!(ToWorker::decode(&model.encode()), Ok(model));
+        let pm = pm_frame();
+        assert_eq!(ToWorker::decode(&pm.encode()), Ok(pm));
         let p = ToMaster::Pixels {
             frame: 7,
             tiles: vec![TilePixels {
                 index: 3,
                 rect: [0, 0, 2, 1],
-                times: TileTimes { decode_ms: 1.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
+                times: TileTimes { decode_ms: 1.0, adapt_ms: 5.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
                 triangles: 12,
                 rgba: vec![9; 8],
             }],
@@ -358,10 +464,13 @@ mod tests {
 
     #[test]
     fn bad_messages_are_errors() {
-        let bytes = frame().encode();
-        for len in 0..bytes.len() {
-            assert!(ToWorker::decode(&bytes[..len]).is_err(), "truncated to {len}");
+        for msg in [frame(), pm_frame()] {
+            let bytes = msg.encode();
+            for len in 0..bytes.len() {
+                assert!(ToWorker::decode(&bytes[..len]).is_err(), "truncated to {len}");
+            }
         }
+        let bytes = frame().encode();
         let mut extra = bytes.clone();
         extra.push(0);
         assert_eq!(ToWorker::decode(&extra), Err(ProtocolError::Trailing(1)));

@@ -102,6 +102,26 @@ impl View {
         }
     }
 
+    /// The view of the part `rect = [x0, y0, x1, y1]` (pixels, half-open, origin top-left, not
+    /// empty) of this view's screen: the sub-frustum through the rect, with the same eye, error
+    /// threshold and pixels per unit. Adapted for it, a mesh meets this view's error bound
+    /// inside the rect and coarsens outside with the `c_lod` falloff, so a tile renderer pays
+    /// only for its own tile.
+    pub fn for_tile(&self, rect: [u32; 4]) -> View {
+        let (w, h) = (self.width.max(1) as f32, self.height.max(1) as f32);
+        let [x0, y0, x1, y1] = rect.map(|v| v as f32);
+        let (l, r) = (2.0 * x0 / w - 1.0, 2.0 * x1 / w - 1.0);
+        let (t, b) = (1.0 - 2.0 * y0 / h, 1.0 - 2.0 * y1 / h);
+        // Clip-space scale and offset mapping [l, r] x [b, t] onto [-1, 1]^2.
+        let crop = Mat4::from_cols(
+            Vec4::new(2.0 / (r - l), 0.0, 0.0, 0.0),
+            Vec4::new(0.0, 2.0 / (t - b), 0.0, 0.0),
+            Vec4::Z,
+            Vec4::new(-(r + l) / (r - l), -(t + b) / (t - b), 0.0, 1.0),
+        );
+        View { view_proj: crop * self.view_proj, width: rect[2] - rect[0], height: rect[3] - rect[1], ..*self }
+    }
+
     /// The frustum planes (left, right, bottom, top, near, far), normalised to world distances,
     /// positive inside.
     pub fn planes(&self) -> [Vec4; 6] {
