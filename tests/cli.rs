@@ -258,3 +258,33 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     }
     assert!(!out.exists());
 }
+
+#[test]
+fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dpm = dir.path().join("bunny.dpm");
+    let o = tessera(&["pm", "build", s(&mesh("stanford/bunny_zipper_c3d.obj.gz")), "-o", s(&dpm)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let xdg = std::env::temp_dir().join("tessera-xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    for view in [
+        vec!["--full"],
+        vec!["--size", "1920x1080", "--error-px", "0.5"],
+        vec!["--size", "640x480", "--error-px", "2", "--eye", "0.3,0.1,0.2", "--normal-weight", "0.02"],
+    ] {
+        let run = |gpu: bool, out: &Path| {
+            let mut args = vec!["pm", "adapt", s(&dpm), "-o", s(out)];
+            args.extend(&view);
+            if gpu {
+                args.push("--gpu");
+            }
+            let o =
+                Command::new(env!("CARGO_BIN_EXE_tessera")).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap();
+            assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+            std::fs::read(out).unwrap()
+        };
+        let (cpu, gpu) = (run(false, &dir.path().join("cpu.ply")), run(true, &dir.path().join("gpu.ply")));
+        assert!(cpu.len() > 1000, "{view:?}: a mesh is written");
+        assert!(cpu == gpu, "{view:?}: the GPU's PLY differs from the CPU's");
+    }
+}

@@ -106,6 +106,14 @@ enum Pm {
         /// Apply every split (ignores the view).
         #[arg(long)]
         full: bool,
+        /// The normal error's weight, as a fraction of the model's bounding box diagonal per
+        /// unit of normal chord (0 ignores normals).
+        #[arg(long, default_value_t = 0.0)]
+        normal_weight: f32,
+        /// Adapt on the GPU (WGSL compute shaders through wgpu; lavapipe without a GPU). The
+        /// mesh written is the same as the CPU reference's.
+        #[arg(long)]
+        gpu: bool,
     },
 }
 
@@ -151,8 +159,15 @@ fn main() -> ExitCode {
             codec::pm::DpmOptions { position_bits: *position_bits, normal_bits: *normal_bits },
         ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
-        Command::Pm { pm: Pm::Adapt { input, camera, size, error_px, output, full } } => {
-            master::pm::adapt(input, camera, *size, *error_px, output, *full)
+        Command::Pm { pm: Pm::Adapt { input, camera, size, error_px, output, full, normal_weight, gpu } } => {
+            let opts = master::pm::AdaptOptions {
+                size: *size,
+                error_px: *error_px,
+                normal_weight: *normal_weight,
+                full: *full,
+                gpu: *gpu,
+            };
+            master::pm::adapt(input, camera, &opts, output)
         }
         Command::Bench { bench: Bench::Bandwidth { models, tiles, size, quant_bits, out, plot } } => {
             master::bandwidth::run(models, *size, tiles, *quant_bits, out, plot)

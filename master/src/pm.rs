@@ -128,49 +128,85 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
     Ok(())
 }
 
-/// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full]`.
-pub fn adapt(
-    input: &Path,
-    camera: &CameraArgs,
-    size: (u32, u32),
-    error_px: f32,
-    output: &Path,
-    full: bool,
-) -> Result<()> {
+/// Options of `tessera pm adapt`.
+#[derive(Clone, Copy, Debug)]
+pub struct AdaptOptions {
+    pub size: (u32, u32),
+    pub error_px: f32,
+    /// Normal error weight, a fraction of the bounding box diagonal (see [`View::attribute_scale`]).
+    pub normal_weight: f32,
+    /// Every split, regardless of the view.
+    pub full: bool,
+    /// On the GPU ([`worker::pm_gpu::GpuAdapter`]).
+    pub gpu: bool,
+}
+
+/// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full] [--gpu]`.
+///
+/// The PLY holds the active vertices in FVID order and the faces sorted by their index
+/// triples (orientation kept), so that the CPU and GPU paths, whose face orders differ, write
+/// the same file for the same mesh.
+pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
+    let (size, error_px) = (opts.size, opts.error_px);
     if size.0 == 0 || size.1 == 0 {
         bail!("--size must be positive, not {}x{}", size.0, size.1);
     }
     if !(error_px.is_finite() && error_px > 0.0) {
         bail!("--error-px must be a positive number, not {error_px}");
     }
+    if !(opts.normal_weight.is_finite() && opts.normal_weight >= 0.0) {
+        bail!("--normal-weight must be zero or positive, not {}", opts.normal_weight);
+    }
     let bytes = read(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
     pb.finish_and_clear();
     let pm = decoded?.pm;
-    let start = Instant::now();
-    let mut adapter = Adapter::new(&pm);
-    let passes = if full {
-        adapter.refine_fully()
+    let (lo, hi) = bbox(&pm.positions);
+    let view = if opts.full {
+        None
     } else {
-        let (lo, hi) = bbox(&pm.positions);
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
-        let view = View::new(&cam, size.0, size.1, error_px);
-        adapter.adapt_until_converged(&view, 10_000).context("the adaption did not converge")?
+        let mut view = View::new(&cam, size.0, size.1, error_px);
+        view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
+        Some(view)
+    };
+    const MAX_PASSES: usize = 10_000;
+    let start = Instant::now();
+    let (active, mut faces, passes) = if opts.gpu {
+        let renderer = worker::render::Renderer::new()?;
+        let mut adapter = worker::pm_gpu::GpuAdapter::new(&renderer, &pm, worker::pm_gpu::DEFAULT_N_ALLOC)?;
+        let passes = match &view {
+            None => {
+                let mut passes = 0;
+                while adapter.refine_step()?.splits > 0 {
+                    passes += 1;
+                }
+                passes
+            }
+            Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
+        };
+        (adapter.active()?, adapter.faces()?, passes)
+    } else {
+        let mut adapter = Adapter::new(&pm);
+        let passes = match &view {
+            None => adapter.refine_fully(),
+            Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaption did not converge")?,
+        };
+        (adapter.active().to_vec(), adapter.faces().to_vec(), passes)
     };
     let secs = start.elapsed().as_secs_f64();
-    let mesh = Mesh {
-        positions: adapter.active().iter().map(|&f| pm.positions[f as usize]).collect(),
-        triangles: adapter.faces().to_vec(),
-    };
+    faces.sort_unstable();
+    let mesh = Mesh { positions: active.iter().map(|&f| pm.positions[f as usize]).collect(), triangles: faces };
     write_atomic(output, |w| codec::save::write_ply(&mesh, w))?;
     println!(
-        "{} -> {}: {} triangles, {} vertices ({} passes) in {:.1} ms",
+        "{} -> {}: {} triangles, {} vertices ({} passes{}) in {:.1} ms",
         input.display(),
         output.display(),
         mesh.triangles.len(),
         mesh.positions.len(),
         passes,
+        if opts.gpu { " on the GPU" } else { "" },
         secs * 1e3
     );
     Ok(())
