@@ -5,7 +5,6 @@
 // target is never itself collapsing (its successor is the vertex collapsing into it), and a
 // count that changes goes from 0 to 1, which no neighbour reads as 2.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> splits: array<Split>;
 @group(0) @binding(2) var<storage, read_write> vnext: array<u32>;
 @group(0) @binding(3) var<storage, read_write> vnode: array<u32>;

@@ -1,5 +1,5 @@
 // Shared declarations of the progressive-mesh adaptation stages (worker/src/pm_gpu.rs).
-// Every stage file is compiled with this file prepended; the stages mirror the CPU reference
+// Every stage file but scan.wgsl (a generic scan) is compiled with this file prepended; the stages mirror the CPU reference
 // codec/src/pm/adapt.rs step for step, and `needs_split` below repeats its refinement test
 // operation for operation (no transcendental functions, no dot() or length() builtins whose
 // evaluation order the compiler picks), so that both reach the same decisions.
@@ -47,6 +47,9 @@ struct Params {
     pad: u32,
 }
 
+// Every stage binds its parameters here.
+@group(0) @binding(0) var<uniform> P: Params;
+
 // Counters the stages accumulate with atomics, read back once per pass.
 const STAT_COLLAPSES: u32 = 0u;
 const STAT_CANCELLED: u32 = 1u;
@@ -61,11 +64,13 @@ fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
 }
 
 // The refinement test of codec::pm::adapt::needs_split, in the same order of operations.
-fn needs_split(p: Params, center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>) -> bool {
+// (It reads the view from the uniform `P` directly: a copy of the whole block per call, which
+// a by-value parameter asks for, made the state update several times slower on lavapipe.)
+fn needs_split(center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>) -> bool {
     let r = crit.w;
-    let tx = center.x - p.eye.x;
-    let ty = center.y - p.eye.y;
-    let tz = center.z - p.eye.z;
+    let tx = center.x - P.eye.x;
+    let ty = center.y - P.eye.y;
+    let tz = center.z - P.eye.z;
     let dist2 = tx * tx + ty * ty + tz * tz;
     let dist = sqrt(dist2);
     let has_normal = normal.x != 0.0 || normal.y != 0.0 || normal.z != 0.0;
@@ -88,16 +93,16 @@ fn needs_split(p: Params, center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>)
             }
         }
     }
-    let err = max(crit.y, p.attribute_scale * crit.z);
+    let err = max(crit.y, P.attribute_scale * crit.z);
     if (!(err > 0.0)) {
         return false;
     }
     var outside = 0.0;
     for (var k = 0u; k < 6u; k++) {
-        let q = p.planes[k];
+        let q = P.planes[k];
         let o = -(q.x * center.x + q.y * center.y + q.z * center.z + q.w) - r;
         outside = max(outside, o);
     }
-    let d = max(dist - r, 0.0) + p.c_lod * outside;
-    return err * p.pixels_per_unit > p.error_px * d;
+    let d = max(dist - r, 0.0) + P.c_lod * outside;
+    return err * P.pixels_per_unit > P.error_px * d;
 }

@@ -3,7 +3,6 @@
 // matter (each split's faces go to the slots its face prefix sum gives), so an atomic cursor
 // replaces a third scan.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> vsum: array<u32>;
 @group(0) @binding(2) var<storage, read_write> list: array<u32>;
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 8>;

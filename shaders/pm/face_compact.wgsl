@@ -3,7 +3,6 @@
 // `fill` moves each live face at or above m_new into one of them. The two counts are equal,
 // so the first m_new slots end up exactly the live faces, without a second buffer.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read_write> face_idx: array<u32>;
 @group(0) @binding(2) var<storage, read_write> face_fvid: array<u32>;
 @group(0) @binding(3) var<storage, read_write> face_owner: array<u32>;

@@ -5,7 +5,6 @@
 // DEAD for the compaction: the owner rule rather than degeneracy, because input faces may be
 // degenerate at every level (see codec/src/pm/adapt.rs).
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> vnode: array<u32>;
 @group(0) @binding(2) var<storage, read> vsum: array<u32>;
 @group(0) @binding(3) var<storage, read> dfvid: array<u32>;

@@ -4,7 +4,6 @@
 // and v_u right after it (v_u's FVID follows v's left range), with their next splits and
 // nodes, so that the new FVID buffer is complete before the split stage searches it.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> splits: array<Split>;
 @group(0) @binding(2) var<storage, read> vfvid: array<u32>;
 @group(0) @binding(3) var<storage, read> vnext: array<u32>;

@@ -4,7 +4,6 @@
 // corner is found by binary search in the new sorted FVID buffer: the active vertex with
 // the greatest FVID <= the corner's.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> splits: array<Split>;
 @group(0) @binding(2) var<storage, read> split_faces: array<u32>;
 @group(0) @binding(3) var<storage, read> vnext: array<u32>;

@@ -2,7 +2,6 @@
 // into `vcnt`, and the number of faces its split creates into `fcnt`. Thread n writes the
 // zero that ends both arrays, so that their exclusive scans end in the totals.
 
-@group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> splits: array<Split>;
 @group(0) @binding(2) var<storage, read> points: array<Point>;
 @group(0) @binding(3) var<storage, read> vfvid: array<u32>;
@@ -35,7 +34,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let next = vnext[i];
     var state = 1u;
     var faces = 0u;
-    if (next != NONE && (P.mode == 1u || needs_split(P, points[f].pos.xyz, points[f].nrm.xyz, splits[next].crit))) {
+    if (next != NONE && (P.mode == 1u || needs_split(points[f].pos.xyz, points[f].nrm.xyz, splits[next].crit))) {
         state = 2u;
         faces = splits[next].face_cnt;
     } else if (P.mode == 0u) {
@@ -45,7 +44,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             // The collapse's criteria are those of the split that made this vertex; its
             // vertex is the target.
             let s = node >> 1u;
-            if (!needs_split(P, points[t].pos.xyz, points[t].nrm.xyz, splits[s].crit)) {
+            if (!needs_split(points[t].pos.xyz, points[t].nrm.xyz, splits[s].crit)) {
                 state = 0u;
             }
         }

@@ -1,6 +1,6 @@
 //! View-dependent adaptation of a dependency-free progressive mesh on the GPU: the stages of
 //! Algorithms 1 to 5 of Derzapf and Guthe as WGSL compute pipelines (`shaders/pm/*.wgsl`, one
-//! file per stage, `common.wgsl` prepended to each), driven pass by pass from here. It is the
+//! file per stage, `common.wgsl` prepended to each but the generic scan), driven pass by pass from here. It is the
 //! GPU twin of the CPU reference [`codec::pm::Adapter`]: same state, same decisions, same
 //! triangle set after every pass (tested in `worker/tests/pm_gpu.rs`).
 //!
@@ -44,7 +44,7 @@ use wgpu::util::DeviceExt;
 use crate::render::{RenderError, Renderer};
 
 const WG: u32 = 256;
-const SCAN_BLOCK: u32 = 512;
+const SCAN_BLOCK: u32 = 2048;
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
 pub const DEFAULT_N_ALLOC: u32 = 1 << 15;
 
@@ -131,7 +131,10 @@ impl Pipelines {
             })
         };
         let single = |label: &str, src: &str| pipeline(&module(label, src), label, "main");
-        let scan = module("pm: scan", include_str!("../../shaders/pm/scan.wgsl"));
+        let scan = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("pm: scan"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/pm/scan.wgsl").into()),
+        });
         let compact = module("pm: face compaction", include_str!("../../shaders/pm/face_compact.wgsl"));
         Pipelines {
             state: single("pm: state update", include_str!("../../shaders/pm/state.wgsl")),
@@ -212,6 +215,10 @@ pub struct GpuAdapter {
     n: u32,
     m: u32,
     reallocations: u64,
+    /// Wait for each pass's second submission and time it ([`GpuAdapter::set_profiling`]).
+    profile: bool,
+    /// Milliseconds of the last pass: classification (to the totals read back), application.
+    times: [f64; 2],
 }
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers, and
@@ -357,6 +364,8 @@ impl GpuAdapter {
             n: 0,
             m: 0,
             reallocations: 0,
+            profile: false,
+            times: [0.0; 2],
             device,
             queue,
         };
@@ -398,6 +407,18 @@ impl GpuAdapter {
     /// Active vertices and faces.
     pub fn counts(&self) -> (u32, u32) {
         (self.n, self.m)
+    }
+
+    /// With `true`, every pass waits until its second submission has run, so that
+    /// [`Self::last_pass_ms`] can time it (a renderer would rather let it overlap).
+    pub fn set_profiling(&mut self, on: bool) {
+        self.profile = on;
+    }
+
+    /// Milliseconds of the last pass: state update, collapses and scans up to the totals read
+    /// back; then (when profiling) reorganisation, splits, index update and face compaction.
+    pub fn last_pass_ms(&self) -> [f64; 2] {
+        self.times
     }
 
     /// How many times a buffer was reallocated by the `n_alloc` policy so far.
@@ -456,6 +477,8 @@ impl GpuAdapter {
     }
 
     fn pass_unscoped(&mut self, view: Option<&View>) -> Result<Stats, RenderError> {
+        let pass_start = std::time::Instant::now();
+        self.times = [0.0; 2];
         let (n, m) = (self.n, self.m);
         let unchanged = Stats { vertices: n as usize, faces: m as usize, ..Default::default() };
         if n == 0 {
@@ -528,6 +551,7 @@ impl GpuAdapter {
         enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
         self.queue.submit([enc.finish()]);
         let totals = self.read_totals()?;
+        self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
         let (n_new, f_add) = (totals[0], totals[1]);
         let counters = &totals[2..];
         let (collapses, cancelled, removed) =
@@ -629,6 +653,13 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.fill, &fill, m + f_add - m_new);
         }
         self.queue.submit([enc.finish()]);
+        if self.profile {
+            let index = self.queue.submit([]);
+            self.device
+                .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+                .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
+        }
         if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
             self.resize_faces(m_new as u64 + na, m_new as u64);
         }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use codec::pm::{build, Adapter, ProgressiveMesh, View};
 use codec::view::Camera;
 use glam::Vec3;
-use worker::pm_gpu::GpuAdapter;
+use worker::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
 fn mesh_path(rel: &str) -> PathBuf {
@@ -153,4 +153,107 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
 fn dragon_path_matches_the_cpu_reference() {
     let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
     check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &renderer);
+}
+
+/// Median of `v` (sorted in place).
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The performance figures of issue 6 on whatever adapter wgpu finds (lavapipe here):
+/// `cargo test -p tessera-worker --release --test pm_gpu -- --ignored --nocapture pm_speed`.
+/// For each view of the dragon at 1920x1080 and 0.5 px: the full original mesh's render time
+/// (draw + read back; the mesh is resident, so no upload), against adapting frame to frame
+/// along a slow orbit (one pass per frame, as a renderer would) plus rendering the adapted mesh
+/// from the GPU buffers; generated triangles per second (faces created by splits from the base
+/// mesh to the converged view, per second of adaptation); the CPU reference's time for the
+/// same passes; and GPU memory per adapted vertex against the paper's (112 + 8k) bytes, k = 6.
+#[test]
+#[ignore = "times the dragon on the GPU; run in release"]
+fn pm_speed() {
+    let rel = std::env::var("TESSERA_PM_MESH").unwrap_or_else(|_| "stanford/dragon_vrip.ply.gz".into());
+    let pm = pm_of(&rel);
+    let mut renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("adapter: {}", renderer.adapter_name());
+    let (w, h) = (1920u32, 1080u32);
+    let rect = [0, 0, w, h];
+
+    let mut full = Adapter::new(&pm);
+    full.refine_fully();
+    let full_faces = full.faces().len();
+    let mesh = worker::RenderMesh {
+        positions: full.active().iter().map(|&f| pm.positions[f as usize]).collect(),
+        normals: full.active().iter().map(|&f| pm.normals[f as usize]).collect(),
+        indices: full.faces().iter().flatten().copied().collect(),
+    };
+    let (lo, hi) = bbox(&pm);
+    let base = Camera::framing(lo.to_array(), hi.to_array(), w as f32 / h as f32);
+    // Views: framing the model, farther away, and close up (much of the model off screen).
+    for (name, scale) in [("framing", 1.0f32), ("far", 3.0), ("farther", 5.0), ("close", 0.35)] {
+        let cam_at = |k: usize| {
+            let rot = glam::Quat::from_rotation_y(0.01 * k as f32);
+            let eye = base.target + rot * ((base.eye - base.target) * scale);
+            Camera { eye, near: base.near * scale.min(1.0) * 0.5, far: base.far * scale.max(1.0), ..base }
+        };
+        let vp = cam_at(0).view_proj(w as f32 / h as f32);
+        let mut full_ms: Vec<f64> = (0..5)
+            .map(|_| {
+                let (_, t) = renderer.render(&mesh, vp, (w, h), rect).unwrap();
+                t.render_ms + t.readback_ms
+            })
+            .collect();
+        let full_ms = median(&mut full_ms);
+
+        // From the base mesh to the converged view: generated triangles per second.
+        let view0 = View::new(&cam_at(0), w, h, 0.5);
+        let mut gpu = GpuAdapter::new(&renderer, &pm, DEFAULT_N_ALLOC).unwrap();
+        let start = Instant::now();
+        let passes = gpu.adapt_until_converged(&view0, 1000).unwrap().expect("converges");
+        let gen_s = start.elapsed().as_secs_f64();
+        let faces = gpu.counts().1 as usize;
+        let mut cpu = Adapter::new(&pm);
+        let start = Instant::now();
+        cpu.adapt_until_converged(&view0, 1000).expect("converges");
+        let cpu_gen_s = start.elapsed().as_secs_f64();
+
+        // Frame to frame: one pass per frame on both, then the render.
+        let (mut adapt_ms, mut draw_ms, mut cpu_ms, mut removed) = (vec![], vec![], vec![], vec![]);
+        let (mut classify_ms, mut apply_ms) = (vec![], vec![]);
+        gpu.set_profiling(true);
+        for k in 1..=20 {
+            let view = View::new(&cam_at(k), w, h, 0.5);
+            let start = Instant::now();
+            gpu.adapt(&view).unwrap();
+            adapt_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            classify_ms.push(gpu.last_pass_ms()[0]);
+            apply_ms.push(gpu.last_pass_ms()[1]);
+            let vp = cam_at(k).view_proj(w as f32 / h as f32);
+            let (_, t) = renderer.render_pm(&gpu, vp, (w, h), rect).unwrap();
+            draw_ms.push(t.render_ms + t.readback_ms);
+            let start = Instant::now();
+            cpu.adapt(&view);
+            cpu_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            removed.push(1.0 - gpu.counts().1 as f64 / full_faces as f64);
+        }
+        let (a, d, c) = (median(&mut adapt_ms), median(&mut draw_ms), median(&mut cpu_ms));
+        let (n, _) = gpu.counts();
+        eprintln!(
+            "{rel} {name}: {faces} of {full_faces} faces ({:.1}% removed); full render {full_ms:.1} ms; \
+             adapt {a:.2} + render {d:.1} ms per frame = {:.2} x full; from base: {passes} passes, {:.2} Mtri/s \
+             generated (CPU reference {:.2} Mtri/s); frame pass GPU {a:.2} ms vs CPU {c:.2} ms = {:.2} x; \
+             dynamic memory {:.1} bytes per adapted vertex ({} vertices; paper 160), static {:.1} MB; \
+             GPU pass = classify {:.2} + apply {:.2} ms",
+            100.0 * median(&mut removed),
+            (a + d) / full_ms,
+            faces as f64 / gen_s / 1e6,
+            faces as f64 / cpu_gen_s / 1e6,
+            a / c,
+            gpu.dynamic_bytes() as f64 / n as f64,
+            n,
+            gpu.static_bytes() as f64 / 1e6,
+            median(&mut classify_ms),
+            median(&mut apply_ms),
+        );
+    }
 }
