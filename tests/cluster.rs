@@ -308,8 +308,9 @@ fn progressive_mesh_tiles_match_the_full_mesh() {
     let reference = reference(&model, size, dir.path());
     for (np, tiles, extra) in [(2, "4x3", vec![]), (3, "3x2", vec!["--balance", "--frames", "2"])] {
         let out = dir.path().join("pm.png");
+        let stats = dir.path().join("pm.jsonl");
         let mut args = vec!["render", dpm.to_str().unwrap(), "--size", size, "--tiles", tiles, "--error-px", "0.5"];
-        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
         args.extend(&extra);
         ok(&mpirun(np, &[], &args));
         let produced = if extra.contains(&"--frames") { dir.path().join("pm-0002.png") } else { out.clone() };
@@ -317,6 +318,14 @@ fn progressive_mesh_tiles_match_the_full_mesh() {
         eprintln!("-np {np} --tiles {tiles}: {covered} covered pixels, {:.4} match within 8/255", fraction);
         assert!(covered > 10_000, "the bunny is in view");
         assert!(fraction >= 0.99, "-np {np} --tiles {tiles}: only {fraction:.4} of covered pixels match");
+        // Each tile's mesh is adapted to the tile: refined inside, coarse outside.
+        let line: serde_json::Value =
+            serde_json::from_str(std::fs::read_to_string(&stats).unwrap().lines().next().unwrap()).unwrap();
+        let counts: Vec<u64> =
+            line["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).collect();
+        let full = codec::load_path(std::path::Path::new(&model)).unwrap().triangles.len() as u64;
+        assert!(counts.iter().all(|&t| t > 0 && t < full), "{counts:?} against {full}");
+        assert!(counts.iter().sum::<u64>() < full * counts.len() as u64 / 2, "{counts:?} against {full}");
         let (c, r) = tiles.split_once('x').unwrap();
         let holes = border_holes(&produced, &reference, c.parse().unwrap(), r.parse().unwrap());
         assert_eq!(holes, 0, "-np {np} --tiles {tiles}: {holes} uncovered pixels at tile borders");
