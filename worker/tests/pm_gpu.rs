@@ -219,7 +219,7 @@ fn pm_speed() {
 
         // Frame to frame: one pass per frame on both, then the render.
         let (mut adapt_ms, mut draw_ms, mut cpu_ms, mut removed) = (vec![], vec![], vec![], vec![]);
-        let (mut classify_ms, mut apply_ms) = (vec![], vec![]);
+        let (mut classify_ms, mut apply_ms, mut state_ms) = (vec![], vec![], vec![]);
         gpu.set_profiling(true);
         for k in 1..=20 {
             let view = View::new(&cam_at(k), w, h, 0.5);
@@ -228,6 +228,7 @@ fn pm_speed() {
             adapt_ms.push(start.elapsed().as_secs_f64() * 1e3);
             classify_ms.push(gpu.last_pass_ms()[0]);
             apply_ms.push(gpu.last_pass_ms()[1]);
+            state_ms.push(gpu.last_pass_ms()[2]);
             let vp = cam_at(k).view_proj(w as f32 / h as f32);
             let (_, t) = renderer.render_pm(&gpu, vp, (w, h), rect).unwrap();
             draw_ms.push(t.render_ms + t.readback_ms);
@@ -243,7 +244,7 @@ fn pm_speed() {
              adapt {a:.2} + render {d:.1} ms per frame = {:.2} x full; from base: {passes} passes, {:.2} Mtri/s \
              generated (CPU reference {:.2} Mtri/s); frame pass GPU {a:.2} ms vs CPU {c:.2} ms = {:.2} x; \
              dynamic memory {:.1} bytes per adapted vertex ({} vertices; paper 160), static {:.1} MB; \
-             GPU pass = classify {:.2} + apply {:.2} ms",
+             GPU pass = classify {:.2} (state update and collapses {:.2}) + apply {:.2} ms",
             100.0 * median(&mut removed),
             (a + d) / full_ms,
             faces as f64 / gen_s / 1e6,
@@ -253,6 +254,7 @@ fn pm_speed() {
             n,
             gpu.static_bytes() as f64 / 1e6,
             median(&mut classify_ms),
+            median(&mut state_ms),
             median(&mut apply_ms),
         );
     }
