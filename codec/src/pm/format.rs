@@ -5,7 +5,7 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSDPM\x1a"
-//! 8       2     version (u16 LE), currently 1
+//! 8       2     version (u16 LE), currently 2
 //! 10      2     header length H (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
@@ -17,57 +17,119 @@
 //! ```
 //!
 //! * `TABL`: the shared probability tables, one static canonical Huffman code over byte
-//!   symbols per (field, byte significance) context ([`super::huffman`]): per table a flag
-//!   byte (0: flat, every symbol 8 bits; 1: 256 code lengths follow).
+//!   symbols per context ([`super::huffman`]), as one bit stream: per table a bit (0: flat,
+//!   every symbol 8 bits; 1: the 256 code lengths follow, each the Elias gamma code of one plus
+//!   the zigzag difference to the previous length, starting from 8).
 //! * `BASE` (LEB128): per base vertex its FVID gap to the previous one, its quantized position
 //!   (3) and octahedral normal (2), and its first operation's address plus one (0: none);
 //!   then the base faces as FVID triples.
-//! * `OPER`: the operations in the pre-order of the split forest (an operation, the subtree
-//!   of `v_l`, the subtree of `v_u`), each a byte-aligned bit stream. Fields, each value coded
-//!   as 7-bit groups, least significant first, with a continuation bit, the group's
-//!   significance (0, 1, 2+) selecting the table (contexts by byte significance):
-//!   1. criteria: `sin(alpha)` in 8 bits (rounded up), the geometric error, the attribute
-//!      error and the radius log-coded at 2% (rounded up, `q * 1.02^(k-1)`, 0 for 0), the first
-//!      three as the zigzag difference to the parent operation's (section 4.2.3), the radius
-//!      as the zigzag difference to this operation's geometric error;
-//!   2. which children split further: 0 none, 1 both, 2 `v_l` only, 3 `v_u` only (4.2.1);
-//!   3. `v_u - v - 2`, only when `v_l` splits further (otherwise `v_u = v + 1`, 4.2.2);
-//!   4. the number of faces, then per face a form (0/1: one corner in `v_l`'s FVID range, one in
-//!      `v_u`'s, one outside `v`'s, with orientation; 2: anything else, e.g. degenerate input
-//!      faces) and for forms 0/1 the corners as offsets to `v` and `v_u` and the third corner
-//!      as the zigzag of its negative offset to `v` or positive offset to the end of `v`'s
-//!      range, sorted, the first absolute and the others as differences (4.2.2); form 2 has
-//!      three zigzag offsets to `v`;
-//!   5. the position delta of `v_u` to `v` (3 zigzag values, quantized over the bounding box)
-//!      and the normal delta (2, octahedral). `v_l` keeps `v`'s position and normal (half-edge
-//!      collapses), so its delta is always zero and not stored;
-//!   6. when both children split further: the address offset of `v_u`'s operation from the end
-//!      of this one, as the zigzag difference to `s_avg * (v_u - v - 1)` (4.2.1).
+//! * `OPER`: the operations in pre-order of the split forest (an operation, the subtree of the
+//!   child it stores first, the subtree of the other), each a byte-aligned bit stream.
+//!
+//! Every value is coded in a *context*: its field and a class computed from what the decoder
+//! already has (the operation's context and the fields before it), each with its own tables.
+//! A value becomes symbols in one of two ways: *groups*, 7 bits at a time, least significant
+//! first, with a continuation bit, the group's byte significance (0, 1, 2+) selecting one of
+//! three tables (the paper's contexts by byte significance); or *buckets*, one symbol for the
+//! value below 16 and otherwise for its bit length and the 3 bits below the leading one,
+//! followed by the other low bits uncoded (for wide values whose low bits are noise). With
+//! `n = v_end - v`, the number of FVIDs `v` stands for, an operation holds, in this order:
+//!
+//! 1. criteria (section 4.2.3): `sin(alpha)` in 8 bits (rounded up), the geometric error and
+//!    the attribute error log-coded at 2% (rounded up, `q * 1.02^(k-1)`, 0 for 0), each as the
+//!    zigzag difference to the parent operation's; `sin(alpha)` in 4 classes by the parent's
+//!    value (groups);
+//! 2. the head symbol, in 4 classes by `n` (2, 3, 4, more; groups):
+//!    `c + 5 * (min(faces, 3) + 4 * (pattern + 3 * r))`, where `c` is the children code (0 none
+//!    splits further, 1 both with `v_l`'s operation stored first, 2 `v_l` only, 3 `v_u` only, 4
+//!    both with `v_u`'s stored first: the swap), `pattern` 0 or 1 when the first two faces are
+//!    standard (below) and of opposite orientation, or there is one standard face, giving the
+//!    first face's orientation, else 2, and `r` whether the radius differs from its prediction;
+//! 3. when `r`: the radius, log-coded, as the zigzag difference to the smaller of the parent's
+//!    radius and this geometric error, less one (groups);
+//! 4. when both children split and `n > 4`: the split point, as the FVID count of the child
+//!    stored first, less 2, in 6 classes by the bit length of `n` (groups; 4.2.1 and 4.2.2).
+//!    Otherwise it is implied: `v_u = v + 1` when `v_l` is a leaf, `v_end - 1` when `v_u` is;
+//! 5. the faces (4.2.2): when more than 2, their number less 3 (groups); then per face its form
+//!    unless the pattern gives it (0/1: a standard face, with one corner in `v_l`'s FVID range,
+//!    one in `v_u`'s and one outside `v`'s, and its orientation; 2: anything else, e.g.
+//!    degenerate input faces). A standard face codes the offset of its corner to `v`, unless
+//!    `v_l`'s range is one FVID, and of its corner to `v_u`, unless `v_u`'s range is one FVID
+//!    (groups, in 7 classes: for the first face by the range's bit length, for the others by
+//!    the previous face's offset, 0, 1 or more), and its third corner as the zigzag of its
+//!    negative offset to `v` or positive offset to `v_end`; the faces are sorted by that, the
+//!    first coded whole and the others as differences (buckets, 3 classes by the bit length of
+//!    `n`). Form 2 has three zigzag offsets to `v` (groups);
+//! 6. the position delta of `v_u` to `v` (quantized over the bounding box; buckets): the two
+//!    axes least aligned with `v`'s normal first, in classes by the magnitude of the radius,
+//!    then the third as the difference to its tangent-plane prediction
+//!    `round(-(n_a d_a + n_b d_b) / n_c)`, in classes by the bit length of `|d_a| + |d_b|`;
+//!    `v_l` keeps `v`'s position and normal (half-edge collapses), so its delta is always zero
+//!    and not stored;
+//! 7. the normal delta (2, octahedral), in classes by the magnitude of the attribute error
+//!    (buckets): the error bounds the normal's change;
+//! 8. when both children split: the address offset of the child stored second from the end of
+//!    this operation, as the zigzag difference to `s_avg * (m - 1)`, `m` the FVID count of the
+//!    child stored first (4.2.1), in 6 classes by the bit length of `m` (groups).
 //!
 //! Compression follows the four steps of section 4.2: operations with zero offsets give the
 //! first tables; the operations are compressed bottom-up (in reverse pre-order), which fixes
 //! the offsets; the tables are rebuilt from those symbols and everything is compressed again.
 //!
+//! **The `v_l`/`v_u` swap (section 4.2.4).** In the paper swapping `v_t` and `v_u` of a split
+//! renumbers the FVIDs of both subtrees and costs nothing to signal. Here a vertex has the
+//! position and normal of its FVID's finest vertex (the left child keeps `v`'s, half-edge
+//! collapses, see [`super`]), so handing `v`'s FVID to the other child would move the coarse
+//! vertex, altering the mesh; and the FVIDs are the decoded mesh's numbering. The swap is
+//! therefore a per-operation coding choice that leaves the FVIDs alone: where both children
+//! split further, the children code (4 instead of 1) says that `v_u`'s operation is stored
+//! directly after this one and `v_l`'s is reached through the pointer, and the split point is
+//! coded as the size of `v_u`'s range. Either way the pointer skips the subtree stored first,
+//! and its estimate errs less over a smaller subtree; the split point is cheaper from the
+//! smaller side. As in the paper the encoder decides by coded size: in each bottom-up
+//! compression an operation whose children both split is coded both ways with that pass's
+//! tables and keeps the shorter (ties: fewer bits, then unswapped). The first tables come from
+//! the guess "smaller subtree first"; from tables built without swaps the swapped children
+//! code would be too long for any swap to pay. On the bunny about half of those operations
+//! swap, saving 0.03 bytes per vertex (0.02 on the dragon, measured against always storing
+//! `v_l`'s operation first). The paper's swap also changes the FVIDs, and with them the face
+//! corner offsets of the operation and its neighbours; here those stay as built.
+//!
 //! Decisions where the paper is silent or that differ from it:
 //! * static canonical Huffman codes instead of arithmetic coding (every operation is padded to
-//!   a byte; the padding is reported in [`Stats`]);
+//!   a byte; the padding is reported in [`Stats`]). A Huffman symbol costs at least a bit, so
+//!   fields that are nearly always the same value are packed into one head symbol, and values
+//!   the FVID ranges imply (children of ranges of 2 or 3 FVIDs, corners in a range of one, the
+//!   split point of a range of 4) are not coded at all, nor is the second face's orientation
+//!   when it is the opposite of the first's (the head's pattern);
+//! * contexts beyond byte significance, from what the decoder knows when it reads a value (the
+//!   classes above), and the tangent-plane prediction of the position (section 4.2.4 only
+//!   predicts from `v`; the normal of `v` is in the context). The prediction uses basic `f64`
+//!   arithmetic on the decoded normal (IEEE 754 rounds those exactly), so encoder and decoder
+//!   agree on every platform;
 //! * the third corner's positive offset is taken to the end of `v`'s FVID range (`v_end`, part
 //!   of the context: the left child's range ends at `v_u`, the right child's where `v`'s did)
 //!   rather than to the next active vertex, which depends on the runtime state;
 //! * the geometric and attribute errors are coded separately (they have different units here),
 //!   and the radius too;
 //! * the input vertex order ([`ProgressiveMesh::fvid_of_input`]) is not stored: the decoded
-//!   mesh is numbered by FVID (`fvid_of_input` is the identity);
-//! * the `v_l`/`v_u` swap optimisation of section 4.2.4 is not implemented.
+//!   mesh is numbered by FVID (`fvid_of_input` is the identity).
+//!
+//! Every context, prediction and implied value above was kept because it made the Stanford
+//! bunny (`stanford/bunny_zipper_c3d.obj.gz`, 34,834 vertices) smaller, tables included; the
+//! file went from 13.11 to 11.30 bytes per vertex with version 2 (the dragon from 11.58 to
+//! 9.80). Contexts that did not pay for their tables on the bunny were left out: classes by
+//! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
+//! tangential coordinate for the second, a normal delta predicted along the motion.
 
 use thiserror::Error;
 
-use super::huffman::{BitReader, BitWriter, Table};
+use super::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::container::{get_varint, put_varint, ContainerError, Layout};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
 /// The `.dpm` container: sections TABL, BASE, OPER.
 const LAYOUT: Layout<3> = Layout {
@@ -352,7 +414,7 @@ fn unzigzag(u: u64) -> i64 {
 
 // ---- symbol coding --------------------------------------------------------------------------
 
-/// The fields of an operation; each has three tables (byte significance 0, 1, 2+).
+/// The fields of an operation, for the size breakdown in [`Stats`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(usize)]
 enum Kind {
@@ -360,8 +422,8 @@ enum Kind {
     GeomError,
     AttrError,
     Radius,
-    Children,
-    VuOffset,
+    Head,
+    Split,
     FaceCount,
     FaceForm,
     FaceT,
@@ -375,36 +437,201 @@ enum Kind {
 }
 
 const KINDS: usize = 16;
-const SIGNIFICANCES: usize = 3;
-const TABLES: usize = KINDS * SIGNIFICANCES;
-const CRITERIA_KINDS: [Kind; 4] = [Kind::Sin, Kind::GeomError, Kind::AttrError, Kind::Radius];
+
+/// How a field's values become byte symbols.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scheme {
+    /// 7-bit groups, least significant first, with a continuation bit; the group's
+    /// significance (0, 1, 2+) selects one of three tables (the paper's contexts by byte
+    /// significance).
+    Groups,
+    /// One symbol per value: the value itself below 16, else its bit length and the three bits
+    /// below the leading one, followed by the remaining low bits uncoded (as DEFLATE codes
+    /// lengths and distances). One table per class; suits wide values whose low bits are
+    /// noise. Values must be below `2^34` (the encoder's are: FVID offsets, positions and
+    /// normals are at most 33 bits as zigzag values).
+    Buckets,
+}
+
+/// A coded field: its kind for the breakdown, its number of classes (a context chosen from
+/// what the decoder already knows, each with its own tables) and its scheme.
+#[derive(Clone, Copy, Debug)]
+struct Field {
+    kind: Kind,
+    classes: usize,
+    scheme: Scheme,
+}
+
+const fn field(kind: Kind, classes: usize, scheme: Scheme) -> Field {
+    Field { kind, classes, scheme }
+}
+
+/// Classes of the region size contexts (see [`region_class`]).
+const REGION_CLASSES: usize = 3;
+
+/// The class of an operation by the number of finest vertices its vertex stands for
+/// (`v_end - v`, at least 2): its bit length less 2, capped.
+fn region_class(v: u32, v_end: u32) -> usize {
+    let n = v_end.saturating_sub(v).max(2);
+    ((32 - n.leading_zeros()) as usize - 2).min(REGION_CLASSES - 1)
+}
+
+/// Classes of the split point's contexts (see [`split_class`]).
+const SPLIT_CLASSES: usize = 6;
+
+/// The class of the split point of a range of `n` FVIDs (more than 4): its bit length less
+/// 3, capped.
+fn split_class(n: u32) -> usize {
+    ((32 - n.leading_zeros()) as usize - 3).min(SPLIT_CLASSES - 1)
+}
+
+/// Classes of the magnitude contexts (see [`magnitude_class`]).
+const MAGNITUDES: usize = 28;
+
+// The fields, in table order.
+const SIN: usize = 0;
+const GEOM: usize = 1;
+const ATTR: usize = 2;
+const RADIUS: usize = 3;
+const HEAD: usize = 4;
+const SPLIT: usize = 5;
+const FACE_COUNT: usize = 6;
+const FACE_FORM: usize = 7;
+const FACE_T: usize = 8;
+const FACE_U: usize = 9;
+const FACE_OTHER: usize = 10;
+const FACE_OTHER_DELTA: usize = 11;
+const FACE_GENERAL: usize = 12;
+const POS_TANGENT: usize = 13;
+const POS_NORMAL: usize = 14;
+const NORMAL: usize = 15;
+const POINTER: usize = 16;
+const FIELDS: [Field; 17] = [
+    field(Kind::Sin, 4, Scheme::Groups),
+    field(Kind::GeomError, 1, Scheme::Groups),
+    field(Kind::AttrError, 1, Scheme::Groups),
+    field(Kind::Radius, 1, Scheme::Groups),
+    field(Kind::Head, 4, Scheme::Groups),
+    field(Kind::Split, SPLIT_CLASSES, Scheme::Groups),
+    field(Kind::FaceCount, 1, Scheme::Groups),
+    field(Kind::FaceForm, 1, Scheme::Groups),
+    field(Kind::FaceT, 7, Scheme::Groups),
+    field(Kind::FaceU, 7, Scheme::Groups),
+    field(Kind::FaceOther, REGION_CLASSES, Scheme::Buckets),
+    field(Kind::FaceOtherDelta, REGION_CLASSES, Scheme::Buckets),
+    field(Kind::FaceGeneral, 1, Scheme::Groups),
+    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Normal, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Pointer, SPLIT_CLASSES, Scheme::Groups),
+];
+
+const fn tables_per_class(s: Scheme) -> usize {
+    match s {
+        Scheme::Groups => 3,
+        Scheme::Buckets => 1,
+    }
+}
+
+/// Per field, the index of its first table; the last entry is the number of tables.
+const TABLE_BASE: [usize; FIELDS.len() + 1] = {
+    let mut b = [0; FIELDS.len() + 1];
+    let mut i = 0;
+    while i < FIELDS.len() {
+        b[i + 1] = b[i] + FIELDS[i].classes * tables_per_class(FIELDS[i].scheme);
+        i += 1;
+    }
+    b
+};
+const TABLES: usize = TABLE_BASE[FIELDS.len()];
+
+/// The magnitude class of a log-coded length or attribute error `k` (section 4.2.3): 0 for
+/// zero, then one class per doubling (35 steps of 2%), capped.
+fn magnitude_class(k: u32) -> usize {
+    if k == 0 {
+        0
+    } else {
+        (1 + (k as usize - 1) / 35).min(MAGNITUDES - 1)
+    }
+}
+
+/// Values below `2^BUCKET_EXACT_BITS` are bucket symbols of their own; above, a symbol holds
+/// the bit length and the `BUCKET_MANTISSA` bits below the leading one.
+const BUCKET_EXACT_BITS: u64 = 4;
+const BUCKET_EXACT: u64 = 1 << BUCKET_EXACT_BITS;
+const BUCKET_MANTISSA: u64 = 3;
+const BUCKET_MASK: u64 = (1 << BUCKET_MANTISSA) - 1;
+
+/// The bucket symbol of `v` and its uncoded low bits (count, value).
+fn bucket(v: u64) -> (u8, u32, u64) {
+    if v < BUCKET_EXACT {
+        return (v as u8, 0, 0);
+    }
+    let b = 64 - v.leading_zeros() as u64; // bit length, above BUCKET_EXACT's
+    let raw = b - 1 - BUCKET_MANTISSA;
+    let sym = BUCKET_EXACT + ((b - BUCKET_EXACT_BITS - 1) << BUCKET_MANTISSA) + ((v >> raw) & BUCKET_MASK);
+    debug_assert!(sym < 256, "bucket value out of range");
+    (sym as u8, raw as u32, v & ((1u64 << raw) - 1))
+}
 
 /// Where op symbols go: counted (to build tables) or written.
 struct OpWriter<'a> {
     tables: Option<&'a [Table]>,
     counts: Option<&'a mut [[u64; 256]]>,
     w: BitWriter,
+    /// Bits written so far.
+    bits: u64,
 }
 
 impl OpWriter<'_> {
-    fn put(&mut self, kind: Kind, mut v: u64) {
-        let mut i = 0;
-        loop {
-            let more = v >= 0x80;
-            let sym = (v & 0x7f) as u8 | if more { 0x80 } else { 0 };
-            let ctx = kind as usize * SIGNIFICANCES + i.min(SIGNIFICANCES - 1);
-            if let Some(c) = self.counts.as_deref_mut() {
-                c[ctx][sym as usize] += 1;
+    fn sym(&mut self, table: usize, sym: u8) {
+        if let Some(c) = self.counts.as_deref_mut() {
+            c[table][sym as usize] += 1;
+        }
+        if let Some(t) = self.tables {
+            t[table].encode(&mut self.w, sym);
+            self.bits += t[table].lens[sym as usize] as u64;
+        }
+    }
+
+    fn raw(&mut self, mut n: u32, v: u64) {
+        self.bits += n as u64;
+        while n > 0 {
+            let k = n.min(16);
+            n -= k;
+            self.w.put(((v >> n) & ((1 << k) - 1)) as u32, k as u8);
+        }
+    }
+
+    /// Codes `v` in class `class` of field `f`.
+    fn put(&mut self, f: usize, class: usize, mut v: u64) {
+        let spec = FIELDS[f];
+        let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
+        match spec.scheme {
+            Scheme::Groups => {
+                let mut i = 0;
+                loop {
+                    let more = v >= 0x80;
+                    self.sym(base + i.min(2), (v & 0x7f) as u8 | if more { 0x80 } else { 0 });
+                    v >>= 7;
+                    i += 1;
+                    if !more {
+                        break;
+                    }
+                }
             }
-            if let Some(t) = self.tables {
-                t[ctx].encode(&mut self.w, sym);
-            }
-            v >>= 7;
-            i += 1;
-            if !more {
-                break;
+            Scheme::Buckets => {
+                let (s, n, low) = bucket(v);
+                self.sym(base, s);
+                if self.tables.is_some() {
+                    self.raw(n, low);
+                }
             }
         }
+    }
+
+    fn put_signed(&mut self, f: usize, class: usize, v: i64) {
+        self.put(f, class, zigzag(v));
     }
 }
 
@@ -415,28 +642,56 @@ struct OpReader<'a, 'b> {
 }
 
 impl OpReader<'_, '_> {
-    fn get(&mut self, kind: Kind) -> Result<u64, DpmError> {
-        let before = self.r.read;
-        let mut v = 0u64;
-        for i in 0..10 {
-            let ctx = kind as usize * SIGNIFICANCES + i.min(SIGNIFICANCES - 1);
-            let sym = self.tables[ctx].decode(&mut self.r).ok_or(DpmError::Truncated("an operation"))?;
-            v |= ((sym & 0x7f) as u64) << (7 * i);
-            if sym & 0x80 == 0 {
-                if let Some(b) = self.bits.as_deref_mut() {
-                    b[kind as usize] += self.r.read - before;
-                }
-                if v > u32::MAX as u64 * 2 + 1 {
-                    return Err(corrupt("value out of range in an operation"));
-                }
-                return Ok(v);
-            }
-        }
-        Err(corrupt("overlong value in an operation"))
+    fn sym(&mut self, table: usize) -> Result<u8, DpmError> {
+        self.tables[table].decode(&mut self.r).ok_or(DpmError::Truncated("an operation"))
     }
 
-    fn get_signed(&mut self, kind: Kind) -> Result<i64, DpmError> {
-        Ok(unzigzag(self.get(kind)?))
+    fn get(&mut self, f: usize, class: usize) -> Result<u64, DpmError> {
+        let before = self.r.read;
+        let spec = FIELDS[f];
+        let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
+        let v = match spec.scheme {
+            Scheme::Groups => {
+                let mut v = 0u64;
+                let mut i = 0;
+                loop {
+                    if i == 10 {
+                        return Err(corrupt("overlong value in an operation"));
+                    }
+                    let sym = self.sym(base + i.min(2))?;
+                    v |= ((sym & 0x7f) as u64) << (7 * i);
+                    i += 1;
+                    if sym & 0x80 == 0 {
+                        break v;
+                    }
+                }
+            }
+            Scheme::Buckets => {
+                let s = self.sym(base)? as u64;
+                if s < BUCKET_EXACT {
+                    s
+                } else {
+                    let b = ((s - BUCKET_EXACT) >> BUCKET_MANTISSA) + BUCKET_EXACT_BITS + 1;
+                    let raw = b - 1 - BUCKET_MANTISSA;
+                    let mut v = ((BUCKET_MASK + 1) | ((s - BUCKET_EXACT) & BUCKET_MASK)) << raw;
+                    for i in (0..raw).rev() {
+                        v |= (self.r.bit().ok_or(DpmError::Truncated("an operation"))? as u64) << i;
+                    }
+                    v
+                }
+            }
+        };
+        if let Some(b) = self.bits.as_deref_mut() {
+            b[spec.kind as usize] += self.r.read - before;
+        }
+        if v > u32::MAX as u64 * 2 + 1 {
+            return Err(corrupt("value out of range in an operation"));
+        }
+        Ok(v)
+    }
+
+    fn get_signed(&mut self, f: usize, class: usize) -> Result<i64, DpmError> {
+        Ok(unzigzag(self.get(f, class)?))
     }
 }
 
@@ -470,6 +725,9 @@ pub struct DecodedOp {
     /// Addresses of the operations of `v_l` and `v_u`, where they split further.
     pub left: Option<usize>,
     pub right: Option<usize>,
+    /// Whether `v_u`'s operation is stored first, directly after this one (the swap of
+    /// section 4.2.4; only where both children split further).
+    pub swapped: bool,
     /// One past this operation's last byte.
     pub end: usize,
 }
@@ -487,12 +745,14 @@ enum FaceCode {
     General([i64; 3]),
 }
 
-/// An operation with everything but its address offset.
+/// An operation with everything but its address offset and its swap.
 struct OpData {
     ctx: OpContext,
     v_u: u32,
     crit: [u32; 4],
-    children: u32,
+    has_left: bool,
+    has_right: bool,
+    /// Standard faces first, by third-corner offset.
     faces: Vec<FaceCode>,
     dpos: [i64; 3],
     dnrm: [i64; 2],
@@ -510,57 +770,160 @@ fn criteria_prediction(parent: &[u32; 4], this: &[u32; 4], i: usize) -> i64 {
     }
 }
 
-fn children_symbol(left: bool, right: bool) -> u32 {
+/// The children code of the head symbol: 0 none splits further, 1 both (`v_l`'s operation
+/// first), 2 `v_l` only, 3 `v_u` only, 4 both, swapped (`v_u`'s operation first).
+fn children_code(left: bool, right: bool, swapped: bool) -> u32 {
     match (left, right) {
         (false, false) => 0,
-        (true, true) => 1,
+        (true, true) => 1 + 3 * swapped as u32,
         (true, false) => 2,
         (false, true) => 3,
     }
 }
 
-fn pointer_estimate(avg: f32, v: u32, v_u: u32) -> i64 {
-    (avg as f64 * (v_u as f64 - v as f64 - 1.0)).round() as i64
+/// The class of the head symbol: the size of `v`'s FVID range, 2, 3, 4 or more (a range of 2
+/// has two leaves as children, one of 3 one leaf and one split).
+fn head_class(v: u32, v_end: u32) -> usize {
+    (v_end.saturating_sub(v).clamp(2, 5) - 2) as usize
 }
 
-fn write_op(w: &mut OpWriter, d: &OpData, offset: u64, avg: f32) {
-    for (i, &kind) in CRITERIA_KINDS.iter().enumerate() {
-        w.put(kind, zigzag(criteria_prediction(&d.ctx.parent_criteria, &d.crit, i) - d.crit[i] as i64));
+/// The class of `sin(alpha)`'s residual: the parent's value in quarters of its range (a wide
+/// parent cone often has an equally wide child cone).
+fn sin_class(parent: &[u32; 4]) -> usize {
+    (parent[0] >> 6).min(3) as usize
+}
+
+/// The orientation pattern of the head symbol: 0 or 1 when the first two faces are standard
+/// and of opposite orientation (or there is one standard face), the first face's orientation;
+/// 2 when every face's form is coded.
+fn face_pattern(faces: &[FaceCode]) -> u32 {
+    match faces {
+        [] => 0,
+        [FaceCode::Standard { rev, .. }] => *rev as u32,
+        [FaceCode::Standard { rev: a, .. }, FaceCode::Standard { rev: b, .. }, ..] if a != b => *a as u32,
+        _ => 2,
     }
-    w.put(Kind::Children, d.children as u64);
-    if d.children == 1 || d.children == 2 {
-        w.put(Kind::VuOffset, (d.v_u - d.ctx.v - 2) as u64);
+}
+
+/// The class of a face corner's offset inside `v_l`'s or `v_u`'s FVID range (of `range` FVIDs,
+/// at least 2; the corner of a range of 1 is not coded): for the first standard face 0 to 3 by
+/// the range's bit length, else 4 to 6 by the previous face's offset (0, 1, more), as the two
+/// faces of an edge often share a corner.
+fn corner_class(prev: Option<u64>, range: u32) -> usize {
+    match prev {
+        None => ((32 - range.leading_zeros()) as usize - 2).min(3),
+        Some(p) => 4 + p.min(2) as usize,
     }
-    w.put(Kind::FaceCount, d.faces.len() as u64);
-    let mut prev_o = None;
-    for f in &d.faces {
+}
+
+fn pointer_estimate(avg: f32, first_size: u32) -> i64 {
+    (avg as f64 * (first_size as f64 - 1.0)).round() as i64
+}
+
+/// The coding frame of a position delta: the axes in coding order, the two least aligned with
+/// `v`'s normal first, and the normal's components along them. The last axis is predicted
+/// from the first two by the tangent plane (section 4.2.4 predicts `v_u` from `v`; the normal
+/// of `v` is known to the decoder, so the delta is predicted to lie in `v`'s tangent plane).
+fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [f64; 3]) {
+    let n = oct_decode(normal, bits);
+    let mut a = 0;
+    for i in 1..3 {
+        if n[i].abs() > n[a].abs() {
+            a = i;
+        }
+    }
+    let axes = match a {
+        0 => [1, 2, 0],
+        1 => [0, 2, 1],
+        _ => [0, 1, 2],
+    };
+    (axes, axes.map(|i| n[i] as f64))
+}
+
+/// The tangent-plane prediction of the last axis from the first two.
+fn tangent_prediction(n: [f64; 3], d0: i64, d1: i64) -> i64 {
+    if n[2] == 0.0 {
+        return 0;
+    }
+    let p = -(n[0] * d0 as f64 + n[1] * d1 as f64) / n[2];
+    p.round().clamp(-2_147_483_648.0, 2_147_483_648.0) as i64
+}
+
+/// The class of the last axis's residual: the bit length of the tangential delta.
+fn tangent_class(d0: i64, d1: i64) -> usize {
+    let m = d0.unsigned_abs() + d1.unsigned_abs();
+    ((64 - m.leading_zeros()) as usize).min(MAGNITUDES - 1)
+}
+
+/// Writes an operation; `swapped` stores `v_u`'s subtree first, `offset` is the size in bytes
+/// of the subtree stored first (both only where both children split further).
+fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64, avg: f32, normal_bits: u8) {
+    let (v, v_u, v_end) = (d.ctx.v, d.v_u, d.ctx.v_end);
+    let mut residual = [0i64; 4];
+    for (i, r) in residual.iter_mut().enumerate() {
+        *r = criteria_prediction(&d.ctx.parent_criteria, &d.crit, i) - d.crit[i] as i64;
+    }
+    w.put_signed(SIN, sin_class(&d.ctx.parent_criteria), residual[0]);
+    w.put_signed(GEOM, 0, residual[1]);
+    w.put_signed(ATTR, 0, residual[2]);
+    let swapped = swapped && d.has_left && d.has_right;
+    let nf = d.faces.len();
+    let pattern = face_pattern(&d.faces);
+    let head = children_code(d.has_left, d.has_right, swapped)
+        + 5 * (nf.min(3) as u32 + 4 * (pattern + 3 * (residual[3] != 0) as u32));
+    w.put(HEAD, head_class(v, v_end), head as u64);
+    if residual[3] != 0 {
+        w.put(RADIUS, 0, zigzag(residual[3]) - 1);
+    }
+    let first_size = if swapped { v_end - v_u } else { v_u - v };
+    // Both children split, so each has at least 2 FVIDs; a range of 4 leaves no choice.
+    if d.has_left && d.has_right && v_end - v > 4 {
+        w.put(SPLIT, split_class(v_end - v), (first_size - 2) as u64);
+    }
+    if nf >= 3 {
+        w.put(FACE_COUNT, 0, (nf - 3) as u64);
+    }
+    let mut prev: Option<(u64, u64, u64)> = None;
+    for (i, f) in d.faces.iter().enumerate() {
+        let implied = pattern < 2 && i < 2;
         match *f {
             FaceCode::Standard { t, u, o, rev } => {
-                w.put(Kind::FaceForm, rev as u64);
-                w.put(Kind::FaceT, t as u64);
-                w.put(Kind::FaceU, u as u64);
-                match prev_o {
-                    None => w.put(Kind::FaceOther, o),
-                    Some(p) => w.put(Kind::FaceOtherDelta, o - p),
+                if !implied {
+                    w.put(FACE_FORM, 0, rev as u64);
                 }
-                prev_o = Some(o);
+                let (t, u) = (t as u64, u as u64);
+                if v_u - v > 1 {
+                    w.put(FACE_T, corner_class(prev.map(|p| p.0), v_u - v), t);
+                }
+                if v_end - v_u > 1 {
+                    w.put(FACE_U, corner_class(prev.map(|p| p.1), v_end - v_u), u);
+                }
+                match prev {
+                    None => w.put(FACE_OTHER, region_class(v, v_end), o),
+                    Some((_, _, po)) => w.put(FACE_OTHER_DELTA, region_class(v, v_end), o - po),
+                }
+                prev = Some((t, u, o));
             }
             FaceCode::General(c) => {
-                w.put(Kind::FaceForm, 2);
+                w.put(FACE_FORM, 0, 2);
                 for x in c {
-                    w.put(Kind::FaceGeneral, zigzag(x));
+                    w.put_signed(FACE_GENERAL, 0, x);
                 }
             }
         }
     }
-    for x in d.dpos {
-        w.put(Kind::Position, zigzag(x));
-    }
+    let (axes, n) = position_frame(d.ctx.normal, normal_bits);
+    let [d0, d1, d2] = axes.map(|a| d.dpos[a]);
+    let class = magnitude_class(d.crit[3]);
+    w.put_signed(POS_TANGENT, class, d0);
+    w.put_signed(POS_TANGENT, class, d1);
+    w.put_signed(POS_NORMAL, tangent_class(d0, d1), d2 - tangent_prediction(n, d0, d1));
+    let class = magnitude_class(d.crit[2]);
     for x in d.dnrm {
-        w.put(Kind::Normal, zigzag(x));
+        w.put_signed(NORMAL, class, x);
     }
-    if d.children == 1 {
-        w.put(Kind::Pointer, zigzag(offset as i64 - pointer_estimate(avg, d.ctx.v, d.v_u)));
+    if d.has_left && d.has_right {
+        w.put_signed(POINTER, split_class(first_size + 2), offset as i64 - pointer_estimate(avg, first_size));
     }
 }
 
@@ -582,50 +945,79 @@ fn read_op(
     }
     let mut r = OpReader { tables, r: BitReader::new(ops, addr), bits };
     let mut crit = [0u32; 4];
-    for i in 0..4 {
-        let k = criteria_prediction(&ctx.parent_criteria, &crit, i) - r.get_signed(CRITERIA_KINDS[i])?;
+    let residual =
+        [r.get_signed(SIN, sin_class(&ctx.parent_criteria))?, r.get_signed(GEOM, 0)?, r.get_signed(ATTR, 0)?];
+    let head = r.get(HEAD, head_class(v, v_end))?;
+    let (code, nfc, pattern, rz) = (head % 5, head / 5 % 4, head / 20 % 3, head / 60);
+    if rz > 1 {
+        return Err(corrupt("bad operation head"));
+    }
+    let radius_residual = if rz == 1 { unzigzag(r.get(RADIUS, 0)? + 1) } else { 0 };
+    for (i, res) in residual.into_iter().chain([radius_residual]).enumerate() {
+        let k = criteria_prediction(&ctx.parent_criteria, &crit, i) - res;
         let max = if i == 0 { 255 } else { MAX_K as i64 };
         if !(0..=max).contains(&k) {
             return Err(corrupt("refinement criterion out of range"));
         }
         crit[i] = k as u32;
     }
-    let children = r.get(Kind::Children)?;
-    let (has_left, has_right) = match children {
-        0 => (false, false),
-        1 => (true, true),
-        2 => (true, false),
-        3 => (false, true),
-        _ => return Err(corrupt("bad children code")),
+    let (has_left, has_right, swapped) = match code {
+        0 => (false, false, false),
+        1 => (true, true, false),
+        2 => (true, false, false),
+        3 => (false, true, false),
+        _ => (true, true, true),
     };
-    let v_u = if has_left { v as u64 + 2 + r.get(Kind::VuOffset)? } else { v as u64 + 1 };
-    if v_u >= v_end as u64 {
-        return Err(corrupt("v_u outside the vertex's FVID range"));
-    }
+    let size = (v_end - v) as u64;
+    let (v_u, first_size) = match (has_left, has_right) {
+        (true, true) => {
+            let s = if size > 4 { r.get(SPLIT, split_class(v_end - v))? + 2 } else { 2 };
+            if s + 2 > size {
+                return Err(corrupt("v_u outside the vertex's FVID range"));
+            }
+            (if swapped { v_end as u64 - s } else { v as u64 + s }, s as u32)
+        }
+        (true, false) => (v_end as u64 - 1, 0),
+        (false, _) => (v as u64 + 1, 0),
+    };
     let v_u = v_u as u32;
     // A leaf's range holds exactly one FVID.
-    if (has_right && v_end - v_u < 2) || (!has_right && v_end - v_u != 1) {
+    if v_u <= v
+        || v_u >= v_end
+        || (has_left && v_u - v < 2)
+        || (!has_left && v_u - v != 1)
+        || (has_right && v_end - v_u < 2)
+        || (!has_right && v_end - v_u != 1)
+    {
         return Err(corrupt("split tree inconsistent with the FVID ranges"));
     }
-    let nf = r.get(Kind::FaceCount)?;
+    let nf = if nfc == 3 { 3 + r.get(FACE_COUNT, 0)? } else { nfc };
     if nf > (ops.len() as u64 - addr as u64) * 8 {
         return Err(corrupt("face count larger than the data"));
     }
+    if (nf == 0 && pattern != 0) || pattern > 2 {
+        return Err(corrupt("bad operation head"));
+    }
     let mut faces = Vec::with_capacity(nf as usize);
-    let mut prev_o = None;
-    for _ in 0..nf {
-        let form = r.get(Kind::FaceForm)?;
+    let mut prev: Option<(u64, u64, u64)> = None;
+    for i in 0..nf {
+        let form = match (pattern, i) {
+            (0 | 1, 0) => pattern,
+            (0 | 1, 1) => 1 - pattern,
+            _ => r.get(FACE_FORM, 0)?,
+        };
         match form {
             0 | 1 => {
-                let t = v as u64 + r.get(Kind::FaceT)?;
-                let u = v_u as u64 + r.get(Kind::FaceU)?;
-                let o = match prev_o {
-                    None => r.get(Kind::FaceOther)?,
-                    Some(p) => p + r.get(Kind::FaceOtherDelta)?,
+                let t = if v_u - v > 1 { r.get(FACE_T, corner_class(prev.map(|p| p.0), v_u - v))? } else { 0 };
+                let u = if v_end - v_u > 1 { r.get(FACE_U, corner_class(prev.map(|p| p.1), v_end - v_u))? } else { 0 };
+                let o = match prev {
+                    None => r.get(FACE_OTHER, region_class(v, v_end))?,
+                    Some((_, _, po)) => po + r.get(FACE_OTHER_DELTA, region_class(v, v_end))?,
                 };
-                prev_o = Some(o);
+                prev = Some((t, u, o));
                 let d = unzigzag(o);
                 let other = if d < 0 { v as i64 + d } else { v_end as i64 + d };
+                let (t, u) = (v as u64 + t, v_u as u64 + u);
                 if t >= v_u as u64 || u >= v_end as u64 || other < 0 || other >= n {
                     return Err(corrupt("face corner out of range"));
                 }
@@ -635,7 +1027,7 @@ fn read_op(
             2 => {
                 let mut c = [0u32; 3];
                 for x in &mut c {
-                    let f = v as i64 + r.get_signed(Kind::FaceGeneral)?;
+                    let f = v as i64 + r.get_signed(FACE_GENERAL, 0)?;
                     if f < 0 || f >= n {
                         return Err(corrupt("face corner out of range"));
                     }
@@ -646,17 +1038,23 @@ fn read_op(
             _ => return Err(corrupt("bad face form")),
         }
     }
+    let (axes, nrm) = position_frame(ctx.normal, h.normal_bits);
+    let class = magnitude_class(crit[3]);
+    let d0 = r.get_signed(POS_TANGENT, class)?;
+    let d1 = r.get_signed(POS_TANGENT, class)?;
+    let d2 = tangent_prediction(nrm, d0, d1) + r.get_signed(POS_NORMAL, tangent_class(d0, d1))?;
     let mut position_u = [0u32; 3];
-    for (x, &base) in position_u.iter_mut().zip(&ctx.position) {
-        let p = base as i64 + r.get_signed(Kind::Position)?;
+    for (a, d) in axes.into_iter().zip([d0, d1, d2]) {
+        let p = ctx.position[a] as i64 + d;
         if !(0..=max_q(h.position_bits) as i64).contains(&p) {
             return Err(corrupt("position out of range"));
         }
-        *x = p as u32;
+        position_u[a] = p as u32;
     }
     let mut normal_u = [0u32; 2];
+    let class = magnitude_class(crit[2]);
     for (x, &base) in normal_u.iter_mut().zip(&ctx.normal) {
-        let p = base as i64 + r.get_signed(Kind::Normal)?;
+        let p = base as i64 + r.get_signed(NORMAL, class)?;
         if !(0..=(1i64 << h.normal_bits)).contains(&p) {
             return Err(corrupt("normal out of range"));
         }
@@ -666,28 +1064,30 @@ fn read_op(
         return Err(corrupt("normal out of range"));
     }
     let offset = if has_left && has_right {
-        let o = pointer_estimate(h.avg_op_bytes, v, v_u) + r.get_signed(Kind::Pointer)?;
+        let residual = r.get_signed(POINTER, split_class(first_size + 2))?;
+        let o = pointer_estimate(h.avg_op_bytes, first_size).saturating_add(residual);
         if o < 1 {
             return Err(corrupt("bad operation pointer"));
         }
-        Some(o as u64)
+        o as u64
     } else {
-        None
+        0
     };
     let end = r.r.end();
-    let left = has_left.then_some(end);
-    let right = if has_right {
-        let a = end as u64 + offset.unwrap_or(0);
-        if a >= ops.len() as u64 {
-            return Err(corrupt("operation pointer past the end of the operations"));
-        }
-        Some(a as usize)
-    } else {
-        None
-    };
-    if left.is_some_and(|a| a >= ops.len()) {
+    if (has_left || has_right) && end >= ops.len() {
         return Err(DpmError::Truncated("the operations"));
     }
+    let second = end as u64 + offset;
+    if has_left && has_right && second >= ops.len() as u64 {
+        return Err(corrupt("operation pointer past the end of the operations"));
+    }
+    let (left, right) = match (has_left, has_right, swapped) {
+        (true, true, false) => (Some(end), Some(second as usize)),
+        (true, true, true) => (Some(second as usize), Some(end)),
+        (true, false, _) => (Some(end), None),
+        (false, true, _) => (None, Some(end)),
+        (false, false, _) => (None, None),
+    };
     Ok(DecodedOp {
         split: Split { v, v_u, faces },
         criteria_q: crit,
@@ -696,6 +1096,7 @@ fn read_op(
         normal_u,
         left,
         right,
+        swapped,
         end,
     })
 }
@@ -718,6 +1119,68 @@ fn classify(v: u32, v_u: u32, v_end: u32, f: [u32; 3]) -> FaceCode {
         return FaceCode::Standard { t: f[i] - v, u: f[j] - v_u, o: zigzag(d), rev: j != (i + 1) % 3 };
     }
     FaceCode::General(f.map(|c| c as i64 - v as i64))
+}
+
+// ---- the tables section --------------------------------------------------------------------
+
+/// One bit stream, padded to a byte: per table a bit, 0 for a flat code (every symbol 8 bits),
+/// 1 for a code whose 256 lengths follow, each as the Elias gamma code of one plus the zigzag
+/// difference to the previous symbol's length (the first to 8): neighbouring symbols mostly
+/// have equal or adjacent lengths, so a table costs about 40 to 80 bytes.
+fn write_tables(tables: &[Table]) -> Vec<u8> {
+    let mut w = BitWriter::default();
+    for t in tables {
+        if t.lens == [8; 256] {
+            w.put(0, 1);
+            continue;
+        }
+        w.put(1, 1);
+        let mut prev = 8i64;
+        for &l in &t.lens {
+            let g = zigzag(l as i64 - prev) as u32 + 1;
+            let b = 32 - g.leading_zeros();
+            w.put(0, (b - 1) as u8);
+            w.put(g, b as u8);
+            prev = l as i64;
+        }
+    }
+    w.finish()
+}
+
+fn read_tables(tb: &[u8]) -> Result<Vec<Table>, DpmError> {
+    let mut r = BitReader::new(tb, 0);
+    let mut bit = || r.bit().ok_or(DpmError::Truncated("tables"));
+    let mut tables = Vec::with_capacity(TABLES);
+    for _ in 0..TABLES {
+        let mut lens = [8u8; 256];
+        if bit()? {
+            let mut prev = 8i64;
+            for l in &mut lens {
+                let mut zeros = 0;
+                while !bit()? {
+                    zeros += 1;
+                    if zeros > 8 {
+                        return Err(corrupt("bad code length"));
+                    }
+                }
+                let mut g = 1u32;
+                for _ in 0..zeros {
+                    g = (g << 1) | bit()? as u32;
+                }
+                let x = prev + unzigzag(g as u64 - 1);
+                if !(1..=MAX_LEN as i64).contains(&x) {
+                    return Err(corrupt("bad code length"));
+                }
+                *l = x as u8;
+                prev = x;
+            }
+        }
+        tables.push(Table::from_lens(lens).ok_or_else(|| corrupt("invalid code lengths"))?);
+    }
+    if r.end() != tb.len() {
+        return Err(corrupt("bytes after the tables"));
+    }
+    Ok(tables)
 }
 
 // ---- integers in the base mesh section ------------------------------------------------------
@@ -747,27 +1210,7 @@ impl<'a> Dpm<'a> {
     pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
         let (hb, sections) = LAYOUT.parse(bytes)?;
         let header = Header::from_bytes(hb)?;
-        // Tables.
-        let tb = sections[0];
-        let mut pos = 0;
-        let mut tables = Vec::with_capacity(TABLES);
-        for _ in 0..TABLES {
-            let flag = *tb.get(pos).ok_or(DpmError::Truncated("tables"))?;
-            pos += 1;
-            let lens: [u8; 256] = match flag {
-                0 => [8; 256],
-                1 => {
-                    let l = tb.get(pos..pos + 256).ok_or(DpmError::Truncated("tables"))?;
-                    pos += 256;
-                    l.try_into().unwrap()
-                }
-                _ => return Err(corrupt("bad table flag")),
-            };
-            tables.push(Table::from_lens(lens).ok_or_else(|| corrupt("invalid code lengths"))?);
-        }
-        if pos != tb.len() {
-            return Err(corrupt("bytes after the tables"));
-        }
+        let tables = read_tables(sections[0])?;
         // Base mesh.
         let bb = sections[1];
         let ops = sections[2];
@@ -1038,14 +1481,15 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
     let qcrit: Vec<[u32; 4]> = pm.criteria.iter().map(|c| quantize_criteria(c, &h)).collect();
     let tree = SplitTree::new(pm);
 
-    // Pre-order over the forest; per op: split index, right child's op index.
+    // Pre-order over the forest (v_l first); per op: split index, children's op indices.
     let mut order: Vec<usize> = Vec::with_capacity(pm.splits.len());
     let mut data: Vec<OpData> = Vec::with_capacity(pm.splits.len());
-    let mut right_op: Vec<usize> = Vec::with_capacity(pm.splits.len());
+    let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(pm.splits.len());
     let mut contexts = vec![OpContext::default(); pm.splits.len()];
     let mut op_of_split = vec![usize::MAX; pm.splits.len()];
+    let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
     // Stack entries: (split, context, parent op index and side).
-    type Pending = (u32, OpContext, Option<(usize, bool)>);
+    type Pending = (u32, OpContext, Option<(usize, usize)>);
     let mut stack: Vec<Pending> = vec![];
     for (b, &v) in pm.base_vertices.iter().enumerate() {
         let v_end = pm.base_vertices.get(b + 1).copied().unwrap_or(n as u32);
@@ -1056,6 +1500,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
             }
             continue;
         }
+        root_ops[b] = data.len();
         let ctx = OpContext { v, v_end, parent_criteria: [0; 4], position: qpos[v as usize], normal: qnrm[v as usize] };
         stack.push((root, ctx, None));
         while let Some((s, ctx, parent)) = stack.pop() {
@@ -1065,19 +1510,18 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
                 return Err(invalid("split outside its vertex's FVID range"));
             }
             let [l, r] = tree.children[s];
-            let (has_l, has_r) = (l != NONE, r != NONE);
-            if (!has_l && split.v_u != split.v + 1) || (!has_r && ctx.v_end != split.v_u + 1) {
+            let (has_left, has_right) = (l != NONE, r != NONE);
+            if (!has_left && split.v_u != split.v + 1) || (!has_right && ctx.v_end != split.v_u + 1) {
                 return Err(invalid("split tree inconsistent with the FVID ranges"));
             }
             let i = data.len();
             op_of_split[s] = i;
-            if let Some((p, true)) = parent {
-                right_op[p] = i;
+            if let Some((p, side)) = parent {
+                child_ops[p][side] = i;
             }
             contexts[s] = ctx;
             let mut faces: Vec<FaceCode> =
                 split.faces.iter().map(|&f| classify(split.v, split.v_u, ctx.v_end, f)).collect();
-            // Standard faces first, by third-corner offset.
             faces.sort_by_key(|f| match *f {
                 FaceCode::Standard { o, .. } => (0, o),
                 FaceCode::General(_) => (1, 0),
@@ -1088,21 +1532,22 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
                 ctx,
                 v_u: split.v_u,
                 crit: qcrit[s],
-                children: children_symbol(has_l, has_r),
+                has_left,
+                has_right,
                 faces,
                 dpos: std::array::from_fn(|k| pu[k] as i64 - pv[k] as i64),
                 dnrm: std::array::from_fn(|k| nu[k] as i64 - nv[k] as i64),
             });
             order.push(s);
-            right_op.push(usize::MAX);
-            if has_r {
+            child_ops.push([usize::MAX; 2]);
+            if has_right {
                 let c =
                     OpContext { v: split.v_u, v_end: ctx.v_end, parent_criteria: qcrit[s], position: pu, normal: nu };
-                stack.push((r, c, Some((i, true))));
+                stack.push((r, c, Some((i, 1))));
             }
-            if has_l {
+            if has_left {
                 let c = OpContext { v_end: split.v_u, parent_criteria: qcrit[s], ..ctx };
-                stack.push((l, c, Some((i, false))));
+                stack.push((l, c, Some((i, 0))));
             }
         }
     }
@@ -1110,46 +1555,87 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
         return Err(invalid("splits not reachable from the base vertices"));
     }
 
-    // Step 1-2: tables from the operations with zero offsets.
-    let count = |offsets: &[u64], avg: f32| {
+    let nb = h.normal_bits;
+    // Symbol counts for given swaps and offsets.
+    let count = |swaps: &[bool], offsets: &[u64], avg: f32| {
         let mut counts = vec![[0u64; 256]; TABLES];
-        for (d, &o) in data.iter().zip(offsets) {
-            let mut w = OpWriter { tables: None, counts: Some(&mut counts), w: BitWriter::default() };
-            write_op(&mut w, d, o, avg);
+        for (i, d) in data.iter().enumerate() {
+            let mut w = OpWriter { tables: None, counts: Some(&mut counts), w: BitWriter::default(), bits: 0 };
+            write_op(&mut w, d, swaps[i], offsets[i], avg, nb);
         }
         counts
     };
+    // Bottom-up compression (children before parents, so the sizes of both subtrees are known):
+    // per op its bytes, swap and offset. Every operation whose children both split is coded
+    // both ways, and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
     let compress = |tables: &[Table], avg: f32| {
-        let mut bytes: Vec<Vec<u8>> = vec![vec![]; data.len()];
-        let mut subtree = vec![0u64; data.len()];
-        let mut offsets = vec![0u64; data.len()];
-        for i in (0..data.len()).rev() {
+        let m = data.len();
+        let mut bytes: Vec<Vec<u8>> = vec![vec![]; m];
+        let mut subtree = vec![0u64; m];
+        let mut swaps = vec![false; m];
+        let mut offsets = vec![0u64; m];
+        for i in (0..m).rev() {
             let d = &data[i];
-            let left = if d.children == 1 || d.children == 2 { subtree[i + 1] } else { 0 };
-            let right = if right_op[i] != usize::MAX { subtree[right_op[i]] } else { 0 };
-            offsets[i] = left;
-            let mut w = OpWriter { tables: Some(tables), counts: None, w: BitWriter::default() };
-            write_op(&mut w, d, left, avg);
-            bytes[i] = w.w.finish();
-            subtree[i] = bytes[i].len() as u64 + left + right;
+            let [l, r] = child_ops[i];
+            let code = |swap: bool, offset: u64| {
+                let mut w = OpWriter { tables: Some(tables), counts: None, w: BitWriter::default(), bits: 0 };
+                write_op(&mut w, d, swap, offset, avg, nb);
+                let bits = w.bits;
+                (w.w.finish(), bits)
+            };
+            let (b, swap, offset) = if d.has_left && d.has_right {
+                let (plain, plain_bits) = code(false, subtree[l]);
+                let (other, other_bits) = code(true, subtree[r]);
+                if (other.len(), other_bits) < (plain.len(), plain_bits) {
+                    (other, true, subtree[r])
+                } else {
+                    (plain, false, subtree[l])
+                }
+            } else {
+                (code(false, 0).0, false, 0)
+            };
+            let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
+            subtree[i] = b.len() as u64 + sub(l) + sub(r);
+            bytes[i] = b;
+            swaps[i] = swap;
+            offsets[i] = offset;
         }
-        (bytes, offsets)
+        (bytes, swaps, offsets)
     };
-    let tables1: Vec<Table> = count(&vec![0; data.len()], 0.0).iter().map(Table::from_counts).collect();
-    // Step 3: bottom-up compression; the average size for the offset estimate comes from it.
-    let (bytes1, _) = compress(&tables1, 0.0);
-    let avg = bytes1.iter().map(|b| b.len()).sum::<usize>() as f32 / data.len().max(1) as f32;
-    let (_, offsets) = compress(&tables1, avg);
-    // Step 4: tables from the final symbols, and the final compression.
-    let tables: Vec<Table> = count(&offsets, avg).iter().map(Table::from_counts).collect();
-    let (op_bytes, _) = compress(&tables, avg);
+    let m = data.len();
+    // Steps 1-2 of section 4.2: tables from the operations with zero offsets, the smaller
+    // subtree first (a first guess at the swaps: tables from unswapped operations would make
+    // the swapped children code too long for any swap to pay).
+    let smaller_first: Vec<bool> = data.iter().map(|d| d.ctx.v_end - d.v_u < d.v_u - d.ctx.v).collect();
+    let tables1: Vec<Table> = count(&smaller_first, &vec![0; m], 0.0).iter().map(Table::from_counts).collect();
+    // Step 3: bottom-up compression, choosing the swaps; the average size for the offset
+    // estimate comes from it.
+    let (bytes1, _, _) = compress(&tables1, 0.0);
+    let avg = bytes1.iter().map(|b| b.len()).sum::<usize>() as f32 / m.max(1) as f32;
+    let (_, swaps, offsets) = compress(&tables1, avg);
+    // Step 4: tables from those symbols, and the final compression (choosing the swaps again
+    // with the final tables; every symbol has a code, so a changed choice still codes).
+    let tables: Vec<Table> = count(&swaps, &offsets, avg).iter().map(Table::from_counts).collect();
+    let (op_bytes, swaps, _) = compress(&tables, avg);
     h.avg_op_bytes = avg;
 
+    // Layout: pre-order, each operation followed by the subtree it stores first.
     let mut ops = Vec::with_capacity(op_bytes.iter().map(|b| b.len()).sum());
-    let mut op_addr = Vec::with_capacity(data.len());
-    for b in &op_bytes {
-        op_addr.push(ops.len());
-        ops.extend_from_slice(b);
+    let mut op_addr = vec![0usize; m];
+    let mut layout: Vec<usize> = vec![];
+    for &root in root_ops.iter().filter(|&&r| r != usize::MAX) {
+        layout.push(root);
+        while let Some(i) = layout.pop() {
+            op_addr[i] = ops.len();
+            ops.extend_from_slice(&op_bytes[i]);
+            let [l, r] = child_ops[i];
+            let (first, second) = if swaps[i] { (r, l) } else { (l, r) };
+            for c in [second, first] {
+                if c != usize::MAX {
+                    layout.push(c);
+                }
+            }
+        }
     }
     let mut addresses = vec![0usize; pm.splits.len()];
     for (i, &s) in order.iter().enumerate() {
@@ -1157,15 +1643,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
     }
 
     // Sections.
-    let mut tb = Vec::new();
-    for t in &tables {
-        if t.lens == [8; 256] {
-            tb.push(0);
-        } else {
-            tb.push(1);
-            tb.extend_from_slice(&t.lens);
-        }
-    }
+    let tb = write_tables(&tables);
     let mut bb = Vec::new();
     let mut next = 0u64;
     for (b, &v) in pm.base_vertices.iter().enumerate() {
@@ -1196,9 +1674,10 @@ pub struct Stats {
     pub bytes: usize,
     /// Refinement criteria (sin alpha, errors, radius).
     pub criteria_bytes: f64,
-    /// Tree pointers: the children code and the address offsets.
+    /// Tree pointers: the head symbol (the children code, with the face count, the faces'
+    /// orientations and the radius flag) and the address offsets.
     pub tree_pointer_bytes: f64,
-    /// Connectivity: `v_u`'s FVID and the faces.
+    /// Connectivity: `v_u`'s FVID (the split point) and the faces.
     pub connectivity_bytes: f64,
     /// Geometry: position and normal deltas.
     pub geometry_bytes: f64,
@@ -1219,10 +1698,10 @@ impl Stats {
         let mut bits = [0u64; KINDS];
         dpm.decode_all(Some(&mut bits))?;
         let sum = |ks: &[Kind]| ks.iter().map(|&k| bits[k as usize]).sum::<u64>() as f64 / 8.0;
-        let criteria_bytes = sum(&CRITERIA_KINDS);
-        let tree_pointer_bytes = sum(&[Kind::Children, Kind::Pointer]);
+        let criteria_bytes = sum(&[Kind::Sin, Kind::GeomError, Kind::AttrError, Kind::Radius]);
+        let tree_pointer_bytes = sum(&[Kind::Head, Kind::Pointer]);
         let connectivity_bytes = sum(&[
-            Kind::VuOffset,
+            Kind::Split,
             Kind::FaceCount,
             Kind::FaceForm,
             Kind::FaceT,
@@ -1276,7 +1755,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         avg_op_bytes: 4.0,
         triangles: data.first().copied().unwrap_or(0) as u32,
     };
-    let tb = [0u8; TABLES];
+    let tb = vec![0u8; TABLES.div_ceil(8)];
     let mut bb = vec![];
     put_varint(&mut bb, 0);
     for _ in 0..5 {

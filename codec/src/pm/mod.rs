@@ -2,10 +2,12 @@
 //! Progressive Meshes"): the builder with its refinement criteria (section 4, [`Criteria`]),
 //! a sequential reference refinement ([`refine`]) and the CPU reference of the parallel
 //! view-dependent adaption of section 5 ([`adapt`]), and the `.dpm` file ([`mod@format`]): every
-//! operation coded on its own with shared static Huffman tables per field and byte
-//! significance (section 4.2), in tree order with pointers, so that any operation decodes from
-//! its address alone. The binary tree pointers of Table 1 are derived from the splits by
-//! [`SplitTree::new`]. Not yet: the v_l/v_u swap optimisation of section 4.2.4.
+//! operation coded on its own with shared static Huffman tables per context (field, byte
+//! significance and classes from what the decoder already knows, section 4.2), in tree order
+//! with pointers, so that any operation decodes from its address alone. The binary tree
+//! pointers of Table 1 are derived from the splits by [`SplitTree::new`]. The v_l/v_u swap of
+//! section 4.2.4 is a per-operation choice of which child's operation is stored first, made by
+//! coded size (the FVIDs stay as built; see [`mod@format`] for why).
 //!
 //! The mesh is simplified by edge collapses until no edge is left (section 3); the original
 //! mesh comes back by applying the inverse vertex splits in reverse order. What makes the
