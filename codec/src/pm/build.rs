@@ -4,14 +4,16 @@
 //! Decisions where the paper is silent:
 //!
 //! * **Half-edge collapses.** `v_u` collapses into `v_t`, which keeps its position, so no
-//!   position has to be solved for and the per-FVID positions are the input's. The paper's
-//!   attribute deltas and its `v_t`/`v_u` swapping (section 4.2.4) are later slices.
+//!   position has to be solved for and the per-FVID positions are the input's. Position and
+//!   normal deltas are coded by [`super::format`], which also makes the `v_t`/`v_u` swap of
+//!   section 4.2.4 a per-operation coding choice (why it cannot renumber here: see there).
 //! * **Cost.** Garland-Heckbert quadrics: every face adds its plane weighted by its area to its
 //!   vertices; the cost of collapsing `u` into `t` is `(Q_u + Q_t)(p_t)`, and an edge offers
 //!   the cheaper of its two directions. Edges are taken greedily, cheapest first, from a
 //!   4-ary heap with lazy invalidation: an entry records when its vertices last changed (absorbed
 //!   another vertex) and is stale once either changed again or died. The local
-//!   error monotonicity of section 3.2 belongs with the refinement criteria, a later slice.
+//!   error monotonicity of section 3.2 is made explicit in the refinement criteria
+//!   ([`super::Criteria`]).
 //! * **No collapse is refused.** The paper simplifies "until no faces are left", so there are
 //!   no link-condition or fold-over checks: whatever the topology, collapses run until no
 //!   face holds two distinct vertices. Vertices left without a common face are not merged
