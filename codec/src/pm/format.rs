@@ -122,6 +122,7 @@
 //! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
 //! tangential coordinate for the second, a normal delta predicted along the motion.
 
+use rayon::prelude::*;
 use thiserror::Error;
 
 use super::huffman::{BitReader, BitWriter, Table, MAX_LEN};
@@ -1557,14 +1558,44 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
 
     let nb = h.normal_bits;
     // Symbol counts for given swaps and offsets.
+    // In parallel chunks, each with its own counts, summed at the end.
     let count = |swaps: &[bool], offsets: &[u64], avg: f32| {
-        let mut counts = vec![[0u64; 256]; TABLES];
-        for (i, d) in data.iter().enumerate() {
-            let mut w = OpWriter { tables: None, counts: Some(&mut counts), w: BitWriter::default(), bits: 0 };
-            write_op(&mut w, d, swaps[i], offsets[i], avg, nb);
-        }
-        counts
+        const CHUNK: usize = 1 << 14;
+        data.par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let mut counts = vec![[0u64; 256]; TABLES];
+                for (k, d) in chunk.iter().enumerate() {
+                    let i = c * CHUNK + k;
+                    let mut w = OpWriter { tables: None, counts: Some(&mut counts), w: BitWriter::default(), bits: 0 };
+                    write_op(&mut w, d, swaps[i], offsets[i], avg, nb);
+                }
+                counts
+            })
+            .reduce(
+                || vec![[0u64; 256]; TABLES],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(&b) {
+                        for (p, q) in x.iter_mut().zip(y) {
+                            *p += q;
+                        }
+                    }
+                    a
+                },
+            )
     };
+    // Operations by height in the split forest (0: both children leaves): an operation's
+    // children are all of lower height, so each height is coded in parallel once the lower
+    // ones are done (pre-order puts children after their parent).
+    let mut height = vec![0u32; data.len()];
+    for i in (0..data.len()).rev() {
+        let h = child_ops[i].iter().filter(|&&c| c != usize::MAX).map(|&c| height[c] + 1).max().unwrap_or(0);
+        height[i] = h;
+    }
+    let mut levels: Vec<Vec<usize>> = vec![vec![]; height.iter().max().map_or(0, |&h| h as usize + 1)];
+    for (i, &h) in height.iter().enumerate() {
+        levels[h as usize].push(i);
+    }
     // Bottom-up compression (children before parents, so the sizes of both subtrees are known):
     // per op its bytes, swap and offset. Every operation whose children both split is coded
     // both ways, and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
@@ -1574,31 +1605,39 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
         let mut subtree = vec![0u64; m];
         let mut swaps = vec![false; m];
         let mut offsets = vec![0u64; m];
-        for i in (0..m).rev() {
-            let d = &data[i];
-            let [l, r] = child_ops[i];
-            let code = |swap: bool, offset: u64| {
-                let mut w = OpWriter { tables: Some(tables), counts: None, w: BitWriter::default(), bits: 0 };
-                write_op(&mut w, d, swap, offset, avg, nb);
-                let bits = w.bits;
-                (w.w.finish(), bits)
-            };
-            let (b, swap, offset) = if d.has_left && d.has_right {
-                let (plain, plain_bits) = code(false, subtree[l]);
-                let (other, other_bits) = code(true, subtree[r]);
-                if (other.len(), other_bits) < (plain.len(), plain_bits) {
-                    (other, true, subtree[r])
-                } else {
-                    (plain, false, subtree[l])
-                }
-            } else {
-                (code(false, 0).0, false, 0)
-            };
-            let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
-            subtree[i] = b.len() as u64 + sub(l) + sub(r);
-            bytes[i] = b;
-            swaps[i] = swap;
-            offsets[i] = offset;
+        for level in &levels {
+            let coded: Vec<(Vec<u8>, bool, u64)> = level
+                .par_iter()
+                .map(|&i| {
+                    let d = &data[i];
+                    let [l, r] = child_ops[i];
+                    let code = |swap: bool, offset: u64| {
+                        let mut w = OpWriter { tables: Some(tables), counts: None, w: BitWriter::default(), bits: 0 };
+                        write_op(&mut w, d, swap, offset, avg, nb);
+                        let bits = w.bits;
+                        (w.w.finish(), bits)
+                    };
+                    if d.has_left && d.has_right {
+                        let (plain, plain_bits) = code(false, subtree[l]);
+                        let (other, other_bits) = code(true, subtree[r]);
+                        if (other.len(), other_bits) < (plain.len(), plain_bits) {
+                            (other, true, subtree[r])
+                        } else {
+                            (plain, false, subtree[l])
+                        }
+                    } else {
+                        (code(false, 0).0, false, 0)
+                    }
+                })
+                .collect();
+            for (&i, (b, swap, offset)) in level.iter().zip(coded) {
+                let [l, r] = child_ops[i];
+                let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
+                subtree[i] = b.len() as u64 + sub(l) + sub(r);
+                bytes[i] = b;
+                swaps[i] = swap;
+                offsets[i] = offset;
+            }
         }
         (bytes, swaps, offsets)
     };
