@@ -379,3 +379,46 @@ fn bunny_adaption_speed() {
         check_state(&pm, &tree, &b);
     }
 }
+
+/// A tile's view is the sub-frustum through the tile: the whole screen gives the same planes,
+/// and points projecting into a tile are inside its frustum (and outside its neighbours').
+#[test]
+fn tile_views_are_the_tiles_sub_frusta() {
+    let cam = Camera::framing([-1.0; 3], [1.0; 3], 1.5);
+    let view = View::new(&cam, 300, 200, 0.5);
+    let whole = view.for_tile([0, 0, 300, 200]);
+    for (a, b) in whole.planes().iter().zip(view.planes()) {
+        assert!((*a - b).abs().max_element() < 1e-5, "{a} vs {b}");
+    }
+    let inside = |v: &View, p: Vec3| v.planes().iter().all(|q| q.truncate().dot(p) + q.w >= -1e-5);
+    let grid = codec::view::TileGrid::new(300, 200, 3, 2).unwrap();
+    let mut hits = 0;
+    for k in 0..400 {
+        // Points on a plane through the target, spread over the screen.
+        let (x, y) = ((k % 20) as f32 / 19.0 * 2.0 - 1.0, (k / 20) as f32 / 19.0 * 2.0 - 1.0);
+        let p = cam.target + Vec3::new(1.1 * x, 0.75 * y, 0.3 * (x * y));
+        let clip = view.view_proj * p.extend(1.0);
+        let (px, py) = ((clip.x / clip.w + 1.0) * 0.5 * 300.0, (1.0 - clip.y / clip.w) * 0.5 * 200.0);
+        for t in 0..grid.tiles() {
+            let r = grid.tile_rect(t);
+            let margin = 0.01; // pixels from a border: either side is fine
+            let strictly_in = px > r[0] as f32 + margin
+                && px < r[2] as f32 - margin
+                && py > r[1] as f32 + margin
+                && py < r[3] as f32 - margin;
+            let strictly_out = px < r[0] as f32 - margin
+                || px > r[2] as f32 + margin
+                || py < r[1] as f32 - margin
+                || py > r[3] as f32 + margin;
+            let tile = view.for_tile(r);
+            if strictly_in {
+                assert!(inside(&tile, p), "point at ({px}, {py}) not in tile {t}");
+                hits += 1;
+            }
+            if strictly_out {
+                assert!(!inside(&tile, p), "point at ({px}, {py}) in tile {t}");
+            }
+        }
+    }
+    assert!(hits > 300, "{hits} points in tiles");
+}
