@@ -301,34 +301,44 @@ fn border_holes(a: &Path, b: &Path, cols: u32, rows: u32) -> usize {
 #[test]
 fn progressive_mesh_tiles_match_the_full_mesh() {
     let dir = tempfile::tempdir().unwrap();
-    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
-    let dpm = dir.path().join("bunny.dpm");
-    ok(&alone(&["pm", "build", &model, "-o", dpm.to_str().unwrap()]));
-    let size = "960x540";
-    let reference = reference(&model, size, dir.path());
-    for (np, tiles, extra) in [(2, "4x3", vec![]), (3, "3x2", vec!["--balance", "--frames", "2"])] {
-        let out = dir.path().join("pm.png");
-        let stats = dir.path().join("pm.jsonl");
-        let mut args = vec!["render", dpm.to_str().unwrap(), "--size", size, "--tiles", tiles, "--error-px", "0.5"];
-        args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
-        args.extend(&extra);
-        ok(&mpirun(np, &[], &args));
-        let produced = if extra.contains(&"--frames") { dir.path().join("pm-0002.png") } else { out.clone() };
-        let (fraction, covered) = matching_fraction(&produced, &reference, 8);
-        eprintln!("-np {np} --tiles {tiles}: {covered} covered pixels, {:.4} match within 8/255", fraction);
-        assert!(covered > 10_000, "the bunny is in view");
-        assert!(fraction >= 0.99, "-np {np} --tiles {tiles}: only {fraction:.4} of covered pixels match");
-        // Each tile's mesh is adapted to the tile: refined inside, coarse outside.
-        let line: serde_json::Value =
-            serde_json::from_str(std::fs::read_to_string(&stats).unwrap().lines().next().unwrap()).unwrap();
-        let counts: Vec<u64> =
-            line["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).collect();
+    type Case = (usize, &'static str, Vec<&'static str>);
+    let models: [(&str, &str, Vec<Case>); 2] = [
+        (
+            "stanford/bunny_zipper_c3d.obj.gz",
+            "960x540",
+            vec![(2, "4x3", vec![]), (3, "3x2", vec!["--balance", "--frames", "2"])],
+        ),
+        ("stanford/dragon_vrip.ply.gz", "1920x1080", vec![(2, "8x8", vec![])]),
+    ];
+    for (rel, size, cases) in models {
+        let model = mesh(rel);
+        let dpm = dir.path().join("model.dpm");
+        ok(&alone(&["pm", "build", &model, "-o", dpm.to_str().unwrap()]));
+        let reference = reference(&model, size, dir.path());
         let full = codec::load_path(std::path::Path::new(&model)).unwrap().triangles.len() as u64;
-        assert!(counts.iter().all(|&t| t > 0 && t < full), "{counts:?} against {full}");
-        assert!(counts.iter().sum::<u64>() < full * counts.len() as u64 / 2, "{counts:?} against {full}");
-        let (c, r) = tiles.split_once('x').unwrap();
-        let holes = border_holes(&produced, &reference, c.parse().unwrap(), r.parse().unwrap());
-        assert_eq!(holes, 0, "-np {np} --tiles {tiles}: {holes} uncovered pixels at tile borders");
+        for (np, tiles, extra) in cases {
+            let out = dir.path().join("pm.png");
+            let stats = dir.path().join("pm.jsonl");
+            let mut args = vec!["render", dpm.to_str().unwrap(), "--size", size, "--tiles", tiles, "--error-px", "0.5"];
+            args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
+            args.extend(&extra);
+            ok(&mpirun(np, &[], &args));
+            let produced = if extra.contains(&"--frames") { dir.path().join("pm-0002.png") } else { out.clone() };
+            let (fraction, covered) = matching_fraction(&produced, &reference, 8);
+            eprintln!("{rel} -np {np} --tiles {tiles}: {covered} covered pixels, {fraction:.4} match within 8/255");
+            assert!(covered > 10_000, "{rel}: the model is in view");
+            assert!(fraction >= 0.99, "{rel} -np {np} --tiles {tiles}: only {fraction:.4} of covered pixels match");
+            // Each tile's mesh is adapted to the tile: refined inside, coarse outside.
+            let line: serde_json::Value =
+                serde_json::from_str(std::fs::read_to_string(&stats).unwrap().lines().next().unwrap()).unwrap();
+            let counts: Vec<u64> =
+                line["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).collect();
+            assert!(counts.iter().all(|&t| t < full), "{rel}: {counts:?} against {full}");
+            assert!(counts.iter().sum::<u64>() < full * counts.len() as u64 / 2, "{rel}: {counts:?} against {full}");
+            let (c, r) = tiles.split_once('x').unwrap();
+            let holes = border_holes(&produced, &reference, c.parse().unwrap(), r.parse().unwrap());
+            assert_eq!(holes, 0, "{rel} -np {np} --tiles {tiles}: {holes} uncovered pixels at tile borders");
+        }
     }
 }
 
