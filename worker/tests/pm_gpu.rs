@@ -259,3 +259,36 @@ fn pm_speed() {
         );
     }
 }
+
+/// The fixed cost of a pass on a small mesh (what a worker with many small tiles pays per
+/// tile and pass): `cargo test -p tessera-worker --release --test pm_gpu -- --ignored --nocapture pass_overhead`.
+#[test]
+#[ignore = "timing; run in release"]
+fn pass_overhead() {
+    let pm = pm_of("stanford/bunny_oded_6k.obj");
+    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    let mut gpu = GpuAdapter::new(&renderer, &pm, DEFAULT_N_ALLOC).unwrap();
+    let view = path_view(&pm, 0, 1, 0.5);
+    gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
+    let mut idle: Vec<f64> = (0..50)
+        .map(|_| {
+            let start = Instant::now();
+            assert!(gpu.adapt(&view).unwrap().converged());
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let mut busy: Vec<f64> = (0..50)
+        .map(|k| {
+            let view = path_view(&pm, k % 2, 4, 0.5);
+            let start = Instant::now();
+            gpu.adapt(&view).unwrap();
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    eprintln!(
+        "{} faces: a pass that changes nothing {:.2} ms, one that changes the mesh {:.2} ms (medians)",
+        gpu.counts().1,
+        median(&mut idle),
+        median(&mut busy)
+    );
+}
