@@ -35,13 +35,13 @@
 //!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is
 //!   what equals the CPU reference.
 
-use std::sync::{mpsc, Arc};
+use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use codec::pm::{ProgressiveMesh, SplitTree, View, NONE};
 use wgpu::util::DeviceExt;
 
-use crate::render::{RenderError, Renderer};
+use crate::render::{map_read, scoped, wait_for, RenderError, Renderer};
 
 const WG: u32 = 256;
 const SCAN_BLOCK: u32 = 2048;
@@ -158,6 +158,14 @@ struct Sized {
     cap: u64,
 }
 
+/// One level of the recursive scan: its block sums, a uniform with its element count, and
+/// its number of blocks.
+struct ScanLevel {
+    sums: Sized,
+    uniform: wgpu::Buffer,
+    blocks: u32,
+}
+
 /// The per-vertex buffers (one of two sets: reorganisation copies from one into the other).
 struct VertexSet {
     fvid: Sized,
@@ -209,8 +217,8 @@ pub struct GpuAdapter {
     fcnt: Sized,
     list: Sized,
     hole: Sized,
-    /// Per scan level: block sums and the level's element count.
-    levels: Vec<(Sized, wgpu::Buffer)>,
+    /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
+    levels: Vec<ScanLevel>,
     /// Active vertices and faces.
     n: u32,
     m: u32,
@@ -305,27 +313,21 @@ impl GpuAdapter {
                 GpuPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
             })
             .collect();
-        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let read_only = wgpu::BufferUsages::STORAGE;
-        let splits = init(&device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
-        let split_faces = init(&device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
-        let points = init(&device, "pm: points", bytemuck::cast_slice(&points), read_only);
-        let shared = Arc::new(Shared {
-            pipelines: Pipelines::new(&device),
-            max_groups: limits.max_compute_workgroups_per_dimension,
-            splits,
-            split_faces,
-            points,
-            base: base_state(pm, &tree),
-        });
-        let adapter = GpuAdapter::with_shared(device, queue, shared, n_alloc.max(1));
-        for scope in [validation, oom] {
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(RenderError::Gpu(e.to_string()));
-            }
-        }
-        Ok(adapter)
+        scoped(renderer.device(), || {
+            let read_only = wgpu::BufferUsages::STORAGE;
+            let splits = init(&device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
+            let split_faces = init(&device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
+            let points = init(&device, "pm: points", bytemuck::cast_slice(&points), read_only);
+            let shared = Arc::new(Shared {
+                pipelines: Pipelines::new(&device),
+                max_groups: limits.max_compute_workgroups_per_dimension,
+                splits,
+                split_faces,
+                points,
+                base: base_state(pm, &tree),
+            });
+            Ok(GpuAdapter::with_shared(device, queue, shared, n_alloc.max(1)))
+        })
     }
 
     /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
@@ -433,7 +435,7 @@ impl GpuAdapter {
             self.sets.iter().map(|s| s.fvid.buffer.size() + s.next.buffer.size() + s.node.buffer.size()).sum();
         let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
         let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
-        let levels: u64 = self.levels.iter().map(|(s, _)| s.buffer.size()).sum();
+        let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size()).sum();
         sets + faces + tmp + levels
     }
 
@@ -466,15 +468,8 @@ impl GpuAdapter {
     }
 
     fn pass(&mut self, view: Option<&View>) -> Result<Stats, RenderError> {
-        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = self.pass_unscoped(view);
-        for scope in [validation, oom] {
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(RenderError::Gpu(e.to_string()));
-            }
-        }
-        result
+        let device = self.device.clone();
+        scoped(&device, || self.pass_unscoped(view))
     }
 
     fn pass_unscoped(&mut self, view: Option<&View>) -> Result<Stats, RenderError> {
@@ -547,10 +542,7 @@ impl GpuAdapter {
         }
         if self.profile {
             // Time the state update and collapses apart from the scans.
-            let index = self.queue.submit([enc.finish()]);
-            self.device
-                .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
-                .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            wait_for(&self.device, self.queue.submit([enc.finish()]))?;
             self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
             enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
         }
@@ -668,10 +660,7 @@ impl GpuAdapter {
         }
         self.queue.submit([enc.finish()]);
         if self.profile {
-            let index = self.queue.submit([]);
-            self.device
-                .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
-                .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            wait_for(&self.device, self.queue.submit([]))?;
             self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
         }
         if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
@@ -719,47 +708,38 @@ impl GpuAdapter {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            self.levels.push((storage(&self.device, "pm: scan sums", 0, 4, VERTEX_USAGE), uniform));
+            self.levels.push(ScanLevel {
+                sums: storage(&self.device, "pm: scan sums", 0, 4, VERTEX_USAGE),
+                uniform,
+                blocks: 0,
+            });
         }
         self.levels.truncate(counts.len());
-        for (k, &c) in counts.iter().enumerate() {
+        for (level, &c) in self.levels.iter_mut().zip(&counts) {
             let blocks = c.div_ceil(SCAN_BLOCK as u64);
-            let (sums, uniform) = &mut self.levels[k];
-            if sums.cap < blocks {
-                *sums = storage(&self.device, "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
+            if level.sums.cap < blocks {
+                level.sums = storage(&self.device, "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
             }
-            self.queue.write_buffer(uniform, 0, bytemuck::cast_slice(&[c as u32, 0, 0, 0]));
+            level.blocks = blocks as u32;
+            self.queue.write_buffer(&level.uniform, 0, bytemuck::cast_slice(&[c as u32, 0, 0, 0]));
         }
     }
 
     /// Exclusive scan of `data` in place over the levels set by [`Self::prepare_scan`].
     fn scan(&self, pass: &mut wgpu::ComputePass<'_>, data: &wgpu::Buffer) {
         let p = &self.shared.pipelines;
-        let levels = self.levels.len();
-        let mut groups = Vec::with_capacity(levels);
+        let mut adds = Vec::with_capacity(self.levels.len());
         // Down: scan each level's blocks, the block sums becoming the next level's data.
-        for k in 0..levels {
-            let input = if k == 0 { data } else { &self.levels[k - 1].0.buffer };
-            let (sums, uniform) = &self.levels[k];
-            let bg = self.bind(&p.scan_blocks, &[uniform, input, &sums.buffer]);
-            let add = self.bind(&p.add_blocks, &[uniform, input, &sums.buffer]);
-            let blocks = self.level_blocks(k);
-            self.dispatch_groups(pass, &p.scan_blocks, &bg, blocks);
-            groups.push((add, blocks));
+        for (k, level) in self.levels.iter().enumerate() {
+            let input = if k == 0 { data } else { &self.levels[k - 1].sums.buffer };
+            let buffers = [&level.uniform, input, &level.sums.buffer];
+            self.dispatch_groups(pass, &p.scan_blocks, &self.bind(&p.scan_blocks, &buffers), level.blocks);
+            adds.push(buffers);
         }
         // Up: add the scanned block sums back (the top level is a single block).
-        for k in (0..levels.saturating_sub(1)).rev() {
-            let (add, blocks) = &groups[k];
-            self.dispatch_groups(pass, &p.add_blocks, add, *blocks);
+        for (level, buffers) in self.levels.iter().zip(&adds).rev().skip(1) {
+            self.dispatch_groups(pass, &p.add_blocks, &self.bind(&p.add_blocks, buffers), level.blocks);
         }
-    }
-
-    fn level_blocks(&self, k: usize) -> u32 {
-        let mut c = self.n as u64 + 1;
-        for _ in 0..k {
-            c = c.div_ceil(SCAN_BLOCK as u64);
-        }
-        c.div_ceil(SCAN_BLOCK as u64) as u32
     }
 
     fn bind(&self, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
@@ -809,21 +789,11 @@ impl GpuAdapter {
     }
 
     fn read_totals(&self) -> Result<[u32; 10], RenderError> {
-        let (tx, rx) = mpsc::channel();
-        self.readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
-        rx.recv()
-            .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
-            .map_err(|e| RenderError::Gpu(e.to_string()))?;
-        let mut out = [0u32; 10];
-        {
-            let mapped = self.readback.get_mapped_range(..).map_err(|e| RenderError::Gpu(e.to_string()))?;
-            out.copy_from_slice(bytemuck::cast_slice(&mapped[..]));
-        }
-        self.readback.unmap();
-        Ok(out)
+        map_read(&self.device, &self.readback, READBACK_BYTES, |mapped| {
+            let mut out = [0u32; 10];
+            out.copy_from_slice(bytemuck::cast_slice(mapped));
+            out
+        })
     }
 
     /// Reads a buffer's first `bytes` bytes back (tests and `pm adapt --gpu`; not the render path).
@@ -841,17 +811,7 @@ impl GpuAdapter {
             self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: read back") });
         enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
         self.queue.submit([enc.finish()]);
-        let (tx, rx) = mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
-        rx.recv()
-            .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
-            .map_err(|e| RenderError::Gpu(e.to_string()))?;
-        let out = staging.get_mapped_range(..).map_err(|e| RenderError::Gpu(e.to_string()))?.to_vec();
-        staging.unmap();
-        Ok(out)
+        map_read(&self.device, &staging, bytes, <[u8]>::to_vec)
     }
 
     /// Active vertex FVIDs, ascending (read back).

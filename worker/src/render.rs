@@ -278,29 +278,41 @@ impl Renderer {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes,
         };
-        let mesh_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("render: mesh pipeline"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                // Positions and normals stay in separate buffers, uploaded straight from the
-                // RenderMesh vectors without interleaving.
-                buffers: &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Less)),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &color_targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        // The shaded pipelines differ in their vertex input only: vertex buffers or pulling.
+        let shaded_pipeline = |label: &str,
+                               layout: &wgpu::PipelineLayout,
+                               entry_point: &str,
+                               buffers: &[Option<wgpu::VertexBufferLayout>]| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module: &shader,
+                    entry_point: Some(entry_point),
+                    compilation_options: Default::default(),
+                    buffers,
+                },
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Less)),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &shader,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &color_targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        // Positions and normals stay in separate buffers, uploaded straight from the
+        // RenderMesh vectors without interleaving.
+        let mesh_pipeline = shaded_pipeline(
+            "render: mesh pipeline",
+            &layout,
+            "vs_main",
+            &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
+        );
         let storage_entry = |binding| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::VERTEX,
@@ -320,27 +332,7 @@ impl Renderer {
             bind_group_layouts: &[Some(&bind_group_layout), Some(&pulled_layout)],
             immediate_size: 0,
         });
-        let pulled_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("render: pulled pipeline"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_pulled"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(depth_stencil(wgpu::CompareFunction::Less)),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &color_targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pulled_pipeline = shaded_pipeline("render: pulled pipeline", &layout, "vs_pulled", &[]);
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("upload: frame uniform"),
             size: std::mem::size_of::<FrameUniform>() as u64,
@@ -437,17 +429,8 @@ impl Renderer {
         if width > max || height > max {
             return Err(RenderError::FrameTooLarge { width, height, max });
         }
-        // Validation and out-of-memory errors are captured and returned instead of reaching
-        // wgpu's default handler, which panics. The scopes are popped in reverse order.
-        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = self.render_unscoped(source, view_proj, frame, rect);
-        for scope in [validation, oom] {
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(RenderError::Gpu(e.to_string()));
-            }
-        }
-        result
+        let device = self.device.clone();
+        scoped(&device, || self.render_unscoped(source, view_proj, frame, rect))
     }
 
     fn render_unscoped(
@@ -486,7 +469,7 @@ impl Renderer {
         let uniform = FrameUniform { view_proj: view_proj.to_cols_array_2d(), eye: eye.to_array() };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // An empty submission flushes the queued writes.
-        self.wait(queue.submit([]))?;
+        wait_for(device, queue.submit([]))?;
         let upload_ms = ms_since(start);
 
         let start = Instant::now();
@@ -547,7 +530,7 @@ impl Renderer {
                 (Source::Pm(_), None) => unreachable!("the pulled bind group is made for every PM source"),
             }
         }
-        self.wait(queue.submit([encoder.finish()]))?;
+        wait_for(device, queue.submit([encoder.finish()]))?;
         let render_ms = ms_since(start);
 
         let start = Instant::now();
@@ -583,34 +566,64 @@ impl Renderer {
             wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
         );
         queue.submit([encoder.finish()]);
-        let (tx, rx) = mpsc::channel();
-        readback.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
-        rx.recv()
-            .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
-            .map_err(|e| RenderError::Gpu(e.to_string()))?;
         let row = (size.0 * BYTES_PER_PIXEL) as usize;
-        let mut pixels = Vec::with_capacity(row * size.1 as usize);
-        {
-            let mapped = readback.get_mapped_range(..bytes).map_err(|e| RenderError::Gpu(e.to_string()))?;
+        let pixels = map_read(device, readback, bytes, |mapped| {
+            let mut pixels = Vec::with_capacity(row * size.1 as usize);
             for padded in mapped.chunks_exact(padded_row as usize) {
                 pixels.extend_from_slice(&padded[..row]);
             }
-        }
-        readback.unmap();
+            pixels
+        })?;
         let readback_ms = ms_since(start);
         Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
     }
+}
 
-    /// Blocks until submission `index` has finished on the device.
-    fn wait(&self, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
-        self.device
-            .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
-            .map(drop)
-            .map_err(|e| RenderError::Gpu(e.to_string()))
+/// Runs `f` with the device's validation and out-of-memory errors captured and returned
+/// instead of reaching wgpu's default handler, which panics. The scopes are popped in reverse
+/// order.
+pub(crate) fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> Result<T, RenderError>) -> Result<T, RenderError> {
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let result = f();
+    for scope in [validation, oom] {
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(RenderError::Gpu(e.to_string()));
+        }
     }
+    result
+}
+
+/// Blocks until submission `index` has finished on the device.
+pub(crate) fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
+    device
+        .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+        .map(drop)
+        .map_err(|e| RenderError::Gpu(e.to_string()))
+}
+
+/// Maps the first `bytes` bytes of a `MAP_READ` buffer (its copies submitted), waits for
+/// them, hands them to `read`, and unmaps the buffer.
+pub(crate) fn map_read<T>(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    read: impl FnOnce(&[u8]) -> T,
+) -> Result<T, RenderError> {
+    let (tx, rx) = mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+        let _ = tx.send(r);
+    });
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
+    rx.recv()
+        .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
+        .map_err(|e| RenderError::Gpu(e.to_string()))?;
+    let out = {
+        let mapped = buffer.get_mapped_range(..bytes).map_err(|e| RenderError::Gpu(e.to_string()))?;
+        read(&mapped)
+    };
+    buffer.unmap();
+    Ok(out)
 }
 
 fn ms_since(start: Instant) -> f64 {
