@@ -187,13 +187,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         let mut adapter = worker::pm_gpu::GpuAdapter::new(&renderer, &pm, worker::pm_gpu::DEFAULT_N_ALLOC)?;
         start = Instant::now();
         let passes = match &view {
-            None => {
-                let mut passes = 0;
-                while adapter.refine_step()?.splits > 0 {
-                    passes += 1;
-                }
-                passes
-            }
+            None => adapter.refine_fully()?,
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
         };
         (adapter.active()?, adapter.faces()?, passes)

@@ -456,6 +456,16 @@ impl GpuAdapter {
         self.pass(None)
     }
 
+    /// Applies every split: [`Self::refine_step`] until no vertex can split; returns the number
+    /// of passes that split (as the CPU reference's `refine_fully`).
+    pub fn refine_fully(&mut self) -> Result<usize, RenderError> {
+        let mut passes = 0;
+        while self.refine_step()?.splits > 0 {
+            passes += 1;
+        }
+        Ok(passes)
+    }
+
     /// Passes until one changes nothing, at most `max_passes`; returns the number of passes
     /// that changed something, or `None` if still not converged.
     pub fn adapt_until_converged(&mut self, view: &View, max_passes: usize) -> Result<Option<usize>, RenderError> {
