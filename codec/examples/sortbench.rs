@@ -23,6 +23,7 @@ fn main() {
     let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
     let mut sorter = Sorter::default();
     let (mut pass1, mut pass2, mut tri) = (vec![], vec![], vec![]);
+    let mut bytes = 0;
     for _ in 0..runs {
         let t = Instant::now();
         let b = tile_sort::boxes(&model, vp, &grid);
@@ -30,14 +31,15 @@ fn main() {
         let tiles = sorter.sort(&model, &b, &grid).expect("sorts");
         pass1.push(t1);
         pass2.push(t.elapsed().as_secs_f64() * 1e3 - t1);
-        std::hint::black_box(tiles);
+        bytes = tiles.iter().map(|t| t.bytes.len()).sum::<usize>();
         let t = Instant::now();
         std::hint::black_box(codec::tri_sort::sort(&model.positions, model.triangles(), vp, &grid));
         tri.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let (p1, p2, tr) = (median(pass1), median(pass2), median(tri));
     println!(
-        "{path} {grid_arg}: BFT sort {:.1} ms (pass 1 {p1:.1}, pass 2 {p2:.1}), Tri sort {tr:.1} ms, ratio {:.2}",
+        "{path} {grid_arg}: BFT sort {:.1} ms (pass 1 {p1:.1}, pass 2 {p2:.1}), Tri sort {tr:.1} ms, ratio {:.2}, \
+         {bytes} tile bytes",
         p1 + p2,
         (p1 + p2) / tr
     );

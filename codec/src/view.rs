@@ -162,7 +162,8 @@ pub struct PixelBox {
     pub ymax: f32,
 }
 
-/// An inclusive rectangle of tiles: columns `c0..=c1`, rows `r0..=r1`; empty if `c0 > c1`.
+/// An inclusive rectangle of tiles: columns `c0..=c1`, rows `r0..=r1`. The one empty box is
+/// [`TileBox::EMPTY`]; build no other.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TileBox {
     pub c0: u16,
@@ -172,7 +173,8 @@ pub struct TileBox {
 }
 
 impl TileBox {
-    pub const EMPTY: TileBox = TileBox { c0: 1, c1: 0, r0: 1, r1: 0 };
+    /// The empty box. Its corners are such that [`TileBox::union`] needs no test for it.
+    pub const EMPTY: TileBox = TileBox { c0: u16::MAX, c1: 0, r0: u16::MAX, r1: 0 };
 
     #[inline]
     pub fn is_empty(&self) -> bool {
@@ -186,12 +188,7 @@ impl TileBox {
 
     #[inline]
     pub fn union(&self, o: &TileBox) -> TileBox {
-        if self.is_empty() {
-            return *o;
-        }
-        if o.is_empty() {
-            return *self;
-        }
+        // Boxes are either non-empty or `EMPTY`, whose corners lose every min and max.
         TileBox { c0: self.c0.min(o.c0), c1: self.c1.max(o.c1), r0: self.r0.min(o.r0), r1: self.r1.max(o.r1) }
     }
 
@@ -226,8 +223,7 @@ impl TileBox {
 /// when nothing of it is inside. Corners wholly inside take the fast path; the rest are
 /// clipped against the six planes in homogeneous coordinates (Sutherland-Hodgman).
 pub fn clipped_pixel_box(c: [Vec4; 3], width: u32, height: u32) -> Option<PixelBox> {
-    // Plane distances, >= 0 inside: x+w, w-x, y+w, w-y, z, w-z (depth 0..1).
-    let d = |v: Vec4| [v.w + v.x, v.w - v.x, v.w + v.y, v.w - v.y, v.z, v.w - v.z];
+    let d = plane_distances;
     let ds = c.map(d);
     let mut inside = true;
     for p in 0..6 {
@@ -267,14 +263,92 @@ pub fn clipped_pixel_box(c: [Vec4; 3], width: u32, height: u32) -> Option<PixelB
         if v.w <= 0.0 {
             continue;
         }
-        let px = (v.x / v.w + 1.0) * 0.5 * width as f32;
-        let py = (1.0 - v.y / v.w) * 0.5 * height as f32;
+        let (px, py) = pixel(*v, width, height);
         b.xmin = b.xmin.min(px);
         b.xmax = b.xmax.max(px);
         b.ymin = b.ymin.min(py);
         b.ymax = b.ymax.max(py);
     }
     (b.xmin <= b.xmax && b.ymin <= b.ymax).then_some(b)
+}
+
+/// A vertex in clip space, with what every triangle through it needs to find its tile box
+/// without clipping: on which side of each frustum plane it lies, and its tile.
+#[derive(Clone, Copy, Debug)]
+pub struct ClipVertex {
+    pub clip: Vec4,
+    /// Bit `p` set: outside plane `p` (distance < 0), in [`clipped_pixel_box`]'s order.
+    outside: u8,
+    /// Its pixel's tile column and row; meaningful only when `fast`.
+    col: u16,
+    row: u16,
+    /// Inside all six planes with `w > 0`: a triangle of three such vertices needs no
+    /// clipping, and its box is the box of their tiles.
+    fast: bool,
+}
+
+impl ClipVertex {
+    #[inline]
+    pub fn new(clip: Vec4, grid: &TileGrid) -> ClipVertex {
+        let d = plane_distances(clip);
+        let (mut outside, mut inside) = (0u8, 0u8);
+        for (p, d) in d.iter().enumerate() {
+            outside |= ((*d < 0.0) as u8) << p;
+            inside |= ((*d >= 0.0) as u8) << p;
+        }
+        let fast = inside == 0x3f && clip.w > 0.0;
+        let (col, row) = if fast {
+            let (px, py) = pixel(clip, grid.width, grid.height);
+            (grid.col(px), grid.row(py))
+        } else {
+            (0, 0)
+        };
+        ClipVertex { clip, outside, col, row, fast }
+    }
+}
+
+/// Plane distances, >= 0 inside: x+w, w-x, y+w, w-y, z, w-z (depth 0..1).
+#[inline]
+fn plane_distances(v: Vec4) -> [f32; 6] {
+    [v.w + v.x, v.w - v.x, v.w + v.y, v.w - v.y, v.z, v.w - v.z]
+}
+
+/// The pixel of a clip-space point with `w > 0`.
+#[inline]
+fn pixel(v: Vec4, width: u32, height: u32) -> (f32, f32) {
+    ((v.x / v.w + 1.0) * 0.5 * width as f32, (1.0 - v.y / v.w) * 0.5 * height as f32)
+}
+
+/// Projects every vertex (in parallel).
+pub fn clip_vertices(positions: &[[f32; 3]], view_proj: Mat4, grid: &TileGrid) -> Vec<ClipVertex> {
+    positions
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| ClipVertex::new(view_proj * Vec3::from(*p).extend(1.0), grid))
+        .collect()
+}
+
+/// A triangle's tile box `[t]`: empty when all three corners are outside one plane, the box
+/// of the corners' tiles when all three are inside every plane, and otherwise the tiles of
+/// [`clipped_pixel_box`]. The first two cases give what the third would (a pixel's column
+/// and row grow with its coordinates, so the tile of the smallest x is the smallest
+/// column), without clipping or dividing per triangle; a test checks them against it.
+#[inline]
+pub fn triangle_tile_box(v: [&ClipVertex; 3], grid: &TileGrid) -> TileBox {
+    let [a, b, c] = v;
+    if a.outside & b.outside & c.outside != 0 {
+        TileBox::EMPTY
+    } else if a.fast && b.fast && c.fast {
+        TileBox {
+            c0: a.col.min(b.col).min(c.col),
+            c1: a.col.max(b.col).max(c.col),
+            r0: a.row.min(b.row).min(c.row),
+            r1: a.row.max(b.row).max(c.row),
+        }
+    } else {
+        clipped_pixel_box([a.clip, b.clip, c.clip], grid.width, grid.height)
+            .map_or(TileBox::EMPTY, |b| grid.tiles_of(&b))
+    }
 }
 
 /// The tile box `[t]` of every triangle: vertices projected, each triangle clipped to the
@@ -286,16 +360,8 @@ pub fn triangle_tile_boxes(
     view_proj: Mat4,
     grid: &TileGrid,
 ) -> Vec<TileBox> {
-    let clip: Vec<Vec4> =
-        positions.par_iter().with_min_len(4096).map(|p| view_proj * Vec3::from(*p).extend(1.0)).collect();
-    triangles
-        .par_iter()
-        .with_min_len(4096)
-        .map(|t| {
-            clipped_pixel_box(t.map(|s| clip[s as usize]), grid.width, grid.height)
-                .map_or(TileBox::EMPTY, |b| grid.tiles_of(&b))
-        })
-        .collect()
+    let clip = clip_vertices(positions, view_proj, grid);
+    triangles.par_iter().with_min_len(4096).map(|t| triangle_tile_box(t.map(|s| &clip[s as usize]), grid)).collect()
 }
 
 #[cfg(test)]
@@ -350,6 +416,44 @@ mod tests {
                 assert!(n.x.abs() <= 1.0 && n.y.abs() <= 1.0 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
             }
         }
+    }
+
+    /// The per-vertex shortcuts of [`triangle_tile_box`] give what clipping every triangle
+    /// gives: triangles wholly inside, wholly outside, across the near plane and through the
+    /// eye, on uneven grids.
+    #[test]
+    fn triangle_tile_box_equals_clipping() {
+        let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fovy: 60.0, near: 0.5, far: 50.0 };
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut fast, mut clipped, mut empty) = (0, 0, 0);
+        for (w, h, c, r) in [(1920, 1080, 8, 8), (1000, 7, 3, 7), (17, 13, 5, 4), (640, 480, 64, 48)] {
+            let grid = TileGrid::new(w, h, c, r).unwrap();
+            let vp = cam.view_proj(grid.aspect());
+            for _ in 0..20_000 {
+                // Mostly in view, some behind the eye and beyond the sides.
+                let p = [(); 3].map(|_| Vec3::new(rnd() * 8.0 - 4.0, rnd() * 8.0 - 4.0, 1.0 - rnd() * 12.0));
+                let clip = p.map(|p| vp * p.extend(1.0));
+                let v = clip.map(|c| ClipVertex::new(c, &grid));
+                let want = clipped_pixel_box(clip, w, h).map_or(TileBox::EMPTY, |b| grid.tiles_of(&b));
+                let got = triangle_tile_box([&v[0], &v[1], &v[2]], &grid);
+                assert_eq!(got.is_empty(), want.is_empty(), "{p:?}");
+                if !want.is_empty() {
+                    assert_eq!(got, want, "{p:?} on {w}x{h} / {c}x{r}");
+                }
+                match (v.iter().all(|v| v.fast), want.is_empty()) {
+                    (true, _) => fast += 1,
+                    (false, false) => clipped += 1,
+                    (false, true) => empty += 1,
+                }
+            }
+        }
+        assert!(fast > 5000 && clipped > 5000 && empty > 1000, "{fast} fast, {clipped} clipped, {empty} empty");
     }
 
     #[test]

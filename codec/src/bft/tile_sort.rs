@@ -6,16 +6,20 @@
 //! (3.2), the modification rules of Table 2 with the `Add` command (3.1.4), and offsets
 //! rewritten from counters of unclipped frontier entries (3.1.3).
 //!
+//! At load, the model's commands are resolved once against the model's frontier (which
+//! slots and frontier positions each touches); that walk does not depend on the view.
 //! Per frame:
-//! 1. project every vertex slot (rayon);
+//! 1. project every vertex slot (rayon), with its side of each frustum plane and its tile;
 //! 2. pass 1: the pixel box of every triangle clipped to the frustum gives its tile box
-//!    `[t]`; a vertex's box `[v]` is the union of its triangles' boxes;
-//! 3. pass 2: replay the model's commands on its frontier once; each command is rewritten
-//!    for every tile in the boxes of its vertices by [`rewrite`] (Table 2) and coded into
-//!    that tile's stream by a `TileWriter`, which holds the state the ordinary decoder
-//!    will have for the tile. Offsets come from the paper's counters: every frontier entry
-//!    remembers, per tile of its vertex's box, its index in that tile's frontier, so an
-//!    offset is a subtraction, never a scan.
+//!    `[t]` (no clipping for triangles wholly inside); a vertex's box `[v]` is the union of
+//!    its triangles' boxes, gathered per vertex in parallel;
+//! 3. pass 2, all tiles in one traversal of the command stream, in chunks in parallel:
+//!    each command is rewritten by [`rewrite`] (Table 2) for every tile in the boxes of its
+//!    vertices and appended to the lists of the tiles where it does something. Then every
+//!    tile, in parallel, follows its list with a `TileWriter`, which holds the state the
+//!    ordinary decoder will have for the tile and codes each rewritten command. Offsets
+//!    come from the paper's counters of unclipped entries, kept per tile as the model
+//!    frontier position of each of the tile's entries.
 //!
 //! A tile's submesh then decodes, with the ordinary decoder, to exactly the triangles `t`
 //! with the tile in `[t]`, orientation kept: a vertex is unclipped for tile `b` iff `b` is
@@ -31,7 +35,7 @@ use super::format::BftError;
 use super::frontier::Frontier;
 use super::tile_writer::TileWriter;
 use super::Command;
-use crate::view::{triangle_tile_boxes, TileBox, TileGrid};
+use crate::view::{clip_vertices, triangle_tile_box, TileBox, TileGrid};
 
 /// Why a tile sort failed.
 #[derive(Debug, Error)]
@@ -40,6 +44,8 @@ pub enum SortError {
     Bft(#[from] BftError),
     #[error("the model's command stream holds {0:?}, which only tile streams may contain")]
     TileCommand(Command),
+    #[error("the model has {0} commands, tail vertices and loose triangles; the tile sort takes at most {MAX_ITEMS}")]
+    TooLarge(usize),
 }
 
 /// A model ready for sorting: its decoded slots and triangles, float positions, and its
@@ -48,17 +54,45 @@ pub struct TileModel {
     pub decoded: Decoded,
     pub ops: Vec<Op>,
     pub positions: Vec<[f32; 3]>,
+    /// Each slot's triangles, `fan[fan_start[s]..fan_start[s + 1]]`: pass 1 gathers a
+    /// vertex's box from them, one vertex per task, instead of scattering every triangle's
+    /// box into its vertices one triangle after the other.
+    fan_start: Vec<u32>,
+    fan: Vec<u32>,
+    /// The commands resolved against the model's frontier.
+    steps: Vec<Step>,
+    /// The first slot that only loose triangles use, and the first loose triangle.
+    tail_start: u32,
+    loose_start: usize,
 }
 
 impl TileModel {
     pub fn from_bytes(bytes: &[u8]) -> Result<TileModel, SortError> {
         let (decoded, ops) = decode_ops(bytes)?;
-        if let Some(op) = ops.iter().find(|o| matches!(o.cmd, Command::AddNew | Command::AddRef | Command::Clear)) {
-            return Err(SortError::TileCommand(op.cmd));
+        let (steps, tail_start, loose_start) = resolve(&ops)?;
+        let items =
+            ops.len() + (decoded.positions.len() - tail_start as usize) + (decoded.triangles.len() - loose_start);
+        if items >= MAX_ITEMS {
+            return Err(SortError::TooLarge(items));
         }
         let q = decoded.quantization();
-        let positions = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
-        Ok(TileModel { decoded, ops, positions })
+        let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
+        let mut fan_start = vec![0u32; positions.len() + 1];
+        for &s in decoded.triangles.iter().flatten() {
+            fan_start[s as usize + 1] += 1;
+        }
+        for i in 1..fan_start.len() {
+            fan_start[i] += fan_start[i - 1];
+        }
+        let mut next = fan_start.clone();
+        let mut fan = vec![0u32; decoded.triangles.len() * 3];
+        for (t, tri) in decoded.triangles.iter().enumerate() {
+            for &s in tri {
+                fan[next[s as usize] as usize] = t as u32;
+                next[s as usize] += 1;
+            }
+        }
+        Ok(TileModel { decoded, ops, positions, fan_start, fan, steps, tail_start, loose_start })
     }
 
     pub fn triangles(&self) -> &[[u32; 3]] {
@@ -90,31 +124,55 @@ pub struct Boxes {
     pub tile_triangles: Vec<u32>,
 }
 
-/// Projects the slots and computes `[t]` and `[v]`.
+/// Projects the slots and computes `[t]` and `[v]`, all in parallel.
 pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
-    let triangles = triangle_tile_boxes(&model.positions, &model.decoded.triangles, view_proj, grid);
-    let n = model.positions.len();
+    let clip = clip_vertices(&model.positions, view_proj, grid);
+    let triangles: Vec<TileBox> = model
+        .decoded
+        .triangles
+        .par_iter()
+        .with_min_len(4096)
+        .map(|t| triangle_tile_box(t.map(|s| &clip[s as usize]), grid))
+        .collect();
     let all = TileBox { c0: 0, c1: (grid.cols - 1) as u16, r0: 0, r1: (grid.rows - 1) as u16 };
-    let (mut vertices, mut whole_fan) = (vec![TileBox::EMPTY; n], vec![all; n]);
-    let mut tile_triangles = vec![0u32; grid.tiles()];
-    for (t, b) in model.decoded.triangles.iter().zip(&triangles) {
-        for &s in t {
-            vertices[s as usize] = vertices[s as usize].union(b);
-            whole_fan[s as usize] = whole_fan[s as usize].intersect(b);
-        }
-        if !b.is_empty() {
-            for r in b.r0..=b.r1 {
-                for c in b.c0..=b.c1 {
-                    tile_triangles[r as usize * grid.cols as usize + c as usize] += 1;
+    let (vertices, whole_fan): (Vec<TileBox>, Vec<TileBox>) = model.fan_start[..model.positions.len()]
+        .par_iter()
+        .zip(&model.fan_start[1..])
+        .with_min_len(4096)
+        .map(|(&a, &b)| {
+            model.fan[a as usize..b as usize].iter().fold((TileBox::EMPTY, all), |(u, i), &t| {
+                let b = &triangles[t as usize];
+                (u.union(b), i.intersect(b))
+            })
+        })
+        .unzip();
+    let tiles = grid.tiles();
+    let tile_triangles = triangles
+        .par_chunks(1 << 16)
+        .map(|chunk| {
+            let mut counts = vec![0u32; tiles];
+            for b in chunk.iter().filter(|b| !b.is_empty()) {
+                for r in b.r0..=b.r1 {
+                    for c in b.c0..=b.c1 {
+                        counts[r as usize * grid.cols as usize + c as usize] += 1;
+                    }
                 }
             }
-        }
-    }
+            counts
+        })
+        .reduce(
+            || vec![0u32; tiles],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+                a
+            },
+        );
     Boxes { triangles, vertices, whole_fan, tile_triangles }
 }
 
 /// What a command becomes in one tile: Table 2 of the paper.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum Rewrite {
     /// The input command itself (offsets rewritten).
     Same,
@@ -127,6 +185,26 @@ pub enum Rewrite {
     Dr,
     /// No output.
     Nothing,
+}
+
+impl Rewrite {
+    const ALL: [Rewrite; 7] =
+        [Rewrite::Same, Rewrite::Null, Rewrite::Add, Rewrite::NullAdd, Rewrite::Dl, Rewrite::Dr, Rewrite::Nothing];
+
+    /// The record code of pass 2: the variant's index, or [`SKIP`] for `Nothing`.
+    #[inline]
+    fn code(self) -> u32 {
+        if self == Rewrite::Nothing {
+            SKIP
+        } else {
+            self as u32
+        }
+    }
+
+    #[inline]
+    fn from_code(code: u32) -> Rewrite {
+        Rewrite::ALL[code as usize]
+    }
 }
 
 /// Table 2 (Mitra & Chiueh): the rewrite of input command `c` for a tile, given whether
@@ -188,49 +266,88 @@ pub fn rewrite(c: Command, l: bool, r: bool, x: bool, t: bool) -> Rewrite {
     }
 }
 
-/// Where each frontier entry of the model sits in each tile's frontier: for the entry at
-/// absolute position `p`, the tile indices of the tiles in its vertex's box, row-major,
-/// start at `starts[p]` in `indices`. These are the paper's clipped-vertex counters,
-/// kept per tile as the count of unclipped entries pushed before.
-#[derive(Default)]
-struct EntryIndex {
-    starts: Vec<u32>,
-    indices: Vec<u32>,
+/// One model command resolved against the model's frontier. The model's frontier walk is
+/// the same for every view, so it runs once, at load; each frame reads these instead.
+#[derive(Clone, Copy, Debug)]
+struct Step {
+    cmd: Command,
+    /// The current edge's slots (`r == l` when the frontier holds one entry).
+    l: u32,
+    r: u32,
+    /// The third vertex (`NEW`, `RF<k>`, `LF<k>`), or the first of a `SEED`'s three.
+    x: u32,
+    /// The model frontier position of `x`'s entry (`RF<k>`, `LF<k>`).
+    x_pos: u32,
+    /// Model frontier pushes before this command: its own pushes (`l` then `x`, the `NULL`'s
+    /// `l`, a seed's three) are at `push`, `push + 1`, ...
+    push: u32,
+    /// Its triangle's index, for commands that code one.
+    tri: u32,
+    /// `SEED`s up to and including this command.
+    seeds: u32,
 }
 
-impl EntryIndex {
-    fn clear(&mut self) {
-        self.starts.clear();
-        self.indices.clear();
-    }
-
-    /// Follows [`Frontier::compact`]: drops the first `n` entries' records.
-    fn drop_front(&mut self, n: usize) {
-        if n == 0 {
-            return;
+/// Resolves every command of the model against its frontier (see [`Step`]). Also returns
+/// the first slot no command creates and the first triangle no command codes. `ops` are
+/// those of a stream the decoder accepted, so every offset is within the frontier.
+fn resolve(ops: &[Op]) -> Result<(Vec<Step>, u32, usize), SortError> {
+    let mut f = Frontier::default();
+    let (mut next_slot, mut tri, mut seeds, mut base) = (0u32, 0u32, 0u32, 0usize);
+    let mut steps = Vec::with_capacity(ops.len());
+    for op in ops {
+        let push = (base + f.back_pos()) as u32;
+        let mut st = Step { cmd: op.cmd, l: 0, r: 0, x: 0, x_pos: 0, push, tri, seeds };
+        if !f.is_empty() {
+            st.l = f.at(0).slot;
+            st.r = if f.len() >= 2 { f.at(1).slot } else { st.l };
         }
-        self.starts.drain(..n);
-        let first = self.starts.first().map_or(self.indices.len() as u32, |&s| s);
-        self.indices.drain(..first as usize);
-        for s in &mut self.starts {
-            *s -= first;
+        match op.cmd {
+            Command::New | Command::Rf | Command::Lf => {
+                let (len, k) = (f.len(), op.offset as usize);
+                let i = match op.cmd {
+                    Command::New => {
+                        next_slot += 1;
+                        st.x = next_slot - 1;
+                        usize::MAX
+                    }
+                    Command::Rf => 2 + k,
+                    _ => len - 1 - k,
+                };
+                if i != usize::MAX {
+                    st.x = f.at(i).slot;
+                    st.x_pos = (base + f.head + i) as u32;
+                }
+                tri += 1;
+                f.insert(st.x);
+            }
+            Command::Rf0 => {
+                tri += 1;
+                f.remove_right(true)
+            }
+            Command::Lf0 => {
+                tri += 1;
+                f.remove_left(true)
+            }
+            Command::Dr => f.remove_right(false),
+            Command::Dl => f.remove_left(false),
+            Command::Null => f.skip(),
+            Command::Seed => {
+                st.x = next_slot;
+                next_slot += 3;
+                tri += 1;
+                seeds += 1;
+                st.seeds = seeds;
+                f.seed(st.x);
+            }
+            Command::AddNew | Command::AddRef | Command::Clear => return Err(SortError::TileCommand(op.cmd)),
         }
+        steps.push(st);
+        base += f.compact();
     }
-
-    /// Reserves room for a new entry of a vertex with tile box `b`; returns its start.
-    fn push(&mut self, b: &TileBox) -> u32 {
-        let start = self.indices.len() as u32;
-        self.starts.push(start);
-        self.indices.resize(self.indices.len() + b.area(), u32::MAX);
-        start
+    if base + f.back_pos() >= u32::MAX as usize {
+        return Err(SortError::TooLarge(ops.len()));
     }
-
-    /// The absolute position, in tile `(c, r)`'s frontier, of the model entry at `pos`
-    /// whose vertex has tile box `b`.
-    #[inline]
-    fn tile_index(&self, pos: usize, b: &TileBox, c: u16, r: u16) -> usize {
-        self.indices[self.starts[pos] as usize + b.index_of(c, r)] as usize
-    }
+    Ok((steps, next_slot, tri as usize))
 }
 
 /// Sorts the model into tiles for one view. Returns the non-empty tiles, by index.
@@ -245,239 +362,227 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
     Sorter::default().sort(model, bx, grid)
 }
 
-/// One thread's share of pass 2: its tiles, and the replay state it needs.
-#[derive(Default)]
-struct Group {
-    at: EntryIndex,
-    f: Frontier,
-}
+/// A tile's share of one command: the command's index (in the model's commands, then its
+/// tail vertices, then its loose triangles) shifted left by 4, or'ed with what the tile
+/// does with it: a [`Rewrite`] code, or for `SEED` bit 0 = the tile is in `[t]` and bits
+/// 1..3 = which of the three vertices are unclipped.
+type Record = u32;
+const RECORD_BITS: u32 = 4;
+/// What `bucket` returns for a tile where a command does nothing.
+const SKIP: u32 = u32::MAX;
+/// Commands, tail vertices and loose triangles a model may have, so that a record fits.
+pub const MAX_ITEMS: usize = 1 << (32 - RECORD_BITS);
 
 /// Pass 2's working memory, kept from frame to frame so that a frame loop does not pay for
-/// fresh pages every frame. The model's frontier is compacted as it goes, so this stays
-/// the size of the live frontier (before compaction, page faults were a sixth of the sort).
+/// fresh pages every frame.
 #[derive(Default)]
 pub struct Sorter {
-    groups: Vec<Group>,
+    /// Per chunk of the command stream, per tile, that tile's records in stream order.
+    chunks: Vec<Vec<Vec<Record>>>,
 }
 
 impl Sorter {
-    /// Pass 2. The tiles are split into one group per thread, balanced by their triangle
-    /// counts (longest first to the lightest group); every group replays the command stream
-    /// once, rewriting and coding only its own tiles. The walk of the model's frontier is
-    /// repeated per group, but all per-tile work, the rewriting and the entropy coding, runs
-    /// in parallel, so pass 2 scales with cores instead of waiting on one sequential replay.
-    /// On this project's 2-core machine both designs measure the same (`examples/sortbench`:
-    /// dragon, 8x8, about 2.6 times the Tri sort either way).
+    /// Pass 2, in two parallel steps that never replay the model's frontier (its walk was
+    /// resolved at load):
+    /// 1. bucket: chunks of the command stream in parallel, each command rewritten by
+    ///    Table 2 for every tile of its vertices' boxes, and a record appended to the lists
+    ///    of the tiles where it does something;
+    /// 2. write: the tiles in parallel, each following its records in stream order with its
+    ///    own `TileWriter`, frontier positions and entropy coders.
+    ///
+    /// No tile waits on another and no thread repeats another's work, so pass 2 scales with
+    /// cores, heaviest tiles first.
     pub fn sort(&mut self, model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
-        let busy: Vec<usize> = (0..grid.tiles()).filter(|&b| bx.tile_triangles[b] > 0).collect();
-        let n = rayon::current_num_threads().clamp(1, busy.len().max(1));
-        let mut group_of = vec![u16::MAX; grid.tiles()];
-        let mut load = vec![0u64; n];
-        let mut order = busy.clone();
-        order.sort_by_key(|&b| std::cmp::Reverse(bx.tile_triangles[b]));
-        for b in order {
-            let g = (0..n).min_by_key(|&g| load[g]).expect("at least one group");
-            load[g] += bx.tile_triangles[b] as u64;
-            group_of[b] = g as u16;
-        }
-        self.groups.resize_with(n, Group::default);
-        let group_of = &group_of;
-        let results: Vec<Result<Vec<Tile>, SortError>> = self
-            .groups
-            .par_iter_mut()
-            .enumerate()
-            .map(|(g, group)| replay(model, bx, grid, group_of, g as u16, group))
+        let tiles = grid.tiles();
+        let n_ops = model.steps.len();
+        let n_slots = model.positions.len();
+        let n_items = n_ops + (n_slots - model.tail_start as usize) + (model.triangles().len() - model.loose_start);
+        let n_chunks = (rayon::current_num_threads() * 4).clamp(1, n_items.div_ceil(4096).max(1));
+        self.chunks.resize_with(n_chunks, Vec::new);
+        let per = n_items.div_ceil(n_chunks);
+        self.chunks.par_iter_mut().enumerate().for_each(|(k, lists)| {
+            lists.resize_with(tiles, Vec::new);
+            lists.iter_mut().for_each(Vec::clear);
+            bucket(model, bx, grid, k * per..((k + 1) * per).min(n_items), lists);
+        });
+        let chunks = &self.chunks;
+        let mut busy: Vec<(usize, usize)> =
+            (0..tiles).map(|b| (b, chunks.iter().map(|c| c[b].len()).sum::<usize>())).filter(|&(_, n)| n > 0).collect();
+        busy.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
+        let mut out: Vec<Tile> = busy
+            .par_iter()
+            .with_max_len(1)
+            .filter_map(|&(b, _)| write_tile(model, chunks.iter().map(|c| c[b].as_slice()), b))
             .collect();
-        let mut tiles = Vec::with_capacity(busy.len());
-        for r in results {
-            tiles.extend(r?);
-        }
-        tiles.sort_by_key(|t| t.index);
-        Ok(tiles)
+        out.sort_by_key(|t| t.index);
+        Ok(out)
     }
 }
 
-/// Replays the model's commands once, rewriting each for the tiles of group `g` in its
-/// vertices' boxes and coding it into those tiles' streams.
-fn replay(
-    model: &TileModel,
-    bx: &Boxes,
-    grid: &TileGrid,
-    group_of: &[u16],
-    g: u16,
-    group: &mut Group,
-) -> Result<Vec<Tile>, SortError> {
-    let d = &model.decoded;
-    let q = &d.positions;
+/// Step 1 of pass 2 for the items `range`: appends each tile's records to `lists`.
+fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range<usize>, lists: &mut [Vec<Record>]) {
     let cols = grid.cols as usize;
-    let (at, f) = (&mut group.at, &mut group.f);
-    at.clear();
-    f.entries.clear();
-    f.head = 0;
-    let mut writers: Vec<Option<TileWriter>> = (0..grid.tiles()).map(|_| None).collect();
-    let mut next_slot = 0u32;
-    let mut next_tri = 0usize;
-    let bits = d.header.quant_bits;
-
-    // Runs `body(writer, tile column, tile row)` for every tile of this group in `rect`.
-    macro_rules! for_tiles {
-        ($rect:expr, |$w:ident, $c:ident, $r:ident| $body:block) => {{
-            let rect: TileBox = $rect;
-            if !rect.is_empty() {
-                for $r in rect.r0..=rect.r1 {
-                    for $c in rect.c0..=rect.c1 {
-                        let b = $r as usize * cols + $c as usize;
-                        if group_of[b] != g {
-                            continue;
-                        }
-                        let $w = writers[b].get_or_insert_with(|| TileWriter::new(bits));
-                        $body
-                    }
+    let n_ops = model.steps.len();
+    let n_tail = model.positions.len() - model.tail_start as usize;
+    let mut put = |rect: TileBox, item: usize, code: &mut dyn FnMut(u16, u16) -> u32| {
+        if rect.is_empty() {
+            return;
+        }
+        for r in rect.r0..=rect.r1 {
+            for c in rect.c0..=rect.c1 {
+                let code = code(c, r);
+                if code != SKIP {
+                    lists[r as usize * cols + c as usize].push(((item as u32) << RECORD_BITS) | code);
                 }
             }
-        }};
-    }
-
-    for op in &model.ops {
-        match op.cmd {
+        }
+    };
+    for i in range {
+        if i >= n_ops {
+            // After the commands: vertices only loose triangles use, then the loose triangles.
+            let rect = if i < n_ops + n_tail {
+                bx.vertices[model.tail_start as usize + i - n_ops]
+            } else {
+                bx.triangles[model.loose_start + i - n_ops - n_tail]
+            };
+            put(rect, i, &mut |_, _| Rewrite::Same.code());
+            continue;
+        }
+        let st = &model.steps[i];
+        let (vl, vr) = (&bx.vertices[st.l as usize], &bx.vertices[st.r as usize]);
+        match st.cmd {
             Command::New | Command::Rf | Command::Lf => {
-                let len = f.len();
-                let (l, r) = (f.at(0), f.at(1));
-                let (xs, x_pos) = match op.cmd {
-                    Command::New => {
-                        next_slot += 1;
-                        (next_slot - 1, 0)
-                    }
-                    Command::Rf => (f.at(2 + op.offset as usize).slot, f.head + 2 + op.offset as usize),
-                    _ => (f.at(len - 1 - op.offset as usize).slot, f.head + len - 1 - op.offset as usize),
-                };
-                let (vl, vr, vx, bt) = (
-                    bx.vertices[l.slot as usize],
-                    bx.vertices[r.slot as usize],
-                    bx.vertices[xs as usize],
-                    bx.triangles[next_tri],
-                );
-                next_tri += 1;
-                let (al, ax) = (at.push(&vl), at.push(&vx));
-                for_tiles!(vl.union(&vx), |w, c, rw| {
-                    let (ln, xn, tn) = (vl.contains(c, rw), vx.contains(c, rw), bt.contains(c, rw));
-                    match rewrite(op.cmd, ln, vr.contains(c, rw), xn, tn) {
-                        Rewrite::Same if op.cmd == Command::New => w.new_vertex(xs, q[xs as usize]),
-                        Rewrite::Same => w.existing(at.tile_index(x_pos, &vx, c, rw) - w.f.head),
-                        Rewrite::Null | Rewrite::NullAdd => w.null(),
-                        _ => {}
-                    }
-                    let back = w.f.back_pos() as u32;
-                    if ln {
-                        // `l` was pushed last by Null, or second to last by New/RF/LF.
-                        at.indices[al as usize + vl.index_of(c, rw)] = back - if tn { 2 } else { 1 };
-                    }
-                    if xn && !tn {
-                        if op.cmd == Command::New {
-                            w.add_new(xs, q[xs as usize]);
-                        } else {
-                            // Where x sits in this tile's frontier now, after the Null.
-                            w.add_ref(at.tile_index(x_pos, &vx, c, rw) - w.f.head);
-                        }
-                    }
-                    if xn {
-                        at.indices[ax as usize + vx.index_of(c, rw)] = w.f.back_pos() as u32 - 1;
-                    }
+                let (vx, bt) = (&bx.vertices[st.x as usize], &bx.triangles[st.tri as usize]);
+                put(vl.union(vx), i, &mut |c, r| {
+                    rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), vx.contains(c, r), bt.contains(c, r)).code()
                 });
-                f.insert(xs);
             }
             Command::Rf0 | Command::Lf0 | Command::Dr | Command::Dl | Command::Null => {
-                let (l, r) = (f.at(0), if f.len() >= 2 { f.at(1) } else { f.at(0) });
-                let (vl, vr) = (bx.vertices[l.slot as usize], bx.vertices[r.slot as usize]);
-                let bt = if matches!(op.cmd, Command::Rf0 | Command::Lf0) {
-                    next_tri += 1;
-                    bx.triangles[next_tri - 1]
+                let bt = if matches!(st.cmd, Command::Rf0 | Command::Lf0) {
+                    bx.triangles[st.tri as usize]
                 } else {
                     TileBox::EMPTY
                 };
-                let rect = if matches!(op.cmd, Command::Rf0 | Command::Dr) { vl.union(&vr) } else { vl };
-                let al = (op.cmd == Command::Null).then(|| at.push(&vl));
-                for_tiles!(rect, |w, c, rw| {
-                    match rewrite(op.cmd, vl.contains(c, rw), vr.contains(c, rw), false, bt.contains(c, rw)) {
-                        Rewrite::Same if op.cmd == Command::Rf0 => w.rf0(),
-                        Rewrite::Same => w.lf0(),
-                        Rewrite::Dr => w.dr(),
-                        Rewrite::Dl => w.dl(),
-                        Rewrite::Null => {
-                            w.null();
-                            at.indices[al.expect("Null allocates") as usize + vl.index_of(c, rw)] =
-                                w.f.back_pos() as u32 - 1;
-                        }
-                        _ => {}
-                    }
+                let rect = if matches!(st.cmd, Command::Rf0 | Command::Dr) { vl.union(vr) } else { *vl };
+                put(rect, i, &mut |c, r| {
+                    rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), false, bt.contains(c, r)).code()
                 });
-                match op.cmd {
-                    Command::Rf0 => f.remove_right(true),
-                    Command::Lf0 => f.remove_left(true),
-                    Command::Dr => f.remove_right(false),
-                    Command::Dl => f.remove_left(false),
-                    _ => f.skip(),
-                }
             }
             Command::Seed => {
-                let s = next_slot;
-                next_slot += 3;
-                let bt = bx.triangles[next_tri];
-                next_tri += 1;
-                let v = [0, 1, 2].map(|j| bx.vertices[(s + j) as usize]);
-                // The model's frontier is cleared: so is every tile's that does not get the seed.
-                for (b, w) in writers.iter_mut().enumerate() {
-                    if let Some(w) = w {
-                        if !w.f.is_empty() && !bt.contains((b % cols) as u16, (b / cols) as u16) {
-                            w.clear();
+                let bt = &bx.triangles[st.tri as usize];
+                let v = [0, 1, 2].map(|j| &bx.vertices[(st.x + j) as usize]);
+                put(v[0].union(v[1]).union(v[2]), i, &mut |c, r| {
+                    let inside = v.map(|v| v.contains(c, r) as u32);
+                    if bt.contains(c, r) {
+                        1
+                    } else {
+                        inside[0] << 1 | inside[1] << 2 | inside[2] << 3
+                    }
+                });
+            }
+            Command::AddNew | Command::AddRef | Command::Clear => unreachable!("resolve rejects tile commands"),
+        }
+    }
+}
+
+/// Step 2 of pass 2: tile `index`'s stream from its records, or `None` if it has no
+/// triangle.
+fn write_tile<'a>(model: &TileModel, lists: impl Iterator<Item = &'a [Record]>, index: usize) -> Option<Tile> {
+    let d = &model.decoded;
+    let q = &d.positions;
+    let n_ops = model.steps.len();
+    let n_tail = model.positions.len() - model.tail_start as usize;
+    let mut w = TileWriter::new(d.header.quant_bits);
+    // The model frontier position of each of this tile's frontier entries, by the tile's
+    // position: both queues grow in the same order, so this is sorted, and an entry of the
+    // model is found in the tile by binary search. These are the paper's counters of
+    // unclipped entries, kept as the positions themselves.
+    let mut pos: Vec<u32> = Vec::new();
+    let find = |w: &TileWriter, pos: &[u32], x_pos: u32| {
+        let i = pos[w.f.head..].partition_point(|&p| p < x_pos);
+        debug_assert_eq!(pos[w.f.head + i], x_pos, "the tile holds the entry");
+        i
+    };
+    let mut seen_seeds = 0;
+    for &rec in lists.flatten() {
+        let (i, code) = ((rec >> RECORD_BITS) as usize, rec & ((1 << RECORD_BITS) - 1));
+        if i >= n_ops {
+            if i < n_ops + n_tail {
+                let s = model.tail_start + (i - n_ops) as u32;
+                w.tail_vertex(s, q[s as usize]);
+            } else {
+                w.loose(d.triangles[model.loose_start + i - n_ops - n_tail]);
+            }
+            continue;
+        }
+        let st = &model.steps[i];
+        // A `SEED` of the model clears its frontier: this tile's too, before its next command.
+        let is_seed = st.cmd == Command::Seed;
+        if st.seeds - is_seed as u32 > seen_seeds && !w.f.is_empty() {
+            w.clear();
+        }
+        seen_seeds = st.seeds;
+        match st.cmd {
+            Command::New | Command::Rf | Command::Lf => {
+                let rw = Rewrite::from_code(code);
+                if rw == Rewrite::Same {
+                    if st.cmd == Command::New {
+                        w.new_vertex(st.x, q[st.x as usize]);
+                    } else {
+                        let k = find(&w, &pos, st.x_pos);
+                        w.existing(k);
+                    }
+                    pos.extend([st.push, st.push + 1]);
+                    continue;
+                }
+                if matches!(rw, Rewrite::Null | Rewrite::NullAdd) {
+                    w.null();
+                    pos.push(st.push);
+                }
+                if matches!(rw, Rewrite::Add | Rewrite::NullAdd) {
+                    if st.cmd == Command::New {
+                        w.add_new(st.x, q[st.x as usize]);
+                    } else {
+                        let k = find(&w, &pos, st.x_pos);
+                        w.add_ref(k);
+                    }
+                    pos.push(st.push + 1);
+                }
+            }
+            Command::Rf0 | Command::Lf0 | Command::Dr | Command::Dl | Command::Null => match Rewrite::from_code(code) {
+                Rewrite::Same if st.cmd == Command::Rf0 => w.rf0(),
+                Rewrite::Same => w.lf0(),
+                Rewrite::Dr => w.dr(),
+                Rewrite::Dl => w.dl(),
+                Rewrite::Null => {
+                    w.null();
+                    pos.push(st.push);
+                }
+                _ => {}
+            },
+            Command::Seed => {
+                let s = st.x;
+                if code & 1 != 0 {
+                    w.seed([s, s + 1, s + 2], [q[s as usize], q[s as usize + 1], q[s as usize + 2]]);
+                    pos.extend([st.push, st.push + 1, st.push + 2]);
+                } else {
+                    if !w.f.is_empty() {
+                        w.clear();
+                    }
+                    for j in 0..3 {
+                        if code & (2 << j) != 0 {
+                            w.add_new(s + j, q[(s + j) as usize]);
+                            pos.push(st.push + j);
                         }
                     }
                 }
-                let a = v.map(|b| at.push(&b));
-                for_tiles!(v[0].union(&v[1]).union(&v[2]), |w, c, rw| {
-                    if bt.contains(c, rw) {
-                        w.seed([s, s + 1, s + 2], [q[s as usize], q[s as usize + 1], q[s as usize + 2]]);
-                        let back = w.f.back_pos() as u32;
-                        for j in 0..3 {
-                            at.indices[a[j] as usize + v[j].index_of(c, rw)] = back - 3 + j as u32;
-                        }
-                    } else {
-                        for j in 0..3 {
-                            if v[j].contains(c, rw) {
-                                w.add_new(s + j as u32, q[(s + j as u32) as usize]);
-                                at.indices[a[j] as usize + v[j].index_of(c, rw)] = w.f.back_pos() as u32 - 1;
-                            }
-                        }
-                    }
-                });
-                f.seed(s);
             }
-            Command::AddNew | Command::AddRef | Command::Clear => return Err(SortError::TileCommand(op.cmd)),
+            Command::AddNew | Command::AddRef | Command::Clear => unreachable!("resolve rejects tile commands"),
         }
-        at.drop_front(f.compact());
+        debug_assert_eq!(pos.len(), w.f.back_pos());
     }
-
-    // After the commands: vertices only loose triangles use, then the loose triangles.
-    for s in next_slot..q.len() as u32 {
-        for_tiles!(bx.vertices[s as usize], |w, _c, _r| {
-            w.tail_vertex(s, q[s as usize]);
-        });
-    }
-    for t in next_tri..d.triangles.len() {
-        for_tiles!(bx.triangles[t], |w, _c, _r| {
-            w.loose(d.triangles[t]);
-        });
-    }
-
-    Ok(writers
-        .into_iter()
-        .enumerate()
-        .filter_map(|(index, w)| {
-            let w = w?;
-            (w.triangles > 0).then(|| {
-                let (triangles, slots) = (w.triangles, w.global.clone());
-                Tile { index, bytes: w.finish(&d.header), triangles, slots }
-            })
-        })
-        .collect())
+    (w.triangles > 0).then(|| {
+        let (triangles, slots) = (w.triangles, w.global.clone());
+        Tile { index, bytes: w.finish(&d.header), triangles, slots }
+    })
 }
