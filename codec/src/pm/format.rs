@@ -130,7 +130,7 @@
 use rayon::prelude::*;
 use thiserror::Error;
 
-use super::huffman::{BitReader, BitWriter, Table, MAX_LEN};
+use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::container::{get_varint, put_varint, ContainerError, Layout};
 
@@ -1127,6 +1127,13 @@ fn classify(v: u32, v_u: u32, v_end: u32, f: [u32; 3]) -> FaceCode {
     FaceCode::General(f.map(|c| c as i64 - v as i64))
 }
 
+/// A `.dpm` table: every one of the 256 symbols gets a code (a count of one more than seen),
+/// so a table built before the final offsets are known still codes every symbol the final
+/// pass produces.
+fn every_symbol(counts: &[u64; 256]) -> Table {
+    Table::from_counts(&counts.map(|c| c + 1), MAX_LEN)
+}
+
 // ---- the tables section --------------------------------------------------------------------
 
 /// One bit stream, padded to a byte: per table a bit, 0 for a flat code (every symbol 8 bits),
@@ -1181,7 +1188,7 @@ fn read_tables(tb: &[u8]) -> Result<Vec<Table>, DpmError> {
                 prev = x;
             }
         }
-        tables.push(Table::from_lens(lens).ok_or_else(|| corrupt("invalid code lengths"))?);
+        tables.push(Table::from_lens(&lens).ok_or_else(|| corrupt("invalid code lengths"))?);
     }
     if r.end() != tb.len() {
         return Err(corrupt("bytes after the tables"));
@@ -1656,7 +1663,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
     // subtree first (a first guess at the swaps: tables from unswapped operations would make
     // the swapped children code too long for any swap to pay).
     let smaller_first: Vec<bool> = data.iter().map(|d| d.ctx.v_end - d.v_u < d.v_u - d.ctx.v).collect();
-    let tables1: Vec<Table> = count(&smaller_first, &vec![0; m], 0.0).iter().map(Table::from_counts).collect();
+    let tables1: Vec<Table> = count(&smaller_first, &vec![0; m], 0.0).iter().map(every_symbol).collect();
     // Step 3: bottom-up compression, choosing the swaps; the average size for the offset
     // estimate comes from it.
     let (bytes1, _, _) = compress(&tables1, 0.0);
@@ -1665,7 +1672,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
     // Step 4: tables from those symbols, and the final compression (choosing the swaps again
     // with the final tables; every symbol has a code, so a changed choice still codes).
     let final_counts = count(&swaps, &offsets, avg);
-    let tables: Vec<Table> = final_counts.iter().map(Table::from_counts).collect();
+    let tables: Vec<Table> = final_counts.iter().map(every_symbol).collect();
     let mut symbol_bits = (0.0f64, 0.0f64);
     for (c, t) in final_counts.iter().zip(&tables) {
         let total = c.iter().sum::<u64>() as f64;

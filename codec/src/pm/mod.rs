@@ -39,7 +39,6 @@
 pub mod adapt;
 pub mod build;
 pub mod format;
-pub mod huffman;
 pub mod refine;
 
 pub use adapt::{Adapter, Stats, View};

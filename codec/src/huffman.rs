@@ -1,0 +1,320 @@
+//! Static canonical Huffman codes over byte symbols, and MSB-first bit streams. Two formats
+//! use them: the `.dpm` operations (the "shared probability tables" of the PM paper's
+//! section 4.2, stored once in the file, so that every operation decodes from its start
+//! alone) and the prefix-coded tile streams of `.bft` (a table per context, per tile).
+
+/// Longest code length a table may have.
+pub const MAX_LEN: u8 = 24;
+
+/// One static code table over symbols `0..lens.len()` (at most 256): a code length per
+/// symbol, 0 for a symbol without a code, and the canonical codes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    pub lens: Vec<u8>,
+    codes: Vec<u32>,
+    /// Per length `l` (index `l`): the first canonical code of that length, how many codes
+    /// have it, and where its symbols start in `sorted`.
+    first: [u32; MAX_LEN as usize + 1],
+    count: [u32; MAX_LEN as usize + 1],
+    offset: [u32; MAX_LEN as usize + 1],
+    sorted: Vec<u8>,
+    /// The longest length in use.
+    longest: u8,
+}
+
+impl Table {
+    /// The code for these symbol counts, at most `max_len` bits long: symbols with a count
+    /// get a code, the others none. A lone symbol gets a one-bit code.
+    pub fn from_counts(counts: &[u64], max_len: u8) -> Table {
+        assert!(counts.len() <= 1 << max_len.min(8) && (1..=MAX_LEN).contains(&max_len), "no code fits");
+        let present: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
+        let mut lens = vec![0u8; counts.len()];
+        match present.len() {
+            0 => {}
+            1 => lens[present[0]] = 1,
+            _ => {
+                let mut freq: Vec<u64> = present.iter().map(|&s| counts[s]).collect();
+                loop {
+                    let l = huffman_lengths(&freq);
+                    if l.iter().all(|&l| l <= max_len) {
+                        for (&s, l) in present.iter().zip(l) {
+                            lens[s] = l;
+                        }
+                        break;
+                    }
+                    // Flatten the distribution until the longest code fits.
+                    for f in &mut freq {
+                        *f = (*f >> 1) + 1;
+                    }
+                }
+            }
+        }
+        Table::from_lens(&lens).expect("Huffman lengths are a complete code")
+    }
+
+    /// The canonical code for these lengths, if they form a complete prefix code (or a
+    /// lone one-bit code, or no code at all).
+    pub fn from_lens(lens: &[u8]) -> Option<Table> {
+        if lens.len() > 256 {
+            return None;
+        }
+        let mut count = [0u32; MAX_LEN as usize + 1];
+        for &l in lens {
+            if l > MAX_LEN {
+                return None;
+            }
+            count[l as usize] += 1;
+        }
+        let used = lens.len() as u32 - count[0];
+        count[0] = 0;
+        // Kraft equality: exactly complete, unless a single symbol has a one-bit code.
+        let kraft: u64 = (1..=MAX_LEN as usize).map(|l| (count[l] as u64) << (MAX_LEN as usize - l)).sum();
+        if used > 1 && kraft != 1u64 << MAX_LEN || used == 1 && count[1] != 1 {
+            return None;
+        }
+        let mut first = [0u32; MAX_LEN as usize + 1];
+        let mut offset = [0u32; MAX_LEN as usize + 1];
+        let mut code = 0u32;
+        let mut off = 0u32;
+        for l in 1..=MAX_LEN as usize {
+            code = (code + if l > 1 { count[l - 1] } else { 0 }) << if l > 1 { 1 } else { 0 };
+            first[l] = code;
+            offset[l] = off;
+            off += count[l];
+        }
+        let mut sorted: Vec<u8> = (0..lens.len()).filter(|&s| lens[s] > 0).map(|s| s as u8).collect();
+        sorted.sort_by_key(|&s| (lens[s as usize], s));
+        let mut codes = vec![0u32; lens.len()];
+        let mut next = first;
+        for &s in &sorted {
+            let l = lens[s as usize] as usize;
+            codes[s as usize] = next[l];
+            next[l] += 1;
+        }
+        let longest = lens.iter().copied().max().unwrap_or(0);
+        Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest })
+    }
+
+    /// Writes `sym`'s code; the symbol must have one.
+    #[inline]
+    pub fn encode(&self, w: &mut BitWriter, sym: u8) {
+        debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
+        w.put(self.codes[sym as usize], self.lens[sym as usize]);
+    }
+
+    /// The next symbol, or `None` past the end of the data or for a bit pattern that is no
+    /// code.
+    #[inline]
+    pub fn decode(&self, r: &mut BitReader) -> Option<u8> {
+        let bits = r.peek();
+        for l in 1..=self.longest as usize {
+            let code = bits >> (MAX_LEN as usize - l);
+            let d = code.wrapping_sub(self.first[l]);
+            if code >= self.first[l] && d < self.count[l] {
+                r.skip(l as u32)?;
+                return Some(self.sorted[(self.offset[l] + d) as usize]);
+            }
+        }
+        None
+    }
+}
+
+/// Huffman code lengths for positive frequencies (two-queue construction).
+fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
+    let n = freq.len();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| freq[i]);
+    // Nodes: leaves 0..n, inner n..2n-1; parent links.
+    let mut weight: Vec<u64> = order.iter().map(|&i| freq[i]).collect();
+    let mut parent = vec![usize::MAX; 2 * n - 1];
+    let (mut leaf, mut inner) = (0usize, n);
+    let take = |weight: &[u64], leaf: &mut usize, inner: &mut usize, made: usize| -> usize {
+        if *leaf < n && (*inner >= made || weight[*leaf] <= weight[*inner]) {
+            *leaf += 1;
+            *leaf - 1
+        } else {
+            *inner += 1;
+            *inner - 1
+        }
+    };
+    for made in n..2 * n - 1 {
+        let a = take(&weight, &mut leaf, &mut inner, made);
+        let b = take(&weight, &mut leaf, &mut inner, made);
+        weight.push(weight[a] + weight[b]);
+        parent[a] = made;
+        parent[b] = made;
+    }
+    let mut depth = vec![0u32; 2 * n - 1];
+    for i in (0..2 * n - 2).rev() {
+        depth[i] = depth[parent[i]] + 1;
+    }
+    let mut lens = vec![0u8; n];
+    for (k, &i) in order.iter().enumerate() {
+        lens[i] = depth[k].min(255) as u8;
+    }
+    lens
+}
+
+/// MSB-first bit writer; [`Self::finish`] pads the last byte with zeros.
+#[derive(Default)]
+pub struct BitWriter {
+    bytes: Vec<u8>,
+    acc: u64,
+    nbits: u32,
+}
+
+impl BitWriter {
+    /// Writes the low `len` bits of `code` (at most 32), most significant first.
+    #[inline]
+    pub fn put(&mut self, code: u32, len: u8) {
+        self.acc = (self.acc << len) | code as u64;
+        self.nbits += len as u32;
+        while self.nbits >= 8 {
+            self.nbits -= 8;
+            self.bytes.push((self.acc >> self.nbits) as u8);
+        }
+        self.acc &= (1u64 << self.nbits) - 1;
+    }
+
+    pub fn finish(mut self) -> Vec<u8> {
+        if self.nbits > 0 {
+            self.bytes.push((self.acc << (8 - self.nbits)) as u8);
+        }
+        self.bytes
+    }
+}
+
+/// MSB-first bit reader over a byte slice from a starting byte. Reads past the end fail
+/// (`None`) and consume nothing.
+pub struct BitReader<'a> {
+    data: &'a [u8],
+    start: usize,
+    /// The next byte to load into `buf`.
+    pos: usize,
+    /// Loaded bits, left-aligned; zeros past the end of the data.
+    buf: u64,
+    nbits: u32,
+    /// Bits in the data from `start`.
+    avail: u64,
+    /// Bits read so far.
+    pub read: u64,
+}
+
+impl<'a> BitReader<'a> {
+    pub fn new(data: &'a [u8], start: usize) -> Self {
+        let avail = data.len().saturating_sub(start) as u64 * 8;
+        BitReader { data, start, pos: start, buf: 0, nbits: 0, avail, read: 0 }
+    }
+
+    #[inline]
+    fn fill(&mut self) {
+        while self.nbits <= 56 {
+            let b = self.data.get(self.pos).copied().unwrap_or(0);
+            self.buf |= (b as u64) << (56 - self.nbits);
+            self.nbits += 8;
+            self.pos += 1;
+        }
+    }
+
+    /// The next [`MAX_LEN`] bits, without consuming them (zeros past the end).
+    #[inline]
+    pub fn peek(&mut self) -> u32 {
+        if self.nbits < 32 {
+            self.fill();
+        }
+        (self.buf >> (64 - MAX_LEN as u32)) as u32
+    }
+
+    /// Consumes `n <= 32` bits; fails past the end of the data.
+    #[inline]
+    pub fn skip(&mut self, n: u32) -> Option<()> {
+        if self.read + n as u64 > self.avail {
+            return None;
+        }
+        if self.nbits < n {
+            self.fill();
+        }
+        self.buf <<= n;
+        self.nbits -= n;
+        self.read += n as u64;
+        Some(())
+    }
+
+    /// The next `n <= 32` bits as a number, most significant first.
+    #[inline]
+    pub fn bits(&mut self, n: u32) -> Option<u32> {
+        if n == 0 {
+            return Some(0);
+        }
+        if self.nbits < n {
+            self.fill();
+        }
+        let v = (self.buf >> (64 - n)) as u32;
+        self.skip(n)?;
+        Some(v)
+    }
+
+    #[inline]
+    pub fn bit(&mut self) -> Option<bool> {
+        self.bits(1).map(|b| b == 1)
+    }
+
+    /// The byte just past the last one touched (the end of a byte-aligned stream).
+    pub fn end(&self) -> usize {
+        self.start + self.read.div_ceil(8) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_round_trip() {
+        let mut counts = [0u64; 256];
+        for (i, c) in counts.iter_mut().enumerate() {
+            *c = if i < 4 { 1_000_000 >> i } else { (i % 7) as u64 + 1 };
+        }
+        let t = Table::from_counts(&counts, MAX_LEN);
+        assert_eq!(Table::from_lens(&t.lens).unwrap(), t);
+        let mut w = BitWriter::default();
+        for s in 0..=255u8 {
+            t.encode(&mut w, s);
+        }
+        let bytes = w.finish();
+        let mut r = BitReader::new(&bytes, 0);
+        for s in 0..=255u8 {
+            assert_eq!(t.decode(&mut r), Some(s));
+        }
+    }
+
+    #[test]
+    fn partial_alphabets_and_truncation() {
+        let counts = [0u64, 5, 0, 1, 1, 0, 9];
+        let t = Table::from_counts(&counts, 15);
+        assert_eq!(t.lens.iter().filter(|&&l| l > 0).count(), 4);
+        let lone = Table::from_counts(&[0, 0, 3], 15);
+        assert_eq!(lone.lens, vec![0, 0, 1]);
+        assert!(Table::from_lens(&[2, 2, 2]).is_none(), "incomplete");
+        assert!(Table::from_lens(&[1, 1, 1]).is_none(), "oversubscribed");
+        let mut w = BitWriter::default();
+        for &s in &[6u8, 1, 3, 4, 6, 6] {
+            t.encode(&mut w, s);
+        }
+        lone.encode(&mut w, 2);
+        w.put(0x1_2345, 17);
+        let bytes = w.finish();
+        let mut r = BitReader::new(&bytes, 0);
+        for &s in &[6u8, 1, 3, 4, 6, 6] {
+            assert_eq!(t.decode(&mut r), Some(s));
+        }
+        assert_eq!(lone.decode(&mut r), Some(2));
+        assert_eq!(r.bits(17), Some(0x1_2345));
+        // Only padding is left: nothing more than it decodes.
+        assert_eq!(r.bits(8), None);
+        assert!(Table::from_counts(&[1_000_000, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1], 5)
+            .lens
+            .iter()
+            .all(|&l| (1..=5).contains(&l)));
+    }
+}
