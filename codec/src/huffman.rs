@@ -159,6 +159,7 @@ fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
 #[derive(Default)]
 pub struct BitWriter {
     bytes: Vec<u8>,
+    /// Pending bits in the low `nbits` (bits above them are stale and never written).
     acc: u64,
     nbits: u32,
 }
@@ -167,16 +168,22 @@ impl BitWriter {
     /// Writes the low `len` bits of `code` (at most 32), most significant first.
     #[inline]
     pub fn put(&mut self, code: u32, len: u8) {
+        debug_assert!(len <= 32 && (len == 32 || code >> len == 0));
+        // Fewer than 32 bits pend before a put, so 64 always hold them and the new ones; a
+        // whole word goes out at once.
         self.acc = (self.acc << len) | code as u64;
         self.nbits += len as u32;
+        if self.nbits >= 32 {
+            self.nbits -= 32;
+            self.bytes.extend_from_slice(&((self.acc >> self.nbits) as u32).to_be_bytes());
+        }
+    }
+
+    pub fn finish(mut self) -> Vec<u8> {
         while self.nbits >= 8 {
             self.nbits -= 8;
             self.bytes.push((self.acc >> self.nbits) as u8);
         }
-        self.acc &= (1u64 << self.nbits) - 1;
-    }
-
-    pub fn finish(mut self) -> Vec<u8> {
         if self.nbits > 0 {
             self.bytes.push((self.acc << (8 - self.nbits)) as u8);
         }

@@ -2,7 +2,9 @@
 
 mod common;
 
-use codec::bft::{self, BftError, EncodeOptions};
+use codec::bft::tile_sort::{self, Sorter, TileModel};
+use codec::bft::{self, BftError, Coding, EncodeOptions};
+use codec::view::{Camera, TileGrid};
 
 fn encoded(rel: &str) -> Vec<u8> {
     let mesh = codec::load_path(&common::shared_meshes().join(rel)).unwrap();
@@ -58,7 +60,27 @@ fn wrong_magic_and_version_are_named() {
 /// they must reject garbage with an error, not a panic, and in bounded time.
 #[test]
 fn forged_checksums_reach_the_stream_decoders_safely() {
-    let bytes = encoded("classic/suzanne.obj");
+    forge_sections(&encoded("classic/suzanne.obj"));
+}
+
+/// The same for a prefix-coded stream: a tile of the sort's fast coding holding the whole
+/// model, whose truncations are all errors too.
+#[test]
+fn corrupt_prefix_coded_streams_are_errors() {
+    let model = TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap();
+    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
+    let tiles = Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap();
+    let bytes = &tiles[0].bytes;
+    assert_eq!(bft::decode(bytes).unwrap().triangles.len(), model.triangles().len());
+    for len in 0..bytes.len() {
+        assert!(bft::decode(&bytes[..len]).is_err(), "truncated to {len}");
+    }
+    forge_sections(bytes);
+}
+
+fn forge_sections(bytes: &[u8]) {
     let header_len = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
     let sections_start = 12 + header_len + 4;
     let mut state = 12345u64;
@@ -68,7 +90,7 @@ fn forged_checksums_reach_the_stream_decoders_safely() {
     };
     let mut rejected = 0;
     for _ in 0..500 {
-        let mut b = bytes.clone();
+        let mut b = bytes.to_vec();
         let i = sections_start + 8 + (next() as usize % (b.len() - sections_start - 8));
         b[i] = next() as u8;
         refresh_checksums(&mut b, sections_start);

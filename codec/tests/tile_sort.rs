@@ -5,18 +5,25 @@
 mod common;
 
 use codec::bft::tile_sort::{self, TileModel};
-use codec::bft::{self, EncodeOptions};
+use codec::bft::{self, Coding, EncodeOptions};
 use codec::view::{Camera, TileGrid};
 use codec::Mesh;
 use common::canonical;
 use glam::Vec3;
 use proptest::prelude::*;
 
-/// Sorts and checks every tile; returns (non-empty tiles, triangle-tile pairs).
+/// Sorts with both codings and checks every tile; returns (non-empty tiles, triangle-tile
+/// pairs).
 fn check_sort(model: &TileModel, cam: &Camera, grid: &TileGrid) -> (usize, usize) {
+    let range = check_coding(model, cam, grid, Coding::Range);
+    assert_eq!(check_coding(model, cam, grid, Coding::Prefix), range);
+    range
+}
+
+fn check_coding(model: &TileModel, cam: &Camera, grid: &TileGrid, coding: Coding) -> (usize, usize) {
     let vp = cam.view_proj(grid.aspect());
     let boxes = tile_sort::boxes(model, vp, grid);
-    let tiles = tile_sort::sort_with_boxes(model, &boxes, grid).expect("sorts");
+    let tiles = tile_sort::Sorter::new(coding).sort(model, &boxes, grid).expect("sorts");
     let mut expected = vec![Vec::new(); grid.tiles()];
     for (t, b) in model.triangles().iter().zip(&boxes.triangles) {
         if b.is_empty() {
@@ -33,6 +40,7 @@ fn check_sort(model: &TileModel, cam: &Camera, grid: &TileGrid) -> (usize, usize
     for tile in &tiles {
         seen[tile.index] = true;
         let dec = bft::decode(&tile.bytes).unwrap_or_else(|e| panic!("tile {} does not decode: {e}", tile.index));
+        assert_eq!(dec.header.coding, coding);
         assert_eq!(dec.positions.len(), tile.slots.len());
         for (i, p) in dec.positions.iter().enumerate() {
             assert_eq!(*p, model.decoded.positions[tile.slots[i] as usize], "tile {} vertex {i}", tile.index);

@@ -8,12 +8,12 @@
 
 use std::path::Path;
 
-use super::format::{self, corrupt, get_varint, BftError, Header};
+use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{basis_position, command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::model::{basis_position, command_context, predict, Prediction, RangeSource, SymbolSource};
+use super::prefix::PrefixSource;
 use super::Command;
 use crate::mesh::{Mesh, Quantization};
-use crate::rangecoder::Decoder;
 
 /// A decoded `.bft` file, at slot level: quantized positions per slot, triangles over
 /// slots, and the duplicate table that maps repeated slots back to their first slot.
@@ -102,13 +102,23 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
         return Err(corrupt("trailing bytes in the duplicate table"));
     }
 
+    match h.coding {
+        Coding::Range => decode_streams(h, RangeSource::new(conn, geom), duplicates, loose_bytes, record),
+        Coding::Prefix => decode_streams(h, PrefixSource::new(conn, geom)?, duplicates, loose_bytes, record),
+    }
+}
+
+fn decode_streams<S: SymbolSource>(
+    h: Header,
+    source: S,
+    duplicates: Vec<(u32, u32)>,
+    loose_bytes: &[u8],
+    record: bool,
+) -> Result<(Decoded, Vec<Op>), BftError> {
     // Capacities come from the header, capped, so a forged count cannot allocate wildly.
     const CAP: usize = 1 << 22;
     let mut st = State {
-        cd: Decoder::new(conn),
-        gd: Decoder::new(geom),
-        cmodel: CommandModel::default(),
-        gmodel: GeometryModel::default(),
+        source,
         f: Frontier::default(),
         positions: Vec::with_capacity((h.slots as usize).min(CAP)),
         deg: Vec::with_capacity((h.slots as usize).min(CAP)),
@@ -129,10 +139,11 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
     if st.positions.len() != h.slots as usize {
         return Err(corrupt(format!("decoded {} vertex slots, header says {}", st.positions.len(), h.slots)));
     }
-    if st.cd.overrun() > 0 {
+    let [conn_over, geom_over] = st.source.overrun();
+    if conn_over > 0 {
         return Err(BftError::Truncated("connectivity stream"));
     }
-    if st.gd.overrun() > 0 {
+    if geom_over > 0 {
         return Err(BftError::Truncated("geometry stream"));
     }
 
@@ -155,11 +166,8 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
     Ok((Decoded { header: h, positions, triangles, duplicates }, ops))
 }
 
-struct State<'a> {
-    cd: Decoder<'a>,
-    gd: Decoder<'a>,
-    cmodel: CommandModel,
-    gmodel: GeometryModel,
+struct State<'a, S> {
+    source: S,
     f: Frontier,
     positions: Vec<[u32; 3]>,
     deg: Vec<u8>,
@@ -172,7 +180,7 @@ struct State<'a> {
     record: bool,
 }
 
-impl State<'_> {
+impl<S: SymbolSource> State<'_, S> {
     #[inline]
     fn slot_pos(&self, slot: u32) -> [u32; 3] {
         basis_position(&self.positions, slot, self.max)
@@ -192,8 +200,8 @@ impl State<'_> {
             _ => {
                 let pred =
                     predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
-                self.gmodel
-                    .decode(&mut self.gd, kind, pred, self.max)
+                self.source
+                    .position(kind, pred, self.max)
                     .ok_or_else(|| corrupt(format!("position of vertex {s} is outside the quantization grid")))?
             }
         };
@@ -219,7 +227,7 @@ impl State<'_> {
     }
 
     fn offset(&mut self, cmd: Command, limit: usize) -> Result<usize, BftError> {
-        let k = self.cmodel.decode_offset(&mut self.cd, cmd).ok_or_else(|| corrupt("bad offset code"))? as usize;
+        let k = self.source.offset(cmd).ok_or_else(|| corrupt("bad offset code"))? as usize;
         if k >= limit {
             return Err(corrupt(format!("{cmd:?} offset {k} past the frontier ({} vertices)", self.f.len())));
         }
@@ -233,7 +241,7 @@ impl State<'_> {
             let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
             let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
             let ctx = command_context(prev, dl, dr);
-            let cmd = self.cmodel.decode(&mut self.cd, ctx).ok_or_else(|| corrupt("invalid command code"))?;
+            let cmd = self.source.command(ctx).ok_or_else(|| corrupt("invalid command code"))?;
             let mut offset = 0;
             match cmd {
                 Command::New => {
@@ -306,7 +314,7 @@ impl State<'_> {
             if self.triangles.len() > triangles as usize {
                 return Err(corrupt("more triangles than the header says"));
             }
-            if self.cd.overrun() > 8 {
+            if self.source.overrun()[0] > 8 {
                 return Err(BftError::Truncated("connectivity stream"));
             }
             prev = cmd;

@@ -8,7 +8,7 @@
 //! rotation without a triangle, or a frontier without unvisited triangles, starts a `SEED`
 //! at the next unvisited triangle in input order.
 
-use super::format::{self, put_varint, Header};
+use super::format::{self, put_varint, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
 use super::Command;
@@ -116,6 +116,7 @@ pub fn encode_with_progress(
         tail_slots,
         components: mesh.components() as u32,
         quant_bits: quant.bits,
+        coding: Coding::Range,
         bbox_min: quant.min,
         step: quant.step,
         bbox_max,

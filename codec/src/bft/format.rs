@@ -14,7 +14,9 @@
 //!         N     payload
 //!         4     CRC-32 of the payload
 //! ```
-//! `CONN` and `GEOM` are range-coded streams ([`crate::rangecoder`]); `DUPS` is the duplicate
+//! `CONN` and `GEOM` are range-coded streams ([`crate::rangecoder`]), or prefix-coded ones
+//! when the header's coding byte (offset 41 of the header; it was reserved, and zero, before)
+//! says so ([`Coding`]); `DUPS` is the duplicate
 //! table (LEB128: count, then per entry the slot's gap from the previous entry and the
 //! source slot); `LOOS` holds loose triangles (LEB128: three slots each). Nothing may follow
 //! the last section.
@@ -50,6 +52,19 @@ pub(crate) fn corrupt(msg: impl Into<String>) -> BftError {
     BftError::Corrupt(msg.into())
 }
 
+/// How a file's `CONN` and `GEOM` streams are entropy-coded (header byte 41).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Coding {
+    /// The adaptive binary range coder with context models: the smallest streams, and what
+    /// `tessera encode` writes.
+    #[default]
+    Range = 0,
+    /// Static canonical Huffman codes, a table per context stored at the head of each stream,
+    /// sign and mantissa bits raw: a few percent larger and several times faster to write and
+    /// read. The tile sort's fast mode writes it (see `codec::bft::prefix`).
+    Prefix = 1,
+}
+
 /// The fixed header: counts, quantization and bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Header {
@@ -69,6 +84,7 @@ pub struct Header {
     /// Connected components (triangles joined through shared vertices).
     pub components: u32,
     pub quant_bits: u8,
+    pub coding: Coding,
     pub bbox_min: [f32; 3],
     pub step: f32,
     pub bbox_max: [f32; 3],
@@ -95,7 +111,7 @@ impl Header {
         ] {
             b.extend_from_slice(&v.to_le_bytes());
         }
-        b.extend_from_slice(&[self.quant_bits, 0, 0, 0]);
+        b.extend_from_slice(&[self.quant_bits, self.coding as u8, 0, 0]);
         for v in self.bbox_min.iter().chain(&[self.step]).chain(&self.bbox_max) {
             b.extend_from_slice(&v.to_le_bytes());
         }
@@ -120,6 +136,11 @@ impl Header {
             tail_slots: u(7),
             components: u(8),
             quant_bits: b[40],
+            coding: match b[41] {
+                0 => Coding::Range,
+                1 => Coding::Prefix,
+                c => return Err(corrupt(format!("unknown entropy coding {c}"))),
+            },
             bbox_min: [f(44), f(48), f(52)],
             step: f(56),
             bbox_max: [f(60), f(64), f(68)],
@@ -222,11 +243,12 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         tail_slots: byte(10) % 4,
         components: 0,
         quant_bits: 8 + (byte(11) % 17) as u8,
+        coding: if byte(12) & 1 == 0 { Coding::Range } else { Coding::Prefix },
         bbox_min: [0.0; 3],
         step: 1.0,
         bbox_max: [1.0; 3],
     };
-    let rest = data.get(12..).unwrap_or(&[]);
+    let rest = data.get(13..).unwrap_or(&[]);
     let (conn, rest) = rest.split_at(rest.len() / 2);
     let (geom, rest) = rest.split_at(rest.len() * 3 / 4);
     let (dups, loose) = rest.split_at(rest.len() / 2);

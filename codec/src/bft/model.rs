@@ -25,6 +25,13 @@ pub fn command_context(prev: Command, deg_l: u8, deg_r: u8) -> usize {
     (class * DEG_CTX + deg_l.min(DEG_CAP) as usize) * DEG_CTX + deg_r.min(DEG_CAP) as usize
 }
 
+/// The previous command's class and the left vertex's visited degree (capped) of a
+/// [`command_context`].
+#[inline]
+pub fn context_parts(ctx: usize) -> (usize, u8) {
+    (ctx / (DEG_CTX * DEG_CTX), ((ctx / DEG_CTX) % DEG_CTX) as u8)
+}
+
 /// Binary decomposition of [`Command`], per context:
 /// node 0: triangle-producing (0) or not (1);
 /// node 1: `NEW` (0) or an existing third vertex (1); node 2: closing (0) or generic (1);
@@ -240,5 +247,93 @@ impl GeometryModel {
             self.prev_class[axis] = class;
         }
         Some(out)
+    }
+}
+
+/// Where a stream's commands, offsets and positions go: the tile writer codes through it,
+/// so one writer serves both [`super::Coding`]s.
+pub(crate) trait SymbolSink {
+    fn command(&mut self, ctx: usize, cmd: Command);
+    fn offset(&mut self, cmd: Command, k: u32);
+    fn position(&mut self, kind: Prediction, actual: [u32; 3], pred: [u32; 3]);
+    /// The `CONN` and `GEOM` streams.
+    fn finish(self) -> [Vec<u8>; 2];
+}
+
+/// Where the decoder reads them from. `None` for a code that is not valid here.
+pub(crate) trait SymbolSource {
+    fn command(&mut self, ctx: usize) -> Option<Command>;
+    fn offset(&mut self, cmd: Command) -> Option<u32>;
+    fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]>;
+    /// Bytes wanted past the end of the `CONN` and the `GEOM` stream.
+    fn overrun(&self) -> [usize; 2];
+}
+
+/// [`super::Coding::Range`]: the adaptive context models over two range coders.
+#[derive(Default)]
+pub(crate) struct RangeSink {
+    conn: Encoder,
+    geom: Encoder,
+    cmodel: CommandModel,
+    gmodel: GeometryModel,
+}
+
+impl SymbolSink for RangeSink {
+    #[inline]
+    fn command(&mut self, ctx: usize, cmd: Command) {
+        self.cmodel.encode(&mut self.conn, ctx, cmd);
+    }
+
+    #[inline]
+    fn offset(&mut self, cmd: Command, k: u32) {
+        self.cmodel.encode_offset(&mut self.conn, cmd, k);
+    }
+
+    #[inline]
+    fn position(&mut self, kind: Prediction, actual: [u32; 3], pred: [u32; 3]) {
+        self.gmodel.encode(&mut self.geom, kind, actual, pred);
+    }
+
+    fn finish(self) -> [Vec<u8>; 2] {
+        [self.conn.finish(), self.geom.finish()]
+    }
+}
+
+pub(crate) struct RangeSource<'a> {
+    conn: Decoder<'a>,
+    geom: Decoder<'a>,
+    cmodel: CommandModel,
+    gmodel: GeometryModel,
+}
+
+impl<'a> RangeSource<'a> {
+    pub fn new(conn: &'a [u8], geom: &'a [u8]) -> Self {
+        RangeSource {
+            conn: Decoder::new(conn),
+            geom: Decoder::new(geom),
+            cmodel: CommandModel::default(),
+            gmodel: GeometryModel::default(),
+        }
+    }
+}
+
+impl SymbolSource for RangeSource<'_> {
+    #[inline]
+    fn command(&mut self, ctx: usize) -> Option<Command> {
+        self.cmodel.decode(&mut self.conn, ctx)
+    }
+
+    #[inline]
+    fn offset(&mut self, cmd: Command) -> Option<u32> {
+        self.cmodel.decode_offset(&mut self.conn, cmd)
+    }
+
+    #[inline]
+    fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
+        self.gmodel.decode(&mut self.geom, kind, pred, max)
+    }
+
+    fn overrun(&self) -> [usize; 2] {
+        [self.conn.overrun(), self.geom.overrun()]
     }
 }

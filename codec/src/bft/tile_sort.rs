@@ -31,11 +31,13 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use super::decode::{decode_ops, Decoded, Op};
-use super::format::BftError;
+use super::format::{BftError, Coding};
 use super::frontier::Frontier;
+use super::model::{RangeSink, SymbolSink};
+use super::prefix::PrefixSink;
 use super::tile_writer::TileWriter;
 use super::Command;
-use crate::view::{clip_vertices, triangle_tile_box, TileBox, TileGrid};
+use crate::view::{clip_position, triangle_tile_box, ClipVertex, PixelTiles, TileBox, TileGrid};
 
 /// Why a tile sort failed.
 #[derive(Debug, Error)]
@@ -113,6 +115,7 @@ pub struct Tile {
 }
 
 /// Pass 1: the tile box of every triangle and every vertex slot.
+#[derive(Default)]
 pub struct Boxes {
     pub triangles: Vec<TileBox>,
     /// `[v]`: the union of the boxes of the slot's triangles.
@@ -120,22 +123,43 @@ pub struct Boxes {
     /// The intersection of the boxes of the slot's triangles: the tiles that hold all of
     /// them (a renderer there sees the slot's whole fan).
     pub whole_fan: Vec<TileBox>,
-    /// Triangles per tile: the work estimate that balances pass 2 across threads.
+    /// Triangles per tile.
     pub tile_triangles: Vec<u32>,
+    /// The projected slots, kept for the next frame's allocation.
+    clip: Vec<ClipVertex>,
 }
 
 /// Projects the slots and computes `[t]` and `[v]`, all in parallel.
 pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
-    let clip = clip_vertices(&model.positions, view_proj, grid);
-    let triangles: Vec<TileBox> = model
+    let mut b = Boxes::default();
+    boxes_into(model, view_proj, grid, &mut b);
+    b
+}
+
+/// [`boxes`] into the buffers of an earlier frame's `Boxes`, which a frame loop keeps: fresh
+/// buffers cost the dragon's sort a few milliseconds of page faults every frame.
+pub fn boxes_into(model: &TileModel, view_proj: Mat4, grid: &TileGrid, out: &mut Boxes) {
+    let pixel_tiles = PixelTiles::new(grid);
+    model
+        .positions
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| ClipVertex::project(*p, view_proj, &pixel_tiles))
+        .collect_into_vec(&mut out.clip);
+    let (clip, positions) = (&out.clip, &model.positions);
+    model
         .decoded
         .triangles
         .par_iter()
         .with_min_len(4096)
-        .map(|t| triangle_tile_box(t.map(|s| &clip[s as usize]), grid))
-        .collect();
+        .map(|t| {
+            let corners = || t.map(|s| clip_position(positions[s as usize], view_proj));
+            triangle_tile_box(t.map(|s| &clip[s as usize]), corners, grid)
+        })
+        .collect_into_vec(&mut out.triangles);
+    let triangles = &out.triangles;
     let all = TileBox { c0: 0, c1: (grid.cols - 1) as u16, r0: 0, r1: (grid.rows - 1) as u16 };
-    let (vertices, whole_fan): (Vec<TileBox>, Vec<TileBox>) = model.fan_start[..model.positions.len()]
+    model.fan_start[..model.positions.len()]
         .par_iter()
         .zip(&model.fan_start[1..])
         .with_min_len(4096)
@@ -145,9 +169,9 @@ pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
                 (u.union(b), i.intersect(b))
             })
         })
-        .unzip();
+        .unzip_into_vecs(&mut out.vertices, &mut out.whole_fan);
     let tiles = grid.tiles();
-    let tile_triangles = triangles
+    out.tile_triangles = triangles
         .par_chunks(1 << 16)
         .map(|chunk| {
             let mut counts = vec![0u32; tiles];
@@ -167,7 +191,6 @@ pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
                 a
             },
         );
-    Boxes { triangles, vertices, whole_fan, tile_triangles }
 }
 
 /// What a command becomes in one tile: Table 2 of the paper.
@@ -379,9 +402,16 @@ pub const MAX_ITEMS: usize = 1 << (32 - RECORD_BITS);
 pub struct Sorter {
     /// Per chunk of the command stream, per tile, that tile's records in stream order.
     chunks: Vec<Vec<Vec<Record>>>,
+    /// How the tiles' streams are entropy-coded.
+    pub coding: Coding,
 }
 
 impl Sorter {
+    /// A sorter whose tiles are coded as `coding`.
+    pub fn new(coding: Coding) -> Sorter {
+        Sorter { chunks: Vec::new(), coding }
+    }
+
     /// Pass 2, in two parallel steps that never replay the model's frontier (its walk was
     /// resolved at load):
     /// 1. bucket: chunks of the command stream in parallel, each command rewritten by
@@ -405,14 +435,20 @@ impl Sorter {
             lists.iter_mut().for_each(Vec::clear);
             bucket(model, bx, grid, k * per..((k + 1) * per).min(n_items), lists);
         });
-        let chunks = &self.chunks;
+        let (chunks, coding) = (&self.chunks, self.coding);
         let mut busy: Vec<(usize, usize)> =
             (0..tiles).map(|b| (b, chunks.iter().map(|c| c[b].len()).sum::<usize>())).filter(|&(_, n)| n > 0).collect();
         busy.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
         let mut out: Vec<Tile> = busy
             .par_iter()
             .with_max_len(1)
-            .filter_map(|&(b, _)| write_tile(model, chunks.iter().map(|c| c[b].as_slice()), b))
+            .filter_map(|&(b, _)| {
+                let lists = chunks.iter().map(|c| c[b].as_slice());
+                match coding {
+                    Coding::Range => write_tile::<RangeSink>(model, lists, b, coding),
+                    Coding::Prefix => write_tile::<PrefixSink>(model, lists, b, coding),
+                }
+            })
             .collect();
         out.sort_by_key(|t| t.index);
         Ok(out)
@@ -487,18 +523,23 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
 
 /// Step 2 of pass 2: tile `index`'s stream from its records, or `None` if it has no
 /// triangle.
-fn write_tile<'a>(model: &TileModel, lists: impl Iterator<Item = &'a [Record]>, index: usize) -> Option<Tile> {
+fn write_tile<'a, S: SymbolSink + Default>(
+    model: &TileModel,
+    lists: impl Iterator<Item = &'a [Record]>,
+    index: usize,
+    coding: Coding,
+) -> Option<Tile> {
     let d = &model.decoded;
     let q = &d.positions;
     let n_ops = model.steps.len();
     let n_tail = model.positions.len() - model.tail_start as usize;
-    let mut w = TileWriter::new(d.header.quant_bits);
+    let mut w = TileWriter::<S>::new(d.header.quant_bits);
     // The model frontier position of each of this tile's frontier entries, by the tile's
     // position: both queues grow in the same order, so this is sorted, and an entry of the
     // model is found in the tile by binary search. These are the paper's counters of
     // unclipped entries, kept as the positions themselves.
     let mut pos: Vec<u32> = Vec::new();
-    let find = |w: &TileWriter, pos: &[u32], x_pos: u32| {
+    let find = |w: &TileWriter<S>, pos: &[u32], x_pos: u32| {
         let i = pos[w.f.head..].partition_point(|&p| p < x_pos);
         debug_assert_eq!(pos[w.f.head + i], x_pos, "the tile holds the entry");
         i
@@ -583,6 +624,6 @@ fn write_tile<'a>(model: &TileModel, lists: impl Iterator<Item = &'a [Record]>, 
     }
     (w.triangles > 0).then(|| {
         let (triangles, slots) = (w.triangles, w.global.clone());
-        Tile { index, bytes: w.finish(&d.header), triangles, slots }
+        Tile { index, bytes: w.finish(&d.header, coding), triangles, slots }
     })
 }

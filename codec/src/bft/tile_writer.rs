@@ -6,22 +6,18 @@
 //! will. It is the decoder of `decode.rs` run forwards: same frontier methods, same models,
 //! same predictions, encoding where the decoder decodes.
 
-use super::format::{self, put_varint, Header};
+use super::format::{self, put_varint, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{basis_position, command_context, predict, CommandModel, GeometryModel, Prediction};
+use super::model::{basis_position, command_context, predict, Prediction, SymbolSink};
 use super::Command;
-use crate::rangecoder::Encoder;
 
-pub(crate) struct TileWriter {
+pub(crate) struct TileWriter<S> {
     pub f: Frontier,
     deg: Vec<u8>,
     positions: Vec<[u32; 3]>,
     /// Tile slot -> the model's slot (ascending: tile slots are created in model order).
     pub global: Vec<u32>,
-    conn: Encoder,
-    geom: Encoder,
-    cmodel: CommandModel,
-    gmodel: GeometryModel,
+    sink: S,
     prev: Command,
     max: u32,
     commands: u32,
@@ -31,17 +27,14 @@ pub(crate) struct TileWriter {
     loose: Vec<[u32; 3]>,
 }
 
-impl TileWriter {
+impl<S: SymbolSink + Default> TileWriter<S> {
     pub fn new(quant_bits: u8) -> Self {
         TileWriter {
             f: Frontier::default(),
             deg: Vec::new(),
             positions: Vec::new(),
             global: Vec::new(),
-            conn: Encoder::new(),
-            geom: Encoder::new(),
-            cmodel: CommandModel::default(),
-            gmodel: GeometryModel::default(),
+            sink: S::default(),
             prev: Command::Seed,
             max: (1u32 << quant_bits) - 1,
             commands: 0,
@@ -57,7 +50,7 @@ impl TileWriter {
         let len = self.f.len();
         let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
         let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
-        self.cmodel.encode(&mut self.conn, command_context(self.prev, dl, dr), cmd);
+        self.sink.command(command_context(self.prev, dl, dr), cmd);
         self.prev = cmd;
         self.commands += 1;
     }
@@ -69,7 +62,7 @@ impl TileWriter {
 
     fn new_slot(&mut self, global: u32, q: [u32; 3], kind: Prediction, basis: [u32; 3]) -> u32 {
         let pred = predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
-        self.gmodel.encode(&mut self.geom, kind, q, pred);
+        self.sink.position(kind, q, pred);
         let s = self.positions.len() as u32;
         self.positions.push(q);
         self.deg.push(0);
@@ -122,7 +115,7 @@ impl TileWriter {
         debug_assert!(i >= 2 && i < len);
         let (cmd, k) = if i - 2 <= len - 1 - i { (Command::Rf, i - 2) } else { (Command::Lf, len - 1 - i) };
         self.code(cmd);
-        self.cmodel.encode_offset(&mut self.conn, cmd, k as u32);
+        self.sink.offset(cmd, k as u32);
         let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
         self.f.insert(t[2]);
         self.emit(t);
@@ -154,7 +147,7 @@ impl TileWriter {
     pub fn add_ref(&mut self, i: usize) {
         let len = self.f.len();
         self.code(Command::AddRef);
-        self.cmodel.encode_offset(&mut self.conn, Command::AddRef, (len - 1 - i) as u32);
+        self.sink.offset(Command::AddRef, (len - 1 - i) as u32);
         let x = self.f.at(i).slot;
         self.f.add(x);
     }
@@ -189,8 +182,9 @@ impl TileWriter {
         self.triangles += 1;
     }
 
-    /// The tile's `.bft` bytes: the model's quantization, this tile's counts and streams.
-    pub fn finish(self, model: &Header) -> Vec<u8> {
+    /// The tile's `.bft` bytes: the model's quantization, this tile's counts and streams,
+    /// coded as `coding` (the sink's).
+    pub fn finish(self, model: &Header, coding: Coding) -> Vec<u8> {
         let slots = self.positions.len() as u32;
         let header = Header {
             input_vertices: slots,
@@ -203,6 +197,7 @@ impl TileWriter {
             tail_slots: self.tail_slots,
             components: 0,
             quant_bits: model.quant_bits,
+            coding,
             bbox_min: model.bbox_min,
             step: model.step,
             bbox_max: model.bbox_max,
@@ -213,6 +208,7 @@ impl TileWriter {
         for s in self.loose.iter().flatten() {
             put_varint(&mut loose, *s as u64);
         }
-        format::write(&header, [&self.conn.finish(), &self.geom.finish(), &dups, &loose])
+        let [conn, geom] = self.sink.finish();
+        format::write(&header, [&conn, &geom, &dups, &loose])
     }
 }

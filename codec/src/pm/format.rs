@@ -130,9 +130,9 @@
 use rayon::prelude::*;
 use thiserror::Error;
 
-use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::container::{get_varint, put_varint, ContainerError, Layout};
+use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
 pub const VERSION: u16 = 2;

@@ -1,0 +1,259 @@
+//! [`Coding::Prefix`](super::Coding::Prefix): the same symbols as the range-coded streams
+//! (commands in context, offsets and residuals by bit length), coded with static canonical
+//! Huffman codes built for the one stream, and stored at its head.
+//!
+//! Why a second coding: the tile sort re-codes every tile every frame, and with the adaptive
+//! range coder that coding was most of the sort (a binary decision, with its multiply and
+//! renormalisation, for every bit of every class symbol, ~20 per vertex). Here a symbol is one
+//! table lookup and one write of its code, followed by its sign and mantissa bits raw, and the
+//! decoder reads a symbol with one peek. The writer buffers the stream's symbols, counts them,
+//! builds the tables, then writes; a tile's symbols are known before it is sent, so the tables
+//! are exact for the tile, and cost about a hundred bytes.
+//!
+//! Stream layout, MSB-first bits, padded to a byte:
+//! - `CONN`: [`COMMAND_TABLES`] command tables (12 symbols, by [`command_table`] of the
+//!   command context), 3 offset tables (`RF<k>`, `LF<k>`, `ADD<k>`; the offset's bit length
+//!   0..=32), then per command its code, and after an offset command the offset's length code
+//!   and the bits below its leading one.
+//! - `GEOM`: 9 residual tables (prediction kind x axis; the residual's bit length 0..=25),
+//!   then per axis of each coded position the length code, and for a nonzero residual its sign
+//!   and the bits below its leading one.
+//! - A table is 6 bits `n` (symbols up to the last with a code), then `n` 4-bit code lengths
+//!   (0: no code), at most [`MAX_CODE_LEN`].
+
+use super::format::{corrupt, BftError};
+use super::model::{Prediction, SymbolSink, SymbolSource};
+use super::Command;
+use crate::huffman::{BitReader, BitWriter, Table};
+
+/// Longest code: lengths are stored in 4 bits.
+pub const MAX_CODE_LEN: u8 = 15;
+/// Command tables: the previous command's class (3) times the left vertex's visited degree
+/// (0, 1, 2, 3 or more).
+pub const COMMAND_TABLES: usize = 12;
+const COMMANDS: usize = 12;
+const OFFSET_SYMBOLS: usize = 33;
+const GEOMETRY_TABLES: usize = 9;
+/// Residual lengths: 0..=25 (24-bit grids plus one for the sign-free magnitude bound).
+const RESIDUAL_SYMBOLS: usize = 26;
+
+const BY_CODE: [Command; COMMANDS] = [
+    Command::New,
+    Command::Rf0,
+    Command::Lf0,
+    Command::Rf,
+    Command::Lf,
+    Command::Null,
+    Command::Dl,
+    Command::Dr,
+    Command::AddNew,
+    Command::AddRef,
+    Command::Seed,
+    Command::Clear,
+];
+
+/// The command table for a context of [`super::model::command_context`].
+#[inline]
+fn command_table(ctx: usize) -> usize {
+    let (class, deg_l) = super::model::context_parts(ctx);
+    class * 4 + (deg_l as usize).min(3)
+}
+
+#[inline]
+fn offset_table(cmd: Command) -> usize {
+    match cmd {
+        Command::Rf => 0,
+        Command::Lf => 1,
+        _ => 2,
+    }
+}
+
+#[inline]
+fn has_offset(cmd: Command) -> bool {
+    matches!(cmd, Command::Rf | Command::Lf | Command::AddRef)
+}
+
+#[inline]
+fn bit_length(v: u32) -> u32 {
+    32 - v.leading_zeros()
+}
+
+/// Writes `v` as its bit length's code and the bits below its leading one.
+#[inline]
+fn put_number(w: &mut BitWriter, table: &Table, v: u32) {
+    let len = bit_length(v);
+    table.encode(w, len as u8);
+    if len >= 2 {
+        w.put(v & ((1 << (len - 1)) - 1), (len - 1) as u8);
+    }
+}
+
+#[inline]
+fn get_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
+    let len = table.decode(r)? as u32;
+    match len {
+        0 | 1 => Some(len),
+        _ if len <= max_len => Some((1 << (len - 1)) | r.bits(len - 1)?),
+        _ => None,
+    }
+}
+
+fn write_table(w: &mut BitWriter, t: &Table) {
+    let n = t.lens.iter().rposition(|&l| l > 0).map_or(0, |i| i + 1);
+    w.put(n as u32, 6);
+    for &l in &t.lens[..n] {
+        w.put(l as u32, 4);
+    }
+}
+
+fn read_table(r: &mut BitReader, symbols: usize, what: &str) -> Result<Table, BftError> {
+    let truncated = || BftError::Truncated("a prefix code table");
+    let n = r.bits(6).ok_or_else(truncated)? as usize;
+    if n > symbols {
+        return Err(corrupt(format!("a {what} code table of {n} symbols (at most {symbols})")));
+    }
+    let mut lens = vec![0u8; symbols];
+    for l in &mut lens[..n] {
+        *l = r.bits(4).ok_or_else(truncated)? as u8;
+    }
+    Table::from_lens(&lens).ok_or_else(|| corrupt(format!("invalid {what} code lengths")))
+}
+
+fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
+    counts.iter().map(|c| Table::from_counts(c, MAX_CODE_LEN)).collect()
+}
+
+/// The writer: buffers the stream's symbols, then codes them in [`SymbolSink::finish`].
+#[derive(Default)]
+pub(crate) struct PrefixSink {
+    /// Per command `table << 4 | command`, followed by its offset for `RF<k>`, `LF<k>`, `ADD<k>`.
+    conn: Vec<u32>,
+    /// Per axis of each position: `table << 5 | bit length`, and the residual's magnitude
+    /// with its sign as bit 31.
+    geom: Vec<(u16, u32)>,
+}
+
+impl SymbolSink for PrefixSink {
+    #[inline]
+    fn command(&mut self, ctx: usize, cmd: Command) {
+        self.conn.push((command_table(ctx) as u32) << 4 | cmd as u32);
+    }
+
+    #[inline]
+    fn offset(&mut self, _cmd: Command, k: u32) {
+        self.conn.push(k);
+    }
+
+    #[inline]
+    fn position(&mut self, kind: Prediction, actual: [u32; 3], pred: [u32; 3]) {
+        for axis in 0..3 {
+            let r = actual[axis] as i64 - pred[axis] as i64;
+            let m = r.unsigned_abs() as u32;
+            let table = (kind as usize * 3 + axis) as u16;
+            self.geom.push((table << 5 | bit_length(m) as u16, m | ((r < 0) as u32) << 31));
+        }
+    }
+
+    fn finish(self) -> [Vec<u8>; 2] {
+        let mut cmd_counts = [[0u64; COMMANDS]; COMMAND_TABLES];
+        let mut off_counts = [[0u64; OFFSET_SYMBOLS]; 3];
+        let mut i = 0;
+        while i < self.conn.len() {
+            let (table, cmd) = ((self.conn[i] >> 4) as usize, BY_CODE[(self.conn[i] & 15) as usize]);
+            cmd_counts[table][cmd as usize] += 1;
+            if has_offset(cmd) {
+                off_counts[offset_table(cmd)][bit_length(self.conn[i + 1]) as usize] += 1;
+                i += 1;
+            }
+            i += 1;
+        }
+        let (cmd_tables, off_tables) = (tables(&cmd_counts), tables(&off_counts));
+        let mut w = BitWriter::default();
+        cmd_tables.iter().chain(&off_tables).for_each(|t| write_table(&mut w, t));
+        let mut i = 0;
+        while i < self.conn.len() {
+            let (table, cmd) = ((self.conn[i] >> 4) as usize, BY_CODE[(self.conn[i] & 15) as usize]);
+            cmd_tables[table].encode(&mut w, cmd as u8);
+            if has_offset(cmd) {
+                put_number(&mut w, &off_tables[offset_table(cmd)], self.conn[i + 1]);
+                i += 1;
+            }
+            i += 1;
+        }
+        let conn = w.finish();
+
+        let mut geo_counts = [[0u64; RESIDUAL_SYMBOLS]; GEOMETRY_TABLES];
+        for &(s, _) in &self.geom {
+            geo_counts[(s >> 5) as usize][(s & 31) as usize] += 1;
+        }
+        let geo_tables = tables(&geo_counts);
+        let mut w = BitWriter::default();
+        geo_tables.iter().for_each(|t| write_table(&mut w, t));
+        for &(s, v) in &self.geom {
+            let len = (s & 31) as u32;
+            geo_tables[(s >> 5) as usize].encode(&mut w, len as u8);
+            if len > 0 {
+                // The sign, then the bits below the leading one.
+                w.put(v >> 31 << (len - 1) | (v & ((1 << (len - 1)) - 1)), len as u8);
+            }
+        }
+        [conn, w.finish()]
+    }
+}
+
+/// The reader.
+pub(crate) struct PrefixSource<'a> {
+    conn: BitReader<'a>,
+    geom: BitReader<'a>,
+    cmd_tables: Vec<Table>,
+    off_tables: Vec<Table>,
+    geo_tables: Vec<Table>,
+}
+
+impl<'a> PrefixSource<'a> {
+    pub fn new(conn: &'a [u8], geom: &'a [u8]) -> Result<Self, BftError> {
+        let (mut c, mut g) = (BitReader::new(conn, 0), BitReader::new(geom, 0));
+        let cmd_tables =
+            (0..COMMAND_TABLES).map(|_| read_table(&mut c, COMMANDS, "command")).collect::<Result<_, _>>()?;
+        let off_tables = (0..3).map(|_| read_table(&mut c, OFFSET_SYMBOLS, "offset")).collect::<Result<_, _>>()?;
+        let geo_tables =
+            (0..GEOMETRY_TABLES).map(|_| read_table(&mut g, RESIDUAL_SYMBOLS, "residual")).collect::<Result<_, _>>()?;
+        Ok(PrefixSource { conn: c, geom: g, cmd_tables, off_tables, geo_tables })
+    }
+}
+
+impl SymbolSource for PrefixSource<'_> {
+    #[inline]
+    fn command(&mut self, ctx: usize) -> Option<Command> {
+        BY_CODE.get(self.cmd_tables[command_table(ctx)].decode(&mut self.conn)? as usize).copied()
+    }
+
+    #[inline]
+    fn offset(&mut self, cmd: Command) -> Option<u32> {
+        get_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32)
+    }
+
+    #[inline]
+    fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
+        let mut out = [0u32; 3];
+        for axis in 0..3 {
+            let len = self.geo_tables[kind as usize * 3 + axis].decode(&mut self.geom)? as u32;
+            let mut v = pred[axis] as i64;
+            if len > 0 {
+                let bits = self.geom.bits(len)?;
+                let m = (1i64 << (len - 1)) | (bits & ((1 << (len - 1)) - 1)) as i64;
+                v += if bits >> (len - 1) != 0 { -m } else { m };
+            }
+            if v < 0 || v > max as i64 {
+                return None;
+            }
+            out[axis] = v as u32;
+        }
+        Some(out)
+    }
+
+    /// Reads past the end fail at once, so nothing is ever wanted past it.
+    fn overrun(&self) -> [usize; 2] {
+        [0, 0]
+    }
+}
