@@ -87,7 +87,7 @@ fn mpirun_tiles_equal_the_single_process_frame() {
         assert!(covered(&reference) > 1000, "{model}: the model is in view");
         for (np, flags) in [
             (2, vec!["--tiles", "4x3"]),
-            (3, vec!["--tiles", "5x4"]),
+            (3, vec!["--tiles", "5x4", "--tile-coding", "range"]),
             (3, vec!["--tiles", "3x3", "--balance", "--frames", "2"]),
         ] {
             let out = dir.path().join("tiled.png");

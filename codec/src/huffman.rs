@@ -95,6 +95,13 @@ impl Table {
         Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest })
     }
 
+    /// `sym`'s code and its length.
+    #[inline]
+    pub fn code(&self, sym: u8) -> (u32, u8) {
+        debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
+        (self.codes[sym as usize], self.lens[sym as usize])
+    }
+
     /// Writes `sym`'s code; the symbol must have one.
     #[inline]
     pub fn encode(&self, w: &mut BitWriter, sym: u8) {

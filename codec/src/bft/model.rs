@@ -253,6 +253,8 @@ impl GeometryModel {
 /// Where a stream's commands, offsets and positions go: the tile writer codes through it,
 /// so one writer serves both [`super::Coding`]s.
 pub(crate) trait SymbolSink {
+    /// A sink for about this many commands and coded positions.
+    fn with_capacity(commands: usize, positions: usize) -> Self;
     fn command(&mut self, ctx: usize, cmd: Command);
     fn offset(&mut self, cmd: Command, k: u32);
     fn position(&mut self, kind: Prediction, actual: [u32; 3], pred: [u32; 3]);
@@ -279,6 +281,10 @@ pub(crate) struct RangeSink {
 }
 
 impl SymbolSink for RangeSink {
+    fn with_capacity(_: usize, _: usize) -> Self {
+        RangeSink::default()
+    }
+
     #[inline]
     fn command(&mut self, ctx: usize, cmd: Command) {
         self.cmodel.encode(&mut self.conn, ctx, cmd);

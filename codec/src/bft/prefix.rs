@@ -124,7 +124,6 @@ fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
 }
 
 /// The writer: buffers the stream's symbols, then codes them in [`SymbolSink::finish`].
-#[derive(Default)]
 pub(crate) struct PrefixSink {
     /// Per command `table << 4 | command`, followed by its offset for `RF<k>`, `LF<k>`, `ADD<k>`.
     conn: Vec<u32>,
@@ -134,6 +133,10 @@ pub(crate) struct PrefixSink {
 }
 
 impl SymbolSink for PrefixSink {
+    fn with_capacity(commands: usize, positions: usize) -> Self {
+        PrefixSink { conn: Vec::with_capacity(commands + commands / 8), geom: Vec::with_capacity(positions * 3) }
+    }
+
     #[inline]
     fn command(&mut self, ctx: usize, cmd: Command) {
         self.conn.push((command_table(ctx) as u32) << 4 | cmd as u32);
@@ -191,10 +194,15 @@ impl SymbolSink for PrefixSink {
         geo_tables.iter().for_each(|t| write_table(&mut w, t));
         for &(s, v) in &self.geom {
             let len = (s & 31) as u32;
-            geo_tables[(s >> 5) as usize].encode(&mut w, len as u8);
-            if len > 0 {
-                // The sign, then the bits below the leading one.
-                w.put(v >> 31 << (len - 1) | (v & ((1 << (len - 1)) - 1)), len as u8);
+            let (code, code_len) = geo_tables[(s >> 5) as usize].code(len as u8);
+            // The length's code, the sign, then the bits below the leading one; in one write
+            // when they fit in 32 bits, as they mostly do.
+            let raw = if len > 0 { v >> 31 << (len - 1) | (v & ((1 << (len - 1)) - 1)) } else { 0 };
+            if code_len as u32 + len <= 32 {
+                w.put(((code as u64) << len | raw as u64) as u32, code_len + len as u8);
+            } else {
+                w.put(code, code_len);
+                w.put(raw, len as u8);
             }
         }
         [conn, w.finish()]

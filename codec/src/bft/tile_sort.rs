@@ -442,11 +442,11 @@ impl Sorter {
         let mut out: Vec<Tile> = busy
             .par_iter()
             .with_max_len(1)
-            .filter_map(|&(b, _)| {
+            .filter_map(|&(b, n)| {
                 let lists = chunks.iter().map(|c| c[b].as_slice());
                 match coding {
-                    Coding::Range => write_tile::<RangeSink>(model, lists, b, coding),
-                    Coding::Prefix => write_tile::<PrefixSink>(model, lists, b, coding),
+                    Coding::Range => write_tile::<RangeSink>(model, lists, n, b, coding),
+                    Coding::Prefix => write_tile::<PrefixSink>(model, lists, n, b, coding),
                 }
             })
             .collect();
@@ -460,7 +460,9 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
     let cols = grid.cols as usize;
     let n_ops = model.steps.len();
     let n_tail = model.positions.len() - model.tail_start as usize;
-    let mut put = |rect: TileBox, item: usize, code: &mut dyn FnMut(u16, u16) -> u32| {
+    // Generic, not `dyn`, so that each command's rewrite inlines into its loop.
+    #[inline(always)]
+    fn put(lists: &mut [Vec<Record>], cols: usize, rect: TileBox, item: usize, code: impl Fn(u16, u16) -> u32) {
         if rect.is_empty() {
             return;
         }
@@ -472,7 +474,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
                 }
             }
         }
-    };
+    }
     for i in range {
         if i >= n_ops {
             // After the commands: vertices only loose triangles use, then the loose triangles.
@@ -481,7 +483,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
             } else {
                 bx.triangles[model.loose_start + i - n_ops - n_tail]
             };
-            put(rect, i, &mut |_, _| Rewrite::Same.code());
+            put(lists, cols, rect, i, |_, _| Rewrite::Same.code());
             continue;
         }
         let st = &model.steps[i];
@@ -489,7 +491,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
         match st.cmd {
             Command::New | Command::Rf | Command::Lf => {
                 let (vx, bt) = (&bx.vertices[st.x as usize], &bx.triangles[st.tri as usize]);
-                put(vl.union(vx), i, &mut |c, r| {
+                put(lists, cols, vl.union(vx), i, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), vx.contains(c, r), bt.contains(c, r)).code()
                 });
             }
@@ -500,14 +502,14 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
                     TileBox::EMPTY
                 };
                 let rect = if matches!(st.cmd, Command::Rf0 | Command::Dr) { vl.union(vr) } else { *vl };
-                put(rect, i, &mut |c, r| {
+                put(lists, cols, rect, i, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), false, bt.contains(c, r)).code()
                 });
             }
             Command::Seed => {
                 let bt = &bx.triangles[st.tri as usize];
                 let v = [0, 1, 2].map(|j| &bx.vertices[(st.x + j) as usize]);
-                put(v[0].union(v[1]).union(v[2]), i, &mut |c, r| {
+                put(lists, cols, v[0].union(v[1]).union(v[2]), i, |c, r| {
                     let inside = v.map(|v| v.contains(c, r) as u32);
                     if bt.contains(c, r) {
                         1
@@ -523,9 +525,10 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
 
 /// Step 2 of pass 2: tile `index`'s stream from its records, or `None` if it has no
 /// triangle.
-fn write_tile<'a, S: SymbolSink + Default>(
+fn write_tile<'a, S: SymbolSink>(
     model: &TileModel,
     lists: impl Iterator<Item = &'a [Record]>,
+    records: usize,
     index: usize,
     coding: Coding,
 ) -> Option<Tile> {
@@ -533,12 +536,12 @@ fn write_tile<'a, S: SymbolSink + Default>(
     let q = &d.positions;
     let n_ops = model.steps.len();
     let n_tail = model.positions.len() - model.tail_start as usize;
-    let mut w = TileWriter::<S>::new(d.header.quant_bits);
+    let mut w = TileWriter::<S>::new(d.header.quant_bits, records);
     // The model frontier position of each of this tile's frontier entries, by the tile's
     // position: both queues grow in the same order, so this is sorted, and an entry of the
     // model is found in the tile by binary search. These are the paper's counters of
     // unclipped entries, kept as the positions themselves.
-    let mut pos: Vec<u32> = Vec::new();
+    let mut pos: Vec<u32> = Vec::with_capacity(records * 2);
     let find = |w: &TileWriter<S>, pos: &[u32], x_pos: u32| {
         let i = pos[w.f.head..].partition_point(|&p| p < x_pos);
         debug_assert_eq!(pos[w.f.head + i], x_pos, "the tile holds the entry");
@@ -623,7 +626,8 @@ fn write_tile<'a, S: SymbolSink + Default>(
         debug_assert_eq!(pos.len(), w.f.back_pos());
     }
     (w.triangles > 0).then(|| {
-        let (triangles, slots) = (w.triangles, w.global.clone());
-        Tile { index, bytes: w.finish(&d.header, coding), triangles, slots }
+        let triangles = w.triangles;
+        let (bytes, slots) = w.finish(&d.header, coding);
+        Tile { index, bytes, triangles, slots }
     })
 }

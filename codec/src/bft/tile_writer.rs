@@ -27,14 +27,17 @@ pub(crate) struct TileWriter<S> {
     loose: Vec<[u32; 3]>,
 }
 
-impl<S: SymbolSink + Default> TileWriter<S> {
-    pub fn new(quant_bits: u8) -> Self {
+impl<S: SymbolSink> TileWriter<S> {
+    /// A writer for about `commands` commands: its buffers start that large, so that they
+    /// do not grow and copy themselves while the tile is written.
+    pub fn new(quant_bits: u8, commands: usize) -> Self {
+        let vertices = commands / 2 + 16;
         TileWriter {
-            f: Frontier::default(),
-            deg: Vec::new(),
-            positions: Vec::new(),
-            global: Vec::new(),
-            sink: S::default(),
+            f: Frontier { entries: Vec::with_capacity(commands * 2), head: 0 },
+            deg: Vec::with_capacity(vertices),
+            positions: Vec::with_capacity(vertices),
+            global: Vec::with_capacity(vertices),
+            sink: S::with_capacity(commands, vertices),
             prev: Command::Seed,
             max: (1u32 << quant_bits) - 1,
             commands: 0,
@@ -183,8 +186,8 @@ impl<S: SymbolSink + Default> TileWriter<S> {
     }
 
     /// The tile's `.bft` bytes: the model's quantization, this tile's counts and streams,
-    /// coded as `coding` (the sink's).
-    pub fn finish(self, model: &Header, coding: Coding) -> Vec<u8> {
+    /// coded as `coding` (the sink's); and the model slot of each of its vertices.
+    pub fn finish(self, model: &Header, coding: Coding) -> (Vec<u8>, Vec<u32>) {
         let slots = self.positions.len() as u32;
         let header = Header {
             input_vertices: slots,
@@ -209,6 +212,6 @@ impl<S: SymbolSink + Default> TileWriter<S> {
             put_varint(&mut loose, *s as u64);
         }
         let [conn, geom] = self.sink.finish();
-        format::write(&header, [&conn, &geom, &dups, &loose])
+        (format::write(&header, [&conn, &geom, &dups, &loose]), self.global)
     }
 }
