@@ -288,3 +288,32 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
         assert!(cpu == gpu, "{view:?}: the GPU's PLY differs from the CPU's");
     }
 }
+
+/// `tessera sort --dump` writes a PLY per non-empty tile and the summary; both tile codings
+/// give the same tiles' triangles, the prefix-coded ones in a few percent more bytes.
+#[test]
+fn sort_dumps_tiles_in_either_coding() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let mut tiles_of = Vec::new();
+    for coding in ["range", "prefix"] {
+        let out = dir.path().join(coding);
+        let o = tessera(&["sort", s(&model), "--tiles", "4x3", "--tile-coding", coding, "--dump", s(&out)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        let per_tile = summary["per_tile"].as_array().unwrap();
+        assert!(per_tile.len() > 4, "{coding}: {} tiles", per_tile.len());
+        let mut tiles = Vec::new();
+        for t in per_tile {
+            let index = t["index"].as_u64().unwrap();
+            let ply = codec::load_path(&out.join(format!("tile-{index}.ply"))).unwrap();
+            assert_eq!(ply.triangles.len() as u64, t["triangles"].as_u64().unwrap(), "{coding} tile {index}");
+            tiles.push((index, ply.triangles.len(), ply.positions.len()));
+        }
+        tiles_of.push((tiles, summary["totals"]["tiled_bft_bytes"].as_f64().unwrap()));
+    }
+    assert_eq!(tiles_of[0].0, tiles_of[1].0, "the same tiles, triangles and vertices");
+    let ratio = tiles_of[1].1 / tiles_of[0].1;
+    assert!((1.0..1.15).contains(&ratio), "prefix / range bytes {ratio}");
+}

@@ -121,3 +121,19 @@ mod tests {
         assert!(format!("{e:#}").contains("eye and target"), "{e:#}");
     }
 }
+
+/// `--tile-coding`: how tile streams are entropy-coded ([`codec::bft::Coding`]).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TileCoding {
+    Prefix,
+    Range,
+}
+
+impl From<TileCoding> for codec::bft::Coding {
+    fn from(c: TileCoding) -> Self {
+        match c {
+            TileCoding::Prefix => codec::bft::Coding::Prefix,
+            TileCoding::Range => codec::bft::Coding::Range,
+        }
+    }
+}

@@ -21,6 +21,7 @@ use serde::Serialize;
 use worker::protocol::{FrameJob, PmFrameJob, TileJob, ToMaster, ToWorker};
 use worker::transport::{self, RecvError, Transport};
 
+use crate::args::TileCoding;
 use crate::args::{parse_pair, CameraArgs};
 use crate::composite::{Image, Wall};
 use crate::output::write_bytes;
@@ -86,22 +87,6 @@ pub struct RenderArgs {
     /// as a pass changes nothing.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_passes: u32,
-}
-
-/// `--tile-coding`.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TileCoding {
-    Prefix,
-    Range,
-}
-
-impl From<TileCoding> for codec::bft::Coding {
-    fn from(c: TileCoding) -> Self {
-        match c {
-            TileCoding::Prefix => codec::bft::Coding::Prefix,
-            TileCoding::Range => codec::bft::Coding::Range,
-        }
-    }
 }
 
 /// Everything checked before any rank talks to another.

@@ -146,11 +146,18 @@ pub fn sort_frame(
 }
 
 /// `tessera sort MODEL --size WxH --tiles CxR [camera] [--dump DIR] [--json]`.
-pub fn run(path: &Path, grid: &GridArgs, camera: &CameraArgs, dump: Option<&PathBuf>, json: bool) -> Result<()> {
+pub fn run(
+    path: &Path,
+    grid: &GridArgs,
+    camera: &CameraArgs,
+    dump: Option<&PathBuf>,
+    json: bool,
+    coding: bft::Coding,
+) -> Result<()> {
     let grid = grid.grid()?;
     let model = load_model(path, EncodeOptions::default())?;
     let cam = model.camera(camera, &grid)?;
-    let (summary, tiles) = sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::default())?;
+    let (summary, tiles) = sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding))?;
     if let Some(dir) = dump {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for t in &tiles {
