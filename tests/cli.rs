@@ -159,7 +159,9 @@ fn bench_bandwidth_writes_the_figure_8_table_and_plot() {
             "meshopt_per_tile_bytes",
             "bft_sort_ms",
             "tri_sort_ms",
-            "draco_retile_ms"
+            "draco_retile_ms",
+            "tiled_bft_prefix_bytes",
+            "bft_prefix_sort_ms"
         ]
     );
     let rows: Vec<std::collections::HashMap<&str, &str>> =
@@ -170,10 +172,17 @@ fn bench_bandwidth_writes_the_figure_8_table_and_plot() {
         assert_eq!(row["model"], "cow");
         assert_eq!(format!("{}x{}", row["cols"], row["rows"]), tiles);
         assert!(n(row, "tiled_tri_bytes") >= n(row, "tri_bytes"), "{row:?}");
-        for k in ["tri_bytes", "bft_bytes", "tiled_bft_bytes", "draco_per_tile_bytes", "meshopt_per_tile_bytes"] {
+        for k in [
+            "tri_bytes",
+            "bft_bytes",
+            "tiled_bft_bytes",
+            "draco_per_tile_bytes",
+            "meshopt_per_tile_bytes",
+            "tiled_bft_prefix_bytes",
+        ] {
             assert!(n(row, k) > 0.0, "{k}: {row:?}");
         }
-        for k in ["bft_sort_ms", "tri_sort_ms", "draco_retile_ms"] {
+        for k in ["bft_sort_ms", "tri_sort_ms", "draco_retile_ms", "bft_prefix_sort_ms"] {
             assert!(n(row, k) >= 0.0, "{k}: {row:?}");
         }
     }

@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, ensure, Context, Result};
 use codec::bft::tile_sort::{self, Sorter};
+use codec::bft::Coding;
 use codec::bft::EncodeOptions;
 use codec::view::{triangle_tile_boxes, TileBox, TileGrid};
 use draco_core::{
@@ -36,7 +37,8 @@ const DRACO_COMPRESSION_LEVEL: i32 = 7;
 const SORT_RUNS: usize = 7;
 
 const CSV_HEADER: &str = "model,triangles,width,height,cols,rows,tile_width,tile_height,tri_bytes,tiled_tri_bytes,\
-bft_bytes,tiled_bft_bytes,draco_per_tile_bytes,meshopt_per_tile_bytes,bft_sort_ms,tri_sort_ms,draco_retile_ms";
+bft_bytes,tiled_bft_bytes,draco_per_tile_bytes,meshopt_per_tile_bytes,bft_sort_ms,tri_sort_ms,draco_retile_ms,\
+tiled_bft_prefix_bytes,bft_prefix_sort_ms";
 
 /// One model on one tile grid: a CSV row.
 struct Row {
@@ -52,6 +54,9 @@ struct Row {
     bft_sort_ms: f64,
     tri_sort_ms: f64,
     draco_retile_ms: f64,
+    /// The same tiles coded with `--tile-coding prefix`, and that sort's time.
+    tiled_bft_prefix_bytes: usize,
+    bft_prefix_sort_ms: f64,
 }
 
 impl Row {
@@ -66,7 +71,7 @@ impl Row {
         let g = &self.grid;
         let (tw, th) = self.tile_size();
         format!(
-            "{},{},{},{},{},{},{tw},{th},{},{},{},{},{},{},{:.3},{:.3},{:.3}",
+            "{},{},{},{},{},{},{tw},{th},{},{},{},{},{},{},{:.3},{:.3},{:.3},{},{:.3}",
             csv_field(&self.model),
             self.triangles,
             g.width,
@@ -81,16 +86,18 @@ impl Row {
             self.meshopt_per_tile_bytes,
             self.bft_sort_ms,
             self.tri_sort_ms,
-            self.draco_retile_ms
+            self.draco_retile_ms,
+            self.tiled_bft_prefix_bytes,
+            self.bft_prefix_sort_ms
         )
     }
 
-    const TABLE_HEADER: &str = "model               tiles    tile px         Tri   Tiled Tri         BFT   Tiled BFT  Draco/tile  meshopt/tile  TiledBFT/Draco  BFT sort ms  Tri sort ms  Draco retile ms  BFT/Tri sort  BFT/retile";
+    const TABLE_HEADER: &str = "model               tiles    tile px         Tri   Tiled Tri         BFT   Tiled BFT  Draco/tile  meshopt/tile  TiledBFT/Draco  BFT sort ms  Tri sort ms  Draco retile ms  BFT/Tri sort  BFT/retile  Tiled BFT prefix  prefix sort ms";
 
     fn table(&self) -> String {
         let (tw, th) = self.tile_size();
         format!(
-            "{:<18} {:>6} {:>10} {:>11} {:>11} {:>11} {:>11} {:>11} {:>13} {:>15.3} {:>12.2} {:>12.2} {:>16.1} {:>13.2} {:>11.4}",
+            "{:<18} {:>6} {:>10} {:>11} {:>11} {:>11} {:>11} {:>11} {:>13} {:>15.3} {:>12.2} {:>12.2} {:>16.1} {:>13.2} {:>11.4} {:>17} {:>15.2}",
             self.model,
             format!("{}x{}", self.grid.cols, self.grid.rows),
             format!("{tw:.0}x{th:.0}"),
@@ -105,7 +112,9 @@ impl Row {
             self.tri_sort_ms,
             self.draco_retile_ms,
             self.bft_sort_ms / self.tri_sort_ms,
-            self.bft_sort_ms / self.draco_retile_ms
+            self.bft_sort_ms / self.draco_retile_ms,
+            self.tiled_bft_prefix_bytes,
+            self.bft_prefix_sort_ms
         )
     }
 }
@@ -151,16 +160,23 @@ impl Subject {
         let tiles = &self.model.tiles;
         let bits = tiles.decoded.header.quant_bits;
         let cam = self.model.camera(&CameraArgs::default(), grid)?;
-        let mut sorter = Sorter::default();
-        let runs: Vec<SortSummary> = (0..SORT_RUNS)
-            .map(|_| sort_frame(&self.model, &self.name, &cam, grid, &mut sorter).map(|(summary, _)| summary))
-            .collect::<Result<_>>()?;
-        let median = |time: fn(&SortSummary) -> f64| {
+        let (mut sorter, mut prefix_sorter) = (Sorter::new(Coding::Range), Sorter::new(Coding::Prefix));
+        let (mut runs, mut prefix_runs) = (Vec::new(), Vec::new());
+        for _ in 0..SORT_RUNS {
+            runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut sorter)?.0);
+            prefix_runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut prefix_sorter)?.0);
+        }
+        let median = |runs: &[SortSummary], time: fn(&SortSummary) -> f64| {
             let mut t: Vec<f64> = runs.iter().map(time).collect();
             t.sort_by(f64::total_cmp);
             t[t.len() / 2]
         };
         let totals = &runs[0].totals;
+        ensure!(
+            prefix_runs[0].totals.tiled_triangles == totals.tiled_triangles,
+            "{}: the two tile codings hold different triangles",
+            self.name
+        );
 
         let view_proj = cam.view_proj(grid.aspect());
         let boxes = tile_sort::boxes(tiles, view_proj, grid);
@@ -189,9 +205,11 @@ impl Subject {
             tiled_bft_bytes: totals.tiled_bft_bytes,
             draco_per_tile_bytes,
             meshopt_per_tile_bytes,
-            bft_sort_ms: median(|s| s.sort_ms),
-            tri_sort_ms: median(|s| s.tri_sort_ms),
+            bft_sort_ms: median(&runs, |s| s.sort_ms),
+            tri_sort_ms: median(&runs, |s| s.tri_sort_ms),
             draco_retile_ms: draco_retile_ms(&self.draco, view_proj, grid, bits)?,
+            tiled_bft_prefix_bytes: prefix_runs[0].totals.tiled_bft_bytes,
+            bft_prefix_sort_ms: median(&prefix_runs, |s| s.sort_ms),
         })
     }
 }
@@ -375,12 +393,13 @@ struct Series {
 }
 
 /// The paper's four series (the whole-model ones in a lighter shade of their tiled
-/// counterpart), then the baselines.
-const SERIES: [Series; 6] = [
+/// counterpart), our faster tile coding, then the baselines.
+const SERIES: [Series; 7] = [
     Series { name: "Tri", bytes: |r| r.tri_bytes, color: RGBColor(160, 160, 160) },
     Series { name: "Tiled Tri", bytes: |r| r.tiled_tri_bytes, color: RGBColor(0, 0, 0) },
     Series { name: "BFT", bytes: |r| r.bft_bytes, color: RGBColor(120, 170, 230) },
     Series { name: "Tiled BFT", bytes: |r| r.tiled_bft_bytes, color: RGBColor(20, 60, 200) },
+    Series { name: "Tiled BFT, prefix-coded", bytes: |r| r.tiled_bft_prefix_bytes, color: RGBColor(140, 60, 200) },
     Series { name: "Draco per tile", bytes: |r| r.draco_per_tile_bytes, color: RGBColor(210, 40, 40) },
     Series { name: "meshopt per tile", bytes: |r| r.meshopt_per_tile_bytes, color: RGBColor(30, 150, 60) },
 ];
