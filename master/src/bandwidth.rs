@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, ensure, Context, Result};
-use codec::bft::tile_sort::{self, Sorter};
+use codec::bft::tile_sort::{self, Boxes, Sorter};
 use codec::bft::Coding;
 use codec::bft::EncodeOptions;
 use codec::view::{triangle_tile_boxes, TileBox, TileGrid};
@@ -162,9 +162,10 @@ impl Subject {
         let cam = self.model.camera(&CameraArgs::default(), grid)?;
         let (mut sorter, mut prefix_sorter) = (Sorter::new(Coding::Range), Sorter::new(Coding::Prefix));
         let (mut runs, mut prefix_runs) = (Vec::new(), Vec::new());
+        let (mut boxes, mut prefix_boxes) = (Boxes::default(), Boxes::default());
         for _ in 0..SORT_RUNS {
-            runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut sorter)?.0);
-            prefix_runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut prefix_sorter)?.0);
+            runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut sorter, &mut boxes)?.0);
+            prefix_runs.push(sort_frame(&self.model, &self.name, &cam, grid, &mut prefix_sorter, &mut prefix_boxes)?.0);
         }
         let median = |runs: &[SortSummary], time: fn(&SortSummary) -> f64| {
             let mut t: Vec<f64> = runs.iter().map(time).collect();

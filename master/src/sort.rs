@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use codec::bft::tile_sort::{self, Sorter, Tile, TileModel};
+use codec::bft::tile_sort::{self, Boxes, Sorter, Tile, TileModel};
 use codec::bft::{self, EncodeOptions};
 use codec::tri_sort;
 use codec::view::{Camera, TileGrid};
@@ -86,19 +86,20 @@ pub struct SortSummary {
     pub per_tile: Vec<TileSummary>,
 }
 
-/// Sorts one frame with both sorts and summarises it. `sorter` keeps the BFT sort's
-/// buffers between calls, as a frame loop does.
+/// Sorts one frame with both sorts and summarises it. `sorter` and `boxes` keep the BFT
+/// sort's buffers between calls, as a frame loop does.
 pub fn sort_frame(
     model: &Model,
     name: &str,
     cam: &Camera,
     grid: &TileGrid,
     sorter: &mut Sorter,
+    boxes: &mut Boxes,
 ) -> Result<(SortSummary, Vec<Tile>)> {
     let vp = cam.view_proj(grid.aspect());
     let start = Instant::now();
-    let boxes = tile_sort::boxes(&model.tiles, vp, grid);
-    let tiles = sorter.sort(&model.tiles, &boxes, grid)?;
+    tile_sort::boxes_into(&model.tiles, vp, grid, boxes);
+    let tiles = sorter.sort(&model.tiles, boxes, grid)?;
     let sort_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
     let tri = tri_sort::sort(&model.tiles.positions, model.tiles.triangles(), vp, grid);
@@ -157,7 +158,8 @@ pub fn run(
     let grid = grid.grid()?;
     let model = load_model(path, EncodeOptions::default())?;
     let cam = model.camera(camera, &grid)?;
-    let (summary, tiles) = sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding))?;
+    let (summary, tiles) =
+        sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
     if let Some(dir) = dump {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for t in &tiles {
