@@ -12,6 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
+
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use codec::bft::tile_sort::{self, Boxes, Tile};
@@ -553,7 +555,7 @@ fn border_normals(
         duplicated[src as usize] = true;
     }
     tiles
-        .iter()
+        .par_iter()
         .map(|tile| {
             let (c, r) = ((tile.index % grid.cols as usize) as u16, (tile.index / grid.cols as usize) as u16);
             tile.slots

@@ -123,8 +123,6 @@ pub struct Boxes {
     /// The intersection of the boxes of the slot's triangles: the tiles that hold all of
     /// them (a renderer there sees the slot's whole fan).
     pub whole_fan: Vec<TileBox>,
-    /// Triangles per tile.
-    pub tile_triangles: Vec<u32>,
     /// The projected slots, kept for the next frame's allocation.
     clip: Vec<ClipVertex>,
 }
@@ -170,27 +168,6 @@ pub fn boxes_into(model: &TileModel, view_proj: Mat4, grid: &TileGrid, out: &mut
             })
         })
         .unzip_into_vecs(&mut out.vertices, &mut out.whole_fan);
-    let tiles = grid.tiles();
-    out.tile_triangles = triangles
-        .par_chunks(1 << 16)
-        .map(|chunk| {
-            let mut counts = vec![0u32; tiles];
-            for b in chunk.iter().filter(|b| !b.is_empty()) {
-                for r in b.r0..=b.r1 {
-                    for c in b.c0..=b.c1 {
-                        counts[r as usize * grid.cols as usize + c as usize] += 1;
-                    }
-                }
-            }
-            counts
-        })
-        .reduce(
-            || vec![0u32; tiles],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-                a
-            },
-        );
 }
 
 /// What a command becomes in one tile: Table 2 of the paper.
