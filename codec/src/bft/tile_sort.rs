@@ -46,7 +46,7 @@ pub enum SortError {
     Bft(#[from] BftError),
     #[error("the model's command stream holds {0:?}, which only tile streams may contain")]
     TileCommand(Command),
-    #[error("the model has {0} commands, tail vertices and loose triangles; the tile sort takes at most {MAX_ITEMS}")]
+    #[error("the model's frontier takes {0} entries; the tile sort counts them in 32 bits")]
     TooLarge(usize),
 }
 
@@ -72,11 +72,6 @@ impl TileModel {
     pub fn from_bytes(bytes: &[u8]) -> Result<TileModel, SortError> {
         let (decoded, ops) = decode_ops(bytes)?;
         let (steps, tail_start, loose_start) = resolve(&ops)?;
-        let items =
-            ops.len() + (decoded.positions.len() - tail_start as usize) + (decoded.triangles.len() - loose_start);
-        if items >= MAX_ITEMS {
-            return Err(SortError::TooLarge(items));
-        }
         let q = decoded.quantization();
         let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
         let mut fan_start = vec![0u32; positions.len() + 1];
@@ -345,7 +340,7 @@ fn resolve(ops: &[Op]) -> Result<(Vec<Step>, u32, usize), SortError> {
         base += f.compact();
     }
     if base + f.back_pos() >= u32::MAX as usize {
-        return Err(SortError::TooLarge(ops.len()));
+        return Err(SortError::TooLarge(base + f.back_pos()));
     }
     Ok((steps, next_slot, tri as usize))
 }
@@ -362,16 +357,27 @@ pub fn sort_with_boxes(model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result
     Sorter::default().sort(model, bx, grid)
 }
 
-/// A tile's share of one command: the command's index (in the model's commands, then its
-/// tail vertices, then its loose triangles) shifted left by 4, or'ed with what the tile
-/// does with it: a [`Rewrite`] code, or for `SEED` bit 0 = the tile is in `[t]` and bits
-/// 1..3 = which of the three vertices are unclipped.
-type Record = u32;
-const RECORD_BITS: u32 = 4;
+/// A tile's share of one command: what the tile's writer needs of it, copied out of the
+/// command's [`Step`] by the bucketing step, which reads the steps in order, so that the
+/// writer reads only its own list and never the steps scattered through the stream.
+#[derive(Clone, Copy, Debug)]
+struct Record {
+    /// `NEW`, `SEED`: the (first) new slot; `RF<k>`, `LF<k>`: `x_pos`; a tail vertex: its
+    /// slot; a loose triangle: its index.
+    a: u32,
+    push: u32,
+    seeds: u32,
+    /// A [`Command`], or [`TAIL`] or [`LOOSE`].
+    cmd: u8,
+    /// What the tile does: a [`Rewrite`] code, or for `SEED` bit 0 = the tile is in `[t]`
+    /// and bits 1..3 = which of the three vertices are unclipped.
+    code: u8,
+}
+
+const TAIL: u8 = 254;
+const LOOSE: u8 = 255;
 /// What `bucket` returns for a tile where a command does nothing.
 const SKIP: u32 = u32::MAX;
-/// Commands, tail vertices and loose triangles a model may have, so that a record fits.
-pub const MAX_ITEMS: usize = 1 << (32 - RECORD_BITS);
 
 /// Pass 2's working memory, kept from frame to frame so that a frame loop does not pay for
 /// fresh pages every frame.
@@ -439,7 +445,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
     let n_tail = model.positions.len() - model.tail_start as usize;
     // Generic, not `dyn`, so that each command's rewrite inlines into its loop.
     #[inline(always)]
-    fn put(lists: &mut [Vec<Record>], cols: usize, rect: TileBox, item: usize, code: impl Fn(u16, u16) -> u32) {
+    fn put(lists: &mut [Vec<Record>], cols: usize, rect: TileBox, rec: Record, code: impl Fn(u16, u16) -> u32) {
         if rect.is_empty() {
             return;
         }
@@ -447,7 +453,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
             for c in rect.c0..=rect.c1 {
                 let code = code(c, r);
                 if code != SKIP {
-                    lists[r as usize * cols + c as usize].push(((item as u32) << RECORD_BITS) | code);
+                    lists[r as usize * cols + c as usize].push(Record { code: code as u8, ..rec });
                 }
             }
         }
@@ -455,20 +461,24 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
     for i in range {
         if i >= n_ops {
             // After the commands: vertices only loose triangles use, then the loose triangles.
-            let rect = if i < n_ops + n_tail {
-                bx.vertices[model.tail_start as usize + i - n_ops]
+            let (rect, rec) = if i < n_ops + n_tail {
+                let s = model.tail_start as usize + i - n_ops;
+                (bx.vertices[s], Record { a: s as u32, push: 0, seeds: 0, cmd: TAIL, code: 0 })
             } else {
-                bx.triangles[model.loose_start + i - n_ops - n_tail]
+                let t = model.loose_start + i - n_ops - n_tail;
+                (bx.triangles[t], Record { a: t as u32, push: 0, seeds: 0, cmd: LOOSE, code: 0 })
             };
-            put(lists, cols, rect, i, |_, _| Rewrite::Same.code());
+            put(lists, cols, rect, rec, |_, _| Rewrite::Same.code());
             continue;
         }
         let st = &model.steps[i];
         let (vl, vr) = (&bx.vertices[st.l as usize], &bx.vertices[st.r as usize]);
+        let a = if matches!(st.cmd, Command::Rf | Command::Lf) { st.x_pos } else { st.x };
+        let rec = Record { a, push: st.push, seeds: st.seeds, cmd: st.cmd as u8, code: 0 };
         match st.cmd {
             Command::New | Command::Rf | Command::Lf => {
                 let (vx, bt) = (&bx.vertices[st.x as usize], &bx.triangles[st.tri as usize]);
-                put(lists, cols, vl.union(vx), i, |c, r| {
+                put(lists, cols, vl.union(vx), rec, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), vx.contains(c, r), bt.contains(c, r)).code()
                 });
             }
@@ -479,14 +489,14 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
                     TileBox::EMPTY
                 };
                 let rect = if matches!(st.cmd, Command::Rf0 | Command::Dr) { vl.union(vr) } else { *vl };
-                put(lists, cols, rect, i, |c, r| {
+                put(lists, cols, rect, rec, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), false, bt.contains(c, r)).code()
                 });
             }
             Command::Seed => {
                 let bt = &bx.triangles[st.tri as usize];
                 let v = [0, 1, 2].map(|j| &bx.vertices[(st.x + j) as usize]);
-                put(lists, cols, v[0].union(v[1]).union(v[2]), i, |c, r| {
+                put(lists, cols, v[0].union(v[1]).union(v[2]), rec, |c, r| {
                     let inside = v.map(|v| v.contains(c, r) as u32);
                     if bt.contains(c, r) {
                         1
@@ -511,8 +521,6 @@ fn write_tile<'a, S: SymbolSink>(
 ) -> Option<Tile> {
     let d = &model.decoded;
     let q = &d.positions;
-    let n_ops = model.steps.len();
-    let n_tail = model.positions.len() - model.tail_start as usize;
     let mut w = TileWriter::<S>::new(d.header.quant_bits, records);
     // The model frontier position of each of this tile's frontier entries, by the tile's
     // position: both queues grow in the same order, so this is sorted, and an entry of the
@@ -524,81 +532,85 @@ fn write_tile<'a, S: SymbolSink>(
         debug_assert_eq!(pos[w.f.head + i], x_pos, "the tile holds the entry");
         i
     };
+    const NEW: u8 = Command::New as u8;
+    const RF: u8 = Command::Rf as u8;
+    const LF: u8 = Command::Lf as u8;
+    const RF0: u8 = Command::Rf0 as u8;
+    const SEED: u8 = Command::Seed as u8;
     let mut seen_seeds = 0;
     for &rec in lists.flatten() {
-        let (i, code) = ((rec >> RECORD_BITS) as usize, rec & ((1 << RECORD_BITS) - 1));
-        if i >= n_ops {
-            if i < n_ops + n_tail {
-                let s = model.tail_start + (i - n_ops) as u32;
-                w.tail_vertex(s, q[s as usize]);
-            } else {
-                w.loose(d.triangles[model.loose_start + i - n_ops - n_tail]);
+        let (x, push, code) = (rec.a, rec.push, rec.code);
+        match rec.cmd {
+            TAIL => {
+                w.tail_vertex(x, q[x as usize]);
+                continue;
             }
-            continue;
+            LOOSE => {
+                w.loose(d.triangles[x as usize]);
+                continue;
+            }
+            _ => {}
         }
-        let st = &model.steps[i];
         // A `SEED` of the model clears its frontier: this tile's too, before its next command.
-        let is_seed = st.cmd == Command::Seed;
-        if st.seeds - is_seed as u32 > seen_seeds && !w.f.is_empty() {
+        if rec.seeds - (rec.cmd == SEED) as u32 > seen_seeds && !w.f.is_empty() {
             w.clear();
         }
-        seen_seeds = st.seeds;
-        match st.cmd {
-            Command::New | Command::Rf | Command::Lf => {
-                let rw = Rewrite::from_code(code);
+        seen_seeds = rec.seeds;
+        match rec.cmd {
+            NEW | RF | LF => {
+                let rw = Rewrite::from_code(code as u32);
                 if rw == Rewrite::Same {
-                    if st.cmd == Command::New {
-                        w.new_vertex(st.x, q[st.x as usize]);
+                    if rec.cmd == NEW {
+                        w.new_vertex(x, q[x as usize]);
                     } else {
-                        let k = find(&w, &pos, st.x_pos);
+                        let k = find(&w, &pos, x);
                         w.existing(k);
                     }
-                    pos.extend([st.push, st.push + 1]);
+                    pos.extend([push, push + 1]);
                     continue;
                 }
                 if matches!(rw, Rewrite::Null | Rewrite::NullAdd) {
                     w.null();
-                    pos.push(st.push);
+                    pos.push(push);
                 }
                 if matches!(rw, Rewrite::Add | Rewrite::NullAdd) {
-                    if st.cmd == Command::New {
-                        w.add_new(st.x, q[st.x as usize]);
+                    if rec.cmd == NEW {
+                        w.add_new(x, q[x as usize]);
                     } else {
-                        let k = find(&w, &pos, st.x_pos);
+                        let k = find(&w, &pos, x);
                         w.add_ref(k);
                     }
-                    pos.push(st.push + 1);
+                    pos.push(push + 1);
                 }
             }
-            Command::Rf0 | Command::Lf0 | Command::Dr | Command::Dl | Command::Null => match Rewrite::from_code(code) {
-                Rewrite::Same if st.cmd == Command::Rf0 => w.rf0(),
-                Rewrite::Same => w.lf0(),
-                Rewrite::Dr => w.dr(),
-                Rewrite::Dl => w.dl(),
-                Rewrite::Null => {
-                    w.null();
-                    pos.push(st.push);
-                }
-                _ => {}
-            },
-            Command::Seed => {
-                let s = st.x;
+            SEED => {
                 if code & 1 != 0 {
-                    w.seed([s, s + 1, s + 2], [q[s as usize], q[s as usize + 1], q[s as usize + 2]]);
-                    pos.extend([st.push, st.push + 1, st.push + 2]);
+                    w.seed([x, x + 1, x + 2], [q[x as usize], q[x as usize + 1], q[x as usize + 2]]);
+                    pos.extend([push, push + 1, push + 2]);
                 } else {
                     if !w.f.is_empty() {
                         w.clear();
                     }
                     for j in 0..3 {
                         if code & (2 << j) != 0 {
-                            w.add_new(s + j, q[(s + j) as usize]);
-                            pos.push(st.push + j);
+                            w.add_new(x + j, q[(x + j) as usize]);
+                            pos.push(push + j);
                         }
                     }
                 }
             }
-            Command::AddNew | Command::AddRef | Command::Clear => unreachable!("resolve rejects tile commands"),
+            // RF0, LF0, DR, DL, NULL.
+            _ => match Rewrite::from_code(code as u32) {
+                Rewrite::Same if rec.cmd == RF0 => w.rf0(),
+                Rewrite::Same => w.lf0(),
+                Rewrite::Dr => w.dr(),
+                Rewrite::Dl => w.dl(),
+                Rewrite::Null => {
+                    w.null();
+                    pos.push(push);
+                }
+                _ => {}
+            },
         }
         debug_assert_eq!(pos.len(), w.f.back_pos());
     }
