@@ -123,27 +123,41 @@ fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
     counts.iter().map(|c| Table::from_counts(c, MAX_CODE_LEN)).collect()
 }
 
-/// The writer: buffers the stream's symbols, then codes them in [`SymbolSink::finish`].
+/// The writer: buffers and counts the stream's symbols, then codes them in
+/// [`SymbolSink::finish`].
 pub(crate) struct PrefixSink {
     /// Per command `table << 4 | command`, followed by its offset for `RF<k>`, `LF<k>`, `ADD<k>`.
     conn: Vec<u32>,
     /// Per axis of each position: `table << 5 | bit length`, and the residual's magnitude
     /// with its sign as bit 31.
     geom: Vec<(u16, u32)>,
+    /// The symbols counted as they come, per table.
+    cmd_counts: [[u64; COMMANDS]; COMMAND_TABLES],
+    off_counts: [[u64; OFFSET_SYMBOLS]; 3],
+    geo_counts: [[u64; RESIDUAL_SYMBOLS]; GEOMETRY_TABLES],
 }
 
 impl SymbolSink for PrefixSink {
     fn with_capacity(commands: usize, positions: usize) -> Self {
-        PrefixSink { conn: Vec::with_capacity(commands + commands / 8), geom: Vec::with_capacity(positions * 3) }
+        PrefixSink {
+            conn: Vec::with_capacity(commands + commands / 8),
+            geom: Vec::with_capacity(positions * 3),
+            cmd_counts: [[0; COMMANDS]; COMMAND_TABLES],
+            off_counts: [[0; OFFSET_SYMBOLS]; 3],
+            geo_counts: [[0; RESIDUAL_SYMBOLS]; GEOMETRY_TABLES],
+        }
     }
 
     #[inline]
     fn command(&mut self, ctx: usize, cmd: Command) {
-        self.conn.push((command_table(ctx) as u32) << 4 | cmd as u32);
+        let table = command_table(ctx);
+        self.cmd_counts[table][cmd as usize] += 1;
+        self.conn.push((table as u32) << 4 | cmd as u32);
     }
 
     #[inline]
-    fn offset(&mut self, _cmd: Command, k: u32) {
+    fn offset(&mut self, cmd: Command, k: u32) {
+        self.off_counts[offset_table(cmd)][bit_length(k) as usize] += 1;
         self.conn.push(k);
     }
 
@@ -152,25 +166,14 @@ impl SymbolSink for PrefixSink {
         for axis in 0..3 {
             let r = actual[axis] as i64 - pred[axis] as i64;
             let m = r.unsigned_abs() as u32;
-            let table = (kind as usize * 3 + axis) as u16;
-            self.geom.push((table << 5 | bit_length(m) as u16, m | ((r < 0) as u32) << 31));
+            let (table, len) = (kind as usize * 3 + axis, bit_length(m));
+            self.geo_counts[table][len as usize] += 1;
+            self.geom.push(((table as u16) << 5 | len as u16, m | ((r < 0) as u32) << 31));
         }
     }
 
     fn finish(self) -> [Vec<u8>; 2] {
-        let mut cmd_counts = [[0u64; COMMANDS]; COMMAND_TABLES];
-        let mut off_counts = [[0u64; OFFSET_SYMBOLS]; 3];
-        let mut i = 0;
-        while i < self.conn.len() {
-            let (table, cmd) = ((self.conn[i] >> 4) as usize, BY_CODE[(self.conn[i] & 15) as usize]);
-            cmd_counts[table][cmd as usize] += 1;
-            if has_offset(cmd) {
-                off_counts[offset_table(cmd)][bit_length(self.conn[i + 1]) as usize] += 1;
-                i += 1;
-            }
-            i += 1;
-        }
-        let (cmd_tables, off_tables) = (tables(&cmd_counts), tables(&off_counts));
+        let (cmd_tables, off_tables) = (tables(&self.cmd_counts), tables(&self.off_counts));
         let mut w = BitWriter::default();
         cmd_tables.iter().chain(&off_tables).for_each(|t| write_table(&mut w, t));
         let mut i = 0;
@@ -185,11 +188,7 @@ impl SymbolSink for PrefixSink {
         }
         let conn = w.finish();
 
-        let mut geo_counts = [[0u64; RESIDUAL_SYMBOLS]; GEOMETRY_TABLES];
-        for &(s, _) in &self.geom {
-            geo_counts[(s >> 5) as usize][(s & 31) as usize] += 1;
-        }
-        let geo_tables = tables(&geo_counts);
+        let geo_tables = tables(&self.geo_counts);
         let mut w = BitWriter::default();
         geo_tables.iter().for_each(|t| write_table(&mut w, t));
         for &(s, v) in &self.geom {
