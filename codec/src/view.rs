@@ -317,6 +317,12 @@ pub struct ClipVertex {
 }
 
 impl ClipVertex {
+    /// Inside all six planes, in front of the eye.
+    #[inline]
+    pub fn is_inside(&self) -> bool {
+        self.fast
+    }
+
     /// The vertex at world position `p`.
     #[inline]
     pub fn project(p: [f32; 3], view_proj: Mat4, tiles: &PixelTiles) -> ClipVertex {

@@ -115,9 +115,6 @@ pub struct Boxes {
     pub triangles: Vec<TileBox>,
     /// `[v]`: the union of the boxes of the slot's triangles.
     pub vertices: Vec<TileBox>,
-    /// The intersection of the boxes of the slot's triangles: the tiles that hold all of
-    /// them (a renderer there sees the slot's whole fan).
-    pub whole_fan: Vec<TileBox>,
     /// The projected slots, kept for the next frame's allocation.
     clip: Vec<ClipVertex>,
 }
@@ -151,18 +148,27 @@ pub fn boxes_into(model: &TileModel, view_proj: Mat4, grid: &TileGrid, out: &mut
         })
         .collect_into_vec(&mut out.triangles);
     let triangles = &out.triangles;
-    let all = TileBox { c0: 0, c1: (grid.cols - 1) as u16, r0: 0, r1: (grid.rows - 1) as u16 };
     model.fan_start[..model.positions.len()]
         .par_iter()
         .zip(&model.fan_start[1..])
         .with_min_len(4096)
         .map(|(&a, &b)| {
-            model.fan[a as usize..b as usize].iter().fold((TileBox::EMPTY, all), |(u, i), &t| {
-                let b = &triangles[t as usize];
-                (u.union(b), i.intersect(b))
-            })
+            model.fan[a as usize..b as usize].iter().fold(TileBox::EMPTY, |u, &t| u.union(&triangles[t as usize]))
         })
-        .unzip_into_vecs(&mut out.vertices, &mut out.whole_fan);
+        .collect_into_vec(&mut out.vertices);
+}
+
+impl Boxes {
+    /// Whether every triangle of `slot` is in tile `(c, r)`, so that a renderer of the tile
+    /// sees the slot's whole fan. Conservative: it answers yes only for a slot inside the
+    /// frustum whose box is that one tile (then each of its triangles, which cannot be
+    /// culled, has a box in it); a slot whose triangles all reach into the tile and also
+    /// beyond it gets no. Its answers cost nothing in pass 1, where intersecting every
+    /// slot's triangle boxes cost the dragon 2.7 ms a frame.
+    pub fn whole_fan_in(&self, slot: u32, c: u16, r: u16) -> bool {
+        let b = &self.vertices[slot as usize];
+        self.clip[slot as usize].is_inside() && b.c0 == c && b.c1 == c && b.r0 == r && b.r1 == r
+    }
 }
 
 /// What a command becomes in one tile: Table 2 of the paper.
