@@ -561,7 +561,7 @@ fn border_normals(
             tile.slots
                 .iter()
                 .enumerate()
-                .filter(|(_, &s)| duplicated[s as usize] || !boxes.whole_fan_in(s, c, r))
+                .filter(|(_, &s)| duplicated[s as usize] || !boxes.whole_fan_in(&model.tiles, s, c, r))
                 .map(|(i, &s)| (i as u32, normals[s as usize]))
                 .collect()
         })
