@@ -78,6 +78,11 @@
 //! by the parallelogram rule across the current edge (`l + r - apex`, with the apex of the
 //! triangle that created the edge, kept per frontier entry); residuals are coded by their
 //! bit length, sign and mantissa.
+//!
+//! A stream may instead be prefix-coded ([`Coding::Prefix`], `prefix.rs`): the same symbols
+//! and contexts (fewer command contexts), with static Huffman tables built for the stream and
+//! stored at its head. The tile sort writes its tiles that way when asked, because it codes
+//! every tile anew each frame; files from `tessera encode` are always range-coded.
 
 mod decode;
 mod encode;

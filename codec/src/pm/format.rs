@@ -17,7 +17,7 @@
 //! ```
 //!
 //! * `TABL`: the shared probability tables, one static canonical Huffman code over byte
-//!   symbols per context ([`super::huffman`]), as one bit stream: per table a bit (0: flat,
+//!   symbols per context ([`crate::huffman`]), as one bit stream: per table a bit (0: flat,
 //!   every symbol 8 bits; 1: the 256 code lengths follow, each the Elias gamma code of one plus
 //!   the zigzag difference to the previous length, starting from 8).
 //! * `BASE` (LEB128): per base vertex its FVID gap to the previous one, its quantized position
