@@ -201,7 +201,7 @@ struct WorkerTileStats {
 /// What rank 0 renders: a BFT model it sorts every frame, or a progressive mesh the workers
 /// adapt themselves.
 enum Scene {
-    Bft { model: Box<Model>, normals: Vec<[f32; 3]>, sorter: tile_sort::Sorter, boxes: Box<Boxes> },
+    Bft { model: Box<Model>, normals: FullNormals, sorter: tile_sort::Sorter, boxes: Box<Boxes> },
     Pm { bytes: Vec<u8>, bbox: ([f32; 3], [f32; 3]) },
 }
 
@@ -213,7 +213,7 @@ impl Scene {
             .is_ok_and(|()| magic == codec::pm::format::MAGIC);
         if !is_dpm {
             let model = load_model(path, codec::bft::EncodeOptions::default())?;
-            let normals = worker::RenderMesh::from_decoded(&model.tiles.decoded).normals;
+            let normals = FullNormals::of(&model);
             return Ok(Scene::Bft {
                 model: Box::new(model),
                 normals,
@@ -318,7 +318,7 @@ type FrameJobs = (Vec<(usize, Vec<u8>)>, Vec<TileStats>);
 #[allow(clippy::too_many_arguments)]
 fn bft_jobs(
     model: &Model,
-    normals: &[[f32; 3]],
+    normals: &FullNormals,
     sorter: &mut tile_sort::Sorter,
     boxes: &mut Boxes,
     vp: glam::Mat4,
@@ -538,6 +538,25 @@ pub fn assign(tiles: &[usize], workers: usize, costs: Option<&[f64]>) -> Vec<usi
     owner
 }
 
+/// The whole mesh's vertex normals, and which slots are duplicates (or have them), whose
+/// normals a tile never computes alone.
+struct FullNormals {
+    normals: Vec<[f32; 3]>,
+    duplicated: Vec<bool>,
+}
+
+impl FullNormals {
+    fn of(model: &Model) -> FullNormals {
+        let d = &model.tiles.decoded;
+        let mut duplicated = vec![false; d.positions.len()];
+        for &(slot, src) in &d.duplicates {
+            duplicated[slot as usize] = true;
+            duplicated[src as usize] = true;
+        }
+        FullNormals { normals: worker::RenderMesh::from_decoded(d).normals, duplicated }
+    }
+}
+
 /// The normals each tile needs from the whole mesh: a worker computes a vertex's normal
 /// from the tile's triangles, which is the whole mesh's normal only when every triangle of
 /// the vertex lies in the tile and the vertex has a single slot. The rest are sent.
@@ -546,14 +565,9 @@ fn border_normals(
     boxes: &Boxes,
     tiles: &[Tile],
     grid: &TileGrid,
-    normals: &[[f32; 3]],
+    full: &FullNormals,
 ) -> Vec<Vec<(u32, [f32; 3])>> {
-    let d = &model.tiles.decoded;
-    let mut duplicated = vec![false; d.positions.len()];
-    for &(slot, src) in &d.duplicates {
-        duplicated[slot as usize] = true;
-        duplicated[src as usize] = true;
-    }
+    let (normals, duplicated) = (&full.normals, &full.duplicated);
     tiles
         .par_iter()
         .map(|tile| {
