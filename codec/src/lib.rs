@@ -15,6 +15,7 @@
 
 pub mod bft;
 mod container;
+mod csr;
 pub mod huffman;
 pub mod load;
 pub mod mesh;

@@ -366,11 +366,6 @@ fn pixel(v: Vec4, width: u32, height: u32) -> (f32, f32) {
     ((v.x / v.w + 1.0) * 0.5 * width as f32, (1.0 - v.y / v.w) * 0.5 * height as f32)
 }
 
-/// Projects every vertex (in parallel).
-pub fn clip_vertices(positions: &[[f32; 3]], view_proj: Mat4, tiles: &PixelTiles) -> Vec<ClipVertex> {
-    positions.par_iter().with_min_len(4096).map(|p| ClipVertex::project(*p, view_proj, tiles)).collect()
-}
-
 /// A triangle's tile box `[t]`: empty when all three corners are outside one plane, the box
 /// of the corners' tiles when all three are inside every plane, and otherwise the tiles of
 /// [`clipped_pixel_box`] of its clip-space corners, which `clip` gives. The first two cases
@@ -403,7 +398,28 @@ pub fn triangle_tile_boxes(
     view_proj: Mat4,
     grid: &TileGrid,
 ) -> Vec<TileBox> {
-    let clip = clip_vertices(positions, view_proj, &PixelTiles::new(grid));
+    let mut boxes = Vec::new();
+    triangle_tile_boxes_into(positions, triangles, view_proj, grid, &mut Vec::new(), &mut boxes);
+    boxes
+}
+
+/// [`triangle_tile_boxes`] into buffers a frame loop keeps (`clip` receives the projected
+/// vertices), in parallel.
+pub fn triangle_tile_boxes_into(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    view_proj: Mat4,
+    grid: &TileGrid,
+    clip: &mut Vec<ClipVertex>,
+    boxes: &mut Vec<TileBox>,
+) {
+    let pixel_tiles = PixelTiles::new(grid);
+    positions
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| ClipVertex::project(*p, view_proj, &pixel_tiles))
+        .collect_into_vec(clip);
+    let clip = &*clip;
     triangles
         .par_iter()
         .with_min_len(4096)
@@ -411,7 +427,7 @@ pub fn triangle_tile_boxes(
             let corners = || t.map(|s| clip_position(positions[s as usize], view_proj));
             triangle_tile_box(t.map(|s| &clip[s as usize]), corners, grid)
         })
-        .collect()
+        .collect_into_vec(boxes);
 }
 
 #[cfg(test)]

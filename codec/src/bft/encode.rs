@@ -12,6 +12,7 @@ use super::format::{self, put_varint, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
 use super::Command;
+use crate::csr::Csr;
 use crate::mesh::{Mesh, MeshError, Quantization};
 use crate::rangecoder::Encoder;
 
@@ -138,7 +139,7 @@ pub fn encode_with_progress(
 }
 
 /// One directed edge `a -> target` of triangle `tri`, whose remaining vertex is `third`.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Default)]
 struct HalfEdge {
     target: u32,
     tri: u32,
@@ -151,9 +152,8 @@ struct Traversal<'a> {
     q: Vec<[u32; 3]>,
     max: u32,
     max_q: [u32; 3],
-    /// CSR: outgoing half-edges of vertex `v` are `edges[start[v]..start[v + 1]]`.
-    start: Vec<u32>,
-    edges: Vec<HalfEdge>,
+    /// The outgoing half-edges of each vertex.
+    edges: Csr<HalfEdge>,
     visited: Vec<bool>,
     /// Unvisited non-loose triangles per vertex.
     remaining: Vec<u32>,
@@ -183,39 +183,22 @@ struct Traversal<'a> {
 impl<'a> Traversal<'a> {
     fn new(mesh: &'a Mesh, q: Vec<[u32; 3]>, max: u32, loose: &'a [bool]) -> Self {
         let n = mesh.positions.len();
-        let mut start = vec![0u32; n + 1];
-        let mut remaining = vec![0u32; n];
-        for (t, tri) in mesh.triangles.iter().enumerate() {
-            if loose[t] {
-                continue;
-            }
-            for &v in tri {
-                start[v as usize + 1] += 1;
-                remaining[v as usize] += 1;
-            }
-        }
-        for i in 0..n {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut edges = vec![HalfEdge { target: 0, tri: 0, third: 0 }; start[n] as usize];
-        for (t, &[a, b, c]) in mesh.triangles.iter().enumerate() {
-            if loose[t] {
-                continue;
-            }
-            for (from, to, third) in [(a, b, c), (b, c, a), (c, a, b)] {
-                let i = &mut fill[from as usize];
-                edges[*i as usize] = HalfEdge { target: to, tri: t as u32, third };
-                *i += 1;
-            }
-        }
+        let half_edges = || {
+            mesh.triangles.iter().enumerate().filter(|&(t, _)| !loose[t]).flat_map(|(t, &[a, b, c])| {
+                [(a, b, c), (b, c, a), (c, a, b)]
+                    .map(|(from, to, third)| (from, HalfEdge { target: to, tri: t as u32, third }))
+            })
+        };
+        let edges = Csr::build(n, half_edges);
+        // One half-edge leaves each corner, so a vertex starts with as many unvisited
+        // triangles as it has half-edges.
+        let remaining: Vec<u32> = edges.start.windows(2).map(|w| w[1] - w[0]).collect();
         Traversal {
             triangles: &mesh.triangles,
             loose,
             q,
             max,
             max_q: [0; 3],
-            start,
             edges,
             visited: vec![false; mesh.triangles.len()],
             remaining,
@@ -315,8 +298,11 @@ impl<'a> Traversal<'a> {
     /// An unvisited triangle on the directed edge `l -> r`, and its third vertex.
     #[inline]
     fn find(&self, l: u32, r: u32) -> Option<(u32, u32)> {
-        let range = self.start[l as usize] as usize..self.start[l as usize + 1] as usize;
-        self.edges[range].iter().find(|e| e.target == r && !self.visited[e.tri as usize]).map(|e| (e.tri, e.third))
+        self.edges
+            .get(l as usize)
+            .iter()
+            .find(|e| e.target == r && !self.visited[e.tri as usize])
+            .map(|e| (e.tri, e.third))
     }
 
     /// Codes `cmd` in the context the decoder will see before reading it.

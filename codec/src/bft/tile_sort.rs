@@ -37,7 +37,8 @@ use super::model::{RangeSink, SymbolSink};
 use super::prefix::PrefixSink;
 use super::tile_writer::TileWriter;
 use super::Command;
-use crate::view::{clip_position, triangle_tile_box, ClipVertex, PixelTiles, TileBox, TileGrid};
+use crate::csr::Csr;
+use crate::view::{triangle_tile_boxes_into, ClipVertex, TileBox, TileGrid};
 
 /// Why a tile sort failed.
 #[derive(Debug, Error)]
@@ -56,11 +57,10 @@ pub struct TileModel {
     pub decoded: Decoded,
     pub ops: Vec<Op>,
     pub positions: Vec<[f32; 3]>,
-    /// Each slot's triangles, `fan[fan_start[s]..fan_start[s + 1]]`: pass 1 gathers a
-    /// vertex's box from them, one vertex per task, instead of scattering every triangle's
-    /// box into its vertices one triangle after the other.
-    fan_start: Vec<u32>,
-    fan: Vec<u32>,
+    /// Each slot's triangles: pass 1 gathers a vertex's box from them, one vertex per task,
+    /// instead of scattering every triangle's box into its vertices one triangle after the
+    /// other.
+    fans: Csr<u32>,
     /// The commands resolved against the model's frontier.
     steps: Vec<Step>,
     /// The first slot that only loose triangles use, and the first loose triangle.
@@ -74,22 +74,10 @@ impl TileModel {
         let (steps, tail_start, loose_start) = resolve(&ops)?;
         let q = decoded.quantization();
         let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
-        let mut fan_start = vec![0u32; positions.len() + 1];
-        for &s in decoded.triangles.iter().flatten() {
-            fan_start[s as usize + 1] += 1;
-        }
-        for i in 1..fan_start.len() {
-            fan_start[i] += fan_start[i - 1];
-        }
-        let mut next = fan_start.clone();
-        let mut fan = vec![0u32; decoded.triangles.len() * 3];
-        for (t, tri) in decoded.triangles.iter().enumerate() {
-            for &s in tri {
-                fan[next[s as usize] as usize] = t as u32;
-                next[s as usize] += 1;
-            }
-        }
-        Ok(TileModel { decoded, ops, positions, fan_start, fan, steps, tail_start, loose_start })
+        let fans = Csr::build(positions.len(), || {
+            decoded.triangles.iter().enumerate().flat_map(|(t, tri)| tri.map(|s| (s, t as u32)))
+        });
+        Ok(TileModel { decoded, ops, positions, fans, steps, tail_start, loose_start })
     }
 
     pub fn triangles(&self) -> &[[u32; 3]] {
@@ -129,32 +117,19 @@ pub fn boxes(model: &TileModel, view_proj: Mat4, grid: &TileGrid) -> Boxes {
 /// [`boxes`] into the buffers of an earlier frame's `Boxes`, which a frame loop keeps: fresh
 /// buffers cost the dragon's sort a few milliseconds of page faults every frame.
 pub fn boxes_into(model: &TileModel, view_proj: Mat4, grid: &TileGrid, out: &mut Boxes) {
-    let pixel_tiles = PixelTiles::new(grid);
-    model
-        .positions
-        .par_iter()
-        .with_min_len(4096)
-        .map(|p| ClipVertex::project(*p, view_proj, &pixel_tiles))
-        .collect_into_vec(&mut out.clip);
-    let (clip, positions) = (&out.clip, &model.positions);
-    model
-        .decoded
-        .triangles
-        .par_iter()
-        .with_min_len(4096)
-        .map(|t| {
-            let corners = || t.map(|s| clip_position(positions[s as usize], view_proj));
-            triangle_tile_box(t.map(|s| &clip[s as usize]), corners, grid)
-        })
-        .collect_into_vec(&mut out.triangles);
+    triangle_tile_boxes_into(
+        &model.positions,
+        &model.decoded.triangles,
+        view_proj,
+        grid,
+        &mut out.clip,
+        &mut out.triangles,
+    );
     let triangles = &out.triangles;
-    model.fan_start[..model.positions.len()]
-        .par_iter()
-        .zip(&model.fan_start[1..])
+    (0..model.positions.len())
+        .into_par_iter()
         .with_min_len(4096)
-        .map(|(&a, &b)| {
-            model.fan[a as usize..b as usize].iter().fold(TileBox::EMPTY, |u, &t| u.union(&triangles[t as usize]))
-        })
+        .map(|s| model.fans.get(s).iter().fold(TileBox::EMPTY, |u, &t| u.union(&triangles[t as usize])))
         .collect_into_vec(&mut out.vertices);
 }
 
@@ -170,8 +145,7 @@ impl Boxes {
         if self.clip[s].is_inside() && b.c0 == c && b.c1 == c && b.r0 == r && b.r1 == r {
             return true;
         }
-        let fan = &model.fan[model.fan_start[s] as usize..model.fan_start[s + 1] as usize];
-        fan.iter().all(|&t| self.triangles[t as usize].contains(c, r))
+        model.fans.get(s).iter().all(|&t| self.triangles[t as usize].contains(c, r))
     }
 }
 

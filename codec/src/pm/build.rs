@@ -52,6 +52,7 @@
 use thiserror::Error;
 
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
+use crate::csr::Csr;
 use crate::mesh::{Mesh, MeshError};
 
 /// Why a progressive mesh cannot be built.
@@ -371,19 +372,7 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
     progress(collapses.len(), bound);
 
     // The forest: each vertex's children are the vertices it absorbed, chronologically.
-    let mut child_start = vec![0usize; n + 1];
-    for &(_, t) in &collapses {
-        child_start[t as usize + 1] += 1;
-    }
-    for v in 0..n {
-        child_start[v + 1] += child_start[v];
-    }
-    let mut fill = child_start.clone();
-    let mut children = vec![0u32; collapses.len()];
-    for &(u, t) in &collapses {
-        children[fill[t as usize]] = u;
-        fill[t as usize] += 1;
-    }
+    let children = Csr::build(n, || collapses.iter().map(|&(u, t)| (t, u)));
 
     // Leaves left to right = pre-order with children in chronological order.
     let mut fvid_of_input = vec![u32::MAX; n];
@@ -396,7 +385,7 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
         while let Some(x) = stack.pop() {
             fvid_of_input[x as usize] = positions.len() as u32;
             positions.push(mesh.positions[x as usize]);
-            stack.extend(children[child_start[x as usize]..child_start[x as usize + 1]].iter().rev());
+            stack.extend(children.get(x as usize).iter().rev());
         }
     }
 
