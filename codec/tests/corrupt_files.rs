@@ -118,16 +118,9 @@ fn refresh_checksums(b: &mut [u8], mut pos: usize) {
 /// exercises it without a fuzzer: errors are fine, panics are not.
 #[test]
 fn arbitrary_streams_behind_a_valid_container_never_panic() {
-    let mut state = 0xDEADBEEFu64;
+    let mut rng = common::XorShift(0xDEADBEEF);
     for len in (0..4000).step_by(7) {
-        let data: Vec<u8> = (0..len)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                state as u8
-            })
-            .collect();
+        let data = rng.bytes(len);
         let _ = bft::decode(&data);
         let _ = bft::decode(&bft::wrap_for_fuzzing(&data));
     }

@@ -4,17 +4,12 @@
 mod common;
 
 use codec::Mesh;
-use common::assert_round_trip;
+use common::{assert_round_trip, XorShift};
 use proptest::prelude::*;
 
 fn positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut rng = XorShift(seed | 1);
+    let mut next = move || rng.unit() * 2.0 - 1.0;
     (0..n).map(|_| [next(), next(), next()]).collect()
 }
 

@@ -110,13 +110,10 @@ fn shared_meshes_sort_exactly() {
 
 fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
     let mut positions = vec![];
-    let mut s = seed | 1;
+    let mut rng = common::XorShift(seed | 1);
     for y in 0..=h {
         for x in 0..=w {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            let z = (s >> 40) as f32 / (1u64 << 24) as f32 * 0.3;
+            let z = rng.unit() * 0.3;
             positions.push([x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.5, z]);
         }
     }

@@ -86,15 +86,33 @@ fn rotate_min<T: Ord + Copy>(t: [T; 3]) -> [T; 3] {
     [[t[0], t[1], t[2]], [t[1], t[2], t[0]], [t[2], t[0], t[1]]].into_iter().min().unwrap()
 }
 
+/// A fixed-seed xorshift64 generator: the same sequence every run.
+pub struct XorShift(pub u64);
+
+impl XorShift {
+    pub fn next(&mut self) -> u64 {
+        let s = &mut self.0;
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        *s
+    }
+
+    /// A number in `[0, 1)` from the next value's top 24 bits.
+    pub fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// `len` bytes, the low byte of each next value.
+    pub fn bytes(&mut self, len: usize) -> Vec<u8> {
+        (0..len).map(|_| self.next() as u8).collect()
+    }
+}
+
 /// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
 pub fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        ((s >> 40) % 4) as f32
-    };
+    let mut rng = XorShift(seed | 1);
+    let mut next = move || ((rng.next() >> 40) % 4) as f32;
     (0..n).map(|_| [next(), next(), next()]).collect()
 }
 
@@ -132,13 +150,8 @@ pub fn soup() -> impl Strategy<Value = Mesh> {
 /// so the corruptions are the same every run). A copy can equal the original when two
 /// flips cancel.
 pub fn bit_flipped_copies(bytes: &[u8], count: usize) -> Vec<Vec<u8>> {
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    let mut next = || rng.next();
     (0..count)
         .map(|_| {
             let mut b = bytes.to_vec();
