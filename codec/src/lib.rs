@@ -17,6 +17,7 @@ pub mod bft;
 mod container;
 mod csr;
 pub mod huffman;
+pub mod input;
 pub mod load;
 pub mod mesh;
 pub mod pm;

@@ -2,8 +2,13 @@
 //! triangle strips) and STL (`stl_io`), each optionally gzip-compressed (`flate2`).
 //!
 //! The format comes from the file name (`.obj`, `.ply`, `.stl`, each optionally followed by
-//! `.gz`); gzip is recognised by its magic bytes, whatever the name says. Polygons are
-//! fan-triangulated; strips are unrolled with alternating orientation and their
+//! `.gz`); gzip is recognised by its magic bytes, whatever the name says. Polygons of PLY
+//! and OBJ faces are triangulated by one function ([`polygon`]): convex ones are fanned from
+//! their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones ear-clipped in the
+//! plane of their Newell normal, every triangle oriented like the polygon; degenerate ones
+//! (no area) are fanned. OBJ faces of one or two corners (and `l` lines) become triangles
+//! `(a, a, a)` and `(a, b, b)`, as `tobj` makes them; PLY faces of fewer than three corners
+//! are dropped. Strips are unrolled with alternating orientation and their
 //! zero-area stitching triangles (a repeated index) dropped, as strip writers intend.
 //! An OBJ file with several objects or groups is merged into one mesh by concatenation.
 //! Every error names the file and what is wrong; no input makes a loader panic.
@@ -16,6 +21,8 @@ use ply_rs_bw::ply::{DefaultElement, Property, PropertyAccess};
 use thiserror::Error;
 
 use crate::mesh::Mesh;
+
+mod polygon;
 
 /// A file that could not be read as a mesh.
 #[derive(Debug, Error)]
@@ -55,17 +62,21 @@ impl Format {
 pub fn load_path(path: &Path) -> Result<Mesh, LoadError> {
     let format = Format::from_path(path)
         .ok_or_else(|| err(path, "unknown mesh format: expected .obj, .ply or .stl, optionally .gz"))?;
-    let raw = std::fs::read(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
+    let raw = crate::input::read_file(path).map_err(|e| err(path, e))?;
     load_bytes(path, &raw, format)
 }
 
 /// Parses mesh bytes (gzip or plain) in the given format; `path` is used in error messages.
 pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadError> {
     let bytes = if raw.starts_with(&[0x1f, 0x8b]) {
-        let mut out = Vec::with_capacity(raw.len() * 4);
-        flate2::read::MultiGzDecoder::new(raw)
-            .read_to_end(&mut out)
-            .map_err(|e| err(path, format!("corrupt gzip data: {e}")))?;
+        let mut out =
+            Vec::with_capacity(raw.len().saturating_mul(4).min(crate::input::max_decompressed_bytes() as usize));
+        crate::input::read_capped(
+            flate2::read::MultiGzDecoder::new(raw),
+            crate::input::max_decompressed_bytes(),
+            &mut out,
+        )
+        .map_err(|e| err(path, if e.starts_with("decompresses") { e } else { format!("corrupt gzip data: {e}") }))?;
         out
     } else {
         raw.to_vec()
@@ -85,25 +96,50 @@ pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadE
 }
 
 fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
-    let options = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
+    // Faces come as polygons (`face_arities`, empty when all are triangles) and are
+    // triangulated here, as PLY faces are: tobj's own triangulation fans every polygon.
+    let options = tobj::LoadOptions { triangulate: false, single_index: false, ..Default::default() };
     let mut reader = BufReader::new(Cursor::new(bytes));
     // Materials are irrelevant to geometry; a missing .mtl must not fail the load.
     let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| Err(tobj::LoadError::OpenFileFailed))
         .map_err(|e| err(path, format!("malformed OBJ: {e}")))?;
     let mut mesh = Mesh::default();
+    let mut triangulator = polygon::Triangulator::default();
+    let mut corners = Vec::new();
     for model in models {
         let m = model.mesh;
-        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
+        let arities_sum: u64 = m.face_arities.iter().map(|&a| u64::from(a)).sum();
+        if m.positions.len() % 3 != 0
+            || (m.face_arities.is_empty() && m.indices.len() % 3 != 0)
+            || (!m.face_arities.is_empty() && arities_sum != m.indices.len() as u64)
+        {
             return Err(err(path, "malformed OBJ: ragged position or index arrays"));
         }
         let base = mesh.positions.len() as u32;
         let count = m.positions.len() / 3;
+        if m.indices.iter().any(|&i| i as usize >= count) {
+            return Err(err(path, format!("object '{}' has a face index out of range", model.name)));
+        }
         mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-        for t in m.indices.chunks_exact(3) {
-            if t.iter().any(|&i| i as usize >= count) {
-                return Err(err(path, format!("object '{}' has a face index out of range", model.name)));
+        if m.face_arities.is_empty() {
+            mesh.triangles.extend(m.indices.chunks_exact(3).map(|t| [base + t[0], base + t[1], base + t[2]]));
+            continue;
+        }
+        let mut next = 0usize;
+        for &arity in &m.face_arities {
+            let face = &m.indices[next..next + arity as usize];
+            next += arity as usize;
+            match *face {
+                // What tobj's triangulation made of points and lines: triangles without area.
+                [] => return Err(err(path, "malformed OBJ: a face without vertices")),
+                [a] => mesh.triangles.push([base + a; 3]),
+                [a, b] => mesh.triangles.push([base + a, base + b, base + b]),
+                _ => {
+                    corners.clear();
+                    corners.extend(face.iter().map(|&i| base + i));
+                    triangulator.polygon(&mesh.positions, &corners, &mut mesh.triangles);
+                }
             }
-            mesh.triangles.push([base + t[0], base + t[1], base + t[2]]);
         }
     }
     Ok(mesh)
@@ -178,6 +214,9 @@ fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
     let skip_parser = Parser::<DefaultElement>::new();
     let mut mesh = Mesh::default();
     let mut saw_vertices = false;
+    // Faces are triangulated once the positions are known (a file may list them first):
+    // their corners in one list, and where each face ends.
+    let (mut corners, mut face_ends) = (Vec::new(), Vec::new());
     for (name, def) in &header.elements {
         let bad = |e: std::io::Error| err(path, format!("malformed PLY element '{name}': {e}"));
         match name.as_str() {
@@ -188,8 +227,11 @@ fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
             }
             "face" => {
                 let faces = index_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
-                for f in faces {
-                    fan(path, &f.0, &mut mesh.triangles)?;
+                for f in faces.iter().filter(|f| f.0.len() >= 3) {
+                    for &i in &f.0 {
+                        corners.push(index(path, i)?);
+                    }
+                    face_ends.push(corners.len());
                 }
             }
             "tristrips" => {
@@ -206,6 +248,12 @@ fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
     if !saw_vertices {
         return Err(err(path, "PLY file has no 'vertex' element"));
     }
+    let mut triangulator = polygon::Triangulator::default();
+    let mut start = 0;
+    for end in face_ends {
+        triangulator.polygon(&mesh.positions, &corners[start..end], &mut mesh.triangles);
+        start = end;
+    }
     let mut rest = [0u8; 1];
     let _ = reader.fill_buf();
     let _ = reader.read(&mut rest);
@@ -214,18 +262,6 @@ fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
 
 fn index(path: &Path, i: i64) -> Result<u32, LoadError> {
     u32::try_from(i).map_err(|_| err(path, format!("vertex index {i} is out of range")))
-}
-
-/// Fan-triangulates one polygon: (v0, v1, v2), (v0, v2, v3), ...
-fn fan(path: &Path, poly: &[i64], out: &mut Vec<[u32; 3]>) -> Result<(), LoadError> {
-    if poly.len() < 3 {
-        return Ok(());
-    }
-    let v0 = index(path, poly[0])?;
-    for w in poly[1..].windows(2) {
-        out.push([v0, index(path, w[0])?, index(path, w[1])?]);
-    }
-    Ok(())
 }
 
 /// Unrolls a triangle strip; a negative index restarts the strip.

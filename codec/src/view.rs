@@ -94,6 +94,34 @@ impl Camera {
     }
 }
 
+/// A conservative pixel rectangle `[x0, y0, x1, y1)` that holds the projection of the box
+/// `lo..hi` under `view_proj` on a `width x height` screen, or `None` when the box is wholly
+/// off screen to one side. A box reaching behind the eye plane gives the whole screen.
+pub fn box_screen_rect(lo: [f32; 3], hi: [f32; 3], view_proj: Mat4, width: u32, height: u32) -> Option<[u32; 4]> {
+    let (w, h) = (width as f32, height as f32);
+    let mut min = [f32::INFINITY; 2];
+    let mut max = [f32::NEG_INFINITY; 2];
+    for corner in 0..8 {
+        let pick = |axis: usize| if corner & (1 << axis) == 0 { lo[axis] } else { hi[axis] };
+        let clip = view_proj * Vec4::new(pick(0), pick(1), pick(2), 1.0);
+        if !(clip.w > 0.0) {
+            return Some([0, 0, width, height]);
+        }
+        let (px, py) = ((clip.x / clip.w + 1.0) * 0.5 * w, (1.0 - clip.y / clip.w) * 0.5 * h);
+        min = [min[0].min(px), min[1].min(py)];
+        max = [max[0].max(px), max[1].max(py)];
+    }
+    if !(min[0].is_finite() && min[1].is_finite() && max[0].is_finite() && max[1].is_finite()) {
+        return Some([0, 0, width, height]);
+    }
+    // One pixel of margin against rounding.
+    let x0 = (min[0].floor() - 1.0).clamp(0.0, w) as u32;
+    let y0 = (min[1].floor() - 1.0).clamp(0.0, h) as u32;
+    let x1 = (max[0].ceil() + 1.0).clamp(0.0, w) as u32;
+    let y1 = (max[1].ceil() + 1.0).clamp(0.0, h) as u32;
+    (x0 < x1 && y0 < y1).then_some([x0, y0, x1, y1])
+}
+
 /// A screen of `width x height` pixels cut into `cols x rows` tiles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TileGrid {
@@ -454,6 +482,14 @@ mod tests {
     #[test]
     fn grid_and_camera_errors() {
         assert_eq!(TileGrid::new(0, 10, 1, 1), Err(ViewError::ZeroSize(0, 10)));
+        // The default camera frames the box; a box to the side is off screen; one around the
+        // eye covers it all.
+        let cam = Camera::framing([0.0; 3], [1.0; 3], 2.0);
+        let vp = cam.view_proj(2.0);
+        let r = box_screen_rect([0.0; 3], [1.0; 3], vp, 200, 100).unwrap();
+        assert!(r[0] > 0 && r[2] < 200 && r[1] < r[3], "{r:?}");
+        assert_eq!(box_screen_rect([100.0, 0.0, 0.0], [101.0, 1.0, 1.0], vp, 200, 100), None);
+        assert_eq!(box_screen_rect([-10.0; 3], [10.0; 3], vp, 200, 100), Some([0, 0, 200, 100]));
         assert!(matches!(TileGrid::new(8, 8, 16, 1), Err(ViewError::GridTooLarge { .. })));
         assert_eq!(TileGrid::new(8, 8, 0, 1), Err(ViewError::ZeroGrid(0, 1)));
         let mut cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);

@@ -55,7 +55,7 @@ impl Decoded {
 
 /// Reads and decodes a `.bft` file.
 pub fn decode_file(path: &Path) -> Result<Decoded, BftError> {
-    let bytes = std::fs::read(path).map_err(|e| BftError::Corrupt(format!("cannot read {}: {e}", path.display())))?;
+    let bytes = crate::input::read_file(path).map_err(|e| BftError::Corrupt(format!("{}: {e}", path.display())))?;
     decode(&bytes)
 }
 

@@ -151,6 +151,12 @@ impl Header {
         if !(h.step.is_finite() && h.step > 0.0 && h.bbox_min.iter().all(|v| v.is_finite())) {
             return Err(corrupt("non-finite quantization parameters"));
         }
+        if !(h.bbox_min.iter().zip(&h.bbox_max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
+            return Err(corrupt(format!(
+                "the bounding box {:?} .. {:?} is not finite and ordered",
+                h.bbox_min, h.bbox_max
+            )));
+        }
         if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
             return Err(corrupt("inconsistent counts in header"));
         }
