@@ -13,6 +13,84 @@ pub fn parse_pair(s: &str) -> Result<(u32, u32), String> {
     Ok((n(a)?, n(b)?))
 }
 
+/// Parses a frame size `WxH`: each side 1 to [`MAX_FRAME_SIDE`], checked here, before anything
+/// is allocated for it.
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = parse_pair(s)?;
+    check_frame_size(w as u64, h as u64).map_err(|e| e.to_string())?;
+    Ok((w, h))
+}
+
+/// The largest frame side Tessera renders, in pixels. A worker renders each tile as a crop of
+/// a frame-sized texture (exact tile borders; see `worker::render`), so the frame must fit one
+/// texture: 16384 is the largest texture side of lavapipe and of most desktop GPUs, and the
+/// handshake checks each worker's own adapter limit against the frame before the first
+/// frame. The composited frame on rank 0 is then at most 1 GiB of RGBA.
+pub const MAX_FRAME_SIDE: u64 = 16384;
+
+/// Refuses a frame with a side of zero or above [`MAX_FRAME_SIDE`] (overflow-free: sides are
+/// taken as `u64`, so wall arithmetic can pass its sums unclamped).
+pub fn check_frame_size(w: u64, h: u64) -> Result<()> {
+    if w == 0 || h == 0 {
+        bail!("the frame size {w}x{h} must be at least 1x1");
+    }
+    if w > MAX_FRAME_SIDE || h > MAX_FRAME_SIDE {
+        bail!("the frame is {w}x{h} pixels; at most {MAX_FRAME_SIDE} on a side is supported (one texture per worker)");
+    }
+    Ok(())
+}
+
+/// The longest `--timeout` accepted: about 31 years.
+const MAX_TIMEOUT_S: f64 = 1e9;
+
+/// Parses a positive number of seconds (at most about 31 years), never panicking on
+/// `inf`, `1e20`, `-0` or `nan`.
+pub fn parse_seconds(s: &str) -> Result<std::time::Duration, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number of seconds"))?;
+    if !(v > 0.0 && v <= MAX_TIMEOUT_S) {
+        return Err(format!("expected a positive number of seconds up to {MAX_TIMEOUT_S:e}, not {s}"));
+    }
+    Ok(std::time::Duration::from_secs_f64(v))
+}
+
+/// Parses a finite number greater than zero.
+pub fn parse_positive(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(_) => Err(format!("expected a finite number above zero, not {s}")),
+        Err(_) => Err(format!("'{s}' is not a number")),
+    }
+}
+
+/// Parses a finite number, zero or greater (`-0` is zero).
+pub fn parse_non_negative(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v + 0.0),
+        Ok(_) => Err(format!("expected a finite number, zero or above, not {s}")),
+        Err(_) => Err(format!("'{s}' is not a number")),
+    }
+}
+
+/// Parses a byte count: a whole number with an optional K, M, G or T suffix (powers of 1024).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, shift) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let shift = match c.to_ascii_uppercase() {
+                'K' => 10,
+                'M' => 20,
+                'G' => 30,
+                'T' => 40,
+                _ => return Err(format!("'{s}': the suffix must be K, M, G or T")),
+            };
+            (&t[..i], shift)
+        }
+        _ => (t, 0),
+    };
+    let n: u64 = num.parse().map_err(|_| format!("'{s}' is not a byte count"))?;
+    n.checked_mul(1u64 << shift).filter(|&v| v > 0).ok_or_else(|| format!("'{s}' is out of range"))
+}
+
 /// Parses `x,y,z`.
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let v: Vec<f32> = s
@@ -30,7 +108,7 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
 #[derive(Args, Clone, Debug)]
 pub struct GridArgs {
     /// Frame size in pixels, WIDTHxHEIGHT.
-    #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+    #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
     pub size: (u32, u32),
     /// Tile grid, COLSxROWS.
     #[arg(long, value_parser = parse_pair, default_value = "8x8")]
@@ -53,11 +131,11 @@ pub struct CameraArgs {
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<Vec3>,
     /// Vertical field of view in degrees.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_positive)]
     pub fovy: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = parse_positive)]
     pub near: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = parse_positive)]
     pub far: Option<f32>,
 }
 
@@ -100,6 +178,64 @@ impl CameraArgs {
     }
 }
 
+/// Far/near ratios above this are refused: a 32-bit float depth buffer under the standard
+/// projection resolves about `2^-24 * far / near` of the distance at the far plane, so at
+/// 1e7 two surfaces less than 60% of their distance apart cannot be told apart.
+pub const MAX_DEPTH_RATIO: f64 = 1e7;
+/// Far/near ratios above this get a warning (0.06% of the distance at the far plane).
+pub const WARN_DEPTH_RATIO: f64 = 1e4;
+/// The smallest angle one pixel may span, in radians: eye-space positions are `f32`, with a
+/// relative precision of about 6e-8 of their distance, so below 1e-6 rad a pixel is a few
+/// rounding steps wide and the image is noise.
+pub const MIN_PIXEL_ANGLE: f64 = 1e-6;
+/// Pixel angles below this get a warning.
+pub const WARN_PIXEL_ANGLE: f64 = 1e-5;
+
+/// Refuses a camera whose depth range or field of view the 32-bit depth buffer and float
+/// projection cannot represent at `height` pixels, and returns warnings (with the numbers)
+/// for ones that are close.
+pub fn check_precision(cam: &Camera, height: u32) -> Result<Vec<String>> {
+    let mut warnings = Vec::new();
+    let ratio = cam.far as f64 / cam.near as f64;
+    let depth_step = ratio * 2f64.powi(-24);
+    if ratio > MAX_DEPTH_RATIO {
+        bail!(
+            "far/near = {:.3e} / {:.3e} = {ratio:.3e} is beyond what a 32-bit depth buffer resolves              (at most {MAX_DEPTH_RATIO:e}; depth steps would be {:.0}% of the distance at the far plane); raise --near or lower --far",
+            cam.far,
+            cam.near,
+            depth_step * 100.0
+        );
+    }
+    if ratio > WARN_DEPTH_RATIO {
+        warnings.push(format!(
+            "far/near = {ratio:.3e}: the depth buffer resolves only {:.2}% of the distance at the far plane;              surfaces closer than that may show through each other",
+            depth_step * 100.0
+        ));
+    }
+    let pixel = (cam.fovy as f64).to_radians() / height as f64;
+    if pixel < MIN_PIXEL_ANGLE {
+        bail!(
+            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel, below the {MIN_PIXEL_ANGLE:e}              that float projection resolves; raise --fovy",
+            cam.fovy
+        );
+    }
+    if pixel < WARN_PIXEL_ANGLE {
+        warnings.push(format!(
+            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel; positions are rounded to a few              percent of a pixel",
+            cam.fovy
+        ));
+    }
+    Ok(warnings)
+}
+
+/// [`check_precision`], printing its warnings on stderr.
+pub fn check_camera(cam: &Camera, height: u32) -> Result<()> {
+    for w in check_precision(cam, height)? {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -112,6 +248,46 @@ mod tests {
         assert_eq!(parse_vec3("1,-2.5,3"), Ok(Vec3::new(1.0, -2.5, 3.0)));
         assert!(parse_vec3("1,2").is_err());
         assert!(parse_vec3("1,nan,2").is_err());
+    }
+
+    #[test]
+    fn numbers_never_panic() {
+        for v in ["1e20", "inf", "-inf", "nan", "-0", "0", "-1", "1e-45", "x", ""] {
+            let _ = parse_seconds(v);
+            let _ = parse_positive(v);
+            let _ = parse_non_negative(v);
+            let _ = parse_bytes(v);
+            let _ = parse_size(&format!("{v}x{v}"));
+        }
+        assert!(parse_seconds("1e20").is_err());
+        assert!(parse_seconds("inf").is_err());
+        assert!(parse_seconds("-0").is_err());
+        assert_eq!(parse_seconds("1.5"), Ok(std::time::Duration::from_millis(1500)));
+        assert_eq!(parse_non_negative("-0"), Ok(0.0));
+        assert!(parse_non_negative("-0").unwrap().is_sign_positive());
+        assert!(parse_positive("-0").is_err());
+        assert_eq!(parse_bytes("4G"), Ok(4 << 30));
+        assert!(parse_bytes("99999999999T").is_err());
+        assert!(parse_size("192000x108000").is_err());
+        assert!(parse_size("4294967295x4294967295").is_err());
+        assert_eq!(parse_size("16384x16384"), Ok((16384, 16384)));
+    }
+
+    #[test]
+    fn precision_limits() {
+        let mut cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);
+        assert!(check_precision(&cam, 1080).unwrap().is_empty());
+        cam.near = 1e-30;
+        let e = check_precision(&cam, 1080).unwrap_err().to_string();
+        assert!(e.contains("far/near") && e.contains("depth buffer"), "{e}");
+        cam.near = cam.far / 1e5;
+        assert_eq!(check_precision(&cam, 1080).unwrap().len(), 1);
+        cam.near = cam.far / 10.0;
+        cam.fovy = 1e-30;
+        let e = check_precision(&cam, 1080).unwrap_err().to_string();
+        assert!(e.contains("field of view"), "{e}");
+        cam.fovy = 0.5;
+        assert_eq!(check_precision(&cam, 1080).unwrap().len(), 1);
     }
 
     #[test]

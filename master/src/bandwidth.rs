@@ -355,11 +355,15 @@ pub fn run(
         .iter()
         .map(|&(c, r)| TileGrid::new(size.0, size.1, c, r).with_context(|| format!("bad --tiles entry {c}x{r}")))
         .collect::<Result<_>>()?;
+    crate::output::check_extension(out, &["csv"], "--out")?;
+    crate::output::check_extension(plot, &["png"], "--plot")?;
     for path in [out, plot] {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         }
     }
+    let inputs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
+    crate::output::check_distinct(&inputs, &[out, plot])?;
     let subjects: Vec<Subject> = models.iter().map(|p| Subject::load(p, quant_bits)).collect::<Result<_>>()?;
 
     println!("{}", Row::TABLE_HEADER);

@@ -8,8 +8,22 @@ use codec::bft::{self, EncodeOptions, Stats};
 use codec::Mesh;
 use serde::Serialize;
 
-use crate::output::{write_atomic, write_bytes};
+use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
+
+/// Prints a command's summary line: on stdout, unless the output itself goes there (`-o -`).
+pub fn summary(output: &Path, line: std::fmt::Arguments) {
+    if output.as_os_str() == "-" {
+        eprintln!("{line}");
+    } else {
+        println!("{line}");
+    }
+}
+
+/// Reads an input file whole: regular files only (see [`codec::input::read_file`]).
+pub fn read_input(path: &Path) -> Result<Vec<u8>> {
+    codec::input::read_file(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
 
 /// Loads a mesh file (OBJ, PLY, STL, optionally gzipped), with a spinner while it parses.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
@@ -24,6 +38,8 @@ pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
     if !(8..=24).contains(&quant_bits) {
         bail!("--quant-bits must be 8 to 24, not {quant_bits}");
     }
+    check_extension(output, &["bft"], "the output of encode")?;
+    check_distinct(&[input], &[output])?;
     let mesh = load_mesh(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.triangles.len() as u64, "encoding");
@@ -34,7 +50,9 @@ pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     write_bytes(output, &enc.bytes)?;
     let stats = Stats::of(&enc.bytes)?;
-    println!(
+    summary(
+        output,
+        format_args!(
         "{} -> {}: {} triangles, {} vertices, {} bytes ({:.3} bits/triangle connectivity, {:.2} bits/vertex geometry at {} bits), {:.0} ms",
         input.display(),
         output.display(),
@@ -45,31 +63,36 @@ pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
         stats.geometry_bits_per_vertex(),
         quant_bits,
         secs * 1e3
+    ),
     );
     Ok(())
 }
 
 fn read_bft(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+    read_input(path)
 }
 
 /// `tessera decode IN.bft -o OUT.ply|OUT.obj`.
 pub fn decode(input: &Path, output: &Path) -> Result<()> {
-    let writer = codec::save::writer_for(output)
-        .with_context(|| format!("{}: the output must end in .ply or .obj", output.display()))?;
+    check_extension(output, &["ply", "obj"], "the output of decode")?;
+    let writer = codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w));
+    check_distinct(&[input], &[output])?;
     let bytes = read_bft(input)?;
     let start = Instant::now();
     let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
     let mesh = decoded.to_mesh();
     let secs = start.elapsed().as_secs_f64();
     write_atomic(output, |w| writer(&mesh, w))?;
-    println!(
-        "{} -> {}: {} triangles, {} vertices, decoded in {:.1} ms",
-        input.display(),
-        output.display(),
-        mesh.triangles.len(),
-        mesh.positions.len(),
-        secs * 1e3
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles, {} vertices, decoded in {:.1} ms",
+            input.display(),
+            output.display(),
+            mesh.triangles.len(),
+            mesh.positions.len(),
+            secs * 1e3
+        ),
     );
     Ok(())
 }

@@ -108,7 +108,8 @@ pub struct Wall {
 
 impl Wall {
     pub fn load(path: &Path) -> Result<Wall> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = crate::commands::read_input(path)?;
+        let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
         let wall: Wall =
             toml::from_str(&text).with_context(|| format!("{}: not a valid wall description", path.display()))?;
         wall.validate().with_context(|| format!("{}", path.display()))?;
@@ -119,14 +120,14 @@ impl Wall {
         if self.columns == 0 || self.rows == 0 || self.display_width == 0 || self.display_height == 0 {
             bail!("columns, rows and display sizes must be at least 1");
         }
-        let (w, h) = self.frame_size();
-        if w > 32768 || h > 32768 {
-            bail!("the wall is {w}x{h} pixels; at most 32768 on a side is supported");
-        }
-        Ok(())
+        // In u64, where no sum of u32 products can wrap.
+        let side = |n: u32, size: u32, bezel: u32| n as u64 * size as u64 + (n as u64 - 1) * bezel as u64;
+        let (w, h) =
+            (side(self.columns, self.display_width, self.bezel_x), side(self.rows, self.display_height, self.bezel_y));
+        crate::args::check_frame_size(w, h).context("the wall (displays and bezels) is too large")
     }
 
-    /// The frame that covers the wall, bezels included.
+    /// The frame that covers the wall, bezels included (valid once [`Wall::load`] checked it).
     pub fn frame_size(&self) -> (u32, u32) {
         (
             self.columns * self.display_width + (self.columns - 1) * self.bezel_x,
@@ -197,5 +198,19 @@ mod tests {
         assert_eq!(px(6, 4), &[6, 4, 0, 255]);
         assert!(toml::from_str::<Wall>("columns = 2\nrows = 2\ndisplay_width = 4\ndisplay_height = 3\nbezels = 1\n")
             .is_err());
+    }
+
+    #[test]
+    fn wall_sizes_do_not_wrap() {
+        let wall = |text: &str| toml::from_str::<Wall>(text).unwrap().validate();
+        // 2 x 2147483649 wraps to 2 in u32 arithmetic.
+        let e = wall("columns = 2\nrows = 1\ndisplay_width = 2147483649\ndisplay_height = 10\n").unwrap_err();
+        assert!(format!("{e:#}").contains("4294967298x10"), "{e:#}");
+        // 100 + 4294967196 wraps to 0 in u32 arithmetic.
+        let e =
+            wall("columns = 2\nrows = 1\ndisplay_width = 50\ndisplay_height = 10\nbezel_x = 4294967196\n").unwrap_err();
+        assert!(format!("{e:#}").contains("at most 16384"), "{e:#}");
+        assert!(wall("columns = 3\nrows = 2\ndisplay_width = 1920\ndisplay_height = 1080\nbezel_x = 60\n").is_ok());
+        assert!(wall("columns = 9\nrows = 1\ndisplay_width = 1920\ndisplay_height = 1080\n").is_err());
     }
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use master::args::{parse_pair, CameraArgs, GridArgs};
+use master::args::{parse_bytes, parse_non_negative, parse_pair, parse_positive, parse_size, CameraArgs, GridArgs};
 use master::commands;
 
 #[derive(Parser)]
@@ -13,6 +13,9 @@ use master::commands;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// The most bytes a gzip-compressed input may expand to (K, M, G, T suffixes allowed).
+    #[arg(long, global = true, value_parser = parse_bytes, default_value = "1G")]
+    max_decompressed: u64,
 }
 
 #[derive(Subcommand)]
@@ -101,10 +104,10 @@ enum Pm {
         #[command(flatten)]
         camera: CameraArgs,
         /// Frame size in pixels, WIDTHxHEIGHT.
-        #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+        #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
         size: (u32, u32),
         /// Screen-space error threshold in pixels.
-        #[arg(long, default_value_t = 0.5)]
+        #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
         error_px: f32,
         #[arg(short, long)]
         output: PathBuf,
@@ -113,7 +116,7 @@ enum Pm {
         full: bool,
         /// The normal error's weight, as a fraction of the model's bounding box diagonal per
         /// unit of normal chord (0 ignores normals).
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, value_parser = parse_non_negative)]
         normal_weight: f32,
         /// Adapt on the GPU (WGSL compute shaders through wgpu; lavapipe without a GPU). The
         /// mesh written is the same as the CPU reference's.
@@ -134,7 +137,7 @@ enum Bench {
         #[arg(long, value_parser = parse_pair, value_delimiter = ',', default_value = "1x1,2x2,4x4,8x8,16x16,32x32")]
         tiles: Vec<(u32, u32)>,
         /// Frame size in pixels, WIDTHxHEIGHT.
-        #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+        #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
         size: (u32, u32),
         /// Bits per quantized coordinate for mesh inputs (8 to 24).
         #[arg(long, default_value_t = 14, value_parser = clap::value_parser!(u8).range(8..=24))]
@@ -150,6 +153,8 @@ enum Bench {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    master::output::install_signal_handler();
+    codec::input::set_max_decompressed_bytes(cli.max_decompressed);
     let result = match &cli.command {
         Command::Encode { input, output, quant_bits } => commands::encode(input, output, *quant_bits),
         Command::Decode { input, output } => commands::decode(input, output),

@@ -11,11 +11,14 @@ use serde::Serialize;
 
 use crate::args::CameraArgs;
 use crate::commands::load_mesh;
-use crate::output::{write_atomic, write_bytes};
+use crate::commands::{read_input, summary};
+use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
 
 /// `tessera pm build IN -o OUT.dpm`.
 pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
+    check_extension(output, &["dpm"], "the output of pm build")?;
+    check_distinct(&[input], &[output])?;
     let mesh = load_mesh(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
@@ -33,32 +36,38 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
     let enc_s = t.elapsed().as_secs_f64();
     write_bytes(output, &enc.bytes)?;
     let secs = build_s + enc_s;
-    println!(
-        "{} -> {}: {} triangles, {} vertices, {} operations, {} bytes ({:.2} bytes/vertex), \
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles, {} vertices, {} operations, {} bytes ({:.2} bytes/vertex), \
          built in {:.0} ms + compressed in {:.0} ms ({:.0} ops/s)",
-        input.display(),
-        output.display(),
-        enc.header.triangles,
-        enc.header.vertices,
-        enc.header.splits,
-        enc.bytes.len(),
-        enc.bytes.len() as f64 / enc.header.vertices.max(1) as f64,
-        build_s * 1e3,
-        enc_s * 1e3,
-        enc.header.splits as f64 / secs.max(1e-9)
+            input.display(),
+            output.display(),
+            enc.header.triangles,
+            enc.header.vertices,
+            enc.header.splits,
+            enc.bytes.len(),
+            enc.bytes.len() as f64 / enc.header.vertices.max(1) as f64,
+            build_s * 1e3,
+            enc_s * 1e3,
+            enc.header.splits as f64 / secs.max(1e-9)
+        ),
     );
     let per_vertex = |bits: f64| bits / 8.0 / enc.header.vertices.max(1) as f64;
-    println!(
-        "  entropy-coded symbols: {:.2} bytes/vertex with the static Huffman codes, {:.2} at their entropy \
+    summary(
+        output,
+        format_args!(
+            "  entropy-coded symbols: {:.2} bytes/vertex with the static Huffman codes, {:.2} at their entropy \
          (an arithmetic coder's bound before its per-operation termination)",
-        per_vertex(enc.symbol_bits.0),
-        per_vertex(enc.symbol_bits.1)
+            per_vertex(enc.symbol_bits.0),
+            per_vertex(enc.symbol_bits.1)
+        ),
     );
     Ok(())
 }
 
 fn read(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+    read_input(path)
 }
 
 /// The numbers `tessera pm stats --json` prints; the `*_per_vertex` fields are the paper's
@@ -164,6 +173,9 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     if !(opts.normal_weight.is_finite() && opts.normal_weight >= 0.0) {
         bail!("--normal-weight must be zero or positive, not {}", opts.normal_weight);
     }
+    check_extension(output, &["ply", "obj"], "the output of pm adapt")?;
+    let writer = codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w));
+    check_distinct(&[input], &[output])?;
     let bytes = read(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
@@ -174,6 +186,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         None
     } else {
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
+        crate::args::check_camera(&cam, size.1)?;
         let mut view = View::new(&cam, size.0, size.1, error_px);
         view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
         Some(view)
@@ -202,16 +215,19 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     let secs = start.elapsed().as_secs_f64();
     faces.sort_unstable();
     let mesh = Mesh { positions: active.iter().map(|&f| pm.positions[f as usize]).collect(), triangles: faces };
-    write_atomic(output, |w| codec::save::write_ply(&mesh, w))?;
-    println!(
-        "{} -> {}: {} triangles, {} vertices ({} passes{}) in {:.1} ms",
-        input.display(),
-        output.display(),
-        mesh.triangles.len(),
-        mesh.positions.len(),
-        passes,
-        if opts.gpu { " on the GPU" } else { "" },
-        secs * 1e3
+    write_atomic(output, |w| writer(&mesh, w))?;
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles, {} vertices ({} passes{}) in {:.1} ms",
+            input.display(),
+            output.display(),
+            mesh.triangles.len(),
+            mesh.positions.len(),
+            passes,
+            if opts.gpu { " on the GPU" } else { "" },
+            secs * 1e3
+        ),
     );
     Ok(())
 }

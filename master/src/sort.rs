@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use codec::bft::tile_sort::{self, Boxes, Sorter, Tile, TileModel};
 use codec::bft::{self, EncodeOptions};
 use codec::tri_sort;
@@ -25,7 +25,7 @@ pub struct Model {
 pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     let is_bft = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bft"));
     let bytes = if is_bft {
-        std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?
+        crate::commands::read_input(path)?
     } else {
         let mesh = load_mesh(path)?;
         bft::encode(&mesh, options).with_context(|| format!("cannot encode {}", path.display()))?.bytes
@@ -146,6 +146,61 @@ pub fn sort_frame(
     Ok((summary, tiles))
 }
 
+/// Whether a file name is one that `--dump` writes: `tile-<index>.ply` or `summary.json`.
+fn is_dump_file(name: &std::ffi::OsStr) -> bool {
+    let Some(name) = name.to_str() else { return false };
+    name == "summary.json"
+        || name
+            .strip_prefix("tile-")
+            .and_then(|n| n.strip_suffix(".ply"))
+            .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Checks, before any work, that `--dump DIR` is new, empty, or holds only an earlier dump's
+/// files (which [`clear_dump`] then removes); anything else in it is refused, never deleted.
+fn prepare_dump(dir: &Path, model: &Path) -> Result<()> {
+    match std::fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
+        }
+        Err(e) => Err(e).with_context(|| format!("cannot use {}", dir.display())),
+        Ok(m) if !m.is_dir() => bail!("--dump {}: not a folder", dir.display()),
+        Ok(_) => {
+            for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
+                let entry = entry.with_context(|| format!("cannot read {}", dir.display()))?;
+                let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+                let model_id = crate::output::Identity::of(model).ok();
+                if model_id.is_some() && crate::output::Identity::of(&entry.path()).ok() == model_id {
+                    bail!(
+                        "--dump {}: the model {} is in the folder the dump would clear",
+                        dir.display(),
+                        model.display()
+                    );
+                }
+                if !is_file || !is_dump_file(&entry.file_name()) {
+                    bail!(
+                        "--dump {}: the folder holds {}, which is not from an earlier dump; give an empty or new folder",
+                        dir.display(),
+                        entry.file_name().to_string_lossy()
+                    );
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Removes an earlier dump's files from `dir` (checked by [`prepare_dump`]).
+fn clear_dump(dir: &Path) -> Result<()> {
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
+        let entry = entry.with_context(|| format!("cannot read {}", dir.display()))?;
+        if entry.file_type().is_ok_and(|t| t.is_file()) && is_dump_file(&entry.file_name()) {
+            std::fs::remove_file(entry.path()).with_context(|| format!("cannot remove {}", entry.path().display()))?;
+        }
+    }
+    Ok(())
+}
+
 /// `tessera sort MODEL --size WxH --tiles CxR [camera] [--dump DIR] [--json]`.
 pub fn run(
     path: &Path,
@@ -156,12 +211,16 @@ pub fn run(
     coding: bft::Coding,
 ) -> Result<()> {
     let grid = grid.grid()?;
+    if let Some(dir) = dump {
+        prepare_dump(dir, path)?;
+    }
     let model = load_model(path, EncodeOptions::default())?;
     let cam = model.camera(camera, &grid)?;
+    crate::args::check_camera(&cam, grid.height)?;
     let (summary, tiles) =
         sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
     if let Some(dir) = dump {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        clear_dump(dir)?;
         for t in &tiles {
             let mesh = bft::decode(&t.bytes).with_context(|| format!("tile {} does not decode", t.index))?.to_mesh();
             write_atomic(&dir.join(format!("tile-{}.ply", t.index)), |w| codec::save::write_ply(&mesh, w))?;
