@@ -24,9 +24,9 @@ use worker::protocol::{FrameJob, PmFrameJob, TileJob, ToMaster, ToWorker};
 use worker::transport::{self, RecvError, Transport};
 
 use crate::args::TileCoding;
-use crate::args::{parse_pair, CameraArgs};
+use crate::args::{parse_non_negative, parse_pair, parse_positive, parse_seconds, parse_size, CameraArgs};
 use crate::composite::{Image, Wall};
-use crate::output::write_bytes;
+use crate::output::{check_distinct, check_extension, Identity, LineLog};
 use crate::sort::{load_model, Model};
 
 /// Flags of `tessera render`.
@@ -35,8 +35,9 @@ pub struct RenderArgs {
     /// A .bft file, a mesh file (OBJ, PLY, STL; encoded on load), or a progressive mesh
     /// (.dpm, from `tessera pm build`), which the workers adapt per tile on the GPU.
     pub model: PathBuf,
-    /// Frame size in pixels, WIDTHxHEIGHT (ignored with --wall, which sets it).
-    #[arg(long, value_parser = parse_pair, default_value = "1920x1080")]
+    /// Frame size in pixels, WIDTHxHEIGHT (ignored with --wall, which sets it), at most
+    /// 16384 on a side.
+    #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
     pub size: (u32, u32),
     /// Tile grid, COLSxROWS.
     #[arg(long, value_parser = parse_pair, default_value = "4x4")]
@@ -66,15 +67,16 @@ pub struct RenderArgs {
     /// A tile wall description (TOML): one PNG per display plus an overview.
     #[arg(long)]
     pub wall: Option<PathBuf>,
-    /// Seconds to wait for a worker before declaring it dead.
-    #[arg(long, default_value_t = 60.0)]
-    pub timeout: f64,
+    /// Seconds of silence after which a worker counts as dead. Workers send a heartbeat
+    /// while they work, so a slow frame is not silence. At least 1.
+    #[arg(long, default_value = "60", value_parser = parse_seconds)]
+    pub timeout: Duration,
     /// Progressive meshes: the screen-space error bound in pixels.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
     pub error_px: f32,
     /// Progressive meshes: the normal error's weight, as a fraction of the model's bounding
     /// box diagonal per unit of normal chord (0 ignores normals).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_non_negative)]
     pub normal_weight: f32,
     /// Progressive meshes: the LOD falloff outside each tile's sub-frustum (the paper's c_LOD):
     /// the distance used for the error test grows by this factor times the world distance by
@@ -83,7 +85,7 @@ pub struct RenderArgs {
     /// and refined by the neighbouring tile, so the default is steeper: on the dragon at
     /// 1920x1080 in 8x8 tiles, 1000 cuts the triangles summed over the tiles from 4.39M (100)
     /// to 0.84M with the same pixels.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, value_parser = parse_non_negative)]
     pub c_lod: f32,
     /// Progressive meshes: adaptation passes per tile and frame at most; a tile stops as soon
     /// as a pass changes nothing.
@@ -96,35 +98,74 @@ struct Plan {
     grid: TileGrid,
     wall: Option<Wall>,
     timeout: Duration,
+    /// The inputs' identities, which no output may be.
+    inputs: Vec<Identity>,
 }
+
+/// Above this many output files the up-front identity check looks only at the first and
+/// last frames' names (each frame is checked again as it is written).
+const CHECKED_OUTPUTS: u64 = 100_000;
 
 fn plan(args: &RenderArgs) -> Result<Plan> {
     let wall = args.wall.as_deref().map(Wall::load).transpose()?;
     let (w, h) = wall.as_ref().map_or(args.size, Wall::frame_size);
+    crate::args::check_frame_size(w as u64, h as u64)?;
     let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
-    if !args.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
-        bail!("{}: the output must be a .png file", args.out.display());
+    check_extension(&args.out, &["png"], "--out")?;
+    if args.timeout < HEARTBEAT * 4 {
+        bail!(
+            "--timeout must be at least {} s (workers send a heartbeat every {} ms)",
+            (HEARTBEAT * 4).as_secs_f64(),
+            HEARTBEAT.as_millis()
+        );
     }
-    if !(args.timeout > 0.0 && args.timeout.is_finite()) {
-        bail!("--timeout must be a positive number of seconds");
+    // No output may be an input or another output.
+    let mut inputs: Vec<&Path> = vec![&args.model];
+    inputs.extend(args.wall.as_deref());
+    let displays = wall.as_ref().map_or(0, |w| w.columns as u64 * w.rows as u64);
+    let per_frame = 1 + displays;
+    let frames: Vec<u32> = if per_frame * args.frames as u64 <= CHECKED_OUTPUTS {
+        (0..args.frames).collect()
+    } else {
+        vec![0, args.frames - 1]
+    };
+    let mut outputs: Vec<PathBuf> =
+        frames.iter().flat_map(|&k| frame_outputs(&args.out, k, args.frames, wall.as_ref())).collect();
+    outputs.extend(args.stats.clone());
+    let outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
+    check_distinct(&inputs, &outputs)?;
+    let inputs = inputs.iter().filter_map(|p| Identity::of(p).ok()).collect();
+    Ok(Plan { grid, wall, timeout: args.timeout, inputs })
+}
+
+/// How often a worker says it is alive while it works.
+pub const HEARTBEAT: Duration = worker::node::HEARTBEAT;
+
+/// Every file frame `k` writes: the frame, and with a wall each display's image.
+fn frame_outputs(out: &Path, k: u32, frames: u32, wall: Option<&Wall>) -> Vec<PathBuf> {
+    let path = frame_path(out, k, frames);
+    let mut v = vec![path.clone()];
+    if let Some(wall) = wall {
+        v.extend(
+            (0..wall.rows).flat_map(|r| (0..wall.columns).map(move |c| (c, r))).map(|(c, r)| display_path(&path, c, r)),
+        );
     }
-    if !(args.error_px > 0.0 && args.error_px.is_finite()) {
-        bail!("--error-px must be a positive number of pixels, not {}", args.error_px);
-    }
-    if !(args.c_lod >= 0.0 && args.c_lod.is_finite()) {
-        bail!("--c-lod must be zero or positive, not {}", args.c_lod);
-    }
-    if !(args.normal_weight >= 0.0 && args.normal_weight.is_finite()) {
-        bail!("--normal-weight must be zero or positive, not {}", args.normal_weight);
-    }
-    Ok(Plan { grid, wall, timeout: Duration::from_secs_f64(args.timeout) })
+    v
+}
+
+/// The image of display `(c, r)` beside the frame's overview `path`.
+fn display_path(path: &Path, c: u32, r: u32) -> PathBuf {
+    let stem = path.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}-display-{c}-{r}.png"))
 }
 
 /// Runs `tessera render` in whichever role this process has.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let plan = plan(args)?;
     if transport::launched_by_mpirun() {
-        let mpi = transport::Mpi::init().context("MPI is already initialized")?;
+        let mpi = transport::Mpi::init().context(
+            "MPI is already initialized, or cannot serialize calls from two threads (MPI_THREAD_SERIALIZED)",
+        )?;
         if mpi.rank() > 0 {
             return worker::node::run(&mpi).map_err(anyhow::Error::msg);
         }
@@ -141,10 +182,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let mut ranks = transport::local_ranks(2);
         let worker_end = ranks.pop().expect("two ranks");
         let handle = std::thread::spawn(move || worker::node::run(&worker_end));
-        let result = master(&ranks[0], args, &plan);
+        // On an error the worker thread may be stuck (that may be the error): return at once,
+        // and the process's exit ends it, so that --timeout bounds the run.
+        master(&ranks[0], args, &plan)?;
         drop(ranks);
         let worker_result = handle.join().map_err(|_| anyhow::anyhow!("the worker thread panicked"))?;
-        result?;
         worker_result.map_err(anyhow::Error::msg)
     }
 }
@@ -221,10 +263,14 @@ impl Scene {
                 boxes: Box::default(),
             });
         }
-        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = crate::commands::read_input(path)?;
         // Decoded here once, so that a corrupt file fails before any worker sees it.
         let pm = codec::pm::format::decode(&bytes).with_context(|| format!("{}", path.display()))?.pm;
-        Ok(Scene::Pm { bytes, bbox: crate::pm::bbox(&pm.positions) })
+        let (lo, hi) = crate::pm::bbox(&pm.positions);
+        if !lo.iter().chain(&hi).all(|v| v.is_finite()) {
+            bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
+        }
+        Ok(Scene::Pm { bytes, bbox: (lo, hi) })
     }
 
     fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
@@ -236,11 +282,14 @@ impl Scene {
 }
 
 fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
+    // Opened first, so that an unwritable path fails before any work.
+    let mut stats = args.stats.as_deref().map(LineLog::create).transpose()?;
     let mut scene = Scene::load(&args.model, args.tile_coding.into())?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
+    crate::args::check_camera(&cam, grid.height)?;
     let workers = t.size() - 1;
-    let adapters = handshake(t, plan.timeout)?;
+    let adapters = handshake(t, plan.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
     if let Scene::Pm { bytes, .. } = &scene {
         let model = ToWorker::Model(bytes.clone()).encode();
@@ -248,7 +297,7 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
     }
 
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
-    let mut stats_lines = Vec::new();
+    let mut silence = Silence::new(workers, plan.timeout);
     for k in 0..args.frames {
         let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
         let vp = cam_k.view_proj(grid.aspect());
@@ -260,6 +309,7 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
             }
             Scene::Pm { bbox: (lo, hi), .. } => pm_jobs(&cam_k, grid, k, workers, args, &costs, *lo, *hi),
         };
+        let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
         let sort_ms = ms(start);
 
         let start = Instant::now();
@@ -270,8 +320,9 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
         let mut frame = Image::new(grid.width, grid.height);
         let mut composite_ms = 0.0;
         let mut worker_lines = Vec::new();
-        for _ in 0..workers {
-            let (rank, pixels) = receive_pixels(t, k, plan.timeout)?;
+        silence.expect(&answering);
+        for _ in 0..answering.len() {
+            let (rank, pixels) = receive_pixels(t, k, &mut silence)?;
             let c = Instant::now();
             for p in &pixels {
                 frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
@@ -287,6 +338,11 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
 
         let start = Instant::now();
         let out = frame_path(&args.out, k, args.frames);
+        for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref()) {
+            if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
+                bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+            }
+        }
         match &plan.wall {
             None => frame.save_png(&out)?,
             Some(wall) => save_wall(wall, &frame, &out)?,
@@ -294,20 +350,65 @@ fn master(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
         let write_ms = ms(start);
         eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
 
-        let line =
-            MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
-        stats_lines.push(serde_json::to_string(&line)?);
-        worker_lines.sort_by_key(|l| l.rank);
-        for l in worker_lines {
-            stats_lines.push(serde_json::to_string(&l)?);
+        if let Some(log) = stats.as_mut() {
+            let line =
+                MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
+            log.line(&serde_json::to_string(&line)?)?;
+            worker_lines.sort_by_key(|l| l.rank);
+            for l in worker_lines {
+                log.line(&serde_json::to_string(&l)?)?;
+            }
         }
     }
     let shutdown = ToWorker::Shutdown.encode();
     t.send_many(&(1..=workers).map(|w| (w, shutdown.clone())).collect::<Vec<_>>());
-    if let Some(path) = &args.stats {
-        write_bytes(path, (stats_lines.join("\n") + "\n").as_bytes())?;
-    }
     Ok(())
+}
+
+/// When each worker was last heard from, for telling a dead worker from a busy one: a worker
+/// sends heartbeats while it works, so only silence longer than the timeout counts.
+struct Silence {
+    timeout: Duration,
+    last: Vec<Instant>,
+    /// The workers whose answer the current wait needs.
+    pending: Vec<bool>,
+}
+
+impl Silence {
+    fn new(workers: usize, timeout: Duration) -> Silence {
+        Silence { timeout, last: vec![Instant::now(); workers + 1], pending: vec![false; workers + 1] }
+    }
+
+    /// Starts a wait for answers from `ranks`, counting their silence from now.
+    fn expect(&mut self, ranks: &[usize]) {
+        let now = Instant::now();
+        for &r in ranks {
+            self.pending[r] = true;
+            self.last[r] = now;
+        }
+    }
+
+    fn heard(&mut self, rank: usize) {
+        if let Some(t) = self.last.get_mut(rank) {
+            *t = Instant::now();
+        }
+    }
+
+    fn answered(&mut self, rank: usize) {
+        if let Some(p) = self.pending.get_mut(rank) {
+            *p = false;
+        }
+    }
+
+    /// How long to wait for the next message, and the worker silent the longest.
+    fn next_wait(&self) -> (Duration, usize) {
+        let (rank, last) = (1..self.last.len())
+            .filter(|&r| self.pending[r])
+            .map(|r| (r, self.last[r]))
+            .min_by_key(|&(_, t)| t)
+            .unwrap_or((0, Instant::now()));
+        (self.timeout.saturating_sub(last.elapsed()), rank)
+    }
 }
 
 /// A frame's messages to the workers (by rank) and its tile lines for the stats.
@@ -378,7 +479,15 @@ fn pm_jobs(
 ) -> FrameJobs {
     let view = codec::pm::View::new(cam, grid.width, grid.height, args.error_px);
     let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
-    let indices: Vec<usize> = (0..grid.tiles()).collect();
+    // Only tiles the model's bounding box can reach: every vertex a progressive mesh can
+    // activate lies in it, so the other tiles stay transparent and cost the workers nothing.
+    let reach = codec::view::box_screen_rect(lo, hi, view.view_proj, grid.width, grid.height);
+    let indices: Vec<usize> = (0..grid.tiles())
+        .filter(|&i| {
+            let [x0, y0, x1, y1] = grid.tile_rect(i);
+            reach.is_some_and(|[rx0, ry0, rx1, ry1]| x0 < rx1 && rx0 < x1 && y0 < ry1 && ry0 < y1)
+        })
+        .collect();
     let owner = assign(&indices, workers, args.balance.then_some(costs));
     let mut jobs: Vec<PmFrameJob> = (0..workers)
         .map(|_| PmFrameJob {
@@ -407,7 +516,13 @@ fn pm_jobs(
             normal_bytes: 0,
         });
     }
-    let msgs = jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode())).collect();
+    // Workers without tiles this frame get no message and are not waited for.
+    let msgs = jobs
+        .into_iter()
+        .enumerate()
+        .filter(|(_, j)| !j.tiles.is_empty())
+        .map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode()))
+        .collect();
     (msgs, tile_stats)
 }
 
@@ -416,18 +531,30 @@ fn ms(since: Instant) -> f64 {
 }
 
 /// Waits for every worker's `Ready`; a `Failed` or silence ends the run with its reason.
-fn handshake(t: &dyn Transport, timeout: Duration) -> Result<Vec<String>> {
+fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -> Result<Vec<String>> {
     let mut adapters = vec![String::new(); t.size()];
     let mut ready = vec![false; t.size()];
     ready[0] = true;
+    let mut last = Instant::now();
     while ready.iter().any(|r| !r) {
-        let (rank, bytes) = match t.recv(timeout) {
+        let (rank, bytes) = match t.recv(timeout.saturating_sub(last.elapsed())) {
             Ok(m) => m,
-            Err(RecvError::Timeout) => bail!("{} did not start within {:.0} s", missing(&ready), timeout.as_secs_f64()),
+            Err(RecvError::Timeout) => {
+                bail!("{} did not start within {:.0} s", missing(&ready), timeout.as_secs_f64())
+            }
             Err(RecvError::Disconnected) => bail!("{} exited before it was ready", missing(&ready)),
         };
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
-            ToMaster::Ready { adapter } => {
+            // Workers still starting (a device can take seconds to open) say so.
+            ToMaster::Heartbeat => last = Instant::now(),
+            ToMaster::Ready { adapter, max_texture_side } => {
+                if grid.width > max_texture_side || grid.height > max_texture_side {
+                    bail!(
+                        "the {}x{} frame does not fit rank {rank}'s adapter ({adapter}), whose largest texture side is {max_texture_side}",
+                        grid.width,
+                        grid.height
+                    );
+                }
                 ready[rank] = true;
                 adapters[rank] = format!("rank {rank}: {adapter}");
             }
@@ -443,23 +570,35 @@ fn missing(flags: &[bool]) -> String {
     format!("rank {}", ranks.join(", rank "))
 }
 
+/// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
+/// a worker silent for the whole timeout ends the run.
 fn receive_pixels(
     t: &dyn Transport,
     frame: u32,
-    timeout: Duration,
+    silence: &mut Silence,
 ) -> Result<(usize, Vec<worker::protocol::TilePixels>)> {
-    let (rank, bytes) = match t.recv(timeout) {
-        Ok(m) => m,
-        Err(RecvError::Timeout) => {
-            bail!("no worker answered frame {} within {:.0} s", frame + 1, timeout.as_secs_f64())
+    loop {
+        let (wait, quiet) = silence.next_wait();
+        let (rank, bytes) = match t.recv(wait) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => bail!(
+                "rank {quiet} sent nothing for {:.0} s during frame {} (--timeout); counting it as dead",
+                silence.timeout.as_secs_f64(),
+                frame + 1
+            ),
+            Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
+        };
+        silence.heard(rank);
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            ToMaster::Heartbeat => continue,
+            ToMaster::Pixels { frame: f, tiles } if f == frame => {
+                silence.answered(rank);
+                return Ok((rank, tiles));
+            }
+            ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
+            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
         }
-        Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
-    };
-    match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
-        ToMaster::Pixels { frame: f, tiles } if f == frame => Ok((rank, tiles)),
-        ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
-        ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
-        ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
     }
 }
 
@@ -506,10 +645,9 @@ pub fn frame_path(out: &Path, k: u32, frames: u32) -> PathBuf {
 
 fn save_wall(wall: &Wall, frame: &Image, out: &Path) -> Result<()> {
     let (displays, overview) = wall.split(frame);
-    let stem = out.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
     for (i, d) in displays.iter().enumerate() {
         let (c, r) = (i as u32 % wall.columns, i as u32 / wall.columns);
-        d.save_png(&out.with_file_name(format!("{stem}-display-{c}-{r}.png")))?;
+        d.save_png(&display_path(out, c, r))?;
     }
     overview.save_png(out)
 }

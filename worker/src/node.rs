@@ -8,6 +8,8 @@
 //! tile's mesh of the frame before, and renders it from the GPU buffers.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use codec::pm::View;
@@ -23,19 +25,89 @@ use crate::RenderMesh;
 /// between frames; when it dies, `mpirun` (or the closed channel) ends the worker sooner.
 const MASTER_SILENCE: Duration = Duration::from_secs(3600);
 
-/// Test hook for fault handling: `TESSERA_FAULT=die:R` makes rank R abort on its first
-/// frame, `TESSERA_FAULT=fail:R` makes it report a failure instead. Unset in normal runs.
-fn fault(rank: usize) -> Option<&'static str> {
+/// How often a worker tells rank 0 that it is alive while it starts or renders a frame, so
+/// that rank 0's `--timeout` measures silence, not the length of a frame.
+pub const HEARTBEAT: Duration = Duration::from_millis(250);
+
+/// Test hooks for fault handling, unset in normal runs. `TESSERA_FAULT=KIND:R[:MS]` makes rank
+/// R, on its first frame: `die`, abort; `fail`, report a failure; `slow:R:MS`, work MS
+/// milliseconds longer (heartbeats go on); `hang`, stop its heartbeat and never answer;
+/// `texture:R:N`, report N as its largest texture side in the handshake.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Fault {
+    Die,
+    Fail,
+    Slow(Duration),
+    Hang,
+    /// Report this largest texture side in the handshake instead of the adapter's.
+    Texture(u32),
+}
+
+fn fault(rank: usize) -> Option<Fault> {
     let v = std::env::var("TESSERA_FAULT").ok()?;
-    let (kind, r) = v.split_once(':')?;
-    (r.parse::<usize>().ok()? == rank).then_some(if kind == "die" { "die" } else { "fail" })
+    let mut parts = v.split(':');
+    let kind = parts.next()?;
+    if parts.next()?.parse::<usize>().ok()? != rank {
+        return None;
+    }
+    Some(match kind {
+        "die" => Fault::Die,
+        "slow" => Fault::Slow(Duration::from_millis(parts.next().and_then(|m| m.parse().ok()).unwrap_or(1000))),
+        "hang" => Fault::Hang,
+        "texture" => Fault::Texture(parts.next()?.parse().ok()?),
+        _ => Fault::Fail,
+    })
+}
+
+/// A thread that sends [`ToMaster::Heartbeat`] every [`HEARTBEAT`] while the worker is busy.
+struct Heartbeat {
+    busy: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Heartbeat {
+    fn start(send: Box<dyn Fn(&[u8]) + Send>) -> Heartbeat {
+        let busy = Arc::new(AtomicBool::new(true));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (b, s) = (busy.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name("heartbeat".into())
+            .spawn(move || {
+                let beat = ToMaster::Heartbeat.encode();
+                while !s.load(Ordering::Relaxed) {
+                    std::thread::park_timeout(HEARTBEAT);
+                    if b.load(Ordering::Relaxed) && !s.load(Ordering::Relaxed) {
+                        send(&beat);
+                    }
+                }
+            })
+            .ok();
+        Heartbeat { busy, stop, thread }
+    }
+
+    fn busy(&self, busy: bool) {
+        self.busy.store(busy, Ordering::Relaxed);
+    }
+}
+
+impl Drop for Heartbeat {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
 }
 
 /// Runs the worker until the master says to stop. `Err` carries the reason, which has
 /// already been sent to rank 0 when the transport allowed it.
 pub fn run(t: &dyn Transport) -> Result<(), String> {
     let rank = t.rank();
+    let heartbeat = Heartbeat::start(t.sender(0));
     let fail = |reason: String| {
+        heartbeat.busy(false);
         t.send(0, &ToMaster::Failed { reason: reason.clone() }.encode());
         Err(format!("rank {rank}: {reason}"))
     };
@@ -43,15 +115,23 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
         Ok(r) => r,
         Err(e) => return fail(e.to_string()),
     };
-    t.send(0, &ToMaster::Ready { adapter: renderer.adapter_name().to_string() }.encode());
+    let max_texture_side = match fault(rank) {
+        Some(Fault::Texture(n)) => n,
+        _ => renderer.limits().max_texture_dimension_2d,
+    };
+    heartbeat.busy(false);
+    t.send(0, &ToMaster::Ready { adapter: renderer.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
+    let mut first_frame = true;
     loop {
+        heartbeat.busy(false);
         let bytes = match t.recv(MASTER_SILENCE) {
             Ok((0, bytes)) => bytes,
             Ok((from, _)) => return fail(format!("unexpected message from rank {from}")),
             Err(RecvError::Timeout) => return fail("no message from rank 0 for an hour".into()),
             Err(RecvError::Disconnected) => return Err(format!("rank {rank}: rank 0 is gone")),
         };
+        heartbeat.busy(true);
         let msg = match ToWorker::decode(&bytes) {
             Ok(ToWorker::Shutdown) => return Ok(()),
             Ok(ToWorker::Model(dpm)) => {
@@ -64,9 +144,17 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
             Ok(msg) => msg,
             Err(e) => return fail(format!("bad message from rank 0: {e}")),
         };
-        match fault(rank) {
-            Some("die") => std::process::abort(),
-            Some(_) => return fail("injected failure (TESSERA_FAULT)".into()),
+        match fault(rank).filter(|_| std::mem::take(&mut first_frame)) {
+            Some(Fault::Die) => std::process::abort(),
+            Some(Fault::Fail) => return fail("injected failure (TESSERA_FAULT)".into()),
+            Some(Fault::Slow(d)) => std::thread::sleep(d),
+            Some(Fault::Texture(_)) => {}
+            Some(Fault::Hang) => {
+                heartbeat.busy(false);
+                loop {
+                    std::thread::park();
+                }
+            }
             None => {}
         }
         let job = match msg {
@@ -128,18 +216,82 @@ fn render_tile(
     })
 }
 
-/// A progressive mesh on this worker's GPU, with one adaptation per tile.
+/// The least `n_alloc` a tile's adapter gets (elements of spare buffer space).
+const MIN_TILE_SLACK: u32 = 256;
+
+/// The most adaptations a worker keeps, and so the most adaptation groups of its tiles: up to
+/// this many tiles, each tile is its own group and keeps its own adaptation from frame to
+/// frame; beyond it, a worker's tiles are grouped by the 4x4 block of the frame they lie in,
+/// each group adapted once to the sub-frustum of its tiles' bounding rectangle (which holds
+/// every tile of the group, so each meets the error bound) and rendered tile by tile from
+/// the same adapted mesh. Memory and adaptation passes then follow the frame, not the tile
+/// count: a 64x64 grid would otherwise hold 4,096 adaptations and run a pass loop for each.
+pub const MAX_ADAPTERS: usize = 16;
+
+/// Tiles adapted together (see [`MAX_ADAPTERS`]).
+struct TileGroup {
+    /// The adaptation's key: the tile index for a tile alone, `1 << 31 | block` for a block.
+    key: u32,
+    /// The bounding rectangle of the group's tiles.
+    rect: [u32; 4],
+    tiles: Vec<(u32, [u32; 4])>,
+}
+
+/// Groups a worker's tiles for adaptation: one group per tile up to [`MAX_ADAPTERS`] tiles,
+/// else one per 4x4 block of the frame (by each tile's top-left corner), in the job's order.
+fn tile_groups(tiles: &[(u32, [u32; 4])], width: u32, height: u32) -> Vec<TileGroup> {
+    if tiles.len() <= MAX_ADAPTERS {
+        return tiles.iter().map(|&(index, rect)| TileGroup { key: index, rect, tiles: vec![(index, rect)] }).collect();
+    }
+    let mut groups: Vec<TileGroup> = Vec::new();
+    for &(index, rect) in tiles {
+        let block = (rect[1] as u64 * 4 / height as u64 * 4 + rect[0] as u64 * 4 / width as u64) as u32;
+        let key = 1 << 31 | block;
+        match groups.iter_mut().find(|g| g.key == key) {
+            Some(g) => {
+                g.rect =
+                    [g.rect[0].min(rect[0]), g.rect[1].min(rect[1]), g.rect[2].max(rect[2]), g.rect[3].max(rect[3])];
+                g.tiles.push((index, rect));
+            }
+            None => groups.push(TileGroup { key, rect, tiles: vec![(index, rect)] }),
+        }
+    }
+    groups
+}
+
+/// A progressive mesh on this worker's GPU, with one adaptation per tile, at most
+/// [`MAX_ADAPTERS`] of them.
 struct PmTiles {
     /// At the base mesh; each tile's adapter starts as its sibling.
     template: GpuAdapter,
-    tiles: HashMap<u32, GpuAdapter>,
+    /// Per tile: its adapter, and when it was last used (a counter of uses).
+    tiles: HashMap<u32, (GpuAdapter, u64)>,
+    uses: u64,
 }
 
 impl PmTiles {
     fn new(renderer: &Renderer, dpm: &[u8]) -> Result<PmTiles, String> {
         let decoded = codec::pm::format::decode(dpm).map_err(|e| format!("cannot decode the progressive mesh: {e}"))?;
         let template = GpuAdapter::new(renderer, &decoded.pm, DEFAULT_N_ALLOC).map_err(|e| e.to_string())?;
-        Ok(PmTiles { template, tiles: HashMap::new() })
+        Ok(PmTiles { template, tiles: HashMap::new(), uses: 0 })
+    }
+
+    /// Tile `index`'s adapter: its own, a new one while fewer than [`MAX_ADAPTERS`] exist, or
+    /// the least recently used tile's.
+    fn adapter(&mut self, index: u32, slack: u32) -> &mut GpuAdapter {
+        self.uses += 1;
+        if !self.tiles.contains_key(&index) {
+            let adapter = if self.tiles.len() < MAX_ADAPTERS {
+                self.template.sibling_with_slack(slack)
+            } else {
+                let lru = *self.tiles.iter().min_by_key(|(_, (_, used))| *used).expect("a full pool").0;
+                self.tiles.remove(&lru).expect("present").0
+            };
+            self.tiles.insert(index, (adapter, 0));
+        }
+        let entry = self.tiles.get_mut(&index).expect("inserted");
+        entry.1 = self.uses;
+        &mut entry.0
     }
 
     /// Adapts every tile of `job` to its sub-frustum (until converged or `max_passes`) and
@@ -156,37 +308,45 @@ impl PmTiles {
             c_lod: job.c_lod,
             attribute_scale: job.attribute_scale,
         };
-        let mut out = Vec::with_capacity(job.tiles.len());
-        for &(index, rect) in &job.tiles {
-            let [x0, y0, x1, y1] = rect;
+        for &(index, [x0, y0, x1, y1]) in &job.tiles {
             if !(x0 < x1 && x1 <= job.width && y0 < y1 && y1 <= job.height) {
-                return Err(format!("tile {index}: rect {rect:?} is not a non-empty part of the frame"));
+                return Err(format!("tile {index}: rect {:?} is not a non-empty part of the frame", [x0, y0, x1, y1]));
             }
-            let adapter = self.tiles.entry(index).or_insert_with(|| self.template.sibling());
-            let tile_view = view.for_tile(rect);
+        }
+        // The paper's n_alloc is for one adapter; each of this worker's adapters gets a share,
+        // so that many small ones do not each hold a whole one's spare buffer space.
+        let groups = tile_groups(&job.tiles, job.width, job.height);
+        let slack = (DEFAULT_N_ALLOC / groups.len().max(1) as u32).max(MIN_TILE_SLACK);
+        let mut out = Vec::with_capacity(job.tiles.len());
+        for group in &groups {
+            let adapter = self.adapter(group.key, slack);
+            let group_view = view.for_tile(group.rect);
             let start = Instant::now();
             for _ in 0..job.max_passes.max(1) {
-                if adapter.adapt(&tile_view).map_err(|e| format!("tile {index}: {e}"))?.converged() {
+                if adapter.adapt(&group_view).map_err(|e| format!("tile {}: {e}", group.tiles[0].0))?.converged() {
                     break;
                 }
             }
-            let adapt_ms = start.elapsed().as_secs_f64() * 1e3;
-            let (rgba, times) = renderer
-                .render_pm(adapter, view_proj, (job.width, job.height), rect)
-                .map_err(|e| format!("tile {index}: {e}"))?;
-            out.push(TilePixels {
-                index,
-                rect,
-                times: TileTimes {
-                    decode_ms: 0.0,
-                    adapt_ms,
-                    upload_ms: times.upload_ms,
-                    render_ms: times.render_ms,
-                    readback_ms: times.readback_ms,
-                },
-                triangles: adapter.counts().1,
-                rgba,
-            });
+            // The group's adaptation, shared out among its tiles for the load balancer.
+            let adapt_ms = start.elapsed().as_secs_f64() * 1e3 / group.tiles.len() as f64;
+            for &(index, rect) in &group.tiles {
+                let (rgba, times) = renderer
+                    .render_pm(adapter, view_proj, (job.width, job.height), rect)
+                    .map_err(|e| format!("tile {index}: {e}"))?;
+                out.push(TilePixels {
+                    index,
+                    rect,
+                    times: TileTimes {
+                        decode_ms: 0.0,
+                        adapt_ms,
+                        upload_ms: times.upload_ms,
+                        render_ms: times.render_ms,
+                        readback_ms: times.readback_ms,
+                    },
+                    triangles: adapter.counts().1,
+                    rgba,
+                });
+            }
         }
         Ok(out)
     }

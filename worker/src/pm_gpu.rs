@@ -98,17 +98,32 @@ const READBACK_BYTES: u64 = 8 + STATS_BYTES;
 /// What one GPU pass did: the same fields as the CPU reference's [`codec::pm::Stats`].
 pub type Stats = codec::pm::Stats;
 
+/// A compute pipeline and its bind group layout, taken from it once: `get_bind_group_layout`
+/// registers a new layout handle on every call, and calling it for every bind group of every
+/// pass grew a worker's memory by megabytes a frame (measured on lavapipe).
+struct Stage {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl std::ops::Deref for Stage {
+    type Target = wgpu::ComputePipeline;
+    fn deref(&self) -> &wgpu::ComputePipeline {
+        &self.pipeline
+    }
+}
+
 struct Pipelines {
-    state: wgpu::ComputePipeline,
-    collapse: wgpu::ComputePipeline,
-    scan_blocks: wgpu::ComputePipeline,
-    add_blocks: wgpu::ComputePipeline,
-    reorganise: wgpu::ComputePipeline,
-    compact_splits: wgpu::ComputePipeline,
-    split: wgpu::ComputePipeline,
-    index_update: wgpu::ComputePipeline,
-    holes: wgpu::ComputePipeline,
-    fill: wgpu::ComputePipeline,
+    state: Stage,
+    collapse: Stage,
+    scan_blocks: Stage,
+    add_blocks: Stage,
+    reorganise: Stage,
+    compact_splits: Stage,
+    split: Stage,
+    index_update: Stage,
+    holes: Stage,
+    fill: Stage,
 }
 
 impl Pipelines {
@@ -121,14 +136,16 @@ impl Pipelines {
             })
         };
         let pipeline = |module: &wgpu::ShaderModule, label: &str, entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
                 layout: None,
                 module,
                 entry_point: Some(entry),
                 compilation_options: Default::default(),
                 cache: None,
-            })
+            });
+            let layout = pipeline.get_bind_group_layout(0);
+            Stage { pipeline, layout }
         };
         let single = |label: &str, src: &str| pipeline(&module(label, src), label, "main");
         let scan = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -333,7 +350,14 @@ impl GpuAdapter {
     /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
     /// pipelines and static buffers (a worker keeps one per tile it renders).
     pub fn sibling(&self) -> GpuAdapter {
-        GpuAdapter::with_shared(self.device.clone(), self.queue.clone(), self.shared.clone(), self.n_alloc)
+        self.sibling_with_slack(self.n_alloc)
+    }
+
+    /// [`GpuAdapter::sibling`] with its own `n_alloc`: a worker that keeps one adapter per
+    /// tile gives each a share of the slack, so that the slack summed over its tiles stays
+    /// one adapter's whatever the tile count.
+    pub fn sibling_with_slack(&self, n_alloc: u32) -> GpuAdapter {
+        GpuAdapter::with_shared(self.device.clone(), self.queue.clone(), self.shared.clone(), n_alloc.max(1))
     }
 
     /// A new adapter at the base mesh.
@@ -752,19 +776,19 @@ impl GpuAdapter {
         }
     }
 
-    fn bind(&self, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+    fn bind(&self, pipeline: &Stage, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
         let entries: Vec<(u32, &wgpu::Buffer)> = buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect();
         self.bind_at(pipeline, &entries)
     }
 
-    fn bind_at(&self, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+    fn bind_at(&self, pipeline: &Stage, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
             .map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() })
             .collect();
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
-            layout: &pipeline.get_bind_group_layout(0),
+            layout: &pipeline.layout,
             entries: &entries,
         })
     }

@@ -18,7 +18,9 @@
 //!                    pixels_per_unit f32, error_px f32, c_lod f32, attribute_scale f32,
 //!                    max_passes u32, tile count u32, then per tile: index u32, rect 4 x u32
 //! worker -> master
-//!   kind 3 Ready     adapter name length u32 + UTF-8 bytes
+//!   kind 3 Ready     adapter name length u32 + UTF-8 bytes, largest texture side u32
+//!   kind 8 Heartbeat (nothing): the worker is alive and working (sent every
+//!                    `node::HEARTBEAT` while it starts or renders a frame)
 //!   kind 4 Pixels    frame u32, tile count u32, then per tile:
 //!                      index u32, rect 4 x u32, decode/adapt/upload/render/readback ms 5 x f64,
 //!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4)
@@ -126,9 +128,21 @@ pub struct TilePixels {
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum ToMaster {
-    Ready { adapter: String },
-    Pixels { frame: u32, tiles: Vec<TilePixels> },
-    Failed { reason: String },
+    /// The worker's adapter, and the largest frame side it can render (its largest 2D
+    /// texture side).
+    Ready {
+        adapter: String,
+        max_texture_side: u32,
+    },
+    /// Still alive and working.
+    Heartbeat,
+    Pixels {
+        frame: u32,
+        tiles: Vec<TilePixels>,
+    },
+    Failed {
+        reason: String,
+    },
 }
 
 struct Writer(Vec<u8>);
@@ -336,11 +350,13 @@ impl ToWorker {
 impl ToMaster {
     pub fn encode(&self) -> Vec<u8> {
         match self {
-            ToMaster::Ready { adapter } => {
+            ToMaster::Ready { adapter, max_texture_side } => {
                 let mut w = Writer::new(3);
                 w.bytes(adapter.as_bytes());
+                w.u32(*max_texture_side);
                 w.0
             }
+            ToMaster::Heartbeat => Writer::new(8).0,
             ToMaster::Pixels { frame, tiles } => {
                 let mut w = Writer::new(4);
                 w.u32(*frame);
@@ -368,7 +384,8 @@ impl ToMaster {
     pub fn decode(b: &[u8]) -> Result<ToMaster, ProtocolError> {
         let (mut r, kind) = Reader::open(b)?;
         let msg = match kind {
-            3 => ToMaster::Ready { adapter: r.string("adapter name")? },
+            3 => ToMaster::Ready { adapter: r.string("adapter name")?, max_texture_side: r.u32("texture side")? },
+            8 => ToMaster::Heartbeat,
             4 => {
                 let frame = r.u32("frame")?;
                 let n = r.count(68, "tiles")?;
@@ -457,7 +474,11 @@ mod tests {
             }],
         };
         assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
-        for m in [ToMaster::Ready { adapter: "llvmpipe".into() }, ToMaster::Failed { reason: "no adapter".into() }] {
+        for m in [
+            ToMaster::Ready { adapter: "llvmpipe".into(), max_texture_side: 16384 },
+            ToMaster::Failed { reason: "no adapter".into() },
+            ToMaster::Heartbeat,
+        ] {
             assert_eq!(ToMaster::decode(&m.encode()), Ok(m));
         }
     }

@@ -373,6 +373,11 @@ impl Renderer {
         &self.queue
     }
 
+    /// The device's limits (the adapter's own: see [`Renderer::new`]).
+    pub fn limits(&self) -> &wgpu::Limits {
+        &self.limits
+    }
+
     /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
     pub fn adapter_name(&self) -> &str {
         &self.adapter_name

@@ -2,6 +2,7 @@
 //! the binary runs alone (the master and one worker thread). Both carry the same bytes.
 
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use mpi::topology::{Communicator, SimpleCommunicator};
@@ -27,6 +28,8 @@ pub trait Transport {
     fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError>;
     /// Ends every rank of the job with a non-zero status.
     fn abort(&self, code: i32) -> !;
+    /// A handle that sends to rank `to` from another thread (a worker's heartbeat).
+    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send>;
 }
 
 /// Whether this process was started by an MPI launcher (Open MPI, MPICH/Hydra, PMIx).
@@ -35,15 +38,31 @@ pub fn launched_by_mpirun() -> bool {
 }
 
 /// MPI's `COMM_WORLD`. Dropping it finalizes MPI.
+///
+/// MPI is initialized at `MPI_THREAD_SERIALIZED`: a worker's heartbeat thread sends while its
+/// main thread renders, and every MPI call of the process takes [`MPI_CALLS`] first, so no
+/// two threads are ever inside MPI at once.
 pub struct Mpi {
     world: SimpleCommunicator,
     _universe: mpi::environment::Universe,
 }
 
+/// Held around every MPI call (see [`Mpi`]).
+static MPI_CALLS: Mutex<()> = Mutex::new(());
+
+fn mpi_lock() -> std::sync::MutexGuard<'static, ()> {
+    MPI_CALLS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 impl Mpi {
-    /// Initializes MPI; `None` if it was already initialized.
+    /// Initializes MPI; `None` if it was already initialized or the library cannot serialize
+    /// calls from several threads.
     pub fn init() -> Option<Mpi> {
-        let universe = mpi::initialize()?;
+        use mpi::environment::Threading;
+        let (universe, level) = mpi::initialize_with_threading(Threading::Serialized)?;
+        if !matches!(level, Threading::Serialized | Threading::Multiple) {
+            return None;
+        }
         Some(Mpi { world: universe.world(), _universe: universe })
     }
 }
@@ -58,10 +77,12 @@ impl Transport for Mpi {
     }
 
     fn send(&self, to: usize, msg: &[u8]) {
+        let _calls = mpi_lock();
         self.world.process_at_rank(to as i32).send(msg);
     }
 
     fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
+        let _calls = mpi_lock();
         mpi::request::scope(|scope| {
             let requests: Vec<_> = msgs
                 .iter()
@@ -75,12 +96,16 @@ impl Transport for Mpi {
 
     fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError> {
         // MPI has no receive with a deadline: probe, and sleep briefly between probes.
-        let deadline = Instant::now() + timeout;
+        let deadline =
+            Instant::now().checked_add(timeout).unwrap_or_else(|| Instant::now() + Duration::from_secs(1 << 40));
         let mut spins = 0u32;
         loop {
-            if let Some(probed) = self.world.any_process().immediate_matched_probe() {
-                let (bytes, status) = probed.matched_receive_vec::<u8>();
-                return Ok((status.source_rank() as usize, bytes));
+            {
+                let _calls = mpi_lock();
+                if let Some(probed) = self.world.any_process().immediate_matched_probe() {
+                    let (bytes, status) = probed.matched_receive_vec::<u8>();
+                    return Ok((status.source_rank() as usize, bytes));
+                }
             }
             if Instant::now() >= deadline {
                 return Err(RecvError::Timeout);
@@ -93,7 +118,15 @@ impl Transport for Mpi {
     }
 
     fn abort(&self, code: i32) -> ! {
+        // Not under the lock: aborting must not wait for a call in flight on another thread.
         self.world.abort(code)
+    }
+
+    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send> {
+        Box::new(move |msg| {
+            let _calls = mpi_lock();
+            SimpleCommunicator::world().process_at_rank(to as i32).send(msg);
+        })
     }
 }
 
@@ -153,6 +186,15 @@ impl Transport for Local {
 
     fn abort(&self, code: i32) -> ! {
         std::process::exit(code)
+    }
+
+    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send> {
+        let (peer, rank) = (self.peers[to].clone(), self.rank);
+        Box::new(move |msg| {
+            if let Some(p) = &peer {
+                let _ = p.send((rank, msg.to_vec()));
+            }
+        })
     }
 }
 
