@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs every system package Tessera needs, idempotently, on Debian (as root, or with sudo).
 #   Open MPI (mpirun + headers) for the cluster path, libclang for the `mpi` crate's bindgen,
-#   Mesa's Vulkan drivers (lavapipe) so wgpu runs headless without a GPU.
+#   Mesa's Vulkan drivers (lavapipe) so wgpu runs headless without a GPU, and GNU time
+#   (/usr/bin/time), with which a test and the scale scripts measure peak memory.
 # Safe to run again: packages already present are skipped and nothing is reinstalled.
 set -euo pipefail
 
@@ -10,6 +11,7 @@ PACKAGES=(
   openmpi-bin libopenmpi-dev
   libclang-dev clang
   mesa-vulkan-drivers libvulkan1 vulkan-tools
+  time
 )
 
 missing=()

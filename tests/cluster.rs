@@ -213,6 +213,27 @@ fn a_dying_or_failing_worker_ends_every_rank() {
 }
 
 #[test]
+fn under_mpirun_the_timeout_measures_silence() {
+    let model = mesh("classic/cow.obj");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f.png");
+    let args =
+        ["render", &model, "--size", "160x120", "--tiles", "2x2", "--timeout", "1", "--out", out.to_str().unwrap()];
+    // Rank 1 works three times the timeout on its first frame, with heartbeats: no death.
+    let o = mpirun(3, &[("TESSERA_FAULT", "slow:1:3000")], &args);
+    ok(&o);
+    assert!(out.exists());
+    std::fs::remove_file(&out).unwrap();
+    // Rank 2 falls silent: every rank ends soon after the timeout.
+    let args =
+        ["render", &model, "--size", "160x120", "--tiles", "2x2", "--timeout", "2", "--out", out.to_str().unwrap()];
+    let started = Instant::now();
+    let o = mpirun(3, &[("TESSERA_FAULT", "hang:2")], &args);
+    assert_fast_failure(&o, started, "rank 2 sent nothing for 2 s");
+    assert!(!out.exists());
+}
+
+#[test]
 fn bad_input_is_reported_before_any_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.png");

@@ -104,7 +104,7 @@ pub fn box_screen_rect(lo: [f32; 3], hi: [f32; 3], view_proj: Mat4, width: u32, 
     for corner in 0..8 {
         let pick = |axis: usize| if corner & (1 << axis) == 0 { lo[axis] } else { hi[axis] };
         let clip = view_proj * Vec4::new(pick(0), pick(1), pick(2), 1.0);
-        if !(clip.w > 0.0) {
+        if clip.w.is_nan() || clip.w <= 0.0 {
             return Some([0, 0, width, height]);
         }
         let (px, py) = ((clip.x / clip.w + 1.0) * 0.5 * w, (1.0 - clip.y / clip.w) * 0.5 * h);

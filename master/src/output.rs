@@ -67,6 +67,9 @@ fn target(path: &Path) -> Result<Target> {
     match std::fs::metadata(path) {
         Ok(meta) if meta.is_dir() => bail!("{} is a directory", path.display()),
         Ok(meta) if !meta.is_file() => Ok(Target::Special(path.to_path_buf())),
+        // `/dev/stdout`, `/dev/fd/N`, `/proc/self/fd/N` name a process's stream even when it
+        // is redirected to a regular file: write to the stream, never replace the file.
+        Ok(_) if path.starts_with("/dev") || path.starts_with("/proc") => Ok(Target::Special(path.to_path_buf())),
         Ok(_) => {
             Ok(Target::Regular(path.canonicalize().with_context(|| format!("cannot resolve {}", path.display()))?))
         }
@@ -91,7 +94,7 @@ pub fn write_atomic(path: &Path, fill: impl FnOnce(&mut dyn Write) -> std::io::R
             return w.flush().with_context(cannot);
         }
         Target::Special(p) => {
-            let f = std::fs::OpenOptions::new().write(true).open(&p).with_context(cannot)?;
+            let f = std::fs::OpenOptions::new().append(true).open(&p).with_context(cannot)?;
             let mut w = BufWriter::new(f);
             fill(&mut w).with_context(cannot)?;
             return w.flush().with_context(cannot);
@@ -236,7 +239,7 @@ impl LineLog {
         let cannot = || format!("cannot write {}", path.display());
         let out: Box<dyn Write + Send> = match target(path)? {
             Target::Stdout => Box::new(std::io::stdout()),
-            Target::Special(p) => Box::new(std::fs::OpenOptions::new().write(true).open(p).with_context(cannot)?),
+            Target::Special(p) => Box::new(std::fs::OpenOptions::new().append(true).open(p).with_context(cannot)?),
             Target::Regular(p) => Box::new(
                 std::fs::OpenOptions::new().write(true).create(true).truncate(true).open(p).with_context(cannot)?,
             ),

@@ -67,7 +67,7 @@ struct Heartbeat {
 }
 
 impl Heartbeat {
-    fn start(send: Box<dyn Fn(&[u8]) + Send>) -> Heartbeat {
+    fn start(send: crate::transport::SendFn) -> Heartbeat {
         let busy = Arc::new(AtomicBool::new(true));
         let stop = Arc::new(AtomicBool::new(false));
         let (b, s) = (busy.clone(), stop.clone());

@@ -17,6 +17,9 @@ pub enum RecvError {
     Disconnected,
 }
 
+/// Sends one message to a fixed rank from any thread ([`Transport::sender`]).
+pub type SendFn = Box<dyn Fn(&[u8]) + Send>;
+
 /// Point-to-point messaging between ranks.
 pub trait Transport {
     fn rank(&self) -> usize;
@@ -29,7 +32,7 @@ pub trait Transport {
     /// Ends every rank of the job with a non-zero status.
     fn abort(&self, code: i32) -> !;
     /// A handle that sends to rank `to` from another thread (a worker's heartbeat).
-    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send>;
+    fn sender(&self, to: usize) -> SendFn;
 }
 
 /// Whether this process was started by an MPI launcher (Open MPI, MPICH/Hydra, PMIx).
@@ -122,7 +125,7 @@ impl Transport for Mpi {
         self.world.abort(code)
     }
 
-    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send> {
+    fn sender(&self, to: usize) -> SendFn {
         Box::new(move |msg| {
             let _calls = mpi_lock();
             SimpleCommunicator::world().process_at_rank(to as i32).send(msg);
@@ -188,7 +191,7 @@ impl Transport for Local {
         std::process::exit(code)
     }
 
-    fn sender(&self, to: usize) -> Box<dyn Fn(&[u8]) + Send> {
+    fn sender(&self, to: usize) -> SendFn {
         let (peer, rank) = (self.peers[to].clone(), self.rank);
         Box::new(move |msg| {
             if let Some(p) = &peer {

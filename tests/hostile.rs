@@ -1,0 +1,438 @@
+//! Issue 12's hostile inputs and flags, each a regression test: outputs that never destroy
+//! anything, sizes checked before allocation, bounded reads, timeouts that mean silence,
+//! stats that survive, and warnings where images would be garbage. Special files are ones
+//! the test makes itself (a FIFO, a private `mknod` copy of the null device), never the
+//! system's own.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_tessera")
+}
+
+fn mesh(rel: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes").join(rel).to_string_lossy().into_owned()
+}
+
+fn cmd() -> Command {
+    let xdg = std::env::temp_dir().join("tessera-xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    let mut c = Command::new(bin());
+    c.env("XDG_RUNTIME_DIR", xdg).env_remove("TESSERA_FAULT");
+    c
+}
+
+fn tessera(args: &[&str]) -> Output {
+    cmd().args(args).output().expect("runs tessera")
+}
+
+fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
+    let mut c = cmd();
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.args(args).output().expect("runs tessera")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Fails with a one-line error that contains `needle`, and no panic.
+fn refused(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "must fail; stderr: {err}");
+    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "stderr: {}", stderr(o));
+}
+
+fn mkfifo(path: &Path) {
+    assert!(Command::new("mkfifo").arg(path).status().unwrap().success());
+}
+
+/// Reads a FIFO to its end on another thread.
+fn drain(path: &Path) -> std::thread::JoinHandle<Vec<u8>> {
+    let path = path.to_path_buf();
+    std::thread::spawn(move || {
+        let mut v = Vec::new();
+        std::fs::File::open(path).unwrap().read_to_end(&mut v).unwrap();
+        v
+    })
+}
+
+fn is_fifo(p: &Path) -> bool {
+    std::os::unix::fs::FileTypeExt::is_fifo(&std::fs::symlink_metadata(p).unwrap().file_type())
+}
+
+fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tessera-"))
+        .collect()
+}
+
+#[test]
+fn special_outputs_are_written_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/woody.obj");
+    // A FIFO gets the bytes and stays a FIFO.
+    let fifo = dir.path().join("out.bft");
+    mkfifo(&fifo);
+    let reader = drain(&fifo);
+    ok(&tessera(&["encode", &model, "-o", s(&fifo)]));
+    let bytes = reader.join().unwrap();
+    assert!(is_fifo(&fifo));
+    assert!(codec::bft::decode(&bytes).is_ok(), "the FIFO's reader got a whole .bft");
+    // A private copy of the null device stays a device (as root; skipped where mknod is not
+    // allowed).
+    let null = dir.path().join("null.bft");
+    if Command::new("mknod").arg(&null).args(["c", "1", "3"]).status().is_ok_and(|s| s.success()) {
+        ok(&tessera(&["encode", &model, "-o", s(&null)]));
+        let t = std::fs::symlink_metadata(&null).unwrap().file_type();
+        assert!(std::os::unix::fs::FileTypeExt::is_char_device(&t), "still a device");
+    }
+    // A symlink to a FIFO stays a symlink; `--stats` lines go through it.
+    let stats_fifo = dir.path().join("stats-fifo");
+    mkfifo(&stats_fifo);
+    let link = dir.path().join("stats.jsonl");
+    std::os::unix::fs::symlink(&stats_fifo, &link).unwrap();
+    let reader = drain(&stats_fifo);
+    let png = dir.path().join("f.png");
+    ok(&tessera(&["render", &model, "--size", "32x24", "--tiles", "1x1", "--out", s(&png), "--stats", s(&link)]));
+    let lines = String::from_utf8(reader.join().unwrap()).unwrap();
+    assert_eq!(lines.lines().count(), 2, "{lines}");
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    // `-` is standard output, and the summary moves to stderr.
+    let o = tessera(&["encode", &model, "-o", "-"]);
+    ok(&o);
+    assert!(codec::bft::decode(&o.stdout).is_ok());
+    assert!(stderr(&o).contains("triangles"));
+    assert!(leftovers(dir.path()).is_empty());
+}
+
+#[test]
+fn outputs_never_overwrite_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("m.obj");
+    std::fs::copy(mesh("classic/woody.obj"), &obj).unwrap();
+    let original = std::fs::read(&obj).unwrap();
+    let same = |o: &Output| refused(o, "same file");
+    // The extension check comes first; a hard link with the right extension is caught by inode.
+    refused(&tessera(&["encode", s(&obj), "-o", s(&obj)]), "must end in .bft");
+    let hard_bft = dir.path().join("m.bft");
+    std::fs::hard_link(&obj, &hard_bft).unwrap();
+    same(&tessera(&["encode", s(&obj), "-o", s(&hard_bft)]));
+    let hard_dpm = dir.path().join("m.dpm");
+    std::fs::hard_link(&obj, &hard_dpm).unwrap();
+    same(&tessera(&["pm", "build", s(&obj), "-o", s(&hard_dpm)]));
+    let hard_csv = dir.path().join("m.csv");
+    std::fs::hard_link(&obj, &hard_csv).unwrap();
+    let plot = dir.path().join("p.png");
+    same(&tessera(&["bench", "bandwidth", s(&obj), "--tiles", "1x1", "--out", s(&hard_csv), "--plot", s(&plot)]));
+    // A symlink to the input, under another name.
+    let link = dir.path().join("link.ply");
+    std::os::unix::fs::symlink(&obj, &link).unwrap();
+    let dpm = dir.path().join("s.dpm");
+    ok(&tessera(&["pm", "build", s(&obj), "-o", s(&dpm)]));
+    let dpm_bytes = std::fs::read(&dpm).unwrap();
+    let dpm_ply = dir.path().join("s.ply");
+    std::fs::hard_link(&dpm, &dpm_ply).unwrap();
+    same(&tessera(&["pm", "adapt", s(&dpm), "--full", "-o", s(&dpm_ply)]));
+    // Two outputs of one command that are the same file.
+    let png = dir.path().join("f.png");
+    refused(&tessera(&["render", s(&obj), "--size", "32x24", "--out", s(&png), "--stats", s(&png)]), "twice");
+    let png2 = dir.path().join("./f.png");
+    refused(&tessera(&["render", s(&obj), "--size", "32x24", "--out", s(&png), "--stats", s(&png2)]), "same file");
+    refused(&tessera(&["render", s(&link), "--size", "32x24", "--out", s(&png), "--stats", s(&obj)]), "same file");
+    assert_eq!(std::fs::read(&obj).unwrap(), original);
+    assert_eq!(std::fs::read(&dpm).unwrap(), dpm_bytes);
+    assert!(!png.exists() && !plot.exists());
+}
+
+#[test]
+fn output_formats_follow_the_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let dpm = dir.path().join("w.dpm");
+    ok(&tessera(&["pm", "build", &mesh("classic/woody.obj"), "-o", s(&dpm)]));
+    let obj = dir.path().join("a.obj");
+    ok(&tessera(&["pm", "adapt", s(&dpm), "--full", "-o", s(&obj)]));
+    let text = std::fs::read_to_string(&obj).expect("an OBJ is text");
+    assert!(text.lines().any(|l| l.starts_with("v ")) && text.lines().any(|l| l.starts_with("f ")));
+    let m = codec::load_path(&obj).unwrap();
+    assert!(!m.triangles.is_empty());
+    refused(&tessera(&["pm", "adapt", s(&dpm), "--full", "-o", s(&dir.path().join("a.stl"))]), ".ply or .obj");
+    refused(&tessera(&["pm", "build", &mesh("classic/woody.obj"), "-o", s(&dir.path().join("x.bft"))]), ".dpm");
+    refused(&tessera(&["decode", s(&dpm), "-o", s(&dir.path().join("x.png"))]), ".ply or .obj");
+}
+
+#[test]
+fn an_interrupted_write_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.bft");
+    for signal in ["-TERM", "-INT"] {
+        let mut child = cmd()
+            .env("TESSERA_FAULT", "slow-write:20000")
+            .args(["encode", &mesh("classic/woody.obj"), "-o", s(&out)])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while leftovers(dir.path()).is_empty() {
+            assert!(start.elapsed() < Duration::from_secs(30), "no temporary file appeared");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(Command::new("kill").arg(signal).arg(child.id().to_string()).status().unwrap().success());
+        let status = child.wait().unwrap();
+        assert_eq!(status.code(), Some(130), "{signal}");
+        assert!(leftovers(dir.path()).is_empty(), "{signal}: {:?}", leftovers(dir.path()));
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn dumps_clear_only_their_own_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dump");
+    let model = mesh("classic/woody.obj");
+    ok(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "4x4", "--dump", s(&dump)]));
+    let tiles =
+        |d: &Path| std::fs::read_dir(d).unwrap().filter(|e| e.as_ref().unwrap().file_name() != "summary.json").count();
+    assert!(tiles(&dump) > 1);
+    ok(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "1x1", "--dump", s(&dump)]));
+    assert_eq!(tiles(&dump), 1, "no stale tiles from the earlier dump");
+    std::fs::write(dump.join("notes.txt"), b"mine").unwrap();
+    refused(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "2x2", "--dump", s(&dump)]), "notes.txt");
+    assert_eq!(std::fs::read(dump.join("notes.txt")).unwrap(), b"mine");
+    assert!(dump.join("tile-0.ply").exists(), "a refused dump removes nothing");
+}
+
+#[test]
+fn sizes_are_checked_before_allocation() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("f.png");
+    let model = mesh("classic/woody.obj");
+    for size in ["192000x108000", "4294967295x4294967295", "16385x16"] {
+        let start = Instant::now();
+        refused(&tessera(&["render", &model, "--size", size, "--out", s(&png)]), "at most 16384");
+        assert!(start.elapsed() < Duration::from_secs(5));
+        refused(&tessera(&["sort", &model, "--size", size]), "at most 16384");
+    }
+    for (text, needle) in [
+        ("columns = 2\nrows = 1\ndisplay_width = 2147483649\ndisplay_height = 10\n", "4294967298x10"),
+        ("columns = 2\nrows = 1\ndisplay_width = 50\ndisplay_height = 10\nbezel_x = 4294967196\n", "at most 16384"),
+        ("columns = 9\nrows = 1\ndisplay_width = 1920\ndisplay_height = 1080\n", "at most 16384"),
+    ] {
+        let wall = dir.path().join("wall.toml");
+        std::fs::write(&wall, text).unwrap();
+        refused(&tessera(&["render", &model, "--wall", s(&wall), "--out", s(&png)]), needle);
+    }
+    // A frame larger than a worker's texture limit is refused at the handshake, before the
+    // first frame (the hook makes rank 1 report a 64-pixel limit).
+    let o = tessera_env(&[("TESSERA_FAULT", "texture:1:64")], &["render", &model, "--size", "96x48", "--out", s(&png)]);
+    refused(&o, "largest texture side is 64");
+    assert!(!stderr(&o).contains("frame 1"));
+    assert!(!png.exists());
+}
+
+#[test]
+fn reads_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let start = Instant::now();
+    refused(&tessera(&["stats", "/dev/zero"]), "not a regular file");
+    let zero = dir.path().join("zero.obj");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    refused(&tessera(&["encode", s(&zero), "-o", s(&dir.path().join("z.bft"))]), "character device");
+    let fifo = dir.path().join("m.obj");
+    mkfifo(&fifo);
+    refused(&tessera(&["encode", s(&fifo), "-o", s(&dir.path().join("z.bft"))]), "FIFO");
+    assert!(start.elapsed() < Duration::from_secs(10));
+    // 3 MB of newlines behind 3 KB of gzip: refused at the cap, with the flag that raises it.
+    let gz = dir.path().join("nl.obj.gz");
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    std::io::Write::write_all(&mut enc, &vec![b'\n'; 3 << 20]).unwrap();
+    std::fs::write(&gz, enc.finish().unwrap()).unwrap();
+    let o = tessera(&["encode", s(&gz), "-o", s(&dir.path().join("z.bft")), "--max-decompressed", "1M"]);
+    refused(&o, "--max-decompressed");
+    let o = tessera(&["encode", s(&gz), "-o", s(&dir.path().join("z.bft")), "--max-decompressed", "4M"]);
+    assert!(!stderr(&o).contains("--max-decompressed"), "under the cap the file is parsed: {}", stderr(&o));
+}
+
+#[test]
+fn numeric_flags_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/woody.obj");
+    let png = dir.path().join("f.png");
+    for v in ["1e20", "inf", "-inf", "nan", "-0", "0", "-1", "1e-40"] {
+        for flag in ["--fovy", "--near", "--far"] {
+            let o = tessera(&["sort", &model, "--size", "32x24", "--tiles", "1x1", flag, v]);
+            assert!(!stderr(&o).contains("panicked") && o.status.code() != Some(101), "{flag} {v}: {}", stderr(&o));
+        }
+        for flag in ["--timeout", "--frames", "--max-passes", "--error-px", "--c-lod", "--normal-weight"] {
+            let o = tessera(&["render", &model, "--size", "16x16", "--tiles", "1x1", "--out", s(&png), flag, v]);
+            assert!(!stderr(&o).contains("panicked") && o.status.code() != Some(101), "{flag} {v}: {}", stderr(&o));
+        }
+        for flag in ["--error-px", "--normal-weight"] {
+            let o = tessera(&["pm", "adapt", "missing.dpm", "-o", s(&dir.path().join("a.ply")), flag, v]);
+            assert!(!stderr(&o).contains("panicked") && o.status.code() != Some(101), "{flag} {v}: {}", stderr(&o));
+        }
+    }
+    refused(&tessera(&["render", &model, "--timeout", "1e20", "--out", s(&png)]), "--timeout");
+}
+
+#[test]
+fn a_busy_worker_is_not_dead() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("f.png");
+    // The worker works 3 s on its first frame, three times the timeout, sending heartbeats.
+    let o = tessera_env(
+        &[("TESSERA_FAULT", "slow:1:3000")],
+        &["render", &mesh("classic/woody.obj"), "--size", "32x24", "--timeout", "1", "--out", s(&png)],
+    );
+    ok(&o);
+    assert!(png.exists());
+}
+
+#[test]
+fn without_mpirun_the_timeout_ends_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("f.png");
+    let start = Instant::now();
+    let o = tessera_env(
+        &[("TESSERA_FAULT", "hang:1")],
+        &["render", &mesh("classic/woody.obj"), "--size", "32x24", "--timeout", "2", "--out", s(&png)],
+    );
+    let took = start.elapsed();
+    refused(&o, "sent nothing for 2 s");
+    assert!(took < Duration::from_secs(15), "took {took:?}");
+    assert!(!png.exists());
+}
+
+#[test]
+fn stats_survive_an_interrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    // An unwritable stats path fails before the first frame.
+    let o = tessera(&[
+        "render",
+        &mesh("classic/woody.obj"),
+        "--size",
+        "32x24",
+        "--out",
+        s(&dir.path().join("f.png")),
+        "--stats",
+        s(&dir.path().join("missing/s.jsonl")),
+    ]);
+    refused(&o, "missing");
+    assert!(!stderr(&o).contains("frame 1"));
+    // Lines are flushed frame by frame: interrupt a long run after its second frame.
+    let stats = dir.path().join("s.jsonl");
+    let mut child = cmd()
+        .args(["render", &mesh("classic/woody.obj"), "--size", "32x24", "--tiles", "2x2", "--frames", "100000"])
+        .args(["--orbit", "--out", s(&dir.path().join("f.png")), "--stats", s(&stats)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 4 {
+        assert!(start.elapsed() < Duration::from_secs(60), "no stats lines appeared");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    let text = std::fs::read_to_string(&stats).unwrap();
+    let lines: Vec<serde_json::Value> =
+        text.lines().map(|l| serde_json::from_str(l).expect("whole JSON lines")).collect();
+    assert!(lines.len() >= 4 && lines.len().is_multiple_of(2), "{} lines", lines.len());
+    assert_eq!(lines[0]["rank"], 0);
+    assert_eq!(lines[1]["rank"], 1);
+    assert_eq!(lines[2]["frame"], 1);
+    assert!(leftovers(dir.path()).is_empty());
+}
+
+#[test]
+fn cameras_that_would_give_garbage_are_refused() {
+    let model = mesh("classic/woody.obj");
+    refused(&tessera(&["sort", &model, "--size", "64x48", "--near", "1e-30"]), "far/near");
+    refused(&tessera(&["sort", &model, "--size", "64x48", "--fovy", "1e-30"]), "field of view");
+    let o = tessera(&["sort", &model, "--size", "64x48", "--near", "1e-5", "--far", "10"]);
+    ok(&o);
+    assert!(stderr(&o).contains("warning: far/near"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_non_finite_model_box_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bft = dir.path().join("m.bft");
+    ok(&tessera(&["encode", &mesh("classic/woody.obj"), "-o", s(&bft)]));
+    let mut b = std::fs::read(&bft).unwrap();
+    // The header's bbox_max.x, then its checksum made valid again: only the box is wrong.
+    // Layout in codec/src/bft/format.rs: the 72-byte header at 12, its CRC-32 at 84.
+    b[12 + 60..12 + 64].copy_from_slice(&f32::NAN.to_le_bytes());
+    let crc = crc32fast::hash(&b[12..84]);
+    b[84..88].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(&bft, &b).unwrap();
+    refused(&tessera(&["stats", s(&bft)]), "m.bft");
+    let o = tessera(&["sort", s(&bft), "--size", "64x48"]);
+    refused(&o, "m.bft");
+    assert!(!stderr(&o).contains("bad camera"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_progressive_mesh_in_many_tiles_costs_no_more_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    let dpm = dir.path().join("spot.dpm");
+    ok(&tessera(&["pm", "build", &mesh("classic/spot.obj"), "-o", s(&dpm)]));
+    let peak_kb = |tiles: &str| -> u64 {
+        let o = Command::new("/usr/bin/time")
+            .args(["-f", "peak %M"])
+            .arg(bin())
+            .args(["render", s(&dpm), "--size", "320x180", "--tiles", tiles, "--out"])
+            .arg(dir.path().join(format!("f-{tiles}.png")))
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .expect("GNU time is installed (scripts/setup.sh)");
+        ok(&o);
+        let err = stderr(&o);
+        let line = err.lines().find_map(|l| l.strip_prefix("peak ")).expect("a peak line");
+        line.trim().parse().unwrap()
+    };
+    let one = peak_kb("1x1");
+    let many = peak_kb("64x64");
+    eprintln!("peak memory: 1x1 {one} kB, 64x64 {many} kB ({:.2}x)", many as f64 / one as f64);
+    assert!(many <= 2 * one, "64x64 tiles took {many} kB, 1x1 {one} kB");
+    // Grouped tiles meet the same error bound: the images agree on almost every pixel.
+    let (a, b) = (pixels(&dir.path().join("f-1x1.png")), pixels(&dir.path().join("f-64x64.png")));
+    let (mut covered, mut matching) = (0, 0);
+    for (x, y) in a.chunks(4).zip(b.chunks(4)) {
+        if x[3] == 0 && y[3] == 0 {
+            continue;
+        }
+        covered += 1;
+        matching += usize::from(x[3] == y[3] && x.iter().zip(y).all(|(p, q)| p.abs_diff(*q) <= 8));
+    }
+    let fraction = matching as f64 / covered as f64;
+    eprintln!("{matching} of {covered} covered pixels within 8/255 ({fraction:.4})");
+    assert!(covered > 1000 && fraction > 0.99, "{fraction}");
+}
+
+fn pixels(path: &Path) -> Vec<u8> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    buf
+}
