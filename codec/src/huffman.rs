@@ -82,14 +82,20 @@ impl Table {
             offset[l] = off;
             off += count[l];
         }
-        let mut sorted: Vec<u8> = (0..lens.len()).filter(|&s| lens[s] > 0).map(|s| s as u8).collect();
-        sorted.sort_by_key(|&s| (lens[s as usize], s));
+        // The symbols with a code, by length and then by symbol (a counting sort: each goes
+        // to the next place of its length's run, visited in symbol order).
+        let mut sorted = vec![0u8; off as usize];
+        let mut place = offset;
         let mut codes = vec![0u32; lens.len()];
         let mut next = first;
-        for &s in &sorted {
-            let l = lens[s as usize] as usize;
-            codes[s as usize] = next[l];
-            next[l] += 1;
+        for (s, &l) in lens.iter().enumerate() {
+            let l = l as usize;
+            if l > 0 {
+                sorted[place[l] as usize] = s as u8;
+                place[l] += 1;
+                codes[s] = next[l];
+                next[l] += 1;
+            }
         }
         let longest = lens.iter().copied().max().unwrap_or(0);
         Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest })

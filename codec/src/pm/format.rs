@@ -127,6 +127,8 @@
 //! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
 //! tangential coordinate for the second, a normal delta predicted along the motion.
 
+use std::sync::{Arc, OnceLock};
+
 use rayon::prelude::*;
 use thiserror::Error;
 
@@ -642,7 +644,7 @@ impl OpWriter<'_> {
 }
 
 struct OpReader<'a, 'b> {
-    tables: &'a [Table],
+    tables: &'a [Arc<Table>],
     r: BitReader<'a>,
     bits: Option<&'b mut [u64; KINDS]>,
 }
@@ -935,7 +937,7 @@ fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64, avg: f32, 
 
 fn read_op(
     h: &Header,
-    tables: &[Table],
+    tables: &[Arc<Table>],
     ops: &[u8],
     addr: usize,
     ctx: &OpContext,
@@ -1160,13 +1162,24 @@ fn write_tables(tables: &[Table]) -> Vec<u8> {
     w.finish()
 }
 
-fn read_tables(tb: &[u8]) -> Result<Vec<Table>, DpmError> {
+/// The flat code (every symbol 8 bits), built once and shared by every table coded as flat.
+fn flat_table() -> Arc<Table> {
+    static FLAT: OnceLock<Arc<Table>> = OnceLock::new();
+    FLAT.get_or_init(|| Arc::new(Table::from_lens(&[8; 256]).expect("a flat code is complete"))).clone()
+}
+
+/// Reads the tables. A flat table is the shared [`flat_table`]; only tables whose lengths are
+/// stored are built, each from at least 256 bits of the section, so the work is bounded by
+/// the section's size (a file of flat tables, such as most fuzzer inputs, builds none).
+fn read_tables(tb: &[u8]) -> Result<Vec<Arc<Table>>, DpmError> {
     let mut r = BitReader::new(tb, 0);
     let mut bit = || r.bit().ok_or(DpmError::Truncated("tables"));
     let mut tables = Vec::with_capacity(TABLES);
     for _ in 0..TABLES {
-        let mut lens = [8u8; 256];
-        if bit()? {
+        if !bit()? {
+            tables.push(flat_table());
+        } else {
+            let mut lens = [8u8; 256];
             let mut prev = 8i64;
             for l in &mut lens {
                 let mut zeros = 0;
@@ -1187,8 +1200,8 @@ fn read_tables(tb: &[u8]) -> Result<Vec<Table>, DpmError> {
                 *l = x as u8;
                 prev = x;
             }
+            tables.push(Arc::new(Table::from_lens(&lens).ok_or_else(|| corrupt("invalid code lengths"))?));
         }
-        tables.push(Table::from_lens(&lens).ok_or_else(|| corrupt("invalid code lengths"))?);
     }
     if r.end() != tb.len() {
         return Err(corrupt("bytes after the tables"));
@@ -1206,7 +1219,7 @@ fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmErro
 #[derive(Clone, Debug)]
 pub struct Dpm<'a> {
     pub header: Header,
-    tables: Vec<Table>,
+    tables: Vec<Arc<Table>>,
     /// Base vertex FVIDs, ascending.
     pub base_vertices: Vec<u32>,
     pub base_positions: Vec<[u32; 3]>,
