@@ -181,6 +181,54 @@ fn invalid_input_is_an_error() {
     assert!(matches!(build(&nan), Err(PmError::Mesh(MeshError::NonFinite { vertex: 1, .. }))));
 }
 
+/// Vertices of high valence become hubs (see `codec::pm::build`), which changes how they
+/// collapse; the results must hold as for any mesh: a closed cone (two hubs), a hub edge shared
+/// by many faces, and random non-manifold triangles around one vertex with degenerate ones.
+#[test]
+fn hubs_refine_back_to_their_input() {
+    use codec::pm::{build_with_stats, HUB_FACES};
+    let k = HUB_FACES + 100;
+    let ring = |i: usize| {
+        let a = i as f32 / k as f32 * std::f32::consts::TAU;
+        [a.cos(), a.sin(), 0.1 * (3.0 * a).sin()]
+    };
+    // Apex 0, base centre 1, rim 2..k+2.
+    let mut cone = Mesh { positions: vec![[0.0, 0.0, 1.0], [0.0, 0.0, -0.2]], triangles: vec![] };
+    cone.positions.extend((0..k).map(ring));
+    for i in 0..k as u32 {
+        let (a, b) = (2 + i, 2 + (i + 1) % k as u32);
+        cone.triangles.push([0, a, b]);
+        cone.triangles.push([1, b, a]);
+    }
+    // Vertices 0 and 1 share k faces, and 0 has a fan too.
+    let mut shared = Mesh { positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], triangles: vec![] };
+    shared.positions.extend((0..k).map(ring));
+    for i in 0..k as u32 {
+        shared.triangles.push([0, 1, 2 + i]);
+        if i + 1 < k as u32 {
+            shared.triangles.push([0, 2 + i, 3 + i]);
+        }
+    }
+    // Random triangles around vertex 0 from 300 others, some degenerate, some repeated.
+    let mut rng = common::XorShift(0x9e37_79b9_7f4a_7c15);
+    let mut soup = Mesh { positions: vec![[0.0; 3]], triangles: vec![] };
+    soup.positions.extend((0..300).map(|_| [rng.unit(), rng.unit(), rng.unit()]));
+    for _ in 0..2 * k {
+        let (a, b) = (1 + rng.next() as u32 % 300, 1 + rng.next() as u32 % 300);
+        soup.triangles.push(match rng.next() % 16 {
+            0 => [0, 0, a],
+            1 => [a, a, a],
+            _ => [0, a, b],
+        });
+    }
+    for (name, mesh) in [("cone", &cone), ("shared edge", &shared), ("soup", &soup)] {
+        let (_, stats) = build_with_stats(mesh, &mut |_, _| {}).expect("builds");
+        assert!(stats.hubs >= 1, "{name}: no hub");
+        let pm = build_and_check(mesh);
+        check_every_level(&pm);
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
 

@@ -2,7 +2,7 @@
 //!
 //! The traversal follows the frontier semantics of [`super`]; the choices it makes are:
 //! the third vertex is looked up among the unvisited triangles on the directed current edge
-//! (a CSR adjacency, no hashing); an existing third vertex takes the frontier occurrence
+//! (a CSR adjacency sorted by target, no hashing: see [`Traversal::find`]); an existing third vertex takes the frontier occurrence
 //! with the smallest offset, preferring `RF0`/`LF0`; a null edge deletes a vertex whose
 //! triangles are all visited (`DL` before `DR`), else it is skipped (`NULL`); a full
 //! rotation without a triangle, or a frontier without unvisited triangles, starts a `SEED`
@@ -42,6 +42,11 @@ pub struct EncodeStats {
     pub command_counts: [usize; 12],
     /// Offsets of generic `RF<k>`/`LF<k>`: how many were `k = 1, 2, 3, 4..7, 8..`.
     pub offset_histogram: [usize; 5],
+    /// Steps of the traversal's inner loops: commands, half-edges looked at to find a
+    /// triangle, and frontier occurrences examined for the third vertex. It is linear in the
+    /// triangle count whatever the valence (a test bounds it), where a linear scan of a
+    /// vertex's half-edges was quadratic on a fan.
+    pub work: u64,
 }
 
 /// An encoded mesh.
@@ -131,6 +136,7 @@ pub fn encode_with_progress(
         commands: tr.commands,
         command_counts: tr.command_counts,
         offset_histogram: tr.offset_histogram,
+        work: tr.work,
     };
     let Traversal { conn, geom, vertex_of, .. } = tr;
     let (conn, geom) = (conn.finish(), geom.finish());
@@ -152,8 +158,13 @@ struct Traversal<'a> {
     q: Vec<[u32; 3]>,
     max: u32,
     max_q: [u32; 3],
-    /// The outgoing half-edges of each vertex.
+    /// The outgoing half-edges of each vertex, sorted by target, in input order per target.
     edges: Csr<HalfEdge>,
+    /// Per half-edge that starts a run of equal targets in its vertex's list: the first one
+    /// of the run that may be unvisited (visited triangles before it are skipped for good).
+    first_open: Vec<u32>,
+    /// See [`EncodeStats::work`].
+    work: u64,
     visited: Vec<bool>,
     /// Unvisited non-loose triangles per vertex.
     remaining: Vec<u32>,
@@ -189,7 +200,12 @@ impl<'a> Traversal<'a> {
                     .map(|(from, to, third)| (from, HalfEdge { target: to, tri: t as u32, third }))
             })
         };
-        let edges = Csr::build(n, half_edges);
+        // Grouped by target, then (stably) by source: each vertex's half-edges come sorted by
+        // target, and those with the same target keep the input order (two counting sorts).
+        let by_target = Csr::build(n, || half_edges().map(|(from, e)| (e.target, (from, e))));
+        let edges = Csr::build(n, || by_target.values.iter().copied());
+        drop(by_target);
+        let first_open = (0..edges.values.len() as u32).collect();
         // One half-edge leaves each corner, so a vertex starts with as many unvisited
         // triangles as it has half-edges.
         let remaining: Vec<u32> = edges.start.windows(2).map(|w| w[1] - w[0]).collect();
@@ -200,6 +216,8 @@ impl<'a> Traversal<'a> {
             max,
             max_q: [0; 3],
             edges,
+            first_open,
+            work: 0,
             visited: vec![false; mesh.triangles.len()],
             remaining,
             slot_of: vec![NONE; n],
@@ -286,23 +304,44 @@ impl<'a> Traversal<'a> {
     /// is `Q[3]` (an `RF<1>`, which would split the frontier) and the next edge `(r, Q[2])`
     /// has the triangle `(r, Q[2], x)`, skipping gives `NULL, RF0, LF0` and no split.
     #[inline]
-    fn defer(&self, x: u32, len: usize) -> bool {
+    fn defer(&mut self, x: u32, len: usize) -> bool {
         if len < 5 {
             return false;
         }
         let f = &self.frontier;
         let at = |i: usize| self.vertex_of[f.at(i).slot as usize];
-        at(3) == x && at(2) != x && self.find(at(1), at(2)).is_some_and(|(_, third)| third == x)
+        let (q1, q2, q3) = (at(1), at(2), at(3));
+        q3 == x && q2 != x && self.find(q1, q2).is_some_and(|(_, third)| third == x)
     }
 
-    /// An unvisited triangle on the directed edge `l -> r`, and its third vertex.
+    /// The first unvisited triangle, in input order, on the directed edge `l -> r`, and its
+    /// third vertex. `l`'s half-edges are sorted by target: a short list is scanned, a long
+    /// one (a vertex of high valence) binary-searched, so a lookup costs `O(log valence)`;
+    /// then the run of half-edges to `r` is walked from its first open one, which advances
+    /// past visited triangles for good (amortized constant, also over repeated triangles).
     #[inline]
-    fn find(&self, l: u32, r: u32) -> Option<(u32, u32)> {
-        self.edges
-            .get(l as usize)
-            .iter()
-            .find(|e| e.target == r && !self.visited[e.tri as usize])
-            .map(|e| (e.tri, e.third))
+    fn find(&mut self, l: u32, r: u32) -> Option<(u32, u32)> {
+        const SCAN: usize = 16;
+        let (lo, hi) = (self.edges.start[l as usize] as usize, self.edges.start[l as usize + 1] as usize);
+        let list = &self.edges.values[lo..hi];
+        let run = if list.len() <= SCAN {
+            let k = list.iter().position(|e| e.target >= r).unwrap_or(list.len());
+            self.work += k as u64 + 1;
+            k
+        } else {
+            self.work += u64::from(usize::BITS - list.len().leading_zeros());
+            list.partition_point(|e| e.target < r)
+        };
+        if run == list.len() || list[run].target != r {
+            return None;
+        }
+        let mut i = self.first_open[lo + run] as usize - lo;
+        while i < list.len() && list[i].target == r && self.visited[list[i].tri as usize] {
+            i += 1;
+            self.work += 1;
+        }
+        self.first_open[lo + run] = (lo + i) as u32;
+        list.get(i).filter(|e| e.target == r).map(|e| (e.tri, e.third))
     }
 
     /// Codes `cmd` in the context the decoder will see before reading it.
@@ -315,6 +354,7 @@ impl<'a> Traversal<'a> {
         self.commands_model.encode(&mut self.conn, ctx, cmd);
         self.prev = cmd;
         self.commands += 1;
+        self.work += 1;
         self.command_counts[cmd as usize] += 1;
     }
 
@@ -417,6 +457,7 @@ impl<'a> Traversal<'a> {
         if self.slot_of[x as usize] != NONE {
             let mut pos = self.last_entry[x as usize];
             while pos != NONE && pos as usize >= head + 2 {
+                self.work += 1;
                 let p = pos as usize;
                 if self.vertex_of[self.frontier.entries[p].slot as usize] != x {
                     break;

@@ -48,12 +48,44 @@
 //!   farthest vertex from `v`, it is also the region's bounding radius.
 //! * the cone angle gets a relative slack of `1e-5` (plus `1e-5` rad) per level, so the
 //!   runtime tests, which recompute the nesting in `f32`, stay monotone.
+//!
+//! **Hubs: linear time whatever the valence.** A collapse costs time in the number of faces
+//! around `u` and `t`: it moves `u`'s faces, reads the errors around both, and offers every
+//! edge of `t` again. Around a vertex of very high valence (a fan of 200k triangles, a large
+//! polygon fan-triangulated) that is quadratic. A vertex with more than [`HUB_FACES`] live
+//! faces becomes a *hub* (for good): an edge between a hub and another vertex always
+//! collapses the other vertex into the hub (between two hubs, the one with fewer faces into
+//! the other), so a hub's faces never move; when a hub absorbs a vertex only the edges to its
+//! new neighbours are offered, and its other edges keep their costs (computed with the hub's
+//! quadric of when they were offered: an approximation of the greedy order, only around
+//! hubs); the errors around a hub are not read but bounded, by the greatest error of any
+//! vertex that was ever its neighbour and of any hub ([`Simplifier::hub_bound`]), which
+//! keeps the errors monotone bounds; and its list of faces is compacted when most of it is
+//! dead. Then every collapse costs time in the faces of its non-hub vertices, at most
+//! `HUB_FACES` each ([`BuildStats::work`] counts it). No mesh in `../shared/meshes` has a hub
+//! (the most faces a vertex reaches there is 352, on the planar `alligator.obj`, whose zero
+//! quadrics tie every cost), so their progressive meshes are the ones of the plain greedy
+//! order.
 
 use thiserror::Error;
 
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::csr::Csr;
 use crate::mesh::{Mesh, MeshError};
+
+/// A vertex with more live faces than this becomes a hub (see the module docs).
+pub const HUB_FACES: usize = 512;
+
+/// What [`build_with_stats`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BuildStats {
+    pub collapses: usize,
+    /// Vertices that became hubs (see the module docs); none on ordinary meshes.
+    pub hubs: usize,
+    /// Steps of the simplification's inner loops: face-list entries read and heap entries
+    /// pushed or popped. Linear in the face count whatever the valence (a test bounds it).
+    pub work: u64,
+}
 
 /// Why a progressive mesh cannot be built.
 #[derive(Debug, Error, PartialEq)]
@@ -195,7 +227,19 @@ struct Simplifier {
     face_alive: Vec<bool>,
     /// The faces of each vertex, each listed once; removed faces linger until compacted.
     vertex_faces: Vec<Vec<u32>>,
+    /// Per vertex: its live faces (the entries of `vertex_faces` whose face is alive).
+    live_faces: Vec<u32>,
+    /// Per vertex: whether it is a hub (see the module docs).
+    hub: Vec<bool>,
+    /// Per hub: at least the error of every vertex that has been its neighbour since it
+    /// became a hub, and of its neighbours then.
+    hub_neighbour_error: Vec<f64>,
+    /// At least the error of every hub.
+    hub_error: f64,
+    hubs: usize,
     heap: QuadHeap,
+    /// See [`BuildStats::work`].
+    work: u64,
 }
 
 impl Simplifier {
@@ -228,6 +272,9 @@ impl Simplifier {
                 quadric[v as usize].add(&q);
             }
         }
+        let live_faces: Vec<u32> = vertex_faces.iter().map(|f| f.len() as u32).collect();
+        let hub: Vec<bool> = live_faces.iter().map(|&f| f as usize > HUB_FACES).collect();
+        let hubs = hub.iter().filter(|&&h| h).count();
         let mut s = Self {
             pos,
             quadric,
@@ -236,7 +283,13 @@ impl Simplifier {
             faces: mesh.triangles.clone(),
             face_alive: vec![true; mesh.triangles.len()],
             vertex_faces,
+            live_faces,
+            hub,
+            hub_neighbour_error: vec![0.0; n],
+            hub_error: 0.0,
+            hubs,
             heap: QuadHeap(Vec::new()),
+            work: 3 * mesh.triangles.len() as u64,
         };
         let mut initial = Vec::with_capacity(3 * mesh.triangles.len());
         for tri in &mesh.triangles {
@@ -254,61 +307,195 @@ impl Simplifier {
         s
     }
 
-    /// The cheaper direction of collapsing edge `(a, b)`.
+    /// The cheaper direction of collapsing edge `(a, b)`; into a hub if one of them is (into
+    /// the one with more faces if both are).
     fn candidate(&self, a: u32, b: u32) -> Candidate {
         let mut q = self.quadric[a as usize];
         q.add(&self.quadric[b as usize]);
         let (ca, cb) = (q.eval(self.pos[a as usize]), q.eval(self.pos[b as usize]));
         let key = |c: f64| if c.is_nan() { f32::MAX.to_bits() } else { (c.max(0.0) as f32).to_bits() };
-        let (u, t, cost) = if cb <= ca { (a, b, key(cb)) } else { (b, a, key(ca)) };
+        let (ha, hb) = (self.hub[a as usize], self.hub[b as usize]);
+        let (fa, fb) = (self.live_faces[a as usize], self.live_faces[b as usize]);
+        let into_b = match (ha, hb) {
+            (false, true) => true,
+            (true, false) => false,
+            (true, true) if fa != fb => fa < fb,
+            _ => cb <= ca,
+        };
+        let (u, t, cost) = if into_b { (a, b, key(cb)) } else { (b, a, key(ca)) };
         pack(cost, u, t, self.changed[u as usize].max(self.changed[t as usize]))
     }
 
+    fn offer(&mut self, a: u32, b: u32) {
+        let c = self.candidate(a, b);
+        self.heap.push(c);
+        self.work += 1;
+    }
+
+    /// The error of a collapse of `u` into `t` before taking `reach` into account: at least the
+    /// tracked error of every vertex around it (section 3.2), read from the faces of `u` and of
+    /// `t`, or bounded for a hub (see [`Self::hub_bound`]). Hubs found among the vertices read
+    /// are remembered in `around`.
+    fn error_around(&mut self, u: u32, t: u32, error: &[f64], around: &mut Vec<u32>) -> f64 {
+        let (ui, ti) = (u as usize, t as usize);
+        let mut e = error[ti].max(error[ui]);
+        for v in [u, t] {
+            if self.hub[v as usize] {
+                e = e.max(self.hub_bound(v));
+                continue;
+            }
+            for &f in &self.vertex_faces[v as usize] {
+                self.work += 1;
+                if self.face_alive[f as usize] {
+                    for w in self.faces[f as usize] {
+                        e = e.max(error[w as usize]);
+                        if self.hub[w as usize] {
+                            around.push(w);
+                        }
+                    }
+                }
+            }
+        }
+        e
+    }
+
+    /// An upper bound of the errors of a hub's neighbours: those it has had, and every hub.
+    fn hub_bound(&self, h: u32) -> f64 {
+        self.hub_neighbour_error[h as usize].max(self.hub_error)
+    }
+
+    /// `t` took the error `e` in a collapse: the hubs around it and the hub bound learn it.
+    fn record_error(&mut self, t: u32, e: f64, around: &[u32]) {
+        for &h in around {
+            let b = &mut self.hub_neighbour_error[h as usize];
+            *b = b.max(e);
+        }
+        if self.hub[t as usize] {
+            self.hub_error = self.hub_error.max(e);
+        }
+    }
+
+    /// Marks `v`, which has more than [`HUB_FACES`] live faces, as a hub: its bound starts at
+    /// its neighbours' errors and its own (once per hub, in its faces).
+    fn make_hub(&mut self, v: u32, error: &[f64]) {
+        let vi = v as usize;
+        self.hub[vi] = true;
+        self.hubs += 1;
+        let mut b = error[vi];
+        for &f in &self.vertex_faces[vi] {
+            self.work += 1;
+            if self.face_alive[f as usize] {
+                for w in self.faces[f as usize] {
+                    b = b.max(error[w as usize]);
+                }
+            }
+        }
+        self.hub_neighbour_error[vi] = b;
+        self.hub_error = self.hub_error.max(error[vi]);
+    }
+
+    /// Face `f` is removed: its vertices have one live face less.
+    fn kill_face(&mut self, f: u32) {
+        self.face_alive[f as usize] = false;
+        let tri = self.faces[f as usize];
+        for (k, &v) in tri.iter().enumerate() {
+            if !tri[..k].contains(&v) {
+                self.live_faces[v as usize] -= 1;
+            }
+        }
+    }
+
     /// Pops stale entries until a valid collapse `(u, t)` comes up; `None` once no edge is left.
+    /// Between ordinary vertices an entry whose vertices have not changed is still an edge
+    /// (a face of both dies only in a collapse that changes one of them), but a hub does not
+    /// change when it absorbs a vertex, so an edge to a hub is checked for a common live face.
     fn next_collapse(&mut self) -> Option<(u32, u32)> {
         while let Some(c) = self.heap.pop() {
+            self.work += 1;
             let (u, t, stamp) = unpack(c);
             let (ui, ti) = (u as usize, t as usize);
-            if self.alive[ui] && self.alive[ti] && self.changed[ui].max(self.changed[ti]) == stamp {
+            if self.alive[ui]
+                && self.alive[ti]
+                && self.changed[ui].max(self.changed[ti]) == stamp
+                && (!(self.hub[ui] || self.hub[ti]) || self.share_face(u, t))
+            {
                 return Some((u, t));
             }
         }
         None
     }
 
+    /// Whether `a` and `b` have a live face in common (read in the shorter face list).
+    fn share_face(&mut self, a: u32, b: u32) -> bool {
+        let (a, b) =
+            if self.vertex_faces[a as usize].len() <= self.vertex_faces[b as usize].len() { (a, b) } else { (b, a) };
+        let list = &self.vertex_faces[a as usize];
+        self.work += list.len() as u64;
+        list.iter().any(|&f| self.face_alive[f as usize] && self.faces[f as usize].contains(&b))
+    }
+
     /// Collapses `u` into `t`, appending the faces it removes to `removed`, and offers every
-    /// edge of `t` again with `t`'s new quadric. `stamp` is the number of collapses done
-    /// before, plus one: it records `t`'s change and marks the neighbours offered in `seen`.
-    fn collapse(&mut self, u: u32, t: u32, removed: &mut Vec<u32>, seen: &mut [u32], stamp: u32) {
+    /// edge of `t` again with `t`'s new quadric (a hub: only the edges to its new
+    /// neighbours). `stamp` is the number of collapses done before, plus one: it records
+    /// `t`'s change and marks the neighbours offered in `seen`. `error` (with `t`'s new
+    /// error) starts the bound of a vertex that becomes a hub.
+    fn collapse(&mut self, u: u32, t: u32, removed: &mut Vec<u32>, seen: &mut [u32], stamp: u32, error: &[f64]) {
         let (ui, ti) = (u as usize, t as usize);
+        let first_moved = self.vertex_faces[ti].len();
         for f in std::mem::take(&mut self.vertex_faces[ui]) {
+            self.work += 1;
             if !self.face_alive[f as usize] {
                 continue;
             }
             let tri = &mut self.faces[f as usize];
             if tri.contains(&t) {
-                self.face_alive[f as usize] = false;
+                self.kill_face(f);
                 removed.push(f);
             } else {
                 for x in tri.iter_mut().filter(|x| **x == u) {
                     *x = t;
                 }
                 self.vertex_faces[ti].push(f);
+                self.live_faces[ti] += 1;
             }
         }
         self.alive[ui] = false;
-        self.changed[ti] = stamp;
         let qu = self.quadric[ui];
         self.quadric[ti].add(&qu);
 
         let mut tf = std::mem::take(&mut self.vertex_faces[ti]);
-        tf.retain(|&f| self.face_alive[f as usize]);
-        for &f in &tf {
-            for w in self.faces[f as usize] {
-                if w != t && seen[w as usize] != stamp {
-                    seen[w as usize] = stamp;
-                    let c = self.candidate(t, w);
-                    self.heap.push(c);
+        if self.hub[ti] {
+            // Its other edges keep their entries: offer the new neighbours only.
+            for &f in &tf[first_moved..] {
+                self.work += 1;
+                for w in self.faces[f as usize] {
+                    if w != t && seen[w as usize] != stamp {
+                        seen[w as usize] = stamp;
+                        self.offer(t, w);
+                    }
+                }
+            }
+            if tf.len() > 2 * self.live_faces[ti] as usize + 64 {
+                self.work += tf.len() as u64;
+                tf.retain(|&f| self.face_alive[f as usize]);
+            }
+        } else {
+            self.changed[ti] = stamp;
+            self.work += tf.len() as u64;
+            tf.retain(|&f| self.face_alive[f as usize]);
+            self.vertex_faces[ti] = tf;
+            if self.live_faces[ti] as usize > HUB_FACES {
+                // Once, for a vertex of high valence; before the offers, which then go into it.
+                self.make_hub(t, error);
+            }
+            tf = std::mem::take(&mut self.vertex_faces[ti]);
+            for &f in &tf {
+                self.work += 1;
+                for w in self.faces[f as usize] {
+                    if w != t && seen[w as usize] != stamp {
+                        seen[w as usize] = stamp;
+                        self.offer(t, w);
+                    }
                 }
             }
         }
@@ -329,6 +516,14 @@ pub fn build(mesh: &Mesh) -> Result<ProgressiveMesh, PmError> {
 /// number of used vertices, which the collapses (one per vertex that is not a base vertex)
 /// approach but never reach.
 pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) -> Result<ProgressiveMesh, PmError> {
+    build_with_stats(mesh, progress).map(|(pm, _)| pm)
+}
+
+/// As [`build_with_progress`], also returning what the builder did.
+pub fn build_with_stats(
+    mesh: &Mesh,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(ProgressiveMesh, BuildStats), PmError> {
     mesh.validate()?;
     let n = mesh.positions.len();
     let bound = mesh.used_vertices().iter().filter(|&&u| u).count();
@@ -346,23 +541,19 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
     let pos64 = |v: u32| mesh.positions[v as usize].map(f64::from);
     let (mut reach, mut error) = (vec![0.0f64; n], vec![0.0f64; n]);
     let mut collapse_error: Vec<f64> = Vec::new();
+    let mut around = Vec::new();
     while let Some((u, t)) = s.next_collapse() {
         let (ui, ti) = (u as usize, t as usize);
         reach[ti] = reach[ti].max(norm(sub(pos64(u), pos64(t))) + reach[ui]);
-        let mut e = reach[ti].max(error[ti]).max(error[ui]);
-        for &f in s.vertex_faces[ui].iter().chain(&s.vertex_faces[ti]) {
-            if s.face_alive[f as usize] {
-                for w in s.faces[f as usize] {
-                    e = e.max(error[w as usize]);
-                }
-            }
-        }
+        around.clear();
+        let e = reach[ti].max(s.error_around(u, t, &error, &mut around));
         error[ti] = e;
+        s.record_error(t, e, &around);
         collapse_error.push(e);
         // At most n - 1 < 2^31 collapses, so stamps (from 1, above the initial 0 of
         // `changed`) never reach the initial u32::MAX of `seen`.
         let stamp = collapses.len() as u32 + 1;
-        s.collapse(u, t, &mut removed, &mut seen, stamp);
+        s.collapse(u, t, &mut removed, &mut seen, stamp, &error);
         collapses.push((u, t));
         removed_end.push(removed.len());
         if collapses.len().is_multiple_of(1 << 16) {
@@ -411,7 +602,8 @@ pub fn build_with_progress(mesh: &Mesh, progress: &mut dyn FnMut(usize, usize)) 
     let (normals, criteria) = criteria(&pm, &finest, &geometric);
     pm.normals = normals;
     pm.criteria = criteria;
-    Ok(pm)
+    let stats = BuildStats { collapses: collapses.len(), hubs: s.hubs, work: s.work };
+    Ok((pm, stats))
 }
 
 /// Relative slack of the nesting bounds (radius, cone angle) per level.

@@ -42,7 +42,7 @@ pub mod format;
 pub mod refine;
 
 pub use adapt::{Adapter, Stats, View};
-pub use build::{build, build_with_progress, PmError};
+pub use build::{build, build_with_progress, build_with_stats, BuildStats, PmError, HUB_FACES};
 pub use format::{DpmError, EncodeOptions as DpmOptions};
 pub use refine::{refine_all, Refiner};
 
