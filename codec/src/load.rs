@@ -321,6 +321,36 @@ element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0
     }
 
     #[test]
+    fn concave_polygons_load_alike_from_obj_and_ply() {
+        // An L (reflex corner 3: the fan from corner 0 would leave it) and a convex quad.
+        let verts = "0 0 0\n3 0 0\n3 1 0\n1 1 0\n1 2 0\n0 2 0\n5 0 0\n6 0 0\n6 1 0\n5 1 0\n";
+        let obj =
+            format!("{}f 1 2 3 4 5 6\nf 7 8 9 10\n", verts.lines().map(|l| format!("v {l}\n")).collect::<String>());
+        let ply = format!(
+            "ply\nformat ascii 1.0\nelement vertex 10\nproperty float x\nproperty float y\nproperty float z\n\
+element face 2\nproperty list uchar int vertex_indices\nend_header\n{verts}6 0 1 2 3 4 5\n4 6 7 8 9\n"
+        );
+        let o = load_bytes(Path::new("l.obj"), obj.as_bytes(), Format::Obj).unwrap();
+        let p = load_bytes(Path::new("l.ply"), ply.as_bytes(), Format::Ply).unwrap();
+        assert_eq!(o, p);
+        assert_eq!(&o.triangles[4..], &[[6, 7, 8], [6, 8, 9]], "the convex quad is fanned");
+        let l = &o.triangles[..4];
+        let area = |t: &[u32; 3]| {
+            let [a, b, c] = t.map(|i| o.positions[i as usize]);
+            ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2.0
+        };
+        assert!(l.iter().all(|t| area(t) > 0.0), "every triangle keeps the counter-clockwise winding: {l:?}");
+        assert_eq!(l.iter().map(area).sum::<f32>(), 4.0, "the triangles cover the L");
+    }
+
+    #[test]
+    fn obj_points_and_lines_stay_triangles_without_area() {
+        let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1\nf 1 2\nl 2 3\nf 1 2 3\n";
+        let m = load_bytes(Path::new("p.obj"), obj, Format::Obj).unwrap();
+        assert_eq!(m.triangles, vec![[0, 0, 0], [0, 1, 1], [1, 2, 2], [0, 1, 2]]);
+    }
+
+    #[test]
     fn stl_ascii_binary_and_gzip_load_alike() {
         let ascii =
             b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n\

@@ -10,11 +10,14 @@
 //!   as the loaders always did, so convex quads and polygons load to the same triangles.
 //! * A **concave** polygon of up to [`EAR_CLIP_CORNERS`] corners is ear-clipped in the plane
 //!   by the `earcut` crate (a port of Mapbox's earcut, which also copes with self-touching
-//!   and self-intersecting outlines). Every triangle is oriented like the polygon
-//!   (counter-clockwise in the plane, so its normal agrees with the Newell normal). earcut
-//!   leaves out corners that carry no area (a repeated corner, a corner in the middle of a
-//!   straight edge), so such a corner of a concave polygon is in no triangle; the triangles
-//!   still cover the polygon exactly.
+//!   outlines, such as a bridge to a hole traversed both ways). Every triangle is oriented
+//!   like the polygon (counter-clockwise in the plane, so its normal agrees with the Newell
+//!   normal), starts at its first corner in the polygon, and the triangles are sorted, so a
+//!   triangulation that is the fan is written as the fan. earcut leaves out corners that carry
+//!   no area (a repeated corner, a corner in the middle of a straight edge), so such a corner
+//!   of a concave polygon is in no triangle; the triangles still cover the polygon exactly.
+//!   But when corners are left out of an outline that crosses itself (a twisted quad, which
+//!   is a bow tie in its plane), the polygon is fanned as before, keeping every corner.
 //! * A larger concave polygon is triangulated by the constrained Delaunay triangulation of
 //!   its outline (the `spade` crate, exact predicates, `O(n log n)`), keeping the triangles
 //!   inside: those reached from the left of an outline edge without crossing one. Ear
@@ -64,6 +67,20 @@ pub(super) struct Triangulator {
     /// rounding of `f32` positions of this magnitude.
     noise: f64,
     ears: Vec<u32>,
+    /// Triangles as corner places in the polygon.
+    tris: Vec<[u32; 3]>,
+}
+
+/// Appends triangles given by corner places (oriented like the polygon), each rotated to start
+/// at its first corner in the polygon and sorted: so a triangulation that happens to be the
+/// fan comes out exactly as [`fan`] writes it.
+fn emit(poly: &[u32], tris: &mut [[u32; 3]], out: &mut Vec<[u32; 3]>) {
+    for t in tris.iter_mut() {
+        let m = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
+        *t = [t[m], t[(m + 1) % 3], t[(m + 2) % 3]];
+    }
+    tris.sort_unstable();
+    out.extend(tris.iter().map(|t| t.map(|k| poly[k as usize])));
 }
 
 /// The fan `(v0, v1, v2), (v0, v2, v3), ...` of a polygon of at least three corners.
@@ -93,18 +110,20 @@ impl Triangulator {
             return;
         }
         self.earcut.earcut(self.plane.iter().copied(), &[] as &[u32], &mut self.ears);
-        if self.ears.is_empty() {
+        if self.ears.len() < 3 * (poly.len() - 2) && self.crosses_itself() {
+            // A corner in no triangle of an outline that crosses itself (a twisted quad seen in
+            // its plane is a bow tie): the fan keeps every corner, as before.
             return fan(poly, out);
         }
+        let mut tris = std::mem::take(&mut self.tris);
+        tris.clear();
         for t in self.ears.chunks_exact(3) {
-            let [a, b, c] = [t[0], t[1], t[2]].map(|k| k as usize);
-            let tri = [poly[a], poly[b], poly[c]];
-            out.push(if cross2(self.plane[a], self.plane[b], self.plane[c]) < 0.0 {
-                [tri[0], tri[2], tri[1]]
-            } else {
-                tri
-            });
+            let [a, b, c] = [t[0], t[1], t[2]];
+            let flip = cross2(self.plane[a as usize], self.plane[b as usize], self.plane[c as usize]) < 0.0;
+            tris.push(if flip { [a, c, b] } else { [a, b, c] });
         }
+        emit(poly, &mut tris, out);
+        self.tris = tris;
     }
 
     /// Triangulates the projected polygon by the constrained Delaunay triangulation of its
@@ -173,13 +192,33 @@ impl Triangulator {
                 }
             }
         }
-        let before = out.len();
-        for face in cdt.inner_faces() {
-            if inside[face.fix().index()] {
-                out.push(face.vertices().map(|v| poly[v.data().k as usize]));
-            }
+        let mut tris: Vec<[u32; 3]> =
+            cdt.inner_faces().filter(|f| inside[f.fix().index()]).map(|f| f.vertices().map(|v| v.data().k)).collect();
+        if tris.is_empty() {
+            return false;
         }
-        out.len() > before
+        emit(poly, &mut tris, out);
+        true
+    }
+
+    /// Whether two edges of the projected outline that share no corner cross properly (a
+    /// quadratic test, for the ear-clipped polygons only).
+    fn crosses_itself(&self) -> bool {
+        let p = &self.plane;
+        let n = p.len();
+        let side = |a, b, c| cross2(a, b, c).partial_cmp(&0.0);
+        (0..n).any(|i| {
+            let (a, b) = (p[i], p[(i + 1) % n]);
+            (i + 2..n).filter(|&j| (j + 1) % n != i).any(|j| {
+                let (c, d) = (p[j], p[(j + 1) % n]);
+                let (s1, s2) = (side(a, b, c), side(a, b, d));
+                let (s3, s4) = (side(c, d, a), side(c, d, b));
+                let opposite = |x: Option<std::cmp::Ordering>, y| {
+                    x.is_some_and(|x| x != std::cmp::Ordering::Equal) && y == x.map(|x| x.reverse())
+                };
+                opposite(s1, s2) && opposite(s3, s4)
+            })
+        })
     }
 
     /// Projects the corners into `plane`, a 2D frame of the plane of the polygon's Newell
@@ -460,5 +499,7 @@ mod tests {
         bow.extend((0..400).map(|i| [1.0 - i as f64 / 400.0, 1.0 - i as f64 / 400.0 * 0.5]));
         bow.extend([[0.5, -1.0], [0.0, 1.0]]);
         let _ = triangulate(&bow);
+        // A bow tie (a twisted quad in its plane) has no triangulation: it is fanned, as before.
+        assert_eq!(triangulate(&[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]), vec![[0, 1, 2], [0, 2, 3]]);
     }
 }
