@@ -402,11 +402,14 @@ impl ToMaster {
                     };
                     let triangles = r.u32("triangles")?;
                     let rgba = r.bytes("pixels")?.to_vec();
-                    let expected = (rect[2] - rect[0]) as usize * (rect[3] - rect[1]) as usize * 4;
-                    if rgba.len() != expected {
+                    // In u64 and checked: a forged rect's area times 4 overflows even 64 bits
+                    // (found by the decode_protocol fuzz target).
+                    let expected = ((rect[2] - rect[0]) as u64 * (rect[3] - rect[1]) as u64).checked_mul(4);
+                    if expected != Some(rgba.len() as u64) {
                         return Err(ProtocolError::Invalid(format!(
-                            "tile {index} has {} bytes of pixels, its rectangle needs {expected}",
-                            rgba.len()
+                            "tile {index} has {} bytes of pixels, its rectangle {rect:?} needs {}",
+                            rgba.len(),
+                            expected.map_or("more than 2^64".into(), |e| e.to_string())
                         )));
                     }
                     tiles.push(TilePixels { index, rect, times, triangles, rgba });
@@ -481,6 +484,13 @@ mod tests {
         ] {
             assert_eq!(ToMaster::decode(&m.encode()), Ok(m));
         }
+    }
+
+    #[test]
+    fn a_forged_rect_whose_area_overflows_is_an_error() {
+        // The fuzzer's find: a Pixels tile whose rect area times 4 overflows 64 bits.
+        let bytes = include_bytes!("../../fuzz/regressions/decode_protocol/pixels-rect-overflow");
+        assert!(matches!(ToMaster::decode(bytes), Err(ProtocolError::Invalid(_)) | Err(ProtocolError::Truncated(_))));
     }
 
     #[test]
