@@ -20,6 +20,14 @@ pub fn summary(output: &Path, line: std::fmt::Arguments) {
     }
 }
 
+/// Checks, before any work, a mesh output (`.ply`, `.obj`, or `-` for PLY on stdout) that
+/// must not be `input`, and returns its writer.
+pub fn mesh_output(input: &Path, output: &Path, what: &str) -> Result<codec::save::WriteMesh> {
+    check_extension(output, &["ply", "obj"], what)?;
+    check_distinct(&[input], &[output])?;
+    Ok(codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w)))
+}
+
 /// Reads an input file whole: regular files only (see [`codec::input::read_file`]).
 pub fn read_input(path: &Path) -> Result<Vec<u8>> {
     codec::input::read_file(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
@@ -68,16 +76,10 @@ pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
     Ok(())
 }
 
-fn read_bft(path: &Path) -> Result<Vec<u8>> {
-    read_input(path)
-}
-
 /// `tessera decode IN.bft -o OUT.ply|OUT.obj`.
 pub fn decode(input: &Path, output: &Path) -> Result<()> {
-    check_extension(output, &["ply", "obj"], "the output of decode")?;
-    let writer = codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w));
-    check_distinct(&[input], &[output])?;
-    let bytes = read_bft(input)?;
+    let writer = mesh_output(input, output, "the output of decode")?;
+    let bytes = read_input(input)?;
     let start = Instant::now();
     let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
     let mesh = decoded.to_mesh();
@@ -149,7 +151,7 @@ impl StatsReport {
 /// `tessera stats IN.bft [--json]`. The whole file is decoded too, so a file whose
 /// sections pass their checksums but whose streams are inconsistent is reported as corrupt.
 pub fn stats(input: &Path, json: bool) -> Result<()> {
-    let bytes = read_bft(input)?;
+    let bytes = read_input(input)?;
     let report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
     bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
     if json {

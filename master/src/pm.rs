@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use crate::args::CameraArgs;
 use crate::commands::load_mesh;
-use crate::commands::{read_input, summary};
+use crate::commands::{mesh_output, read_input, summary};
 use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
 
@@ -66,10 +66,6 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
     Ok(())
 }
 
-fn read(path: &Path) -> Result<Vec<u8>> {
-    read_input(path)
-}
-
 /// The numbers `tessera pm stats --json` prints; the `*_per_vertex` fields are the paper's
 /// breakdown in bytes per vertex.
 #[derive(Debug, Serialize)]
@@ -121,7 +117,7 @@ impl PmStatsReport {
 
 /// `tessera pm stats IN.dpm [--json]` (decodes every operation, so corruption is reported).
 pub fn stats(input: &Path, json: bool) -> Result<()> {
-    let bytes = read(input)?;
+    let bytes = read_input(input)?;
     let r = PmStatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&r)?);
@@ -173,10 +169,8 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     if !(opts.normal_weight.is_finite() && opts.normal_weight >= 0.0) {
         bail!("--normal-weight must be zero or positive, not {}", opts.normal_weight);
     }
-    check_extension(output, &["ply", "obj"], "the output of pm adapt")?;
-    let writer = codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w));
-    check_distinct(&[input], &[output])?;
-    let bytes = read(input)?;
+    let writer = mesh_output(input, output, "the output of pm adapt")?;
+    let bytes = read_input(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
     pb.finish_and_clear();
