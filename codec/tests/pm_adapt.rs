@@ -7,7 +7,7 @@ mod common;
 
 use std::time::Instant;
 
-use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, View, NONE};
+use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, Viewpoint, NONE};
 use codec::view::Camera;
 use codec::Mesh;
 use common::{shared_meshes, sorted_canonical, soup};
@@ -133,14 +133,14 @@ fn bbox(pm: &ProgressiveMesh) -> ([f32; 3], [f32; 3]) {
 }
 
 /// A view from which everything that is not back-facing needs splitting when `error_px` is 0.
-fn far_view(pm: &ProgressiveMesh) -> View {
+fn far_view(pm: &ProgressiveMesh) -> Viewpoint {
     let (lo, hi) = bbox(pm);
-    View::new(&Camera::framing(lo, hi, 1.0), 64, 64, 0.0)
+    Viewpoint::new(&Camera::framing(lo, hi, 1.0), 64, 64, 0.0)
 }
 
 /// Frame `k` of a camera path around the mesh: an orbit that zooms in (some frames see only
 /// part of the model, some parts leave the frustum) and out again.
-fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> View {
+fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> Viewpoint {
     let (lo, hi) = bbox(pm);
     let (w, h) = (640u32, 480u32);
     let base = Camera::framing(lo, hi, w as f32 / h as f32);
@@ -152,13 +152,13 @@ fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> Vi
     let size = (Vec3::from(hi) - Vec3::from(lo)).length().max(1e-3);
     let target = base.target + Vec3::new(0.2 * size * (5.0 * t).sin(), 0.0, 0.0);
     let cam = Camera { eye: target + rot * offset, target, near: base.near * zoom * 0.1, far: base.far * 2.0, ..base };
-    let mut v = View::new(&cam, w, h, error_px);
+    let mut v = Viewpoint::new(&cam, w, h, error_px);
     v.attribute_scale = 0.05 * size;
     v
 }
 
 /// Checks that one pass splits every active vertex the criteria ask to split.
-fn pass_checked(pm: &ProgressiveMesh, a: &mut Adapter, view: &View) -> codec::pm::Stats {
+fn pass_checked(pm: &ProgressiveMesh, a: &mut Adapter, view: &Viewpoint) -> codec::pm::PassStats {
     let wanted: Vec<u32> = a
         .next_splits()
         .iter()
@@ -174,7 +174,7 @@ fn pass_checked(pm: &ProgressiveMesh, a: &mut Adapter, view: &View) -> codec::pm
 }
 
 /// Passes until converged, each checked.
-fn converge(pm: &ProgressiveMesh, tree: &SplitTree, a: &mut Adapter, view: &View) -> usize {
+fn converge(pm: &ProgressiveMesh, tree: &SplitTree, a: &mut Adapter, view: &Viewpoint) -> usize {
     for passes in 0..MAX_PASSES {
         let st = pass_checked(pm, a, view);
         check_state(pm, tree, a);
@@ -187,7 +187,7 @@ fn converge(pm: &ProgressiveMesh, tree: &SplitTree, a: &mut Adapter, view: &View
 
 /// A converged state is the fixpoint: no active vertex asks to split, every collapsible pair's
 /// collapse is asked to stay split, and a further pass changes nothing.
-fn check_converged(pm: &ProgressiveMesh, a: &mut Adapter, view: &View) {
+fn check_converged(pm: &ProgressiveMesh, a: &mut Adapter, view: &Viewpoint) {
     let active = a.active().to_vec();
     for (i, &s) in a.next_splits().iter().enumerate() {
         assert!(s == NONE || !view.needs_split(pm, s as usize), "vertex {} still wants split {s}", active[i]);
@@ -385,12 +385,12 @@ fn bunny_adaption_speed() {
 #[test]
 fn tile_views_are_the_tiles_sub_frusta() {
     let cam = Camera::framing([-1.0; 3], [1.0; 3], 1.5);
-    let view = View::new(&cam, 300, 200, 0.5);
+    let view = Viewpoint::new(&cam, 300, 200, 0.5);
     let whole = view.for_tile([0, 0, 300, 200]);
     for (a, b) in whole.planes().iter().zip(view.planes()) {
         assert!((*a - b).abs().max_element() < 1e-5, "{a} vs {b}");
     }
-    let inside = |v: &View, p: Vec3| v.planes().iter().all(|q| q.truncate().dot(p) + q.w >= -1e-5);
+    let inside = |v: &Viewpoint, p: Vec3| v.planes().iter().all(|q| q.truncate().dot(p) + q.w >= -1e-5);
     let grid = codec::view::TileGrid::new(300, 200, 3, 2).unwrap();
     let mut hits = 0;
     for k in 0..400 {

@@ -6,7 +6,7 @@ mod common;
 use std::collections::HashMap;
 use std::time::Instant;
 
-use codec::pm::format::{self, decode, encode, quantized, Dpm, EncodeOptions, Stats};
+use codec::pm::format::{self, decode, encode, quantized, Dpm, DpmStats, EncodeOptions};
 use codec::pm::{build, refine_all, DpmError, ProgressiveMesh, SplitTree, NONE};
 use codec::Mesh;
 use common::{shared_meshes, sorted_canonical, soup, XorShift};
@@ -87,7 +87,7 @@ fn shared_meshes_round_trip_and_ops_decode_alone() {
         let pm = build(&load(rel)).unwrap();
         let enc = round_trip(&pm);
         single_ops(&pm, &enc);
-        let st = Stats::of(&enc.bytes).unwrap();
+        let st = DpmStats::of(&enc.bytes).unwrap();
         eprintln!("{rel}: {} vertices, {:.2} bytes/vertex", st.header.vertices, st.bytes_per_vertex());
     }
 }
@@ -123,7 +123,7 @@ fn random_byte_flips_are_detected() {
     for b in common::bit_flipped_copies(&bytes, 2000) {
         if b != bytes {
             assert!(decode(&b).is_err(), "a corrupted file decoded");
-            assert!(Stats::of(&b).is_err());
+            assert!(DpmStats::of(&b).is_err());
         }
     }
 }
@@ -155,7 +155,7 @@ fn bunny_is_at_most_12_bytes_per_vertex() {
     let pm = build(&load("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
     let enc = round_trip(&pm);
     let swapped = single_ops(&pm, &enc);
-    let st = Stats::of(&enc.bytes).unwrap();
+    let st = DpmStats::of(&enc.bytes).unwrap();
     eprintln!("bunny: {:.3} bytes/vertex, {swapped} of {} operations swapped", st.bytes_per_vertex(), pm.splits.len());
     assert!(st.bytes_per_vertex() <= 12.0, "bunny: {:.3} bytes/vertex", st.bytes_per_vertex());
     assert!(swapped > 0, "no operation is stored swapped");
@@ -177,7 +177,7 @@ fn bunny_and_dragon_sizes() {
         let t = Instant::now();
         decode(&enc.bytes).unwrap();
         let dec_s = t.elapsed().as_secs_f64();
-        let st = Stats::of(&enc.bytes).unwrap();
+        let st = DpmStats::of(&enc.bytes).unwrap();
         eprintln!(
             "{rel}: {} vertices, {} splits, {} bytes = {:.2} bytes/vertex: criteria {:.2}, tree pointers {:.2}, \
              connectivity {:.2}, geometry {:.2}, padding {:.2}, base {:.3}, tables {:.3}",

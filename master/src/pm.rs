@@ -4,8 +4,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use codec::pm::format::{self, EncodeOptions, Stats};
-use codec::pm::{Adapter, View};
+use codec::pm::format::{self, DpmStats, EncodeOptions};
+use codec::pm::{Adapter, Viewpoint};
 use codec::Mesh;
 use serde::Serialize;
 
@@ -91,7 +91,7 @@ pub struct PmStatsReport {
 
 impl PmStatsReport {
     pub fn of(bytes: &[u8]) -> Result<Self> {
-        let s = Stats::of(bytes)?;
+        let s = DpmStats::of(bytes)?;
         let h = s.header;
         Ok(PmStatsReport {
             bytes: s.bytes,
@@ -145,7 +145,7 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
 pub struct AdaptOptions {
     pub size: (u32, u32),
     pub error_px: f32,
-    /// Normal error weight, a fraction of the bounding box diagonal (see [`View::attribute_scale`]).
+    /// Normal error weight, a fraction of the bounding box diagonal (see [`Viewpoint::attribute_scale`]).
     pub normal_weight: f32,
     /// Every split, regardless of the view.
     pub full: bool,
@@ -181,7 +181,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     } else {
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
         crate::args::check_camera(&cam, size.1)?;
-        let mut view = View::new(&cam, size.0, size.1, error_px);
+        let mut view = Viewpoint::new(&cam, size.0, size.1, error_px);
         view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
         Some(view)
     };

@@ -477,7 +477,7 @@ fn pm_jobs(
     lo: [f32; 3],
     hi: [f32; 3],
 ) -> FrameJobs {
-    let view = codec::pm::View::new(cam, grid.width, grid.height, args.error_px);
+    let view = codec::pm::Viewpoint::new(cam, grid.width, grid.height, args.error_px);
     let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
     // Only tiles the model's bounding box can reach: every vertex a progressive mesh can
     // activate lies in it, so the other tiles stay transparent and cost the workers nothing.

@@ -4,7 +4,7 @@
 //!
 //! With a progressive mesh (a `Model` message, then `PmFrame`s) the worker uploads the mesh
 //! once and keeps one GPU adaptation per tile it has rendered: every frame it adapts each of
-//! its tiles to the tile's sub-frustum ([`codec::pm::View::for_tile`]), starting from the
+//! its tiles to the tile's sub-frustum ([`codec::pm::Viewpoint::for_tile`]), starting from the
 //! tile's mesh of the frame before, and renders it from the GPU buffers.
 
 use std::collections::HashMap;
@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use codec::pm::View;
+use codec::pm::Viewpoint;
 use glam::{Mat4, Vec3};
 
 use crate::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
@@ -312,7 +312,7 @@ impl PmTiles {
     /// renders it.
     fn render(&mut self, renderer: &mut Renderer, job: &PmFrameJob) -> Result<Vec<TilePixels>, String> {
         let view_proj = Mat4::from_cols_array(&job.view_proj);
-        let view = View {
+        let view = Viewpoint {
             view_proj,
             eye: Vec3::from(job.eye),
             width: job.width,

@@ -38,7 +38,7 @@
 use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
-use codec::pm::{ProgressiveMesh, SplitTree, View, NONE};
+use codec::pm::{PassStats, ProgressiveMesh, SplitTree, Viewpoint, NONE};
 use wgpu::util::DeviceExt;
 
 use crate::render::{map_read, scoped, wait_for, RenderError, Renderer};
@@ -94,9 +94,6 @@ const STAT_REMOVED_FACES: usize = 2;
 const STATS_BYTES: u64 = 32;
 /// Readback: vertex total, face total, then the 8 counters.
 const READBACK_BYTES: u64 = 8 + STATS_BYTES;
-
-/// What one GPU pass did: the same fields as the CPU reference's [`codec::pm::Stats`].
-pub type Stats = codec::pm::Stats;
 
 /// A compute pipeline and its bind group layout, taken from it once: `get_bind_group_layout`
 /// registers a new layout handle on every call, and calling it for every bind group of every
@@ -470,13 +467,13 @@ impl GpuAdapter {
     }
 
     /// One adaptation pass for `view` (Algorithms 1 to 5).
-    pub fn adapt(&mut self, view: &View) -> Result<Stats, RenderError> {
+    pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, RenderError> {
         self.pass(Some(view))
     }
 
     /// One pass that splits every vertex that can split and collapses nothing (the CPU
     /// reference's `refine_step`).
-    pub fn refine_step(&mut self) -> Result<Stats, RenderError> {
+    pub fn refine_step(&mut self) -> Result<PassStats, RenderError> {
         self.pass(None)
     }
 
@@ -492,7 +489,7 @@ impl GpuAdapter {
 
     /// Passes until one changes nothing, at most `max_passes`; returns the number of passes
     /// that changed something, or `None` if still not converged.
-    pub fn adapt_until_converged(&mut self, view: &View, max_passes: usize) -> Result<Option<usize>, RenderError> {
+    pub fn adapt_until_converged(&mut self, view: &Viewpoint, max_passes: usize) -> Result<Option<usize>, RenderError> {
         for k in 0..max_passes {
             if self.adapt(view)?.converged() {
                 return Ok(Some(k));
@@ -501,16 +498,16 @@ impl GpuAdapter {
         Ok(None)
     }
 
-    fn pass(&mut self, view: Option<&View>) -> Result<Stats, RenderError> {
+    fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, RenderError> {
         let device = self.device.clone();
         scoped(&device, || self.pass_unscoped(view))
     }
 
-    fn pass_unscoped(&mut self, view: Option<&View>) -> Result<Stats, RenderError> {
+    fn pass_unscoped(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, RenderError> {
         let pass_start = std::time::Instant::now();
         self.times = [0.0; 3];
         let (n, m) = (self.n, self.m);
-        let unchanged = Stats { vertices: n as usize, faces: m as usize, ..Default::default() };
+        let unchanged = PassStats { vertices: n as usize, faces: m as usize, ..Default::default() };
         if n == 0 {
             return Ok(unchanged);
         }
@@ -600,7 +597,7 @@ impl GpuAdapter {
             RenderError::Gpu(format!("inconsistent pass totals: {n} vertices, {n_new} after, {collapses} collapses"))
         })?;
         if splits == 0 && collapses == 0 {
-            return Ok(Stats { cancelled: cancelled as usize, ..unchanged });
+            return Ok(PassStats { cancelled: cancelled as usize, ..unchanged });
         }
         let m_new = m - removed + f_add;
 
@@ -703,7 +700,7 @@ impl GpuAdapter {
         self.cur = dst;
         self.n = n_new;
         self.m = m_new;
-        Ok(Stats {
+        Ok(PassStats {
             splits: splits as usize,
             collapses: collapses as usize,
             cancelled: cancelled as usize,

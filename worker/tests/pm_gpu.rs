@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use codec::pm::{build, Adapter, ProgressiveMesh, View};
+use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
 use worker::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
@@ -41,7 +41,7 @@ fn bbox(pm: &ProgressiveMesh) -> (Vec3, Vec3) {
 
 /// Frame `k` of `frames` of a path that orbits, zooms in until parts of the model leave the
 /// frustum, pans, and zooms out again, at 1920x1080 with normal error counted.
-fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> View {
+fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> Viewpoint {
     let (lo, hi) = bbox(pm);
     let (w, h) = (1920u32, 1080u32);
     let base = Camera::framing(lo.to_array(), hi.to_array(), w as f32 / h as f32);
@@ -58,13 +58,13 @@ fn path_view(pm: &ProgressiveMesh, k: usize, frames: usize, error_px: f32) -> Vi
         far: base.far * 2.0,
         ..base
     };
-    let mut v = View::new(&cam, w, h, error_px);
+    let mut v = Viewpoint::new(&cam, w, h, error_px);
     v.attribute_scale = 0.05 * size;
     v
 }
 
 /// One pass on both, then everything compared.
-fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view: Option<&View>, what: &str) {
+fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view: Option<&Viewpoint>, what: &str) {
     let (c, g) = match view {
         Some(v) => (cpu.adapt(v), gpu.adapt(v).unwrap()),
         None => (cpu.refine_step(), gpu.refine_step().unwrap()),
@@ -140,7 +140,7 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
         let (lo, hi) = bbox(&pm);
         let cam = Camera::framing(lo.to_array(), hi.to_array(), 1.0);
         let far = Camera { eye: cam.target + (cam.eye - cam.target) * 50.0, far: cam.far * 100.0, ..cam };
-        let view = View::new(&far, 64, 64, 4.0);
+        let view = Viewpoint::new(&far, 64, 64, 4.0);
         for k in 0..passes + 2 {
             pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} coarsen pass {k}"));
         }
@@ -206,7 +206,7 @@ fn pm_speed() {
         let full_ms = median(&mut full_ms);
 
         // From the base mesh to the converged view: generated triangles per second.
-        let view0 = View::new(&cam_at(0), w, h, 0.5);
+        let view0 = Viewpoint::new(&cam_at(0), w, h, 0.5);
         let mut gpu = GpuAdapter::new(&renderer, &pm, DEFAULT_N_ALLOC).unwrap();
         let start = Instant::now();
         let passes = gpu.adapt_until_converged(&view0, 1000).unwrap().expect("converges");
@@ -222,7 +222,7 @@ fn pm_speed() {
         let (mut classify_ms, mut apply_ms, mut state_ms) = (vec![], vec![], vec![]);
         gpu.set_profiling(true);
         for k in 1..=20 {
-            let view = View::new(&cam_at(k), w, h, 0.5);
+            let view = Viewpoint::new(&cam_at(k), w, h, 0.5);
             let start = Instant::now();
             gpu.adapt(&view).unwrap();
             adapt_ms.push(start.elapsed().as_secs_f64() * 1e3);

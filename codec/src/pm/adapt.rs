@@ -70,7 +70,7 @@ use crate::view::Camera;
 
 /// A view for [`Adapter::adapt`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct View {
+pub struct Viewpoint {
     /// Projection times view matrix (the conventions of [`crate::view`], depth 0..1).
     pub view_proj: Mat4,
     pub eye: Vec3,
@@ -86,11 +86,11 @@ pub struct View {
     pub attribute_scale: f32,
 }
 
-impl View {
+impl Viewpoint {
     /// The view of `camera` on a `width x height` screen, `c_lod` 100, normals ignored.
     pub fn new(camera: &Camera, width: u32, height: u32, error_px: f32) -> Self {
         let h = height.max(1) as f32;
-        View {
+        Viewpoint {
             view_proj: camera.view_proj(width.max(1) as f32 / h),
             eye: camera.eye,
             width,
@@ -107,7 +107,7 @@ impl View {
     /// threshold and pixels per unit. Adapted for it, a mesh meets this view's error bound
     /// inside the rect and coarsens outside with the `c_lod` falloff, so a tile renderer pays
     /// only for its own tile.
-    pub fn for_tile(&self, rect: [u32; 4]) -> View {
+    pub fn for_tile(&self, rect: [u32; 4]) -> Viewpoint {
         let (w, h) = (self.width.max(1) as f32, self.height.max(1) as f32);
         let [x0, y0, x1, y1] = rect.map(|v| v as f32);
         let (l, r) = (2.0 * x0 / w - 1.0, 2.0 * x1 / w - 1.0);
@@ -119,7 +119,7 @@ impl View {
             Vec4::Z,
             Vec4::new(-(r + l) / (r - l), -(t + b) / (t - b), 0.0, 1.0),
         );
-        View { view_proj: crop * self.view_proj, width: rect[2] - rect[0], height: rect[3] - rect[1], ..*self }
+        Viewpoint { view_proj: crop * self.view_proj, width: rect[2] - rect[0], height: rect[3] - rect[1], ..*self }
     }
 
     /// The frustum planes (left, right, bottom, top, near, far), normalised to world distances,
@@ -145,12 +145,12 @@ impl View {
 
 /// A view prepared for evaluation.
 struct Eval {
-    view: View,
+    view: Viewpoint,
     planes: [Vec4; 6],
 }
 
 impl Eval {
-    fn new(view: &View) -> Self {
+    fn new(view: &Viewpoint) -> Self {
         Eval { view: *view, planes: view.planes() }
     }
 
@@ -162,14 +162,14 @@ impl Eval {
     }
 }
 
-/// The refinement test of [`View::needs_split`] (see the module docs) for a split whose vertex
+/// The refinement test of [`Viewpoint::needs_split`] (see the module docs) for a split whose vertex
 /// lies at `center` with unit normal `normal` (or zero).
 ///
 /// Back faces: with `a = angle(n, c - eye)`, `alpha = asin(sin_alpha)` and
 /// `beta = asin(r / |c - eye|)`, all in `[0, 90]` degrees once `n . (c - eye) > 0`, the test
 /// `a + alpha + beta < 90` degrees is decided by the signs of `cos(a + alpha)` and
 /// `cos(a + alpha + beta)`, computed from the sines and cosines by the addition theorems.
-pub fn needs_split(view: &View, planes: &[Vec4; 6], center: [f32; 3], normal: [f32; 3], crit: &Criteria) -> bool {
+pub fn needs_split(view: &Viewpoint, planes: &[Vec4; 6], center: [f32; 3], normal: [f32; 3], crit: &Criteria) -> bool {
     let r = crit.radius;
     let (tx, ty, tz) = (center[0] - view.eye.x, center[1] - view.eye.y, center[2] - view.eye.z);
     let dist2 = tx * tx + ty * ty + tz * tz;
@@ -231,7 +231,7 @@ impl Cached {
 
 /// What one pass did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Stats {
+pub struct PassStats {
     pub splits: usize,
     pub collapses: usize,
     /// Collapses cancelled because their target split (Algorithm 2).
@@ -241,7 +241,7 @@ pub struct Stats {
     pub faces: usize,
 }
 
-impl Stats {
+impl PassStats {
     /// No split and no collapse: the state is converged for this view.
     pub fn converged(&self) -> bool {
         self.splits == 0 && self.collapses == 0
@@ -314,19 +314,19 @@ impl<'a> Adapter<'a> {
     }
 
     /// One adaption pass for `view` (Algorithms 1 to 5).
-    pub fn adapt(&mut self, view: &View) -> Stats {
+    pub fn adapt(&mut self, view: &Viewpoint) -> PassStats {
         let eval = Eval::new(view);
         self.pass(&|c| eval.needs(c))
     }
 
-    /// Passes until converged ([`Stats::converged`]), at most `max_passes`; returns the number of
+    /// Passes until converged ([`PassStats::converged`]), at most `max_passes`; returns the number of
     /// passes that changed something, or `None` if still not converged.
-    pub fn adapt_until_converged(&mut self, view: &View, max_passes: usize) -> Option<usize> {
+    pub fn adapt_until_converged(&mut self, view: &Viewpoint, max_passes: usize) -> Option<usize> {
         (0..max_passes).find(|_| self.adapt(view).converged())
     }
 
     /// One pass that splits every active vertex that has a split (and collapses nothing).
-    pub fn refine_step(&mut self) -> Stats {
+    pub fn refine_step(&mut self) -> PassStats {
         self.pass(&|_| true)
     }
 
@@ -384,7 +384,7 @@ impl<'a> Adapter<'a> {
         }
     }
 
-    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> Stats {
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
         let pm = self.pm;
         let n = self.fvid.len();
 
@@ -414,7 +414,7 @@ impl<'a> Adapter<'a> {
         let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
         let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
         if splits == 0 && collapses == 0 {
-            return Stats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() };
+            return PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() };
         }
 
         // Algorithm 3: memory management.
@@ -521,6 +521,6 @@ impl<'a> Adapter<'a> {
         self.node = vertices.par_iter().map(|v| v.2).collect();
         self.split_cache = vertices.par_iter().map(|v| v.3).collect();
         self.collapse_cache = vertices.par_iter().map(|v| v.4).collect();
-        Stats { splits, collapses, cancelled, vertices: self.fvid.len(), faces }
+        PassStats { splits, collapses, cancelled, vertices: self.fvid.len(), faces }
     }
 }

@@ -97,7 +97,7 @@
 //!
 //! Decisions where the paper is silent or that differ from it:
 //! * static canonical Huffman codes instead of arithmetic coding (every operation is padded to
-//!   a byte; the padding is reported in [`Stats`]). Measured (`tessera pm build` prints it,
+//!   a byte; the padding is reported in [`DpmStats`]). Measured (`tessera pm build` prints it,
 //!   from [`Encoded::symbol_bits`]): the entropy-coded symbols take 8.14 bytes per vertex on the
 //!   bunny with these codes against 7.94 at their entropy, 7.69 against 7.57 on the dragon; an
 //!   arithmetic coder could save at most those 0.20 and 0.12 bytes, and must then terminate
@@ -422,7 +422,7 @@ fn unzigzag(u: u64) -> i64 {
 
 // ---- symbol coding --------------------------------------------------------------------------
 
-/// The fields of an operation, for the size breakdown in [`Stats`].
+/// The fields of an operation, for the size breakdown in [`DpmStats`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(usize)]
 enum Kind {
@@ -1749,7 +1749,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
 
 /// Sizes of a `.dpm` file, with the paper's breakdown of the operations (section 6).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Stats {
+pub struct DpmStats {
     pub header: Header,
     pub bytes: usize,
     /// Refinement criteria (sin alpha, errors, radius).
@@ -1771,9 +1771,9 @@ pub struct Stats {
     pub framing_bytes: usize,
 }
 
-impl Stats {
+impl DpmStats {
     /// Measures a file (decoding every operation).
-    pub fn of(bytes: &[u8]) -> Result<Stats, DpmError> {
+    pub fn of(bytes: &[u8]) -> Result<DpmStats, DpmError> {
         let dpm = Dpm::parse(bytes)?;
         let mut bits = [0u64; KINDS];
         dpm.decode_all(Some(&mut bits))?;
@@ -1792,7 +1792,7 @@ impl Stats {
         ]);
         let geometry_bytes = sum(&[Kind::Position, Kind::Normal]);
         let [tables, base, ops] = dpm.section_lens;
-        Ok(Stats {
+        Ok(DpmStats {
             header: dpm.header,
             bytes: bytes.len(),
             criteria_bytes,

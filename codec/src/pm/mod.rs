@@ -41,7 +41,7 @@ pub mod build;
 pub mod format;
 pub mod refine;
 
-pub use adapt::{Adapter, Stats, View};
+pub use adapt::{Adapter, PassStats, Viewpoint};
 pub use build::{build, build_with_progress, build_with_stats, BuildStats, PmError, HUB_FACES};
 pub use format::{DpmError, EncodeOptions as DpmOptions};
 pub use refine::{refine_all, Refiner};
@@ -98,7 +98,7 @@ pub struct Criteria {
     pub geometric_error: f32,
     /// Attribute (normal) error: a bound on the chord `|n_w - n_v|` between the unit normal of
     /// any finest vertex `w` of the region and `v`'s normal (0 to 2, dimensionless; a view
-    /// converts it into a length, see [`adapt::View::attribute_scale`]).
+    /// converts it into a length, see [`adapt::Viewpoint::attribute_scale`]).
     pub attribute_error: f32,
     /// Radius of the bounding sphere around `v`'s position containing the region's finest
     /// vertices and the children's spheres (for frustum, back-face and screen-space tests).
