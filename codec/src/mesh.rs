@@ -87,6 +87,21 @@ impl Mesh {
     }
 }
 
+/// The axis-aligned bounding box of `points`, as (min, max) corners; `None` when there are
+/// none (or when every x is NaN). NaN coordinates are skipped (`f32::min` ignores them):
+/// callers that must refuse them check first.
+pub fn bounding_box<'a>(points: impl IntoIterator<Item = &'a [f32; 3]>) -> Option<([f32; 3], [f32; 3])> {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in points {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    (lo[0] <= hi[0]).then_some((lo, hi))
+}
+
 /// Uniform quantization of positions over the bounding box of the used vertices.
 ///
 /// One step size serves all three axes (the largest extent over `2^bits - 1` steps), as in
@@ -106,20 +121,10 @@ impl Quantization {
         if !(8..=24).contains(&bits) {
             return Err(MeshError::QuantBits(bits));
         }
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        for (i, p) in positions.iter().enumerate() {
-            if used.is_some_and(|u| !u[i]) {
-                continue;
-            }
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        if lo[0] > hi[0] {
+        let used = positions.iter().enumerate().filter(|(i, _)| used.is_none_or(|u| u[*i])).map(|(_, p)| p);
+        let Some((lo, hi)) = bounding_box(used) else {
             return Ok(Quantization { bits, min: [0.0; 3], step: 1.0 });
-        }
+        };
         let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max);
         let levels = ((1u32 << bits) - 1) as f32;
         let step = if extent > 0.0 { extent / levels } else { 1.0 };

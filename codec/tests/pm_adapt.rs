@@ -118,18 +118,7 @@ fn check_refine_fully(mesh: &Mesh, pm: &ProgressiveMesh) {
 }
 
 fn bbox(pm: &ProgressiveMesh) -> ([f32; 3], [f32; 3]) {
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in &pm.positions {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    if pm.positions.is_empty() {
-        return ([0.0; 3], [1.0; 3]);
-    }
-    (lo, hi)
+    codec::mesh::bounding_box(&pm.positions).unwrap_or(([0.0; 3], [1.0; 3]))
 }
 
 /// A view from which everything that is not back-facing needs splitting when `error_px` is 0.

@@ -8,8 +8,8 @@ pub mod protocol;
 pub mod render;
 pub mod transport;
 
+use codec::bft::normals::vertex_normals;
 use codec::bft::Decoded;
-use glam::Vec3;
 
 /// GPU-ready geometry: float positions, smooth unit normals, and a triangle index list.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -20,28 +20,12 @@ pub struct RenderMesh {
 }
 
 impl RenderMesh {
-    /// Builds buffers from a decoded mesh. Normals are area-weighted averages of the face
-    /// normals around each *input* vertex: duplicate slots share their source's normal, so
-    /// the seams the encoder cut at non-manifold vertices do not show in the shading.
+    /// Builds buffers from a decoded mesh, with the normals of
+    /// [`codec::bft::normals::vertex_normals`], which rank 0 computes the same way.
     pub fn from_decoded(decoded: &Decoded) -> RenderMesh {
         let q = decoded.quantization();
         let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
-        let mut source: Vec<u32> = (0..positions.len() as u32).collect();
-        for &(slot, src) in &decoded.duplicates {
-            source[slot as usize] = source[src as usize];
-        }
-        let mut acc = vec![Vec3::ZERO; positions.len()];
-        for t in &decoded.triangles {
-            let [a, b, c] = t.map(|s| Vec3::from(positions[s as usize]));
-            // The cross product's length is twice the area: larger faces weigh more.
-            let n = (b - a).cross(c - a);
-            for &s in t {
-                acc[source[s as usize] as usize] += n;
-            }
-        }
-        let normals = (0..positions.len())
-            .map(|s| acc[source[s] as usize].try_normalize().unwrap_or(Vec3::Z).to_array())
-            .collect();
+        let normals = vertex_normals(&positions, &decoded.triangles, &decoded.duplicates);
         let indices = decoded.triangles.iter().flatten().copied().collect();
         RenderMesh { positions, normals, indices }
     }
@@ -55,6 +39,7 @@ impl RenderMesh {
 mod tests {
     use super::*;
     use codec::{bft, Mesh};
+    use glam::Vec3;
 
     #[test]
     fn flat_square_has_up_normals_and_all_triangles() {
@@ -67,22 +52,6 @@ mod tests {
         assert_eq!(rm.triangle_count(), 2);
         for n in &rm.normals {
             assert!((Vec3::from(*n) - Vec3::Z).length() < 1e-6, "{n:?}");
-        }
-    }
-
-    #[test]
-    fn duplicate_slots_share_the_normal_of_their_vertex() {
-        // Two fans sharing only vertex 0 (a non-manifold vertex): the encoder duplicates it.
-        let mesh = Mesh {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.5], [0.0, -1.0, 0.5]],
-            triangles: vec![[0, 1, 2], [0, 3, 4]],
-        };
-        let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
-        let dec = bft::decode(&enc.bytes).unwrap();
-        assert!(!dec.duplicates.is_empty(), "expected the shared vertex to be duplicated");
-        let rm = RenderMesh::from_decoded(&dec);
-        for &(slot, src) in &dec.duplicates {
-            assert_eq!(rm.normals[slot as usize], rm.normals[src as usize]);
         }
     }
 }

@@ -89,6 +89,7 @@ mod encode;
 mod format;
 mod frontier;
 mod model;
+pub mod normals;
 mod prefix;
 pub mod tile_sort;
 mod tile_writer;
