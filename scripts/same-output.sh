@@ -3,7 +3,9 @@
 # origin/main, else main) and at the working tree, writes scripts/outputs.sh's files with both,
 # and compares every file. In `.bft` and `.dpm` files the version field and the header CRC
 # (which covers no version, but moves with it in the comparison) are masked, so a version bump
-# alone compares equal; everything else must match byte for byte.
+# alone compares equal. JSON summaries are compared without their timings (keys ending in
+# `_ms`) and with the output folder's name taken out; everything else must match byte for
+# byte.
 #   usage: scripts/same-output.sh [REV]        (BASE_BIN=path skips building REV)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -25,11 +27,19 @@ scripts/outputs.sh "$BASE_BIN" "$work/before"
 scripts/outputs.sh target/release/tessera "$work/after"
 
 python3 - "$work/before" "$work/after" <<'EOF'
-import os, sys
+import json, os, sys
 before, after = sys.argv[1], sys.argv[2]
 def files(root):
     return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
-def masked(path):
+def untimed(v, root):
+    if isinstance(v, dict):
+        return {k: untimed(x, root) for k, x in v.items() if not k.endswith("_ms")}
+    if isinstance(v, list):
+        return [untimed(x, root) for x in v]
+    return v.replace(root, "OUT") if isinstance(v, str) else v
+def masked(path, root):
+    if path.endswith(".json"):
+        return json.dumps(untimed(json.load(open(path)), root), sort_keys=True).encode()
     b = bytearray(open(path, "rb").read())
     if b[:7] in (b"TESSBFT", b"TESSDPM") and len(b) >= 12:
         h = int.from_bytes(b[10:12], "little")
@@ -42,7 +52,7 @@ for f in bad:
     print(f"only {'before' if f in a else 'after'}: {f}")
 same = 0
 for f in sorted(set(a) & set(b)):
-    if masked(os.path.join(before, f)) == masked(os.path.join(after, f)):
+    if masked(os.path.join(before, f), before) == masked(os.path.join(after, f), after):
         same += 1
     else:
         print(f"differs: {f}")
