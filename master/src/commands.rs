@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use codec::bft::{self, EncodeOptions, Stats};
 use codec::Mesh;
 use serde::Serialize;
@@ -43,9 +43,6 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
 
 /// `tessera encode IN -o OUT.bft [--quant-bits N]`.
 pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
-    if !(8..=24).contains(&quant_bits) {
-        bail!("--quant-bits must be 8 to 24, not {quant_bits}");
-    }
     check_extension(output, &["bft"], "the output of encode")?;
     check_distinct(&[input], &[output])?;
     let mesh = load_mesh(input)?;

@@ -124,7 +124,7 @@ impl Wall {
         let side = |n: u32, size: u32, bezel: u32| n as u64 * size as u64 + (n as u64 - 1) * bezel as u64;
         let (w, h) =
             (side(self.columns, self.display_width, self.bezel_x), side(self.rows, self.display_height, self.bezel_y));
-        crate::args::check_frame_size(w, h).context("the wall (displays and bezels) is too large")
+        crate::cli::check_frame_size(w, h).context("the wall (displays and bezels) is too large")
     }
 
     /// The frame that covers the wall, bezels included (valid once [`Wall::load`] checked it).

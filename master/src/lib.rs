@@ -2,8 +2,7 @@
 //! lives here (the frame loop arrives with the cluster pipeline); so do the file commands
 //! `encode`, `decode` and `stats`.
 
-pub mod args;
-pub mod bandwidth;
+pub mod cli;
 pub mod commands;
 pub mod composite;
 pub mod output;

@@ -3,13 +3,13 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use codec::pm::format::{self, DpmStats, EncodeOptions};
 use codec::pm::{Adapter, Viewpoint};
 use codec::Mesh;
 use serde::Serialize;
 
-use crate::args::CameraArgs;
+use crate::cli::CameraArgs;
 use crate::commands::load_mesh;
 use crate::commands::{mesh_output, read_input, summary};
 use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
@@ -141,6 +141,7 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
 }
 
 /// Options of `tessera pm adapt`.
+/// `pm adapt`'s options, as `master::cli` parsed and checked them.
 #[derive(Clone, Copy, Debug)]
 pub struct AdaptOptions {
     pub size: (u32, u32),
@@ -160,15 +161,6 @@ pub struct AdaptOptions {
 /// the same file for the same mesh.
 pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
     let (size, error_px) = (opts.size, opts.error_px);
-    if size.0 == 0 || size.1 == 0 {
-        bail!("--size must be positive, not {}x{}", size.0, size.1);
-    }
-    if !(error_px.is_finite() && error_px > 0.0) {
-        bail!("--error-px must be a positive number, not {error_px}");
-    }
-    if !(opts.normal_weight.is_finite() && opts.normal_weight >= 0.0) {
-        bail!("--normal-weight must be zero or positive, not {}", opts.normal_weight);
-    }
     let writer = mesh_output(input, output, "the output of pm adapt")?;
     let bytes = read_input(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
@@ -180,7 +172,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         None
     } else {
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
-        crate::args::check_camera(&cam, size.1)?;
+        crate::cli::check_camera(&cam, size.1)?;
         let mut view = Viewpoint::new(&cam, size.0, size.1, error_px);
         view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
         Some(view)
@@ -227,17 +219,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
 }
 
 /// The bounding box of `p` (the unit cube when empty).
+/// The bounding box of a progressive mesh's positions; a unit box for an empty one.
 pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
-    if p.is_empty() {
-        return ([0.0; 3], [1.0; 3]);
-    }
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for v in p {
-        for i in 0..3 {
-            lo[i] = lo[i].min(v[i]);
-            hi[i] = hi[i].max(v[i]);
-        }
-    }
-    (lo, hi)
+    codec::mesh::bounding_box(p).unwrap_or(([0.0; 3], [1.0; 3]))
 }

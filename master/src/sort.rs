@@ -11,7 +11,7 @@ use codec::tri_sort;
 use codec::view::{Camera, TileGrid};
 use serde::Serialize;
 
-use crate::args::{CameraArgs, GridArgs};
+use crate::cli::{CameraArgs, GridArgs};
 use crate::commands::load_mesh;
 use crate::output::{write_atomic, write_bytes};
 
@@ -23,8 +23,11 @@ pub struct Model {
 
 /// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL) on load with `options`.
 pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
-    let is_bft = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bft"));
-    let bytes = if is_bft {
+    let kind = codec::input::ModelKind::of(path);
+    if kind == codec::input::ModelKind::Dpm {
+        bail!("{}: a progressive mesh (.dpm); this command takes a .bft or a mesh file", path.display());
+    }
+    let bytes = if kind == codec::input::ModelKind::Bft {
         crate::commands::read_input(path)?
     } else {
         let mesh = load_mesh(path)?;
@@ -216,7 +219,7 @@ pub fn run(
     }
     let model = load_model(path, EncodeOptions::default())?;
     let cam = model.camera(camera, &grid)?;
-    crate::args::check_camera(&cam, grid.height)?;
+    crate::cli::check_camera(&cam, grid.height)?;
     let (summary, tiles) =
         sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
     if let Some(dir) = dump {

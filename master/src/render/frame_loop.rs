@@ -1,0 +1,123 @@
+//! The frame loop of rank 0: per frame the camera, the jobs, sending, receiving and
+//! compositing the tiles, writing the images and the stats lines.
+
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use codec::view::Camera;
+use glam::Quat;
+use worker::protocol::ToWorker;
+use worker::transport::Transport;
+
+use super::jobs::{FrameContext, FrameJobs};
+use super::link::{handshake, receive_pixels, Silence};
+use super::plan::{frame_outputs, frame_path, save_wall, Plan};
+use super::scene::{PmScene, Scene};
+use super::stats::{worker_stats, MasterStats};
+use crate::cli::RenderArgs;
+use crate::composite::Image;
+use crate::output::{Identity, LineLog};
+
+/// Runs every frame of `tessera render` over `t`, whose rank 0 this process is.
+pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
+    // Opened first, so that an unwritable path fails before any work.
+    let mut stats = args.stats.as_deref().map(LineLog::create).transpose()?;
+    let mut scene = Scene::load(&args.model, args.tile_coding.into())?;
+    let grid = &plan.grid;
+    let cam = scene.camera(&args.camera, grid)?;
+    crate::cli::check_camera(&cam, grid.height)?;
+    let workers = t.size() - 1;
+    let adapters = handshake(t, args.timeout, grid)?;
+    eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
+    if let Scene::Pm(PmScene { bytes, .. }) = &scene {
+        let model = ToWorker::Model(bytes.clone()).encode();
+        t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
+    }
+
+    let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
+    let mut silence = Silence::new(workers, args.timeout);
+    for k in 0..args.frames {
+        let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
+
+        let start = Instant::now();
+        let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
+        let FrameJobs { messages: msgs, tiles: mut tile_stats } = scene.jobs(&ctx)?;
+        let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
+        let sort_ms = ms(start);
+
+        let start = Instant::now();
+        t.send_many(&msgs);
+        let send_ms = ms(start);
+
+        let start = Instant::now();
+        let mut frame = Image::new(grid.width, grid.height);
+        let mut composite_ms = 0.0;
+        let mut worker_lines = Vec::new();
+        silence.expect(&answering);
+        for _ in 0..answering.len() {
+            let (rank, pixels) = receive_pixels(t, k, &mut silence)?;
+            let c = Instant::now();
+            for p in &pixels {
+                frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+                costs[p.index as usize] = p.times.total_ms();
+                if let Some(s) = tile_stats.iter_mut().find(|s| s.index == p.index) {
+                    s.triangles = p.triangles;
+                }
+            }
+            composite_ms += ms(c);
+            worker_lines.push(worker_stats(k, rank, &pixels));
+        }
+        let wait_ms = ms(start) - composite_ms;
+
+        let start = Instant::now();
+        let out = frame_path(&args.out, k, args.frames);
+        for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref()) {
+            if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
+                bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+            }
+        }
+        match &plan.wall {
+            None => frame.save_png(&out)?,
+            Some(wall) => save_wall(wall, &frame, &out)?,
+        }
+        let write_ms = ms(start);
+        eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
+
+        if let Some(log) = stats.as_mut() {
+            let line =
+                MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
+            log.line(&serde_json::to_string(&line)?)?;
+            worker_lines.sort_by_key(|l| l.rank);
+            for l in worker_lines {
+                log.line(&serde_json::to_string(&l)?)?;
+            }
+        }
+    }
+    let shutdown = ToWorker::Shutdown.encode();
+    t.send_many(&(1..=workers).map(|w| (w, shutdown.clone())).collect::<Vec<_>>());
+    Ok(())
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// The camera of frame `k` of `n` on a full orbit around the target, about the up axis.
+pub fn orbit(cam: &Camera, k: u32, n: u32) -> Camera {
+    let angle = std::f32::consts::TAU * k as f32 / n as f32;
+    let rot = Quat::from_axis_angle(cam.up.normalize(), angle);
+    Camera { eye: cam.target + rot * (cam.eye - cam.target), ..*cam }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn orbit_keeps_distance_and_returns() {
+        let cam = Camera::framing([0.0; 3], [1.0; 3], 1.0);
+        let half = orbit(&cam, 2, 4);
+        assert!((half.eye.distance(cam.target) - cam.eye.distance(cam.target)).abs() < 1e-4);
+        assert!(half.eye.distance(cam.eye) > 1.0);
+    }
+}

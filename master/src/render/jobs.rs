@@ -1,0 +1,146 @@
+//! One frame's messages to the workers, and the tile lines of its stats.
+
+use anyhow::Result;
+use codec::bft::tile_sort;
+use codec::view::{Camera, TileGrid};
+use worker::protocol::{FrameJob, PmFrameJob, TileJob, ToWorker};
+
+use super::scene::{BftScene, PmScene, Scene};
+use super::schedule::assign;
+use super::stats::TileStats;
+use crate::cli::RenderArgs;
+
+/// What every frame's jobs are made from.
+pub(super) struct FrameContext<'a> {
+    /// The frame's number, from 0.
+    pub frame: u32,
+    pub camera: Camera,
+    pub grid: &'a TileGrid,
+    /// Workers are ranks `1..=workers`.
+    pub workers: usize,
+    pub args: &'a RenderArgs,
+    /// Each tile's cost the frame before (ms), for `--balance`.
+    pub costs: &'a [f64],
+}
+
+impl FrameContext<'_> {
+    /// The worker of each of `tiles`.
+    fn owners(&self, tiles: &[usize]) -> Vec<usize> {
+        assign(tiles, self.workers, self.args.balance.then_some(self.costs))
+    }
+}
+
+/// A frame's messages to the workers (by rank) and its tile lines for the stats.
+pub(super) struct FrameJobs {
+    pub messages: Vec<(usize, Vec<u8>)>,
+    pub tiles: Vec<TileStats>,
+}
+
+impl Scene {
+    /// The frame's jobs for either kind of model.
+    pub fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
+        match self {
+            Scene::Bft(s) => s.jobs(ctx),
+            Scene::Pm(s) => Ok(s.jobs(ctx)),
+        }
+    }
+}
+
+impl BftScene {
+    /// One frame of a BFT model: the tile sort, then each worker's tiles with their border
+    /// normals, as messages.
+    fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
+        let grid = ctx.grid;
+        let vp = ctx.camera.view_proj(grid.aspect());
+        let model = &self.model.tiles;
+        tile_sort::boxes_into(model, vp, grid, &mut self.boxes);
+        let tiles = self.sorter.sort(model, &self.boxes, grid)?;
+        let borders = self.normals.for_tiles(model, &self.boxes, &tiles, grid);
+        let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
+        let owner = ctx.owners(&indices);
+        let mut jobs: Vec<FrameJob> = (0..ctx.workers)
+            .map(|_| FrameJob {
+                frame: ctx.frame,
+                width: grid.width,
+                height: grid.height,
+                view_proj: vp.to_cols_array(),
+                tiles: vec![],
+            })
+            .collect();
+        let mut tile_stats = Vec::with_capacity(tiles.len());
+        for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
+            tile_stats.push(TileStats {
+                index: tile.index as u32,
+                worker: w,
+                triangles: tile.triangles,
+                bytes: tile.bytes.len(),
+                tri_bytes: tile.triangles as usize * codec::tri_sort::TRIANGLE_BYTES,
+                normal_bytes: normals.len() * 16,
+            });
+            jobs[w - 1].tiles.push(TileJob {
+                index: tile.index as u32,
+                rect: grid.tile_rect(tile.index),
+                bft: tile.bytes,
+                normals,
+            });
+        }
+        let messages = jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect();
+        Ok(FrameJobs { messages, tiles: tile_stats })
+    }
+}
+
+impl PmScene {
+    /// One frame of a progressive mesh: every tile the model can reach goes to a worker with
+    /// the camera; nothing of the mesh is sent. The tiles' triangle counts come back with the
+    /// pixels.
+    fn jobs(&self, ctx: &FrameContext) -> FrameJobs {
+        let (grid, args, (lo, hi)) = (ctx.grid, ctx.args, self.bbox);
+        let view = codec::pm::Viewpoint::new(&ctx.camera, grid.width, grid.height, args.error_px);
+        let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
+        // Only tiles the model's bounding box can reach: every vertex a progressive mesh can
+        // activate lies in it, so the other tiles stay transparent and cost the workers nothing.
+        let reach = codec::view::box_screen_rect(lo, hi, view.view_proj, grid.width, grid.height);
+        let indices: Vec<usize> = (0..grid.tiles())
+            .filter(|&i| {
+                let [x0, y0, x1, y1] = grid.tile_rect(i);
+                reach.is_some_and(|[rx0, ry0, rx1, ry1]| x0 < rx1 && rx0 < x1 && y0 < ry1 && ry0 < y1)
+            })
+            .collect();
+        let owner = ctx.owners(&indices);
+        let mut jobs: Vec<PmFrameJob> = (0..ctx.workers)
+            .map(|_| PmFrameJob {
+                frame: ctx.frame,
+                width: grid.width,
+                height: grid.height,
+                view_proj: view.view_proj.to_cols_array(),
+                eye: view.eye.to_array(),
+                pixels_per_unit: view.pixels_per_unit,
+                error_px: view.error_px,
+                c_lod: args.c_lod,
+                attribute_scale: args.normal_weight * diagonal,
+                max_passes: args.max_passes,
+                tiles: vec![],
+            })
+            .collect();
+        let mut tile_stats = Vec::with_capacity(indices.len());
+        for (&i, &w) in indices.iter().zip(&owner) {
+            jobs[w - 1].tiles.push((i as u32, grid.tile_rect(i)));
+            tile_stats.push(TileStats {
+                index: i as u32,
+                worker: w,
+                triangles: 0,
+                bytes: 0,
+                tri_bytes: 0,
+                normal_bytes: 0,
+            });
+        }
+        // Workers without tiles this frame get no message and are not waited for.
+        let messages = jobs
+            .into_iter()
+            .enumerate()
+            .filter(|(_, j)| !j.tiles.is_empty())
+            .map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode()))
+            .collect();
+        FrameJobs { messages, tiles: tile_stats }
+    }
+}

@@ -1,0 +1,123 @@
+//! Rank 0's side of the conversation with the workers: the handshake, the heartbeats that
+//! tell a busy worker from a dead one, and receiving each frame's tile pixels.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use codec::view::TileGrid;
+use worker::protocol::{TilePixels, ToMaster};
+use worker::transport::{RecvError, Transport};
+
+/// When each worker was last heard from, for telling a dead worker from a busy one: a worker
+/// sends heartbeats while it works, so only silence longer than the timeout counts.
+pub(super) struct Silence {
+    timeout: Duration,
+    last: Vec<Instant>,
+    /// The workers whose answer the current wait needs.
+    pending: Vec<bool>,
+}
+
+impl Silence {
+    pub(super) fn new(workers: usize, timeout: Duration) -> Silence {
+        Silence { timeout, last: vec![Instant::now(); workers + 1], pending: vec![false; workers + 1] }
+    }
+
+    /// Starts a wait for answers from `ranks`, counting their silence from now.
+    pub(super) fn expect(&mut self, ranks: &[usize]) {
+        let now = Instant::now();
+        for &r in ranks {
+            self.pending[r] = true;
+            self.last[r] = now;
+        }
+    }
+
+    fn heard(&mut self, rank: usize) {
+        if let Some(t) = self.last.get_mut(rank) {
+            *t = Instant::now();
+        }
+    }
+
+    fn answered(&mut self, rank: usize) {
+        if let Some(p) = self.pending.get_mut(rank) {
+            *p = false;
+        }
+    }
+
+    /// How long to wait for the next message, and the worker silent the longest.
+    fn next_wait(&self) -> (Duration, usize) {
+        let (rank, last) = (1..self.last.len())
+            .filter(|&r| self.pending[r])
+            .map(|r| (r, self.last[r]))
+            .min_by_key(|&(_, t)| t)
+            .unwrap_or((0, Instant::now()));
+        (self.timeout.saturating_sub(last.elapsed()), rank)
+    }
+}
+
+/// Waits for every worker's `Ready`; a `Failed` or silence ends the run with its reason.
+pub(super) fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -> Result<Vec<String>> {
+    let mut adapters = vec![String::new(); t.size()];
+    let mut ready = vec![false; t.size()];
+    ready[0] = true;
+    let mut last = Instant::now();
+    while ready.iter().any(|r| !r) {
+        let (rank, bytes) = match t.recv(timeout.saturating_sub(last.elapsed())) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => {
+                bail!("{} did not start within {:.0} s", missing(&ready), timeout.as_secs_f64())
+            }
+            Err(RecvError::Disconnected) => bail!("{} exited before it was ready", missing(&ready)),
+        };
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            // Workers still starting (a device can take seconds to open) say so.
+            ToMaster::Heartbeat => last = Instant::now(),
+            ToMaster::Ready { adapter, max_texture_side } => {
+                if grid.width > max_texture_side || grid.height > max_texture_side {
+                    bail!(
+                        "the {}x{} frame does not fit rank {rank}'s adapter ({adapter}), whose largest texture side is {max_texture_side}",
+                        grid.width,
+                        grid.height
+                    );
+                }
+                ready[rank] = true;
+                adapters[rank] = format!("rank {rank}: {adapter}");
+            }
+            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            other => bail!("rank {rank} sent {other:?} before it was ready"),
+        }
+    }
+    Ok(adapters.split_off(1))
+}
+
+fn missing(flags: &[bool]) -> String {
+    let ranks: Vec<String> = flags.iter().enumerate().filter(|(_, &f)| !f).map(|(r, _)| r.to_string()).collect();
+    format!("rank {}", ranks.join(", rank "))
+}
+
+/// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
+/// a worker silent for the whole timeout ends the run.
+pub(super) fn receive_pixels(t: &dyn Transport, frame: u32, silence: &mut Silence) -> Result<(usize, Vec<TilePixels>)> {
+    loop {
+        let (wait, quiet) = silence.next_wait();
+        let (rank, bytes) = match t.recv(wait) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => bail!(
+                "rank {quiet} sent nothing for {:.0} s during frame {} (--timeout); counting it as dead",
+                silence.timeout.as_secs_f64(),
+                frame + 1
+            ),
+            Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
+        };
+        silence.heard(rank);
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            ToMaster::Heartbeat => continue,
+            ToMaster::Pixels { frame: f, tiles } if f == frame => {
+                silence.answered(rank);
+                return Ok((rank, tiles));
+            }
+            ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
+            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
+        }
+    }
+}

@@ -1,0 +1,80 @@
+//! The `--stats` schema: one JSON line per frame for rank 0 and one per worker, each stage's
+//! time in milliseconds (the README lists the fields).
+
+use serde::Serialize;
+use worker::protocol::{TilePixels, TileTimes};
+
+/// One stats line of rank 0.
+#[derive(Serialize)]
+pub(super) struct MasterStats {
+    pub frame: u32,
+    pub rank: usize,
+    pub sort_ms: f64,
+    pub send_ms: f64,
+    pub wait_ms: f64,
+    pub composite_ms: f64,
+    pub write_ms: f64,
+    pub tiles: Vec<TileStats>,
+}
+
+#[derive(Serialize)]
+pub(super) struct TileStats {
+    pub index: u32,
+    pub worker: usize,
+    pub triangles: u32,
+    pub bytes: usize,
+    /// Bytes the tile's triangles need as independent triangles (36 each).
+    pub tri_bytes: usize,
+    /// Bytes of border normals sent with the tile.
+    pub normal_bytes: usize,
+}
+
+/// One stats line of a worker, as reported back to rank 0.
+#[derive(Serialize)]
+pub(super) struct WorkerStats {
+    frame: u32,
+    pub rank: usize,
+    decode_ms: f64,
+    adapt_ms: f64,
+    upload_ms: f64,
+    render_ms: f64,
+    readback_ms: f64,
+    tiles: Vec<WorkerTileStats>,
+}
+
+#[derive(Serialize)]
+struct WorkerTileStats {
+    index: u32,
+    triangles: u32,
+    decode_ms: f64,
+    adapt_ms: f64,
+    upload_ms: f64,
+    render_ms: f64,
+    readback_ms: f64,
+}
+
+/// A worker's line for `frame`, from the tiles it sent back.
+pub(super) fn worker_stats(frame: u32, rank: usize, pixels: &[TilePixels]) -> WorkerStats {
+    let sum = |f: fn(&TileTimes) -> f64| pixels.iter().map(|p| f(&p.times)).sum();
+    WorkerStats {
+        frame,
+        rank,
+        decode_ms: sum(|t| t.decode_ms),
+        adapt_ms: sum(|t| t.adapt_ms),
+        upload_ms: sum(|t| t.upload_ms),
+        render_ms: sum(|t| t.render_ms),
+        readback_ms: sum(|t| t.readback_ms),
+        tiles: pixels
+            .iter()
+            .map(|p| WorkerTileStats {
+                index: p.index,
+                triangles: p.triangles,
+                decode_ms: p.times.decode_ms,
+                adapt_ms: p.times.adapt_ms,
+                upload_ms: p.times.upload_ms,
+                render_ms: p.times.render_ms,
+                readback_ms: p.times.readback_ms,
+            })
+            .collect(),
+    }
+}
