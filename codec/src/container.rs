@@ -13,12 +13,62 @@
 //!         N     payload
 //!         4     CRC-32 of the payload
 //! ```
-//! Nothing may follow the last section. Each format turns [`ContainerError`] into its own
-//! error type.
+//! Nothing may follow the last section. A reader knows the versions it reads and refuses
+//! any other with [`FormatError::UnsupportedVersion`]: a field that gains a meaning takes a
+//! new version, so an older reader refuses the file instead of misreading it.
+
+use thiserror::Error;
+
+/// Which of Tessera's file formats a [`FormatError`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Bft,
+    Dpm,
+}
+
+impl std::fmt::Display for Format {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(match self {
+            Format::Bft => ".bft",
+            Format::Dpm => ".dpm",
+        })
+    }
+}
+
+/// Everything that can be wrong with the bytes of a `.bft` or `.dpm` file: the container's
+/// checks, shared by both formats, and `Corrupt` for a format's own checks of its header and
+/// streams.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum FormatError {
+    #[error("not a {0} file (bad magic number)")]
+    BadMagic(Format),
+    #[error("unsupported {format} version {found} (this build reads {})", versions(.known))]
+    UnsupportedVersion { format: Format, found: u16, known: &'static [u16] },
+    #[error("file is truncated: {0}")]
+    Truncated(&'static str),
+    #[error("checksum mismatch in {0}: the file is corrupt")]
+    Checksum(&'static str),
+    #[error("{0} trailing bytes after the last section")]
+    TrailingBytes(usize),
+    #[error("corrupt {0} data: {1}")]
+    Corrupt(Format, String),
+}
+
+/// "version 2", "versions 1 and 2", "versions 1, 2 and 3".
+fn versions(known: &[u16]) -> String {
+    match known {
+        [v] => format!("version {v}"),
+        [rest @ .., last] => {
+            let rest: Vec<String> = rest.iter().map(u16::to_string).collect();
+            format!("versions {} and {last}", rest.join(", "))
+        }
+        [] => "no version".into(),
+    }
+}
 
 /// What can be wrong with a container, before any format-specific check.
 #[derive(Debug, PartialEq)]
-pub(crate) enum ContainerError {
+enum ContainerError {
     BadMagic,
     UnsupportedVersion(u16),
     Truncated(&'static str),
@@ -26,14 +76,33 @@ pub(crate) enum ContainerError {
     /// A section other than the named one stands where it should.
     WrongSection(&'static str),
     TrailingBytes(usize),
-    /// A LEB128 integer longer than 64 bits.
-    Overlong(&'static str),
+}
+
+impl ContainerError {
+    /// The error in `layout`'s format.
+    fn within<const N: usize>(self, layout: &Layout<N>) -> FormatError {
+        let format = layout.format;
+        match self {
+            ContainerError::BadMagic => FormatError::BadMagic(format),
+            ContainerError::UnsupportedVersion(found) => {
+                FormatError::UnsupportedVersion { format, found, known: layout.reads }
+            }
+            ContainerError::Truncated(what) => FormatError::Truncated(what),
+            ContainerError::Checksum(what) => FormatError::Checksum(what),
+            ContainerError::TrailingBytes(n) => FormatError::TrailingBytes(n),
+            ContainerError::WrongSection(name) => FormatError::Corrupt(format, format!("expected the {name}")),
+        }
+    }
 }
 
 /// A format's container: its magic number, version, and section tags with readable names.
 pub(crate) struct Layout<const N: usize> {
+    pub format: Format,
     pub magic: [u8; 8],
+    /// The version written.
     pub version: u16,
+    /// The versions read (the written one among them).
+    pub reads: &'static [u16],
     pub tags: [[u8; 4]; N],
     pub names: [&'static str; N],
 }
@@ -78,9 +147,14 @@ impl<const N: usize> Layout<N> {
         out
     }
 
-    /// Checks magic, version, lengths and checksums; returns the header and the sections.
-    /// A prefix of the magic number reads as truncated, anything else there as bad magic.
-    pub fn parse<'a>(&self, bytes: &'a [u8]) -> Result<(&'a [u8], [&'a [u8]; N]), ContainerError> {
+    /// Checks magic, version, lengths and checksums; returns the version, the header and the
+    /// sections. A prefix of the magic number reads as truncated, anything else there as bad
+    /// magic.
+    pub fn parse<'a>(&self, bytes: &'a [u8]) -> Result<Contents<'a, N>, FormatError> {
+        self.parse_container(bytes).map_err(|e| e.within(self))
+    }
+
+    fn parse_container<'a>(&self, bytes: &'a [u8]) -> Result<Contents<'a, N>, ContainerError> {
         let mut r = Reader { b: bytes, pos: 0 };
         let magic = r.take(8, "magic number").map_err(|e| {
             if self.magic.starts_with(bytes) {
@@ -93,7 +167,7 @@ impl<const N: usize> Layout<N> {
             return Err(ContainerError::BadMagic);
         }
         let version = r.u16("version")?;
-        if version != self.version {
+        if !self.reads.contains(&version) {
             return Err(ContainerError::UnsupportedVersion(version));
         }
         let hlen = r.u16("header length")? as usize;
@@ -116,8 +190,16 @@ impl<const N: usize> Layout<N> {
         if r.pos != bytes.len() {
             return Err(ContainerError::TrailingBytes(bytes.len() - r.pos));
         }
-        Ok((header, sections))
+        Ok(Contents { version, header, sections })
     }
+}
+
+/// A parsed container, borrowed from its bytes.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Contents<'a, const N: usize> {
+    pub version: u16,
+    pub header: &'a [u8],
+    pub sections: [&'a [u8]; N],
 }
 
 pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
@@ -128,39 +210,59 @@ pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
-pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, ContainerError> {
+/// Reads a LEB128 integer of `format`'s `what` at `*pos`, moving `pos` past it.
+pub(crate) fn get_varint(format: Format, b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, FormatError> {
     let mut v = 0u64;
     for shift in (0..64).step_by(7) {
-        let byte = *b.get(*pos).ok_or(ContainerError::Truncated(what))?;
+        let byte = *b.get(*pos).ok_or(FormatError::Truncated(what))?;
         *pos += 1;
         v |= ((byte & 0x7f) as u64) << shift;
         if byte & 0x80 == 0 {
             return Ok(v);
         }
     }
-    Err(ContainerError::Overlong(what))
+    Err(FormatError::Corrupt(format, format!("overlong integer in {what}")))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const LAYOUT: Layout<2> =
-        Layout { magic: *b"TESTFMT\x1a", version: 3, tags: [*b"AAAA", *b"BBBB"], names: ["a", "b"] };
+    const LAYOUT: Layout<2> = Layout {
+        format: Format::Bft,
+        magic: *b"TESTFMT\x1a",
+        version: 3,
+        reads: &[2, 3],
+        tags: [*b"AAAA", *b"BBBB"],
+        names: ["a", "b"],
+    };
 
     #[test]
     fn round_trip_and_errors() {
         let bytes = LAYOUT.write(b"head", [b"one", b""]);
-        assert_eq!(LAYOUT.parse(&bytes), Ok((&b"head"[..], [&b"one"[..], &b""[..]])));
-        assert_eq!(LAYOUT.parse(&bytes[..3]), Err(ContainerError::Truncated("magic number")));
-        assert_eq!(LAYOUT.parse(b"nope"), Err(ContainerError::BadMagic));
+        assert_eq!(LAYOUT.parse(&bytes), Ok(Contents { version: 3, header: b"head", sections: [b"one", b""] }));
+        assert_eq!(LAYOUT.parse(&bytes[..3]), Err(FormatError::Truncated("magic number")));
+        assert_eq!(LAYOUT.parse(b"nope"), Err(FormatError::BadMagic(Format::Bft)));
         let mut longer = bytes.clone();
         longer.push(0);
-        assert_eq!(LAYOUT.parse(&longer), Err(ContainerError::TrailingBytes(1)));
+        assert_eq!(LAYOUT.parse(&longer), Err(FormatError::TrailingBytes(1)));
+        // Every version the layout reads parses; any other is refused, naming the known ones.
+        for (v, ok) in [(0u16, false), (1, false), (2, true), (3, true), (4, false), (u16::MAX, false)] {
+            let mut b = bytes.clone();
+            b[8..10].copy_from_slice(&v.to_le_bytes());
+            let r = LAYOUT.parse(&b);
+            assert_eq!(r.is_ok(), ok, "version {v}: {r:?}");
+            if let Err(e) = r {
+                assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 2 and 3)"));
+            }
+        }
         let mut v = Vec::new();
         put_varint(&mut v, u64::MAX);
         let mut pos = 0;
-        assert_eq!(get_varint(&v, &mut pos, "x"), Ok(u64::MAX));
-        assert_eq!(get_varint(&[0x80; 11], &mut 0, "x"), Err(ContainerError::Overlong("x")));
+        assert_eq!(get_varint(Format::Dpm, &v, &mut pos, "x"), Ok(u64::MAX));
+        assert_eq!(
+            get_varint(Format::Dpm, &[0x80; 11], &mut 0, "x"),
+            Err(FormatError::Corrupt(Format::Dpm, "overlong integer in x".into()))
+        );
     }
 }

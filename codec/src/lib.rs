@@ -26,5 +26,6 @@ pub mod save;
 pub mod tri_sort;
 pub mod view;
 
+pub use container::{Format, FormatError};
 pub use load::{load_path, LoadError};
 pub use mesh::{Mesh, MeshError, Quantization};

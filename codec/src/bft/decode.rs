@@ -17,7 +17,7 @@ use crate::mesh::{Mesh, Quantization};
 
 /// A decoded `.bft` file, at slot level: quantized positions per slot, triangles over
 /// slots, and the duplicate table that maps repeated slots back to their first slot.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Decoded {
     pub header: Header,
     pub positions: Vec<[u32; 3]>,
@@ -55,7 +55,7 @@ impl Decoded {
 
 /// Reads and decodes a `.bft` file.
 pub fn decode_file(path: &Path) -> Result<Decoded, BftError> {
-    let bytes = crate::input::read_file(path).map_err(|e| BftError::Corrupt(format!("{}: {e}", path.display())))?;
+    let bytes = crate::input::read_file(path).map_err(|e| format::corrupt(format!("{}: {e}", path.display())))?;
     decode(&bytes)
 }
 

@@ -4,7 +4,7 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSBFT\x1a"
-//! 8       2     version (u16 LE), currently 1
+//! 8       2     version (u16 LE): 2 is written; 1 and 2 are read
 //! 10      2     header length H in bytes (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
@@ -15,41 +15,37 @@
 //!         4     CRC-32 of the payload
 //! ```
 //! `CONN` and `GEOM` are range-coded streams ([`crate::rangecoder`]), or prefix-coded ones
-//! when the header's coding byte (offset 41 of the header; it was reserved, and zero, before)
-//! says so ([`Coding`]); `DUPS` is the duplicate
+//! when the header's coding byte (offset 41 of the header) says so ([`Coding`]). Version 2
+//! gave that byte its meaning; in version 1 it was reserved and zero, so a version 1 file is
+//! range-coded (and one with a non-zero byte 41 is corrupt), and a reader of version 1 alone
+//! refuses a version 2 file rather than misread a prefix-coded one. `DUPS` is the duplicate
 //! table (LEB128: count, then per entry the slot's gap from the previous entry and the
 //! source slot); `LOOS` holds loose triangles (LEB128: three slots each). Nothing may follow
 //! the last section.
 
-use thiserror::Error;
-
-pub(crate) use crate::container::{get_varint, put_varint};
-use crate::container::{ContainerError, Layout};
+pub(crate) use crate::container::put_varint;
+use crate::container::Layout;
+pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
-pub const VERSION: u16 = 1;
+/// The version written.
+pub const VERSION: u16 = 2;
+/// The versions read: 1 (before the coding byte) and 2.
+pub const READS: &[u16] = &[1, 2];
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
 pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
 
-/// Everything that can be wrong with `.bft` bytes.
-#[derive(Debug, Error, PartialEq)]
-pub enum BftError {
-    #[error("not a .bft file (bad magic number)")]
-    BadMagic,
-    #[error("unsupported .bft version {0} (this build reads version {VERSION})")]
-    UnsupportedVersion(u16),
-    #[error("file is truncated: {0}")]
-    Truncated(&'static str),
-    #[error("checksum mismatch in {0}: the file is corrupt")]
-    Checksum(&'static str),
-    #[error("{0} trailing bytes after the last section")]
-    TrailingBytes(usize),
-    #[error("corrupt .bft data: {0}")]
-    Corrupt(String),
-}
+/// Everything that can be wrong with `.bft` bytes: the container error type both formats
+/// share.
+pub type BftError = FormatError;
 
 pub(crate) fn corrupt(msg: impl Into<String>) -> BftError {
-    BftError::Corrupt(msg.into())
+    FormatError::Corrupt(Format::Bft, msg.into())
+}
+
+/// Reads a LEB128 integer of a `.bft` section.
+pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, BftError> {
+    crate::container::get_varint(Format::Bft, b, pos, what)
 }
 
 /// How a file's `CONN` and `GEOM` streams are entropy-coded (header byte 41).
@@ -172,33 +168,25 @@ pub(crate) struct Parts<'a> {
 
 /// The `.bft` container: sections CONN, GEOM, DUPS, LOOS.
 const LAYOUT: Layout<4> = Layout {
+    format: Format::Bft,
     magic: MAGIC,
     version: VERSION,
+    reads: READS,
     tags: SECTION_TAGS,
     names: ["connectivity section", "geometry section", "duplicate table", "loose triangles"],
 };
-
-impl From<ContainerError> for BftError {
-    fn from(e: ContainerError) -> BftError {
-        match e {
-            ContainerError::BadMagic => BftError::BadMagic,
-            ContainerError::UnsupportedVersion(v) => BftError::UnsupportedVersion(v),
-            ContainerError::Truncated(what) => BftError::Truncated(what),
-            ContainerError::Checksum(what) => BftError::Checksum(what),
-            ContainerError::TrailingBytes(n) => BftError::TrailingBytes(n),
-            ContainerError::WrongSection(name) => corrupt(format!("expected the {name}")),
-            ContainerError::Overlong(what) => corrupt(format!("overlong integer in {what}")),
-        }
-    }
-}
 
 pub(crate) fn write(header: &Header, sections: [&[u8]; 4]) -> Vec<u8> {
     LAYOUT.write(&header.to_bytes(), sections)
 }
 
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
-    let (header, sections) = LAYOUT.parse(bytes)?;
-    Ok(Parts { header: Header::from_bytes(header)?, sections })
+    let c = LAYOUT.parse(bytes)?;
+    let header = Header::from_bytes(c.header)?;
+    if c.version == 1 && header.coding != Coding::Range {
+        return Err(corrupt("a version 1 file has a non-zero reserved byte 41"));
+    }
+    Ok(Parts { header, sections: c.sections })
 }
 
 /// Sizes and rates of a `.bft` file, as `tessera stats` reports them.

@@ -96,7 +96,7 @@ mod tile_writer;
 
 pub use decode::{decode, decode_file, decode_ops, Decoded, Op};
 pub use encode::{encode, encode_with_progress, EncodeOptions, EncodeStats, Encoded};
-pub use format::{wrap_for_fuzzing, BftError, Coding, Header, Stats, MAGIC, VERSION};
+pub use format::{wrap_for_fuzzing, BftError, Coding, Header, Stats, MAGIC, READS, VERSION};
 
 /// The commands of the BFT stream, with `ADD` split by operand form and the paper's
 /// offsets carried beside `Rf`, `Lf` and `AddRef`.

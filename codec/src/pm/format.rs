@@ -133,7 +133,7 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
-use crate::container::{get_varint, put_varint, ContainerError, Layout};
+use crate::container::{put_varint, Format, FormatError, Layout};
 use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
@@ -141,8 +141,10 @@ pub const VERSION: u16 = 2;
 const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
 /// The `.dpm` container: sections TABL, BASE, OPER.
 const LAYOUT: Layout<3> = Layout {
+    format: Format::Dpm,
     magic: MAGIC,
     version: VERSION,
+    reads: &[VERSION],
     tags: [*b"TABL", *b"BASE", *b"OPER"],
     names: ["tables section", "base mesh section", "operations section"],
 };
@@ -172,18 +174,22 @@ fn corrupt(msg: impl Into<String>) -> DpmError {
     DpmError::Corrupt(msg.into())
 }
 
-impl From<ContainerError> for DpmError {
-    fn from(e: ContainerError) -> DpmError {
+impl From<FormatError> for DpmError {
+    fn from(e: FormatError) -> DpmError {
         match e {
-            ContainerError::BadMagic => DpmError::BadMagic,
-            ContainerError::UnsupportedVersion(v) => DpmError::UnsupportedVersion(v),
-            ContainerError::Truncated(what) => DpmError::Truncated(what),
-            ContainerError::Checksum(what) => DpmError::Checksum(what),
-            ContainerError::TrailingBytes(n) => DpmError::TrailingBytes(n),
-            ContainerError::WrongSection(name) => corrupt(format!("expected the {name}")),
-            ContainerError::Overlong(what) => corrupt(format!("overlong number in {what}")),
+            FormatError::BadMagic(_) => DpmError::BadMagic,
+            FormatError::UnsupportedVersion { found, .. } => DpmError::UnsupportedVersion(found),
+            FormatError::Truncated(what) => DpmError::Truncated(what),
+            FormatError::Checksum(what) => DpmError::Checksum(what),
+            FormatError::TrailingBytes(n) => DpmError::TrailingBytes(n),
+            FormatError::Corrupt(_, msg) => DpmError::Corrupt(msg),
         }
     }
+}
+
+/// Reads a LEB128 integer of a `.dpm` section.
+fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, FormatError> {
+    crate::container::get_varint(Format::Dpm, b, pos, what)
 }
 
 /// Encoder settings.
@@ -1234,7 +1240,8 @@ pub struct Dpm<'a> {
 impl<'a> Dpm<'a> {
     /// Checks the container and reads the tables and the base mesh (not the operations).
     pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
-        let (hb, sections) = LAYOUT.parse(bytes)?;
+        let c = LAYOUT.parse(bytes)?;
+        let (hb, sections) = (c.header, c.sections);
         let header = Header::from_bytes(hb)?;
         let tables = read_tables(sections[0])?;
         // Base mesh.
