@@ -10,7 +10,7 @@ fn bin() -> &'static str {
 }
 
 fn mesh(rel: &str) -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes").join(rel).to_string_lossy().into_owned()
+    testkit::mesh_arg(rel)
 }
 
 fn env(cmd: &mut Command) -> &mut Command {

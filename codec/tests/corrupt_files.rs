@@ -1,13 +1,12 @@
 //! Truncated and corrupted `.bft` files get an error, never a panic or a wrong mesh.
 
-mod common;
-
 use codec::bft::tile_sort::{self, Sorter, TileModel};
 use codec::bft::{self, BftError, Coding, EncodeOptions};
 use codec::view::{Camera, TileGrid};
+use codec::{Format, FormatError};
 
 fn encoded(rel: &str) -> Vec<u8> {
-    let mesh = codec::load_path(&common::shared_meshes().join(rel)).unwrap();
+    let mesh = codec::load_path(&testkit::shared_meshes().join(rel)).unwrap();
     bft::encode(&mesh, EncodeOptions::default()).unwrap().bytes
 }
 
@@ -18,7 +17,7 @@ fn every_truncation_of_a_small_file_is_an_error() {
     for len in 0..bytes.len() {
         match bft::decode(&bytes[..len]) {
             Err(BftError::Truncated(_)) => {}
-            Err(BftError::BadMagic) if len == 0 => panic!("empty input must read as truncated"),
+            Err(BftError::BadMagic(_)) if len == 0 => panic!("empty input must read as truncated"),
             other => panic!("truncated to {len} of {} bytes: {other:?}", bytes.len()),
         }
     }
@@ -31,7 +30,7 @@ fn every_truncation_of_a_small_file_is_an_error() {
 fn random_byte_flips_are_detected() {
     let bytes = encoded("classic/teapot.obj");
     let reference = bft::decode(&bytes).unwrap();
-    for b in common::bit_flipped_copies(&bytes, 2000) {
+    for b in testkit::bit_flipped_copies(&bytes, 2000) {
         if b == bytes {
             continue;
         }
@@ -49,11 +48,38 @@ fn random_byte_flips_are_detected() {
 #[test]
 fn wrong_magic_and_version_are_named() {
     let mut b = encoded("odedstein/cube.obj");
-    b[8] = 9;
-    assert_eq!(bft::decode(&b).unwrap_err(), BftError::UnsupportedVersion(9));
+    assert_eq!(u16::from_le_bytes([b[8], b[9]]), bft::VERSION);
+    for v in [0u16, 3, 9, u16::MAX] {
+        b[8..10].copy_from_slice(&v.to_le_bytes());
+        let e = bft::decode(&b).unwrap_err();
+        assert_eq!(e, FormatError::UnsupportedVersion { format: Format::Bft, found: v, known: bft::READS });
+        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1 and 2)"));
+    }
     b[0] = b'X';
-    assert_eq!(bft::decode(&b).unwrap_err(), BftError::BadMagic);
-    assert_eq!(bft::decode(b"ply\nformat ascii").unwrap_err(), BftError::BadMagic);
+    assert_eq!(bft::decode(&b).unwrap_err(), BftError::BadMagic(Format::Bft));
+    assert_eq!(bft::decode(b"ply\nformat ascii").unwrap_err(), BftError::BadMagic(Format::Bft));
+}
+
+/// Version 2 gave header byte 41 (the entropy coding) its meaning. A version 1 file, whose
+/// byte 41 was reserved and zero, still reads as the range-coded file it is; a version 1
+/// file that claims a prefix coding is corrupt, never misread.
+#[test]
+fn version_1_files_read_and_their_reserved_byte_stays_reserved() {
+    let v2 = encoded("classic/suzanne.obj");
+    let mut v1 = v2.clone();
+    v1[8..10].copy_from_slice(&1u16.to_le_bytes());
+    assert_eq!(bft::decode(&v1).unwrap(), bft::decode(&v2).unwrap());
+
+    let model = TileModel::from_bytes(&v2).unwrap();
+    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
+    let mut prefix =
+        Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap()[0].bytes.clone();
+    assert_eq!(bft::Stats::of(&prefix).unwrap().header.coding, Coding::Prefix);
+    prefix[8..10].copy_from_slice(&1u16.to_le_bytes());
+    let e = bft::decode(&prefix).unwrap_err().to_string();
+    assert!(e.contains("version 1") && e.contains("byte 41"), "{e}");
 }
 
 /// Sections whose checksums are recomputed after corruption reach the stream decoders:
@@ -81,19 +107,14 @@ fn corrupt_prefix_coded_streams_are_errors() {
 }
 
 fn forge_sections(bytes: &[u8]) {
-    let header_len = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
-    let sections_start = 12 + header_len + 4;
-    let mut state = 12345u64;
-    let mut next = || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        state >> 33
-    };
+    let sections_start = testkit::sections_start(bytes);
+    let mut rng = testkit::XorShift(12345);
     let mut rejected = 0;
     for _ in 0..500 {
         let mut b = bytes.to_vec();
-        let i = sections_start + 8 + (next() as usize % (b.len() - sections_start - 8));
-        b[i] = next() as u8;
-        refresh_checksums(&mut b, sections_start);
+        let i = sections_start + 8 + (rng.next_u64() as usize % (b.len() - sections_start - 8));
+        b[i] = rng.next_u64() as u8;
+        testkit::refresh_checksums(&mut b, sections_start);
         if bft::decode(&b).is_err() {
             rejected += 1;
         }
@@ -101,24 +122,11 @@ fn forge_sections(bytes: &[u8]) {
     assert!(rejected > 0);
 }
 
-fn refresh_checksums(b: &mut [u8], mut pos: usize) {
-    while pos + 8 <= b.len() {
-        let n = u32::from_le_bytes(b[pos + 4..pos + 8].try_into().unwrap()) as usize;
-        let start = pos + 8;
-        if start + n + 4 > b.len() {
-            return;
-        }
-        let crc = crc32fast::hash(&b[start..start + n]);
-        b[start + n..start + n + 4].copy_from_slice(&crc.to_le_bytes());
-        pos = start + n + 4;
-    }
-}
-
 /// The fuzz target's input path, run on a fixed set of pseudo-random inputs so the suite
 /// exercises it without a fuzzer: errors are fine, panics are not.
 #[test]
 fn arbitrary_streams_behind_a_valid_container_never_panic() {
-    let mut rng = common::XorShift(0xDEADBEEF);
+    let mut rng = testkit::XorShift(0xDEADBEEF);
     for len in (0..4000).step_by(7) {
         let data = rng.bytes(len);
         let _ = bft::decode(&data);

@@ -3,16 +3,14 @@
 //! converges to the same mesh as adapting from the base mesh, one pass performs every split
 //! the criteria ask for, and the criteria are monotone over the split tree.
 
-mod common;
-
 use std::time::Instant;
 
 use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, Viewpoint, NONE};
 use codec::view::Camera;
 use codec::Mesh;
-use common::{shared_meshes, sorted_canonical, soup};
 use glam::Vec3;
 use proptest::prelude::*;
+use testkit::{shared_meshes, sorted_canonical, soup};
 
 const MAX_PASSES: usize = 10_000;
 
@@ -28,11 +26,6 @@ fn input_of_fvid(pm: &ProgressiveMesh) -> Vec<u32> {
         }
     }
     inv
-}
-
-/// Sorted multiset of faces (rotation-canonical, so orientation counts).
-fn canon(faces: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
-    sorted_canonical(faces)
 }
 
 /// Checks everything an adapted state must satisfy: the active set is the base vertices plus
@@ -85,7 +78,10 @@ fn check_state(pm: &ProgressiveMesh, tree: &SplitTree, a: &Adapter) {
         .iter()
         .copied()
         .chain(pm.splits.iter().zip(&applied).filter(|(_, &ap)| ap).flat_map(|(s, _)| s.faces.iter().copied()));
-    assert!(canon(a.finest_faces().iter().copied()) == canon(expected), "faces are not those of the applied splits");
+    assert!(
+        sorted_canonical(a.finest_faces().iter().copied()) == sorted_canonical(expected),
+        "faces are not those of the applied splits"
+    );
 }
 
 /// Refines with the adapter, checking every pass, and compares with the input.
@@ -113,7 +109,10 @@ fn check_refine_fully(mesh: &Mesh, pm: &ProgressiveMesh) {
     for x in [&a, &b] {
         assert_eq!(x.active().len(), pm.positions.len());
         let back = x.face_fvids().into_iter().map(|t| t.map(|f| inv[f as usize]));
-        assert!(canon(back) == canon(mesh.triangles.iter().copied()), "fully refined faces differ from the input");
+        assert!(
+            sorted_canonical(back) == sorted_canonical(mesh.triangles.iter().copied()),
+            "fully refined faces differ from the input"
+        );
     }
 }
 
@@ -191,11 +190,11 @@ fn check_converged(pm: &ProgressiveMesh, a: &mut Adapter, view: &Viewpoint) {
             assert!(view.needs_split(pm, (node >> 1) as usize), "pair {} {} could collapse", active[i - 1], active[i]);
         }
     }
-    let faces = canon(a.face_fvids());
+    let faces = sorted_canonical(a.face_fvids());
     let st = a.adapt(view);
     assert!(st.converged());
     assert!(a.active() == &active[..]);
-    assert!(canon(a.face_fvids()) == faces);
+    assert!(sorted_canonical(a.face_fvids()) == faces);
 }
 
 /// Adapts frame to frame along a camera path and from the base mesh for every frame; both
@@ -211,7 +210,7 @@ fn check_path(pm: &ProgressiveMesh, frames: usize, error_px: f32) -> (usize, usi
         let mut b = Adapter::new(pm);
         converge(pm, &tree, &mut b, &view);
         assert!(a.active() == b.active(), "frame {k}: frame-to-frame and from-base active sets differ");
-        assert!(canon(a.face_fvids()) == canon(b.face_fvids()), "frame {k}: faces differ");
+        assert!(sorted_canonical(a.face_fvids()) == sorted_canonical(b.face_fvids()), "frame {k}: faces differ");
         lo = lo.min(a.faces().len());
         hi = hi.max(a.faces().len());
     }
@@ -246,22 +245,10 @@ const MESHES: [&str; 5] = [
     "classic/spot.obj",
 ];
 
-fn find(rel: &str) -> String {
-    // Files live in one of the collection folders; find it by name.
-    let name = rel.rsplit('/').next().unwrap();
-    for dir in std::fs::read_dir(shared_meshes()).unwrap() {
-        let p = dir.unwrap().path().join(name);
-        if p.exists() {
-            return p.strip_prefix(shared_meshes()).unwrap().display().to_string();
-        }
-    }
-    panic!("{rel} not found");
-}
-
 #[test]
 fn shared_meshes_refine_fully_to_their_input() {
     for rel in MESHES {
-        let rel = find(rel);
+        let rel = testkit::find_mesh(rel);
         let mesh = load(&rel);
         let pm = build(&mesh).unwrap();
         check_monotone(&pm);
@@ -273,7 +260,7 @@ fn shared_meshes_refine_fully_to_their_input() {
 #[test]
 fn shared_meshes_frame_to_frame_equals_from_base() {
     for rel in MESHES {
-        let rel = find(rel);
+        let rel = testkit::find_mesh(rel);
         let mesh = load(&rel);
         let pm = build(&mesh).unwrap();
         let (lo, hi) = check_path(&pm, 24, 1.0);

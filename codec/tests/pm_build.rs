@@ -2,14 +2,12 @@
 //! exactly (multiset, orientation) for every shared mesh and random triangle soups; the FVIDs
 //! are a permutation; every intermediate level is a consistent mesh over the active vertices.
 
-mod common;
-
 use std::time::Instant;
 
 use codec::pm::{build, refine_all, PmError, ProgressiveMesh, Refiner};
 use codec::{Mesh, MeshError};
-use common::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
 use proptest::prelude::*;
+use testkit::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
 
 fn all_same(t: [u32; 3]) -> bool {
     t[0] == t[1] && t[1] == t[2]
@@ -210,12 +208,12 @@ fn hubs_refine_back_to_their_input() {
         }
     }
     // Random triangles around vertex 0 from 300 others, some degenerate, some repeated.
-    let mut rng = common::XorShift(0x9e37_79b9_7f4a_7c15);
+    let mut rng = testkit::XorShift(0x9e37_79b9_7f4a_7c15);
     let mut soup = Mesh { positions: vec![[0.0; 3]], triangles: vec![] };
     soup.positions.extend((0..300).map(|_| [rng.unit(), rng.unit(), rng.unit()]));
     for _ in 0..2 * k {
-        let (a, b) = (1 + rng.next() as u32 % 300, 1 + rng.next() as u32 % 300);
-        soup.triangles.push(match rng.next() % 16 {
+        let (a, b) = (1 + rng.next_u64() as u32 % 300, 1 + rng.next_u64() as u32 % 300);
+        soup.triangles.push(match rng.next_u64() % 16 {
             0 => [0, 0, a],
             1 => [a, a, a],
             _ => [0, a, b],

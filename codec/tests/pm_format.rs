@@ -1,16 +1,14 @@
 //! The `.dpm` format: exact round trips (triangles by FVID, quantized positions and criteria),
 //! every operation decoding from its own address, and corrupt files giving errors.
 
-mod common;
-
 use std::collections::HashMap;
 use std::time::Instant;
 
 use codec::pm::format::{self, decode, encode, quantized, Dpm, DpmStats, EncodeOptions};
 use codec::pm::{build, refine_all, DpmError, ProgressiveMesh, SplitTree, NONE};
 use codec::Mesh;
-use common::{shared_meshes, sorted_canonical, soup, XorShift};
 use proptest::prelude::*;
+use testkit::{shared_meshes, sorted_canonical, soup, XorShift};
 
 fn load(rel: &str) -> Mesh {
     codec::load_path(&shared_meshes().join(rel)).unwrap()
@@ -120,7 +118,7 @@ fn every_truncation_of_a_small_file_is_an_error() {
 #[test]
 fn random_byte_flips_are_detected() {
     let bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
-    for b in common::bit_flipped_copies(&bytes, 2000) {
+    for b in testkit::bit_flipped_copies(&bytes, 2000) {
         if b != bytes {
             assert!(decode(&b).is_err(), "a corrupted file decoded");
             assert!(DpmStats::of(&b).is_err());

@@ -1,11 +1,9 @@
 //! Property tests: every random mesh round-trips exactly (triangle multiset on input vertex
 //! indices, orientation, quantized positions), whatever its topology.
 
-mod common;
-
 use codec::Mesh;
-use common::{assert_round_trip, XorShift};
 use proptest::prelude::*;
+use testkit::{assert_round_trip, XorShift};
 
 fn positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
     let mut rng = XorShift(seed | 1);
@@ -35,10 +33,9 @@ fn grid(w: usize, h: usize, holes: &[bool], flips: &[bool], offset: u32) -> Vec<
 }
 
 fn shuffle<T>(v: &mut [T], seed: u64) {
-    let mut s = seed | 1;
+    let mut rng = XorShift(seed | 1);
     for i in (1..v.len()).rev() {
-        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        v.swap(i, (s >> 33) as usize % (i + 1));
+        v.swap(i, (rng.next_u64() >> 33) as usize % (i + 1));
     }
 }
 

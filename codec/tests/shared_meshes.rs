@@ -1,8 +1,6 @@
 //! Every mesh in `shared/meshes` loads and round-trips exactly through the BFT codec.
 
-mod common;
-
-use common::{all_shared_meshes, assert_round_trip};
+use testkit::{all_shared_meshes, assert_round_trip};
 
 #[test]
 fn every_shared_mesh_round_trips() {
@@ -43,7 +41,7 @@ fn triangle_counts_match_the_mesh_readme() {
         ("odedstein/spot_control_mesh.obj", 372),
         ("degenerate/non_manifold_face_graph.obj", 21),
     ] {
-        let mesh = codec::load_path(&common::shared_meshes().join(file)).unwrap();
+        let mesh = codec::load_path(&testkit::shared_meshes().join(file)).unwrap();
         assert_eq!(mesh.triangles.len(), tris, "{file}");
     }
 }

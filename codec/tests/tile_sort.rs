@@ -2,15 +2,13 @@
 //! exactly the triangles `t` with that tile in `[t]` (same multiset, orientation kept),
 //! with the model's quantized positions.
 
-mod common;
-
 use codec::bft::tile_sort::{self, TileModel};
 use codec::bft::{self, Coding, EncodeOptions};
 use codec::view::{Camera, TileGrid};
 use codec::Mesh;
-use common::canonical;
 use glam::Vec3;
 use proptest::prelude::*;
+use testkit::canonical;
 
 /// Sorts with both codings and checks every tile; returns (non-empty tiles, triangle-tile
 /// pairs).
@@ -64,7 +62,7 @@ fn model_of(mesh: &Mesh) -> TileModel {
 }
 
 fn shared(rel: &str) -> TileModel {
-    model_of(&codec::load_path(&common::shared_meshes().join(rel)).unwrap())
+    model_of(&codec::load_path(&testkit::shared_meshes().join(rel)).unwrap())
 }
 
 /// Cameras around a model: the default framing, an oblique view with the model partly
@@ -110,7 +108,7 @@ fn shared_meshes_sort_exactly() {
 
 fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
     let mut positions = vec![];
-    let mut rng = common::XorShift(seed | 1);
+    let mut rng = testkit::XorShift(seed | 1);
     for y in 0..=h {
         for x in 0..=w {
             let z = rng.unit() * 0.3;

@@ -8,14 +8,12 @@
 //! builder on ordinary meshes). The timings at
 //! 200k: `cargo run --release -p tessera-codec --example valence`.
 
-mod common;
-
 use std::path::Path;
 
 use codec::load::{load_bytes, Format};
 use codec::pm::{build_with_stats, format, refine_all};
 use codec::Mesh;
-use common::{assert_round_trip, sorted_canonical};
+use testkit::{assert_round_trip, sorted_canonical};
 
 /// Steps per triangle the encoder may take (a binary search of a long half-edge list is
 /// counted as its `log2` steps: 15 for the fan's centre here).

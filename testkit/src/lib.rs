@@ -1,7 +1,9 @@
-//! Helpers shared by the codec's integration tests.
-#![allow(dead_code)]
+//! Scaffolding shared by Tessera's tests, each piece once: where the shared meshes are, the
+//! canonical form of a triangle set (orientation kept), a fixed-seed RNG, corruptions and
+//! checksum refresh for the file formats' hostile tests, and the BFT round-trip check.
+//! A dev-dependency of every crate; never part of a binary.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use codec::bft::{self, EncodeOptions, Encoded};
 use codec::{Mesh, Quantization};
@@ -10,6 +12,34 @@ use proptest::prelude::*;
 /// `../shared/meshes`, next to the repository.
 pub fn shared_meshes() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes")
+}
+
+/// A shared mesh by its path under `shared/meshes`, e.g. `stanford/bunny_zipper_c3d.obj.gz`.
+pub fn mesh_path(rel: &str) -> PathBuf {
+    shared_meshes().join(rel)
+}
+
+/// [`mesh_path`] as a string, for command lines.
+pub fn mesh_arg(rel: &str) -> String {
+    mesh_path(rel).to_string_lossy().into_owned()
+}
+
+/// Loads a shared mesh, panicking with its name if it does not load.
+pub fn load_mesh(rel: &str) -> Mesh {
+    codec::load_path(&mesh_path(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// The path under `shared/meshes` of the mesh file named like `rel`'s last component, in
+/// whichever collection folder holds it.
+pub fn find_mesh(rel: &str) -> String {
+    let name = rel.rsplit('/').next().unwrap();
+    for dir in std::fs::read_dir(shared_meshes()).expect("shared/meshes is next to the repo") {
+        let p = dir.unwrap().path().join(name);
+        if p.exists() {
+            return p.strip_prefix(shared_meshes()).unwrap().display().to_string();
+        }
+    }
+    panic!("{rel} not found under {}", shared_meshes().display());
 }
 
 /// Every mesh file under `shared/meshes`, sorted.
@@ -38,6 +68,8 @@ pub fn canonical(t: [u32; 3]) -> [u32; 3] {
     [t[m], t[(m + 1) % 3], t[(m + 2) % 3]]
 }
 
+/// The sorted multiset of `tris` in [`canonical`] form: equal for equal triangle sets with
+/// equal orientation.
 pub fn sorted_canonical(tris: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
     let mut v: Vec<_> = tris.into_iter().map(canonical).collect();
     v.sort_unstable();
@@ -90,7 +122,7 @@ fn rotate_min<T: Ord + Copy>(t: [T; 3]) -> [T; 3] {
 pub struct XorShift(pub u64);
 
 impl XorShift {
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         let s = &mut self.0;
         *s ^= *s << 13;
         *s ^= *s >> 7;
@@ -100,19 +132,19 @@ impl XorShift {
 
     /// A number in `[0, 1)` from the next value's top 24 bits.
     pub fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 
     /// `len` bytes, the low byte of each next value.
     pub fn bytes(&mut self, len: usize) -> Vec<u8> {
-        (0..len).map(|_| self.next() as u8).collect()
+        (0..len).map(|_| self.next_u64() as u8).collect()
     }
 }
 
 /// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
 pub fn grid_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
     let mut rng = XorShift(seed | 1);
-    let mut next = move || ((rng.next() >> 40) % 4) as f32;
+    let mut next = move || ((rng.next_u64() >> 40) % 4) as f32;
     (0..n).map(|_| [next(), next(), next()]).collect()
 }
 
@@ -151,7 +183,7 @@ pub fn soup() -> impl Strategy<Value = Mesh> {
 /// flips cancel.
 pub fn bit_flipped_copies(bytes: &[u8], count: usize) -> Vec<Vec<u8>> {
     let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
-    let mut next = || rng.next();
+    let mut next = || rng.next_u64();
     (0..count)
         .map(|_| {
             let mut b = bytes.to_vec();
@@ -162,4 +194,30 @@ pub fn bit_flipped_copies(bytes: &[u8], count: usize) -> Vec<Vec<u8>> {
             b
         })
         .collect()
+}
+
+/// Recomputes the CRC-32 of every section of a `.bft` or `.dpm` container from `pos` (the
+/// first section's tag) on, so that a corruption inside a section reaches its decoder. Stops
+/// at a section whose length runs past the end.
+pub fn refresh_checksums(b: &mut [u8], mut pos: usize) {
+    while pos + 8 <= b.len() {
+        let n = u32::from_le_bytes(b[pos + 4..pos + 8].try_into().unwrap()) as usize;
+        let start = pos + 8;
+        if start + n + 4 > b.len() {
+            return;
+        }
+        let crc = crc32fast::hash(&b[start..start + n]);
+        b[start + n..start + n + 4].copy_from_slice(&crc.to_le_bytes());
+        pos = start + n + 4;
+    }
+}
+
+/// Where a container's first section starts: after the 12-byte prefix, the header and its CRC.
+pub fn sections_start(b: &[u8]) -> usize {
+    12 + u16::from_le_bytes([b[10], b[11]]) as usize + 4
+}
+
+/// A path as a `&str`, for command lines.
+pub fn arg(p: &Path) -> &str {
+    p.to_str().expect("a UTF-8 path")
 }
