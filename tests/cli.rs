@@ -8,7 +8,7 @@ fn tessera(args: &[&str]) -> Output {
 }
 
 fn mesh(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes").join(rel)
+    testkit::mesh_path(rel)
 }
 
 fn s(p: &Path) -> &str {
@@ -126,100 +126,6 @@ fn bad_input_gets_a_clear_error_and_no_output() {
         .filter(|e| e.file_name().to_string_lossy().starts_with(".tessera-"))
         .collect();
     assert!(leftovers.is_empty());
-}
-
-#[test]
-fn bench_bandwidth_writes_the_figure_8_table_and_plot() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let cow = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes/classic/cow.obj");
-    let (csv, png) = (d.join("out/report.csv"), d.join("out/report.png"));
-    let o = tessera(&["bench", "bandwidth", s(&cow), "--tiles", "1x1,4x4", "--out", s(&csv), "--plot", s(&png)]);
-    assert!(o.status.success(), "{}", stderr(&o));
-
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(
-        header,
-        [
-            "model",
-            "triangles",
-            "width",
-            "height",
-            "cols",
-            "rows",
-            "tile_width",
-            "tile_height",
-            "tri_bytes",
-            "tiled_tri_bytes",
-            "bft_bytes",
-            "tiled_bft_bytes",
-            "draco_per_tile_bytes",
-            "meshopt_per_tile_bytes",
-            "bft_sort_ms",
-            "tri_sort_ms",
-            "draco_retile_ms",
-            "tiled_bft_prefix_bytes",
-            "bft_prefix_sort_ms"
-        ]
-    );
-    let rows: Vec<std::collections::HashMap<&str, &str>> =
-        lines.map(|l| header.iter().copied().zip(l.split(',')).collect()).collect();
-    assert_eq!(rows.len(), 2, "{text}");
-    let n = |row: &std::collections::HashMap<&str, &str>, k: &str| row[k].parse::<f64>().unwrap();
-    for (row, tiles) in rows.iter().zip(["1x1", "4x4"]) {
-        assert_eq!(row["model"], "cow");
-        assert_eq!(format!("{}x{}", row["cols"], row["rows"]), tiles);
-        assert!(n(row, "tiled_tri_bytes") >= n(row, "tri_bytes"), "{row:?}");
-        for k in [
-            "tri_bytes",
-            "bft_bytes",
-            "tiled_bft_bytes",
-            "draco_per_tile_bytes",
-            "meshopt_per_tile_bytes",
-            "tiled_bft_prefix_bytes",
-        ] {
-            assert!(n(row, k) > 0.0, "{k}: {row:?}");
-        }
-        for k in ["bft_sort_ms", "tri_sort_ms", "draco_retile_ms", "bft_prefix_sort_ms"] {
-            assert!(n(row, k) >= 0.0, "{k}: {row:?}");
-        }
-    }
-    // On one tile every visible triangle travels once.
-    assert_eq!(n(&rows[0], "tiled_tri_bytes"), n(&rows[0], "tri_bytes"));
-
-    // The same 14-bit model through `tessera sort`: its tiles give the same totals.
-    let bft = d.join("cow.bft");
-    assert!(tessera(&["encode", s(&cow), "-o", s(&bft), "--quant-bits", "14"]).status.success());
-    for row in &rows {
-        let tiles = format!("{}x{}", row["cols"], row["rows"]);
-        let o = tessera(&["sort", s(&bft), "--tiles", &tiles, "--json"]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let t = &serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["totals"];
-        assert_eq!(n(row, "tiled_tri_bytes"), 36.0 * t["tiled_triangles"].as_f64().unwrap(), "{tiles}");
-        assert_eq!(n(row, "tiled_bft_bytes"), t["tiled_bft_bytes"].as_f64().unwrap(), "{tiles}");
-        assert_eq!(n(row, "bft_bytes"), std::fs::metadata(&bft).unwrap().len() as f64);
-    }
-
-    let image = std::fs::read(&png).unwrap();
-    assert!(image.starts_with(b"\x89PNG\r\n\x1a\n"), "not a PNG");
-
-    // A bad request fails at once, naming the problem, and writes nothing.
-    let fresh = (d.join("bad.csv"), d.join("bad.png"));
-    for (args, message) in [
-        (vec![s(&cow), "--tiles", "1x1,0x4"], "0x4"),
-        (vec![s(&cow), "--tiles", "4000x2"], "does not fit"),
-        (vec!["missing.obj"], "missing.obj"),
-    ] {
-        let mut all = vec!["bench", "bandwidth"];
-        all.extend(args);
-        all.extend(["--out", s(&fresh.0), "--plot", s(&fresh.1)]);
-        let o = tessera(&all);
-        assert_eq!(o.status.code(), Some(1), "{all:?}");
-        assert!(stderr(&o).contains(message), "{all:?}: {}", stderr(&o));
-        assert!(!fresh.0.exists() && !fresh.1.exists());
-    }
 }
 
 #[test]

@@ -1,10 +1,10 @@
 //! Tessera's BFT codec against meshopt and draco-core, on the same meshes, in one run.
 //!
-//! Every peer is set up the way its users would run it at 14-bit positions:
+//! Every peer is set up the way its users would run it at 14-bit positions, as
+//! `tessera_bench::peers` says (the bandwidth experiment uses the same set-up):
 //! - BFT: `codec::bft::encode` with `quant_bits: 14`.
-//! - meshopt: positions quantized to 14-bit integers (u16 x, y, z plus a pad, since the
-//!   vertex codec wants a multiple of 4 bytes), vertex-cache then vertex-fetch optimised,
-//!   then the index and vertex codecs. No general-purpose compressor on top.
+//! - meshopt: 14-bit quantized positions, vertex-cache then vertex-fetch optimised, then the
+//!   index and vertex codecs. No general-purpose compressor on top.
 //! - Draco: compression level 7 (the `draco_encoder` CLI default, speed 3), 14-bit positions.
 //!
 //! Criterion measures decode (and our encode) in triangles/s; afterwards a plain summary
@@ -16,13 +16,9 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, SamplingMode, Throughput};
-use draco_core::{
-    DataType, DecoderBuffer, EncoderBuffer, EncoderOptions, GeometryAttributeType, MeshDecoder, MeshEncoder,
-    PointAttribute,
-};
+use tessera_bench::peers::{draco_decode, draco_encode, Meshopt};
 
 const QUANT_BITS: u8 = 14;
-const DRACO_COMPRESSION_LEVEL: i32 = 7;
 /// Runs per codec behind each median in the summary table.
 const SUMMARY_RUNS: usize = 5;
 const SUMMARY_RUN_MIN: Duration = Duration::from_millis(50);
@@ -39,14 +35,6 @@ const MESHES: [(&str, &str); 2] =
 
 fn mesh_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/meshes"))
-}
-
-/// meshopt's encoded streams plus the counts its decoder has to be told.
-struct Meshopt {
-    indices: Vec<u8>,
-    vertices: Vec<u8>,
-    index_count: usize,
-    vertex_count: usize,
 }
 
 /// One mesh with every peer's encoding of it.
@@ -93,47 +81,13 @@ impl Prepared {
 
 fn encode_meshopt(mesh: &codec::Mesh) -> Meshopt {
     let quant = codec::Quantization::fit(&mesh.positions, None, QUANT_BITS).expect("14 bits is a valid quantization");
-    let quantized: Vec<[u16; 4]> = mesh
-        .positions
-        .iter()
-        .map(|&p| {
-            let [x, y, z] = quant.quantize(p);
-            [x as u16, y as u16, z as u16, 0]
-        })
-        .collect();
-    let flat: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-    let mut indices = meshopt::optimize_vertex_cache(&flat, quantized.len());
-    // Also drops vertices no triangle uses, as a real pipeline would.
-    let vertices = meshopt::optimize_vertex_fetch(&mut indices, &quantized);
-    Meshopt {
-        indices: meshopt::encode_index_buffer(&indices, vertices.len()).expect("meshopt index encode"),
-        vertices: meshopt::encode_vertex_buffer(&vertices).expect("meshopt vertex encode"),
-        index_count: indices.len(),
-        vertex_count: vertices.len(),
-    }
+    let quantized: Vec<[u32; 3]> = mesh.positions.iter().map(|&p| quant.quantize(p)).collect();
+    Meshopt::encode_quantized(&mesh.triangles, &quantized, QUANT_BITS).expect("meshopt encode")
 }
 
 fn encode_draco(name: &str, mesh: &codec::Mesh) -> Vec<u8> {
-    let mut position = PointAttribute::new();
-    position.init(GeometryAttributeType::Position, 3, DataType::Float32, false, mesh.positions.len());
-    let bytes: Vec<u8> = mesh.positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
-    position.buffer_mut().write(0, &bytes);
-
-    let mut draco_mesh = draco_core::Mesh::new();
-    let position_id = draco_mesh.add_attribute(position);
-    draco_mesh.set_num_faces(mesh.triangles.len());
-    let flat: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-    draco_mesh.set_faces_from_flat_indices(&flat);
-
-    let mut options = EncoderOptions::new();
-    options.set_compression_level(DRACO_COMPRESSION_LEVEL);
-    options.set_attribute_quantization(position_id, QUANT_BITS.into());
-
-    let mut encoder = MeshEncoder::new();
-    encoder.set_mesh(draco_mesh);
-    let mut out = EncoderBuffer::new();
-    encoder.encode(&options, &mut out).unwrap_or_else(|e| panic!("{name}: Draco encode failed: {e}"));
-    out.data().to_vec()
+    draco_encode(&mesh.positions, &mesh.triangles, QUANT_BITS)
+        .unwrap_or_else(|e| panic!("{name}: Draco encode failed: {e}"))
 }
 
 fn decode_bft(bytes: &[u8]) -> codec::bft::Decoded {
@@ -141,17 +95,11 @@ fn decode_bft(bytes: &[u8]) -> codec::bft::Decoded {
 }
 
 fn decode_meshopt(m: &Meshopt) -> (Vec<u32>, Vec<[u16; 4]>) {
-    let indices = meshopt::decode_index_buffer::<u32>(&m.indices, m.index_count).expect("meshopt index decode");
-    let vertices =
-        meshopt::decode_vertex_buffer::<[u16; 4]>(&m.vertices, m.vertex_count).expect("meshopt vertex decode");
-    (indices, vertices)
+    m.decode::<[u16; 4]>().expect("meshopt decode")
 }
 
-/// Note Draco's decoder also dequantizes positions back to f32; it has no switch to skip that.
 fn decode_draco(bytes: &[u8]) -> draco_core::Mesh {
-    let mut mesh = draco_core::Mesh::new();
-    MeshDecoder::new().decode(&mut DecoderBuffer::new(bytes), &mut mesh).expect("Draco decode");
-    mesh
+    draco_decode(bytes).expect("Draco decode")
 }
 
 fn bench_mesh(c: &mut Criterion, p: &Prepared) {
@@ -217,7 +165,7 @@ fn print_summary(p: &Prepared) {
     let options = codec::bft::EncodeOptions { quant_bits: QUANT_BITS };
     let encode_t = median_time(|| codec::bft::encode(&p.mesh, options).expect("BFT encode"));
 
-    let meshopt_bytes = p.meshopt.indices.len() + p.meshopt.vertices.len();
+    let meshopt_bytes = p.meshopt.bytes();
     let bits_per_tri = |bytes: usize| bytes as f64 * 8.0 / n as f64;
     let (bft_rate, meshopt_rate, draco_rate) = (mtri_per_s(n, bft_t), mtri_per_s(n, meshopt_t), mtri_per_s(n, draco_t));
     let encode_rate = mtri_per_s(n, encode_t);

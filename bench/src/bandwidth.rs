@@ -1,4 +1,4 @@
-//! `tessera bench bandwidth`: Figure 8 of the paper (Mitra & Chiueh), bytes per frame against
+//! The bandwidth experiment (`cargo run --release -p tessera-bench --bin bandwidth`): Figure 8 of the paper (Mitra & Chiueh), bytes per frame against
 //! tile size, for independent triangles ("Tri", "Tiled Tri"), the BFT model and the tile
 //! sort's BFT submeshes ("BFT", "Tiled BFT"), with two baselines the paper did not have:
 //! every tile's triangles compressed on their own by Draco and by meshopt.
@@ -17,20 +17,15 @@ use codec::bft::tile_sort::{self, Boxes, Sorter};
 use codec::bft::Coding;
 use codec::bft::EncodeOptions;
 use codec::view::{triangle_tile_boxes, TileBox, TileGrid};
-use draco_core::{
-    DataType, DecoderBuffer, EncoderBuffer, EncoderOptions, GeometryAttributeType, MeshDecoder, MeshEncoder,
-    PointAttribute,
-};
 use glam::Mat4;
 use plotters::prelude::*;
 
-use crate::args::CameraArgs;
-use crate::output::write_bytes;
-use crate::progress;
-use crate::sort::{load_model, sort_frame, Model, SortSummary};
+use master::cli::CameraArgs;
+use master::output::write_bytes;
+use master::progress;
+use master::sort::{load_model, sort_frame, Model, SortSummary};
 
-/// Draco's `draco_encoder` default (speed 3), as in the codec benchmark.
-const DRACO_COMPRESSION_LEVEL: i32 = 7;
+use crate::peers::{draco_decode, draco_encode, draco_to_mesh, Meshopt};
 /// Runs of `sort_frame` per row, the two sorts alternating and the BFT sort keeping its
 /// buffers as a frame loop does; the row keeps the median of each sort's time, so the
 /// first, cold run (fresh pages, idle thread pool) does not count.
@@ -274,47 +269,13 @@ fn tile_sets(triangles: &[[u32; 3]], vertex_count: usize, boxes: &[TileBox], gri
         .collect()
 }
 
-/// Draco at `DRACO_COMPRESSION_LEVEL` with positions quantized to `quant_bits`.
-fn draco_encode(positions: &[[f32; 3]], triangles: &[[u32; 3]], quant_bits: u8) -> Result<Vec<u8>> {
-    let mut position = PointAttribute::new();
-    position.init(GeometryAttributeType::Position, 3, DataType::Float32, false, positions.len());
-    let bytes: Vec<u8> = positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
-    position.buffer_mut().write(0, &bytes);
-
-    let mut mesh = draco_core::Mesh::new();
-    let position_id = mesh.add_attribute(position);
-    mesh.set_num_faces(triangles.len());
-    mesh.set_faces_from_flat_indices(triangles.as_flattened());
-
-    let mut options = EncoderOptions::new();
-    options.set_compression_level(DRACO_COMPRESSION_LEVEL);
-    options.set_attribute_quantization(position_id, quant_bits.into());
-    let mut encoder = MeshEncoder::new();
-    encoder.set_mesh(mesh);
-    let mut out = EncoderBuffer::new();
-    encoder.encode(&options, &mut out)?;
-    Ok(out.data().to_vec())
-}
-
-/// Decodes a Draco stream.
-fn draco_decode(bytes: &[u8]) -> Result<codec::Mesh> {
-    let mut mesh = draco_core::Mesh::new();
-    MeshDecoder::new().decode(&mut DecoderBuffer::new(bytes), &mut mesh)?;
-    let position =
-        mesh.named_attribute(GeometryAttributeType::Position).context("the Draco stream has no positions")?;
-    let flat = position.read_f32s(mesh.num_points(), 3);
-    let positions = flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
-    let triangles = mesh.faces().iter().map(|f| f.map(|p| p.0)).collect();
-    Ok(codec::Mesh { positions, triangles })
-}
-
 /// Milliseconds for Draco to turn the whole-model stream into per-tile Draco streams:
 /// decode, bin the triangles into tiles, encode every tile. As in the BFT sort, which
 /// projects with rayon, the machine's cores may help: draco-core splits large attribute
 /// passes across threads; binning and the tile encodes run one after another.
 fn draco_retile_ms(stream: &[u8], view_proj: Mat4, grid: &TileGrid, quant_bits: u8) -> Result<f64> {
     let start = Instant::now();
-    let mesh = draco_decode(stream)?;
+    let mesh = draco_to_mesh(&draco_decode(stream)?)?;
     let boxes = triangle_tile_boxes(&mesh.positions, &mesh.triangles, view_proj, grid);
     for set in tile_sets(&mesh.triangles, mesh.positions.len(), &boxes, grid) {
         draco_encode(&set.gather(&mesh.positions), &set.triangles, quant_bits)?;
@@ -322,26 +283,12 @@ fn draco_retile_ms(stream: &[u8], view_proj: Mat4, grid: &TileGrid, quant_bits: 
     Ok(start.elapsed().as_secs_f64() * 1e3)
 }
 
-/// meshopt's bytes for a tile: vertex-cache then vertex-fetch optimised, then the index and
-/// vertex codecs, on the model's own quantized positions (u16 x, y, z and a pad up to 16
-/// bits, since the vertex codec wants a multiple of 4 bytes; u32 x, y, z above).
+/// meshopt's bytes for a tile, on the model's own quantized positions (see `peers`).
 fn meshopt_bytes(set: &TileSet, quantized: &[[u32; 3]], quant_bits: u8) -> Result<usize> {
-    fn encode<V: Clone + Default>(triangles: &[[u32; 3]], vertices: &[V]) -> Result<usize> {
-        let mut indices = meshopt::optimize_vertex_cache(triangles.as_flattened(), vertices.len());
-        let vertices = meshopt::optimize_vertex_fetch(&mut indices, vertices);
-        Ok(meshopt::encode_index_buffer(&indices, vertices.len())?.len()
-            + meshopt::encode_vertex_buffer(&vertices)?.len())
-    }
-    let positions = set.gather(quantized);
-    if quant_bits <= 16 {
-        let narrow: Vec<[u16; 4]> = positions.iter().map(|&[x, y, z]| [x as u16, y as u16, z as u16, 0]).collect();
-        encode(&set.triangles, &narrow)
-    } else {
-        encode(&set.triangles, &positions)
-    }
+    Ok(Meshopt::encode_quantized(&set.triangles, &set.gather(quantized), quant_bits)?.bytes())
 }
 
-/// `tessera bench bandwidth MODEL... [--tiles LIST] [--size WxH] [--quant-bits N] --out CSV --plot PNG`.
+/// `bandwidth MODEL... [--tiles LIST] [--size WxH] [--quant-bits N] --out CSV --plot PNG`.
 pub fn run(
     models: &[PathBuf],
     size: (u32, u32),
@@ -355,15 +302,15 @@ pub fn run(
         .iter()
         .map(|&(c, r)| TileGrid::new(size.0, size.1, c, r).with_context(|| format!("bad --tiles entry {c}x{r}")))
         .collect::<Result<_>>()?;
-    crate::output::check_extension(out, &["csv"], "--out")?;
-    crate::output::check_extension(plot, &["png"], "--plot")?;
+    master::output::check_extension(out, &["csv"], "--out")?;
+    master::output::check_extension(plot, &["png"], "--plot")?;
     for path in [out, plot] {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         }
     }
     let inputs: Vec<&Path> = models.iter().map(PathBuf::as_path).collect();
-    crate::output::check_distinct(&inputs, &[out, plot])?;
+    master::output::check_distinct(&inputs, &[out, plot])?;
     let subjects: Vec<Subject> = models.iter().map(|p| Subject::load(p, quant_bits)).collect::<Result<_>>()?;
 
     println!("{}", Row::TABLE_HEADER);
@@ -432,7 +379,7 @@ fn render_plot(panels: &[&[Row]], size: (u32, u32), quant_bits: u8) -> Result<Ve
         }
         root.present()?;
     }
-    crate::composite::encode_png(w, h, png::ColorType::Rgb, &pixels)
+    master::composite::encode_png(w, h, png::ColorType::Rgb, &pixels)
 }
 
 /// One model's panel: a line per series over tile width, both axes logarithmic, ticks at
@@ -503,33 +450,6 @@ fn trim(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A `n x n` square of quads, two triangles each.
-    fn square(n: u32) -> codec::Mesh {
-        let positions = (0..=n).flat_map(|y| (0..=n).map(move |x| [x as f32, y as f32, 0.0])).collect();
-        let v = |x: u32, y: u32| y * (n + 1) + x;
-        let triangles = (0..n)
-            .flat_map(|y| {
-                (0..n).flat_map(move |x| {
-                    [[v(x, y), v(x + 1, y), v(x, y + 1)], [v(x + 1, y), v(x + 1, y + 1), v(x, y + 1)]]
-                })
-            })
-            .collect();
-        codec::Mesh { positions, triangles }
-    }
-
-    #[test]
-    fn draco_round_trip_keeps_the_mesh() {
-        let mesh = square(10);
-        let back = draco_decode(&draco_encode(&mesh.positions, &mesh.triangles, 14).unwrap()).unwrap();
-        assert_eq!(back.triangles.len(), 200);
-        assert_eq!(back.positions.len(), 121);
-        let mut a: Vec<_> = back.positions.iter().map(|p| p.map(|c| c.round() as i32)).collect();
-        let mut b: Vec<_> = mesh.positions.iter().map(|p| p.map(|c| c as i32)).collect();
-        a.sort_unstable();
-        b.sort_unstable();
-        assert_eq!(a, b);
-    }
 
     #[test]
     fn tile_sets_are_compact_and_follow_the_boxes() {
