@@ -36,3 +36,13 @@ if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found; install the Rust toolchain with rustup (https://rustup.rs)" >&2
   exit 1
 fi
+
+# CI checks formatting and lints: the toolchain's rustfmt and clippy components.
+if command -v rustup >/dev/null 2>&1; then
+  for c in rustfmt clippy; do
+    if ! rustup component list --installed 2>/dev/null | grep -q "^$c"; then
+      echo "setup: adding the $c component"
+      rustup component add "$c"
+    fi
+  done
+fi
