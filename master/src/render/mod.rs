@@ -17,7 +17,7 @@
 //! | `plan.rs` | what is checked before any rank talks to another, and the output files' names |
 //! | `scene.rs` | the model rank 0 holds: a BFT model it sorts, or a progressive mesh |
 //! | `frame_loop.rs` | the frame loop |
-//! | `jobs.rs` | one frame's messages to the workers, from one [`jobs::FrameContext`] |
+//! | `jobs.rs` | one frame's messages to the workers, from one `FrameContext` |
 //! | `schedule.rs` | which worker renders which tile (round robin, or balanced by cost) |
 //! | `link.rs` | the handshake, heartbeats and silence, receiving the tiles' pixels |
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
