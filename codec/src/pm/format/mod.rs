@@ -128,8 +128,10 @@
 //! tangential coordinate for the second, a normal delta predicted along the motion.
 
 mod header;
+mod quantize;
 
 pub use header::{DpmError, Header, MAGIC, VERSION};
+pub use quantize::quantized;
 
 use std::sync::{Arc, OnceLock};
 
@@ -139,6 +141,10 @@ use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::container::{get_varint, put_varint};
 use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
 use header::{corrupt, LAYOUT};
+use quantize::{
+    dequantize_criteria, dequantize_position, fit_header, max_q, oct_decode, oct_encode, quantize_criteria,
+    quantize_position, valid_oct, MAX_K,
+};
 
 /// Encoder settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,121 +161,7 @@ impl Default for EncodeOptions {
     }
 }
 
-// ---- quantization -------------------------------------------------------------------------
-
-const MAX_K: u32 = 1 << 20;
-const LN_STEP: f64 = 0.019_802_627_296_179_712; // ln 1.02
-
-fn log_enc(e: f32, q: f32) -> u32 {
-    if e.is_nan() {
-        return MAX_K;
-    }
-    if e <= 0.0 {
-        return 0;
-    }
-    if e <= q {
-        return 1;
-    }
-    let k = ((e as f64).ln() - (q as f64).ln()) / LN_STEP;
-    let mut k = (k.ceil().min(MAX_K as f64) as u32 + 1).min(MAX_K);
-    // Never below the true value.
-    while k < MAX_K && log_dec(k, q) < e {
-        k += 1;
-    }
-    k
-}
-
-fn log_dec(k: u32, q: f32) -> f32 {
-    if k == 0 {
-        0.0
-    } else {
-        (q as f64 * (LN_STEP * (k - 1) as f64).exp()) as f32
-    }
-}
-
-fn sin_enc(s: f32) -> u32 {
-    if s.is_nan() {
-        return 255;
-    }
-    (s.clamp(0.0, 1.0) * 255.0).ceil() as u32
-}
-
-fn quantize_criteria(c: &Criteria, h: &Header) -> [u32; 4] {
-    [
-        sin_enc(c.sin_alpha),
-        log_enc(c.geometric_error, h.length_step),
-        log_enc(c.attribute_error, h.attribute_step),
-        log_enc(c.radius, h.length_step),
-    ]
-}
-
-fn dequantize_criteria(k: [u32; 4], h: &Header) -> Criteria {
-    Criteria {
-        sin_alpha: k[0] as f32 / 255.0,
-        geometric_error: log_dec(k[1], h.length_step),
-        attribute_error: log_dec(k[2], h.attribute_step),
-        radius: log_dec(k[3], h.length_step),
-    }
-}
-
-fn max_q(bits: u8) -> u32 {
-    (1u32 << bits) - 1
-}
-
-fn quantize_position(p: [f32; 3], h: &Header) -> [u32; 3] {
-    let m = max_q(h.position_bits) as f32;
-    std::array::from_fn(|i| {
-        let x = ((p[i] - h.bbox_min[i]) / h.step).round();
-        if x.is_nan() {
-            0
-        } else {
-            x.clamp(0.0, m) as u32
-        }
-    })
-}
-
-fn dequantize_position(q: [u32; 3], h: &Header) -> [f32; 3] {
-    std::array::from_fn(|i| h.bbox_min[i] + q[i] as f32 * h.step)
-}
-
-/// Octahedral normal coding; `[2^bits, 2^bits]` stands for the zero normal.
-fn oct_encode(n: [f32; 3], bits: u8) -> [u32; 2] {
-    let zero = 1u32 << bits;
-    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
-    if !(l1 > 1e-20 && l1.is_finite()) {
-        return [zero, zero];
-    }
-    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
-    if n[2] < 0.0 {
-        let (ox, oy) = (x, y);
-        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
-        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
-    }
-    let m = max_q(bits) as f32;
-    [x, y].map(|c| (((c + 1.0) * 0.5 * m).round()).clamp(0.0, m) as u32)
-}
-
-fn oct_decode(q: [u32; 2], bits: u8) -> [f32; 3] {
-    let zero = 1u32 << bits;
-    if q == [zero, zero] {
-        return [0.0; 3];
-    }
-    let m = max_q(bits) as f32;
-    let (mut x, mut y) = (q[0] as f32 / m * 2.0 - 1.0, q[1] as f32 / m * 2.0 - 1.0);
-    let z = 1.0 - x.abs() - y.abs();
-    if z < 0.0 {
-        let (ox, oy) = (x, y);
-        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
-        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
-    }
-    let l = (x * x + y * y + z * z).sqrt();
-    [x / l, y / l, z / l]
-}
-
-fn valid_oct(q: [u32; 2], bits: u8) -> bool {
-    let zero = 1u32 << bits;
-    q == [zero, zero] || (q[0] < zero && q[1] < zero)
-}
+// ---- symbol mapping ---------------------------------------------------------------------------
 
 fn zigzag(v: i64) -> u64 {
     if v >= 0 {
@@ -1294,59 +1186,6 @@ pub struct Encoded {
     /// coder with the same static tables would spend on them (before its per-operation
     /// termination). The gap is what arithmetic coding could save.
     pub symbol_bits: (f64, f64),
-}
-
-/// The header's quantization for a mesh.
-fn fit_header(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Header, DpmError> {
-    if !(8..=24).contains(&opts.position_bits) || !(4..=16).contains(&opts.normal_bits) {
-        return Err(DpmError::InvalidOptions("position bits must be 8 to 24, normal bits 4 to 16".into()));
-    }
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in &pm.positions {
-        for i in 0..3 {
-            if !p[i].is_finite() {
-                return Err(DpmError::InvalidMesh("non-finite position".into()));
-            }
-            lo[i] = lo[i].min(p[i]);
-            hi[i] = hi[i].max(p[i]);
-        }
-    }
-    if pm.positions.is_empty() {
-        lo = [0.0; 3];
-        hi = [0.0; 3];
-    }
-    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0f32, f32::max);
-    let mut step = extent / max_q(opts.position_bits) as f32;
-    if !(step > 0.0 && step.is_finite()) {
-        step = 1.0;
-    }
-    let n = pm.positions.len();
-    Ok(Header {
-        vertices: u32::try_from(n).map_err(|_| DpmError::InvalidMesh("too many vertices".into()))?,
-        base_vertices: pm.base_vertices.len() as u32,
-        base_faces: pm.base_faces.len() as u32,
-        splits: pm.splits.len() as u32,
-        position_bits: opts.position_bits,
-        normal_bits: opts.normal_bits,
-        bbox_min: lo,
-        step,
-        length_step: step * 0.25,
-        attribute_step: 1.0 / 4096.0,
-        avg_op_bytes: 0.0,
-        triangles: (pm.base_faces.len() + pm.splits.iter().map(|s| s.faces.len()).sum::<usize>()) as u32,
-    })
-}
-
-/// `pm` as the decoder gives it back: positions quantized, normals through the octahedral
-/// code, criteria quantized (splits and their order unchanged).
-pub fn quantized(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<ProgressiveMesh, DpmError> {
-    let h = fit_header(pm, opts)?;
-    let mut q = pm.clone();
-    q.positions = pm.positions.iter().map(|&p| dequantize_position(quantize_position(p, &h), &h)).collect();
-    q.normals = pm.normals.iter().map(|&n| oct_decode(oct_encode(n, h.normal_bits), h.normal_bits)).collect();
-    q.criteria = pm.criteria.iter().map(|c| dequantize_criteria(quantize_criteria(c, &h), &h)).collect();
-    Ok(q)
 }
 
 fn invalid(msg: &str) -> DpmError {
