@@ -127,8 +127,10 @@
 //! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
 //! tangential coordinate for the second, a normal delta predicted along the motion.
 
+mod fields;
 mod header;
 mod quantize;
+mod symbols;
 
 pub use header::{DpmError, Header, MAGIC, VERSION};
 pub use quantize::quantized;
@@ -140,11 +142,13 @@ use rayon::prelude::*;
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
 use crate::container::{get_varint, put_varint};
 use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
+use fields::*;
 use header::{corrupt, LAYOUT};
 use quantize::{
     dequantize_criteria, dequantize_position, fit_header, max_q, oct_decode, oct_encode, quantize_criteria,
     quantize_position, valid_oct, MAX_K,
 };
+use symbols::{unzigzag, zigzag, OpReader, OpWriter};
 
 /// Encoder settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -158,307 +162,6 @@ pub struct EncodeOptions {
 impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions { position_bits: 16, normal_bits: 10 }
-    }
-}
-
-// ---- symbol mapping ---------------------------------------------------------------------------
-
-fn zigzag(v: i64) -> u64 {
-    if v >= 0 {
-        2 * v as u64
-    } else {
-        2 * v.unsigned_abs() - 1
-    }
-}
-
-fn unzigzag(u: u64) -> i64 {
-    if u & 1 == 0 {
-        (u >> 1) as i64
-    } else {
-        -(((u + 1) >> 1) as i64)
-    }
-}
-
-// ---- symbol coding --------------------------------------------------------------------------
-
-/// The fields of an operation, for the size breakdown in [`DpmStats`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(usize)]
-enum Kind {
-    Sin,
-    GeomError,
-    AttrError,
-    Radius,
-    Head,
-    Split,
-    FaceCount,
-    FaceForm,
-    FaceT,
-    FaceU,
-    FaceOther,
-    FaceOtherDelta,
-    FaceGeneral,
-    Position,
-    Normal,
-    Pointer,
-}
-
-const KINDS: usize = 16;
-
-/// How a field's values become byte symbols.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scheme {
-    /// 7-bit groups, least significant first, with a continuation bit; the group's
-    /// significance (0, 1, 2+) selects one of three tables (the paper's contexts by byte
-    /// significance).
-    Groups,
-    /// One symbol per value: the value itself below 16, else its bit length and the three bits
-    /// below the leading one, followed by the remaining low bits uncoded (as DEFLATE codes
-    /// lengths and distances). One table per class; suits wide values whose low bits are
-    /// noise. Values must be below `2^34` (the encoder's are: FVID offsets, positions and
-    /// normals are at most 33 bits as zigzag values).
-    Buckets,
-}
-
-/// A coded field: its kind for the breakdown, its number of classes (a context chosen from
-/// what the decoder already knows, each with its own tables) and its scheme.
-#[derive(Clone, Copy, Debug)]
-struct Field {
-    kind: Kind,
-    classes: usize,
-    scheme: Scheme,
-}
-
-const fn field(kind: Kind, classes: usize, scheme: Scheme) -> Field {
-    Field { kind, classes, scheme }
-}
-
-/// Classes of the region size contexts (see [`region_class`]).
-const REGION_CLASSES: usize = 3;
-
-/// The class of an operation by the number of finest vertices its vertex stands for
-/// (`v_end - v`, at least 2): its bit length less 2, capped.
-fn region_class(v: u32, v_end: u32) -> usize {
-    let n = v_end.saturating_sub(v).max(2);
-    ((32 - n.leading_zeros()) as usize - 2).min(REGION_CLASSES - 1)
-}
-
-/// Classes of the split point's contexts (see [`split_class`]).
-const SPLIT_CLASSES: usize = 6;
-
-/// The class of the split point of a range of `n` FVIDs (more than 4): its bit length less
-/// 3, capped.
-fn split_class(n: u32) -> usize {
-    ((32 - n.leading_zeros()) as usize - 3).min(SPLIT_CLASSES - 1)
-}
-
-/// Classes of the magnitude contexts (see [`magnitude_class`]).
-const MAGNITUDES: usize = 28;
-
-// The fields, in table order.
-const SIN: usize = 0;
-const GEOM: usize = 1;
-const ATTR: usize = 2;
-const RADIUS: usize = 3;
-const HEAD: usize = 4;
-const SPLIT: usize = 5;
-const FACE_COUNT: usize = 6;
-const FACE_FORM: usize = 7;
-const FACE_T: usize = 8;
-const FACE_U: usize = 9;
-const FACE_OTHER: usize = 10;
-const FACE_OTHER_DELTA: usize = 11;
-const FACE_GENERAL: usize = 12;
-const POS_TANGENT: usize = 13;
-const POS_NORMAL: usize = 14;
-const NORMAL: usize = 15;
-const POINTER: usize = 16;
-const FIELDS: [Field; 17] = [
-    field(Kind::Sin, 4, Scheme::Groups),
-    field(Kind::GeomError, 1, Scheme::Groups),
-    field(Kind::AttrError, 1, Scheme::Groups),
-    field(Kind::Radius, 1, Scheme::Groups),
-    field(Kind::Head, 4, Scheme::Groups),
-    field(Kind::Split, SPLIT_CLASSES, Scheme::Groups),
-    field(Kind::FaceCount, 1, Scheme::Groups),
-    field(Kind::FaceForm, 1, Scheme::Groups),
-    field(Kind::FaceT, 7, Scheme::Groups),
-    field(Kind::FaceU, 7, Scheme::Groups),
-    field(Kind::FaceOther, REGION_CLASSES, Scheme::Buckets),
-    field(Kind::FaceOtherDelta, REGION_CLASSES, Scheme::Buckets),
-    field(Kind::FaceGeneral, 1, Scheme::Groups),
-    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
-    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
-    field(Kind::Normal, MAGNITUDES, Scheme::Buckets),
-    field(Kind::Pointer, SPLIT_CLASSES, Scheme::Groups),
-];
-
-const fn tables_per_class(s: Scheme) -> usize {
-    match s {
-        Scheme::Groups => 3,
-        Scheme::Buckets => 1,
-    }
-}
-
-/// Per field, the index of its first table; the last entry is the number of tables.
-const TABLE_BASE: [usize; FIELDS.len() + 1] = {
-    let mut b = [0; FIELDS.len() + 1];
-    let mut i = 0;
-    while i < FIELDS.len() {
-        b[i + 1] = b[i] + FIELDS[i].classes * tables_per_class(FIELDS[i].scheme);
-        i += 1;
-    }
-    b
-};
-const TABLES: usize = TABLE_BASE[FIELDS.len()];
-
-/// The magnitude class of a log-coded length or attribute error `k` (section 4.2.3): 0 for
-/// zero, then one class per doubling (35 steps of 2%), capped.
-fn magnitude_class(k: u32) -> usize {
-    if k == 0 {
-        0
-    } else {
-        (1 + (k as usize - 1) / 35).min(MAGNITUDES - 1)
-    }
-}
-
-/// Values below `2^BUCKET_EXACT_BITS` are bucket symbols of their own; above, a symbol holds
-/// the bit length and the `BUCKET_MANTISSA` bits below the leading one.
-const BUCKET_EXACT_BITS: u64 = 4;
-const BUCKET_EXACT: u64 = 1 << BUCKET_EXACT_BITS;
-const BUCKET_MANTISSA: u64 = 3;
-const BUCKET_MASK: u64 = (1 << BUCKET_MANTISSA) - 1;
-
-/// The bucket symbol of `v` and its uncoded low bits (count, value).
-fn bucket(v: u64) -> (u8, u32, u64) {
-    if v < BUCKET_EXACT {
-        return (v as u8, 0, 0);
-    }
-    let b = 64 - v.leading_zeros() as u64; // bit length, above BUCKET_EXACT's
-    let raw = b - 1 - BUCKET_MANTISSA;
-    let sym = BUCKET_EXACT + ((b - BUCKET_EXACT_BITS - 1) << BUCKET_MANTISSA) + ((v >> raw) & BUCKET_MASK);
-    debug_assert!(sym < 256, "bucket value out of range");
-    (sym as u8, raw as u32, v & ((1u64 << raw) - 1))
-}
-
-/// Where op symbols go: counted (to build tables) or written.
-struct OpWriter<'a> {
-    tables: Option<&'a [Table]>,
-    counts: Option<&'a mut [[u64; 256]]>,
-    w: BitWriter,
-    /// Bits written so far.
-    bits: u64,
-}
-
-impl OpWriter<'_> {
-    fn sym(&mut self, table: usize, sym: u8) {
-        if let Some(c) = self.counts.as_deref_mut() {
-            c[table][sym as usize] += 1;
-        }
-        if let Some(t) = self.tables {
-            t[table].encode(&mut self.w, sym);
-            self.bits += t[table].lens[sym as usize] as u64;
-        }
-    }
-
-    fn raw(&mut self, mut n: u32, v: u64) {
-        self.bits += n as u64;
-        while n > 0 {
-            let k = n.min(16);
-            n -= k;
-            self.w.put(((v >> n) & ((1 << k) - 1)) as u32, k as u8);
-        }
-    }
-
-    /// Codes `v` in class `class` of field `f`.
-    fn put(&mut self, f: usize, class: usize, mut v: u64) {
-        let spec = FIELDS[f];
-        let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
-        match spec.scheme {
-            Scheme::Groups => {
-                let mut i = 0;
-                loop {
-                    let more = v >= 0x80;
-                    self.sym(base + i.min(2), (v & 0x7f) as u8 | if more { 0x80 } else { 0 });
-                    v >>= 7;
-                    i += 1;
-                    if !more {
-                        break;
-                    }
-                }
-            }
-            Scheme::Buckets => {
-                let (s, n, low) = bucket(v);
-                self.sym(base, s);
-                if self.tables.is_some() {
-                    self.raw(n, low);
-                }
-            }
-        }
-    }
-
-    fn put_signed(&mut self, f: usize, class: usize, v: i64) {
-        self.put(f, class, zigzag(v));
-    }
-}
-
-struct OpReader<'a, 'b> {
-    tables: &'a [Arc<Table>],
-    r: BitReader<'a>,
-    bits: Option<&'b mut [u64; KINDS]>,
-}
-
-impl OpReader<'_, '_> {
-    fn sym(&mut self, table: usize) -> Result<u8, DpmError> {
-        self.tables[table].decode(&mut self.r).ok_or(DpmError::Truncated("an operation"))
-    }
-
-    fn get(&mut self, f: usize, class: usize) -> Result<u64, DpmError> {
-        let before = self.r.read;
-        let spec = FIELDS[f];
-        let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
-        let v = match spec.scheme {
-            Scheme::Groups => {
-                let mut v = 0u64;
-                let mut i = 0;
-                loop {
-                    if i == 10 {
-                        return Err(corrupt("overlong value in an operation"));
-                    }
-                    let sym = self.sym(base + i.min(2))?;
-                    v |= ((sym & 0x7f) as u64) << (7 * i);
-                    i += 1;
-                    if sym & 0x80 == 0 {
-                        break v;
-                    }
-                }
-            }
-            Scheme::Buckets => {
-                let s = self.sym(base)? as u64;
-                if s < BUCKET_EXACT {
-                    s
-                } else {
-                    let b = ((s - BUCKET_EXACT) >> BUCKET_MANTISSA) + BUCKET_EXACT_BITS + 1;
-                    let raw = b - 1 - BUCKET_MANTISSA;
-                    let mut v = ((BUCKET_MASK + 1) | ((s - BUCKET_EXACT) & BUCKET_MASK)) << raw;
-                    for i in (0..raw).rev() {
-                        v |= (self.r.bit().ok_or(DpmError::Truncated("an operation"))? as u64) << i;
-                    }
-                    v
-                }
-            }
-        };
-        if let Some(b) = self.bits.as_deref_mut() {
-            b[spec.kind as usize] += self.r.read - before;
-        }
-        if v > u32::MAX as u64 * 2 + 1 {
-            return Err(corrupt("value out of range in an operation"));
-        }
-        Ok(v)
-    }
-
-    fn get_signed(&mut self, f: usize, class: usize) -> Result<i64, DpmError> {
-        Ok(unzigzag(self.get(f, class)?))
     }
 }
 
@@ -525,18 +228,6 @@ struct OpData {
     dnrm: [i64; 2],
 }
 
-/// The prediction of criterion `i`: the parent's value, except for the radius, which is at
-/// most both the parent's radius and this operation's geometric error (the error is the
-/// region's farthest vertex raised to its neighbours' errors) and is predicted by the
-/// smaller of the two.
-fn criteria_prediction(parent: &[u32; 4], this: &[u32; 4], i: usize) -> i64 {
-    if i == 3 {
-        parent[3].min(this[1]) as i64
-    } else {
-        parent[i] as i64
-    }
-}
-
 /// The children code of the head symbol: 0 none splits further, 1 both (`v_l`'s operation
 /// first), 2 `v_l` only, 3 `v_u` only, 4 both, swapped (`v_u`'s operation first).
 fn children_code(left: bool, right: bool, swapped: bool) -> u32 {
@@ -546,18 +237,6 @@ fn children_code(left: bool, right: bool, swapped: bool) -> u32 {
         (true, false) => 2,
         (false, true) => 3,
     }
-}
-
-/// The class of the head symbol: the size of `v`'s FVID range, 2, 3, 4 or more (a range of 2
-/// has two leaves as children, one of 3 one leaf and one split).
-fn head_class(v: u32, v_end: u32) -> usize {
-    (v_end.saturating_sub(v).clamp(2, 5) - 2) as usize
-}
-
-/// The class of `sin(alpha)`'s residual: the parent's value in quarters of its range (a wide
-/// parent cone often has an equally wide child cone).
-fn sin_class(parent: &[u32; 4]) -> usize {
-    (parent[0] >> 6).min(3) as usize
 }
 
 /// The orientation pattern of the head symbol: 0 or 1 when the first two faces are standard
@@ -570,56 +249,6 @@ fn face_pattern(faces: &[FaceCode]) -> u32 {
         [FaceCode::Standard { rev: a, .. }, FaceCode::Standard { rev: b, .. }, ..] if a != b => *a as u32,
         _ => 2,
     }
-}
-
-/// The class of a face corner's offset inside `v_l`'s or `v_u`'s FVID range (of `range` FVIDs,
-/// at least 2; the corner of a range of 1 is not coded): for the first standard face 0 to 3 by
-/// the range's bit length, else 4 to 6 by the previous face's offset (0, 1, more), as the two
-/// faces of an edge often share a corner.
-fn corner_class(prev: Option<u64>, range: u32) -> usize {
-    match prev {
-        None => ((32 - range.leading_zeros()) as usize - 2).min(3),
-        Some(p) => 4 + p.min(2) as usize,
-    }
-}
-
-fn pointer_estimate(avg: f32, first_size: u32) -> i64 {
-    (avg as f64 * (first_size as f64 - 1.0)).round() as i64
-}
-
-/// The coding frame of a position delta: the axes in coding order, the two least aligned with
-/// `v`'s normal first, and the normal's components along them. The last axis is predicted
-/// from the first two by the tangent plane (section 4.2.4 predicts `v_u` from `v`; the normal
-/// of `v` is known to the decoder, so the delta is predicted to lie in `v`'s tangent plane).
-fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [f64; 3]) {
-    let n = oct_decode(normal, bits);
-    let mut a = 0;
-    for i in 1..3 {
-        if n[i].abs() > n[a].abs() {
-            a = i;
-        }
-    }
-    let axes = match a {
-        0 => [1, 2, 0],
-        1 => [0, 2, 1],
-        _ => [0, 1, 2],
-    };
-    (axes, axes.map(|i| n[i] as f64))
-}
-
-/// The tangent-plane prediction of the last axis from the first two.
-fn tangent_prediction(n: [f64; 3], d0: i64, d1: i64) -> i64 {
-    if n[2] == 0.0 {
-        return 0;
-    }
-    let p = -(n[0] * d0 as f64 + n[1] * d1 as f64) / n[2];
-    p.round().clamp(-2_147_483_648.0, 2_147_483_648.0) as i64
-}
-
-/// The class of the last axis's residual: the bit length of the tangential delta.
-fn tangent_class(d0: i64, d1: i64) -> usize {
-    let m = d0.unsigned_abs() + d1.unsigned_abs();
-    ((64 - m.leading_zeros()) as usize).min(MAGNITUDES - 1)
 }
 
 /// Writes an operation; `swapped` stores `v_u`'s subtree first, `offset` is the size in bytes
@@ -710,7 +339,7 @@ fn read_op(
     if v >= v_end || v_end as i64 > n {
         return Err(corrupt("bad operation context"));
     }
-    let mut r = OpReader { tables, r: BitReader::new(ops, addr), bits };
+    let mut r = OpReader::new(tables, ops, addr, bits);
     let mut crit = [0u32; 4];
     let residual =
         [r.get_signed(SIN, sin_class(&ctx.parent_criteria))?, r.get_signed(GEOM, 0)?, r.get_signed(ATTR, 0)?];
@@ -840,7 +469,7 @@ fn read_op(
     } else {
         0
     };
-    let end = r.r.end();
+    let end = r.end();
     if (has_left || has_right) && end >= ops.len() {
         return Err(DpmError::Truncated("the operations"));
     }
@@ -1303,7 +932,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
                 let mut counts = vec![[0u64; 256]; TABLES];
                 for (k, d) in chunk.iter().enumerate() {
                     let i = c * CHUNK + k;
-                    let mut w = OpWriter { tables: None, counts: Some(&mut counts), w: BitWriter::default(), bits: 0 };
+                    let mut w = OpWriter::counting(&mut counts);
                     write_op(&mut w, d, swaps[i], offsets[i], avg, nb);
                 }
                 counts
@@ -1348,10 +977,9 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
                     let d = &data[i];
                     let [l, r] = child_ops[i];
                     let code = |swap: bool, offset: u64| {
-                        let mut w = OpWriter { tables: Some(tables), counts: None, w: BitWriter::default(), bits: 0 };
+                        let mut w = OpWriter::coding(tables);
                         write_op(&mut w, d, swap, offset, avg, nb);
-                        let bits = w.bits;
-                        (w.w.finish(), bits)
+                        w.finish()
                     };
                     if d.has_left && d.has_right {
                         let (plain, plain_bits) = code(false, subtree[l]);
