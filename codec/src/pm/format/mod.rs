@@ -132,25 +132,27 @@ mod header;
 mod op;
 mod quantize;
 mod symbols;
+mod tables;
 
 pub use header::{DpmError, Header, MAGIC, VERSION};
 pub use op::{DecodedOp, OpContext};
 pub use quantize::quantized;
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use super::{ProgressiveMesh, SplitTree, NONE};
 use crate::container::{get_varint, put_varint};
-use crate::huffman::{BitReader, BitWriter, Table, MAX_LEN};
+use crate::huffman::Table;
 use fields::*;
 use header::{corrupt, LAYOUT};
 use op::{classify, read_op, write_op, FaceCode, OpData};
 use quantize::{
     dequantize_position, fit_header, max_q, oct_decode, oct_encode, quantize_criteria, quantize_position, valid_oct,
 };
-use symbols::{unzigzag, zigzag, OpWriter};
+use symbols::OpWriter;
+use tables::{every_symbol, read_tables, write_tables};
 
 /// Encoder settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,86 +167,6 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions { position_bits: 16, normal_bits: 10 }
     }
-}
-
-/// A `.dpm` table: every one of the 256 symbols gets a code (a count of one more than seen),
-/// so a table built before the final offsets are known still codes every symbol the final
-/// pass produces.
-fn every_symbol(counts: &[u64; 256]) -> Table {
-    Table::from_counts(&counts.map(|c| c + 1), MAX_LEN)
-}
-
-// ---- the tables section --------------------------------------------------------------------
-
-/// One bit stream, padded to a byte: per table a bit, 0 for a flat code (every symbol 8 bits),
-/// 1 for a code whose 256 lengths follow, each as the Elias gamma code of one plus the zigzag
-/// difference to the previous symbol's length (the first to 8): neighbouring symbols mostly
-/// have equal or adjacent lengths, so a table costs about 40 to 80 bytes.
-fn write_tables(tables: &[Table]) -> Vec<u8> {
-    let mut w = BitWriter::default();
-    for t in tables {
-        if t.lens == [8; 256] {
-            w.put(0, 1);
-            continue;
-        }
-        w.put(1, 1);
-        let mut prev = 8i64;
-        for &l in &t.lens {
-            let g = zigzag(l as i64 - prev) as u32 + 1;
-            let b = 32 - g.leading_zeros();
-            w.put(0, (b - 1) as u8);
-            w.put(g, b as u8);
-            prev = l as i64;
-        }
-    }
-    w.finish()
-}
-
-/// The flat code (every symbol 8 bits), built once and shared by every table coded as flat.
-fn flat_table() -> Arc<Table> {
-    static FLAT: OnceLock<Arc<Table>> = OnceLock::new();
-    FLAT.get_or_init(|| Arc::new(Table::from_lens(&[8; 256]).expect("a flat code is complete"))).clone()
-}
-
-/// Reads the tables. A flat table is the shared [`flat_table`]; only tables whose lengths are
-/// stored are built, each from at least 256 bits of the section, so the work is bounded by
-/// the section's size (a file of flat tables, such as most fuzzer inputs, builds none).
-fn read_tables(tb: &[u8]) -> Result<Vec<Arc<Table>>, DpmError> {
-    let mut r = BitReader::new(tb, 0);
-    let mut bit = || r.bit().ok_or(DpmError::Truncated("tables"));
-    let mut tables = Vec::with_capacity(TABLES);
-    for _ in 0..TABLES {
-        if !bit()? {
-            tables.push(flat_table());
-        } else {
-            let mut lens = [8u8; 256];
-            let mut prev = 8i64;
-            for l in &mut lens {
-                let mut zeros = 0;
-                while !bit()? {
-                    zeros += 1;
-                    if zeros > 8 {
-                        return Err(corrupt("bad code length"));
-                    }
-                }
-                let mut g = 1u32;
-                for _ in 0..zeros {
-                    g = (g << 1) | bit()? as u32;
-                }
-                let x = prev + unzigzag(g as u64 - 1);
-                if !(1..=MAX_LEN as i64).contains(&x) {
-                    return Err(corrupt("bad code length"));
-                }
-                *l = x as u8;
-                prev = x;
-            }
-            tables.push(Arc::new(Table::from_lens(&lens).ok_or_else(|| corrupt("invalid code lengths"))?));
-        }
-    }
-    if r.end() != tb.len() {
-        return Err(corrupt("bytes after the tables"));
-    }
-    Ok(tables)
 }
 
 // ---- integers in the base mesh section ------------------------------------------------------
