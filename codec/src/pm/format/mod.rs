@@ -127,32 +127,32 @@
 //! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
 //! tangential coordinate for the second, a normal delta predicted along the motion.
 
+mod decode;
 mod fields;
 mod header;
 mod op;
 mod quantize;
+mod stats;
 mod symbols;
 mod tables;
 
+pub use decode::{decode, Decoded, Dpm};
 pub use header::{DpmError, Header, MAGIC, VERSION};
 pub use op::{DecodedOp, OpContext};
 pub use quantize::quantized;
-
-use std::sync::Arc;
+pub use stats::DpmStats;
 
 use rayon::prelude::*;
 
 use super::{ProgressiveMesh, SplitTree, NONE};
-use crate::container::{get_varint, put_varint};
+use crate::container::put_varint;
 use crate::huffman::Table;
 use fields::*;
-use header::{corrupt, LAYOUT};
-use op::{classify, read_op, write_op, FaceCode, OpData};
-use quantize::{
-    dequantize_position, fit_header, max_q, oct_decode, oct_encode, quantize_criteria, quantize_position, valid_oct,
-};
+use header::LAYOUT;
+use op::{classify, write_op, FaceCode, OpData};
+use quantize::{fit_header, oct_encode, quantize_criteria, quantize_position};
 use symbols::OpWriter;
-use tables::{every_symbol, read_tables, write_tables};
+use tables::{every_symbol, write_tables};
 
 /// Encoder settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -167,211 +167,6 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions { position_bits: 16, normal_bits: 10 }
     }
-}
-
-// ---- integers in the base mesh section ------------------------------------------------------
-
-fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmError> {
-    u32::try_from(get_varint(b, pos, what)?).map_err(|_| corrupt(format!("number out of range in {what}")))
-}
-
-/// The parsed container: header, tables, the base mesh and the operation bytes.
-#[derive(Clone, Debug)]
-pub struct Dpm<'a> {
-    pub header: Header,
-    tables: Vec<Arc<Table>>,
-    /// Base vertex FVIDs, ascending.
-    pub base_vertices: Vec<u32>,
-    pub base_positions: Vec<[u32; 3]>,
-    pub base_normals: Vec<[u32; 2]>,
-    /// Per base vertex: the address of its first operation.
-    pub roots: Vec<Option<usize>>,
-    pub base_faces: Vec<[u32; 3]>,
-    pub ops: &'a [u8],
-    section_lens: [usize; 3],
-}
-
-impl<'a> Dpm<'a> {
-    /// Checks the container and reads the tables and the base mesh (not the operations).
-    pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
-        let (hb, sections) = LAYOUT.parse(bytes)?;
-        let header = Header::from_bytes(hb)?;
-        let tables = read_tables(sections[0])?;
-        // Base mesh.
-        let bb = sections[1];
-        let ops = sections[2];
-        let nb = header.base_vertices as usize;
-        if nb > bb.len() / 7 || header.base_faces as usize > bb.len() / 3 || header.splits as usize > ops.len() {
-            return Err(corrupt("counts larger than the data"));
-        }
-        let mut pos = 0;
-        let (mut base_vertices, mut base_positions, mut base_normals, mut roots) =
-            (Vec::with_capacity(nb), Vec::with_capacity(nb), Vec::with_capacity(nb), Vec::with_capacity(nb));
-        let mut next = 0u64;
-        for _ in 0..nb {
-            let f = next + get_varint(bb, &mut pos, "base vertices")?;
-            if f >= header.vertices as u64 {
-                return Err(corrupt("base vertex FVID out of range"));
-            }
-            base_vertices.push(f as u32);
-            next = f + 1;
-            let mut p = [0u32; 3];
-            for x in &mut p {
-                *x = get_u32(bb, &mut pos, "base vertices")?;
-                if *x > max_q(header.position_bits) {
-                    return Err(corrupt("base position out of range"));
-                }
-            }
-            let mut q = [0u32; 2];
-            for x in &mut q {
-                *x = get_u32(bb, &mut pos, "base vertices")?;
-            }
-            if !valid_oct(q, header.normal_bits) {
-                return Err(corrupt("base normal out of range"));
-            }
-            base_positions.push(p);
-            base_normals.push(q);
-            let root = get_varint(bb, &mut pos, "base vertices")?;
-            roots.push(match root {
-                0 => None,
-                a if a - 1 < ops.len() as u64 => Some(a as usize - 1),
-                _ => return Err(corrupt("root operation address out of range")),
-            });
-        }
-        if nb > 0 && base_vertices[0] != 0 || (nb == 0 && header.vertices != 0) {
-            return Err(corrupt("the first base vertex must have FVID 0"));
-        }
-        let mut base_faces = Vec::with_capacity(header.base_faces as usize);
-        for _ in 0..header.base_faces {
-            let mut t = [0u32; 3];
-            for x in &mut t {
-                *x = get_u32(bb, &mut pos, "base faces")?;
-                if *x >= header.vertices {
-                    return Err(corrupt("base face FVID out of range"));
-                }
-            }
-            base_faces.push(t);
-        }
-        if pos != bb.len() {
-            return Err(corrupt("bytes after the base mesh"));
-        }
-        Ok(Dpm {
-            header,
-            tables,
-            base_vertices,
-            base_positions,
-            base_normals,
-            roots,
-            base_faces,
-            ops,
-            section_lens: sections.map(|s| s.len()),
-        })
-    }
-
-    /// Decodes the single operation at `addr` of the operations section.
-    pub fn decode_op(&self, addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
-        read_op(&self.header, &self.tables, self.ops, addr, ctx, None)
-    }
-
-    /// Decodes every operation (pre-order over the forest), optionally counting bits per field.
-    fn decode_all(&self, mut bits: Option<&mut [u64; KINDS]>) -> Result<Decoded, DpmError> {
-        let h = &self.header;
-        let n = h.vertices as usize;
-        let mut positions = vec![[0f32; 3]; n];
-        let mut normals = vec![[0f32; 3]; n];
-        let mut splits = Vec::with_capacity(h.splits as usize);
-        let mut criteria = Vec::with_capacity(h.splits as usize);
-        let mut addresses = Vec::with_capacity(h.splits as usize);
-        let mut contexts = Vec::with_capacity(h.splits as usize);
-        let mut stack: Vec<(usize, OpContext)> = vec![];
-        for b in 0..self.base_vertices.len() {
-            let v = self.base_vertices[b];
-            let v_end = self.base_vertices.get(b + 1).copied().unwrap_or(h.vertices);
-            positions[v as usize] = dequantize_position(self.base_positions[b], h);
-            normals[v as usize] = oct_decode(self.base_normals[b], h.normal_bits);
-            let Some(root) = self.roots[b] else {
-                if v_end - v != 1 {
-                    return Err(corrupt("split tree inconsistent with the FVID ranges"));
-                }
-                continue;
-            };
-            stack.push((
-                root,
-                OpContext {
-                    v,
-                    v_end,
-                    parent_criteria: [0; 4],
-                    position: self.base_positions[b],
-                    normal: self.base_normals[b],
-                },
-            ));
-            while let Some((addr, ctx)) = stack.pop() {
-                if splits.len() >= h.splits as usize {
-                    return Err(corrupt("more operations than the header says"));
-                }
-                let op = read_op(h, &self.tables, self.ops, addr, &ctx, bits.as_deref_mut())?;
-                let v_u = op.split.v_u;
-                positions[v_u as usize] = dequantize_position(op.position_u, h);
-                normals[v_u as usize] = oct_decode(op.normal_u, h.normal_bits);
-                if let Some(a) = op.right {
-                    stack.push((
-                        a,
-                        OpContext {
-                            v: v_u,
-                            v_end: ctx.v_end,
-                            parent_criteria: op.criteria_q,
-                            position: op.position_u,
-                            normal: op.normal_u,
-                        },
-                    ));
-                }
-                if let Some(a) = op.left {
-                    stack.push((a, OpContext { v_end: v_u, parent_criteria: op.criteria_q, ..ctx }));
-                }
-                addresses.push(addr);
-                contexts.push(ctx);
-                criteria.push(op.criteria);
-                splits.push(op.split);
-            }
-        }
-        if splits.len() != h.splits as usize {
-            return Err(corrupt("fewer operations than the header says"));
-        }
-        let triangles = self.base_faces.len() as u64 + splits.iter().map(|s| s.faces.len() as u64).sum::<u64>();
-        if triangles != h.triangles as u64 {
-            return Err(corrupt("triangle count differs from the header"));
-        }
-        Ok(Decoded {
-            pm: ProgressiveMesh {
-                base_vertices: self.base_vertices.clone(),
-                base_faces: self.base_faces.clone(),
-                splits,
-                positions,
-                fvid_of_input: (0..h.vertices).collect(),
-                normals,
-                criteria,
-            },
-            header: *h,
-            addresses,
-            contexts,
-        })
-    }
-}
-
-/// A decoded `.dpm` file.
-#[derive(Clone, Debug)]
-pub struct Decoded {
-    /// The progressive mesh, splits in the file's (pre-)order, numbered by FVID.
-    pub pm: ProgressiveMesh,
-    pub header: Header,
-    /// Per split: its operation's address in the operations section, and its context.
-    pub addresses: Vec<usize>,
-    pub contexts: Vec<OpContext>,
-}
-
-/// Decodes a `.dpm` file.
-pub fn decode(bytes: &[u8]) -> Result<Decoded, DpmError> {
-    Dpm::parse(bytes)?.decode_all(None)
 }
 
 /// An encoded file and, per split of the input (in its order), the operation's address in the
@@ -651,75 +446,6 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, DpmE
     }
     let out = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &ops]);
     Ok(Encoded { bytes: out, header: h, addresses, contexts, symbol_bits })
-}
-
-/// Sizes of a `.dpm` file, with the paper's breakdown of the operations (section 6).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DpmStats {
-    pub header: Header,
-    pub bytes: usize,
-    /// Refinement criteria (sin alpha, errors, radius).
-    pub criteria_bytes: f64,
-    /// Tree pointers: the head symbol (the children code, with the face count, the faces'
-    /// orientations and the radius flag) and the address offsets.
-    pub tree_pointer_bytes: f64,
-    /// Connectivity: `v_u`'s FVID (the split point) and the faces.
-    pub connectivity_bytes: f64,
-    /// Geometry: position and normal deltas.
-    pub geometry_bytes: f64,
-    /// Byte alignment of the operations.
-    pub padding_bytes: f64,
-    /// The base mesh section.
-    pub base_bytes: usize,
-    /// The probability tables section.
-    pub table_bytes: usize,
-    /// Magic, header, section framing and checksums.
-    pub framing_bytes: usize,
-}
-
-impl DpmStats {
-    /// Measures a file (decoding every operation).
-    pub fn of(bytes: &[u8]) -> Result<DpmStats, DpmError> {
-        let dpm = Dpm::parse(bytes)?;
-        let mut bits = [0u64; KINDS];
-        dpm.decode_all(Some(&mut bits))?;
-        let sum = |ks: &[Kind]| ks.iter().map(|&k| bits[k as usize]).sum::<u64>() as f64 / 8.0;
-        let criteria_bytes = sum(&[Kind::Sin, Kind::GeomError, Kind::AttrError, Kind::Radius]);
-        let tree_pointer_bytes = sum(&[Kind::Head, Kind::Pointer]);
-        let connectivity_bytes = sum(&[
-            Kind::Split,
-            Kind::FaceCount,
-            Kind::FaceForm,
-            Kind::FaceT,
-            Kind::FaceU,
-            Kind::FaceOther,
-            Kind::FaceOtherDelta,
-            Kind::FaceGeneral,
-        ]);
-        let geometry_bytes = sum(&[Kind::Position, Kind::Normal]);
-        let [tables, base, ops] = dpm.section_lens;
-        Ok(DpmStats {
-            header: dpm.header,
-            bytes: bytes.len(),
-            criteria_bytes,
-            tree_pointer_bytes,
-            connectivity_bytes,
-            geometry_bytes,
-            padding_bytes: ops as f64 - criteria_bytes - tree_pointer_bytes - connectivity_bytes - geometry_bytes,
-            base_bytes: base,
-            table_bytes: tables,
-            framing_bytes: bytes.len() - tables - base - ops,
-        })
-    }
-
-    pub fn bytes_per_vertex(&self) -> f64 {
-        self.bytes as f64 / self.header.vertices.max(1) as f64
-    }
-
-    /// A part of the breakdown per vertex.
-    pub fn per_vertex(&self, bytes: f64) -> f64 {
-        bytes / self.header.vertices.max(1) as f64
-    }
 }
 
 /// Wraps arbitrary bytes as the operations section of a valid container (for fuzzing the
