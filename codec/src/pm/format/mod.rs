@@ -117,8 +117,9 @@
 //!   rather than to the next active vertex, which depends on the runtime state;
 //! * the geometric and attribute errors are coded separately (they have different units here),
 //!   and the radius too;
-//! * the input vertex order ([`ProgressiveMesh::fvid_of_input`]) is not stored: the decoded
-//!   mesh is numbered by FVID (`fvid_of_input` is the identity).
+//! * the input vertex order
+//!   ([`ProgressiveMesh::fvid_of_input`](super::ProgressiveMesh::fvid_of_input)) is not
+//!   stored: the decoded mesh is numbered by FVID (`fvid_of_input` is the identity).
 //!
 //! Every context, prediction and implied value above was kept because it made the Stanford
 //! bunny (`stanford/bunny_zipper_c3d.obj.gz`, 34,834 vertices) smaller, tables included; the
