@@ -59,7 +59,7 @@
 //! new neighbours are offered, and its other edges keep their costs (computed with the hub's
 //! quadric of when they were offered: an approximation of the greedy order, only around
 //! hubs); the errors around a hub are not read but bounded, by the greatest error of any
-//! vertex that was ever its neighbour and of any hub ([`Simplifier::hub_bound`]), which
+//! vertex that was ever its neighbour and of any hub (`Simplifier::hub_bound`), which
 //! keeps the errors monotone bounds; and its list of faces is compacted when most of it is
 //! dead. Then every collapse costs time in the faces of its non-hub vertices, at most
 //! `HUB_FACES` each ([`BuildStats::work`] counts it). No mesh in `../shared/meshes` has a hub
