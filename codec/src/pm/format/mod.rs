@@ -72,9 +72,10 @@
 //!    this operation, as the zigzag difference to `s_avg * (m - 1)`, `m` the FVID count of the
 //!    child stored first (4.2.1), in 6 classes by the bit length of `m` (groups).
 //!
-//! Compression follows the four steps of section 4.2: operations with zero offsets give the
-//! first tables; the operations are compressed bottom-up (in reverse pre-order), which fixes
-//! the offsets; the tables are rebuilt from those symbols and everything is compressed again.
+//! Compression follows the four steps of section 4.2 (`encode.rs`, one function per step):
+//! operations with zero offsets give the first tables; the operations are compressed bottom-up
+//! (children before parents, as the paper's reverse order), which fixes the offsets; the
+//! tables are rebuilt from those symbols and everything is compressed again.
 //!
 //! **The `v_l`/`v_u` swap (section 4.2.4).** In the paper swapping `v_t` and `v_u` of a split
 //! renumbers the FVIDs of both subtrees and costs nothing to signal. Here a vertex has the
@@ -127,6 +128,14 @@
 //! 9.80). Contexts that did not pay for their tables on the bunny were left out: classes by
 //! `n` for the geometric and attribute errors, by the parent's magnitude for them, by the first
 //! tangential coordinate for the second, a normal delta predicted along the motion.
+//!
+//! # The code
+//!
+//! One concern per file: `header.rs` the container and the header; `quantize.rs` the
+//! quantizers of positions, normals and criteria; `fields.rs` the fields of an operation with
+//! their contexts and predictions; `symbols.rs` how values become Huffman-coded symbols;
+//! `tables.rs` the shared tables (`TABL`); `op.rs` one operation, written and read; `decode.rs`
+//! the decoder; `encode.rs` the encoder; `stats.rs` the size breakdown ([`DpmStats`]).
 
 mod decode;
 mod encode;
