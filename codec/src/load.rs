@@ -3,8 +3,8 @@
 //!
 //! The format comes from the file name (`.obj`, `.ply`, `.stl`, each optionally followed by
 //! `.gz`); gzip is recognised by its magic bytes, whatever the name says. Polygons of PLY
-//! and OBJ faces are triangulated by one function (`polygon`): convex ones are fanned from
-//! their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones ear-clipped in the
+//! and OBJ faces are triangulated by one function (in `load/polygon.rs`): convex ones are
+//! fanned from their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones ear-clipped in the
 //! plane of their Newell normal, every triangle oriented like the polygon; degenerate ones
 //! (no area) are fanned. OBJ faces of one or two corners (and `l` lines) become triangles
 //! `(a, a, a)` and `(a, b, b)`, as `tobj` makes them; PLY faces of fewer than three corners

@@ -198,3 +198,17 @@ fn bunny_and_dragon_sizes() {
         assert!(st.bytes_per_vertex() <= 12.0, "{rel}: {:.3} bytes/vertex", st.bytes_per_vertex());
     }
 }
+
+/// A version this build does not know is refused, naming the one it reads; the version
+/// field is outside the header's checksum, so nothing else stops the file.
+#[test]
+fn unknown_versions_are_refused() {
+    let mut bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), format::VERSION);
+    for v in [0u16, 1, 3, u16::MAX] {
+        bytes[8..10].copy_from_slice(&v.to_le_bytes());
+        let e = decode(&bytes).unwrap_err();
+        assert_eq!(e.to_string(), format!("unsupported .dpm version {v} (this build reads version 2)"));
+        assert!(DpmStats::of(&bytes).is_err());
+    }
+}

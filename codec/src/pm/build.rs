@@ -247,23 +247,21 @@ impl Simplifier {
         let n = mesh.positions.len();
         let mut alive = vec![false; n];
         let mut vertex_faces = vec![Vec::new(); n];
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for (f, tri) in mesh.triangles.iter().enumerate() {
             for (k, &v) in tri.iter().enumerate() {
                 if tri[..k].contains(&v) {
                     continue;
                 }
                 vertex_faces[v as usize].push(f as u32);
-                if !alive[v as usize] {
-                    alive[v as usize] = true;
-                    for (a, &c) in mesh.positions[v as usize].iter().enumerate() {
-                        lo[a] = lo[a].min(f64::from(c));
-                        hi[a] = hi[a].max(f64::from(c));
-                    }
-                }
+                alive[v as usize] = true;
             }
         }
-        let centre: [f64; 3] = std::array::from_fn(|a| if lo[a] <= hi[a] { 0.5 * (lo[a] + hi[a]) } else { 0.0 });
+        // The used vertices' box (their positions are finite: `Mesh::validate` ran).
+        let used = mesh.positions.iter().zip(&alive).filter(|(_, &a)| a).map(|(p, _)| p);
+        let centre: [f64; 3] = match crate::mesh::bounding_box(used) {
+            Some((lo, hi)) => std::array::from_fn(|a| 0.5 * (f64::from(lo[a]) + f64::from(hi[a]))),
+            None => [0.0; 3],
+        };
         let pos: Vec<[f64; 3]> = mesh.positions.iter().map(|p| sub(p.map(f64::from), centre)).collect();
         let mut quadric = vec![Quadric::default(); n];
         for tri in &mesh.triangles {

@@ -1,0 +1,223 @@
+//! The `.dpm` decoder. [`Dpm::parse`] checks the container and reads the header, the tables
+//! and the base mesh; [`Dpm::decode_op`] decodes any single operation from its address and
+//! context, which is all the runtime does; [`decode`] walks the split forest from the base
+//! vertices in the file's pre-order and decodes every operation, checking the counts against
+//! the header. Every way the bytes can be wrong is a [`DpmError`], never a panic
+//! (`fuzz/fuzz_targets/decode_dpm.rs` fuzzes this, behind the checksums too).
+
+use std::sync::Arc;
+
+use super::fields::KINDS;
+use super::header::{corrupt, get_varint, Header, LAYOUT};
+use super::op::{read_op, DecodedOp, OpContext};
+use super::quantize::{dequantize_position, max_q, oct_decode, valid_oct};
+use super::tables::read_tables;
+use super::DpmError;
+use crate::huffman::Table;
+use crate::pm::ProgressiveMesh;
+
+/// A LEB128 number of the base mesh section that must fit in 32 bits.
+fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmError> {
+    u32::try_from(get_varint(b, pos, what)?).map_err(|_| corrupt(format!("number out of range in {what}")))
+}
+
+/// The parsed container: header, tables, the base mesh and the operation bytes.
+#[derive(Clone, Debug)]
+pub struct Dpm<'a> {
+    pub header: Header,
+    tables: Vec<Arc<Table>>,
+    /// Base vertex FVIDs, ascending.
+    pub base_vertices: Vec<u32>,
+    pub base_positions: Vec<[u32; 3]>,
+    pub base_normals: Vec<[u32; 2]>,
+    /// Per base vertex: the address of its first operation.
+    pub roots: Vec<Option<usize>>,
+    pub base_faces: Vec<[u32; 3]>,
+    pub ops: &'a [u8],
+    /// The sizes of the sections TABL, BASE, OPER.
+    pub(super) section_lens: [usize; 3],
+}
+
+impl<'a> Dpm<'a> {
+    /// Checks the container and reads the tables and the base mesh (not the operations).
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
+        let c = LAYOUT.parse(bytes)?;
+        let (hb, sections) = (c.header, c.sections);
+        let header = Header::from_bytes(hb)?;
+        let tables = read_tables(sections[0])?;
+        // Base mesh.
+        let bb = sections[1];
+        let ops = sections[2];
+        let nb = header.base_vertices as usize;
+        if nb > bb.len() / 7 || header.base_faces as usize > bb.len() / 3 || header.splits as usize > ops.len() {
+            return Err(corrupt("counts larger than the data"));
+        }
+        let mut pos = 0;
+        let (mut base_vertices, mut base_positions, mut base_normals, mut roots) =
+            (Vec::with_capacity(nb), Vec::with_capacity(nb), Vec::with_capacity(nb), Vec::with_capacity(nb));
+        let mut next = 0u64;
+        for _ in 0..nb {
+            let f = next + get_varint(bb, &mut pos, "base vertices")?;
+            if f >= header.vertices as u64 {
+                return Err(corrupt("base vertex FVID out of range"));
+            }
+            base_vertices.push(f as u32);
+            next = f + 1;
+            let mut p = [0u32; 3];
+            for x in &mut p {
+                *x = get_u32(bb, &mut pos, "base vertices")?;
+                if *x > max_q(header.position_bits) {
+                    return Err(corrupt("base position out of range"));
+                }
+            }
+            let mut q = [0u32; 2];
+            for x in &mut q {
+                *x = get_u32(bb, &mut pos, "base vertices")?;
+            }
+            if !valid_oct(q, header.normal_bits) {
+                return Err(corrupt("base normal out of range"));
+            }
+            base_positions.push(p);
+            base_normals.push(q);
+            let root = get_varint(bb, &mut pos, "base vertices")?;
+            roots.push(match root {
+                0 => None,
+                a if a - 1 < ops.len() as u64 => Some(a as usize - 1),
+                _ => return Err(corrupt("root operation address out of range")),
+            });
+        }
+        if nb > 0 && base_vertices[0] != 0 || (nb == 0 && header.vertices != 0) {
+            return Err(corrupt("the first base vertex must have FVID 0"));
+        }
+        let mut base_faces = Vec::with_capacity(header.base_faces as usize);
+        for _ in 0..header.base_faces {
+            let mut t = [0u32; 3];
+            for x in &mut t {
+                *x = get_u32(bb, &mut pos, "base faces")?;
+                if *x >= header.vertices {
+                    return Err(corrupt("base face FVID out of range"));
+                }
+            }
+            base_faces.push(t);
+        }
+        if pos != bb.len() {
+            return Err(corrupt("bytes after the base mesh"));
+        }
+        Ok(Dpm {
+            header,
+            tables,
+            base_vertices,
+            base_positions,
+            base_normals,
+            roots,
+            base_faces,
+            ops,
+            section_lens: sections.map(|s| s.len()),
+        })
+    }
+
+    /// Decodes the single operation at `addr` of the operations section.
+    pub fn decode_op(&self, addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
+        read_op(&self.header, &self.tables, self.ops, addr, ctx, None)
+    }
+
+    /// Decodes every operation (pre-order over the forest), optionally counting bits per field.
+    pub(super) fn decode_all(&self, mut bits: Option<&mut [u64; KINDS]>) -> Result<Decoded, DpmError> {
+        let h = &self.header;
+        let n = h.vertices as usize;
+        let mut positions = vec![[0f32; 3]; n];
+        let mut normals = vec![[0f32; 3]; n];
+        let mut splits = Vec::with_capacity(h.splits as usize);
+        let mut criteria = Vec::with_capacity(h.splits as usize);
+        let mut addresses = Vec::with_capacity(h.splits as usize);
+        let mut contexts = Vec::with_capacity(h.splits as usize);
+        let mut stack: Vec<(usize, OpContext)> = vec![];
+        for b in 0..self.base_vertices.len() {
+            let v = self.base_vertices[b];
+            let v_end = self.base_vertices.get(b + 1).copied().unwrap_or(h.vertices);
+            positions[v as usize] = dequantize_position(self.base_positions[b], h);
+            normals[v as usize] = oct_decode(self.base_normals[b], h.normal_bits);
+            let Some(root) = self.roots[b] else {
+                if v_end - v != 1 {
+                    return Err(corrupt("split tree inconsistent with the FVID ranges"));
+                }
+                continue;
+            };
+            stack.push((
+                root,
+                OpContext {
+                    v,
+                    v_end,
+                    parent_criteria: [0; 4],
+                    position: self.base_positions[b],
+                    normal: self.base_normals[b],
+                },
+            ));
+            while let Some((addr, ctx)) = stack.pop() {
+                if splits.len() >= h.splits as usize {
+                    return Err(corrupt("more operations than the header says"));
+                }
+                let op = read_op(h, &self.tables, self.ops, addr, &ctx, bits.as_deref_mut())?;
+                let v_u = op.split.v_u;
+                positions[v_u as usize] = dequantize_position(op.position_u, h);
+                normals[v_u as usize] = oct_decode(op.normal_u, h.normal_bits);
+                if let Some(a) = op.right {
+                    stack.push((
+                        a,
+                        OpContext {
+                            v: v_u,
+                            v_end: ctx.v_end,
+                            parent_criteria: op.criteria_q,
+                            position: op.position_u,
+                            normal: op.normal_u,
+                        },
+                    ));
+                }
+                if let Some(a) = op.left {
+                    stack.push((a, OpContext { v_end: v_u, parent_criteria: op.criteria_q, ..ctx }));
+                }
+                addresses.push(addr);
+                contexts.push(ctx);
+                criteria.push(op.criteria);
+                splits.push(op.split);
+            }
+        }
+        if splits.len() != h.splits as usize {
+            return Err(corrupt("fewer operations than the header says"));
+        }
+        let triangles = self.base_faces.len() as u64 + splits.iter().map(|s| s.faces.len() as u64).sum::<u64>();
+        if triangles != h.triangles as u64 {
+            return Err(corrupt("triangle count differs from the header"));
+        }
+        Ok(Decoded {
+            pm: ProgressiveMesh {
+                base_vertices: self.base_vertices.clone(),
+                base_faces: self.base_faces.clone(),
+                splits,
+                positions,
+                fvid_of_input: (0..h.vertices).collect(),
+                normals,
+                criteria,
+            },
+            header: *h,
+            addresses,
+            contexts,
+        })
+    }
+}
+
+/// A decoded `.dpm` file.
+#[derive(Clone, Debug)]
+pub struct Decoded {
+    /// The progressive mesh, splits in the file's (pre-)order, numbered by FVID.
+    pub pm: ProgressiveMesh,
+    pub header: Header,
+    /// Per split: its operation's address in the operations section, and its context.
+    pub addresses: Vec<usize>,
+    pub contexts: Vec<OpContext>,
+}
+
+/// Decodes a `.dpm` file.
+pub fn decode(bytes: &[u8]) -> Result<Decoded, DpmError> {
+    Dpm::parse(bytes)?.decode_all(None)
+}

@@ -1,0 +1,478 @@
+//! The `.dpm` encoder, in the four steps that section 4.2 of the paper gives for it:
+//!
+//! > 1. Compute uncompressed operations with zero address offsets.
+//! > 2. Compute the probability tables.
+//! > 3. Compress the operations in reverse order, computing the correct address offsets.
+//! > 4. Re-compute the probability tables and re-compress.
+//!
+//! [`encode`] checks and quantizes the mesh, runs the steps, one function each
+//! ([`uncompressed_operations`], [`probability_tables`], [`compress_in_reverse_order`],
+//! [`recompute_and_recompress`]), then lays the operations out in pre-order and writes the
+//! sections. The paper's reverse order is there so that an operation is compressed after the
+//! subtrees it points past; [`compress_bottom_up`] gets the same by compressing the split
+//! forest one height at a time, each height in parallel. Steps 3 and 4 also choose the
+//! `v_l`/`v_u` swap of section 4.2.4 (see the format's documentation, [`super`]).
+
+use rayon::prelude::*;
+
+use super::fields::TABLES;
+use super::header::{Header, LAYOUT};
+use super::op::{classify, write_op, FaceCode, OpContext, OpData};
+use super::quantize::{fit_header, oct_encode, quantize_criteria, quantize_position};
+use super::symbols::OpWriter;
+use super::tables::{every_symbol, write_tables};
+use crate::container::put_varint;
+use crate::huffman::Table;
+use crate::pm::{ProgressiveMesh, SplitTree, NONE};
+use thiserror::Error;
+
+/// Encoder settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EncodeOptions {
+    /// Bits per position coordinate over the bounding box (8 to 24).
+    pub position_bits: u8,
+    /// Bits per octahedral normal coordinate (4 to 16).
+    pub normal_bits: u8,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions { position_bits: 16, normal_bits: 10 }
+    }
+}
+
+/// An encoded file and, per split of the input (in its order), the operation's address in the
+/// operations section and its context.
+#[derive(Clone, Debug)]
+pub struct Encoded {
+    pub bytes: Vec<u8>,
+    pub header: Header,
+    pub addresses: Vec<usize>,
+    pub contexts: Vec<OpContext>,
+    /// The Huffman-coded symbols of the tables' counts (before the final choice of swaps):
+    /// their bits with the file's codes, and their entropy, the bits an ideal arithmetic
+    /// coder with the same static tables would spend on them (before its per-operation
+    /// termination). The gap is what arithmetic coding could save.
+    pub symbol_bits: (f64, f64),
+}
+
+/// What keeps a progressive mesh from being encoded.
+#[derive(Debug, Error, PartialEq)]
+pub enum EncodeError {
+    #[error("invalid progressive mesh: {0}")]
+    InvalidMesh(String),
+    #[error("invalid options: {0}")]
+    InvalidOptions(String),
+}
+
+fn invalid(msg: &str) -> EncodeError {
+    EncodeError::InvalidMesh(msg.into())
+}
+
+/// Encodes a progressive mesh from [`super::build`](fn@crate::pm::build) (or any with the same
+/// structure: every split reachable from the base vertices, FVID ranges as in section 3.2).
+pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, EncodeError> {
+    let mut h = fit_header(pm, opts)?;
+    check_mesh(pm)?;
+    let qpos: Vec<[u32; 3]> = pm.positions.iter().map(|&p| quantize_position(p, &h)).collect();
+    let qnrm: Vec<[u32; 2]> = pm.normals.iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
+    let qcrit: Vec<[u32; 4]> = pm.criteria.iter().map(|c| quantize_criteria(c, &h)).collect();
+    let tree = SplitTree::new(pm);
+
+    let (ops, first_guess) = uncompressed_operations(pm, &tree, &qpos, &qnrm, &qcrit, h.normal_bits)?;
+    let (first_tables, _) = probability_tables(&ops, &first_guess);
+    let offsets = compress_in_reverse_order(&ops, &first_tables);
+    let last = recompute_and_recompress(&ops, &offsets);
+    h.avg_op_bytes = offsets.avg;
+
+    let (oper, addresses) = lay_out(&ops, &last.bytes, &last.choices.swaps);
+    let tb = write_tables(&last.tables);
+    let bb = base_section(pm, &tree, &qpos, &qnrm, &addresses);
+    let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &oper]);
+    Ok(Encoded { bytes, header: h, addresses, contexts: ops.contexts, symbol_bits: last.symbol_bits })
+}
+
+/// The checks of `pm`'s structure that need no traversal (the traversal of step 1 checks the
+/// split tree against the FVID ranges).
+fn check_mesh(pm: &ProgressiveMesh) -> Result<(), EncodeError> {
+    let n = pm.positions.len();
+    if pm.normals.len() != n || pm.criteria.len() != pm.splits.len() {
+        return Err(invalid("normals or criteria do not match the vertices or splits"));
+    }
+    if pm.base_vertices.len() + pm.splits.len() != n {
+        return Err(invalid("base vertices and splits do not add up to the vertices"));
+    }
+    if pm.base_vertices.windows(2).any(|w| w[0] >= w[1]) || pm.base_vertices.first().is_some_and(|&v| v != 0) {
+        return Err(invalid("base vertices must ascend from FVID 0"));
+    }
+    if pm.splits.iter().any(|s| s.v as usize >= n || s.v_u as usize >= n) {
+        return Err(invalid("split FVID out of range"));
+    }
+    let in_range = |t: &[u32; 3]| t.iter().all(|&f| (f as usize) < n);
+    if !pm.base_faces.iter().all(in_range) || !pm.splits.iter().all(|s| s.faces.iter().all(in_range)) {
+        return Err(invalid("face FVID out of range"));
+    }
+    Ok(())
+}
+
+/// The operations of step 1, in pre-order of the split forest (an operation, then `v_l`'s
+/// subtree, then `v_u`'s), and the split forest over them.
+struct Operations {
+    /// Per operation: everything but its address offset and its swap.
+    data: Vec<OpData>,
+    /// Per operation: its split.
+    order: Vec<usize>,
+    /// Per operation: the operations of `v_l` and `v_u` (`usize::MAX` where that child is a leaf).
+    child_ops: Vec<[usize; 2]>,
+    /// Per base vertex: its first operation (`usize::MAX`: none).
+    root_ops: Vec<usize>,
+    /// Per split (in the input's order): its operation's context.
+    contexts: Vec<OpContext>,
+    /// The operations by height in the split forest (0: both children leaves): an operation's
+    /// children are all of lower height, so each height is coded in parallel once the lower
+    /// ones are done (pre-order puts children after their parent).
+    levels: Vec<Vec<usize>>,
+    normal_bits: u8,
+}
+
+/// How the operations are stored besides their data, what an operation's bytes depend on: per
+/// operation whether `v_u`'s operation is stored first (the swap, where both children split),
+/// the address offset of the child stored second (the size of the subtree stored first), and
+/// the average operation size `s_avg` the offsets are estimated from (section 4.2.1).
+struct Choices {
+    swaps: Vec<bool>,
+    offsets: Vec<u64>,
+    avg: f32,
+}
+
+/// Step 1 of section 4.2: "Compute uncompressed operations with zero address offsets."
+///
+/// Walks the split forest from the base vertices in pre-order, checking every split against
+/// its vertex's FVID range, and makes each split an [`OpData`]: its context, its quantized
+/// criteria, its faces classified and sorted by third-corner offset (4.2.2), its position and
+/// normal deltas. The choices go with zero offsets and a first guess at the swaps, the smaller
+/// subtree first: from tables built without swaps, the swapped children code would be too
+/// long for any swap to pay.
+fn uncompressed_operations(
+    pm: &ProgressiveMesh,
+    tree: &SplitTree,
+    qpos: &[[u32; 3]],
+    qnrm: &[[u32; 2]],
+    qcrit: &[[u32; 4]],
+    normal_bits: u8,
+) -> Result<(Operations, Choices), EncodeError> {
+    let n = pm.positions.len();
+    // Pre-order over the forest (v_l first); per op: split index, children's op indices.
+    let mut order: Vec<usize> = Vec::with_capacity(pm.splits.len());
+    let mut data: Vec<OpData> = Vec::with_capacity(pm.splits.len());
+    let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(pm.splits.len());
+    let mut contexts = vec![OpContext::default(); pm.splits.len()];
+    let mut op_of_split = vec![usize::MAX; pm.splits.len()];
+    let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
+    // Stack entries: (split, context, parent op index and side).
+    type Pending = (u32, OpContext, Option<(usize, usize)>);
+    let mut stack: Vec<Pending> = vec![];
+    for (b, &v) in pm.base_vertices.iter().enumerate() {
+        let v_end = pm.base_vertices.get(b + 1).copied().unwrap_or(n as u32);
+        let root = tree.roots[b];
+        if root == NONE {
+            if v_end - v != 1 {
+                return Err(invalid("FVID range of an unsplit base vertex"));
+            }
+            continue;
+        }
+        root_ops[b] = data.len();
+        let ctx = OpContext { v, v_end, parent_criteria: [0; 4], position: qpos[v as usize], normal: qnrm[v as usize] };
+        stack.push((root, ctx, None));
+        while let Some((s, ctx, parent)) = stack.pop() {
+            let s = s as usize;
+            let split = &pm.splits[s];
+            if split.v != ctx.v || split.v_u <= ctx.v || split.v_u >= ctx.v_end || op_of_split[s] != usize::MAX {
+                return Err(invalid("split outside its vertex's FVID range"));
+            }
+            let [l, r] = tree.children[s];
+            let (has_left, has_right) = (l != NONE, r != NONE);
+            if (!has_left && split.v_u != split.v + 1) || (!has_right && ctx.v_end != split.v_u + 1) {
+                return Err(invalid("split tree inconsistent with the FVID ranges"));
+            }
+            let i = data.len();
+            op_of_split[s] = i;
+            if let Some((p, side)) = parent {
+                child_ops[p][side] = i;
+            }
+            contexts[s] = ctx;
+            let mut faces: Vec<FaceCode> =
+                split.faces.iter().map(|&f| classify(split.v, split.v_u, ctx.v_end, f)).collect();
+            faces.sort_by_key(|f| match *f {
+                FaceCode::Standard { o, .. } => (0, o),
+                FaceCode::General(_) => (1, 0),
+            });
+            let (pv, pu) = (qpos[split.v as usize], qpos[split.v_u as usize]);
+            let (nv, nu) = (qnrm[split.v as usize], qnrm[split.v_u as usize]);
+            data.push(OpData {
+                ctx,
+                v_u: split.v_u,
+                crit: qcrit[s],
+                has_left,
+                has_right,
+                faces,
+                dpos: std::array::from_fn(|k| pu[k] as i64 - pv[k] as i64),
+                dnrm: std::array::from_fn(|k| nu[k] as i64 - nv[k] as i64),
+            });
+            order.push(s);
+            child_ops.push([usize::MAX; 2]);
+            if has_right {
+                let c =
+                    OpContext { v: split.v_u, v_end: ctx.v_end, parent_criteria: qcrit[s], position: pu, normal: nu };
+                stack.push((r, c, Some((i, 1))));
+            }
+            if has_left {
+                let c = OpContext { v_end: split.v_u, parent_criteria: qcrit[s], ..ctx };
+                stack.push((l, c, Some((i, 0))));
+            }
+        }
+    }
+    if data.len() != pm.splits.len() {
+        return Err(invalid("splits not reachable from the base vertices"));
+    }
+
+    let mut height = vec![0u32; data.len()];
+    for i in (0..data.len()).rev() {
+        let h = child_ops[i].iter().filter(|&&c| c != usize::MAX).map(|&c| height[c] + 1).max().unwrap_or(0);
+        height[i] = h;
+    }
+    let mut levels: Vec<Vec<usize>> = vec![vec![]; height.iter().max().map_or(0, |&h| h as usize + 1)];
+    for (i, &h) in height.iter().enumerate() {
+        levels[h as usize].push(i);
+    }
+
+    let smaller_first: Vec<bool> = data.iter().map(|d| d.ctx.v_end - d.v_u < d.v_u - d.ctx.v).collect();
+    let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; data.len()], avg: 0.0 };
+    let ops = Operations { data, order, child_ops, root_ops, contexts, levels, normal_bits };
+    Ok((ops, zero_offsets))
+}
+
+/// Step 2 of section 4.2: "Compute the probability tables."
+///
+/// The symbols of every operation coded with `choices` are counted per table, and every table
+/// is a Huffman code over those counts in which every symbol has a code ([`every_symbol`]), so
+/// that the tables still code the symbols of the next compression, whose offsets and swaps
+/// differ. Returns the tables and the counts.
+fn probability_tables(ops: &Operations, choices: &Choices) -> (Vec<Table>, Vec<[u64; 256]>) {
+    let counts = count_symbols(ops, choices);
+    (counts.iter().map(every_symbol).collect(), counts)
+}
+
+/// Step 3 of section 4.2: "Compress the operations in reverse order, computing the correct
+/// address offsets."
+///
+/// Two bottom-up compressions with step 2's tables: the first without an offset estimate gives
+/// the average operation size `s_avg` (section 4.2.1), the second, with the estimate, gives
+/// the offsets and the swaps that step 4 counts.
+fn compress_in_reverse_order(ops: &Operations, tables: &[Table]) -> Choices {
+    let (bytes, _) = compress_bottom_up(ops, tables, 0.0);
+    let avg = bytes.iter().map(|b| b.len()).sum::<usize>() as f32 / ops.data.len().max(1) as f32;
+    compress_bottom_up(ops, tables, avg).1
+}
+
+/// What the encoder writes: the file's tables, each operation's bytes and how it was stored.
+struct Recompressed {
+    tables: Vec<Table>,
+    bytes: Vec<Vec<u8>>,
+    choices: Choices,
+    /// [`Encoded::symbol_bits`].
+    symbol_bits: (f64, f64),
+}
+
+/// Step 4 of section 4.2: "Re-compute the probability tables and re-compress."
+///
+/// The tables are counted from the operations as step 3 stored them (its offsets and swaps),
+/// and the final compression chooses the swaps again with those tables (every symbol has a
+/// code, so a changed choice still codes); the offset estimate keeps step 3's `s_avg`.
+fn recompute_and_recompress(ops: &Operations, step3: &Choices) -> Recompressed {
+    let (tables, counts) = probability_tables(ops, step3);
+    let symbol_bits = symbol_bits(&counts, &tables);
+    let (bytes, choices) = compress_bottom_up(ops, &tables, step3.avg);
+    Recompressed { tables, bytes, choices, symbol_bits }
+}
+
+/// The symbol counts per table of every operation coded with `choices`, in parallel chunks,
+/// each with its own counts, summed at the end.
+fn count_symbols(ops: &Operations, choices: &Choices) -> Vec<[u64; 256]> {
+    const CHUNK: usize = 1 << 14;
+    let Choices { swaps, offsets, avg } = choices;
+    ops.data
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut counts = vec![[0u64; 256]; TABLES];
+            for (k, d) in chunk.iter().enumerate() {
+                let i = c * CHUNK + k;
+                let mut w = OpWriter::counting(&mut counts);
+                write_op(&mut w, d, swaps[i], offsets[i], *avg, ops.normal_bits);
+            }
+            counts
+        })
+        .reduce(
+            || vec![[0u64; 256]; TABLES],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(&b) {
+                    for (p, q) in x.iter_mut().zip(y) {
+                        *p += q;
+                    }
+                }
+                a
+            },
+        )
+}
+
+/// The bits of the counted symbols with `tables`, and their entropy.
+fn symbol_bits(counts: &[[u64; 256]], tables: &[Table]) -> (f64, f64) {
+    let mut symbol_bits = (0.0f64, 0.0f64);
+    for (c, t) in counts.iter().zip(tables) {
+        let total = c.iter().sum::<u64>() as f64;
+        for (&k, &len) in c.iter().zip(&t.lens) {
+            if k > 0 {
+                symbol_bits.0 += k as f64 * len as f64;
+                symbol_bits.1 += k as f64 * (total / k as f64).log2();
+            }
+        }
+    }
+    symbol_bits
+}
+
+/// One bottom-up compression with `tables` and the offset estimate from `avg`: children before
+/// parents, so the sizes of both subtrees are known when an operation is coded. Per operation
+/// its bytes, swap and offset. Every operation whose children both split is coded both ways,
+/// and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
+fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: f32) -> (Vec<Vec<u8>>, Choices) {
+    let (data, child_ops) = (&ops.data, &ops.child_ops);
+    let m = data.len();
+    let mut bytes: Vec<Vec<u8>> = vec![vec![]; m];
+    let mut subtree = vec![0u64; m];
+    let mut swaps = vec![false; m];
+    let mut offsets = vec![0u64; m];
+    for level in &ops.levels {
+        let coded: Vec<(Vec<u8>, bool, u64)> = level
+            .par_iter()
+            .map(|&i| {
+                let d = &data[i];
+                let [l, r] = child_ops[i];
+                let code = |swap: bool, offset: u64| {
+                    let mut w = OpWriter::coding(tables);
+                    write_op(&mut w, d, swap, offset, avg, ops.normal_bits);
+                    w.finish()
+                };
+                if d.has_left && d.has_right {
+                    let (plain, plain_bits) = code(false, subtree[l]);
+                    let (other, other_bits) = code(true, subtree[r]);
+                    if (other.len(), other_bits) < (plain.len(), plain_bits) {
+                        (other, true, subtree[r])
+                    } else {
+                        (plain, false, subtree[l])
+                    }
+                } else {
+                    (code(false, 0).0, false, 0)
+                }
+            })
+            .collect();
+        for (&i, (b, swap, offset)) in level.iter().zip(coded) {
+            let [l, r] = child_ops[i];
+            let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
+            subtree[i] = b.len() as u64 + sub(l) + sub(r);
+            bytes[i] = b;
+            swaps[i] = swap;
+            offsets[i] = offset;
+        }
+    }
+    (bytes, Choices { swaps, offsets, avg })
+}
+
+/// The operations section: pre-order, each operation followed by the subtree it stores first.
+/// Returns the section and, per split (in the input's order), its operation's address.
+fn lay_out(ops: &Operations, op_bytes: &[Vec<u8>], swaps: &[bool]) -> (Vec<u8>, Vec<usize>) {
+    let m = op_bytes.len();
+    let mut oper = Vec::with_capacity(op_bytes.iter().map(|b| b.len()).sum());
+    let mut op_addr = vec![0usize; m];
+    let mut layout: Vec<usize> = vec![];
+    for &root in ops.root_ops.iter().filter(|&&r| r != usize::MAX) {
+        layout.push(root);
+        while let Some(i) = layout.pop() {
+            op_addr[i] = oper.len();
+            oper.extend_from_slice(&op_bytes[i]);
+            let [l, r] = ops.child_ops[i];
+            let (first, second) = if swaps[i] { (r, l) } else { (l, r) };
+            for c in [second, first] {
+                if c != usize::MAX {
+                    layout.push(c);
+                }
+            }
+        }
+    }
+    let mut addresses = vec![0usize; ops.order.len()];
+    for (i, &s) in ops.order.iter().enumerate() {
+        addresses[s] = op_addr[i];
+    }
+    (oper, addresses)
+}
+
+/// The base mesh section (LEB128): per base vertex its FVID gap to the previous one, its
+/// quantized position and normal, and its first operation's address plus one (0: none); then
+/// the base faces.
+fn base_section(
+    pm: &ProgressiveMesh,
+    tree: &SplitTree,
+    qpos: &[[u32; 3]],
+    qnrm: &[[u32; 2]],
+    addresses: &[usize],
+) -> Vec<u8> {
+    let mut bb = Vec::new();
+    let mut next = 0u64;
+    for (b, &v) in pm.base_vertices.iter().enumerate() {
+        put_varint(&mut bb, v as u64 - next);
+        next = v as u64 + 1;
+        for x in qpos[v as usize] {
+            put_varint(&mut bb, x as u64);
+        }
+        for x in qnrm[v as usize] {
+            put_varint(&mut bb, x as u64);
+        }
+        let root = tree.roots[b];
+        put_varint(&mut bb, if root == NONE { 0 } else { addresses[root as usize] as u64 + 1 });
+    }
+    for t in &pm.base_faces {
+        for &x in t {
+            put_varint(&mut bb, x as u64);
+        }
+    }
+    bb
+}
+
+/// Wraps arbitrary bytes as the operations section of a valid container (for fuzzing the
+/// operation decoder behind the checksums): flat tables, one base vertex whose first operation
+/// is at address 0, and counts taken from the data's length.
+pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
+    let splits = (data.len() as u32).min(64);
+    let h = Header {
+        vertices: splits + 1,
+        base_vertices: 1,
+        base_faces: 0,
+        splits,
+        position_bits: 16,
+        normal_bits: 10,
+        bbox_min: [0.0; 3],
+        step: 1.0,
+        length_step: 0.25,
+        attribute_step: 1.0 / 4096.0,
+        avg_op_bytes: 4.0,
+        triangles: data.first().copied().unwrap_or(0) as u32,
+    };
+    let tb = vec![0u8; TABLES.div_ceil(8)];
+    let mut bb = vec![];
+    put_varint(&mut bb, 0);
+    for _ in 0..5 {
+        put_varint(&mut bb, 0);
+    }
+    put_varint(&mut bb, if data.is_empty() { 0 } else { 1 });
+    LAYOUT.write(&h.to_bytes(), [&tb, &bb, data])
+}

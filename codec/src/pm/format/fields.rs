@@ -1,0 +1,226 @@
+//! The fields of an operation and their contexts: per field its kind (for the size breakdown
+//! of [`DpmStats`](super::DpmStats)), its number of classes and how its values become symbols,
+//! where its tables start among the shared ones, and the functions that choose a class or a
+//! prediction from what the decoder already has (the operation's context and the fields read
+//! before). Encoder and decoder both call these, so a context is computed one way only; the
+//! order in which the fields are coded is in the format's documentation ([`super`]) and `op.rs`.
+
+use super::quantize::oct_decode;
+
+/// The fields of an operation, for the size breakdown in [`DpmStats`](super::DpmStats).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(usize)]
+pub(super) enum Kind {
+    Sin,
+    GeomError,
+    AttrError,
+    Radius,
+    Head,
+    Split,
+    FaceCount,
+    FaceForm,
+    FaceT,
+    FaceU,
+    FaceOther,
+    FaceOtherDelta,
+    FaceGeneral,
+    Position,
+    Normal,
+    Pointer,
+}
+
+pub(super) const KINDS: usize = 16;
+
+/// How a field's values become byte symbols.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Scheme {
+    /// 7-bit groups, least significant first, with a continuation bit; the group's
+    /// significance (0, 1, 2+) selects one of three tables (the paper's contexts by byte
+    /// significance).
+    Groups,
+    /// One symbol per value: the value itself below 16, else its bit length and the three bits
+    /// below the leading one, followed by the remaining low bits uncoded (as DEFLATE codes
+    /// lengths and distances). One table per class; suits wide values whose low bits are
+    /// noise. Values must be below `2^34` (the encoder's are: FVID offsets, positions and
+    /// normals are at most 33 bits as zigzag values).
+    Buckets,
+}
+
+/// A coded field: its kind for the breakdown, its number of classes (a context chosen from
+/// what the decoder already knows, each with its own tables) and its scheme.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Field {
+    pub(super) kind: Kind,
+    pub(super) classes: usize,
+    pub(super) scheme: Scheme,
+}
+
+const fn field(kind: Kind, classes: usize, scheme: Scheme) -> Field {
+    Field { kind, classes, scheme }
+}
+
+/// Classes of the region size contexts (see [`region_class`]).
+const REGION_CLASSES: usize = 3;
+
+/// The class of an operation by the number of finest vertices its vertex stands for
+/// (`v_end - v`, at least 2): its bit length less 2, capped.
+pub(super) fn region_class(v: u32, v_end: u32) -> usize {
+    let n = v_end.saturating_sub(v).max(2);
+    ((32 - n.leading_zeros()) as usize - 2).min(REGION_CLASSES - 1)
+}
+
+/// Classes of the split point's contexts (see [`split_class`]).
+const SPLIT_CLASSES: usize = 6;
+
+/// The class of the split point of a range of `n` FVIDs (more than 4): its bit length less
+/// 3, capped.
+pub(super) fn split_class(n: u32) -> usize {
+    ((32 - n.leading_zeros()) as usize - 3).min(SPLIT_CLASSES - 1)
+}
+
+/// Classes of the magnitude contexts (see [`magnitude_class`]).
+const MAGNITUDES: usize = 28;
+
+// The fields, in table order.
+pub(super) const SIN: usize = 0;
+pub(super) const GEOM: usize = 1;
+pub(super) const ATTR: usize = 2;
+pub(super) const RADIUS: usize = 3;
+pub(super) const HEAD: usize = 4;
+pub(super) const SPLIT: usize = 5;
+pub(super) const FACE_COUNT: usize = 6;
+pub(super) const FACE_FORM: usize = 7;
+pub(super) const FACE_T: usize = 8;
+pub(super) const FACE_U: usize = 9;
+pub(super) const FACE_OTHER: usize = 10;
+pub(super) const FACE_OTHER_DELTA: usize = 11;
+pub(super) const FACE_GENERAL: usize = 12;
+pub(super) const POS_TANGENT: usize = 13;
+pub(super) const POS_NORMAL: usize = 14;
+pub(super) const NORMAL: usize = 15;
+pub(super) const POINTER: usize = 16;
+pub(super) const FIELDS: [Field; 17] = [
+    field(Kind::Sin, 4, Scheme::Groups),
+    field(Kind::GeomError, 1, Scheme::Groups),
+    field(Kind::AttrError, 1, Scheme::Groups),
+    field(Kind::Radius, 1, Scheme::Groups),
+    field(Kind::Head, 4, Scheme::Groups),
+    field(Kind::Split, SPLIT_CLASSES, Scheme::Groups),
+    field(Kind::FaceCount, 1, Scheme::Groups),
+    field(Kind::FaceForm, 1, Scheme::Groups),
+    field(Kind::FaceT, 7, Scheme::Groups),
+    field(Kind::FaceU, 7, Scheme::Groups),
+    field(Kind::FaceOther, REGION_CLASSES, Scheme::Buckets),
+    field(Kind::FaceOtherDelta, REGION_CLASSES, Scheme::Buckets),
+    field(Kind::FaceGeneral, 1, Scheme::Groups),
+    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Position, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Normal, MAGNITUDES, Scheme::Buckets),
+    field(Kind::Pointer, SPLIT_CLASSES, Scheme::Groups),
+];
+
+pub(super) const fn tables_per_class(s: Scheme) -> usize {
+    match s {
+        Scheme::Groups => 3,
+        Scheme::Buckets => 1,
+    }
+}
+
+/// Per field, the index of its first table; the last entry is the number of tables.
+pub(super) const TABLE_BASE: [usize; FIELDS.len() + 1] = {
+    let mut b = [0; FIELDS.len() + 1];
+    let mut i = 0;
+    while i < FIELDS.len() {
+        b[i + 1] = b[i] + FIELDS[i].classes * tables_per_class(FIELDS[i].scheme);
+        i += 1;
+    }
+    b
+};
+pub(super) const TABLES: usize = TABLE_BASE[FIELDS.len()];
+
+/// The magnitude class of a log-coded length or attribute error `k` (section 4.2.3): 0 for
+/// zero, then one class per doubling (35 steps of 2%), capped.
+pub(super) fn magnitude_class(k: u32) -> usize {
+    if k == 0 {
+        0
+    } else {
+        (1 + (k as usize - 1) / 35).min(MAGNITUDES - 1)
+    }
+}
+
+/// The prediction of criterion `i`: the parent's value, except for the radius, which is at
+/// most both the parent's radius and this operation's geometric error (the error is the
+/// region's farthest vertex raised to its neighbours' errors) and is predicted by the
+/// smaller of the two.
+pub(super) fn criteria_prediction(parent: &[u32; 4], this: &[u32; 4], i: usize) -> i64 {
+    if i == 3 {
+        parent[3].min(this[1]) as i64
+    } else {
+        parent[i] as i64
+    }
+}
+
+/// The class of the head symbol: the size of `v`'s FVID range, 2, 3, 4 or more (a range of 2
+/// has two leaves as children, one of 3 one leaf and one split).
+pub(super) fn head_class(v: u32, v_end: u32) -> usize {
+    (v_end.saturating_sub(v).clamp(2, 5) - 2) as usize
+}
+
+/// The class of `sin(alpha)`'s residual: the parent's value in quarters of its range (a wide
+/// parent cone often has an equally wide child cone).
+pub(super) fn sin_class(parent: &[u32; 4]) -> usize {
+    (parent[0] >> 6).min(3) as usize
+}
+
+/// The class of a face corner's offset inside `v_l`'s or `v_u`'s FVID range (of `range` FVIDs,
+/// at least 2; the corner of a range of 1 is not coded): for the first standard face 0 to 3 by
+/// the range's bit length, else 4 to 6 by the previous face's offset (0, 1, more), as the two
+/// faces of an edge often share a corner.
+pub(super) fn corner_class(prev: Option<u64>, range: u32) -> usize {
+    match prev {
+        None => ((32 - range.leading_zeros()) as usize - 2).min(3),
+        Some(p) => 4 + p.min(2) as usize,
+    }
+}
+
+/// The estimate of the address offset of the child stored second, from the average operation
+/// size: `s_avg * (m - 1)` for `m` the FVID count of the child stored first (section 4.2.1,
+/// where that child is always `v_l`: `s_avg * (v_u - v - 1)`).
+pub(super) fn pointer_estimate(avg: f32, first_size: u32) -> i64 {
+    (avg as f64 * (first_size as f64 - 1.0)).round() as i64
+}
+
+/// The coding frame of a position delta: the axes in coding order, the two least aligned with
+/// `v`'s normal first, and the normal's components along them. The last axis is predicted
+/// from the first two by the tangent plane (section 4.2.4 predicts `v_u` from `v`; the normal
+/// of `v` is known to the decoder, so the delta is predicted to lie in `v`'s tangent plane).
+pub(super) fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [f64; 3]) {
+    let n = oct_decode(normal, bits);
+    let mut a = 0;
+    for i in 1..3 {
+        if n[i].abs() > n[a].abs() {
+            a = i;
+        }
+    }
+    let axes = match a {
+        0 => [1, 2, 0],
+        1 => [0, 2, 1],
+        _ => [0, 1, 2],
+    };
+    (axes, axes.map(|i| n[i] as f64))
+}
+
+/// The tangent-plane prediction of the last axis from the first two.
+pub(super) fn tangent_prediction(n: [f64; 3], d0: i64, d1: i64) -> i64 {
+    if n[2] == 0.0 {
+        return 0;
+    }
+    let p = -(n[0] * d0 as f64 + n[1] * d1 as f64) / n[2];
+    p.round().clamp(-2_147_483_648.0, 2_147_483_648.0) as i64
+}
+
+/// The class of the last axis's residual: the bit length of the tangential delta.
+pub(super) fn tangent_class(d0: i64, d1: i64) -> usize {
+    let m = d0.unsigned_abs() + d1.unsigned_abs();
+    ((64 - m.leading_zeros()) as usize).min(MAGNITUDES - 1)
+}

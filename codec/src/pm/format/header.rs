@@ -1,0 +1,140 @@
+//! The `.dpm` container and its fixed header: the magic number, the version, the layout of
+//! the three checksummed sections ([`crate::container`] checks them), the header's fields byte
+//! by byte. What can be wrong with the bytes is a [`DpmError`], the container error type
+//! `.bft` files share ([`FormatError`]).
+
+use crate::container::Layout;
+pub use crate::container::{Format, FormatError};
+
+pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
+pub const VERSION: u16 = 2;
+const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
+/// The `.dpm` container: sections TABL, BASE, OPER.
+pub(super) const LAYOUT: Layout<3> = Layout {
+    format: Format::Dpm,
+    magic: MAGIC,
+    version: VERSION,
+    reads: &[VERSION],
+    tags: [*b"TABL", *b"BASE", *b"OPER"],
+    names: ["tables section", "base mesh section", "operations section"],
+};
+
+/// Everything that can be wrong with `.dpm` bytes: the container error type both formats
+/// share. (What keeps a mesh from being encoded is an [`EncodeError`](super::EncodeError).)
+pub type DpmError = FormatError;
+
+pub(super) fn corrupt(msg: impl Into<String>) -> DpmError {
+    FormatError::Corrupt(Format::Dpm, msg.into())
+}
+
+/// Reads a LEB128 integer of a `.dpm` section.
+pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u64, DpmError> {
+    crate::container::get_varint(Format::Dpm, b, pos, what)
+}
+
+/// The fixed header, little-endian, `HEADER_LEN` (50) bytes:
+///
+/// ```text
+/// offset  size  field
+/// 0       4     vertices (u32)
+/// 4       4     base_vertices (u32)
+/// 8       4     base_faces (u32)
+/// 12      4     splits (u32)
+/// 16      1     position_bits (8 to 24)
+/// 17      1     normal_bits (4 to 16)
+/// 18      12    bbox_min (3 f32)
+/// 30      4     step (f32)
+/// 34      4     length_step (f32)
+/// 38      4     attribute_step (f32)
+/// 42      4     avg_op_bytes (f32)
+/// 46      4     triangles (u32)
+/// ```
+///
+/// Reading it rejects bit counts out of range, non-finite floats, steps that are
+/// not positive, a negative average and vertex counts that do not add up
+/// (`base_vertices + splits = vertices`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Header {
+    /// Finest-level vertices (FVIDs).
+    pub vertices: u32,
+    pub base_vertices: u32,
+    pub base_faces: u32,
+    pub splits: u32,
+    pub position_bits: u8,
+    pub normal_bits: u8,
+    pub bbox_min: [f32; 3],
+    /// Position quantization step.
+    pub step: f32,
+    /// Lower bound `q` of the log-coded lengths (geometric error, radius).
+    pub length_step: f32,
+    /// Lower bound `q` of the log-coded attribute error.
+    pub attribute_step: f32,
+    /// Average operation size in bytes, for the address offset estimate.
+    pub avg_op_bytes: f32,
+    /// Total triangles after full refinement.
+    pub triangles: u32,
+}
+
+impl Header {
+    pub(super) fn to_bytes(self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(HEADER_LEN);
+        for v in [self.vertices, self.base_vertices, self.base_faces, self.splits] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.push(self.position_bits);
+        b.push(self.normal_bits);
+        for v in [
+            self.bbox_min[0],
+            self.bbox_min[1],
+            self.bbox_min[2],
+            self.step,
+            self.length_step,
+            self.attribute_step,
+            self.avg_op_bytes,
+        ] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&self.triangles.to_le_bytes());
+        debug_assert_eq!(b.len(), HEADER_LEN);
+        b
+    }
+
+    pub(super) fn from_bytes(b: &[u8]) -> Result<Self, DpmError> {
+        if b.len() != HEADER_LEN {
+            return Err(corrupt(format!("header is {} bytes, expected {HEADER_LEN}", b.len())));
+        }
+        let u = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap());
+        let f = |i: usize| f32::from_le_bytes(b[i..i + 4].try_into().unwrap());
+        let h = Header {
+            vertices: u(0),
+            base_vertices: u(4),
+            base_faces: u(8),
+            splits: u(12),
+            position_bits: b[16],
+            normal_bits: b[17],
+            bbox_min: [f(18), f(22), f(26)],
+            step: f(30),
+            length_step: f(34),
+            attribute_step: f(38),
+            avg_op_bytes: f(42),
+            triangles: u(46),
+        };
+        if !(8..=24).contains(&h.position_bits) || !(4..=16).contains(&h.normal_bits) {
+            return Err(corrupt("quantization bits out of range"));
+        }
+        let pos = |x: f32| x.is_finite() && x > 0.0;
+        if !(h.bbox_min.iter().all(|x| x.is_finite())
+            && pos(h.step)
+            && pos(h.length_step)
+            && pos(h.attribute_step)
+            && h.avg_op_bytes.is_finite()
+            && h.avg_op_bytes >= 0.0)
+        {
+            return Err(corrupt("bad quantization parameters"));
+        }
+        if h.base_vertices as u64 + h.splits as u64 != h.vertices as u64 {
+            return Err(corrupt("vertex counts do not add up"));
+        }
+        Ok(h)
+    }
+}

@@ -1,0 +1,78 @@
+//! The size breakdown of a `.dpm` file ([`DpmStats`], what `tessera pm stats` prints): the
+//! operations' bits per field kind, measured by decoding every operation, in the groups that
+//! section 6 of the paper reports (refinement criteria, tree structure, connectivity, geometry,
+//! and the bytes the per-operation compression wastes), and the sizes of the other sections.
+
+use super::decode::Dpm;
+use super::fields::{Kind, KINDS};
+use super::header::Header;
+use super::DpmError;
+
+/// Sizes of a `.dpm` file, with the paper's breakdown of the operations (section 6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DpmStats {
+    pub header: Header,
+    pub bytes: usize,
+    /// Refinement criteria (sin alpha, errors, radius).
+    pub criteria_bytes: f64,
+    /// Tree pointers: the head symbol (the children code, with the face count, the faces'
+    /// orientations and the radius flag) and the address offsets.
+    pub tree_pointer_bytes: f64,
+    /// Connectivity: `v_u`'s FVID (the split point) and the faces.
+    pub connectivity_bytes: f64,
+    /// Geometry: position and normal deltas.
+    pub geometry_bytes: f64,
+    /// Byte alignment of the operations.
+    pub padding_bytes: f64,
+    /// The base mesh section.
+    pub base_bytes: usize,
+    /// The probability tables section.
+    pub table_bytes: usize,
+    /// Magic, header, section framing and checksums.
+    pub framing_bytes: usize,
+}
+
+impl DpmStats {
+    /// Measures a file (decoding every operation).
+    pub fn of(bytes: &[u8]) -> Result<DpmStats, DpmError> {
+        let dpm = Dpm::parse(bytes)?;
+        let mut bits = [0u64; KINDS];
+        dpm.decode_all(Some(&mut bits))?;
+        let sum = |ks: &[Kind]| ks.iter().map(|&k| bits[k as usize]).sum::<u64>() as f64 / 8.0;
+        let criteria_bytes = sum(&[Kind::Sin, Kind::GeomError, Kind::AttrError, Kind::Radius]);
+        let tree_pointer_bytes = sum(&[Kind::Head, Kind::Pointer]);
+        let connectivity_bytes = sum(&[
+            Kind::Split,
+            Kind::FaceCount,
+            Kind::FaceForm,
+            Kind::FaceT,
+            Kind::FaceU,
+            Kind::FaceOther,
+            Kind::FaceOtherDelta,
+            Kind::FaceGeneral,
+        ]);
+        let geometry_bytes = sum(&[Kind::Position, Kind::Normal]);
+        let [tables, base, ops] = dpm.section_lens;
+        Ok(DpmStats {
+            header: dpm.header,
+            bytes: bytes.len(),
+            criteria_bytes,
+            tree_pointer_bytes,
+            connectivity_bytes,
+            geometry_bytes,
+            padding_bytes: ops as f64 - criteria_bytes - tree_pointer_bytes - connectivity_bytes - geometry_bytes,
+            base_bytes: base,
+            table_bytes: tables,
+            framing_bytes: bytes.len() - tables - base - ops,
+        })
+    }
+
+    pub fn bytes_per_vertex(&self) -> f64 {
+        self.bytes as f64 / self.header.vertices.max(1) as f64
+    }
+
+    /// A part of the breakdown per vertex.
+    pub fn per_vertex(&self, bytes: f64) -> f64 {
+        bytes / self.header.vertices.max(1) as f64
+    }
+}
