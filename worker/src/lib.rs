@@ -2,6 +2,7 @@
 //! index buffers the renderer draws, and render them headless with wgpu ([`render`]). The GPU
 //! progressive-mesh adaptation builds on this crate.
 
+pub mod gpu;
 pub mod node;
 pub mod pm_gpu;
 pub mod protocol;

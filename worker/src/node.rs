@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use codec::pm::Viewpoint;
 use glam::{Mat4, Vec3};
 
+use crate::gpu::Gpu;
 use crate::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
 use crate::protocol::{PmFrameJob, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
 use crate::render::Renderer;
@@ -111,16 +112,17 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
         t.send(0, &ToMaster::Failed { reason: reason.clone() }.encode());
         Err(format!("rank {rank}: {reason}"))
     };
-    let mut renderer = match Renderer::new() {
-        Ok(r) => r,
+    let gpu = match Gpu::new() {
+        Ok(g) => g,
         Err(e) => return fail(e.to_string()),
     };
+    let mut renderer = Renderer::new(&gpu);
     let max_texture_side = match fault(rank) {
         Some(Fault::Texture(n)) => n,
-        _ => renderer.limits().max_texture_dimension_2d,
+        _ => gpu.limits().max_texture_dimension_2d,
     };
     heartbeat.busy(false);
-    t.send(0, &ToMaster::Ready { adapter: renderer.adapter_name().to_string(), max_texture_side }.encode());
+    t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
     let mut first_frame = true;
     loop {
@@ -135,7 +137,7 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
         let msg = match ToWorker::decode(&bytes) {
             Ok(ToWorker::Shutdown) => return Ok(()),
             Ok(ToWorker::Model(dpm)) => {
-                match PmTiles::new(&renderer, &dpm) {
+                match PmTiles::new(&gpu, &dpm) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
@@ -284,9 +286,9 @@ struct PmTiles {
 }
 
 impl PmTiles {
-    fn new(renderer: &Renderer, dpm: &[u8]) -> Result<PmTiles, String> {
+    fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, String> {
         let decoded = codec::pm::format::decode(dpm).map_err(|e| format!("cannot decode the progressive mesh: {e}"))?;
-        let template = GpuAdapter::new(renderer, &decoded.pm, DEFAULT_N_ALLOC).map_err(|e| e.to_string())?;
+        let template = GpuAdapter::new(gpu, &decoded.pm, DEFAULT_N_ALLOC).map_err(|e| e.to_string())?;
         Ok(PmTiles { template, tiles: HashMap::new(), uses: 0 })
     }
 

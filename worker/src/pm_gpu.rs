@@ -39,14 +39,30 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use codec::pm::{PassStats, ProgressiveMesh, SplitTree, Viewpoint, NONE};
+use thiserror::Error;
 use wgpu::util::DeviceExt;
 
-use crate::render::{map_read, scoped, wait_for, RenderError, Renderer};
+use crate::gpu::{Gpu, GpuError};
 
 const WG: u32 = 256;
 const SCAN_BLOCK: u32 = 2048;
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
 pub const DEFAULT_N_ALLOC: u32 = 1 << 15;
+
+/// Why an adaptation could not start or a pass failed.
+#[derive(Debug, Error)]
+pub enum AdaptError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("GPU error: the PM stages need {need} storage buffers per shader stage; the adapter allows {allowed}")]
+    TooFewStorageBuffers { need: u32, allowed: u32 },
+    /// The totals read back after the classification do not add up (a GPU fault).
+    #[error("GPU error: inconsistent pass totals: {vertices} vertices, {after} after, {collapses} collapses")]
+    InconsistentTotals { vertices: u32, after: u32, collapses: u32 },
+    /// A face read back refers to a vertex that is not active (a GPU fault).
+    #[error("GPU error: face index {index} out of {vertices} vertices")]
+    FaceIndex { index: u32, vertices: usize },
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -216,8 +232,7 @@ impl FaceSet {
 
 /// The adaptation state of one progressive mesh on the GPU (see the module docs).
 pub struct GpuAdapter {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+    gpu: Gpu,
     /// Pipelines and static data, shared by every adapter of the same mesh on this device.
     shared: Arc<Shared>,
     n_alloc: u32,
@@ -284,16 +299,15 @@ fn needs_resize(cap: u64, need: u64, n_alloc: u32) -> bool {
 }
 
 impl GpuAdapter {
-    /// Uploads `pm` to the renderer's device and starts at the base mesh. `n_alloc` is the
-    /// paper's reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
-    pub fn new(renderer: &Renderer, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, RenderError> {
-        let (device, queue) = (renderer.device().clone(), renderer.queue().clone());
-        let limits = device.limits();
+    /// Uploads `pm` to `gpu`'s device and starts at the base mesh. `n_alloc` is the paper's
+    /// reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
+    pub fn new(gpu: &Gpu, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
+        let limits = gpu.limits();
         if limits.max_storage_buffers_per_shader_stage < 10 {
-            return Err(RenderError::Gpu(format!(
-                "the PM stages need 10 storage buffers per shader stage; the adapter allows {}",
-                limits.max_storage_buffers_per_shader_stage
-            )));
+            return Err(AdaptError::TooFewStorageBuffers {
+                need: 10,
+                allowed: limits.max_storage_buffers_per_shader_stage,
+            });
         }
         let tree = SplitTree::new(pm);
         let mut face_off = 0u32;
@@ -327,20 +341,21 @@ impl GpuAdapter {
                 GpuPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
             })
             .collect();
-        scoped(renderer.device(), || {
+        gpu.scoped(|| {
+            let device = gpu.device();
             let read_only = wgpu::BufferUsages::STORAGE;
-            let splits = init(&device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
-            let split_faces = init(&device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
-            let points = init(&device, "pm: points", bytemuck::cast_slice(&points), read_only);
+            let splits = init(device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
+            let split_faces = init(device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
+            let points = init(device, "pm: points", bytemuck::cast_slice(&points), read_only);
             let shared = Arc::new(Shared {
-                pipelines: Pipelines::new(&device),
+                pipelines: Pipelines::new(device),
                 max_groups: limits.max_compute_workgroups_per_dimension,
                 splits,
                 split_faces,
                 points,
                 base: base_state(pm, &tree),
             });
-            Ok(GpuAdapter::with_shared(device, queue, shared, n_alloc.max(1)))
+            Ok(GpuAdapter::with_shared(gpu.clone(), shared, n_alloc.max(1)))
         })
     }
 
@@ -354,12 +369,12 @@ impl GpuAdapter {
     /// tile gives each a share of the slack, so that the slack summed over its tiles stays
     /// one adapter's whatever the tile count.
     pub fn sibling_with_slack(&self, n_alloc: u32) -> GpuAdapter {
-        GpuAdapter::with_shared(self.device.clone(), self.queue.clone(), self.shared.clone(), n_alloc.max(1))
+        GpuAdapter::with_shared(self.gpu.clone(), self.shared.clone(), n_alloc.max(1))
     }
 
     /// A new adapter at the base mesh.
-    fn with_shared(device: wgpu::Device, queue: wgpu::Queue, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
-        let d = &device;
+    fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
+        let d = gpu.device();
         let mut adapter = GpuAdapter {
             shared,
             n_alloc,
@@ -389,8 +404,7 @@ impl GpuAdapter {
             reallocations: 0,
             profile: false,
             times: [0.0; 3],
-            device,
-            queue,
+            gpu,
         };
         adapter.reset();
         adapter
@@ -406,22 +420,22 @@ impl GpuAdapter {
         self.cur = 0;
         let na = self.n_alloc as u64;
         if needs_resize(self.sets[0].fvid.cap, n, self.n_alloc) {
-            self.sets[0] = VertexSet::new(&self.device, "A", n + na);
+            self.sets[0] = VertexSet::new(self.gpu.device(), "A", n + na);
         }
         let set = &self.sets[0];
         for (s, data) in [(&set.fvid, fvid), (&set.next, next), (&set.node, &node)] {
             if !data.is_empty() {
-                self.queue.write_buffer(&s.buffer, 0, bytemuck::cast_slice(data));
+                self.gpu.queue().write_buffer(&s.buffer, 0, bytemuck::cast_slice(data));
             }
         }
         if needs_resize(self.faces.idx.cap, m, self.n_alloc) {
-            self.faces = FaceSet::new(&self.device, m + na);
+            self.faces = FaceSet::new(self.gpu.device(), m + na);
         }
         let faces = &self.faces;
         if m > 0 {
-            self.queue.write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(faces_idx));
-            self.queue.write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(faces_fvid));
-            self.queue.write_buffer(&faces.owner.buffer, 0, bytemuck::cast_slice(&owner));
+            self.gpu.queue().write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(faces_idx));
+            self.gpu.queue().write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(faces_fvid));
+            self.gpu.queue().write_buffer(&faces.owner.buffer, 0, bytemuck::cast_slice(&owner));
         }
         self.n = n as u32;
         self.m = m as u32;
@@ -467,19 +481,19 @@ impl GpuAdapter {
     }
 
     /// One adaptation pass for `view` (Algorithms 1 to 5).
-    pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, RenderError> {
+    pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, AdaptError> {
         self.pass(Some(view))
     }
 
     /// One pass that splits every vertex that can split and collapses nothing (the CPU
     /// reference's `refine_step`).
-    pub fn refine_step(&mut self) -> Result<PassStats, RenderError> {
+    pub fn refine_step(&mut self) -> Result<PassStats, AdaptError> {
         self.pass(None)
     }
 
     /// Applies every split: [`Self::refine_step`] until no vertex can split; returns the number
     /// of passes that split (as the CPU reference's `refine_fully`).
-    pub fn refine_fully(&mut self) -> Result<usize, RenderError> {
+    pub fn refine_fully(&mut self) -> Result<usize, AdaptError> {
         let mut passes = 0;
         while self.refine_step()?.splits > 0 {
             passes += 1;
@@ -489,7 +503,7 @@ impl GpuAdapter {
 
     /// Passes until one changes nothing, at most `max_passes`; returns the number of passes
     /// that changed something, or `None` if still not converged.
-    pub fn adapt_until_converged(&mut self, view: &Viewpoint, max_passes: usize) -> Result<Option<usize>, RenderError> {
+    pub fn adapt_until_converged(&mut self, view: &Viewpoint, max_passes: usize) -> Result<Option<usize>, AdaptError> {
         for k in 0..max_passes {
             if self.adapt(view)?.converged() {
                 return Ok(Some(k));
@@ -498,12 +512,12 @@ impl GpuAdapter {
         Ok(None)
     }
 
-    fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, RenderError> {
-        let device = self.device.clone();
-        scoped(&device, || self.pass_unscoped(view))
+    fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
+        let gpu = self.gpu.clone();
+        gpu.scoped(|| self.pass_unscoped(view))
     }
 
-    fn pass_unscoped(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, RenderError> {
+    fn pass_unscoped(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
         let pass_start = std::time::Instant::now();
         self.times = [0.0; 3];
         let (n, m) = (self.n, self.m);
@@ -515,9 +529,9 @@ impl GpuAdapter {
         // Temporaries hold n + 1 counts (the last one the scan's total).
         if needs_resize(self.vcnt.cap, n as u64 + 1, self.n_alloc) {
             let cap = n as u64 + 1 + na;
-            self.vcnt = storage(&self.device, "pm: vertex counts", cap, 4, VERTEX_USAGE);
-            self.fcnt = storage(&self.device, "pm: face counts", cap, 4, VERTEX_USAGE);
-            self.list = storage(&self.device, "pm: split list", cap, 4, VERTEX_USAGE);
+            self.vcnt = storage(self.gpu.device(), "pm: vertex counts", cap, 4, VERTEX_USAGE);
+            self.fcnt = storage(self.gpu.device(), "pm: face counts", cap, 4, VERTEX_USAGE);
+            self.list = storage(self.gpu.device(), "pm: split list", cap, 4, VERTEX_USAGE);
             self.reallocations += 1;
         }
         self.prepare_scan(n as u64 + 1);
@@ -531,11 +545,11 @@ impl GpuAdapter {
             params.c_lod = v.c_lod;
             params.attribute_scale = v.attribute_scale;
         }
-        self.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 1: state update, collapses, scans, and the totals read back.
         let mut enc =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
+            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
         enc.clear_buffer(&self.stats, 0, None);
         {
             let set = &self.sets[self.cur];
@@ -573,9 +587,10 @@ impl GpuAdapter {
         }
         if self.profile {
             // Time the state update and collapses apart from the scans.
-            wait_for(&self.device, self.queue.submit([enc.finish()]))?;
+            self.gpu.wait_for(self.gpu.queue().submit([enc.finish()]))?;
             self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
-            enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
+            enc =
+                self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
         }
         {
             let mut pass = enc
@@ -586,15 +601,17 @@ impl GpuAdapter {
         enc.copy_buffer_to_buffer(&self.vcnt.buffer, n as u64 * 4, &self.readback, 0, 4);
         enc.copy_buffer_to_buffer(&self.fcnt.buffer, n as u64 * 4, &self.readback, 4, 4);
         enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
-        self.queue.submit([enc.finish()]);
+        self.gpu.queue().submit([enc.finish()]);
         let totals = self.read_totals()?;
         self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
         let (n_new, f_add) = (totals[0], totals[1]);
         let counters = &totals[2..];
         let (collapses, cancelled, removed) =
             (counters[STAT_COLLAPSES], counters[STAT_CANCELLED], counters[STAT_REMOVED_FACES]);
-        let splits = (n_new + collapses).checked_sub(n).ok_or_else(|| {
-            RenderError::Gpu(format!("inconsistent pass totals: {n} vertices, {n_new} after, {collapses} collapses"))
+        let splits = (n_new + collapses).checked_sub(n).ok_or(AdaptError::InconsistentTotals {
+            vertices: n,
+            after: n_new,
+            collapses,
         })?;
         if splits == 0 && collapses == 0 {
             return Ok(PassStats { cancelled: cancelled as usize, ..unchanged });
@@ -606,7 +623,7 @@ impl GpuAdapter {
         let dst = 1 - self.cur;
         if needs_resize(self.sets[dst].fvid.cap, n_new as u64, self.n_alloc) {
             let cap = n_new as u64 + na;
-            self.sets[dst] = VertexSet::new(&self.device, if dst == 0 { "A" } else { "B" }, cap);
+            self.sets[dst] = VertexSet::new(self.gpu.device(), if dst == 0 { "A" } else { "B" }, cap);
             self.reallocations += 1;
         }
         let total = m as u64 + f_add as u64;
@@ -614,17 +631,18 @@ impl GpuAdapter {
             self.resize_faces(total + na, m as u64);
         }
         if self.hole.cap < removed as u64 {
-            self.hole = storage(&self.device, "pm: face holes", removed as u64 + na, 4, VERTEX_USAGE);
+            self.hole = storage(self.gpu.device(), "pm: face holes", removed as u64 + na, 4, VERTEX_USAGE);
             self.reallocations += 1;
         }
         params.n_new = n_new;
         params.f_add = f_add;
         params.m_new = m_new;
         params.splits = splits;
-        self.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 2: reorganisation, splits, index update, face compaction.
-        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: apply") });
+        let mut enc =
+            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: apply") });
         {
             let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
             let (p, f) = (&self.shared.pipelines, &self.faces);
@@ -689,9 +707,9 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.holes, &holes, m_new);
             self.dispatch(&mut pass, &p.fill, &fill, m + f_add - m_new);
         }
-        self.queue.submit([enc.finish()]);
+        self.gpu.queue().submit([enc.finish()]);
         if self.profile {
-            wait_for(&self.device, self.queue.submit([]))?;
+            self.gpu.wait_for(self.gpu.queue().submit([]))?;
             self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
         }
         if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
@@ -711,14 +729,14 @@ impl GpuAdapter {
 
     /// Reallocates the face buffers to `cap` faces, keeping the first `keep`.
     fn resize_faces(&mut self, cap: u64, keep: u64) {
-        let d = &self.device;
+        let d = self.gpu.device();
         let new = FaceSet::new(d, cap);
         if keep > 0 {
             let mut enc = d.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: face resize") });
             enc.copy_buffer_to_buffer(&self.faces.idx.buffer, 0, &new.idx.buffer, 0, keep * 12);
             enc.copy_buffer_to_buffer(&self.faces.fvid.buffer, 0, &new.fvid.buffer, 0, keep * 12);
             enc.copy_buffer_to_buffer(&self.faces.owner.buffer, 0, &new.owner.buffer, 0, keep * 4);
-            self.queue.submit([enc.finish()]);
+            self.gpu.queue().submit([enc.finish()]);
         }
         self.faces = new;
         self.reallocations += 1;
@@ -733,14 +751,14 @@ impl GpuAdapter {
         }
         while self.levels.len() < counts.len() {
             let k = self.levels.len();
-            let uniform = self.device.create_buffer(&wgpu::BufferDescriptor {
+            let uniform = self.gpu.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("pm: scan level {k}")),
                 size: 16,
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             self.levels.push(ScanLevel {
-                sums: storage(&self.device, "pm: scan sums", 0, 4, VERTEX_USAGE),
+                sums: storage(self.gpu.device(), "pm: scan sums", 0, 4, VERTEX_USAGE),
                 uniform,
                 blocks: 0,
             });
@@ -749,10 +767,10 @@ impl GpuAdapter {
         for (level, &c) in self.levels.iter_mut().zip(&counts) {
             let blocks = c.div_ceil(SCAN_BLOCK as u64);
             if level.sums.cap < blocks {
-                level.sums = storage(&self.device, "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
+                level.sums = storage(self.gpu.device(), "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
             }
             level.blocks = blocks as u32;
-            self.queue.write_buffer(&level.uniform, 0, bytemuck::cast_slice(&[c as u32, 0, 0, 0]));
+            self.gpu.queue().write_buffer(&level.uniform, 0, bytemuck::cast_slice(&[c as u32, 0, 0, 0]));
         }
     }
 
@@ -783,7 +801,7 @@ impl GpuAdapter {
             .iter()
             .map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() })
             .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        self.gpu.device().create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
             layout: &pipeline.layout,
             entries: &entries,
@@ -819,8 +837,8 @@ impl GpuAdapter {
         pass.dispatch_workgroups(x, y, 1);
     }
 
-    fn read_totals(&self) -> Result<[u32; 10], RenderError> {
-        map_read(&self.device, &self.readback, READBACK_BYTES, |mapped| {
+    fn read_totals(&self) -> Result<[u32; 10], GpuError> {
+        self.gpu.map_read(&self.readback, READBACK_BYTES, |mapped| {
             let mut out = [0u32; 10];
             out.copy_from_slice(bytemuck::cast_slice(mapped));
             out
@@ -828,47 +846,32 @@ impl GpuAdapter {
     }
 
     /// Reads a buffer's first `bytes` bytes back (tests and `pm adapt --gpu`; not the render path).
-    fn read_buffer(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, RenderError> {
-        if bytes == 0 {
-            return Ok(Vec::new());
-        }
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pm: read back"),
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut enc =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: read back") });
-        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
-        self.queue.submit([enc.finish()]);
-        map_read(&self.device, &staging, bytes, <[u8]>::to_vec)
+    fn read_buffer(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        self.gpu.read_buffer("pm: read back", buffer, bytes)
     }
 
     /// Active vertex FVIDs, ascending (read back).
-    pub fn active(&self) -> Result<Vec<u32>, RenderError> {
+    pub fn active(&self) -> Result<Vec<u32>, AdaptError> {
         let bytes = self.read_buffer(&self.sets[self.cur].fvid.buffer, self.n as u64 * 4)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     /// The current faces as indices into [`Self::active`] (read back; the order is the GPU's).
-    pub fn faces(&self) -> Result<Vec<[u32; 3]>, RenderError> {
+    pub fn faces(&self) -> Result<Vec<[u32; 3]>, AdaptError> {
         let bytes = self.read_buffer(&self.faces.idx.buffer, self.m as u64 * 12)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     /// The current faces as FVID triples of active vertices (read back), for comparison with
     /// [`codec::pm::Adapter::face_fvids`].
-    pub fn face_fvids(&self) -> Result<Vec<[u32; 3]>, RenderError> {
+    pub fn face_fvids(&self) -> Result<Vec<[u32; 3]>, AdaptError> {
         let active = self.active()?;
         self.faces()?
             .into_iter()
             .map(|t| {
                 let mut out = [0u32; 3];
                 for (o, i) in out.iter_mut().zip(t) {
-                    *o = *active
-                        .get(i as usize)
-                        .ok_or_else(|| RenderError::Gpu(format!("face index {i} out of {} vertices", active.len())))?;
+                    *o = *active.get(i as usize).ok_or(AdaptError::FaceIndex { index: i, vertices: active.len() })?;
                 }
                 Ok(out)
             })

@@ -20,13 +20,13 @@
 //! headlight, on a transparent background; there is no culling, as meshes may be
 //! inconsistently oriented.
 
-use std::sync::mpsc;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec4};
 use thiserror::Error;
 
+use crate::gpu::{Gpu, GpuError};
 use crate::pm_gpu::GpuAdapter;
 use crate::RenderMesh;
 
@@ -49,13 +49,6 @@ const NORMAL_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 
 /// Why the renderer could not start or render.
 #[derive(Debug, Error)]
 pub enum RenderError {
-    #[error(
-        "no GPU adapter found ({0}); without a GPU, wgpu needs Mesa's lavapipe: install \
-         mesa-vulkan-drivers (scripts/setup.sh does)"
-    )]
-    NoAdapter(String),
-    #[error("adapter {adapter} refused a device: {source}")]
-    Device { adapter: String, source: wgpu::RequestDeviceError },
     #[error("rect {rect:?} is not a non-empty part of the {width}x{height} frame")]
     BadRect { rect: [u32; 4], width: u32, height: u32 },
     #[error("frame {width}x{height} exceeds the adapter's largest texture side, {max}")]
@@ -64,8 +57,8 @@ pub enum RenderError {
     NormalCount { positions: usize, normals: usize },
     #[error("the mesh's {what} buffer needs {bytes} bytes; the adapter allows {max}")]
     MeshTooLarge { what: &'static str, bytes: u64, max: u64 },
-    #[error("GPU error: {0}")]
-    Gpu(String),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
 }
 
 /// Wall-clock milliseconds of the three stages of [`Renderer::render`], each waited for
@@ -168,14 +161,11 @@ impl FrameTarget {
     }
 }
 
-/// A wgpu device with the tile pipelines, and the buffers and targets it reuses across
-/// calls: a worker renders the same tiles of the same frame size every frame, so after the
-/// first frame a call allocates only when its mesh or tile outgrows the previous ones.
+/// The tile pipelines on a [`Gpu`], and the buffers and targets they reuse across calls: a
+/// worker renders the same tiles of the same frame size every frame, so after the first
+/// frame a call allocates only when its mesh or tile outgrows the previous ones.
 pub struct Renderer {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    adapter_name: String,
-    limits: wgpu::Limits,
+    gpu: Gpu,
     clear_pipeline: wgpu::RenderPipeline,
     mesh_pipeline: wgpu::RenderPipeline,
     /// The mesh pipeline with vertices pulled from a [`GpuAdapter`]'s buffers (`vs_pulled`).
@@ -192,31 +182,9 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    /// Opens a headless device: a hardware adapter if there is one, otherwise a fallback
-    /// (software) adapter such as lavapipe. `WGPU_BACKEND` and the other `WGPU_*` variables
-    /// wgpu reads can narrow the choice. The device gets the adapter's full limits, so large
-    /// meshes and frames fit whatever the adapter can hold.
-    pub fn new() -> Result<Renderer, RenderError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let request = |force_fallback_adapter| {
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter,
-                ..Default::default()
-            }))
-        };
-        let adapter = request(false).or_else(|_| request(true)).map_err(|e| RenderError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let adapter_name = info.name.clone();
-        log::info!("render: adapter {adapter_name} ({:?}, {:?})", info.backend, info.device_type);
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("render: device"),
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|source| RenderError::Device { adapter: adapter_name.clone(), source })?;
-
+    /// Creates the tile pipelines on `gpu`'s device.
+    pub fn new(gpu: &Gpu) -> Renderer {
+        let device = gpu.device();
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render: shader"),
             source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/render.wgsl").into()),
@@ -344,11 +312,8 @@ impl Renderer {
             layout: &bind_group_layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
         });
-        Ok(Renderer {
-            device,
-            queue,
-            adapter_name,
-            limits,
+        Renderer {
+            gpu: gpu.clone(),
             clear_pipeline,
             mesh_pipeline,
             pulled_pipeline,
@@ -360,27 +325,12 @@ impl Renderer {
             indices: GrowBuffer::new("upload: indices", wgpu::BufferUsages::INDEX),
             frame_target: None,
             readback: None,
-        })
+        }
     }
 
-    /// The device, for compute work on the same GPU (the progressive-mesh adaptation).
-    pub fn device(&self) -> &wgpu::Device {
-        &self.device
-    }
-
-    /// The device's queue.
-    pub fn queue(&self) -> &wgpu::Queue {
-        &self.queue
-    }
-
-    /// The device's limits (the adapter's own: see [`Renderer::new`]).
-    pub fn limits(&self) -> &wgpu::Limits {
-        &self.limits
-    }
-
-    /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
-    pub fn adapter_name(&self) -> &str {
-        &self.adapter_name
+    /// The GPU this renderer draws on.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
     }
 
     /// Renders the part `rect = [x0, y0, x1, y1]` (pixels, half-open, origin top-left) of a
@@ -430,12 +380,12 @@ impl Renderer {
             return Err(RenderError::BadRect { rect, width, height });
         }
         // The frame is a texture.
-        let max = self.limits.max_texture_dimension_2d;
+        let max = self.gpu.limits().max_texture_dimension_2d;
         if width > max || height > max {
             return Err(RenderError::FrameTooLarge { width, height, max });
         }
-        let device = self.device.clone();
-        scoped(&device, || self.render_unscoped(source, view_proj, frame, rect))
+        let gpu = self.gpu.clone();
+        gpu.scoped(|| self.render_unscoped(source, view_proj, frame, rect))
     }
 
     fn render_unscoped(
@@ -447,8 +397,8 @@ impl Renderer {
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
         let size = (x1 - x0, y1 - y0);
         let start = Instant::now();
-        let max = self.limits.max_buffer_size;
-        let (device, queue) = (&self.device, &self.queue);
+        let max = self.gpu.limits().max_buffer_size;
+        let (device, queue) = (self.gpu.device(), self.gpu.queue());
         let pulled = match source {
             Source::Mesh(mesh) => {
                 self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
@@ -474,7 +424,7 @@ impl Renderer {
         let uniform = FrameUniform { view_proj: view_proj.to_cols_array_2d(), eye: eye.to_array() };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // An empty submission flushes the queued writes.
-        wait_for(device, queue.submit([]))?;
+        self.gpu.wait_for(queue.submit([]))?;
         let upload_ms = ms_since(start);
 
         let start = Instant::now();
@@ -535,7 +485,7 @@ impl Renderer {
                 (Source::Pm(_), None) => unreachable!("the pulled bind group is made for every PM source"),
             }
         }
-        wait_for(device, queue.submit([encoder.finish()]))?;
+        self.gpu.wait_for(queue.submit([encoder.finish()]))?;
         let render_ms = ms_since(start);
 
         let start = Instant::now();
@@ -572,7 +522,7 @@ impl Renderer {
         );
         queue.submit([encoder.finish()]);
         let row = (size.0 * BYTES_PER_PIXEL) as usize;
-        let pixels = map_read(device, readback, bytes, |mapped| {
+        let pixels = self.gpu.map_read(readback, bytes, |mapped| {
             let mut pixels = Vec::with_capacity(row * size.1 as usize);
             for padded in mapped.chunks_exact(padded_row as usize) {
                 pixels.extend_from_slice(&padded[..row]);
@@ -582,53 +532,6 @@ impl Renderer {
         let readback_ms = ms_since(start);
         Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
     }
-}
-
-/// Runs `f` with the device's validation and out-of-memory errors captured and returned
-/// instead of reaching wgpu's default handler, which panics. The scopes are popped in reverse
-/// order.
-pub(crate) fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> Result<T, RenderError>) -> Result<T, RenderError> {
-    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let result = f();
-    for scope in [validation, oom] {
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(RenderError::Gpu(e.to_string()));
-        }
-    }
-    result
-}
-
-/// Blocks until submission `index` has finished on the device.
-pub(crate) fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
-    device
-        .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
-        .map(drop)
-        .map_err(|e| RenderError::Gpu(e.to_string()))
-}
-
-/// Maps the first `bytes` bytes of a `MAP_READ` buffer (its copies submitted), waits for
-/// them, hands them to `read`, and unmaps the buffer.
-pub(crate) fn map_read<T>(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    bytes: u64,
-    read: impl FnOnce(&[u8]) -> T,
-) -> Result<T, RenderError> {
-    let (tx, rx) = mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-        let _ = tx.send(r);
-    });
-    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
-    rx.recv()
-        .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
-        .map_err(|e| RenderError::Gpu(e.to_string()))?;
-    let out = {
-        let mapped = buffer.get_mapped_range(..bytes).map_err(|e| RenderError::Gpu(e.to_string()))?;
-        read(&mapped)
-    };
-    buffer.unmap();
-    Ok(out)
 }
 
 fn ms_since(start: Instant) -> f64 {
