@@ -351,7 +351,7 @@ impl PmTiles {
             // cost 4,096 times in a 64x64 grid.
             let first = group.tiles[0].0;
             let (group_rgba, group_times) = renderer
-                .render_pm(adapter, view_proj, (job.width, job.height), group.rect)
+                .render_pm(adapter.mesh(), view_proj, (job.width, job.height), group.rect)
                 .map_err(|e| format!("tile {first}: {e}"))?;
             let share = 1.0 / group.tiles.len() as f64;
             for &(index, rect) in &group.tiles {

@@ -43,6 +43,7 @@ use thiserror::Error;
 use wgpu::util::DeviceExt;
 
 use crate::gpu::{Gpu, GpuError};
+use crate::render::{AdaptedMesh, PmPoint};
 
 const WG: u32 = 256;
 const SCAN_BLOCK: u32 = 2048;
@@ -75,13 +76,6 @@ struct GpuSplit {
     parent: u32,
     pad: u32,
     crit: [f32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct GpuPoint {
-    pos: [f32; 4],
-    nrm: [f32; 4],
 }
 
 /// `Params` of `shaders/pm/common.wgsl`.
@@ -332,13 +326,13 @@ impl GpuAdapter {
             })
             .collect();
         let split_faces: Vec<u32> = pm.splits.iter().flat_map(|s| s.faces.iter().flatten().copied()).collect();
-        let points: Vec<GpuPoint> = pm
+        let points: Vec<PmPoint> = pm
             .positions
             .iter()
             .enumerate()
             .map(|(f, p)| {
                 let n = pm.normals.get(f).copied().unwrap_or_default();
-                GpuPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
+                PmPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
             })
             .collect();
         gpu.scoped(|| {
@@ -878,10 +872,15 @@ impl GpuAdapter {
             .collect()
     }
 
-    /// For the renderer: the FVID buffer of the active vertices, the per-FVID points, the
-    /// face index buffer, and the face count.
-    pub(crate) fn draw_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer, u32) {
-        (&self.sets[self.cur].fvid.buffer, &self.shared.points, &self.faces.idx.buffer, self.m)
+    /// The current mesh, for [`crate::render::Renderer::render_pm`]: the FVID buffer of the
+    /// active vertices, the per-FVID points, and the face index buffer, all on the device.
+    pub fn mesh(&self) -> AdaptedMesh<'_> {
+        AdaptedMesh {
+            fvid: &self.sets[self.cur].fvid.buffer,
+            points: &self.shared.points,
+            indices: &self.faces.idx.buffer,
+            index_count: self.m * 3,
+        }
     }
 }
 

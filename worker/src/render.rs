@@ -27,15 +27,39 @@ use glam::{Mat4, Vec4};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
-use crate::pm_gpu::GpuAdapter;
 use crate::RenderMesh;
 
-/// What a tile draws: an uploaded mesh, or a progressive mesh adapted on the GPU, drawn from
-/// its own buffers.
+/// A mesh that is already on the device, in the layout of the GPU progressive-mesh
+/// adaptation (`crate::pm_gpu`), drawn by vertex pulling (`vs_pulled` in
+/// `shaders/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
+/// its FVID, then that FVID's position and normal.
+#[derive(Clone, Copy)]
+pub struct AdaptedMesh<'a> {
+    /// The FVID of each active vertex (`u32`, `STORAGE`).
+    pub fvid: &'a wgpu::Buffer,
+    /// Position and normal per FVID ([`PmPoint`], `STORAGE`).
+    pub points: &'a wgpu::Buffer,
+    /// Active-vertex indices, 3 per triangle (`u32`, `INDEX`).
+    pub indices: &'a wgpu::Buffer,
+    /// How many of `indices` to draw.
+    pub index_count: u32,
+}
+
+/// One FVID's finest-level position and unit normal, `w` unused: `PmPoint` of
+/// `render.wgsl`, `Point` of `pm/common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PmPoint {
+    pub pos: [f32; 4],
+    pub nrm: [f32; 4],
+}
+
+/// What a tile draws: an uploaded mesh, or a mesh adapted on the GPU, drawn from its own
+/// buffers.
 #[derive(Clone, Copy)]
 enum Source<'a> {
     Mesh(&'a RenderMesh),
-    Pm(&'a GpuAdapter),
+    Pm(AdaptedMesh<'a>),
 }
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -168,7 +192,7 @@ pub struct Renderer {
     gpu: Gpu,
     clear_pipeline: wgpu::RenderPipeline,
     mesh_pipeline: wgpu::RenderPipeline,
-    /// The mesh pipeline with vertices pulled from a [`GpuAdapter`]'s buffers (`vs_pulled`).
+    /// The mesh pipeline with vertices pulled from an [`AdaptedMesh`]'s buffers (`vs_pulled`).
     pulled_pipeline: wgpu::RenderPipeline,
     pulled_layout: wgpu::BindGroupLayout,
     uniform: wgpu::Buffer,
@@ -354,12 +378,13 @@ impl Renderer {
         self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
     }
 
-    /// Renders the mesh `pm` holds now, as [`Renderer::render`] renders a [`RenderMesh`], but
-    /// straight from the adapter's GPU buffers: nothing is uploaded or read back but the pixels
-    /// (its upload time is the frame uniform's). `pm` must live on this renderer's device.
+    /// Renders an adapted mesh (`GpuAdapter::mesh`) as [`Renderer::render`] renders a
+    /// [`RenderMesh`], but straight from its GPU buffers: nothing is uploaded or read back but
+    /// the pixels (its upload time is the frame uniform's). `pm` must live on this renderer's
+    /// device.
     pub fn render_pm(
         &mut self,
-        pm: &GpuAdapter,
+        pm: AdaptedMesh<'_>,
         view_proj: Mat4,
         frame: (u32, u32),
         rect: [u32; 4],
@@ -407,7 +432,7 @@ impl Renderer {
                 None
             }
             Source::Pm(pm) => {
-                let (fvid, points, _, _) = pm.draw_buffers();
+                let (fvid, points) = (pm.fvid, pm.points);
                 Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("render: pulled vertices"),
                     layout: &self.pulled_layout,
@@ -473,13 +498,12 @@ impl Renderer {
                     }
                 }
                 (Source::Pm(pm), Some(bind_group)) => {
-                    let (_, _, indices, faces) = pm.draw_buffers();
-                    if faces > 0 {
+                    if pm.index_count > 0 {
                         pass.set_pipeline(&self.pulled_pipeline);
                         pass.set_bind_group(0, &self.bind_group, &[]);
                         pass.set_bind_group(1, bind_group, &[]);
-                        pass.set_index_buffer(indices.slice(..faces as u64 * 12), wgpu::IndexFormat::Uint32);
-                        pass.draw_indexed(0..faces * 3, 0, 0..1);
+                        pass.set_index_buffer(pm.indices.slice(..pm.index_count as u64 * 4), wgpu::IndexFormat::Uint32);
+                        pass.draw_indexed(0..pm.index_count, 0, 0..1);
                     }
                 }
                 (Source::Pm(_), None) => unreachable!("the pulled bind group is made for every PM source"),

@@ -232,7 +232,7 @@ fn pm_speed() {
             apply_ms.push(gpu.last_pass_ms()[1]);
             state_ms.push(gpu.last_pass_ms()[2]);
             let vp = cam_at(k).view_proj(w as f32 / h as f32);
-            let (_, t) = renderer.render_pm(&gpu, vp, (w, h), rect).unwrap();
+            let (_, t) = renderer.render_pm(gpu.mesh(), vp, (w, h), rect).unwrap();
             draw_ms.push(t.render_ms + t.readback_ms);
             let start = Instant::now();
             cpu.adapt(&view);
