@@ -4,7 +4,7 @@
 
 pub mod gpu;
 pub mod node;
-pub mod pm_gpu;
+pub mod pm_adapt;
 pub mod protocol;
 pub mod render;
 pub mod transport;

@@ -16,7 +16,7 @@ use codec::pm::Viewpoint;
 use glam::{Mat4, Vec3};
 
 use crate::gpu::Gpu;
-use crate::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
+use crate::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use crate::protocol::{PmFrameJob, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
 use crate::render::Renderer;
 use crate::transport::{RecvError, Transport};

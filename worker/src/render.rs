@@ -30,7 +30,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::RenderMesh;
 
 /// A mesh that is already on the device, in the layout of the GPU progressive-mesh
-/// adaptation (`crate::pm_gpu`), drawn by vertex pulling (`vs_pulled` in
+/// adaptation (`crate::pm_adapt`), drawn by vertex pulling (`vs_pulled` in
 /// `shaders/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
 /// its FVID, then that FVID's position and normal.
 #[derive(Clone, Copy)]

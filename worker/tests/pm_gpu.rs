@@ -1,4 +1,4 @@
-//! The GPU adaptation (worker::pm_gpu, shaders/pm/*.wgsl) against the CPU reference
+//! The GPU adaptation (worker::pm_adapt, shaders/pm/*.wgsl) against the CPU reference
 //! (codec::pm::Adapter): after every pass of a camera path, the same active vertices, the
 //! same per-pass statistics and the same triangle set (as FVID triples, orientation kept).
 //! Needs a wgpu adapter; without a GPU that is Mesa's lavapipe.
@@ -11,7 +11,7 @@ use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
 use worker::gpu::Gpu;
-use worker::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
+use worker::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
 fn mesh_path(rel: &str) -> PathBuf {
