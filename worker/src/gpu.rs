@@ -2,6 +2,11 @@
 //! pipeline of the crate needs from them: error scopes that turn wgpu's validation and
 //! out-of-memory errors into values (wgpu's default handler panics), waits for submissions,
 //! and buffer read-backs.
+//!
+//! It also holds the Rust half of the contract with the WGSL: a `Binding` row names one
+//! buffer binding of a shader (slot, variable name, access, byte size), bind group layouts and
+//! bind groups are built from tables of them, and `wgsl_contract` (a test that parses every
+//! shader with naga, no GPU needed) checks each table against the shader's declarations.
 
 use std::sync::{mpsc, Arc};
 
@@ -17,7 +22,7 @@ pub enum GpuError {
     NoAdapter(wgpu::RequestAdapterError),
     #[error("adapter {adapter} refused a device: {source}")]
     Device { adapter: String, source: wgpu::RequestDeviceError },
-    /// A validation or out-of-memory error caught by [`Gpu::scoped`].
+    /// A validation or out-of-memory error caught by an error scope (`Gpu::scoped`).
     #[error("GPU error: {0}")]
     Scope(wgpu::Error),
     /// Waiting for the device failed.
@@ -151,5 +156,106 @@ impl Gpu {
         enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
         self.queue.submit([enc.finish()]);
         self.map_read(&staging, bytes, <[u8]>::to_vec)
+    }
+
+    /// A bind group layout with one buffer entry per row of `bindings`. A uniform's entry
+    /// requires its whole block ([`Binding::bytes`]); a storage entry leaves the minimum size
+    /// to wgpu's draw- and dispatch-time check against the shader.
+    pub(crate) fn bind_group_layout(
+        &self,
+        label: &str,
+        visibility: wgpu::ShaderStages,
+        bindings: &[Binding],
+    ) -> wgpu::BindGroupLayout {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+            .iter()
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b.slot,
+                visibility,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match b.access {
+                        Access::Uniform => wgpu::BufferBindingType::Uniform,
+                        Access::Read => wgpu::BufferBindingType::Storage { read_only: true },
+                        Access::ReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: match b.access {
+                        Access::Uniform => wgpu::BufferSize::new(b.bytes),
+                        Access::Read | Access::ReadWrite => None,
+                    },
+                },
+                count: None,
+            })
+            .collect();
+        self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+    }
+
+    /// A bind group of `layout` (made from `bindings`) that binds each buffer of `buffers`,
+    /// whole, to the binding of its name.
+    ///
+    /// # Panics
+    ///
+    /// Unless `buffers` names every binding of the table exactly once: a mismatch is a bug in
+    /// the caller, not a condition of the input.
+    pub(crate) fn bind_group(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        bindings: &[Binding],
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
+        assert_eq!(buffers.len(), bindings.len(), "{label}: {} buffers for {} bindings", buffers.len(), bindings.len());
+        let entries: Vec<wgpu::BindGroupEntry> = bindings
+            .iter()
+            .map(|b| {
+                let (_, buffer) = buffers
+                    .iter()
+                    .find(|(name, _)| *name == b.name)
+                    .unwrap_or_else(|| panic!("{label}: no buffer for binding {} ({})", b.slot, b.name));
+                wgpu::BindGroupEntry { binding: b.slot, resource: buffer.as_entire_binding() }
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+    }
+}
+
+/// How a shader declares a buffer binding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Access {
+    /// `var<uniform>`
+    Uniform,
+    /// `var<storage, read>`
+    Read,
+    /// `var<storage, read_write>`
+    ReadWrite,
+}
+
+/// One buffer binding of a bind group, `@binding(slot) var<access> name: T`, as the Rust
+/// side lays out and binds it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Binding {
+    pub slot: u32,
+    /// The WGSL variable's name; [`Gpu::bind_group`] takes buffers by it.
+    pub name: &'static str,
+    pub access: Access,
+    /// Bytes of the Rust twin of `T`: the whole of `T` when it is sized (a uniform block, a
+    /// fixed-size array), one element when `T` is a runtime-sized array.
+    pub bytes: u64,
+}
+
+impl Binding {
+    /// A `var<uniform>` whose block is a `T`.
+    pub(crate) const fn uniform<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::Uniform, bytes: std::mem::size_of::<T>() as u64 }
+    }
+
+    /// A `var<storage, read>` of `T`s (or a `T`).
+    pub(crate) const fn read<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::Read, bytes: std::mem::size_of::<T>() as u64 }
+    }
+
+    /// A `var<storage, read_write>` of `T`s (or a `T`).
+    pub(crate) const fn read_write<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::ReadWrite, bytes: std::mem::size_of::<T>() as u64 }
     }
 }

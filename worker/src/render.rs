@@ -26,7 +26,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec4};
 use thiserror::Error;
 
-use crate::gpu::{Gpu, GpuError};
+use crate::gpu::{Binding, Gpu, GpuError};
 use crate::RenderMesh;
 
 /// A mesh that is already on the device, in the layout of the GPU progressive-mesh
@@ -61,6 +61,17 @@ enum Source<'a> {
     Mesh(&'a RenderMesh),
     Pm(AdaptedMesh<'a>),
 }
+
+/// The renderer's shaders (see `shaders/README.md`).
+pub(crate) const SHADER: &str = include_str!("../../shaders/render.wgsl");
+
+/// Bind group 0 of the mesh pipelines: the frame uniform, read by both shader stages.
+pub(crate) const FRAME_GROUP: u32 = 0;
+pub(crate) const FRAME_BINDINGS: &[Binding] = &[Binding::uniform::<FrameUniform>(0, "frame")];
+/// Bind group 1 of the pulled pipeline: the adapted mesh's buffers, read by `vs_pulled`.
+pub(crate) const PULLED_GROUP: u32 = 1;
+pub(crate) const PULLED_BINDINGS: &[Binding] =
+    &[Binding::read::<u32>(0, "pm_fvid"), Binding::read::<PmPoint>(1, "pm_points")];
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -97,10 +108,10 @@ pub struct RenderTimes {
     pub readback_ms: f64,
 }
 
-/// The uniform block of `render.wgsl`.
+/// The uniform block of `render.wgsl`, `Frame`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct FrameUniform {
+pub(crate) struct FrameUniform {
     view_proj: [[f32; 4]; 4],
     eye: [f32; 4],
 }
@@ -211,21 +222,10 @@ impl Renderer {
         let device = gpu.device();
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render: shader"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/render.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render: frame uniform layout"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FrameUniform>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let bind_group_layout =
+            gpu.bind_group_layout("render: frame uniform layout", wgpu::ShaderStages::VERTEX_FRAGMENT, FRAME_BINDINGS);
         let depth_stencil = |depth_compare| wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
@@ -305,20 +305,9 @@ impl Renderer {
             "vs_main",
             &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
         );
-        let storage_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::VERTEX,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let pulled_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render: pulled vertices layout"),
-            entries: &[storage_entry(0), storage_entry(1)],
-        });
+        let pulled_layout =
+            gpu.bind_group_layout("render: pulled vertices layout", wgpu::ShaderStages::VERTEX, PULLED_BINDINGS);
+        // Indexed by group: FRAME_GROUP, PULLED_GROUP.
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("render: pulled pipeline layout"),
             bind_group_layouts: &[Some(&bind_group_layout), Some(&pulled_layout)],
@@ -331,11 +320,8 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("render: frame uniform"),
-            layout: &bind_group_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-        });
+        let bind_group =
+            gpu.bind_group("render: frame uniform", &bind_group_layout, FRAME_BINDINGS, &[("frame", &uniform)]);
         Renderer {
             gpu: gpu.clone(),
             clear_pipeline,
@@ -431,17 +417,12 @@ impl Renderer {
                 self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
                 None
             }
-            Source::Pm(pm) => {
-                let (fvid, points) = (pm.fvid, pm.points);
-                Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("render: pulled vertices"),
-                    layout: &self.pulled_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: fvid.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: points.as_entire_binding() },
-                    ],
-                }))
-            }
+            Source::Pm(pm) => Some(self.gpu.bind_group(
+                "render: pulled vertices",
+                &self.pulled_layout,
+                PULLED_BINDINGS,
+                &[("pm_fvid", pm.fvid), ("pm_points", pm.points)],
+            )),
         };
         // The eye is the point the projection sends to infinity: clip (0, 0, 1, 0) back in
         // world space, up to a scale (see `Frame::eye` in render.wgsl).
@@ -490,7 +471,7 @@ impl Renderer {
                     if index_count > 0 {
                         let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
                         pass.set_pipeline(&self.mesh_pipeline);
-                        pass.set_bind_group(0, &self.bind_group, &[]);
+                        pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
                         pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
                         pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
                         pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
@@ -500,8 +481,8 @@ impl Renderer {
                 (Source::Pm(pm), Some(bind_group)) => {
                     if pm.index_count > 0 {
                         pass.set_pipeline(&self.pulled_pipeline);
-                        pass.set_bind_group(0, &self.bind_group, &[]);
-                        pass.set_bind_group(1, bind_group, &[]);
+                        pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
+                        pass.set_bind_group(PULLED_GROUP, bind_group, &[]);
                         pass.set_index_buffer(pm.indices.slice(..pm.index_count as u64 * 4), wgpu::IndexFormat::Uint32);
                         pass.draw_indexed(0..pm.index_count, 0, 0..1);
                     }

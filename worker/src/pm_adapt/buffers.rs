@@ -4,6 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
+/// `Split` of `shaders/pm/common.wgsl`: a split record, uploaded once per progressive mesh.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(super) struct GpuSplit {
@@ -37,10 +38,21 @@ pub(super) struct Params {
     pub(super) pad: u32,
 }
 
-pub(super) const STAT_COLLAPSES: usize = 0;
-pub(super) const STAT_CANCELLED: usize = 1;
-pub(super) const STAT_REMOVED_FACES: usize = 2;
-pub(super) const STATS_BYTES: u64 = 32;
+/// `Level` of `shaders/pm/scan.wgsl`: the element count of one level of the scan.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct LevelUniform {
+    pub(super) count: u32,
+    pub(super) pad: [u32; 3],
+}
+
+/// The counters the stages accumulate with atomics (`stats`), read back once per pass; the
+/// indices are the `STAT_*` constants of `common.wgsl`.
+pub(super) type Stats = [u32; 8];
+pub(crate) const STAT_COLLAPSES: usize = 0;
+pub(crate) const STAT_CANCELLED: usize = 1;
+pub(crate) const STAT_REMOVED_FACES: usize = 2;
+pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 /// Readback: vertex total, face total, then the 8 counters.
 pub(super) const READBACK_BYTES: u64 = 8 + STATS_BYTES;
 

@@ -35,7 +35,7 @@
 //!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is
 //!   what equals the CPU reference.
 
-mod buffers;
+pub(crate) mod buffers;
 mod pass;
 pub(crate) mod pipelines;
 
@@ -113,9 +113,10 @@ impl GpuAdapter {
     /// reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
     pub fn new(gpu: &Gpu, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
         let limits = gpu.limits();
-        if limits.max_storage_buffers_per_shader_stage < 10 {
+        let need = pipelines::storage_buffers_per_stage();
+        if limits.max_storage_buffers_per_shader_stage < need {
             return Err(AdaptError::TooFewStorageBuffers {
-                need: 10,
+                need,
                 allowed: limits.max_storage_buffers_per_shader_stage,
             });
         }
@@ -158,7 +159,7 @@ impl GpuAdapter {
             let split_faces = init(device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
             let points = init(device, "pm: points", bytemuck::cast_slice(&points), read_only);
             let shared = Arc::new(Shared {
-                pipelines: Pipelines::new(device),
+                pipelines: Pipelines::new(gpu),
                 max_groups: limits.max_compute_workgroups_per_dimension,
                 splits,
                 split_faces,

@@ -4,8 +4,8 @@
 use codec::pm::{PassStats, Viewpoint};
 
 use super::buffers::{
-    needs_resize, storage, FaceSet, Params, ScanLevel, VertexSet, READBACK_BYTES, STATS_BYTES, STAT_CANCELLED,
-    STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
+    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, READBACK_BYTES, STATS_BYTES,
+    STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter};
@@ -54,28 +54,28 @@ impl GpuAdapter {
         {
             let set = &self.sets[self.cur];
             let p = &self.shared.pipelines;
-            let state = self.bind(
-                &p.state,
+            let state = p.state.bind(
+                &self.gpu,
                 &[
-                    &self.params,
-                    &self.shared.splits,
-                    &self.shared.points,
-                    &set.fvid.buffer,
-                    &set.next.buffer,
-                    &set.node.buffer,
-                    &self.vcnt.buffer,
-                    &self.fcnt.buffer,
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("points", &self.shared.points),
+                    ("vfvid", &set.fvid.buffer),
+                    ("vnext", &set.next.buffer),
+                    ("vnode", &set.node.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("fcnt", &self.fcnt.buffer),
                 ],
             );
-            let collapse = self.bind(
-                &p.collapse,
+            let collapse = p.collapse.bind(
+                &self.gpu,
                 &[
-                    &self.params,
-                    &self.shared.splits,
-                    &set.next.buffer,
-                    &set.node.buffer,
-                    &self.vcnt.buffer,
-                    &self.stats,
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("vnext", &set.next.buffer),
+                    ("vnode", &set.node.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("stats", &self.stats),
                 ],
             );
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -146,57 +146,78 @@ impl GpuAdapter {
         {
             let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
             let (p, f) = (&self.shared.pipelines, &self.faces);
-            let reorganise = self.bind(
-                &p.reorganise,
+            // The vertex and face counts were scanned in place: from here on they are the
+            // prefix sums `vsum` and `fsum`.
+            let reorganise = p.reorganise.bind(
+                &self.gpu,
                 &[
-                    &self.params,
-                    &self.shared.splits,
-                    &src.fvid.buffer,
-                    &src.next.buffer,
-                    &src.node.buffer,
-                    &self.vcnt.buffer,
-                    &dstset.fvid.buffer,
-                    &dstset.next.buffer,
-                    &dstset.node.buffer,
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("vfvid", &src.fvid.buffer),
+                    ("vnext", &src.next.buffer),
+                    ("vnode", &src.node.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("dnext", &dstset.next.buffer),
+                    ("dnode", &dstset.node.buffer),
                 ],
             );
-            let compact =
-                self.bind(&p.compact_splits, &[&self.params, &self.vcnt.buffer, &self.list.buffer, &self.stats]);
-            let split = self.bind(
-                &p.split,
+            let compact = p.compact_splits.bind(
+                &self.gpu,
                 &[
-                    &self.params,
-                    &self.shared.splits,
-                    &self.shared.split_faces,
-                    &src.next.buffer,
-                    &self.vcnt.buffer,
-                    &self.fcnt.buffer,
-                    &self.list.buffer,
-                    &dstset.fvid.buffer,
-                    &f.idx.buffer,
-                    &f.fvid.buffer,
-                    &f.owner.buffer,
+                    ("P", &self.params),
+                    ("vsum", &self.vcnt.buffer),
+                    ("list", &self.list.buffer),
+                    ("stats", &self.stats),
                 ],
             );
-            let index = self.bind(
-                &p.index_update,
+            let split = p.split.bind(
+                &self.gpu,
                 &[
-                    &self.params,
-                    &src.node.buffer,
-                    &self.vcnt.buffer,
-                    &dstset.fvid.buffer,
-                    &f.idx.buffer,
-                    &f.fvid.buffer,
-                    &f.owner.buffer,
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("split_faces", &self.shared.split_faces),
+                    ("vnext", &src.next.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("fsum", &self.fcnt.buffer),
+                    ("list", &self.list.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
                 ],
             );
-            let holes = self.bind_at(
-                &p.holes,
-                &[(0, &self.params), (3, &f.owner.buffer), (4, &self.hole.buffer), (5, &self.stats)],
+            let index = p.index_update.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vnode", &src.node.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
+                ],
             );
-            let fill = self.bind(
-                &p.fill,
-                &[&self.params, &f.idx.buffer, &f.fvid.buffer, &f.owner.buffer, &self.hole.buffer, &self.stats],
+            let holes = p.holes.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("face_owner", &f.owner.buffer),
+                    ("hole", &self.hole.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let fill = p.fill.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
+                    ("hole", &self.hole.buffer),
+                    ("stats", &self.stats),
+                ],
             );
             let mut pass = enc
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None });
@@ -270,7 +291,8 @@ impl GpuAdapter {
                 level.sums = storage(self.gpu.device(), "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
             }
             level.blocks = blocks as u32;
-            self.gpu.queue().write_buffer(&level.uniform, 0, bytemuck::cast_slice(&[c as u32, 0, 0, 0]));
+            let uniform = LevelUniform { count: c as u32, pad: [0; 3] };
+            self.gpu.queue().write_buffer(&level.uniform, 0, bytemuck::bytes_of(&uniform));
         }
     }
 
@@ -281,58 +303,29 @@ impl GpuAdapter {
         // Down: scan each level's blocks, the block sums becoming the next level's data.
         for (k, level) in self.levels.iter().enumerate() {
             let input = if k == 0 { data } else { &self.levels[k - 1].sums.buffer };
-            let buffers = [&level.uniform, input, &level.sums.buffer];
-            self.dispatch_groups(pass, &p.scan_blocks, &self.bind(&p.scan_blocks, &buffers), level.blocks);
+            let buffers = [("L", &level.uniform), ("data", input), ("sums", &level.sums.buffer)];
+            self.dispatch_groups(pass, &p.scan_blocks, &p.scan_blocks.bind(&self.gpu, &buffers), level.blocks);
             adds.push(buffers);
         }
         // Up: add the scanned block sums back (the top level is a single block).
         for (level, buffers) in self.levels.iter().zip(&adds).rev().skip(1) {
-            self.dispatch_groups(pass, &p.add_blocks, &self.bind(&p.add_blocks, buffers), level.blocks);
+            self.dispatch_groups(pass, &p.add_blocks, &p.add_blocks.bind(&self.gpu, buffers), level.blocks);
         }
     }
 
-    fn bind(&self, pipeline: &Stage, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
-        let entries: Vec<(u32, &wgpu::Buffer)> = buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect();
-        self.bind_at(pipeline, &entries)
-    }
-
-    fn bind_at(&self, pipeline: &Stage, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() })
-            .collect();
-        self.gpu.device().create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.layout,
-            entries: &entries,
-        })
-    }
-
     /// Dispatches one thread per element, `threads` in all (nothing for zero).
-    fn dispatch(
-        &self,
-        pass: &mut wgpu::ComputePass<'_>,
-        pipeline: &wgpu::ComputePipeline,
-        bg: &wgpu::BindGroup,
-        threads: u32,
-    ) {
-        self.dispatch_groups(pass, pipeline, bg, threads.div_ceil(WG));
+    fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, threads: u32) {
+        self.dispatch_groups(pass, stage, bg, threads.div_ceil(WG));
     }
 
     /// Dispatches `groups` workgroups, in two dimensions beyond the per-dimension limit.
-    fn dispatch_groups(
-        &self,
-        pass: &mut wgpu::ComputePass<'_>,
-        pipeline: &wgpu::ComputePipeline,
-        bg: &wgpu::BindGroup,
-        groups: u32,
-    ) {
+    fn dispatch_groups(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, groups: u32) {
         if groups == 0 {
             return;
         }
         let x = groups.min(self.shared.max_groups);
         let y = groups.div_ceil(x);
-        pass.set_pipeline(pipeline);
+        pass.set_pipeline(&stage.pipeline);
         pass.set_bind_group(0, bg, &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
