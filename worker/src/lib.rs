@@ -8,6 +8,8 @@ pub mod pm_adapt;
 pub mod protocol;
 pub mod render;
 pub mod transport;
+#[cfg(test)]
+mod wgsl_contract;
 
 use codec::bft::Decoded;
 use glam::Vec3;
