@@ -1,8 +1,13 @@
 //! View-dependent adaptation of a dependency-free progressive mesh on the GPU: the stages of
 //! Algorithms 1 to 5 of Derzapf and Guthe as WGSL compute pipelines (`shaders/pm/*.wgsl`, one
-//! file per stage, `common.wgsl` prepended to each but the generic scan), driven pass by pass from here. It is the
-//! GPU twin of the CPU reference [`codec::pm::Adapter`]: same state, same decisions, same
-//! triangle set after every pass (tested in `worker/tests/pm_gpu.rs`).
+//! file per stage, `common.wgsl` prepended to each but the generic scan), driven pass by pass
+//! from here. It is the GPU twin of the CPU reference [`codec::pm::Adapter`]: same state, same
+//! decisions, same triangle set after every pass (tested in `worker/tests/pm_gpu.rs`).
+//!
+//! It runs on a [`Gpu`] and hands the renderer the adapted mesh as an [`AdaptedMesh`]
+//! ([`GpuAdapter::mesh`]); it knows nothing else of the renderer. `buffers` holds the records
+//! it uploads (the WGSL structs' twins) and its `n_alloc`-sized buffers, `pipelines` the
+//! stages with their binding tables, and `pass` one adaptation pass.
 //!
 //! One [`GpuAdapter::adapt`] pass is two submissions:
 //!
