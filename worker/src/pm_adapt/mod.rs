@@ -52,7 +52,8 @@ use thiserror::Error;
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
-    init, needs_resize, storage, FaceSet, GpuSplit, Params, ScanLevel, Sized, VertexSet, READBACK_BYTES, VERTEX_USAGE,
+    init, needs_resize, storage, FaceSet, GpuSplit, Params, ScanLevel, Sized, VertexSet, READBACK_BYTES, STATS_BYTES,
+    VERTEX_USAGE,
 };
 use pipelines::Pipelines;
 
@@ -117,7 +118,7 @@ impl GpuAdapter {
     /// Uploads `pm` to `gpu`'s device and starts at the base mesh. `n_alloc` is the paper's
     /// reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
     pub fn new(gpu: &Gpu, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
-        let limits = gpu.limits();
+        let limits = gpu.device().limits();
         let need = pipelines::storage_buffers_per_stage();
         if limits.max_storage_buffers_per_shader_stage < need {
             return Err(AdaptError::TooFewStorageBuffers {
@@ -200,7 +201,7 @@ impl GpuAdapter {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            stats: storage(d, "pm: stats", 8, 4, VERTEX_USAGE).buffer,
+            stats: storage(d, "pm: stats", STATS_BYTES / 4, 4, VERTEX_USAGE).buffer,
             readback: d.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pm: readback"),
                 size: READBACK_BYTES,
