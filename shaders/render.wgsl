@@ -45,7 +45,7 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> 
     return transform(position, normal);
 }
 
-// The progressive mesh adapted on the GPU (worker/src/pm_gpu.rs), drawn from its own buffers:
+// The progressive mesh adapted on the GPU (worker/src/pm_adapt/), drawn from its own buffers:
 // the index buffer holds active-vertex indices, and each vertex pulls its position and normal
 // through its FVID.
 struct PmPoint {

@@ -150,7 +150,7 @@ pub struct AdaptOptions {
     pub normal_weight: f32,
     /// Every split, regardless of the view.
     pub full: bool,
-    /// On the GPU ([`worker::pm_gpu::GpuAdapter`]).
+    /// On the GPU ([`worker::pm_adapt::GpuAdapter`]).
     pub gpu: bool,
 }
 
@@ -182,8 +182,8 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     // static buffers are set up).
     let mut start = Instant::now();
     let (active, mut faces, passes) = if opts.gpu {
-        let renderer = worker::render::Renderer::new()?;
-        let mut adapter = worker::pm_gpu::GpuAdapter::new(&renderer, &pm, worker::pm_gpu::DEFAULT_N_ALLOC)?;
+        let gpu = worker::gpu::Gpu::new()?;
+        let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &pm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
         start = Instant::now();
         let passes = match &view {
             None => adapter.refine_fully()?,

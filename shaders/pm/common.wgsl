@@ -1,4 +1,4 @@
-// Shared declarations of the progressive-mesh adaptation stages (worker/src/pm_gpu.rs).
+// Shared declarations of the progressive-mesh adaptation stages (worker/src/pm_adapt/).
 // Every stage file but scan.wgsl (a generic scan) is compiled with this file prepended; the stages mirror the CPU reference
 // codec/src/pm/adapt.rs step for step, and `needs_split` below repeats its refinement test
 // operation for operation (no transcendental functions, no dot() or length() builtins whose

@@ -1,12 +1,28 @@
 //! Tessera's worker side (MPI ranks >= 1): turn a decoded BFT (sub)mesh into the vertex and
-//! index buffers the renderer draws, and render them headless with wgpu ([`render`]). The GPU
-//! progressive-mesh adaptation builds on this crate.
+//! index buffers the renderer draws ([`RenderMesh`]), render them headless with wgpu, and adapt
+//! progressive meshes on the GPU.
+//!
+//! The GPU modules depend on each other one way, each only on those above it:
+//!
+//! 1. [`gpu`]: the adapter, device and queue ([`gpu::Gpu`]), error scopes, submission waits and
+//!    read-backs, and the binding tables every bind group is built from. Nothing of Tessera.
+//! 2. [`render`]: the tile renderer on a `Gpu`. It draws a [`RenderMesh`] it uploads, or an
+//!    [`render::AdaptedMesh`]: named buffers already on the device.
+//! 3. [`pm_adapt`]: the progressive-mesh adaptation on a `Gpu` (Algorithms 1 to 5 of Derzapf
+//!    and Guthe). It hands the renderer an `AdaptedMesh` and uses nothing else of it.
+//! 4. [`node`]: the worker loop, which drives the three for the [`protocol`] messages it
+//!    receives over a [`transport`], and whose errors are a [`node::WorkerError`].
+//!
+//! `protocol` and `transport` need no GPU; the master uses them too.
 
+pub mod gpu;
 pub mod node;
-pub mod pm_gpu;
+pub mod pm_adapt;
 pub mod protocol;
 pub mod render;
 pub mod transport;
+#[cfg(test)]
+mod wgsl_contract;
 
 use codec::bft::normals::vertex_normals;
 use codec::bft::Decoded;

@@ -6,18 +6,24 @@
 //! once and keeps one GPU adaptation per tile it has rendered: every frame it adapts each of
 //! its tiles to the tile's sub-frustum ([`codec::pm::Viewpoint::for_tile`]), starting from the
 //! tile's mesh of the frame before, and renders it from the GPU buffers.
+//!
+//! Everything that stops a worker is a [`WorkerError`]; its display is the reason rank 0
+//! receives and prints as `rank R failed: <reason>`.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use codec::pm::Viewpoint;
+use codec::bft::BftError;
+use codec::pm::{DpmError, Viewpoint};
 use glam::{Mat4, Vec3};
+use thiserror::Error;
 
-use crate::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
-use crate::protocol::{PmFrameJob, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
-use crate::render::Renderer;
+use crate::gpu::{Gpu, GpuError};
+use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
+use crate::protocol::{PmFrameJob, ProtocolError, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
+use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
 
@@ -28,6 +34,71 @@ const MASTER_SILENCE: Duration = Duration::from_secs(3600);
 /// How often a worker tells rank 0 that it is alive while it starts or renders a frame, so
 /// that rank 0's `--timeout` measures silence, not the length of a frame.
 pub const HEARTBEAT: Duration = Duration::from_millis(250);
+
+/// Why a worker stopped: the reason it sends rank 0 in [`ToMaster::Failed`].
+#[derive(Debug, Error)]
+pub enum WorkerError {
+    /// The GPU could not be opened.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// Transport: a message from a rank other than 0.
+    #[error("unexpected message from rank {0}")]
+    UnexpectedSender(usize),
+    /// Transport: nothing from rank 0 for `MASTER_SILENCE`.
+    #[error("no message from rank 0 for an hour")]
+    MasterSilent,
+    /// Transport: rank 0's end is closed (reported to no one: there is no one to tell).
+    #[error("rank 0 is gone")]
+    MasterGone,
+    /// Protocol: bytes from rank 0 that are no message.
+    #[error("bad message from rank 0: {0}")]
+    BadMessage(ProtocolError),
+    /// Protocol: a `PmFrame` before any `Model`.
+    #[error("a progressive-mesh frame arrived before its model")]
+    FrameBeforeModel,
+    /// Decode: the `Model` message's `.dpm` bytes.
+    #[error("cannot decode the progressive mesh: {0}")]
+    Model(DpmError),
+    /// GPU: the progressive mesh could not be uploaded.
+    #[error(transparent)]
+    Upload(AdaptError),
+    /// The `fail` hook of `TESSERA_FAULT`.
+    #[error("injected failure (TESSERA_FAULT)")]
+    Injected,
+    /// One tile of a frame.
+    #[error("tile {index}: {error}")]
+    Tile { index: u32, error: TileError },
+}
+
+/// Why a tile could not be rendered.
+#[derive(Debug, Error)]
+pub enum TileError {
+    #[error("cannot decode the submesh: {0}")]
+    Decode(BftError),
+    #[error("border normal for vertex {slot}, but the tile has {vertices}")]
+    BorderNormal { slot: u32, vertices: usize },
+    #[error("rect {0:?} is not a non-empty part of the frame")]
+    BadRect([u32; 4]),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Adapt(#[from] AdaptError),
+}
+
+impl TileError {
+    fn at(self, index: u32) -> WorkerError {
+        WorkerError::Tile { index, error: self }
+    }
+}
+
+/// What [`run`] returns when a worker stops on an error: its rank and the reason, displayed
+/// `rank R: <reason>`.
+#[derive(Debug, Error)]
+#[error("rank {rank}: {reason}")]
+pub struct RankError {
+    pub rank: usize,
+    pub reason: WorkerError,
+}
 
 /// Test hooks for fault handling, unset in normal runs. `TESSERA_FAULT=KIND:R[:MS]` makes rank
 /// R, on its first frame: `die`, abort; `fail`, report a failure; `slow:R:MS`, work MS
@@ -103,50 +174,51 @@ impl Drop for Heartbeat {
 
 /// Runs the worker until the master says to stop. `Err` carries the reason, which has
 /// already been sent to rank 0 when the transport allowed it.
-pub fn run(t: &dyn Transport) -> Result<(), String> {
+pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     let rank = t.rank();
     let heartbeat = Heartbeat::start(t.sender(0));
-    let fail = |reason: String| {
+    let fail = |reason: WorkerError| {
         heartbeat.busy(false);
-        t.send(0, &ToMaster::Failed { reason: reason.clone() }.encode());
-        Err(format!("rank {rank}: {reason}"))
+        t.send(0, &ToMaster::Failed { reason: reason.to_string() }.encode());
+        Err(RankError { rank, reason })
     };
-    let mut renderer = match Renderer::new() {
-        Ok(r) => r,
-        Err(e) => return fail(e.to_string()),
+    let gpu = match Gpu::new() {
+        Ok(g) => g,
+        Err(e) => return fail(e.into()),
     };
+    let mut renderer = Renderer::new(&gpu);
     let max_texture_side = match fault(rank) {
         Some(Fault::Texture(n)) => n,
-        _ => renderer.limits().max_texture_dimension_2d,
+        _ => gpu.limits().max_texture_dimension_2d,
     };
     heartbeat.busy(false);
-    t.send(0, &ToMaster::Ready { adapter: renderer.adapter_name().to_string(), max_texture_side }.encode());
+    t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
     let mut first_frame = true;
     loop {
         heartbeat.busy(false);
         let bytes = match t.recv(MASTER_SILENCE) {
             Ok((0, bytes)) => bytes,
-            Ok((from, _)) => return fail(format!("unexpected message from rank {from}")),
-            Err(RecvError::Timeout) => return fail("no message from rank 0 for an hour".into()),
-            Err(RecvError::Disconnected) => return Err(format!("rank {rank}: rank 0 is gone")),
+            Ok((from, _)) => return fail(WorkerError::UnexpectedSender(from)),
+            Err(RecvError::Timeout) => return fail(WorkerError::MasterSilent),
+            Err(RecvError::Disconnected) => return Err(RankError { rank, reason: WorkerError::MasterGone }),
         };
         heartbeat.busy(true);
         let msg = match ToWorker::decode(&bytes) {
             Ok(ToWorker::Shutdown) => return Ok(()),
             Ok(ToWorker::Model(dpm)) => {
-                match PmTiles::new(&renderer, &dpm) {
+                match PmTiles::new(&gpu, &dpm) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
                 continue;
             }
             Ok(msg) => msg,
-            Err(e) => return fail(format!("bad message from rank 0: {e}")),
+            Err(e) => return fail(WorkerError::BadMessage(e)),
         };
         match fault(rank).filter(|_| std::mem::take(&mut first_frame)) {
             Some(Fault::Die) => std::process::abort(),
-            Some(Fault::Fail) => return fail("injected failure (TESSERA_FAULT)".into()),
+            Some(Fault::Fail) => return fail(WorkerError::Injected),
             Some(Fault::Slow(d)) => std::thread::sleep(d),
             Some(Fault::Texture(_)) => {}
             Some(Fault::Hang) => {
@@ -161,7 +233,7 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
             ToWorker::Frame(job) => job,
             ToWorker::PmFrame(job) => {
                 let Some(pm) = pm.as_mut() else {
-                    return fail("a progressive-mesh frame arrived before its model".into());
+                    return fail(WorkerError::FrameBeforeModel);
                 };
                 match pm.render(&mut renderer, &job) {
                     Ok(tiles) => t.send(0, &ToMaster::Pixels { frame: job.frame, tiles }.encode()),
@@ -176,7 +248,7 @@ pub fn run(t: &dyn Transport) -> Result<(), String> {
         for tile in &job.tiles {
             match render_tile(&mut renderer, tile, view_proj, (job.width, job.height)) {
                 Ok(p) => tiles.push(p),
-                Err(e) => return fail(format!("tile {}: {e}", tile.index)),
+                Err(e) => return fail(e.at(tile.index)),
             }
         }
         t.send(0, &ToMaster::Pixels { frame: job.frame, tiles }.encode());
@@ -189,18 +261,18 @@ fn render_tile(
     tile: &TileJob,
     view_proj: Mat4,
     frame: (u32, u32),
-) -> Result<TilePixels, String> {
+) -> Result<TilePixels, TileError> {
     let start = Instant::now();
-    let decoded = codec::bft::decode(&tile.bft).map_err(|e| format!("cannot decode the submesh: {e}"))?;
+    let decoded = codec::bft::decode(&tile.bft).map_err(TileError::Decode)?;
     let mut mesh = RenderMesh::from_decoded(&decoded);
     for &(slot, n) in &tile.normals {
         let Some(dst) = mesh.normals.get_mut(slot as usize) else {
-            return Err(format!("border normal for vertex {slot}, but the tile has {}", mesh.positions.len()));
+            return Err(TileError::BorderNormal { slot, vertices: mesh.positions.len() });
         };
         *dst = n;
     }
     let decode_ms = start.elapsed().as_secs_f64() * 1e3;
-    let (rgba, times) = renderer.render(&mesh, view_proj, frame, tile.rect).map_err(|e| e.to_string())?;
+    let (rgba, times) = renderer.render(&mesh, view_proj, frame, tile.rect)?;
     Ok(TilePixels {
         index: tile.index,
         rect: tile.rect,
@@ -284,9 +356,9 @@ struct PmTiles {
 }
 
 impl PmTiles {
-    fn new(renderer: &Renderer, dpm: &[u8]) -> Result<PmTiles, String> {
-        let decoded = codec::pm::format::decode(dpm).map_err(|e| format!("cannot decode the progressive mesh: {e}"))?;
-        let template = GpuAdapter::new(renderer, &decoded.pm, DEFAULT_N_ALLOC).map_err(|e| e.to_string())?;
+    fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, WorkerError> {
+        let decoded = codec::pm::format::decode(dpm).map_err(WorkerError::Model)?;
+        let template = GpuAdapter::new(gpu, &decoded.pm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
         Ok(PmTiles { template, tiles: HashMap::new(), uses: 0 })
     }
 
@@ -310,7 +382,7 @@ impl PmTiles {
 
     /// Adapts every tile of `job` to its sub-frustum (until converged or `max_passes`) and
     /// renders it.
-    fn render(&mut self, renderer: &mut Renderer, job: &PmFrameJob) -> Result<Vec<TilePixels>, String> {
+    fn render(&mut self, renderer: &mut Renderer, job: &PmFrameJob) -> Result<Vec<TilePixels>, WorkerError> {
         let view_proj = Mat4::from_cols_array(&job.view_proj);
         let view = Viewpoint {
             view_proj,
@@ -324,7 +396,7 @@ impl PmTiles {
         };
         for &(index, [x0, y0, x1, y1]) in &job.tiles {
             if !(x0 < x1 && x1 <= job.width && y0 < y1 && y1 <= job.height) {
-                return Err(format!("tile {index}: rect {:?} is not a non-empty part of the frame", [x0, y0, x1, y1]));
+                return Err(TileError::BadRect([x0, y0, x1, y1]).at(index));
             }
         }
         // The paper's n_alloc is for one adapter; each of this worker's adapters gets a share,
@@ -337,7 +409,7 @@ impl PmTiles {
             let group_view = view.for_tile(group.rect);
             let start = Instant::now();
             for _ in 0..job.max_passes.max(1) {
-                if adapter.adapt(&group_view).map_err(|e| format!("tile {}: {e}", group.tiles[0].0))?.converged() {
+                if adapter.adapt(&group_view).map_err(|e| TileError::from(e).at(group.tiles[0].0))?.converged() {
                     break;
                 }
             }
@@ -349,8 +421,8 @@ impl PmTiles {
             // cost 4,096 times in a 64x64 grid.
             let first = group.tiles[0].0;
             let (group_rgba, group_times) = renderer
-                .render_pm(adapter, view_proj, (job.width, job.height), group.rect)
-                .map_err(|e| format!("tile {first}: {e}"))?;
+                .render_pm(adapter.mesh(), view_proj, (job.width, job.height), group.rect)
+                .map_err(|e| TileError::from(e).at(first))?;
             let share = 1.0 / group.tiles.len() as f64;
             for &(index, rect) in &group.tiles {
                 let rgba = crop(&group_rgba, group.rect, rect);
@@ -375,5 +447,45 @@ impl PmTiles {
             }
         }
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The reasons rank 0 prints (`rank R failed: <reason>`), which scripts and
+    /// `tests/cluster.rs` match, word for word.
+    #[test]
+    fn failure_reasons_keep_their_wording() {
+        let cases = [
+            (WorkerError::UnexpectedSender(3), "unexpected message from rank 3"),
+            (WorkerError::MasterSilent, "no message from rank 0 for an hour"),
+            (WorkerError::MasterGone, "rank 0 is gone"),
+            (
+                WorkerError::BadMessage(ProtocolError::Truncated("header")),
+                "bad message from rank 0: message is truncated (while reading header)",
+            ),
+            (WorkerError::FrameBeforeModel, "a progressive-mesh frame arrived before its model"),
+            (WorkerError::Injected, "injected failure (TESSERA_FAULT)"),
+            (TileError::BadRect([4, 0, 2, 9]).at(7), "tile 7: rect [4, 0, 2, 9] is not a non-empty part of the frame"),
+            (
+                TileError::BorderNormal { slot: 12, vertices: 10 }.at(2),
+                "tile 2: border normal for vertex 12, but the tile has 10",
+            ),
+            (
+                TileError::Render(RenderError::NormalCount { positions: 3, normals: 0 }).at(0),
+                "tile 0: mesh has 3 positions but 0 normals",
+            ),
+            (
+                TileError::Adapt(AdaptError::FaceIndex { index: 9, vertices: 4 }).at(5),
+                "tile 5: GPU error: face index 9 out of 4 vertices",
+            ),
+        ];
+        for (error, reason) in cases {
+            assert_eq!(error.to_string(), reason);
+        }
+        let stopped = RankError { rank: 2, reason: WorkerError::MasterGone };
+        assert_eq!(stopped.to_string(), "rank 2: rank 0 is gone");
     }
 }

@@ -20,23 +20,58 @@
 //! headlight, on a transparent background; there is no culling, as meshes may be
 //! inconsistently oriented.
 
-use std::sync::mpsc;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec4};
 use thiserror::Error;
 
-use crate::pm_gpu::GpuAdapter;
+use crate::gpu::{Binding, Gpu, GpuError};
 use crate::RenderMesh;
 
-/// What a tile draws: an uploaded mesh, or a progressive mesh adapted on the GPU, drawn from
-/// its own buffers.
+/// A mesh that is already on the device, in the layout of the GPU progressive-mesh
+/// adaptation (`crate::pm_adapt`), drawn by vertex pulling (`vs_pulled` in
+/// `shaders/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
+/// its FVID, then that FVID's position and normal.
+#[derive(Clone, Copy)]
+pub struct AdaptedMesh<'a> {
+    /// The FVID of each active vertex (`u32`, `STORAGE`).
+    pub fvid: &'a wgpu::Buffer,
+    /// Position and normal per FVID ([`PmPoint`], `STORAGE`).
+    pub points: &'a wgpu::Buffer,
+    /// Active-vertex indices, 3 per triangle (`u32`, `INDEX`).
+    pub indices: &'a wgpu::Buffer,
+    /// How many of `indices` to draw.
+    pub index_count: u32,
+}
+
+/// One FVID's finest-level position and unit normal, `w` unused: `PmPoint` of
+/// `render.wgsl`, `Point` of `pm/common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PmPoint {
+    pub pos: [f32; 4],
+    pub nrm: [f32; 4],
+}
+
+/// What a tile draws: an uploaded mesh, or a mesh adapted on the GPU, drawn from its own
+/// buffers.
 #[derive(Clone, Copy)]
 enum Source<'a> {
     Mesh(&'a RenderMesh),
-    Pm(&'a GpuAdapter),
+    Pm(AdaptedMesh<'a>),
 }
+
+/// The renderer's shaders (see `shaders/README.md`).
+pub(crate) const SHADER: &str = include_str!("../../shaders/render.wgsl");
+
+/// Bind group 0 of the mesh pipelines: the frame uniform, read by both shader stages.
+pub(crate) const FRAME_GROUP: u32 = 0;
+pub(crate) const FRAME_BINDINGS: &[Binding] = &[Binding::uniform::<FrameUniform>(0, "frame")];
+/// Bind group 1 of the pulled pipeline: the adapted mesh's buffers, read by `vs_pulled`.
+pub(crate) const PULLED_GROUP: u32 = 1;
+pub(crate) const PULLED_BINDINGS: &[Binding] =
+    &[Binding::read::<u32>(0, "pm_fvid"), Binding::read::<PmPoint>(1, "pm_points")];
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -49,13 +84,6 @@ const NORMAL_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 
 /// Why the renderer could not start or render.
 #[derive(Debug, Error)]
 pub enum RenderError {
-    #[error(
-        "no GPU adapter found ({0}); without a GPU, wgpu needs Mesa's lavapipe: install \
-         mesa-vulkan-drivers (scripts/setup.sh does)"
-    )]
-    NoAdapter(String),
-    #[error("adapter {adapter} refused a device: {source}")]
-    Device { adapter: String, source: wgpu::RequestDeviceError },
     #[error("rect {rect:?} is not a non-empty part of the {width}x{height} frame")]
     BadRect { rect: [u32; 4], width: u32, height: u32 },
     #[error("frame {width}x{height} exceeds the adapter's largest texture side, {max}")]
@@ -64,8 +92,8 @@ pub enum RenderError {
     NormalCount { positions: usize, normals: usize },
     #[error("the mesh's {what} buffer needs {bytes} bytes; the adapter allows {max}")]
     MeshTooLarge { what: &'static str, bytes: u64, max: u64 },
-    #[error("GPU error: {0}")]
-    Gpu(String),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
 }
 
 /// Wall-clock milliseconds of the three stages of [`Renderer::render`], each waited for
@@ -80,10 +108,10 @@ pub struct RenderTimes {
     pub readback_ms: f64,
 }
 
-/// The uniform block of `render.wgsl`.
+/// The uniform block of `render.wgsl`, `Frame`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct FrameUniform {
+pub(crate) struct FrameUniform {
     view_proj: [[f32; 4]; 4],
     eye: [f32; 4],
 }
@@ -168,17 +196,14 @@ impl FrameTarget {
     }
 }
 
-/// A wgpu device with the tile pipelines, and the buffers and targets it reuses across
-/// calls: a worker renders the same tiles of the same frame size every frame, so after the
-/// first frame a call allocates only when its mesh or tile outgrows the previous ones.
+/// The tile pipelines on a [`Gpu`], and the buffers and targets they reuse across calls: a
+/// worker renders the same tiles of the same frame size every frame, so after the first
+/// frame a call allocates only when its mesh or tile outgrows the previous ones.
 pub struct Renderer {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    adapter_name: String,
-    limits: wgpu::Limits,
+    gpu: Gpu,
     clear_pipeline: wgpu::RenderPipeline,
     mesh_pipeline: wgpu::RenderPipeline,
-    /// The mesh pipeline with vertices pulled from a [`GpuAdapter`]'s buffers (`vs_pulled`).
+    /// The mesh pipeline with vertices pulled from an [`AdaptedMesh`]'s buffers (`vs_pulled`).
     pulled_pipeline: wgpu::RenderPipeline,
     pulled_layout: wgpu::BindGroupLayout,
     uniform: wgpu::Buffer,
@@ -192,48 +217,15 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    /// Opens a headless device: a hardware adapter if there is one, otherwise a fallback
-    /// (software) adapter such as lavapipe. `WGPU_BACKEND` and the other `WGPU_*` variables
-    /// wgpu reads can narrow the choice. The device gets the adapter's full limits, so large
-    /// meshes and frames fit whatever the adapter can hold.
-    pub fn new() -> Result<Renderer, RenderError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let request = |force_fallback_adapter| {
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter,
-                ..Default::default()
-            }))
-        };
-        let adapter = request(false).or_else(|_| request(true)).map_err(|e| RenderError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let adapter_name = info.name.clone();
-        log::info!("render: adapter {adapter_name} ({:?}, {:?})", info.backend, info.device_type);
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("render: device"),
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|source| RenderError::Device { adapter: adapter_name.clone(), source })?;
-
+    /// Creates the tile pipelines on `gpu`'s device.
+    pub fn new(gpu: &Gpu) -> Renderer {
+        let device = gpu.device();
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render: shader"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/render.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render: frame uniform layout"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FrameUniform>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let bind_group_layout =
+            gpu.bind_group_layout("render: frame uniform layout", wgpu::ShaderStages::VERTEX_FRAGMENT, FRAME_BINDINGS);
         let depth_stencil = |depth_compare| wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
@@ -313,20 +305,9 @@ impl Renderer {
             "vs_main",
             &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
         );
-        let storage_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::VERTEX,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let pulled_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render: pulled vertices layout"),
-            entries: &[storage_entry(0), storage_entry(1)],
-        });
+        let pulled_layout =
+            gpu.bind_group_layout("render: pulled vertices layout", wgpu::ShaderStages::VERTEX, PULLED_BINDINGS);
+        // Indexed by group: FRAME_GROUP, PULLED_GROUP.
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("render: pulled pipeline layout"),
             bind_group_layouts: &[Some(&bind_group_layout), Some(&pulled_layout)],
@@ -339,16 +320,10 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("render: frame uniform"),
-            layout: &bind_group_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-        });
-        Ok(Renderer {
-            device,
-            queue,
-            adapter_name,
-            limits,
+        let bind_group =
+            gpu.bind_group("render: frame uniform", &bind_group_layout, FRAME_BINDINGS, &[("frame", &uniform)]);
+        Renderer {
+            gpu: gpu.clone(),
             clear_pipeline,
             mesh_pipeline,
             pulled_pipeline,
@@ -360,27 +335,12 @@ impl Renderer {
             indices: GrowBuffer::new("upload: indices", wgpu::BufferUsages::INDEX),
             frame_target: None,
             readback: None,
-        })
+        }
     }
 
-    /// The device, for compute work on the same GPU (the progressive-mesh adaptation).
-    pub fn device(&self) -> &wgpu::Device {
-        &self.device
-    }
-
-    /// The device's queue.
-    pub fn queue(&self) -> &wgpu::Queue {
-        &self.queue
-    }
-
-    /// The device's limits (the adapter's own: see [`Renderer::new`]).
-    pub fn limits(&self) -> &wgpu::Limits {
-        &self.limits
-    }
-
-    /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
-    pub fn adapter_name(&self) -> &str {
-        &self.adapter_name
+    /// The GPU this renderer draws on.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
     }
 
     /// Renders the part `rect = [x0, y0, x1, y1]` (pixels, half-open, origin top-left) of a
@@ -404,12 +364,13 @@ impl Renderer {
         self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
     }
 
-    /// Renders the mesh `pm` holds now, as [`Renderer::render`] renders a [`RenderMesh`], but
-    /// straight from the adapter's GPU buffers: nothing is uploaded or read back but the pixels
-    /// (its upload time is the frame uniform's). `pm` must live on this renderer's device.
+    /// Renders an adapted mesh (`GpuAdapter::mesh`) as [`Renderer::render`] renders a
+    /// [`RenderMesh`], but straight from its GPU buffers: nothing is uploaded or read back but
+    /// the pixels (its upload time is the frame uniform's). `pm` must live on this renderer's
+    /// device.
     pub fn render_pm(
         &mut self,
-        pm: &GpuAdapter,
+        pm: AdaptedMesh<'_>,
         view_proj: Mat4,
         frame: (u32, u32),
         rect: [u32; 4],
@@ -430,12 +391,12 @@ impl Renderer {
             return Err(RenderError::BadRect { rect, width, height });
         }
         // The frame is a texture.
-        let max = self.limits.max_texture_dimension_2d;
+        let max = self.gpu.limits().max_texture_dimension_2d;
         if width > max || height > max {
             return Err(RenderError::FrameTooLarge { width, height, max });
         }
-        let device = self.device.clone();
-        scoped(&device, || self.render_unscoped(source, view_proj, frame, rect))
+        let gpu = self.gpu.clone();
+        gpu.scoped(|| self.render_unscoped(source, view_proj, frame, rect))
     }
 
     fn render_unscoped(
@@ -447,8 +408,8 @@ impl Renderer {
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
         let size = (x1 - x0, y1 - y0);
         let start = Instant::now();
-        let max = self.limits.max_buffer_size;
-        let (device, queue) = (&self.device, &self.queue);
+        let max = self.gpu.limits().max_buffer_size;
+        let (device, queue) = (self.gpu.device(), self.gpu.queue());
         let pulled = match source {
             Source::Mesh(mesh) => {
                 self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
@@ -456,17 +417,12 @@ impl Renderer {
                 self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
                 None
             }
-            Source::Pm(pm) => {
-                let (fvid, points, _, _) = pm.draw_buffers();
-                Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("render: pulled vertices"),
-                    layout: &self.pulled_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: fvid.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: points.as_entire_binding() },
-                    ],
-                }))
-            }
+            Source::Pm(pm) => Some(self.gpu.bind_group(
+                "render: pulled vertices",
+                &self.pulled_layout,
+                PULLED_BINDINGS,
+                &[("pm_fvid", pm.fvid), ("pm_points", pm.points)],
+            )),
         };
         // The eye is the point the projection sends to infinity: clip (0, 0, 1, 0) back in
         // world space, up to a scale (see `Frame::eye` in render.wgsl).
@@ -474,7 +430,7 @@ impl Renderer {
         let uniform = FrameUniform { view_proj: view_proj.to_cols_array_2d(), eye: eye.to_array() };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // An empty submission flushes the queued writes.
-        wait_for(device, queue.submit([]))?;
+        self.gpu.wait_for(queue.submit([]))?;
         let upload_ms = ms_since(start);
 
         let start = Instant::now();
@@ -515,7 +471,7 @@ impl Renderer {
                     if index_count > 0 {
                         let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
                         pass.set_pipeline(&self.mesh_pipeline);
-                        pass.set_bind_group(0, &self.bind_group, &[]);
+                        pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
                         pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
                         pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
                         pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
@@ -523,19 +479,18 @@ impl Renderer {
                     }
                 }
                 (Source::Pm(pm), Some(bind_group)) => {
-                    let (_, _, indices, faces) = pm.draw_buffers();
-                    if faces > 0 {
+                    if pm.index_count > 0 {
                         pass.set_pipeline(&self.pulled_pipeline);
-                        pass.set_bind_group(0, &self.bind_group, &[]);
-                        pass.set_bind_group(1, bind_group, &[]);
-                        pass.set_index_buffer(indices.slice(..faces as u64 * 12), wgpu::IndexFormat::Uint32);
-                        pass.draw_indexed(0..faces * 3, 0, 0..1);
+                        pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
+                        pass.set_bind_group(PULLED_GROUP, bind_group, &[]);
+                        pass.set_index_buffer(pm.indices.slice(..pm.index_count as u64 * 4), wgpu::IndexFormat::Uint32);
+                        pass.draw_indexed(0..pm.index_count, 0, 0..1);
                     }
                 }
                 (Source::Pm(_), None) => unreachable!("the pulled bind group is made for every PM source"),
             }
         }
-        wait_for(device, queue.submit([encoder.finish()]))?;
+        self.gpu.wait_for(queue.submit([encoder.finish()]))?;
         let render_ms = ms_since(start);
 
         let start = Instant::now();
@@ -572,7 +527,7 @@ impl Renderer {
         );
         queue.submit([encoder.finish()]);
         let row = (size.0 * BYTES_PER_PIXEL) as usize;
-        let pixels = map_read(device, readback, bytes, |mapped| {
+        let pixels = self.gpu.map_read(readback, bytes, |mapped| {
             let mut pixels = Vec::with_capacity(row * size.1 as usize);
             for padded in mapped.chunks_exact(padded_row as usize) {
                 pixels.extend_from_slice(&padded[..row]);
@@ -582,53 +537,6 @@ impl Renderer {
         let readback_ms = ms_since(start);
         Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
     }
-}
-
-/// Runs `f` with the device's validation and out-of-memory errors captured and returned
-/// instead of reaching wgpu's default handler, which panics. The scopes are popped in reverse
-/// order.
-pub(crate) fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> Result<T, RenderError>) -> Result<T, RenderError> {
-    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let result = f();
-    for scope in [validation, oom] {
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(RenderError::Gpu(e.to_string()));
-        }
-    }
-    result
-}
-
-/// Blocks until submission `index` has finished on the device.
-pub(crate) fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
-    device
-        .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
-        .map(drop)
-        .map_err(|e| RenderError::Gpu(e.to_string()))
-}
-
-/// Maps the first `bytes` bytes of a `MAP_READ` buffer (its copies submitted), waits for
-/// them, hands them to `read`, and unmaps the buffer.
-pub(crate) fn map_read<T>(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    bytes: u64,
-    read: impl FnOnce(&[u8]) -> T,
-) -> Result<T, RenderError> {
-    let (tx, rx) = mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-        let _ = tx.send(r);
-    });
-    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Gpu(e.to_string()))?;
-    rx.recv()
-        .map_err(|_| RenderError::Gpu("readback map callback never ran".into()))?
-        .map_err(|e| RenderError::Gpu(e.to_string()))?;
-    let out = {
-        let mapped = buffer.get_mapped_range(..bytes).map_err(|e| RenderError::Gpu(e.to_string()))?;
-        read(&mapped)
-    };
-    buffer.unmap();
-    Ok(out)
 }
 
 fn ms_since(start: Instant) -> f64 {

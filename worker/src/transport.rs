@@ -43,7 +43,7 @@ pub fn launched_by_mpirun() -> bool {
 /// MPI's `COMM_WORLD`. Dropping it finalizes MPI.
 ///
 /// MPI is initialized at `MPI_THREAD_SERIALIZED`: a worker's heartbeat thread sends while its
-/// main thread renders, and every MPI call of the process takes [`MPI_CALLS`] first, so no
+/// main thread renders, and every MPI call of the process takes `MPI_CALLS` first, so no
 /// two threads are ever inside MPI at once.
 pub struct Mpi {
     world: SimpleCommunicator,

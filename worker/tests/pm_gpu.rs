@@ -1,4 +1,4 @@
-//! The GPU adaptation (worker::pm_gpu, shaders/pm/*.wgsl) against the CPU reference
+//! The GPU adaptation (worker::pm_adapt, shaders/pm/*.wgsl) against the CPU reference
 //! (codec::pm::Adapter): after every pass of a camera path, the same active vertices, the
 //! same per-pass statistics and the same triangle set (as FVID triples, orientation kept).
 //! Needs a wgpu adapter; without a GPU that is Mesa's lavapipe.
@@ -10,7 +10,8 @@ use std::time::Instant;
 use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
-use worker::pm_gpu::{GpuAdapter, DEFAULT_N_ALLOC};
+use worker::gpu::Gpu;
+use worker::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
 fn mesh_path(rel: &str) -> PathBuf {
@@ -82,10 +83,10 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
 }
 
 /// Adapts along a path of `frames` frames, one pass per frame, on both.
-fn check_path(rel: &str, frames: usize, error_px: f32, renderer: &Renderer) {
+fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu) {
     let pm = pm_of(rel);
     let mut cpu = Adapter::new(&pm);
-    let mut gpu = GpuAdapter::new(renderer, &pm, 4096).unwrap();
+    let mut gpu = GpuAdapter::new(device, &pm, 4096).unwrap();
     let start = Instant::now();
     let (mut lo, mut hi) = (usize::MAX, 0);
     for k in 0..frames {
@@ -104,13 +105,13 @@ fn check_path(rel: &str, frames: usize, error_px: f32, renderer: &Renderer) {
 
 #[test]
 fn bunny_path_matches_the_cpu_reference() {
-    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
-    check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &renderer);
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &device);
 }
 
 #[test]
 fn refining_everything_on_the_gpu_matches_the_cpu() {
-    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
     // Small meshes with boundaries, non-manifold edges and degenerate faces; a tiny n_alloc
     // so that buffers are reallocated in most passes.
     for rel in [
@@ -126,7 +127,7 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
         };
         let pm = pm_of(&rel);
         let mut cpu = Adapter::new(&pm);
-        let mut gpu = GpuAdapter::new(&renderer, &pm, 16).unwrap();
+        let mut gpu = GpuAdapter::new(&device, &pm, 16).unwrap();
         let mut passes = 0;
         loop {
             pass_both(&pm, &mut cpu, &mut gpu, None, &format!("{rel} refine pass {passes}"));
@@ -151,8 +152,8 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
 
 #[test]
 fn dragon_path_matches_the_cpu_reference() {
-    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
-    check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &renderer);
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &device);
 }
 
 /// Median of `v` (sorted in place).
@@ -174,8 +175,9 @@ fn median(v: &mut [f64]) -> f64 {
 fn pm_speed() {
     let rel = std::env::var("TESSERA_PM_MESH").unwrap_or_else(|_| "stanford/dragon_vrip.ply.gz".into());
     let pm = pm_of(&rel);
-    let mut renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
-    eprintln!("adapter: {}", renderer.adapter_name());
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("adapter: {}", device.adapter_name());
+    let mut renderer = Renderer::new(&device);
     let (w, h) = (1920u32, 1080u32);
     let rect = [0, 0, w, h];
 
@@ -207,7 +209,7 @@ fn pm_speed() {
 
         // From the base mesh to the converged view: generated triangles per second.
         let view0 = Viewpoint::new(&cam_at(0), w, h, 0.5);
-        let mut gpu = GpuAdapter::new(&renderer, &pm, DEFAULT_N_ALLOC).unwrap();
+        let mut gpu = GpuAdapter::new(&device, &pm, DEFAULT_N_ALLOC).unwrap();
         let start = Instant::now();
         let passes = gpu.adapt_until_converged(&view0, 1000).unwrap().expect("converges");
         let gen_s = start.elapsed().as_secs_f64();
@@ -230,7 +232,7 @@ fn pm_speed() {
             apply_ms.push(gpu.last_pass_ms()[1]);
             state_ms.push(gpu.last_pass_ms()[2]);
             let vp = cam_at(k).view_proj(w as f32 / h as f32);
-            let (_, t) = renderer.render_pm(&gpu, vp, (w, h), rect).unwrap();
+            let (_, t) = renderer.render_pm(gpu.mesh(), vp, (w, h), rect).unwrap();
             draw_ms.push(t.render_ms + t.readback_ms);
             let start = Instant::now();
             cpu.adapt(&view);
@@ -266,8 +268,8 @@ fn pm_speed() {
 #[ignore = "timing; run in release"]
 fn pass_overhead() {
     let pm = pm_of("stanford/bunny_oded_6k.obj");
-    let renderer = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
-    let mut gpu = GpuAdapter::new(&renderer, &pm, DEFAULT_N_ALLOC).unwrap();
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let mut gpu = GpuAdapter::new(&device, &pm, DEFAULT_N_ALLOC).unwrap();
     let view = path_view(&pm, 0, 1, 0.5);
     gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
     let mut idle: Vec<f64> = (0..50)

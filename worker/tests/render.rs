@@ -11,6 +11,7 @@ use std::time::Instant;
 use codec::bft;
 use codec::view::{Camera, TileGrid};
 use glam::{Mat4, Vec3};
+use worker::gpu::Gpu;
 use worker::render::{RenderError, RenderTimes, Renderer};
 use worker::RenderMesh;
 
@@ -36,9 +37,9 @@ fn framing(mesh: &RenderMesh, (w, h): (u32, u32)) -> Mat4 {
 }
 
 fn renderer() -> Renderer {
-    let r = Renderer::new().unwrap_or_else(|e| panic!("{e}"));
-    eprintln!("adapter: {}", r.adapter_name());
-    r
+    let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("adapter: {}", gpu.adapter_name());
+    Renderer::new(&gpu)
 }
 
 fn alphas(pixels: &[u8]) -> impl Iterator<Item = u8> + '_ {

@@ -1,0 +1,261 @@
+//! The GPU a worker computes and draws on: one adapter, its device and queue, and what every
+//! pipeline of the crate needs from them: error scopes that turn wgpu's validation and
+//! out-of-memory errors into values (wgpu's default handler panics), waits for submissions,
+//! and buffer read-backs.
+//!
+//! It also holds the Rust half of the contract with the WGSL: a `Binding` row names one
+//! buffer binding of a shader (slot, variable name, access, byte size), bind group layouts and
+//! bind groups are built from tables of them, and `wgsl_contract` (a test that parses every
+//! shader with naga, no GPU needed) checks each table against the shader's declarations.
+
+use std::sync::{mpsc, Arc};
+
+use thiserror::Error;
+
+/// Why the GPU could not be opened, or an operation on it failed.
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter found ({0}); without a GPU, wgpu needs Mesa's lavapipe: install \
+         mesa-vulkan-drivers (scripts/setup.sh does)"
+    )]
+    NoAdapter(wgpu::RequestAdapterError),
+    #[error("adapter {adapter} refused a device: {source}")]
+    Device { adapter: String, source: wgpu::RequestDeviceError },
+    /// A validation or out-of-memory error caught by an error scope (`Gpu::scoped`).
+    #[error("GPU error: {0}")]
+    Scope(wgpu::Error),
+    /// Waiting for the device failed.
+    #[error("GPU error: {0}")]
+    Poll(wgpu::PollError),
+    /// A buffer could not be mapped for reading.
+    #[error("GPU error: {0}")]
+    Map(wgpu::BufferAsyncError),
+    #[error("GPU error: readback map callback never ran")]
+    MapCallbackLost,
+    /// The mapped range of a buffer could not be viewed.
+    #[error("GPU error: {0}")]
+    MappedRange(wgpu::MapRangeError),
+}
+
+/// A headless wgpu device and its queue. Cloning is cheap (shared handles): the renderer and
+/// every progressive-mesh adapter of a worker hold clones of one `Gpu`, so that the adapted
+/// meshes they compute are drawn on the device they live on.
+#[derive(Clone)]
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter_name: Arc<str>,
+    limits: Arc<wgpu::Limits>,
+}
+
+impl Gpu {
+    /// Opens a headless device: a hardware adapter if there is one, otherwise a fallback
+    /// (software) adapter such as lavapipe. `WGPU_BACKEND` and the other `WGPU_*` variables
+    /// wgpu reads can narrow the choice. The device gets the adapter's full limits, so large
+    /// meshes and frames fit whatever the adapter can hold.
+    pub fn new() -> Result<Gpu, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let request = |force_fallback_adapter| {
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter,
+                ..Default::default()
+            }))
+        };
+        let adapter = request(false).or_else(|_| request(true)).map_err(GpuError::NoAdapter)?;
+        let info = adapter.get_info();
+        let adapter_name = info.name.clone();
+        log::info!("gpu: adapter {adapter_name} ({:?}, {:?})", info.backend, info.device_type);
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("gpu: device"),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|source| GpuError::Device { adapter: adapter_name.clone(), source })?;
+        Ok(Gpu { device, queue, adapter_name: adapter_name.into(), limits: Arc::new(limits) })
+    }
+
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// The device's limits (the adapter's own: see [`Gpu::new`]).
+    pub fn limits(&self) -> &wgpu::Limits {
+        &self.limits
+    }
+
+    /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
+    pub fn adapter_name(&self) -> &str {
+        &self.adapter_name
+    }
+
+    /// Runs `f` with the device's validation and out-of-memory errors captured and returned
+    /// (a validation error first) instead of reaching wgpu's default handler, which panics.
+    /// The scopes are popped in reverse order.
+    pub(crate) fn scoped<T, E: From<GpuError>>(&self, f: impl FnOnce() -> Result<T, E>) -> Result<T, E> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = f();
+        for scope in [validation, oom] {
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(GpuError::Scope(e).into());
+            }
+        }
+        result
+    }
+
+    /// Blocks until submission `index` has finished on the device.
+    pub(crate) fn wait_for(&self, index: wgpu::SubmissionIndex) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+            .map(drop)
+            .map_err(GpuError::Poll)
+    }
+
+    /// Maps the first `bytes` bytes of a `MAP_READ` buffer (its copies submitted), waits for
+    /// them, hands them to `read`, and unmaps the buffer.
+    pub(crate) fn map_read<T>(
+        &self,
+        buffer: &wgpu::Buffer,
+        bytes: u64,
+        read: impl FnOnce(&[u8]) -> T,
+    ) -> Result<T, GpuError> {
+        let (tx, rx) = mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(GpuError::Poll)?;
+        rx.recv().map_err(|_| GpuError::MapCallbackLost)?.map_err(GpuError::Map)?;
+        let out = {
+            let mapped = buffer.get_mapped_range(..bytes).map_err(GpuError::MappedRange)?;
+            read(&mapped)
+        };
+        buffer.unmap();
+        Ok(out)
+    }
+
+    /// Copies the first `bytes` bytes of a `COPY_SRC` buffer into a new staging buffer
+    /// labelled `label` and reads them back (for tests and tools, not for a frame's path).
+    pub(crate) fn read_buffer(&self, label: &str, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
+        self.queue.submit([enc.finish()]);
+        self.map_read(&staging, bytes, <[u8]>::to_vec)
+    }
+
+    /// A bind group layout with one buffer entry per row of `bindings`. A uniform's entry
+    /// requires its whole block ([`Binding::bytes`]); a storage entry leaves the minimum size
+    /// to wgpu's draw- and dispatch-time check against the shader.
+    pub(crate) fn bind_group_layout(
+        &self,
+        label: &str,
+        visibility: wgpu::ShaderStages,
+        bindings: &[Binding],
+    ) -> wgpu::BindGroupLayout {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+            .iter()
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b.slot,
+                visibility,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match b.access {
+                        Access::Uniform => wgpu::BufferBindingType::Uniform,
+                        Access::Read => wgpu::BufferBindingType::Storage { read_only: true },
+                        Access::ReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: match b.access {
+                        Access::Uniform => wgpu::BufferSize::new(b.bytes),
+                        Access::Read | Access::ReadWrite => None,
+                    },
+                },
+                count: None,
+            })
+            .collect();
+        self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+    }
+
+    /// A bind group of `layout` (made from `bindings`) that binds each buffer of `buffers`,
+    /// whole, to the binding of its name.
+    ///
+    /// # Panics
+    ///
+    /// Unless `buffers` names every binding of the table exactly once: a mismatch is a bug in
+    /// the caller, not a condition of the input.
+    pub(crate) fn bind_group(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        bindings: &[Binding],
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
+        assert_eq!(buffers.len(), bindings.len(), "{label}: {} buffers for {} bindings", buffers.len(), bindings.len());
+        let entries: Vec<wgpu::BindGroupEntry> = bindings
+            .iter()
+            .map(|b| {
+                let (_, buffer) = buffers
+                    .iter()
+                    .find(|(name, _)| *name == b.name)
+                    .unwrap_or_else(|| panic!("{label}: no buffer for binding {} ({})", b.slot, b.name));
+                wgpu::BindGroupEntry { binding: b.slot, resource: buffer.as_entire_binding() }
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+    }
+}
+
+/// How a shader declares a buffer binding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Access {
+    /// `var<uniform>`
+    Uniform,
+    /// `var<storage, read>`
+    Read,
+    /// `var<storage, read_write>`
+    ReadWrite,
+}
+
+/// One buffer binding of a bind group, `@binding(slot) var<access> name: T`, as the Rust
+/// side lays out and binds it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Binding {
+    pub slot: u32,
+    /// The WGSL variable's name; [`Gpu::bind_group`] takes buffers by it.
+    pub name: &'static str,
+    pub access: Access,
+    /// Bytes of the Rust twin of `T`: the whole of `T` when it is sized (a uniform block, a
+    /// fixed-size array), one element when `T` is a runtime-sized array.
+    pub bytes: u64,
+}
+
+impl Binding {
+    /// A `var<uniform>` whose block is a `T`.
+    pub(crate) const fn uniform<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::Uniform, bytes: std::mem::size_of::<T>() as u64 }
+    }
+
+    /// A `var<storage, read>` of `T`s (or a `T`).
+    pub(crate) const fn read<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::Read, bytes: std::mem::size_of::<T>() as u64 }
+    }
+
+    /// A `var<storage, read_write>` of `T`s (or a `T`).
+    pub(crate) const fn read_write<T>(slot: u32, name: &'static str) -> Binding {
+        Binding { slot, name, access: Access::ReadWrite, bytes: std::mem::size_of::<T>() as u64 }
+    }
+}

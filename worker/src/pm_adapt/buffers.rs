@@ -1,0 +1,141 @@
+//! The adaptation's buffers: the records it uploads (twins of the WGSL structs), and the
+//! per-vertex and per-face buffers resized by the paper's `n_alloc` policy.
+
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+
+/// `Split` of `shaders/pm/common.wgsl`: a split record, uploaded once per progressive mesh.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct GpuSplit {
+    pub(super) v: u32,
+    pub(super) v_u: u32,
+    pub(super) face_off: u32,
+    pub(super) face_cnt: u32,
+    pub(super) child: [u32; 2],
+    pub(super) parent: u32,
+    pub(super) pad: u32,
+    pub(super) crit: [f32; 4],
+}
+
+/// `Params` of `shaders/pm/common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Default)]
+pub(super) struct Params {
+    pub(super) planes: [[f32; 4]; 6],
+    pub(super) eye: [f32; 4],
+    pub(super) pixels_per_unit: f32,
+    pub(super) error_px: f32,
+    pub(super) c_lod: f32,
+    pub(super) attribute_scale: f32,
+    pub(super) n: u32,
+    pub(super) m: u32,
+    pub(super) mode: u32,
+    pub(super) n_new: u32,
+    pub(super) f_add: u32,
+    pub(super) m_new: u32,
+    pub(super) splits: u32,
+    pub(super) pad: u32,
+}
+
+/// `Level` of `shaders/pm/scan.wgsl`: the element count of one level of the scan.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct LevelUniform {
+    pub(super) count: u32,
+    pub(super) pad: [u32; 3],
+}
+
+/// The counters the stages accumulate with atomics (`stats`), read back once per pass; the
+/// indices are the `STAT_*` constants of `common.wgsl`.
+pub(super) type Stats = [u32; 8];
+pub(crate) const STAT_COLLAPSES: usize = 0;
+pub(crate) const STAT_CANCELLED: usize = 1;
+pub(crate) const STAT_REMOVED_FACES: usize = 2;
+pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
+/// Readback: vertex total, face total, then the 8 counters.
+pub(super) const READBACK_BYTES: u64 = 8 + STATS_BYTES;
+
+/// A buffer with a capacity in elements, resized by the paper's `n_alloc` policy.
+pub(super) struct Sized {
+    pub(super) buffer: wgpu::Buffer,
+    /// Capacity in elements.
+    pub(super) cap: u64,
+}
+
+/// One level of the recursive scan: its block sums, a uniform with its element count, and
+/// its number of blocks.
+pub(super) struct ScanLevel {
+    pub(super) sums: Sized,
+    pub(super) uniform: wgpu::Buffer,
+    pub(super) blocks: u32,
+}
+
+/// The per-vertex buffers (one of two sets: reorganisation copies from one into the other).
+pub(super) struct VertexSet {
+    pub(super) fvid: Sized,
+    pub(super) next: Sized,
+    pub(super) node: Sized,
+}
+
+impl VertexSet {
+    pub(super) fn new(device: &wgpu::Device, name: &str, cap: u64) -> VertexSet {
+        VertexSet {
+            fvid: storage(device, &format!("pm: vertex fvid {name}"), cap, 4, VERTEX_USAGE),
+            next: storage(device, &format!("pm: vertex next {name}"), cap, 4, VERTEX_USAGE),
+            node: storage(device, &format!("pm: vertex node {name}"), cap, 4, VERTEX_USAGE),
+        }
+    }
+}
+
+pub(super) struct FaceSet {
+    /// Current vertex indices, 3 per face: the draw's index buffer.
+    pub(super) idx: Sized,
+    pub(super) fvid: Sized,
+    pub(super) owner: Sized,
+}
+
+impl FaceSet {
+    pub(super) fn new(device: &wgpu::Device, cap: u64) -> FaceSet {
+        FaceSet {
+            idx: storage(device, "pm: face indices", cap, 12, VERTEX_USAGE | wgpu::BufferUsages::INDEX),
+            fvid: storage(device, "pm: face fvids", cap, 12, VERTEX_USAGE),
+            owner: storage(device, "pm: face owners", cap, 4, VERTEX_USAGE),
+        }
+    }
+}
+
+pub(super) const VERTEX_USAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+
+pub(super) fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    elements: u64,
+    element_bytes: u64,
+    usage: wgpu::BufferUsages,
+) -> Sized {
+    // Never empty: a binding needs at least one element.
+    let size = (elements.max(1) * element_bytes).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).max(16);
+    let buffer =
+        device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false });
+    Sized { buffer, cap: elements }
+}
+
+pub(super) fn init(device: &wgpu::Device, label: &str, data: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    let mut padded;
+    let contents = if data.len() < 16 || !data.len().is_multiple_of(4) {
+        padded = data.to_vec();
+        padded.resize(data.len().max(16).next_multiple_of(4), 0);
+        &padded[..]
+    } else {
+        data
+    };
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+}
+
+/// Whether a buffer of `cap` elements must be reallocated for `need`: too small, or larger
+/// than `need + 2 n_alloc` (section 5.3).
+pub(super) fn needs_resize(cap: u64, need: u64, n_alloc: u32) -> bool {
+    cap < need || cap > need + 2 * n_alloc as u64
+}

@@ -1,0 +1,386 @@
+//! View-dependent adaptation of a dependency-free progressive mesh on the GPU: the stages of
+//! Algorithms 1 to 5 of Derzapf and Guthe as WGSL compute pipelines (`shaders/pm/*.wgsl`, one
+//! file per stage, `common.wgsl` prepended to each but the generic scan), driven pass by pass
+//! from here. It is the GPU twin of the CPU reference [`codec::pm::Adapter`]: same state, same
+//! decisions, same triangle set after every pass (tested in `worker/tests/pm_gpu.rs`).
+//!
+//! It runs on a [`Gpu`] and hands the renderer the adapted mesh as an [`AdaptedMesh`]
+//! ([`GpuAdapter::mesh`]); it knows nothing else of the renderer. `buffers` holds the records
+//! it uploads (the WGSL structs' twins) and its `n_alloc`-sized buffers, `pipelines` the
+//! stages with their binding tables, and `pass` one adaptation pass.
+//!
+//! One [`GpuAdapter::adapt`] pass is two submissions:
+//!
+//! 1. state update (Algorithm 1), collapses (Algorithm 2, in place), and the work-efficient
+//!    scans of the vertex and face counts; the totals and the collapse counters are then read
+//!    back (40 bytes): the host needs them to size the buffers (the paper's `n_alloc` policy)
+//!    and to size the remaining dispatches;
+//! 2. vertex reorganisation (Algorithm 3) into the other of two vertex buffer sets, split
+//!    compaction, splits with binary search (Algorithm 4), index update (Algorithm 5) and the
+//!    in-place face compaction (section 5.6).
+//!
+//! The adapted mesh stays on the GPU between passes (temporal coherence). It is drawn straight
+//! from these buffers: the face index buffer is the draw's index buffer, and the vertex shader
+//! pulls each vertex's position and normal through its FVID (see `vs_pulled` in
+//! `shaders/render.wgsl`), so rendering reads nothing back.
+//!
+//! Where this differs from the paper:
+//!
+//! * The split records (criteria, children, faces) are uploaded decoded, once, from the
+//!   `.dpm` decoded on the CPU; the paper decodes each operation on the GPU from its address.
+//!   The split/collapse cache is then the split record itself, one indexed load away.
+//! * The vertex VBO is not copied during reorganisation: positions and normals are static per
+//!   FVID and pulled through the FVID buffer, so a pass moves 12 bytes per vertex, not 36.
+//! * Splits write `v` and `v_u` during reorganisation, so that the new FVID buffer is complete
+//!   before the split stage binary-searches it; the split stage appends the faces.
+//! * Faces carry the split that created them (4 bytes per face): the collapse removes exactly
+//!   those, as in the CPU reference (inputs may hold faces that are degenerate at every level).
+//! * The split compaction and the face compaction use atomic cursors instead of scans: the
+//!   order they produce does not matter (face slots come from the face prefix sum, and the
+//!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is
+//!   what equals the CPU reference.
+
+pub(crate) mod buffers;
+mod pass;
+pub(crate) mod pipelines;
+
+use std::sync::Arc;
+
+use codec::pm::{PassStats, ProgressiveMesh, SplitTree, Viewpoint, NONE};
+use thiserror::Error;
+
+use crate::gpu::{Gpu, GpuError};
+use crate::render::{AdaptedMesh, PmPoint};
+use buffers::{
+    init, needs_resize, storage, FaceSet, GpuSplit, Params, ScanLevel, Sized, VertexSet, READBACK_BYTES, STATS_BYTES,
+    VERTEX_USAGE,
+};
+use pipelines::Pipelines;
+
+/// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
+pub const DEFAULT_N_ALLOC: u32 = 1 << 15;
+
+/// Why an adaptation could not start or a pass failed.
+#[derive(Debug, Error)]
+pub enum AdaptError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("GPU error: the PM stages need {need} storage buffers per shader stage; the adapter allows {allowed}")]
+    TooFewStorageBuffers { need: u32, allowed: u32 },
+    /// The totals read back after the classification do not add up (a GPU fault).
+    #[error("GPU error: inconsistent pass totals: {vertices} vertices, {after} after, {collapses} collapses")]
+    InconsistentTotals { vertices: u32, after: u32, collapses: u32 },
+    /// A face read back refers to a vertex that is not active (a GPU fault).
+    #[error("GPU error: face index {index} out of {vertices} vertices")]
+    FaceIndex { index: u32, vertices: usize },
+}
+
+/// The adaptation state of one progressive mesh on the GPU (see the module docs).
+pub struct GpuAdapter {
+    gpu: Gpu,
+    /// Pipelines and static data, shared by every adapter of the same mesh on this device.
+    shared: Arc<Shared>,
+    n_alloc: u32,
+    params: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    sets: [VertexSet; 2],
+    cur: usize,
+    faces: FaceSet,
+    vcnt: Sized,
+    fcnt: Sized,
+    list: Sized,
+    hole: Sized,
+    /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
+    levels: Vec<ScanLevel>,
+    /// Active vertices and faces.
+    n: u32,
+    m: u32,
+    reallocations: u64,
+    /// Wait for each pass's second submission and time it ([`GpuAdapter::set_profiling`]).
+    profile: bool,
+    /// Milliseconds of the last pass: classification (to the totals read back), application.
+    times: [f64; 3],
+}
+
+/// What adapters of the same progressive mesh share: the pipelines, the static buffers, and
+/// the base mesh.
+struct Shared {
+    pipelines: Pipelines,
+    max_groups: u32,
+    splits: wgpu::Buffer,
+    split_faces: wgpu::Buffer,
+    points: wgpu::Buffer,
+    base: BaseState,
+}
+
+impl GpuAdapter {
+    /// Uploads `pm` to `gpu`'s device and starts at the base mesh. `n_alloc` is the paper's
+    /// reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
+    pub fn new(gpu: &Gpu, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
+        let limits = gpu.device().limits();
+        let need = pipelines::storage_buffers_per_stage();
+        if limits.max_storage_buffers_per_shader_stage < need {
+            return Err(AdaptError::TooFewStorageBuffers {
+                need,
+                allowed: limits.max_storage_buffers_per_shader_stage,
+            });
+        }
+        let tree = SplitTree::new(pm);
+        let mut face_off = 0u32;
+        let splits: Vec<GpuSplit> = pm
+            .splits
+            .iter()
+            .enumerate()
+            .map(|(s, split)| {
+                let c = pm.criteria.get(s).copied().unwrap_or_default();
+                let g = GpuSplit {
+                    v: split.v,
+                    v_u: split.v_u,
+                    face_off,
+                    face_cnt: split.faces.len() as u32,
+                    child: tree.children[s],
+                    parent: tree.parent[s],
+                    pad: 0,
+                    crit: [c.sin_alpha, c.geometric_error, c.attribute_error, c.radius],
+                };
+                face_off += split.faces.len() as u32;
+                g
+            })
+            .collect();
+        let split_faces: Vec<u32> = pm.splits.iter().flat_map(|s| s.faces.iter().flatten().copied()).collect();
+        let points: Vec<PmPoint> = pm
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(f, p)| {
+                let n = pm.normals.get(f).copied().unwrap_or_default();
+                PmPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
+            })
+            .collect();
+        gpu.scoped(|| {
+            let device = gpu.device();
+            let read_only = wgpu::BufferUsages::STORAGE;
+            let splits = init(device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
+            let split_faces = init(device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
+            let points = init(device, "pm: points", bytemuck::cast_slice(&points), read_only);
+            let shared = Arc::new(Shared {
+                pipelines: Pipelines::new(gpu),
+                max_groups: limits.max_compute_workgroups_per_dimension,
+                splits,
+                split_faces,
+                points,
+                base: base_state(pm, &tree),
+            });
+            Ok(GpuAdapter::with_shared(gpu.clone(), shared, n_alloc.max(1)))
+        })
+    }
+
+    /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
+    /// pipelines and static buffers (a worker keeps one per tile it renders).
+    pub fn sibling(&self) -> GpuAdapter {
+        self.sibling_with_slack(self.n_alloc)
+    }
+
+    /// [`GpuAdapter::sibling`] with its own `n_alloc`: a worker that keeps one adapter per
+    /// tile gives each a share of the slack, so that the slack summed over its tiles stays
+    /// one adapter's whatever the tile count.
+    pub fn sibling_with_slack(&self, n_alloc: u32) -> GpuAdapter {
+        GpuAdapter::with_shared(self.gpu.clone(), self.shared.clone(), n_alloc.max(1))
+    }
+
+    /// A new adapter at the base mesh.
+    fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
+        let d = gpu.device();
+        let mut adapter = GpuAdapter {
+            shared,
+            n_alloc,
+            params: d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pm: params"),
+                size: std::mem::size_of::<Params>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            stats: storage(d, "pm: stats", STATS_BYTES / 4, 4, VERTEX_USAGE).buffer,
+            readback: d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pm: readback"),
+                size: READBACK_BYTES,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            sets: [VertexSet::new(d, "A", 0), VertexSet::new(d, "B", 0)],
+            cur: 0,
+            faces: FaceSet::new(d, 0),
+            vcnt: storage(d, "pm: vertex counts", 0, 4, VERTEX_USAGE),
+            fcnt: storage(d, "pm: face counts", 0, 4, VERTEX_USAGE),
+            list: storage(d, "pm: split list", 0, 4, VERTEX_USAGE),
+            hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
+            levels: Vec::new(),
+            n: 0,
+            m: 0,
+            reallocations: 0,
+            profile: false,
+            times: [0.0; 3],
+            gpu,
+        };
+        adapter.reset();
+        adapter
+    }
+
+    /// Goes back to the base mesh.
+    pub fn reset(&mut self) {
+        let shared = self.shared.clone();
+        let (fvid, next, faces_idx, faces_fvid) = &shared.base;
+        let (n, m) = (fvid.len() as u64, faces_idx.len() as u64);
+        let node = vec![NONE; fvid.len()];
+        let owner = vec![NONE; faces_idx.len()];
+        self.cur = 0;
+        let na = self.n_alloc as u64;
+        if needs_resize(self.sets[0].fvid.cap, n, self.n_alloc) {
+            self.sets[0] = VertexSet::new(self.gpu.device(), "A", n + na);
+        }
+        let set = &self.sets[0];
+        for (s, data) in [(&set.fvid, fvid), (&set.next, next), (&set.node, &node)] {
+            if !data.is_empty() {
+                self.gpu.queue().write_buffer(&s.buffer, 0, bytemuck::cast_slice(data));
+            }
+        }
+        if needs_resize(self.faces.idx.cap, m, self.n_alloc) {
+            self.faces = FaceSet::new(self.gpu.device(), m + na);
+        }
+        let faces = &self.faces;
+        if m > 0 {
+            self.gpu.queue().write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(faces_idx));
+            self.gpu.queue().write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(faces_fvid));
+            self.gpu.queue().write_buffer(&faces.owner.buffer, 0, bytemuck::cast_slice(&owner));
+        }
+        self.n = n as u32;
+        self.m = m as u32;
+    }
+
+    /// Active vertices and faces.
+    pub fn counts(&self) -> (u32, u32) {
+        (self.n, self.m)
+    }
+
+    /// With `true`, every pass waits until its second submission has run, so that
+    /// [`Self::last_pass_ms`] can time it (a renderer would rather let it overlap).
+    pub fn set_profiling(&mut self, on: bool) {
+        self.profile = on;
+    }
+
+    /// Milliseconds of the last pass: state update, collapses and scans up to the totals read
+    /// back; then (when profiling) reorganisation, splits, index update and face compaction;
+    /// and (when profiling) the state update and collapses alone, part of the first figure.
+    pub fn last_pass_ms(&self) -> [f64; 3] {
+        self.times
+    }
+
+    /// How many times a buffer was reallocated by the `n_alloc` policy so far.
+    pub fn reallocations(&self) -> u64 {
+        self.reallocations
+    }
+
+    /// Bytes of GPU memory the dynamic (per adapted mesh) buffers take now, at their capacities.
+    pub fn dynamic_bytes(&self) -> u64 {
+        let sets: u64 =
+            self.sets.iter().map(|s| s.fvid.buffer.size() + s.next.buffer.size() + s.node.buffer.size()).sum();
+        let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
+        let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
+        let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size()).sum();
+        sets + faces + tmp + levels
+    }
+
+    /// Bytes of the static (per progressive mesh) buffers: decoded split records, their faces,
+    /// and positions and normals per FVID.
+    pub fn static_bytes(&self) -> u64 {
+        self.shared.splits.size() + self.shared.split_faces.size() + self.shared.points.size()
+    }
+
+    /// One adaptation pass for `view` (Algorithms 1 to 5).
+    pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, AdaptError> {
+        self.pass(Some(view))
+    }
+
+    /// One pass that splits every vertex that can split and collapses nothing (the CPU
+    /// reference's `refine_step`).
+    pub fn refine_step(&mut self) -> Result<PassStats, AdaptError> {
+        self.pass(None)
+    }
+
+    /// Applies every split: [`Self::refine_step`] until no vertex can split; returns the number
+    /// of passes that split (as the CPU reference's `refine_fully`).
+    pub fn refine_fully(&mut self) -> Result<usize, AdaptError> {
+        let mut passes = 0;
+        while self.refine_step()?.splits > 0 {
+            passes += 1;
+        }
+        Ok(passes)
+    }
+
+    /// Passes until one changes nothing, at most `max_passes`; returns the number of passes
+    /// that changed something, or `None` if still not converged.
+    pub fn adapt_until_converged(&mut self, view: &Viewpoint, max_passes: usize) -> Result<Option<usize>, AdaptError> {
+        for k in 0..max_passes {
+            if self.adapt(view)?.converged() {
+                return Ok(Some(k));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Reads a buffer's first `bytes` bytes back (tests and `pm adapt --gpu`; not the render path).
+    fn read_buffer(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        self.gpu.read_buffer("pm: read back", buffer, bytes)
+    }
+
+    /// Active vertex FVIDs, ascending (read back).
+    pub fn active(&self) -> Result<Vec<u32>, AdaptError> {
+        let bytes = self.read_buffer(&self.sets[self.cur].fvid.buffer, self.n as u64 * 4)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// The current faces as indices into [`Self::active`] (read back; the order is the GPU's).
+    pub fn faces(&self) -> Result<Vec<[u32; 3]>, AdaptError> {
+        let bytes = self.read_buffer(&self.faces.idx.buffer, self.m as u64 * 12)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// The current faces as FVID triples of active vertices (read back), for comparison with
+    /// [`codec::pm::Adapter::face_fvids`].
+    pub fn face_fvids(&self) -> Result<Vec<[u32; 3]>, AdaptError> {
+        let active = self.active()?;
+        self.faces()?
+            .into_iter()
+            .map(|t| {
+                let mut out = [0u32; 3];
+                for (o, i) in out.iter_mut().zip(t) {
+                    *o = *active.get(i as usize).ok_or(AdaptError::FaceIndex { index: i, vertices: active.len() })?;
+                }
+                Ok(out)
+            })
+            .collect()
+    }
+
+    /// The current mesh, for [`crate::render::Renderer::render_pm`]: the FVID buffer of the
+    /// active vertices, the per-FVID points, and the face index buffer, all on the device.
+    pub fn mesh(&self) -> AdaptedMesh<'_> {
+        AdaptedMesh {
+            fvid: &self.sets[self.cur].fvid.buffer,
+            points: &self.shared.points,
+            indices: &self.faces.idx.buffer,
+            index_count: self.m * 3,
+        }
+    }
+}
+
+/// The base mesh as the adapter's initial buffers: FVIDs, next splits, face indices, face FVIDs.
+type BaseState = (Vec<u32>, Vec<u32>, Vec<[u32; 3]>, Vec<[u32; 3]>);
+
+/// Builds the [`BaseState`] of `pm`.
+fn base_state(pm: &ProgressiveMesh, tree: &SplitTree) -> BaseState {
+    let fvid = pm.base_vertices.clone();
+    let idx =
+        pm.base_faces.iter().map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32)).collect();
+    (fvid, tree.roots.clone(), idx, pm.base_faces.clone())
+}

@@ -1,0 +1,340 @@
+//! One adaptation pass (Algorithms 1 to 5, see the module docs of [`super`]): the two
+//! submissions, the scans, and the buffer resizes between them.
+
+use codec::pm::{PassStats, Viewpoint};
+
+use super::buffers::{
+    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, READBACK_BYTES, STATS_BYTES,
+    STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
+};
+use super::pipelines::{Stage, SCAN_BLOCK, WG};
+use super::{AdaptError, GpuAdapter};
+use crate::gpu::GpuError;
+
+impl GpuAdapter {
+    pub(super) fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
+        let gpu = self.gpu.clone();
+        gpu.scoped(|| self.pass_unscoped(view))
+    }
+
+    fn pass_unscoped(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
+        let pass_start = std::time::Instant::now();
+        self.times = [0.0; 3];
+        let (n, m) = (self.n, self.m);
+        let unchanged = PassStats { vertices: n as usize, faces: m as usize, ..Default::default() };
+        if n == 0 {
+            return Ok(unchanged);
+        }
+        let na = self.n_alloc as u64;
+        // Temporaries hold n + 1 counts (the last one the scan's total).
+        if needs_resize(self.vcnt.cap, n as u64 + 1, self.n_alloc) {
+            let cap = n as u64 + 1 + na;
+            self.vcnt = storage(self.gpu.device(), "pm: vertex counts", cap, 4, VERTEX_USAGE);
+            self.fcnt = storage(self.gpu.device(), "pm: face counts", cap, 4, VERTEX_USAGE);
+            self.list = storage(self.gpu.device(), "pm: split list", cap, 4, VERTEX_USAGE);
+            self.reallocations += 1;
+        }
+        self.prepare_scan(n as u64 + 1);
+        let mut params = Params { n, m, mode: 1, ..Default::default() };
+        if let Some(v) = view {
+            params.mode = 0;
+            params.planes = v.planes().map(|p| p.to_array());
+            params.eye = [v.eye.x, v.eye.y, v.eye.z, 1.0];
+            params.pixels_per_unit = v.pixels_per_unit;
+            params.error_px = v.error_px;
+            params.c_lod = v.c_lod;
+            params.attribute_scale = v.attribute_scale;
+        }
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+
+        // Submission 1: state update, collapses, scans, and the totals read back.
+        let mut enc =
+            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
+        enc.clear_buffer(&self.stats, 0, None);
+        {
+            let set = &self.sets[self.cur];
+            let p = &self.shared.pipelines;
+            let state = p.state.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("points", &self.shared.points),
+                    ("vfvid", &set.fvid.buffer),
+                    ("vnext", &set.next.buffer),
+                    ("vnode", &set.node.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("fcnt", &self.fcnt.buffer),
+                ],
+            );
+            let collapse = p.collapse.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("vnext", &set.next.buffer),
+                    ("vnode", &set.node.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("pm: classify"),
+                timestamp_writes: None,
+            });
+            self.dispatch(&mut pass, &p.state, &state, n + 1);
+            self.dispatch(&mut pass, &p.collapse, &collapse, n);
+        }
+        if self.profile {
+            // Time the state update and collapses apart from the scans.
+            self.gpu.wait_for(self.gpu.queue().submit([enc.finish()]))?;
+            self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
+            enc =
+                self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
+        }
+        {
+            let mut pass = enc
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: scans"), timestamp_writes: None });
+            self.scan(&mut pass, &self.vcnt.buffer);
+            self.scan(&mut pass, &self.fcnt.buffer);
+        }
+        enc.copy_buffer_to_buffer(&self.vcnt.buffer, n as u64 * 4, &self.readback, 0, 4);
+        enc.copy_buffer_to_buffer(&self.fcnt.buffer, n as u64 * 4, &self.readback, 4, 4);
+        enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
+        self.gpu.queue().submit([enc.finish()]);
+        let totals = self.read_totals()?;
+        self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
+        let (n_new, f_add) = (totals[0], totals[1]);
+        let counters = &totals[2..];
+        let (collapses, cancelled, removed) =
+            (counters[STAT_COLLAPSES], counters[STAT_CANCELLED], counters[STAT_REMOVED_FACES]);
+        let splits = (n_new + collapses).checked_sub(n).ok_or(AdaptError::InconsistentTotals {
+            vertices: n,
+            after: n_new,
+            collapses,
+        })?;
+        if splits == 0 && collapses == 0 {
+            return Ok(PassStats { cancelled: cancelled as usize, ..unchanged });
+        }
+        let m_new = m - removed + f_add;
+
+        // Memory management (section 5.3): the other vertex set receives the reorganised
+        // vertices, so it is reallocated without copying; the face buffers keep their content.
+        let dst = 1 - self.cur;
+        if needs_resize(self.sets[dst].fvid.cap, n_new as u64, self.n_alloc) {
+            let cap = n_new as u64 + na;
+            self.sets[dst] = VertexSet::new(self.gpu.device(), if dst == 0 { "A" } else { "B" }, cap);
+            self.reallocations += 1;
+        }
+        let total = m as u64 + f_add as u64;
+        if self.faces.idx.cap < total {
+            self.resize_faces(total + na, m as u64);
+        }
+        if self.hole.cap < removed as u64 {
+            self.hole = storage(self.gpu.device(), "pm: face holes", removed as u64 + na, 4, VERTEX_USAGE);
+            self.reallocations += 1;
+        }
+        params.n_new = n_new;
+        params.f_add = f_add;
+        params.m_new = m_new;
+        params.splits = splits;
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+
+        // Submission 2: reorganisation, splits, index update, face compaction.
+        let mut enc =
+            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: apply") });
+        {
+            let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
+            let (p, f) = (&self.shared.pipelines, &self.faces);
+            // The vertex and face counts were scanned in place: from here on they are the
+            // prefix sums `vsum` and `fsum`.
+            let reorganise = p.reorganise.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("vfvid", &src.fvid.buffer),
+                    ("vnext", &src.next.buffer),
+                    ("vnode", &src.node.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("dnext", &dstset.next.buffer),
+                    ("dnode", &dstset.node.buffer),
+                ],
+            );
+            let compact = p.compact_splits.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vsum", &self.vcnt.buffer),
+                    ("list", &self.list.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let split = p.split.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("splits", &self.shared.splits),
+                    ("split_faces", &self.shared.split_faces),
+                    ("vnext", &src.next.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("fsum", &self.fcnt.buffer),
+                    ("list", &self.list.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
+                ],
+            );
+            let index = p.index_update.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vnode", &src.node.buffer),
+                    ("vsum", &self.vcnt.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
+                ],
+            );
+            let holes = p.holes.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("face_owner", &f.owner.buffer),
+                    ("hole", &self.hole.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let fill = p.fill.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("face_idx", &f.idx.buffer),
+                    ("face_fvid", &f.fvid.buffer),
+                    ("face_owner", &f.owner.buffer),
+                    ("hole", &self.hole.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let mut pass = enc
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None });
+            self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
+            self.dispatch(&mut pass, &p.compact_splits, &compact, n);
+            self.dispatch(&mut pass, &p.split, &split, splits);
+            self.dispatch(&mut pass, &p.index_update, &index, m);
+            self.dispatch(&mut pass, &p.holes, &holes, m_new);
+            self.dispatch(&mut pass, &p.fill, &fill, m + f_add - m_new);
+        }
+        self.gpu.queue().submit([enc.finish()]);
+        if self.profile {
+            self.gpu.wait_for(self.gpu.queue().submit([]))?;
+            self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
+        }
+        if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
+            self.resize_faces(m_new as u64 + na, m_new as u64);
+        }
+        self.cur = dst;
+        self.n = n_new;
+        self.m = m_new;
+        Ok(PassStats {
+            splits: splits as usize,
+            collapses: collapses as usize,
+            cancelled: cancelled as usize,
+            vertices: n_new as usize,
+            faces: m_new as usize,
+        })
+    }
+
+    /// Reallocates the face buffers to `cap` faces, keeping the first `keep`.
+    fn resize_faces(&mut self, cap: u64, keep: u64) {
+        let d = self.gpu.device();
+        let new = FaceSet::new(d, cap);
+        if keep > 0 {
+            let mut enc = d.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: face resize") });
+            enc.copy_buffer_to_buffer(&self.faces.idx.buffer, 0, &new.idx.buffer, 0, keep * 12);
+            enc.copy_buffer_to_buffer(&self.faces.fvid.buffer, 0, &new.fvid.buffer, 0, keep * 12);
+            enc.copy_buffer_to_buffer(&self.faces.owner.buffer, 0, &new.owner.buffer, 0, keep * 4);
+            self.gpu.queue().submit([enc.finish()]);
+        }
+        self.faces = new;
+        self.reallocations += 1;
+    }
+
+    /// Sizes the block-sum buffers of the scan levels for `count` elements and writes each
+    /// level's count.
+    fn prepare_scan(&mut self, count: u64) {
+        let mut counts = vec![count];
+        while *counts.last().expect("non-empty") > SCAN_BLOCK as u64 {
+            counts.push(counts.last().expect("non-empty").div_ceil(SCAN_BLOCK as u64));
+        }
+        while self.levels.len() < counts.len() {
+            let k = self.levels.len();
+            let uniform = self.gpu.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some(&format!("pm: scan level {k}")),
+                size: 16,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.levels.push(ScanLevel {
+                sums: storage(self.gpu.device(), "pm: scan sums", 0, 4, VERTEX_USAGE),
+                uniform,
+                blocks: 0,
+            });
+        }
+        self.levels.truncate(counts.len());
+        for (level, &c) in self.levels.iter_mut().zip(&counts) {
+            let blocks = c.div_ceil(SCAN_BLOCK as u64);
+            if level.sums.cap < blocks {
+                level.sums = storage(self.gpu.device(), "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
+            }
+            level.blocks = blocks as u32;
+            let uniform = LevelUniform { count: c as u32, pad: [0; 3] };
+            self.gpu.queue().write_buffer(&level.uniform, 0, bytemuck::bytes_of(&uniform));
+        }
+    }
+
+    /// Exclusive scan of `data` in place over the levels set by [`Self::prepare_scan`].
+    fn scan(&self, pass: &mut wgpu::ComputePass<'_>, data: &wgpu::Buffer) {
+        let p = &self.shared.pipelines;
+        let mut adds = Vec::with_capacity(self.levels.len());
+        // Down: scan each level's blocks, the block sums becoming the next level's data.
+        for (k, level) in self.levels.iter().enumerate() {
+            let input = if k == 0 { data } else { &self.levels[k - 1].sums.buffer };
+            let buffers = [("L", &level.uniform), ("data", input), ("sums", &level.sums.buffer)];
+            self.dispatch_groups(pass, &p.scan_blocks, &p.scan_blocks.bind(&self.gpu, &buffers), level.blocks);
+            adds.push(buffers);
+        }
+        // Up: add the scanned block sums back (the top level is a single block).
+        for (level, buffers) in self.levels.iter().zip(&adds).rev().skip(1) {
+            self.dispatch_groups(pass, &p.add_blocks, &p.add_blocks.bind(&self.gpu, buffers), level.blocks);
+        }
+    }
+
+    /// Dispatches one thread per element, `threads` in all (nothing for zero).
+    fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, threads: u32) {
+        self.dispatch_groups(pass, stage, bg, threads.div_ceil(WG));
+    }
+
+    /// Dispatches `groups` workgroups, in two dimensions beyond the per-dimension limit.
+    fn dispatch_groups(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, groups: u32) {
+        if groups == 0 {
+            return;
+        }
+        let x = groups.min(self.shared.max_groups);
+        let y = groups.div_ceil(x);
+        pass.set_pipeline(&stage.pipeline);
+        pass.set_bind_group(0, bg, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+
+    fn read_totals(&self) -> Result<[u32; 10], GpuError> {
+        self.gpu.map_read(&self.readback, READBACK_BYTES, |mapped| {
+            let mut out = [0u32; 10];
+            out.copy_from_slice(bytemuck::cast_slice(mapped));
+            out
+        })
+    }
+}

@@ -1,0 +1,295 @@
+//! The adaptation's stages, one compute pipeline per entry point of `shaders/pm/*.wgsl`, in
+//! the order a pass runs them. Each [`StageDef`] is the Rust half of the stage's contract with
+//! its WGSL: the bind group layout and every bind group of the stage are built from its
+//! binding table, and `wgsl_contract` checks the table against the shader (slot, name,
+//! access, and the size of the Rust record behind each binding).
+
+use std::borrow::Cow;
+
+use super::buffers::{GpuSplit, LevelUniform, Params, Stats};
+use crate::gpu::{Access, Binding, Gpu};
+use crate::render::PmPoint;
+
+/// Threads per workgroup of every stage (`WG` of `common.wgsl`, `@workgroup_size`).
+pub(crate) const WG: u32 = 256;
+/// Elements one workgroup of the scan handles (`BLOCK` of `scan.wgsl`).
+pub(crate) const SCAN_BLOCK: u32 = 2048;
+
+/// Types, `Params`, and the refinement test every stage but the scan shares.
+const COMMON: &str = include_str!("../../../shaders/pm/common.wgsl");
+
+/// One WGSL file of the adaptation, compiled as one shader module.
+pub(crate) struct ShaderDef {
+    pub label: &'static str,
+    source: &'static str,
+    /// Whether `common.wgsl` is prepended.
+    common: bool,
+}
+
+impl ShaderDef {
+    /// The WGSL the device compiles (and the contract test parses).
+    pub(crate) fn wgsl(&self) -> Cow<'static, str> {
+        if self.common {
+            format!("{COMMON}\n{}", self.source).into()
+        } else {
+            self.source.into()
+        }
+    }
+}
+
+/// One stage: an entry point of a shader and its bind group 0.
+pub(crate) struct StageDef {
+    /// Names the pipeline, its layouts and its bind groups.
+    pub label: &'static str,
+    pub shader: &'static ShaderDef,
+    pub entry: &'static str,
+    pub bindings: &'static [Binding],
+}
+
+const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
+    ShaderDef { label, source, common: true }
+}
+
+const STATE_WGSL: ShaderDef = with_common("pm: state update", include_str!("../../../shaders/pm/state.wgsl"));
+const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("../../../shaders/pm/collapse.wgsl"));
+const SCAN_WGSL: ShaderDef =
+    ShaderDef { label: "pm: scan", source: include_str!("../../../shaders/pm/scan.wgsl"), common: false };
+const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("../../../shaders/pm/reorganise.wgsl"));
+const COMPACT_SPLITS_WGSL: ShaderDef =
+    with_common("pm: compact splits", include_str!("../../../shaders/pm/compact_splits.wgsl"));
+const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("../../../shaders/pm/split.wgsl"));
+const INDEX_UPDATE_WGSL: ShaderDef =
+    with_common("pm: index update", include_str!("../../../shaders/pm/index_update.wgsl"));
+const FACE_COMPACT_WGSL: ShaderDef =
+    with_common("pm: face compaction", include_str!("../../../shaders/pm/face_compact.wgsl"));
+
+/// `P`, the parameters every stage of `common.wgsl` binds first.
+const PARAMS: Binding = Binding::uniform::<Params>(0, "P");
+
+/// Algorithm 1.
+pub(crate) const STATE: StageDef = StageDef {
+    label: "pm: state update",
+    shader: &STATE_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<GpuSplit>(1, "splits"),
+        Binding::read::<PmPoint>(2, "points"),
+        Binding::read::<u32>(3, "vfvid"),
+        Binding::read::<u32>(4, "vnext"),
+        Binding::read::<u32>(5, "vnode"),
+        Binding::read_write::<u32>(6, "vcnt"),
+        Binding::read_write::<u32>(7, "fcnt"),
+    ],
+};
+
+/// Algorithm 2.
+pub(crate) const COLLAPSE: StageDef = StageDef {
+    label: "pm: collapse",
+    shader: &COLLAPSE_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<GpuSplit>(1, "splits"),
+        Binding::read_write::<u32>(2, "vnext"),
+        Binding::read_write::<u32>(3, "vnode"),
+        Binding::read_write::<u32>(4, "vcnt"),
+        Binding::read_write::<Stats>(5, "stats"),
+    ],
+};
+
+/// The scan's bindings, the same for both of its entry points.
+const SCAN_BINDINGS: &[Binding] = &[
+    Binding::uniform::<LevelUniform>(0, "L"),
+    Binding::read_write::<u32>(1, "data"),
+    Binding::read_write::<u32>(2, "sums"),
+];
+
+/// The scan, down: each block scanned, its total to `sums`.
+pub(crate) const SCAN_BLOCKS: StageDef =
+    StageDef { label: "pm: scan blocks", shader: &SCAN_WGSL, entry: "scan_blocks", bindings: SCAN_BINDINGS };
+
+/// The scan, up: the scanned block totals added back.
+pub(crate) const ADD_BLOCKS: StageDef =
+    StageDef { label: "pm: scan add", shader: &SCAN_WGSL, entry: "add_blocks", bindings: SCAN_BINDINGS };
+
+/// Algorithm 3.
+pub(crate) const REORGANISE: StageDef = StageDef {
+    label: "pm: reorganise",
+    shader: &REORGANISE_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<GpuSplit>(1, "splits"),
+        Binding::read::<u32>(2, "vfvid"),
+        Binding::read::<u32>(3, "vnext"),
+        Binding::read::<u32>(4, "vnode"),
+        Binding::read::<u32>(5, "vsum"),
+        Binding::read_write::<u32>(6, "dfvid"),
+        Binding::read_write::<u32>(7, "dnext"),
+        Binding::read_write::<u32>(8, "dnode"),
+    ],
+};
+
+/// Algorithm 4's first step.
+pub(crate) const COMPACT_SPLITS: StageDef = StageDef {
+    label: "pm: compact splits",
+    shader: &COMPACT_SPLITS_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vsum"),
+        Binding::read_write::<u32>(2, "list"),
+        Binding::read_write::<Stats>(3, "stats"),
+    ],
+};
+
+/// Algorithm 4.
+pub(crate) const SPLIT: StageDef = StageDef {
+    label: "pm: split",
+    shader: &SPLIT_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<GpuSplit>(1, "splits"),
+        Binding::read::<u32>(2, "split_faces"),
+        Binding::read::<u32>(3, "vnext"),
+        Binding::read::<u32>(4, "vsum"),
+        Binding::read::<u32>(5, "fsum"),
+        Binding::read::<u32>(6, "list"),
+        Binding::read::<u32>(7, "dfvid"),
+        Binding::read_write::<u32>(8, "face_idx"),
+        Binding::read_write::<u32>(9, "face_fvid"),
+        Binding::read_write::<u32>(10, "face_owner"),
+    ],
+};
+
+/// Algorithm 5.
+pub(crate) const INDEX_UPDATE: StageDef = StageDef {
+    label: "pm: index update",
+    shader: &INDEX_UPDATE_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vnode"),
+        Binding::read::<u32>(2, "vsum"),
+        Binding::read::<u32>(3, "dfvid"),
+        Binding::read_write::<u32>(4, "face_idx"),
+        Binding::read::<u32>(5, "face_fvid"),
+        Binding::read_write::<u32>(6, "face_owner"),
+    ],
+};
+
+/// Section 5.6, first half: the dead slots below `m_new` listed. It uses only some of the
+/// file's bindings, and its layout holds only those.
+pub(crate) const HOLES: StageDef = StageDef {
+    label: "pm: face holes",
+    shader: &FACE_COMPACT_WGSL,
+    entry: "holes",
+    bindings: &[
+        PARAMS,
+        Binding::read_write::<u32>(3, "face_owner"),
+        Binding::read_write::<u32>(4, "hole"),
+        Binding::read_write::<Stats>(5, "stats"),
+    ],
+};
+
+/// Section 5.6, second half: the live faces above `m_new` moved into the holes.
+pub(crate) const FILL: StageDef = StageDef {
+    label: "pm: face fill",
+    shader: &FACE_COMPACT_WGSL,
+    entry: "fill",
+    bindings: &[
+        PARAMS,
+        Binding::read_write::<u32>(1, "face_idx"),
+        Binding::read_write::<u32>(2, "face_fvid"),
+        Binding::read_write::<u32>(3, "face_owner"),
+        Binding::read_write::<u32>(4, "hole"),
+        Binding::read_write::<Stats>(5, "stats"),
+    ],
+};
+
+/// Every stage, in pass order.
+pub(crate) const STAGES: [&StageDef; 10] =
+    [&STATE, &COLLAPSE, &SCAN_BLOCKS, &ADD_BLOCKS, &REORGANISE, &COMPACT_SPLITS, &SPLIT, &INDEX_UPDATE, &HOLES, &FILL];
+
+/// The most storage buffers one stage binds: what the device must allow per shader stage.
+pub(super) fn storage_buffers_per_stage() -> u32 {
+    let storage = |s: &StageDef| s.bindings.iter().filter(|b| b.access != Access::Uniform).count();
+    STAGES.iter().map(|s| storage(s)).max().unwrap_or(0) as u32
+}
+
+/// A compute pipeline, its bind group layout, and the stage it runs. The layout is made from
+/// the stage's table and kept: `get_bind_group_layout` would register a new layout handle on
+/// every call, and calling it for every bind group of every pass grew a worker's memory by
+/// megabytes a frame (measured on lavapipe).
+pub(super) struct Stage {
+    pub(super) def: &'static StageDef,
+    pub(super) pipeline: wgpu::ComputePipeline,
+    pub(super) layout: wgpu::BindGroupLayout,
+}
+
+impl Stage {
+    fn new(gpu: &Gpu, module: &wgpu::ShaderModule, def: &'static StageDef) -> Stage {
+        let layout = gpu.bind_group_layout(&format!("{} layout", def.label), wgpu::ShaderStages::COMPUTE, def.bindings);
+        let pipeline_layout = gpu.device().create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&format!("{} pipeline layout", def.label)),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = gpu.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(def.label),
+            layout: Some(&pipeline_layout),
+            module,
+            entry_point: Some(def.entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Stage { def, pipeline, layout }
+    }
+
+    /// A bind group of this stage, each buffer bound to the WGSL variable it is named after.
+    pub(super) fn bind(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        gpu.bind_group(self.def.label, &self.layout, self.def.bindings, buffers)
+    }
+}
+
+pub(super) struct Pipelines {
+    pub(super) state: Stage,
+    pub(super) collapse: Stage,
+    pub(super) scan_blocks: Stage,
+    pub(super) add_blocks: Stage,
+    pub(super) reorganise: Stage,
+    pub(super) compact_splits: Stage,
+    pub(super) split: Stage,
+    pub(super) index_update: Stage,
+    pub(super) holes: Stage,
+    pub(super) fill: Stage,
+}
+
+impl Pipelines {
+    pub(super) fn new(gpu: &Gpu) -> Pipelines {
+        let module = |shader: &ShaderDef| {
+            gpu.device().create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(shader.label),
+                source: wgpu::ShaderSource::Wgsl(shader.wgsl()),
+            })
+        };
+        // A module per file: the scan and the face compaction have two entry points each.
+        let scan = module(&SCAN_WGSL);
+        let compact = module(&FACE_COMPACT_WGSL);
+        let single = |def: &'static StageDef| Stage::new(gpu, &module(def.shader), def);
+        Pipelines {
+            state: single(&STATE),
+            collapse: single(&COLLAPSE),
+            scan_blocks: Stage::new(gpu, &scan, &SCAN_BLOCKS),
+            add_blocks: Stage::new(gpu, &scan, &ADD_BLOCKS),
+            reorganise: single(&REORGANISE),
+            compact_splits: single(&COMPACT_SPLITS),
+            split: single(&SPLIT),
+            index_update: single(&INDEX_UPDATE),
+            holes: Stage::new(gpu, &compact, &HOLES),
+            fill: Stage::new(gpu, &compact, &FILL),
+        }
+    }
+}
