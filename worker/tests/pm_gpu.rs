@@ -4,40 +4,23 @@
 //! Needs a wgpu adapter; without a GPU that is Mesa's lavapipe.
 //! The dragon's 50 frames take about 20 s on lavapipe (with its PM build).
 
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
+use testkit::sorted_canonical;
 use worker::gpu::Gpu;
 use worker::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
-fn mesh_path(rel: &str) -> PathBuf {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/meshes")).join(rel)
-}
-
 fn pm_of(rel: &str) -> ProgressiveMesh {
-    let mesh = codec::load_path(&mesh_path(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
-    build(&mesh).unwrap_or_else(|e| panic!("{rel}: {e}"))
-}
-
-/// Rotation-canonical (orientation kept), sorted.
-fn canon(faces: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
-    let mut v: Vec<[u32; 3]> = faces
-        .into_iter()
-        .map(|t| {
-            let k = (0..3).min_by_key(|&k| t[k]).unwrap();
-            [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
-        })
-        .collect();
-    v.sort_unstable();
-    v
+    build(&testkit::load_mesh(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
 }
 
 fn bbox(pm: &ProgressiveMesh) -> (Vec3, Vec3) {
-    pm.positions.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| (lo.min(Vec3::from(p)), hi.max(Vec3::from(p))))
+    let (lo, hi) = codec::mesh::bounding_box(&pm.positions).expect("a mesh with vertices");
+    (Vec3::from(lo), Vec3::from(hi))
 }
 
 /// Frame `k` of `frames` of a path that orbits, zooms in until parts of the model leave the
@@ -72,8 +55,8 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
     };
     assert_eq!(c, g, "{what}: pass statistics differ");
     assert_eq!(gpu.active().unwrap(), cpu.active(), "{what}: active vertices differ");
-    let gf = canon(gpu.face_fvids().unwrap());
-    let cf = canon(cpu.face_fvids());
+    let gf = sorted_canonical(gpu.face_fvids().unwrap());
+    let cf = sorted_canonical(cpu.face_fvids());
     if gf != cf {
         let only_gpu = gf.iter().filter(|t| cf.binary_search(t).is_err()).count();
         let only_cpu = cf.iter().filter(|t| gf.binary_search(t).is_err()).count();
@@ -120,7 +103,7 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
         "degenerate/fused_vertices.obj",
         "odedstein/bunny_oded_6k.obj",
     ] {
-        let rel = if mesh_path(rel).exists() {
+        let rel = if testkit::mesh_path(rel).exists() {
             rel.to_string()
         } else {
             format!("stanford/{}", rel.rsplit('/').next().unwrap())

@@ -5,7 +5,6 @@
 //! `cargo test -p tessera-worker --release --test render -- --ignored --nocapture` times
 //! the dragon at 1920x1080, whole and in 8x8 tiles.
 
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use codec::bft;
@@ -15,13 +14,9 @@ use worker::gpu::Gpu;
 use worker::render::{RenderError, RenderTimes, Renderer};
 use worker::RenderMesh;
 
-fn mesh_path(rel: &str) -> PathBuf {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/meshes")).join(rel)
-}
-
 /// Loads a shared mesh the way a worker gets it: through a BFT encode and decode.
 fn load(rel: &str) -> RenderMesh {
-    let mesh = codec::load_path(&mesh_path(rel)).unwrap();
+    let mesh = testkit::load_mesh(rel);
     let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
     RenderMesh::from_decoded(&bft::decode(&enc.bytes).unwrap())
 }
