@@ -1,6 +1,15 @@
-//! Tessera's codec: the mesh type and its loaders, quantization, the adaptive range coder,
-//! and BFT mesh coding (Mitra & Chiueh). No MPI, no GPU: it builds and tests fast, and the
-//! decoder can be fuzzed (`fuzz/`).
+//! Tessera's codec, everything about meshes and their files that needs no MPI and no GPU, so
+//! that it builds and tests fast and its decoders can be fuzzed (`fuzz/`):
+//! - the mesh type, its loaders and writers ([`load`], [`save`]), bounded reads and model-kind
+//!   detection ([`input`]), quantization and bounding boxes ([`mesh`]);
+//! - entropy coding: the adaptive binary range coder ([`rangecoder`]) and canonical Huffman
+//!   codes ([`huffman`]);
+//! - the container both file formats share, with its one error type ([`FormatError`]);
+//! - BFT mesh coding (Mitra & Chiueh; [`bft`]): encoder, decoder, the `.bft` format, the
+//!   compression-domain tile sort with Table 2, and the vertex normals master and workers share;
+//! - the camera and tile conventions ([`view`]) and the independent-triangle sort ([`tri_sort`]);
+//! - dependency-free progressive meshes (Derzapf & Guthe; [`pm`]): builder, `.dpm` coder and
+//!   the CPU reference adaptation that the GPU adaptation is tested against.
 //!
 //! ```
 //! use codec::{bft, Mesh};

@@ -1,6 +1,9 @@
-//! Tessera's master side: the commands behind the `tessera` binary. Rank 0 of a cluster run
-//! lives here (the frame loop arrives with the cluster pipeline); so do the file commands
-//! `encode`, `decode` and `stats`.
+//! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]), the
+//! file commands `encode`, `decode` and `stats` ([`commands`]), the one-frame tile sort
+//! ([`sort`]), the progressive-mesh commands ([`pm`]), rank 0 of `render` ([`render`]: the
+//! frame loop, tile scheduling, the workers' handshake and silence, stats), the compositor and
+//! tile walls ([`composite`]), and output files that are never left half-written
+//! ([`output`]). `main.rs` decides each process's role.
 
 pub mod cli;
 pub mod commands;
