@@ -397,7 +397,7 @@ pub fn check_precision(cam: &Camera, height: u32) -> Result<Vec<String>> {
     let depth_step = ratio * 2f64.powi(-24);
     if ratio > MAX_DEPTH_RATIO {
         bail!(
-            "far/near = {:.3e} / {:.3e} = {ratio:.3e} is beyond what a 32-bit depth buffer resolves              (at most {MAX_DEPTH_RATIO:e}; depth steps would be {:.0}% of the distance at the far plane); raise --near or lower --far",
+            "far/near = {:.3e} / {:.3e} = {ratio:.3e} is beyond what a 32-bit depth buffer resolves (at most {MAX_DEPTH_RATIO:e}; depth steps would be {:.0}% of the distance at the far plane); raise --near or lower --far",
             cam.far,
             cam.near,
             depth_step * 100.0
@@ -405,20 +405,20 @@ pub fn check_precision(cam: &Camera, height: u32) -> Result<Vec<String>> {
     }
     if ratio > WARN_DEPTH_RATIO {
         warnings.push(format!(
-            "far/near = {ratio:.3e}: the depth buffer resolves only {:.2}% of the distance at the far plane;              surfaces closer than that may show through each other",
+            "far/near = {ratio:.3e}: the depth buffer resolves only {:.2}% of the distance at the far plane; surfaces closer than that may show through each other",
             depth_step * 100.0
         ));
     }
     let pixel = (cam.fovy as f64).to_radians() / height as f64;
     if pixel < MIN_PIXEL_ANGLE {
         bail!(
-            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel, below the {MIN_PIXEL_ANGLE:e}              that float projection resolves; raise --fovy",
+            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel, below the {MIN_PIXEL_ANGLE:e} that float projection resolves; raise --fovy",
             cam.fovy
         );
     }
     if pixel < WARN_PIXEL_ANGLE {
         warnings.push(format!(
-            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel; positions are rounded to a few              percent of a pixel",
+            "a field of view of {}° over {height} pixels is {pixel:.3e} rad a pixel; positions are rounded to a few percent of a pixel",
             cam.fovy
         ));
     }
