@@ -5,7 +5,8 @@
 
 Prints one line per frame (rank 0's sort, send and composite; the workers' decode, upload,
 render and readback, summed over workers) and then the ranges and the overhead: sort + send +
-composite against the workers' render time, per frame and over the whole run.
+composite against the workers' render time, per frame and over the whole run (not for a
+`--decode-only` run, which renders nothing).
 """
 import json
 import sys
@@ -44,8 +45,13 @@ def main(path):
     tb = [r["tile_bytes"] for r in rows]
     nb = [r["normal_bytes"] for r in rows]
     print(f"tile bytes {min(tb)}-{max(tb)}, border normal bytes {min(nb)}-{max(nb)} per frame")
+    rendered = sum(r["render_ms"] for r in rows)
+    if rendered == 0:
+        # `render --decode-only`: nothing was rasterized, so there is no ratio to give.
+        print("no render time (a --decode-only run): the stage times above are the distribution alone")
+        return
     ratios = [r["ratio"] for r in rows]
-    total = sum(r["overhead"] for r in rows) / sum(r["render_ms"] for r in rows)
+    total = sum(r["overhead"] for r in rows) / rendered
     over = sum(x > 0.5 for x in ratios)
     print(
         f"overhead/render: {min(ratios):.2f}-{max(ratios):.2f} per frame, {total:.2f} over the run;"

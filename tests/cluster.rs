@@ -377,3 +377,43 @@ fn bad_progressive_meshes_are_reported() {
     assert!(err.contains("bad.dpm"), "names the file: {err}");
     assert!(!out.exists(), "no image is written");
 }
+
+/// `--decode-only`: the workers decode every tile the master sorts (the same triangles as a
+/// rendered frame) but rasterize nothing, so the frame is transparent and the stats show
+/// decode time without render time; a progressive mesh is refused, before any work.
+#[test]
+fn decode_only_measures_the_distribution_without_rasterizing() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let run = |name: &str, extra: &[&str]| {
+        let (out, stats) = (dir.path().join(format!("{name}.png")), dir.path().join(format!("{name}.jsonl")));
+        let mut args = vec!["render", &model, "--size", "320x240", "--tiles", "4x4"];
+        args.extend(extra);
+        args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
+        ok(&alone(&args));
+        let lines: Vec<serde_json::Value> =
+            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (out, lines)
+    };
+    let (drawn, drawn_stats) = run("drawn", &[]);
+    let (blank, stats) = run("blank", &["--decode-only"]);
+    assert!(covered(&drawn) > 1000);
+    assert_eq!(covered(&blank), 0, "a decode-only frame is transparent");
+    let worker = |lines: &[serde_json::Value]| lines.iter().find(|l| l["rank"] == 1).unwrap().clone();
+    let (w, wd) = (worker(&stats), worker(&drawn_stats));
+    assert!(w["decode_ms"].as_f64().unwrap() > 0.0);
+    assert_eq!(w["render_ms"].as_f64().unwrap(), 0.0);
+    assert!(wd["render_ms"].as_f64().unwrap() > 0.0);
+    let triangles = |w: &serde_json::Value| -> u64 {
+        w["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).sum()
+    };
+    assert_eq!(triangles(&w), triangles(&wd), "the same tiles are decoded");
+    assert!(triangles(&w) >= 69_451);
+
+    let dpm = dir.path().join("b.dpm");
+    ok(&alone(&["pm", "build", &model, "-o", dpm.to_str().unwrap()]));
+    let o =
+        alone(&["render", dpm.to_str().unwrap(), "--decode-only", "--out", dir.path().join("x.png").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--decode-only"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -279,6 +279,11 @@ pub struct RenderArgs {
     /// while they work, so a slow frame is not silence. At least 1.
     #[arg(long, default_value = "60", value_parser = parse_timeout)]
     pub timeout: Duration,
+    /// Workers decode their tiles but do not rasterize them: the frames are transparent, and
+    /// --stats measures the distribution (sort, send, decode, composite) apart from the
+    /// rasterizer. Sorted models only (.bft and mesh files).
+    #[arg(long)]
+    pub decode_only: bool,
     /// Progressive meshes: the screen-space error bound in pixels.
     #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
     pub error_px: f32,

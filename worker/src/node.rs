@@ -246,7 +246,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
         let view_proj = Mat4::from_cols_array(&job.view_proj);
         let mut tiles = Vec::with_capacity(job.tiles.len());
         for tile in &job.tiles {
-            match render_tile(&mut renderer, tile, view_proj, (job.width, job.height)) {
+            match render_tile(&mut renderer, tile, view_proj, (job.width, job.height), job.decode_only) {
                 Ok(p) => tiles.push(p),
                 Err(e) => return fail(e.at(tile.index)),
             }
@@ -255,12 +255,14 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     }
 }
 
-/// Decodes one tile, applies the border normals the master sent, and renders it.
+/// Decodes one tile, applies the border normals the master sent, and renders it; with
+/// `decode_only`, answers transparent pixels instead of rendering.
 fn render_tile(
     renderer: &mut Renderer,
     tile: &TileJob,
     view_proj: Mat4,
     frame: (u32, u32),
+    decode_only: bool,
 ) -> Result<TilePixels, TileError> {
     let start = Instant::now();
     let decoded = codec::bft::decode(&tile.bft).map_err(TileError::Decode)?;
@@ -272,7 +274,12 @@ fn render_tile(
         *dst = n;
     }
     let decode_ms = start.elapsed().as_secs_f64() * 1e3;
-    let (rgba, times) = renderer.render(&mesh, view_proj, frame, tile.rect)?;
+    let (rgba, times) = if decode_only {
+        let [x0, y0, x1, y1] = tile.rect.map(|v| v as usize);
+        (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
+    } else {
+        renderer.render(&mesh, view_proj, frame, tile.rect)?
+    };
     Ok(TilePixels {
         index: tile.index,
         rect: tile.rect,

@@ -8,6 +8,7 @@
 //! ```text
 //! master -> worker
 //!   kind 1 Frame     frame u32, width u32, height u32, view_proj 16 x f32 (column-major),
+//!                    flags u8 (bit 0: decode only, do not rasterize; other bits zero),
 //!                    tile count u32, then per tile:
 //!                      index u32, rect 4 x u32 (x0 y0 x1 y1), bft length u32 + bytes,
 //!                      normal count u32, then per normal: slot u32, 3 x f32
@@ -68,6 +69,9 @@ pub struct FrameJob {
     pub width: u32,
     pub height: u32,
     pub view_proj: [f32; 16],
+    /// Decode the tiles but do not rasterize them (`render --decode-only`): the answer's
+    /// pixels are transparent, so the distribution can be measured apart from the renderer.
+    pub decode_only: bool,
     pub tiles: Vec<TileJob>,
 }
 
@@ -244,6 +248,7 @@ impl ToWorker {
                 for v in f.view_proj {
                     w.f32(v);
                 }
+                w.0.push(f.decode_only as u8);
                 w.u32(f.tiles.len() as u32);
                 for t in &f.tiles {
                     w.u32(t.index);
@@ -294,6 +299,11 @@ impl ToWorker {
                 for v in &mut view_proj {
                     *v = r.f32("view_proj")?;
                 }
+                let decode_only = match r.take(1, "flags")?[0] {
+                    0 => false,
+                    1 => true,
+                    f => return Err(ProtocolError::Invalid(format!("unknown frame flags {f:#04x}"))),
+                };
                 let n = r.count(24, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
                 for _ in 0..n {
@@ -307,7 +317,7 @@ impl ToWorker {
                     }
                     tiles.push(TileJob { index, rect, bft, normals });
                 }
-                ToWorker::Frame(FrameJob { frame, width, height, view_proj, tiles })
+                ToWorker::Frame(FrameJob { frame, width, height, view_proj, decode_only, tiles })
             }
             2 => ToWorker::Shutdown,
             6 => ToWorker::Model(r.bytes("model")?.to_vec()),
@@ -434,6 +444,7 @@ mod tests {
             width: 640,
             height: 480,
             view_proj: std::array::from_fn(|i| i as f32 * 0.5),
+            decode_only: true,
             tiles: vec![
                 TileJob { index: 3, rect: [0, 0, 80, 60], bft: vec![1, 2, 3], normals: vec![(5, [0.0, 1.0, 0.0])] },
                 TileJob { index: 9, rect: [80, 60, 160, 120], bft: vec![], normals: vec![] },

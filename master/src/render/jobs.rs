@@ -64,6 +64,7 @@ impl BftScene {
                 width: grid.width,
                 height: grid.height,
                 view_proj: vp.to_cols_array(),
+                decode_only: ctx.args.decode_only,
                 tiles: vec![],
             })
             .collect();

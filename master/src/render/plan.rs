@@ -29,6 +29,9 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     crate::cli::check_frame_size(w as u64, h as u64)?;
     let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
     check_extension(&args.out, &["png"], "--out")?;
+    if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Dpm {
+        anyhow::bail!("--decode-only applies to sorted models; a progressive mesh (.dpm) has no tiles to decode");
+    }
     // No output may be an input or another output.
     let mut inputs: Vec<&Path> = vec![&args.model];
     inputs.extend(args.wall.as_deref());
