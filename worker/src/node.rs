@@ -18,11 +18,12 @@ use std::time::{Duration, Instant};
 use codec::bft::BftError;
 use codec::pm::{DpmError, Viewpoint};
 use glam::{Mat4, Vec3};
+use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
-use crate::protocol::{PmFrameJob, ProtocolError, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
+use crate::protocol::{FrameJob, PmFrameJob, ProtocolError, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
@@ -243,10 +244,13 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             }
             _ => unreachable!("handled above"),
         };
-        let view_proj = Mat4::from_cols_array(&job.view_proj);
+        // The tiles decode in parallel (they are independent), then render one after the
+        // other on the one device; the first tile in order that fails is the one reported.
+        let decoded: Vec<Result<(RenderMesh, f64), TileError>> = job.tiles.par_iter().map(decode_tile).collect();
         let mut tiles = Vec::with_capacity(job.tiles.len());
-        for tile in &job.tiles {
-            match render_tile(&mut renderer, tile, view_proj, (job.width, job.height), job.decode_only) {
+        for (tile, d) in job.tiles.iter().zip(decoded) {
+            let rendered = d.and_then(|(mesh, decode_ms)| render_tile(&mut renderer, &job, tile, &mesh, decode_ms));
+            match rendered {
                 Ok(p) => tiles.push(p),
                 Err(e) => return fail(e.at(tile.index)),
             }
@@ -255,15 +259,9 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     }
 }
 
-/// Decodes one tile, applies the border normals the master sent, and renders it; with
-/// `decode_only`, answers transparent pixels instead of rendering.
-fn render_tile(
-    renderer: &mut Renderer,
-    tile: &TileJob,
-    view_proj: Mat4,
-    frame: (u32, u32),
-    decode_only: bool,
-) -> Result<TilePixels, TileError> {
+/// Decodes one tile and applies the border normals the master sent; returns the mesh and
+/// the milliseconds it took.
+fn decode_tile(tile: &TileJob) -> Result<(RenderMesh, f64), TileError> {
     let start = Instant::now();
     let decoded = codec::bft::decode(&tile.bft).map_err(TileError::Decode)?;
     let mut mesh = RenderMesh::from_decoded(&decoded);
@@ -273,12 +271,22 @@ fn render_tile(
         };
         *dst = n;
     }
-    let decode_ms = start.elapsed().as_secs_f64() * 1e3;
-    let (rgba, times) = if decode_only {
+    Ok((mesh, start.elapsed().as_secs_f64() * 1e3))
+}
+
+/// Renders one decoded tile of `job`; with `job.decode_only`, answers transparent pixels.
+fn render_tile(
+    renderer: &mut Renderer,
+    job: &FrameJob,
+    tile: &TileJob,
+    mesh: &RenderMesh,
+    decode_ms: f64,
+) -> Result<TilePixels, TileError> {
+    let (rgba, times) = if job.decode_only {
         let [x0, y0, x1, y1] = tile.rect.map(|v| v as usize);
         (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
     } else {
-        renderer.render(&mesh, view_proj, frame, tile.rect)?
+        renderer.render(mesh, Mat4::from_cols_array(&job.view_proj), (job.width, job.height), tile.rect)?
     };
     Ok(TilePixels {
         index: tile.index,
