@@ -2,8 +2,9 @@
 //! byte layout. Both transports (MPI, and channels for a run without mpirun) carry these
 //! same bytes, and every receive checks what it got.
 //!
-//! All integers are little-endian. A message starts with the 4-byte magic `TSRM` and a
-//! 1-byte kind; lengths are `u32` and precede what they count.
+//! All integers are little-endian. A message starts with the 4-byte magic `TSRM`, the
+//! 1-byte protocol version ([`VERSION`]; a message of another version is refused by name, so
+//! ranks of different builds cannot misread each other) and a 1-byte kind; lengths are `u32` and precede what they count.
 //!
 //! ```text
 //! master -> worker
@@ -34,6 +35,9 @@
 use thiserror::Error;
 
 const MAGIC: &[u8; 4] = b"TSRM";
+/// The protocol version this build speaks. 2 added the `Frame` flags byte; version 1
+/// messages had no version byte, so they read as version = their kind byte and are refused.
+pub const VERSION: u8 = 2;
 
 /// A message that does not parse.
 #[derive(Debug, Error, PartialEq)]
@@ -42,6 +46,10 @@ pub enum ProtocolError {
     Truncated(&'static str),
     #[error("message does not start with the protocol's magic number")]
     BadMagic,
+    #[error(
+        "a message of protocol version {0}; this build speaks version {VERSION}: run the same build on every rank"
+    )]
+    Version(u8),
     #[error("unknown message kind {0}")]
     UnknownKind(u8),
     #[error("unexpected message: {0}")]
@@ -155,6 +163,7 @@ impl Writer {
     fn new(kind: u8) -> Writer {
         let mut v = Vec::with_capacity(64);
         v.extend_from_slice(MAGIC);
+        v.push(VERSION);
         v.push(kind);
         Writer(v)
     }
@@ -181,13 +190,16 @@ struct Reader<'a> {
 impl<'a> Reader<'a> {
     /// Checks the magic number and returns the kind.
     fn open(b: &'a [u8]) -> Result<(Reader<'a>, u8), ProtocolError> {
-        if b.len() < 5 {
-            return Err(ProtocolError::Truncated("header"));
-        }
-        if &b[..4] != MAGIC {
+        if b.len() >= 4 && &b[..4] != MAGIC {
             return Err(ProtocolError::BadMagic);
         }
-        Ok((Reader { b, pos: 5 }, b[4]))
+        if b.len() < 6 {
+            return Err(ProtocolError::Truncated("header"));
+        }
+        if b[4] != VERSION {
+            return Err(ProtocolError::Version(b[4]));
+        }
+        Ok((Reader { b, pos: 6 }, b[5]))
     }
     fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], ProtocolError> {
         if self.b.len() - self.pos < n {
@@ -516,8 +528,16 @@ mod tests {
         let mut extra = bytes.clone();
         extra.push(0);
         assert_eq!(ToWorker::decode(&extra), Err(ProtocolError::Trailing(1)));
-        assert_eq!(ToWorker::decode(b"XXXX\x01"), Err(ProtocolError::BadMagic));
-        assert_eq!(ToMaster::decode(b"TSRM\x09"), Err(ProtocolError::UnknownKind(9)));
+        assert_eq!(ToWorker::decode(b"XXXX\x02\x01"), Err(ProtocolError::BadMagic));
+        assert_eq!(ToMaster::decode(b"TSRM\x02\x09"), Err(ProtocolError::UnknownKind(9)));
+        // Another build's message is refused by its version, before its kind is read.
+        for v in [0u8, 1, 3, 255] {
+            let mut b = frame().encode();
+            b[4] = v;
+            let e = ToWorker::decode(&b).unwrap_err();
+            assert_eq!(e, ProtocolError::Version(v));
+            assert!(e.to_string().contains("same build on every rank"), "{e}");
+        }
         let wrong_size = ToMaster::Pixels {
             frame: 1,
             tiles: vec![TilePixels {
