@@ -60,21 +60,6 @@ const TABLE_2: [(&[Command], [Status; 4], Rewrite); 13] = [
     (&[Command::Null], [Nc, X, Undef, Undef], Rewrite::Null), // [v_l]
 ];
 
-const COMMANDS: [Command; 12] = [
-    Command::New,
-    Command::Rf0,
-    Command::Lf0,
-    Command::Rf,
-    Command::Lf,
-    Command::Null,
-    Command::Dl,
-    Command::Dr,
-    Command::AddNew,
-    Command::AddRef,
-    Command::Seed,
-    Command::Clear,
-];
-
 /// Which of `v_l`, `v_r`, `v_x`, `t` are unclipped, for all 16 combinations.
 fn combinations() -> impl Iterator<Item = [bool; 4]> {
     (0..16u8).map(|bits| std::array::from_fn(|i| bits & (1 << i) != 0))
@@ -90,7 +75,7 @@ fn codes_the_triangle(c: Command) -> bool {
 fn every_row_of_table_2() {
     let mut failures = vec![];
     let mut used = [0usize; TABLE_2.len()];
-    for c in COMMANDS {
+    for c in Command::ALL {
         for s @ [l, r, x, t] in combinations() {
             if codes_the_triangle(c) && t && !(l && r && x) {
                 continue;

@@ -118,6 +118,22 @@ pub enum Command {
 }
 
 impl Command {
+    /// Every command, in the order of its code (`Command::ALL[c as usize] == c`).
+    pub const ALL: [Command; 12] = [
+        Command::New,
+        Command::Rf0,
+        Command::Lf0,
+        Command::Rf,
+        Command::Lf,
+        Command::Null,
+        Command::Dl,
+        Command::Dr,
+        Command::AddNew,
+        Command::AddRef,
+        Command::Seed,
+        Command::Clear,
+    ];
+
     /// Whether the command codes a triangle.
     pub fn is_triangle(self) -> bool {
         matches!(self, Command::New | Command::Rf0 | Command::Lf0 | Command::Rf | Command::Lf | Command::Seed)

@@ -31,26 +31,13 @@ pub const MAX_CODE_LEN: u8 = 15;
 /// Command tables: the previous command's class (3) times the left vertex's visited degree
 /// (0, 1, 2, 3 or more).
 pub const COMMAND_TABLES: usize = 12;
-const COMMANDS: usize = 12;
+const COMMANDS: usize = Command::ALL.len();
 const OFFSET_SYMBOLS: usize = 33;
 const GEOMETRY_TABLES: usize = 9;
 /// Residual lengths: 0..=25 (24-bit grids plus one for the sign-free magnitude bound).
 const RESIDUAL_SYMBOLS: usize = 26;
 
-const BY_CODE: [Command; COMMANDS] = [
-    Command::New,
-    Command::Rf0,
-    Command::Lf0,
-    Command::Rf,
-    Command::Lf,
-    Command::Null,
-    Command::Dl,
-    Command::Dr,
-    Command::AddNew,
-    Command::AddRef,
-    Command::Seed,
-    Command::Clear,
-];
+const BY_CODE: [Command; COMMANDS] = Command::ALL;
 
 /// The command table for a context of [`super::model::command_context`].
 #[inline]
