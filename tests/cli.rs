@@ -1,22 +1,12 @@
 //! End-to-end tests of the `tessera` binary on real files.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
+
+use testkit::{arg as s, mesh_path as mesh, stderr};
 
 fn tessera(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).output().expect("runs tessera")
-}
-
-fn mesh(rel: &str) -> PathBuf {
-    testkit::mesh_path(rel)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]

@@ -5,12 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
+use testkit::mesh_arg as mesh;
+
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_tessera")
-}
-
-fn mesh(rel: &str) -> String {
-    testkit::mesh_arg(rel)
 }
 
 fn env(cmd: &mut Command) -> &mut Command {

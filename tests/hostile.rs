@@ -9,12 +9,10 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use testkit::{arg as s, mesh_arg as mesh, stderr};
+
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_tessera")
-}
-
-fn mesh(rel: &str) -> String {
-    testkit::mesh_arg(rel)
 }
 
 fn cmd() -> Command {
@@ -35,14 +33,6 @@ fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
         c.env(k, v);
     }
     c.args(args).output().expect("runs tessera")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// Fails with a one-line error that contains `needle`, and no panic.

@@ -1,6 +1,5 @@
 //! The bandwidth experiment's binary, end to end.
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use codec::bft::tile_sort::{Boxes, Sorter};
@@ -8,21 +7,10 @@ use codec::bft::{Coding, EncodeOptions};
 use codec::view::TileGrid;
 use master::cli::CameraArgs;
 use master::sort::{load_model, sort_frame};
+use testkit::{arg as s, mesh_path as mesh, stderr};
 
 fn bandwidth(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_bandwidth")).args(args).output().expect("runs bandwidth")
-}
-
-fn mesh(rel: &str) -> PathBuf {
-    testkit::mesh_path(rel)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]

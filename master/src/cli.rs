@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use codec::view::{Camera, TileGrid};
 use glam::Vec3;
+use worker::node::HEARTBEAT;
 
 /// Parses `WxH` (or `CxR`).
 pub fn parse_pair(s: &str) -> Result<(u32, u32), String> {
@@ -56,9 +57,6 @@ pub fn parse_seconds(s: &str) -> Result<Duration, String> {
     }
     Ok(Duration::from_secs_f64(v))
 }
-
-/// How often a worker says it is alive while it works.
-pub const HEARTBEAT: Duration = worker::node::HEARTBEAT;
 
 /// Parses `--timeout`: [`parse_seconds`], and at least four heartbeats, so that one late
 /// heartbeat is not taken for a dead worker.

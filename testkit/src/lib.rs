@@ -221,3 +221,8 @@ pub fn sections_start(b: &[u8]) -> usize {
 pub fn arg(p: &Path) -> &str {
     p.to_str().expect("a UTF-8 path")
 }
+
+/// A finished command's standard error, as text.
+pub fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}

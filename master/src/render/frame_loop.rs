@@ -38,7 +38,6 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut silence = Silence::new(workers, args.timeout);
     for k in 0..args.frames {
         let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
-
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
         let FrameJobs { messages: msgs, tiles: mut tile_stats } = scene.jobs(&ctx)?;
