@@ -162,14 +162,14 @@ impl TileGrid {
 
     /// The tile column of a pixel x coordinate (clamped to the screen).
     #[inline]
-    fn col(&self, px: f32) -> u16 {
+    pub(crate) fn col(&self, px: f32) -> u16 {
         // Clamped to >= 0 first, so the truncating cast is the floor (without a libm call).
         let p = (px.max(0.0) as u64).min(self.width as u64 - 1);
         (((p + 1) * self.cols as u64 - 1) / self.width as u64) as u16
     }
 
     #[inline]
-    fn row(&self, py: f32) -> u16 {
+    pub(crate) fn row(&self, py: f32) -> u16 {
         let p = (py.max(0.0) as u64).min(self.height as u64 - 1);
         (((p + 1) * self.rows as u64 - 1) / self.height as u64) as u16
     }
@@ -384,7 +384,7 @@ pub fn clip_position(p: [f32; 3], view_proj: Mat4) -> Vec4 {
 
 /// Plane distances, >= 0 inside: x+w, w-x, y+w, w-y, z, w-z (depth 0..1).
 #[inline]
-fn plane_distances(v: Vec4) -> [f32; 6] {
+pub(crate) fn plane_distances(v: Vec4) -> [f32; 6] {
     [v.w + v.x, v.w - v.x, v.w + v.y, v.w - v.y, v.z, v.w - v.z]
 }
 

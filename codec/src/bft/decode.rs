@@ -66,8 +66,12 @@ pub struct Op {
     pub offset: u32,
 }
 
-/// Decodes `.bft` bytes.
+/// Decodes `.bft` bytes: one stream, or every chunk of a chunked file as one model
+/// ([`super::chunked::ChunkedFile::decode_all`]).
 pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
+    if super::chunked::is_chunked(bytes) {
+        return super::chunked::ChunkedFile::open(bytes)?.decode_all();
+    }
     decode_inner(bytes, false).map(|(d, _)| d)
 }
 
@@ -77,6 +81,9 @@ pub fn decode_ops(bytes: &[u8]) -> Result<(Decoded, Vec<Op>), BftError> {
 }
 
 fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftError> {
+    if super::chunked::is_chunked(bytes) {
+        return Err(corrupt("a chunked file (version 3) is many streams; its chunks are sorted one by one"));
+    }
     let parts = format::parse(bytes)?;
     let h = parts.header;
     let [conn, geom, dup_bytes, loose_bytes] = parts.sections;

@@ -73,8 +73,20 @@ pub fn encode_with_progress(
     mesh.validate()?;
     let used = mesh.used_vertices();
     let quant = Quantization::fit(&mesh.positions, Some(&used), options.quant_bits)?;
+    encode_quantized(mesh, &used, quant, progress)
+}
+
+/// As [`encode_with_progress`], on a quantization given by the caller (a chunked file's
+/// chunks share the whole model's), with the mesh already validated and `used` its used
+/// vertices. Every used position must lie in the quantization's box (it is clamped).
+pub(crate) fn encode_quantized(
+    mesh: &Mesh,
+    used: &[bool],
+    quant: Quantization,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Encoded, MeshError> {
     let q: Vec<[u32; 3]> =
-        mesh.positions.iter().zip(&used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
+        mesh.positions.iter().zip(used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
     let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
 
     let mut tr = Traversal::new(mesh, q, quant.max_level(), &loose);

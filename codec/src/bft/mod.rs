@@ -84,6 +84,7 @@
 //! stored at its head. The tile sort writes its tiles that way when asked, because it codes
 //! every tile anew each frame; files from `tessera encode` are always range-coded.
 
+pub mod chunked;
 mod decode;
 mod encode;
 mod format;

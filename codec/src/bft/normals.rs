@@ -22,6 +22,19 @@ use crate::view::TileGrid;
 /// encoder cut at non-manifold vertices do not show in the shading. A vertex without
 /// triangles, or whose faces cancel, gets +Z.
 pub fn vertex_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], duplicates: &[(u32, u32)]) -> Vec<[f32; 3]> {
+    let (source, acc) = face_normal_sums(positions, triangles, duplicates);
+    (0..positions.len()).map(|s| unit(acc[source[s] as usize])).collect()
+}
+
+/// The sums [`vertex_normals`] normalizes: per slot, the slot's source (itself, or the slot
+/// it duplicates), and at each source the face normals of its triangles added in triangle
+/// order. A chunked file's border normals add these sums chunk after chunk
+/// (`bft::chunked`).
+pub fn face_normal_sums(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    duplicates: &[(u32, u32)],
+) -> (Vec<u32>, Vec<Vec3>) {
     let mut source: Vec<u32> = (0..positions.len() as u32).collect();
     for &(slot, src) in duplicates {
         source[slot as usize] = source[src as usize];
@@ -35,7 +48,12 @@ pub fn vertex_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], duplicates
             acc[source[s as usize] as usize] += n;
         }
     }
-    (0..positions.len()).map(|s| acc[source[s] as usize].try_normalize().unwrap_or(Vec3::Z).to_array()).collect()
+    (source, acc)
+}
+
+/// A sum of face normals as a unit normal: +Z where the faces cancel or there are none.
+pub fn unit(sum: Vec3) -> [f32; 3] {
+    sum.try_normalize().unwrap_or(Vec3::Z).to_array()
 }
 
 /// The whole mesh's vertex normals, and which slots are duplicates (or have them), whose
@@ -55,6 +73,21 @@ impl BorderNormals {
             duplicated[src as usize] = true;
         }
         BorderNormals { normals: vertex_normals(&positions, &decoded.triangles, &decoded.duplicates), duplicated }
+    }
+
+    /// Replaces the normals of `slots` by the given ones and makes them border slots of every
+    /// tile: a chunk's slots whose vertex other chunks share get the whole model's normal,
+    /// which the chunk alone cannot compute (`bft::chunked`).
+    pub fn set_border(&mut self, slots: impl IntoIterator<Item = (u32, [f32; 3])>) {
+        for (slot, n) in slots {
+            self.normals[slot as usize] = n;
+            self.duplicated[slot as usize] = true;
+        }
+    }
+
+    /// The bytes its tables take on the heap.
+    pub fn heap_bytes(&self) -> usize {
+        std::mem::size_of_val(&self.normals[..]) + self.duplicated.len()
     }
 
     /// The whole mesh's normal of `slot`.

@@ -83,6 +83,20 @@ impl TileModel {
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.decoded.triangles
     }
+
+    /// The bytes its tables take on the heap (what a cache of models counts).
+    pub fn heap_bytes(&self) -> usize {
+        use std::mem::size_of_val;
+        let d = &self.decoded;
+        size_of_val(&d.positions[..])
+            + size_of_val(&d.triangles[..])
+            + size_of_val(&d.duplicates[..])
+            + size_of_val(&self.ops[..])
+            + size_of_val(&self.positions[..])
+            + size_of_val(&self.fans.start[..])
+            + size_of_val(&self.fans.values[..])
+            + size_of_val(&self.steps[..])
+    }
 }
 
 /// One non-empty tile of a sorted frame.

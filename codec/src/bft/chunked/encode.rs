@@ -1,0 +1,474 @@
+//! The chunked encoder, out of core: it holds the positions (12 bytes a vertex) and a few
+//! bytes of bookkeeping per vertex, never the triangles.
+//!
+//! 1. **Partition.** One pass over the triangles marks the used vertices and writes each
+//!    triangle to a spatial bucket (a cell of a coarse grid over the model's box, by its
+//!    centroid), in temporary files when the model is large. A bucket is then read back and
+//!    cut by a kd-tree on the centroids (median splits on the longest axis) into chunks of at
+//!    most `chunk_triangles`, each keeping its triangles in input order. The chunks of a
+//!    bucket follow its kd-tree's leaves; buckets follow each other in grid order. Which
+//!    chunks use each vertex is noted on the way (first chunk, and whether another does).
+//! 2. **Encode.** Batches of chunks are encoded in parallel (rayon) with the ordinary encoder
+//!    on the whole model's quantization, and decoded again to check them and to sum the face
+//!    normals of their border vertices; the streams go to a temporary file in chunk order.
+//! 3. **Write.** The header, the directory, and each chunk's stream followed by its border
+//!    table, whose normals are now complete.
+//!
+//! Peak memory: the positions, 6 bytes per vertex of bookkeeping, the border vertices'
+//! tables, and one bucket or one batch of chunks at a time.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{self, BufReader, BufWriter, Read, Seek, Write};
+use std::path::PathBuf;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use super::{write_head, Border, ChunkEntry, ChunkedHeader, DEFAULT_CHUNK_TRIANGLES};
+use crate::bft::encode::encode_quantized;
+use crate::bft::normals::{face_normal_sums, unit};
+use crate::load::LoadError;
+use crate::mesh::{bounding_box, Mesh, MeshError, Quantization};
+
+/// Chunked encoder settings.
+#[derive(Clone, Debug)]
+pub struct ChunkOptions {
+    /// Bits per quantized coordinate, 8 to 24.
+    pub quant_bits: u8,
+    /// Triangles per chunk at most. Smaller chunks let a frame skip and forward more of the
+    /// model untouched, and cost more bytes at their borders (see the README's figures).
+    pub chunk_triangles: u32,
+    /// Where temporary files go (the system's temporary folder if `None`).
+    pub temp_dir: Option<PathBuf>,
+    /// Return the input vertex of every slot ([`ChunkedEncoded::slot_vertex`]), for tests.
+    pub keep_slot_vertex: bool,
+}
+
+impl Default for ChunkOptions {
+    fn default() -> Self {
+        ChunkOptions {
+            quant_bits: Quantization::DEFAULT_BITS,
+            chunk_triangles: DEFAULT_CHUNK_TRIANGLES,
+            temp_dir: None,
+            keep_slot_vertex: false,
+        }
+    }
+}
+
+/// Why the chunked encoder failed.
+#[derive(Debug, Error)]
+pub enum EncodeChunkError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    #[error("temporary or output file: {0}")]
+    Io(#[from] io::Error),
+    #[error("the model is too large for a chunked file: {0}")]
+    TooLarge(String),
+    #[error("chunk size must be at least 1 triangle")]
+    ChunkSize,
+}
+
+/// What the chunked encoder wrote.
+#[derive(Clone, Debug)]
+pub struct ChunkedEncoded {
+    pub header: ChunkedHeader,
+    pub bytes: u64,
+    /// The input vertex of each slot, when asked for.
+    pub slot_vertex: Vec<u32>,
+}
+
+/// The stage [`encode_chunked`] reports progress of: `(stage, done, total)`, totals in
+/// triangles (0 while unknown).
+pub type Progress<'a> = &'a mut dyn FnMut(&'static str, u64, u64);
+
+/// A sink for triangles, and a source that feeds every triangle of the model to a sink once.
+pub type TriangleSink<'a> = &'a mut dyn FnMut([u32; 3]) -> Result<(), EncodeChunkError>;
+
+/// Encodes an in-memory mesh as a chunked file, into memory.
+pub fn encode_mesh_chunked(mesh: &Mesh, options: &ChunkOptions) -> Result<(Vec<u8>, ChunkedEncoded), EncodeChunkError> {
+    let mut out = Vec::new();
+    let enc = encode_chunked(
+        &mesh.positions,
+        &mut |sink: TriangleSink| mesh.triangles.iter().try_for_each(|&t| sink(t)),
+        options,
+        &mut |_, _, _| {},
+        &mut out,
+    )?;
+    Ok((out, enc))
+}
+
+/// Spilled bytes: in memory for small models, in an anonymous temporary file for large ones.
+enum Spill {
+    Mem(Vec<u8>),
+    File(BufWriter<File>),
+}
+
+impl Spill {
+    fn new(on_disk: bool, dir: &Option<PathBuf>) -> io::Result<Spill> {
+        Ok(if on_disk {
+            let f = match dir {
+                Some(d) => tempfile::tempfile_in(d)?,
+                None => tempfile::tempfile()?,
+            };
+            Spill::File(BufWriter::with_capacity(1 << 16, f))
+        } else {
+            Spill::Mem(Vec::new())
+        })
+    }
+
+    fn write(&mut self, b: &[u8]) -> io::Result<()> {
+        match self {
+            Spill::Mem(v) => {
+                v.extend_from_slice(b);
+                Ok(())
+            }
+            Spill::File(w) => w.write_all(b),
+        }
+    }
+
+    /// Everything written, to read back from the start.
+    fn reader(self) -> io::Result<Box<dyn Read + Send>> {
+        Ok(match self {
+            Spill::Mem(v) => Box::new(io::Cursor::new(v)),
+            Spill::File(w) => {
+                let mut f = w.into_inner().map_err(|e| e.into_error())?;
+                f.rewind()?;
+                Box::new(BufReader::with_capacity(1 << 20, f))
+            }
+        })
+    }
+}
+
+fn read_triangles(r: &mut dyn Read, n: usize) -> io::Result<Vec<[u32; 3]>> {
+    let mut buf = vec![0u8; n * 12];
+    r.read_exact(&mut buf)?;
+    Ok(buf.chunks_exact(12).map(|b| [0, 4, 8].map(|o| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()))).collect())
+}
+
+fn centroid(p: &[[f32; 3]], t: [u32; 3]) -> [f32; 3] {
+    let [a, b, c] = t.map(|v| p[v as usize]);
+    [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
+}
+
+/// Cuts `idx` (triangle indices with their centroids) into leaves of at most `target`
+/// triangles with a kd-tree of median splits on the longest axis of the centroids' box; each
+/// leaf's range is pushed in the tree's order. Leaves are balanced: a node of `n` triangles
+/// gets `ceil(n / target)` leaves, split as evenly as they go.
+fn kd_leaves(cent: &[[f32; 3]], idx: &mut [u32], target: usize, start: usize, out: &mut Vec<std::ops::Range<usize>>) {
+    let n = idx.len();
+    if n <= target {
+        out.push(start..start + n);
+        return;
+    }
+    let leaves = n.div_ceil(target);
+    let left = n * (leaves / 2) / leaves;
+    let (lo, hi) = bounding_box(idx.iter().map(|&t| &cent[t as usize])).unwrap_or(([0.0; 3], [0.0; 3]));
+    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+    idx.select_nth_unstable_by(left, |&a, &b| {
+        cent[a as usize][axis].total_cmp(&cent[b as usize][axis]).then(a.cmp(&b))
+    });
+    let (l, r) = idx.split_at_mut(left);
+    kd_leaves(cent, l, target, start, out);
+    kd_leaves(cent, r, target, start + left, out);
+}
+
+/// One encoded chunk, before its place in the file is known.
+struct Encoded {
+    bytes: Vec<u8>,
+    triangles: u32,
+    /// The input vertex of each slot.
+    slot_vertex: Vec<u32>,
+    qmin: [u32; 3],
+    qmax: [u32; 3],
+    /// `(input vertex, sum of its face normals in the chunk)` for the chunk's border
+    /// vertices, one per vertex.
+    partial_normals: Vec<(u32, Vec3)>,
+    commands: u32,
+}
+
+fn encode_chunk(
+    positions: &[[f32; 3]],
+    quant: Quantization,
+    multi: &[bool],
+    tris: &[[u32; 3]],
+) -> Result<Encoded, EncodeChunkError> {
+    let mut verts: Vec<u32> = tris.iter().flatten().copied().collect();
+    verts.sort_unstable();
+    verts.dedup();
+    let local = |v: u32| verts.binary_search(&v).expect("the chunk's own vertex") as u32;
+    let mesh = Mesh {
+        positions: verts.iter().map(|&v| positions[v as usize]).collect(),
+        triangles: tris.iter().map(|t| t.map(local)).collect(),
+    };
+    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, &mut |_, _| {})?;
+    // Decoded again: the stream checks itself, and the normal sums follow the decoded
+    // triangle order, which is what a worker sums.
+    let d = crate::bft::decode(&enc.bytes).map_err(|e| io::Error::other(format!("a chunk does not decode: {e}")))?;
+    let slot_vertex: Vec<u32> = enc.slot_vertex.iter().map(|&l| verts[l as usize]).collect();
+    let mut qmin = [u32::MAX; 3];
+    let mut qmax = [0u32; 3];
+    for p in &d.positions {
+        for a in 0..3 {
+            qmin[a] = qmin[a].min(p[a]);
+            qmax[a] = qmax[a].max(p[a]);
+        }
+    }
+    let q = d.quantization();
+    let fp: Vec<[f32; 3]> = d.positions.iter().map(|&p| q.dequantize(p)).collect();
+    let (source, acc) = face_normal_sums(&fp, &d.triangles, &d.duplicates);
+    let partial_normals = (0..fp.len())
+        .filter(|&s| source[s] as usize == s && multi[slot_vertex[s] as usize])
+        .map(|s| (slot_vertex[s], acc[s]))
+        .collect();
+    Ok(Encoded {
+        bytes: enc.bytes,
+        triangles: tris.len() as u32,
+        slot_vertex,
+        qmin,
+        qmax,
+        partial_normals,
+        commands: enc.header.commands,
+    })
+}
+
+/// Encodes a model as a chunked `.bft` file written to `out`. `positions` are all input
+/// vertices; `triangles` feeds every triangle to the sink it is given, once, in input order.
+pub fn encode_chunked(
+    positions: &[[f32; 3]],
+    triangles: &mut dyn FnMut(TriangleSink) -> Result<(), EncodeChunkError>,
+    options: &ChunkOptions,
+    progress: Progress,
+    out: &mut dyn Write,
+) -> Result<ChunkedEncoded, EncodeChunkError> {
+    let n = positions.len();
+    if n > 1 << 31 {
+        return Err(MeshError::TooManyVertices(n).into());
+    }
+    if options.chunk_triangles == 0 {
+        return Err(EncodeChunkError::ChunkSize);
+    }
+    if !(8..=24).contains(&options.quant_bits) {
+        return Err(MeshError::QuantBits(options.quant_bits).into());
+    }
+    let target = options.chunk_triangles as usize;
+
+    // 1. Partition into buckets of a grid of 8^b cells, b from the expected triangle count
+    //    (about twice the vertices) so that a bucket holds a few million triangles.
+    let finite = positions.iter().filter(|p| p.iter().all(|c| c.is_finite()));
+    let (lo, hi) = bounding_box(finite).unwrap_or(([0.0; 3], [1.0; 3]));
+    let expected = 2 * n as u64;
+    let bits = match expected {
+        0..=8_000_000 => 0u32,
+        8_000_001..=64_000_000 => 1,
+        64_000_001..=512_000_000 => 2,
+        _ => 3,
+    };
+    let cells = 1usize << (3 * bits);
+    let mut buckets: Vec<Spill> =
+        (0..cells).map(|_| Spill::new(bits > 0, &options.temp_dir)).collect::<Result<_, _>>()?;
+    let mut counts = vec![0usize; cells];
+    let mut used = vec![false; n];
+    let mut total = 0u64;
+    let side = (1u32 << bits) as f32;
+    let cell_of = |c: [f32; 3]| -> usize {
+        let k = |a: usize| {
+            let e = hi[a] - lo[a];
+            let f = if e > 0.0 { (c[a] - lo[a]) / e * side } else { 0.0 };
+            // NaN (an unused vertex's) and out-of-range values clamp into the grid.
+            (f.max(0.0) as u32).min((1 << bits) - 1) as usize
+        };
+        (k(2) << (2 * bits)) | (k(1) << bits) | k(0)
+    };
+    triangles(&mut |t: [u32; 3]| {
+        if let Some(&bad) = t.iter().find(|&&v| v as usize >= n) {
+            return Err(MeshError::IndexOutOfRange { triangle: total as usize, index: bad, vertices: n }.into());
+        }
+        for v in t {
+            used[v as usize] = true;
+        }
+        let cell = if bits == 0 { 0 } else { cell_of(centroid(positions, t)) };
+        let mut b = [0u8; 12];
+        for (k, v) in t.iter().enumerate() {
+            b[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        buckets[cell].write(&b)?;
+        counts[cell] += 1;
+        total += 1;
+        if total.is_multiple_of(1 << 20) {
+            progress("partitioning", total, 0);
+        }
+        Ok(())
+    })?;
+    if total >= u32::MAX as u64 {
+        return Err(MeshError::TooManyTriangles(total as usize).into());
+    }
+    if let Some(v) = (0..n).find(|&v| used[v] && !positions[v].iter().all(|c| c.is_finite())) {
+        return Err(MeshError::NonFinite { vertex: v, value: positions[v] }.into());
+    }
+    let quant = Quantization::fit(positions, Some(&used), options.quant_bits)?;
+    let unique_vertices = used.iter().filter(|&&u| u).count() as u32;
+    drop(used);
+
+    //    Buckets into chunks; chunk-ordered triangles into one spill, noting which vertices
+    //    several chunks use.
+    let mut owner = vec![u32::MAX; n];
+    let mut multi = vec![false; n];
+    let mut chunk_sizes: Vec<usize> = Vec::new();
+    let mut ordered = Spill::new(bits > 0, &options.temp_dir)?;
+    for (bucket, &count) in buckets.drain(..).zip(&counts) {
+        if count == 0 {
+            continue;
+        }
+        let tris = read_triangles(&mut *bucket.reader()?, count)?;
+        let cent: Vec<[f32; 3]> = tris.par_iter().map(|&t| centroid(positions, t)).collect();
+        let mut idx: Vec<u32> = (0..count as u32).collect();
+        let mut leaves = Vec::new();
+        kd_leaves(&cent, &mut idx, target, 0, &mut leaves);
+        for leaf in leaves {
+            let chunk = chunk_sizes.len() as u32;
+            let members = &mut idx[leaf];
+            members.sort_unstable();
+            let mut b = Vec::with_capacity(members.len() * 12);
+            for &t in members.iter() {
+                for v in tris[t as usize] {
+                    let o = &mut owner[v as usize];
+                    if *o == u32::MAX {
+                        *o = chunk;
+                    } else if *o != chunk {
+                        multi[v as usize] = true;
+                    }
+                    b.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            ordered.write(&b)?;
+            chunk_sizes.push(members.len());
+        }
+    }
+    drop(owner);
+    let chunks = chunk_sizes.len();
+    if chunks > u32::MAX as usize / 2 {
+        return Err(EncodeChunkError::TooLarge(format!("{chunks} chunks")));
+    }
+
+    // 2. Encode in batches of chunks, in parallel; place them in order.
+    let mut ordered = ordered.reader()?;
+    let mut streams = Spill::new(bits > 0, &options.temp_dir)?;
+    let mut entries: Vec<ChunkEntry> = Vec::with_capacity(chunks);
+    let mut borders: Vec<(Border, Vec<u32>)> = Vec::with_capacity(chunks);
+    let mut first_slot: HashMap<u32, u32> = HashMap::new();
+    let mut normal_sums: HashMap<u32, Vec3> = HashMap::new();
+    let mut slot_vertex = Vec::new();
+    let (mut slots, mut tris_done, mut commands) = (0u64, 0u64, 0u64);
+    let batch_triangles = (rayon::current_num_threads() * 8 * target).max(1 << 20);
+    let mut next = 0;
+    while next < chunks {
+        let mut end = next;
+        let mut size = 0;
+        while end < chunks && (end == next || size + chunk_sizes[end] <= batch_triangles) {
+            size += chunk_sizes[end];
+            end += 1;
+        }
+        let batch: Vec<Vec<[u32; 3]>> =
+            chunk_sizes[next..end].iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
+        let encoded: Vec<Encoded> = batch
+            .par_iter()
+            .with_max_len(1)
+            .map(|tris| encode_chunk(positions, quant, &multi, tris))
+            .collect::<Result<_, _>>()?;
+        for enc in encoded {
+            let base = slots;
+            let n_slots = enc.slot_vertex.len() as u64;
+            if base + n_slots >= u32::MAX as u64 {
+                return Err(EncodeChunkError::TooLarge(format!("more than {} vertex slots", u32::MAX)));
+            }
+            let mut border = Border::default();
+            let mut border_vertices = Vec::new();
+            for (s, &v) in enc.slot_vertex.iter().enumerate() {
+                if multi[v as usize] {
+                    let global = (base + s as u64) as u32;
+                    border.slots.push(s as u32);
+                    border.links.push(match first_slot.entry(v) {
+                        std::collections::hash_map::Entry::Occupied(o) => Some(*o.get()),
+                        std::collections::hash_map::Entry::Vacant(e) => {
+                            e.insert(global);
+                            None
+                        }
+                    });
+                    border_vertices.push(v);
+                }
+            }
+            for (v, sum) in enc.partial_normals {
+                *normal_sums.entry(v).or_insert(Vec3::ZERO) += sum;
+            }
+            if options.keep_slot_vertex {
+                slot_vertex.extend_from_slice(&enc.slot_vertex);
+            }
+            streams.write(&enc.bytes)?;
+            entries.push(ChunkEntry {
+                offset: 0,
+                bft_len: enc.bytes.len() as u32,
+                border_len: 0,
+                triangles: enc.triangles,
+                slots: n_slots as u32,
+                first_triangle: tris_done as u32,
+                first_slot: base as u32,
+                qmin: enc.qmin,
+                qmax: enc.qmax,
+            });
+            borders.push((border, border_vertices));
+            slots += n_slots;
+            tris_done += enc.triangles as u64;
+            commands += enc.commands as u64;
+        }
+        progress("encoding", tris_done, total);
+        next = end;
+    }
+    drop(first_slot);
+
+    // 3. Border normals are complete: lay the file out and write it.
+    let mut border_slots = 0u64;
+    let tables: Vec<Vec<u8>> = borders
+        .into_iter()
+        .map(|(mut border, vertices)| {
+            border_slots += border.slots.len() as u64;
+            border.normals = vertices.iter().map(|v| unit(normal_sums[v])).collect();
+            border.to_bytes()
+        })
+        .collect();
+    let mut offset = super::head_len(chunks);
+    for (e, t) in entries.iter_mut().zip(&tables) {
+        e.offset = offset;
+        e.border_len = t.len() as u32;
+        offset += e.bft_len as u64 + e.border_len as u64;
+    }
+    let top = entries.iter().fold([0u32; 3], |m, e| [0, 1, 2].map(|a| m[a].max(e.qmax[a])));
+    let header = ChunkedHeader {
+        input_vertices: n as u32,
+        slots: slots as u32,
+        triangles: total as u32,
+        chunks: chunks as u32,
+        chunk_triangles: options.chunk_triangles,
+        border_slots: border_slots as u32,
+        unique_vertices,
+        commands: commands.min(u32::MAX as u64) as u32,
+        quant_bits: quant.bits,
+        bbox_min: quant.min,
+        step: quant.step,
+        bbox_max: quant.dequantize(top),
+    };
+    out.write_all(&write_head(&header, &entries))?;
+    let mut streams = streams.reader()?;
+    let mut buf = Vec::new();
+    for (e, table) in entries.iter().zip(&tables) {
+        buf.resize(e.bft_len as usize, 0);
+        streams.read_exact(&mut buf)?;
+        out.write_all(&buf)?;
+        out.write_all(table)?;
+    }
+    progress("writing", total, total);
+    Ok(ChunkedEncoded { header, bytes: offset, slot_vertex })
+}

@@ -1,0 +1,550 @@
+//! Chunked `.bft` files (version 3): a model cut into spatially coherent chunks, each an
+//! ordinary `.bft` stream, behind a directory that a reader classifies without touching the
+//! chunks' bytes.
+//!
+//! The BFT paper sorts one command stream per frame, so the master's work and memory grow
+//! with the model. Here a frame skips the chunks outside the frustum unread, forwards a chunk
+//! that lands wholly in one tile verbatim (its bytes copied, never decoded), and tile-sorts
+//! only the chunks that straddle tile borders or frustum planes (`sort.rs`). A file of one
+//! chunk is today's model, and today's single-stream files (versions 1 and 2) are still read.
+//!
+//! # Layout
+//!
+//! ```text
+//! offset  size  field
+//! 0       8     magic  b"TESSBFT\x1a" (as versions 1 and 2)
+//! 8       2     version (u16 LE) = 3
+//! 10      2     header length H (u16 LE)
+//! 12      H     header (`ChunkedHeader`, little-endian)
+//! 12+H    4     CRC-32 of the header
+//!         64*C  directory: one `ChunkEntry` per chunk, C = the header's chunk count
+//!         4     CRC-32 of the directory
+//! then each chunk, in directory order, back to back:
+//!         B     an ordinary `.bft` file (version 2, range-coded) on the model's quantization
+//!         D     the chunk's border table (below), ending in its CRC-32
+//! ```
+//! Nothing follows the last chunk. The directory holds, per chunk, its byte offset and the
+//! lengths of its two parts, its triangle and slot counts, its first triangle and first slot
+//! in the whole model's numbering (running sums, checked), and its quantized bounding box.
+//! There is no checksum over the whole file, so that a reader can open a file larger than
+//! memory and read only the chunks a view needs; each chunk's own checksums guard it when it
+//! is read.
+//!
+//! # Numbering and borders
+//!
+//! Every input triangle is in exactly one chunk. A chunk's slots are numbered after the
+//! previous chunk's, so the whole file decodes (`decode_all`) to one slot array and one
+//! triangle array, as a single stream would. A vertex used by triangles of several chunks has
+//! a slot in each: the **border table** of a chunk lists such slots (and every slot of such a
+//! vertex, duplicates inside the chunk included), each with
+//! - a link: 0 for the vertex's first slot in the file, else 1 + that first slot, so that
+//!   decoding the whole file welds the copies back into one input vertex;
+//! - the vertex's normal over the whole model, which no chunk can compute alone.
+//!
+//! `LEB128 count`, then per entry `LEB128 slot gap` (increasing local slots; the first gap is
+//! the slot itself) and `LEB128 link`, then `count` normals as three `f32` LE, then the CRC-32
+//! of all that.
+//!
+//! # Normals
+//!
+//! A worker computes a stream's normals from its own triangles ([`super::normals`]), and that
+//! is the model's normal for a slot whose every triangle is in the stream. A slot on a chunk
+//! border has triangles in other chunks, so its normal comes from the border table. The
+//! model normal of a vertex is the unit vector of the sum, chunk after chunk in file order,
+//! of each chunk's sum of its face normals in stream order ([`super::normals::face_normal_sums`]):
+//! for a vertex inside one chunk that is exactly what the worker computes, and every rank
+//! uses the same stored value for the others, so a frame does not depend on how the chunks
+//! were distributed. (The sums are grouped by chunk, so a chunked file's normals may differ in
+//! the last bit from the single-stream file's.)
+
+use crate::container::{get_varint, put_varint, Format, FormatError};
+use crate::mesh::Quantization;
+
+use super::decode::Decoded;
+use super::format::{Coding, Header, MAGIC};
+
+mod encode;
+pub mod sort;
+
+pub use encode::{encode_chunked, encode_mesh_chunked, ChunkOptions, ChunkedEncoded, EncodeChunkError};
+
+/// The version of chunked files.
+pub const VERSION: u16 = 3;
+/// The default number of triangles per chunk (see `ChunkOptions::chunk_triangles`).
+pub const DEFAULT_CHUNK_TRIANGLES: u32 = 16384;
+const HEADER_LEN: usize = 4 * 8 + 4 + 4 * 7;
+/// Bytes of one directory entry.
+pub const ENTRY_LEN: usize = 56;
+
+fn corrupt(msg: impl Into<String>) -> FormatError {
+    FormatError::Corrupt(Format::Bft, msg.into())
+}
+
+fn chunk_err(i: usize, msg: impl std::fmt::Display) -> FormatError {
+    corrupt(format!("chunk {i}: {msg}"))
+}
+
+/// Whether `bytes` start like a chunked `.bft` file (magic and version 3).
+pub fn is_chunked(bytes: &[u8]) -> bool {
+    bytes.len() >= 10 && bytes[..8] == MAGIC && u16::from_le_bytes([bytes[8], bytes[9]]) == VERSION
+}
+
+/// The fixed header of a chunked file: the whole model's counts and quantization.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChunkedHeader {
+    /// Vertices of the input mesh, used or not.
+    pub input_vertices: u32,
+    /// Slots of all chunks.
+    pub slots: u32,
+    pub triangles: u32,
+    pub chunks: u32,
+    /// The chunk size the encoder aimed at (triangles per chunk).
+    pub chunk_triangles: u32,
+    /// Entries of all border tables.
+    pub border_slots: u32,
+    /// Input vertices that triangles use (the whole file welds to this many).
+    pub unique_vertices: u32,
+    pub commands: u32,
+    pub quant_bits: u8,
+    pub bbox_min: [f32; 3],
+    pub step: f32,
+    pub bbox_max: [f32; 3],
+}
+
+impl ChunkedHeader {
+    pub fn quantization(&self) -> Quantization {
+        Quantization { bits: self.quant_bits, min: self.bbox_min, step: self.step }
+    }
+
+    fn to_bytes(self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(HEADER_LEN);
+        for v in [
+            self.input_vertices,
+            self.slots,
+            self.triangles,
+            self.chunks,
+            self.chunk_triangles,
+            self.border_slots,
+            self.unique_vertices,
+            self.commands,
+        ] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&[self.quant_bits, 0, 0, 0]);
+        for v in self.bbox_min.iter().chain(&[self.step]).chain(&self.bbox_max) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        debug_assert_eq!(b.len(), HEADER_LEN);
+        b
+    }
+
+    fn from_bytes(b: &[u8]) -> Result<Self, FormatError> {
+        if b.len() != HEADER_LEN {
+            return Err(corrupt(format!("chunked header is {} bytes, expected {HEADER_LEN}", b.len())));
+        }
+        let u = |i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap());
+        let f = |off: usize| f32::from_le_bytes(b[off..off + 4].try_into().unwrap());
+        let h = ChunkedHeader {
+            input_vertices: u(0),
+            slots: u(1),
+            triangles: u(2),
+            chunks: u(3),
+            chunk_triangles: u(4),
+            border_slots: u(5),
+            unique_vertices: u(6),
+            commands: u(7),
+            quant_bits: b[32],
+            bbox_min: [f(36), f(40), f(44)],
+            step: f(48),
+            bbox_max: [f(52), f(56), f(60)],
+        };
+        if b[33..36] != [0, 0, 0] {
+            return Err(corrupt("reserved header bytes are not zero"));
+        }
+        if !(8..=24).contains(&h.quant_bits) {
+            return Err(corrupt(format!("quantization of {} bits is outside 8..=24", h.quant_bits)));
+        }
+        if !(h.step.is_finite() && h.step > 0.0 && h.bbox_min.iter().all(|v| v.is_finite())) {
+            return Err(corrupt("non-finite quantization parameters"));
+        }
+        if !(h.bbox_min.iter().zip(&h.bbox_max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
+            return Err(corrupt(format!(
+                "the bounding box {:?} .. {:?} is not finite and ordered",
+                h.bbox_min, h.bbox_max
+            )));
+        }
+        if h.border_slots > h.slots || h.unique_vertices > h.slots || h.unique_vertices > h.input_vertices {
+            return Err(corrupt("inconsistent counts in the chunked header"));
+        }
+        Ok(h)
+    }
+}
+
+/// One chunk's directory entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkEntry {
+    /// Byte offset of the chunk's `.bft` stream in the file.
+    pub offset: u64,
+    /// Bytes of the `.bft` stream, then of the border table.
+    pub bft_len: u32,
+    pub border_len: u32,
+    pub triangles: u32,
+    pub slots: u32,
+    /// The chunk's first triangle and first slot in the whole model's numbering.
+    pub first_triangle: u32,
+    pub first_slot: u32,
+    /// The quantized bounding box of the chunk's slots.
+    pub qmin: [u32; 3],
+    pub qmax: [u32; 3],
+}
+
+impl ChunkEntry {
+    fn write(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.offset.to_le_bytes());
+        for v in [self.bft_len, self.border_len, self.triangles, self.slots, self.first_triangle, self.first_slot] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in self.qmin.iter().chain(&self.qmax) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+
+    fn read(b: &[u8]) -> ChunkEntry {
+        let u = |i: usize| u32::from_le_bytes(b[8 + 4 * i..12 + 4 * i].try_into().unwrap());
+        ChunkEntry {
+            offset: u64::from_le_bytes(b[..8].try_into().unwrap()),
+            bft_len: u(0),
+            border_len: u(1),
+            triangles: u(2),
+            slots: u(3),
+            first_triangle: u(4),
+            first_slot: u(5),
+            qmin: [u(6), u(7), u(8)],
+            qmax: [u(9), u(10), u(11)],
+        }
+    }
+
+    /// The byte range of the chunk's `.bft` stream.
+    pub fn bft_range(&self) -> std::ops::Range<usize> {
+        self.offset as usize..self.offset as usize + self.bft_len as usize
+    }
+
+    fn border_range(&self) -> std::ops::Range<usize> {
+        let start = self.offset as usize + self.bft_len as usize;
+        start..start + self.border_len as usize
+    }
+}
+
+/// A chunk's border table: the slots whose vertex other chunks share.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Border {
+    /// Local slots, increasing.
+    pub slots: Vec<u32>,
+    /// Per slot: `None` for the vertex's first slot in the file, else that first slot.
+    pub links: Vec<Option<u32>>,
+    /// Per slot: the vertex's normal over the whole model.
+    pub normals: Vec<[f32; 3]>,
+}
+
+impl Border {
+    /// `(local slot, normal)` pairs, as a tile message carries border normals.
+    pub fn slot_normals(&self) -> Vec<(u32, [f32; 3])> {
+        self.slots.iter().copied().zip(self.normals.iter().copied()).collect()
+    }
+
+    pub(crate) fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(self.slots.len() * 16 + 8);
+        put_varint(&mut b, self.slots.len() as u64);
+        let mut last = 0;
+        for (i, (&s, link)) in self.slots.iter().zip(&self.links).enumerate() {
+            put_varint(&mut b, (s - if i == 0 { 0 } else { last }) as u64);
+            put_varint(&mut b, link.map_or(0, |l| l as u64 + 1));
+            last = s;
+        }
+        for n in &self.normals {
+            for v in n {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let crc = crc32fast::hash(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    /// Parses and checks chunk `index`'s border table against its entry: slots in range and
+    /// increasing, links to earlier slots of the file, finite normals.
+    fn from_bytes(b: &[u8], index: usize, e: &ChunkEntry) -> Result<Border, FormatError> {
+        let Some(body_len) = b.len().checked_sub(4) else {
+            return Err(chunk_err(index, "the border table is truncated"));
+        };
+        let (body, crc) = b.split_at(body_len);
+        if crc32fast::hash(body) != u32::from_le_bytes(crc.try_into().unwrap()) {
+            return Err(chunk_err(index, "checksum mismatch in the border table: the file is corrupt"));
+        }
+        let what = "border table";
+        let mut pos = 0;
+        let count = get_varint(Format::Bft, body, &mut pos, what)?;
+        if count > e.slots as u64 {
+            return Err(chunk_err(index, format!("the border table lists {count} slots of {}", e.slots)));
+        }
+        let mut border = Border::default();
+        let mut last = 0u64;
+        for i in 0..count {
+            let gap = get_varint(Format::Bft, body, &mut pos, what)?;
+            let link = get_varint(Format::Bft, body, &mut pos, what)?;
+            let slot = if i == 0 { gap } else { last + gap };
+            if (i > 0 && gap == 0) || slot >= e.slots as u64 {
+                return Err(chunk_err(index, format!("border entry {i} (slot {slot}) is out of order or range")));
+            }
+            let global = e.first_slot as u64 + slot;
+            if link > global {
+                return Err(chunk_err(
+                    index,
+                    format!("border entry {i} links to slot {}, not an earlier one", link - 1),
+                ));
+            }
+            border.slots.push(slot as u32);
+            border.links.push(link.checked_sub(1).map(|l| l as u32));
+            last = slot;
+        }
+        let normals = &body[pos..];
+        if normals.len() != count as usize * 12 {
+            return Err(chunk_err(index, "the border table's normals do not match its count"));
+        }
+        for n in normals.chunks_exact(12) {
+            let v = [0, 4, 8].map(|o| f32::from_le_bytes(n[o..o + 4].try_into().unwrap()));
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(chunk_err(index, "a border normal is not finite"));
+            }
+            border.normals.push(v);
+        }
+        Ok(border)
+    }
+}
+
+/// A chunked file opened on its bytes (a `Vec`, or a memory map: only the header and the
+/// directory are read here).
+pub struct ChunkedFile<B: AsRef<[u8]>> {
+    bytes: B,
+    pub header: ChunkedHeader,
+    pub entries: Vec<ChunkEntry>,
+}
+
+impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
+    /// Reads and checks the header and the directory: entries contiguous and in order from the
+    /// end of the directory to the end of the file, running sums and totals that agree with
+    /// the header, boxes inside the quantization grid. Chunks are checked when read.
+    pub fn open(bytes: B) -> Result<Self, FormatError> {
+        let b = bytes.as_ref();
+        if b.len() < 8 || b[..8] != MAGIC {
+            return Err(if MAGIC.starts_with(b) {
+                FormatError::Truncated("magic number")
+            } else {
+                FormatError::BadMagic(Format::Bft)
+            });
+        }
+        let take =
+            |from: usize, n: usize, what: &'static str| b.get(from..from + n).ok_or(FormatError::Truncated(what));
+        let version = u16::from_le_bytes(take(8, 2, "version")?.try_into().unwrap());
+        if version != VERSION {
+            return Err(FormatError::UnsupportedVersion { format: Format::Bft, found: version, known: &[VERSION] });
+        }
+        let hlen = u16::from_le_bytes(take(10, 2, "header length")?.try_into().unwrap()) as usize;
+        let hbytes = take(12, hlen, "header")?;
+        let crc = u32::from_le_bytes(take(12 + hlen, 4, "header checksum")?.try_into().unwrap());
+        if crc != crc32fast::hash(hbytes) {
+            return Err(FormatError::Checksum("header"));
+        }
+        let header = ChunkedHeader::from_bytes(hbytes)?;
+        let dir_start = 16 + hlen;
+        let dir_len = header.chunks as usize * ENTRY_LEN;
+        if (b.len() - dir_start.min(b.len())) / ENTRY_LEN < header.chunks as usize {
+            return Err(FormatError::Truncated("chunk directory"));
+        }
+        let dir = take(dir_start, dir_len, "chunk directory")?;
+        let crc = u32::from_le_bytes(take(dir_start + dir_len, 4, "chunk directory checksum")?.try_into().unwrap());
+        if crc != crc32fast::hash(dir) {
+            return Err(FormatError::Checksum("chunk directory"));
+        }
+        let max_level = (1u32 << header.quant_bits) - 1;
+        let mut entries = Vec::with_capacity(header.chunks as usize);
+        let (mut offset, mut tris, mut slots) = ((dir_start + dir_len + 4) as u64, 0u64, 0u64);
+        for (i, raw) in dir.chunks_exact(ENTRY_LEN).enumerate() {
+            let e = ChunkEntry::read(raw);
+            if e.offset != offset {
+                return Err(chunk_err(
+                    i,
+                    format!("its bytes start at {} but the previous chunk ends at {offset} (ranges overlap, leave gaps or are out of order)", e.offset),
+                ));
+            }
+            let end = e.offset + e.bft_len as u64 + e.border_len as u64;
+            if end > b.len() as u64 {
+                return Err(chunk_err(
+                    i,
+                    format!("its bytes end at {end}, past the end of the file ({} bytes)", b.len()),
+                ));
+            }
+            if e.first_triangle as u64 != tris || e.first_slot as u64 != slots {
+                return Err(chunk_err(i, "its first triangle or slot disagrees with the chunks before it"));
+            }
+            if e.triangles == 0 || e.slots == 0 {
+                return Err(chunk_err(i, "it holds no triangle"));
+            }
+            if (0..3).any(|a| e.qmin[a] > e.qmax[a] || e.qmax[a] > max_level) {
+                return Err(chunk_err(i, "its bounding box is not ordered inside the quantization grid"));
+            }
+            offset = end;
+            tris += e.triangles as u64;
+            slots += e.slots as u64;
+            entries.push(e);
+        }
+        if tris != header.triangles as u64 || slots != header.slots as u64 {
+            return Err(corrupt(format!(
+                "the chunks hold {tris} triangles and {slots} slots, the header says {} and {}",
+                header.triangles, header.slots
+            )));
+        }
+        if offset != b.len() as u64 {
+            return Err(FormatError::TrailingBytes((b.len() as u64 - offset) as usize));
+        }
+        Ok(ChunkedFile { bytes, header, entries })
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        self.bytes.as_ref()
+    }
+
+    /// Chunk `i`'s `.bft` stream (not yet checked).
+    pub fn chunk_bft(&self, i: usize) -> &[u8] {
+        &self.bytes.as_ref()[self.entries[i].bft_range()]
+    }
+
+    /// Chunk `i`'s border table, checked.
+    pub fn border(&self, i: usize) -> Result<Border, FormatError> {
+        let e = &self.entries[i];
+        Border::from_bytes(&self.bytes.as_ref()[e.border_range()], i, e)
+    }
+
+    /// The float bounding box of chunk `i`'s dequantized slots (dequantization is monotone,
+    /// so it holds every slot's float position).
+    pub fn chunk_box(&self, i: usize) -> ([f32; 3], [f32; 3]) {
+        let q = self.header.quantization();
+        (q.dequantize(self.entries[i].qmin), q.dequantize(self.entries[i].qmax))
+    }
+
+    /// Checks that a decoded chunk agrees with its entry and the file: the same
+    /// quantization, counts and bounding box.
+    pub fn check_chunk(&self, i: usize, h: &Header, positions: &[[u32; 3]]) -> Result<(), FormatError> {
+        let (e, g) = (&self.entries[i], &self.header);
+        if h.quant_bits != g.quant_bits || h.bbox_min != g.bbox_min || h.step.to_bits() != g.step.to_bits() {
+            return Err(chunk_err(i, "its quantization differs from the file's"));
+        }
+        if h.triangles != e.triangles || h.slots != e.slots {
+            return Err(chunk_err(
+                i,
+                format!(
+                    "it holds {} triangles and {} slots, the directory says {} and {}",
+                    h.triangles, h.slots, e.triangles, e.slots
+                ),
+            ));
+        }
+        if positions.iter().any(|p| (0..3).any(|a| p[a] < e.qmin[a] || p[a] > e.qmax[a])) {
+            return Err(chunk_err(i, "a position lies outside the chunk's bounding box"));
+        }
+        Ok(())
+    }
+
+    /// Decodes chunk `i` with the ordinary decoder and checks it against the directory.
+    pub fn decode_chunk(&self, i: usize) -> Result<Decoded, FormatError> {
+        let d = super::decode(self.chunk_bft(i)).map_err(|e| chunk_err(i, e))?;
+        self.check_chunk(i, &d.header, &d.positions)?;
+        Ok(d)
+    }
+
+    /// The whole file as one decoded model: every chunk's slots and triangles renumbered
+    /// after the chunks before it, and the duplicate table extended with the border links,
+    /// so that [`Decoded::to_mesh`] welds each input vertex back into one.
+    pub fn decode_all(&self) -> Result<Decoded, FormatError> {
+        use rayon::prelude::*;
+        let parts: Vec<(Decoded, Border)> = (0..self.entries.len())
+            .into_par_iter()
+            .map(|i| Ok((self.decode_chunk(i)?, self.border(i)?)))
+            .collect::<Result<_, FormatError>>()?;
+        let g = &self.header;
+        let mut out = Decoded {
+            header: Header {
+                input_vertices: g.input_vertices,
+                slots: g.slots,
+                triangles: g.triangles,
+                loose_triangles: 0,
+                commands: 0,
+                seeds: 0,
+                duplicates: 0,
+                tail_slots: 0,
+                components: 0,
+                quant_bits: g.quant_bits,
+                coding: Coding::Range,
+                bbox_min: g.bbox_min,
+                step: g.step,
+                bbox_max: g.bbox_max,
+            },
+            positions: Vec::with_capacity(g.slots as usize),
+            triangles: Vec::with_capacity(g.triangles as usize),
+            duplicates: Vec::new(),
+        };
+        for (e, (d, border)) in self.entries.iter().zip(parts) {
+            let base = e.first_slot;
+            out.positions.extend_from_slice(&d.positions);
+            out.triangles.extend(d.triangles.iter().map(|t| t.map(|s| s + base)));
+            // A slot's link to an earlier chunk replaces its duplicate entry inside the
+            // chunk: both name the same input vertex.
+            let mut links =
+                border.slots.iter().zip(&border.links).filter_map(|(&s, l)| l.map(|l| (s + base, l))).peekable();
+            let mut dups = d.duplicates.iter().map(|&(s, src)| (s + base, src + base)).peekable();
+            loop {
+                let next = match (dups.peek(), links.peek()) {
+                    (None, None) => break,
+                    (Some(&a), Some(&b)) if a.0 < b.0 => dups.next(),
+                    (Some(&a), Some(&b)) if a.0 == b.0 => {
+                        dups.next();
+                        links.next()
+                    }
+                    (Some(_), None) => dups.next(),
+                    _ => links.next(),
+                };
+                out.duplicates.push(next.expect("peeked"));
+            }
+            let h = &d.header;
+            out.header.loose_triangles += h.loose_triangles;
+            out.header.commands += h.commands;
+            out.header.seeds += h.seeds;
+            out.header.tail_slots += h.tail_slots;
+            out.header.components += h.components;
+        }
+        out.header.duplicates = out.duplicates.len() as u32;
+        Ok(out)
+    }
+}
+
+/// Writes a chunked file's header and directory (what precedes the chunks).
+pub(crate) fn write_head(header: &ChunkedHeader, entries: &[ChunkEntry]) -> Vec<u8> {
+    let h = header.to_bytes();
+    let mut out = Vec::with_capacity(20 + h.len() + entries.len() * ENTRY_LEN);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    out.extend_from_slice(&h);
+    out.extend_from_slice(&crc32fast::hash(&h).to_le_bytes());
+    let dir_start = out.len();
+    for e in entries {
+        e.write(&mut out);
+    }
+    let crc = crc32fast::hash(&out[dir_start..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+/// The length of [`write_head`]'s output for `chunks` chunks: where the first chunk starts.
+pub(crate) fn head_len(chunks: usize) -> u64 {
+    (16 + HEADER_LEN + chunks * ENTRY_LEN + 4) as u64
+}

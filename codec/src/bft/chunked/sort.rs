@@ -1,0 +1,297 @@
+//! The per-frame sort of a chunked model: every chunk classified from the directory alone,
+//! and only the chunks that straddle a tile border or a frustum plane tile-sorted.
+//!
+//! - **Culled**: all eight corners of the chunk's box are outside one frustum plane, so
+//!   every triangle is (no tile holds it); its bytes are not read.
+//! - **Verbatim**: the box is inside every plane and its pixel rectangle inside one tile,
+//!   so every triangle's box `[t]` is that tile: the chunk's stream is the tile's piece as
+//!   it is, never decoded.
+//! - **Straddling**: anything else goes through pass 1 and Table 2 (`tile_sort`), on a
+//!   `TileModel` built from the chunk on first use and kept in a cache bounded in bytes
+//!   (least recently used out first).
+//!
+//! The first two tests hold for every point of the box because a point of the box is a
+//! convex combination of its corners, and so are its clip coordinates and (for `w > 0`) its
+//! pixel; each test keeps a margin for the rounding of `f32` arithmetic (relative 1e-5 of the
+//! magnitudes involved, far above the few ulps the projection can err by), and a chunk
+//! inside that margin is simply sorted. A tile's pieces therefore decode to exactly the
+//! triangles whose `[t]` holds it, as a single stream's tile does (tested).
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use glam::{Mat4, Vec4};
+use rayon::prelude::*;
+
+use super::ChunkedFile;
+use crate::bft::format::Coding;
+use crate::bft::normals::BorderNormals;
+use crate::bft::tile_sort::{boxes_into, Boxes, SortError, Sorter, TileModel};
+use crate::container::{Format, FormatError};
+use crate::view::{plane_distances, TileGrid};
+
+/// What a frame does with a chunk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Class {
+    Culled,
+    /// Wholly in this tile (its index).
+    Verbatim(u32),
+    Straddling,
+}
+
+/// Classifies a box under `view_proj` on `grid` (see the module doc).
+pub fn classify(lo: [f32; 3], hi: [f32; 3], view_proj: Mat4, grid: &TileGrid) -> Class {
+    let m = view_proj.to_cols_array_2d();
+    let mut outside_all = [true; 6];
+    let mut inside = true;
+    let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    let (w, h) = (grid.width as f32, grid.height as f32);
+    for corner in 0..8 {
+        let p = [0, 1, 2].map(|a| if corner & (1 << a) == 0 { lo[a] } else { hi[a] });
+        let clip = view_proj * Vec4::new(p[0], p[1], p[2], 1.0);
+        // The magnitude the clip coordinates were summed from: their rounding is relative
+        // to it.
+        let scale = (0..4)
+            .map(|r| (0..4).map(|c| m[c][r].abs() * if c < 3 { p[c].abs() } else { 1.0 }).sum::<f32>())
+            .sum::<f32>();
+        if !scale.is_finite() {
+            return Class::Straddling;
+        }
+        let margin = scale * 1e-5;
+        let d = plane_distances(clip);
+        for k in 0..6 {
+            outside_all[k] &= d[k] < -margin;
+            inside &= d[k] >= margin;
+        }
+        if inside {
+            let (px, py) = ((clip.x / clip.w + 1.0) * 0.5 * w, (1.0 - clip.y / clip.w) * 0.5 * h);
+            let u = margin / clip.w * w.max(h) + 1e-3;
+            x0 = x0.min(px - u);
+            x1 = x1.max(px + u);
+            y0 = y0.min(py - u);
+            y1 = y1.max(py + u);
+        }
+    }
+    if outside_all.iter().any(|&o| o) {
+        return Class::Culled;
+    }
+    if !(inside && x0.is_finite() && x1.is_finite() && y0.is_finite() && y1.is_finite()) {
+        return Class::Straddling;
+    }
+    let (c0, c1, r0, r1) = (grid.col(x0), grid.col(x1), grid.row(y0), grid.row(y1));
+    if c0 == c1 && r0 == r1 {
+        Class::Verbatim(r0 as u32 * grid.cols + c0 as u32)
+    } else {
+        Class::Straddling
+    }
+}
+
+/// One chunk's share of a tile.
+#[derive(Clone, Debug)]
+pub struct Piece {
+    pub chunk: u32,
+    pub triangles: u32,
+    pub kind: PieceKind,
+}
+
+#[derive(Clone, Debug)]
+pub enum PieceKind {
+    /// The chunk's own stream ([`ChunkedFile::chunk_bft`]); its border normals are its border
+    /// table's ([`ChunkedFile::border`]).
+    Verbatim,
+    /// A tile submesh of a straddling chunk.
+    Sorted {
+        bytes: Vec<u8>,
+        /// The chunk slot of each of the piece's slots.
+        slots: Vec<u32>,
+        /// `(piece slot, normal)` for the slots whose triangles leave the piece.
+        normals: Vec<(u32, [f32; 3])>,
+    },
+}
+
+/// A tile of a chunked frame: its pieces, in chunk order.
+#[derive(Clone, Debug)]
+pub struct ChunkedTile {
+    pub index: usize,
+    pub pieces: Vec<Piece>,
+}
+
+impl ChunkedTile {
+    pub fn triangles(&self) -> u64 {
+        self.pieces.iter().map(|p| p.triangles as u64).sum()
+    }
+}
+
+/// What one frame's chunked sort did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameCounts {
+    pub culled: u32,
+    pub verbatim: u32,
+    pub straddling: u32,
+    /// Triangles of the straddling chunks (those that went through pass 1 and Table 2).
+    pub straddling_triangles: u64,
+    /// Straddling chunks whose tables were built this frame (not found in the cache).
+    pub built: u32,
+}
+
+/// A straddling chunk's index, its `(tile, piece)`s, and whether its tables were built.
+type SortedChunk = (usize, Vec<(usize, Piece)>, bool);
+
+/// A straddling chunk's tables: its `TileModel` and normals, built on first use.
+pub struct Straddler {
+    pub model: TileModel,
+    pub normals: BorderNormals,
+    bytes: usize,
+}
+
+struct Cache {
+    entries: HashMap<u32, (Arc<Straddler>, u64)>,
+    bytes: usize,
+    clock: u64,
+}
+
+/// A chunked model ready for sorting: the file (its directory read), the chunks' float
+/// boxes, and the cache of straddling chunks' tables.
+pub struct ChunkedModel<B: AsRef<[u8]>> {
+    pub file: ChunkedFile<B>,
+    boxes: Vec<([f32; 3], [f32; 3])>,
+    cache: Mutex<Cache>,
+    /// The cache's bound in bytes.
+    pub cache_limit: usize,
+}
+
+impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
+    pub fn new(file: ChunkedFile<B>, cache_limit: usize) -> ChunkedModel<B> {
+        let boxes = (0..file.entries.len()).map(|i| file.chunk_box(i)).collect();
+        ChunkedModel {
+            file,
+            boxes,
+            cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, clock: 0 }),
+            cache_limit,
+        }
+    }
+
+    pub fn chunks(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// Bytes the cache holds now.
+    pub fn cached_bytes(&self) -> usize {
+        self.cache.lock().expect("cache lock").bytes
+    }
+
+    /// Every chunk's class for a view.
+    pub fn classify_all(&self, view_proj: Mat4, grid: &TileGrid) -> Vec<Class> {
+        self.boxes.par_iter().with_min_len(256).map(|&(lo, hi)| classify(lo, hi, view_proj, grid)).collect()
+    }
+
+    /// Chunk `i`'s tables, from the cache or built (and then cached if they fit).
+    pub fn straddler(&self, i: usize) -> Result<(Arc<Straddler>, bool), FormatError> {
+        {
+            let mut c = self.cache.lock().expect("cache lock");
+            c.clock += 1;
+            let now = c.clock;
+            if let Some((s, used)) = c.entries.get_mut(&(i as u32)) {
+                *used = now;
+                return Ok((s.clone(), false));
+            }
+        }
+        let err = |e: String| FormatError::Corrupt(Format::Bft, format!("chunk {i}: {e}"));
+        let model = TileModel::from_bytes(self.file.chunk_bft(i)).map_err(|e| match e {
+            SortError::Bft(e) => err(e.to_string()),
+            other => err(other.to_string()),
+        })?;
+        self.file.check_chunk(i, &model.decoded.header, &model.decoded.positions)?;
+        let mut normals = BorderNormals::of(&model.decoded);
+        normals.set_border(self.file.border(i)?.slot_normals());
+        let bytes = model.heap_bytes() + normals.heap_bytes();
+        let s = Arc::new(Straddler { model, normals, bytes });
+        let mut c = self.cache.lock().expect("cache lock");
+        if bytes <= self.cache_limit {
+            c.clock += 1;
+            let now = c.clock;
+            c.bytes += bytes;
+            if let Some((old, _)) = c.entries.insert(i as u32, (s.clone(), now)) {
+                c.bytes -= old.bytes;
+            }
+            while c.bytes > self.cache_limit {
+                let (&victim, _) = c.entries.iter().min_by_key(|(_, (_, used))| *used).expect("over budget, not empty");
+                let (old, _) = c.entries.remove(&victim).expect("present");
+                c.bytes -= old.bytes;
+            }
+        }
+        Ok((s, true))
+    }
+
+    /// Sorts the model for one view: the non-empty tiles, by index, each with its pieces in
+    /// chunk order. Straddling chunks are sorted in parallel, each coded as `coding`.
+    pub fn sort(
+        &self,
+        view_proj: Mat4,
+        grid: &TileGrid,
+        coding: Coding,
+    ) -> Result<(Vec<ChunkedTile>, FrameCounts), SortError> {
+        let classes = self.classify_all(view_proj, grid);
+        let mut counts = FrameCounts::default();
+        let mut straddling = Vec::new();
+        for (i, c) in classes.iter().enumerate() {
+            match c {
+                Class::Culled => counts.culled += 1,
+                Class::Verbatim(_) => counts.verbatim += 1,
+                Class::Straddling => {
+                    counts.straddling += 1;
+                    counts.straddling_triangles += self.file.entries[i].triangles as u64;
+                    straddling.push(i);
+                }
+            }
+        }
+        let sorted: Vec<SortedChunk> = straddling
+            .par_iter()
+            .with_max_len(1)
+            .map(|&i| {
+                let (s, built) = self.straddler(i)?;
+                let mut boxes = Boxes::default();
+                boxes_into(&s.model, view_proj, grid, &mut boxes);
+                let tiles = Sorter::new(coding).sort(&s.model, &boxes, grid)?;
+                let normals = s.normals.for_tiles(&s.model, &boxes, &tiles, grid);
+                let pieces = tiles
+                    .into_iter()
+                    .zip(normals)
+                    .map(|(t, normals)| {
+                        let kind = PieceKind::Sorted { bytes: t.bytes, slots: t.slots, normals };
+                        (t.index, Piece { chunk: i as u32, triangles: t.triangles, kind })
+                    })
+                    .collect();
+                Ok((i, pieces, built))
+            })
+            .collect::<Result<_, SortError>>()?;
+        let mut per_tile: Vec<Vec<Piece>> = (0..grid.tiles()).map(|_| Vec::new()).collect();
+        let mut sorted = sorted.into_iter().peekable();
+        for (i, c) in classes.iter().enumerate() {
+            match c {
+                Class::Verbatim(t) => per_tile[*t as usize].push(Piece {
+                    chunk: i as u32,
+                    triangles: self.file.entries[i].triangles,
+                    kind: PieceKind::Verbatim,
+                }),
+                Class::Straddling => {
+                    let (j, pieces, built) = sorted.next().expect("one result per straddling chunk");
+                    debug_assert_eq!(i, j);
+                    counts.built += built as u32;
+                    for (t, p) in pieces {
+                        per_tile[t].push(p);
+                    }
+                }
+                Class::Culled => {}
+            }
+        }
+        debug_assert!(sorted.peek().is_none());
+        let tiles = per_tile
+            .into_iter()
+            .enumerate()
+            .filter(|(_, p)| !p.is_empty())
+            .map(|(index, pieces)| ChunkedTile { index, pieces })
+            .collect();
+        Ok((tiles, counts))
+    }
+}

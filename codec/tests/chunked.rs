@@ -1,0 +1,348 @@
+//! Chunked `.bft` files: the whole file decodes to the input exactly, whatever the chunk
+//! size; every frame's tiles, from verbatim chunks and sorted pieces together, decode with
+//! the ordinary decoder to exactly the triangles whose box `[t]` holds the tile; a damaged
+//! directory or chunk is an error naming the chunk.
+
+use codec::bft::chunked::sort::{ChunkedModel, Class, PieceKind};
+use codec::bft::chunked::{encode_mesh_chunked, ChunkOptions, ChunkedFile};
+use codec::bft::{self, Coding};
+use codec::view::{triangle_tile_boxes, Camera, TileGrid};
+use codec::{Mesh, Quantization};
+use glam::Vec3;
+use proptest::prelude::*;
+use testkit::{canonical, sorted_canonical};
+
+fn chunked(mesh: &Mesh, chunk: u32) -> (Vec<u8>, Vec<u32>) {
+    let opts = ChunkOptions { chunk_triangles: chunk, keep_slot_vertex: true, ..Default::default() };
+    let (bytes, enc) = encode_mesh_chunked(mesh, &opts).expect("encodes");
+    assert_eq!(enc.bytes as usize, bytes.len());
+    (bytes, enc.slot_vertex)
+}
+
+/// Decoding the whole file keeps the single-stream guarantee: the input's triangle multiset
+/// on input vertex indices, orientation kept, every slot at its vertex's quantized position,
+/// links and duplicates naming the same vertex, and the welded mesh one vertex per used one.
+fn assert_chunked_round_trip(mesh: &Mesh, chunk: u32) -> ChunkedFile<Vec<u8>> {
+    let (bytes, slot_vertex) = chunked(mesh, chunk);
+    let file = ChunkedFile::open(bytes.clone()).expect("opens");
+    assert!(file.entries.iter().all(|e| e.triangles <= chunk));
+    let dec = bft::decode(&bytes).expect("decodes");
+    assert_eq!(dec.triangles.len(), mesh.triangles.len());
+    assert_eq!(slot_vertex.len(), dec.positions.len());
+    let back = dec.triangles.iter().map(|t| t.map(|s| slot_vertex[s as usize]));
+    assert!(sorted_canonical(back) == sorted_canonical(mesh.triangles.iter().copied()), "triangles differ");
+    let used = mesh.used_vertices();
+    let q = Quantization::fit(&mesh.positions, Some(&used), 16).unwrap();
+    assert_eq!(dec.quantization(), q);
+    for (slot, p) in dec.positions.iter().enumerate() {
+        assert_eq!(*p, q.quantize(mesh.positions[slot_vertex[slot] as usize]), "slot {slot}");
+    }
+    for &(slot, source) in &dec.duplicates {
+        assert!(source < slot);
+        assert_eq!(slot_vertex[slot as usize], slot_vertex[source as usize], "slot {slot} -> {source}");
+    }
+    let welded = dec.to_mesh();
+    assert_eq!(welded.positions.len(), used.iter().filter(|&&u| u).count(), "one vertex per used input vertex");
+    assert_eq!(file.header.unique_vertices as usize, welded.positions.len());
+    file
+}
+
+const MESHES: [&str; 7] = [
+    "classic/teapot.obj",               // holes, non-manifold vertices, 4 components
+    "classic/beetle.obj",               // non-manifold edges, 23 holes
+    "stanford/dragon_vrip_res4.ply.gz", // non-manifold, duplicate faces
+    "odedstein/plane_holes.obj.gz",     // 27 holes
+    "classic/ogre.obj.gz",              // 44 components
+    "degenerate/fused_vertices.obj",
+    "degenerate/non_manifold_face_graph.obj",
+];
+
+#[test]
+fn shared_meshes_round_trip_at_every_chunk_size() {
+    for rel in MESHES {
+        let mesh = testkit::load_mesh(rel);
+        let n = mesh.triangles.len() as u32;
+        for chunk in [3, 61, 1000, n.max(1)] {
+            let file = assert_chunked_round_trip(&mesh, chunk);
+            assert_eq!(
+                file.header.chunks as usize,
+                (n as usize).div_ceil(chunk as usize).max(1).min(file.entries.len())
+            );
+        }
+    }
+}
+
+#[test]
+fn a_one_chunk_file_holds_the_single_stream() {
+    let mesh = testkit::load_mesh("classic/teapot.obj");
+    let (bytes, _) = chunked(&mesh, u32::MAX);
+    let file = ChunkedFile::open(bytes).unwrap();
+    assert_eq!(file.entries.len(), 1);
+    let single = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
+    let d = file.decode_chunk(0).unwrap();
+    assert_eq!(d.triangles.len(), mesh.triangles.len());
+    assert!(file.border(0).unwrap().slots.is_empty(), "one chunk has no border");
+    // The same traversal on the vertices in the same order, up to their local renumbering.
+    assert_eq!(d.positions.len(), bft::decode(&single.bytes).unwrap().positions.len());
+}
+
+/// The pieces of a chunked frame decode with the ordinary decoder to exactly the triangles
+/// whose `[t]` holds each tile; returns (verbatim, straddling, culled) chunk counts.
+fn check_frame(model: &ChunkedModel<Vec<u8>>, whole: &bft::Decoded, cam: &Camera, grid: &TileGrid) -> [u32; 3] {
+    let vp = cam.view_proj(grid.aspect());
+    let q = whole.quantization();
+    let positions: Vec<[f32; 3]> = whole.positions.iter().map(|&p| q.dequantize(p)).collect();
+    let boxes = triangle_tile_boxes(&positions, &whole.triangles, vp, grid);
+    let mut expected = vec![Vec::new(); grid.tiles()];
+    for (t, b) in whole.triangles.iter().zip(&boxes) {
+        if b.is_empty() {
+            continue;
+        }
+        for r in b.r0..=b.r1 {
+            for c in b.c0..=b.c1 {
+                expected[r as usize * grid.cols as usize + c as usize].push(canonical(*t));
+            }
+        }
+    }
+    let classes = model.classify_all(vp, grid);
+    for coding in [Coding::Prefix, Coding::Range] {
+        let (tiles, counts) = model.sort(vp, grid, coding).expect("sorts");
+        let mut got = vec![Vec::new(); grid.tiles()];
+        for tile in &tiles {
+            for p in &tile.pieces {
+                let e = model.file.entries[p.chunk as usize];
+                let (tris, base): (Vec<[u32; 3]>, u32) = match &p.kind {
+                    PieceKind::Verbatim => {
+                        assert_eq!(classes[p.chunk as usize], Class::Verbatim(tile.index as u32));
+                        (bft::decode(model.file.chunk_bft(p.chunk as usize)).unwrap().triangles, e.first_slot)
+                    }
+                    PieceKind::Sorted { bytes, slots, .. } => {
+                        let d = bft::decode(bytes).expect("a piece decodes");
+                        (d.triangles.iter().map(|t| t.map(|s| slots[s as usize])).collect(), e.first_slot)
+                    }
+                };
+                assert_eq!(tris.len(), p.triangles as usize);
+                got[tile.index].extend(tris.iter().map(|t| canonical(t.map(|s| s + base))));
+            }
+        }
+        for (b, (g, w)) in got.iter_mut().zip(expected.iter_mut()).enumerate() {
+            g.sort_unstable();
+            w.sort_unstable();
+            assert!(g == w, "tile {b}: {} triangles from the pieces, {} expected", g.len(), w.len());
+        }
+        let sum = counts.verbatim + counts.straddling + counts.culled;
+        assert_eq!(sum as usize, model.chunks());
+    }
+    let count = |f: &dyn Fn(&Class) -> bool| classes.iter().filter(|c| f(c)).count() as u32;
+    [count(&|c| matches!(c, Class::Verbatim(_))), count(&|c| *c == Class::Straddling), count(&|c| *c == Class::Culled)]
+}
+
+/// The default framing, an oblique view with the model partly off-screen, a close-up from
+/// inside the bounding box (triangles cross the near plane, most chunks culled).
+fn cameras(h: &codec::bft::chunked::ChunkedHeader, aspect: f32) -> Vec<Camera> {
+    let (lo, hi) = (Vec3::from(h.bbox_min), Vec3::from(h.bbox_max));
+    let (center, size) = ((lo + hi) * 0.5, (hi - lo).length());
+    let framed = Camera::framing(h.bbox_min, h.bbox_max, aspect);
+    let offside = Camera { target: center + Vec3::new(size * 0.45, size * 0.2, 0.0), ..framed };
+    let inside = Camera {
+        eye: center + Vec3::new(0.1, 0.05, 0.3) * size,
+        target: center - Vec3::new(0.2, 0.1, 0.4) * size,
+        up: Vec3::Y,
+        fovy: 70.0,
+        near: size * 0.01,
+        far: size * 4.0,
+    };
+    vec![framed, offside, inside]
+}
+
+#[test]
+fn shared_meshes_sort_exactly_from_chunks() {
+    let mut totals = [0u32; 3];
+    for rel in MESHES.iter().chain(&["stanford/bunny_zipper_c3d.obj.gz"]) {
+        let mesh = testkit::load_mesh(rel);
+        for chunk in [5, 300, 4096, u32::MAX] {
+            let (bytes, _) = chunked(&mesh, chunk);
+            let whole = bft::decode(&bytes).unwrap();
+            // A small cache bound, so that chunks are evicted and built again.
+            let model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 20);
+            for (w, h, c, r) in [(1920, 1080, 8, 8), (1000, 601, 7, 3), (640, 480, 1, 1), (333, 257, 64, 64)] {
+                let grid = TileGrid::new(w, h, c, r).unwrap();
+                for cam in cameras(&model.file.header, grid.aspect()) {
+                    let k = check_frame(&model, &whole, &cam, &grid);
+                    (0..3).for_each(|i| totals[i] += k[i]);
+                }
+            }
+        }
+    }
+    // Every class occurs: the test covers forwarding, sorting and culling.
+    assert!(totals.iter().all(|&n| n > 100), "verbatim, straddling, culled: {totals:?}");
+}
+
+fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
+    let mut positions = vec![];
+    let mut rng = testkit::XorShift(seed | 1);
+    for y in 0..=h {
+        for x in 0..=w {
+            positions.push([x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.5, rng.unit() * 0.3]);
+        }
+    }
+    let id = |x: usize, y: usize| (y * (w + 1) + x) as u32;
+    let mut triangles = vec![];
+    let mut k = 0;
+    for y in 0..h {
+        for x in 0..w {
+            for t in [[id(x, y), id(x + 1, y), id(x + 1, y + 1)], [id(x, y), id(x + 1, y + 1), id(x, y + 1)]] {
+                if !holes[k % holes.len()] {
+                    triangles.push(t);
+                }
+                k += 1;
+            }
+        }
+    }
+    Mesh { positions, triangles }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Random holed grids (several copies: many components) cut into chunks of random size,
+    /// under random cameras (inside the model, looking past it) on random tile grids.
+    #[test]
+    fn random_meshes_chunks_and_cameras_sort_exactly(
+        w in 2usize..30, h in 2usize..30, copies in 1usize..4,
+        holes in prop::collection::vec(prop::bool::weighted(0.1), 1..30),
+        seed: u64, chunk in 1u32..400,
+        eye in (-2.0f32..2.0, -2.0f32..2.0, -0.5f32..3.0),
+        target in (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0),
+        fovy in 20.0f32..120.0, near in 0.01f32..0.5,
+        size in (1u32..700, 1u32..500), tiles in (1u32..65, 1u32..65),
+    ) {
+        let mut mesh = Mesh::default();
+        for k in 0..copies {
+            let g = grid_mesh(w, h, &holes, seed.wrapping_add(k as u64));
+            let base = mesh.positions.len() as u32;
+            mesh.positions.extend(g.positions.iter().map(|p| [p[0] + k as f32 * 0.7, p[1] - k as f32 * 0.4, p[2]]));
+            mesh.triangles.extend(g.triangles.iter().map(|t| t.map(|v| v + base)));
+        }
+        prop_assume!(!mesh.triangles.is_empty());
+        let file = assert_chunked_round_trip(&mesh, chunk);
+        let whole = bft::decode(file.bytes()).unwrap();
+        let model = ChunkedModel::new(file, 1 << 16);
+        let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0 };
+        prop_assume!(cam.validate().is_ok());
+        let grid = TileGrid::new(size.0, size.1, tiles.0.min(size.0), tiles.1.min(size.1)).unwrap();
+        check_frame(&model, &whole, &cam, &grid);
+    }
+}
+
+/// A chunk's border normals are the whole model's: a worker shading a verbatim chunk or a
+/// sorted piece, with the normals that come with it, gets every slot's model normal, which
+/// for a vertex inside one chunk is the one the chunk's own triangles give.
+#[test]
+fn border_normals_complete_each_chunk() {
+    use codec::bft::normals::{unit, vertex_normals};
+    let mesh = testkit::load_mesh("classic/teapot.obj");
+    let (bytes, slot_vertex) = chunked(&mesh, 200);
+    let file = ChunkedFile::open(bytes).unwrap();
+    // The model normal of each input vertex: chunk sums added in file order.
+    let mut sums = vec![Vec3::ZERO; mesh.positions.len()];
+    let mut normal_of = vec![None; mesh.positions.len()];
+    for i in 0..file.entries.len() {
+        let d = file.decode_chunk(i).unwrap();
+        let q = d.quantization();
+        let p: Vec<[f32; 3]> = d.positions.iter().map(|&x| q.dequantize(x)).collect();
+        let (source, acc) = codec::bft::normals::face_normal_sums(&p, &d.triangles, &d.duplicates);
+        for s in 0..p.len() {
+            if source[s] as usize == s {
+                sums[slot_vertex[file.entries[i].first_slot as usize + s] as usize] += acc[s];
+            }
+        }
+    }
+    for (v, s) in sums.iter().enumerate() {
+        normal_of[v] = Some(unit(*s));
+    }
+    let mut bordered = 0;
+    for i in 0..file.entries.len() {
+        let d = file.decode_chunk(i).unwrap();
+        let q = d.quantization();
+        let p: Vec<[f32; 3]> = d.positions.iter().map(|&x| q.dequantize(x)).collect();
+        let mut normals = vertex_normals(&p, &d.triangles, &d.duplicates);
+        let border = file.border(i).unwrap();
+        bordered += border.slots.len();
+        for (s, n) in border.slot_normals() {
+            normals[s as usize] = n;
+        }
+        for (s, n) in normals.iter().enumerate() {
+            let v = slot_vertex[file.entries[i].first_slot as usize + s] as usize;
+            assert_eq!(n.map(f32::to_bits), normal_of[v].unwrap().map(f32::to_bits), "chunk {i} slot {s}");
+        }
+    }
+    assert!(bordered > 0);
+}
+
+fn refresh_dir_crc(b: &mut [u8]) {
+    let hlen = u16::from_le_bytes([b[10], b[11]]) as usize;
+    let chunks = u32::from_le_bytes(b[12 + 12..12 + 16].try_into().unwrap()) as usize;
+    let start = 16 + hlen;
+    let end = start + chunks * codec::bft::chunked::ENTRY_LEN;
+    let crc = crc32fast::hash(&b[start..end]);
+    b[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// A damaged directory is refused when the file is opened, naming the chunk; a damaged chunk
+/// when it is read.
+#[test]
+fn bad_directories_and_chunks_are_named() {
+    let mesh = testkit::load_mesh("classic/teapot.obj");
+    let (bytes, _) = chunked(&mesh, 500);
+    let file = ChunkedFile::open(bytes.clone()).unwrap();
+    assert!(file.entries.len() >= 4);
+    let hlen = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
+    let dir = 16 + hlen;
+    let entry = |i: usize| dir + i * codec::bft::chunked::ENTRY_LEN;
+    let open_err = |b: &[u8]| ChunkedFile::open(b.to_vec()).err().expect("refused").to_string();
+    // The second chunk's offset moved past the file's end; into the first; its byte
+    // length grown (overlap); its triangle count changed.
+    let cases: [(usize, u64, &str); 4] = [
+        (entry(1), bytes.len() as u64 + 10, "chunk 1: its bytes start at"),
+        (entry(1), file.entries[0].offset + 1, "chunk 1: its bytes start at"),
+        (entry(1) + 8, file.entries[1].bft_len as u64 + 7, "chunk 2: its bytes start at"),
+        (entry(1) + 16, file.entries[1].triangles as u64 + 1, "chunk 2: its first triangle"),
+    ];
+    for (at, value, want) in cases {
+        let mut b = bytes.clone();
+        if at == entry(1) {
+            b[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        } else {
+            b[at..at + 4].copy_from_slice(&(value as u32).to_le_bytes());
+        }
+        refresh_dir_crc(&mut b);
+        let e = open_err(&b);
+        assert!(e.contains(want), "{e}");
+        assert!(!e.contains('\n'));
+    }
+    // Without a refreshed checksum the directory is corrupt as such.
+    let mut b = bytes.clone();
+    b[entry(2)] ^= 1;
+    assert_eq!(open_err(&b), "checksum mismatch in chunk directory: the file is corrupt");
+    // Truncated anywhere: refused at open.
+    for cut in [5, 20, entry(1), bytes.len() - 1] {
+        assert!(ChunkedFile::open(bytes[..cut].to_vec()).is_err(), "cut at {cut}");
+    }
+    // A flipped byte inside chunk 3's stream: the file opens; reading the chunk names it.
+    let mut b = bytes.clone();
+    let e3 = file.entries[3];
+    b[e3.offset as usize + e3.bft_len as usize / 2] ^= 0x40;
+    let f = ChunkedFile::open(b.clone()).expect("the directory is intact");
+    let e = f.decode_chunk(3).unwrap_err().to_string();
+    assert!(e.contains("chunk 3"), "{e}");
+    assert!(bft::decode(&b).unwrap_err().to_string().contains("chunk 3"));
+    let model = ChunkedModel::new(f, 1 << 20);
+    assert!(model.straddler(3).err().expect("refused").to_string().contains("chunk 3"));
+    // A flipped byte in chunk 2's border table.
+    let mut b = bytes.clone();
+    let e2 = file.entries[2];
+    b[(e2.offset + e2.bft_len as u64) as usize + 1] ^= 0x01;
+    let e = ChunkedFile::open(b).unwrap().border(2).unwrap_err().to_string();
+    assert!(e.contains("chunk 2") && e.contains("border table"), "{e}");
+}
