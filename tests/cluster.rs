@@ -99,6 +99,74 @@ fn mpirun_tiles_equal_the_single_process_frame() {
     }
 }
 
+/// Exactly equal images (every byte of every pixel).
+fn identical(a: &Path, b: &Path) -> bool {
+    pixels(a) == pixels(b)
+}
+
+/// A chunked model renders the same frame whatever the tiles, ranks, balancing and worker
+/// caches: verbatim chunks (sent or kept by the worker), sorted pieces and their border
+/// normals together equal the single-process frame pixel for pixel, and the single-stream
+/// model's frame within rounding of the normals at chunk borders.
+#[test]
+fn chunked_models_render_the_same_frames_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    ok(&alone(&["encode", &model, "-o", &p("bunny.bft"), "--chunk-triangles", "1500"]));
+    ok(&alone(&["encode", &model, "-o", &p("single.bft"), "--chunk-triangles", "0"]));
+    let size = "400x300";
+    fn frames<'a>(model: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+        let mut args = vec!["render", model, "--size", "400x300", "--frames", "3", "--orbit", "--out", out];
+        args.extend(extra);
+        args
+    }
+    let (chunked, single) = (p("bunny.bft"), p("single.bft"));
+    // References: the whole frame as one tile in one process, chunked and single-stream.
+    ok(&alone(&frames(&chunked, &p("ref.png"), &["--tiles", "1x1"])));
+    ok(&alone(&frames(&single, &p("one.png"), &["--tiles", "1x1"])));
+    let frame = |name: &str, k: u32| dir.path().join(format!("{name}-{k:04}.png"));
+    for k in 1..=3 {
+        assert!(covered(&frame("ref", k)) > 1000, "the model is in view");
+        let px = (400 * 300) as f64;
+        let near = differing(&frame("ref", k), &frame("one", k)) as f64;
+        assert!(near / px < 1e-3, "frame {k}: {near} pixels differ from the single stream's");
+    }
+    let stats = p("s.jsonl");
+    for (np, flags) in [
+        (2, vec!["--tiles", "8x6", "--stats", &stats]),
+        (3, vec!["--tiles", "5x4", "--tile-coding", "range"]),
+        (3, vec!["--tiles", "3x3", "--balance"]),
+        (2, vec!["--tiles", "4x4", "--worker-cache-mb", "0", "--cache-mb", "0"]),
+    ] {
+        let out = p("t.png");
+        ok(&mpirun(np, &[], &frames(&chunked, &out, &flags)));
+        for k in 1..=3 {
+            assert!(identical(&frame("t", k), &frame("ref", k)), "-np {np} {flags:?}, frame {k}");
+        }
+    }
+    // The 8x6 run: chunks of every kind, and the worker kept chunks from frame to frame.
+    let lines: Vec<serde_json::Value> =
+        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let chunks: Vec<&serde_json::Value> = lines.iter().filter(|l| l["rank"] == 0).map(|l| &l["chunks"]).collect();
+    assert_eq!(chunks.len(), 3);
+    assert!(chunks.iter().all(|c| c["verbatim"].as_u64() > Some(0) && c["straddling"].as_u64() > Some(0)));
+    assert!(chunks[0]["kept"] == 0 && chunks[0]["sent"] == chunks[0]["verbatim"]);
+    // The same view twice: the second frame names every verbatim chunk the worker kept.
+    let still = p("still.jsonl");
+    let out = p("still.png");
+    ok(&mpirun(
+        2,
+        &[],
+        &["render", &chunked, "--size", size, "--tiles", "8x6", "--frames", "2", "--out", &out, "--stats", &still],
+    ));
+    assert!(identical(&frame("still", 2), &frame("ref", 1)));
+    let lines: Vec<serde_json::Value> =
+        std::fs::read_to_string(&still).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let second = &lines.iter().filter(|l| l["rank"] == 0).nth(1).unwrap()["chunks"];
+    assert!(second["kept"].as_u64() > Some(0) && second["sent"] == 0, "{second}");
+}
+
 #[test]
 fn alone_more_workers_than_tiles_and_orbit() {
     let dir = tempfile::tempdir().unwrap();

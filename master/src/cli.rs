@@ -140,9 +140,8 @@ pub enum Command {
         input: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
-        /// Bits per quantized coordinate (8 to 24).
-        #[arg(long, default_value_t = codec::Quantization::DEFAULT_BITS, value_parser = clap::value_parser!(u8).range(8..=24))]
-        quant_bits: u8,
+        #[command(flatten)]
+        options: EncodeArgs,
     },
     /// Decompress a .bft file into PLY or OBJ (chosen by the output's extension).
     Decode {
@@ -235,6 +234,23 @@ pub enum Pm {
     },
 }
 
+/// Flags of `tessera encode`.
+#[derive(Args, Clone, Debug)]
+pub struct EncodeArgs {
+    /// Bits per quantized coordinate (8 to 24).
+    #[arg(long, default_value_t = codec::Quantization::DEFAULT_BITS, value_parser = clap::value_parser!(u8).range(8..=24))]
+    pub quant_bits: u8,
+    /// Triangles per chunk at most: a model with more is written as a chunked file,
+    /// whose frames skip, forward and sort chunk by chunk (0: always one stream). Smaller
+    /// chunks forward more of a frame untouched and cost more bytes at their borders.
+    #[arg(long, default_value_t = codec::bft::chunked::DEFAULT_CHUNK_TRIANGLES)]
+    pub chunk_triangles: u32,
+    /// Where the chunked encoder's temporary files go (the system's temporary folder by
+    /// default).
+    #[arg(long)]
+    pub temp_dir: Option<PathBuf>,
+}
+
 /// Flags of `tessera render`.
 #[derive(Args, Clone, Debug)]
 pub struct RenderArgs {
@@ -282,6 +298,14 @@ pub struct RenderArgs {
     /// rasterizer. Sorted models only (.bft and mesh files).
     #[arg(long)]
     pub decode_only: bool,
+    /// Chunked models: rank 0's cache of straddling chunks' sort tables, in MB (a chunk
+    /// that straddles a tile border is decoded once and kept while it fits).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
+    pub cache_mb: u64,
+    /// Chunked models: each worker's cache of chunks it rendered whole, in MB (decoded
+    /// meshes); rank 0 sends a chunk again only when the worker no longer holds it.
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
+    pub worker_cache_mb: u64,
     /// Progressive meshes: the screen-space error bound in pixels.
     #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
     pub error_px: f32,

@@ -4,11 +4,13 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use codec::bft::{self, EncodeOptions, Stats};
+use codec::bft::chunked::{encode_chunked, ChunkOptions, TriangleSink};
+use codec::bft::{self, Stats};
 use codec::Mesh;
 use serde::Serialize;
 
-use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
+use crate::cli::EncodeArgs;
+use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
 
 /// Prints a command's summary line: on stdout, unless the output itself goes there (`-o -`).
@@ -41,34 +43,57 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
     Ok(mesh?)
 }
 
-/// `tessera encode IN -o OUT.bft [--quant-bits N]`.
-pub fn encode(input: &Path, output: &Path, quant_bits: u8) -> Result<()> {
+/// `tessera encode IN -o OUT.bft [--quant-bits N] [--chunk-triangles N] [--temp-dir DIR]`.
+///
+/// A model of more than `chunk_triangles` triangles becomes a chunked file
+/// (`codec::bft::chunked`), encoded out of core: the positions are read in one pass, the
+/// triangles in another, and partitioned through temporary files, so memory follows the
+/// vertex count, not the file. Fewer triangles give today's single-stream file, byte for
+/// byte what `bft::encode` writes. The output is written to a temporary file and renamed.
+pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
     check_extension(output, &["bft"], "the output of encode")?;
     check_distinct(&[input], &[output])?;
-    let mesh = load_mesh(input)?;
     let start = Instant::now();
-    let pb = progress::bar(mesh.triangles.len() as u64, "encoding");
-    let enc =
-        bft::encode_with_progress(&mesh, EncodeOptions { quant_bits }, &mut |done, _| pb.set_position(done as u64))
-            .with_context(|| format!("cannot encode {}", input.display()))?;
+    let opts = ChunkOptions {
+        quant_bits: options.quant_bits,
+        chunk_triangles: if options.chunk_triangles == 0 { u32::MAX } else { options.chunk_triangles },
+        temp_dir: options.temp_dir.clone(),
+        ..Default::default()
+    };
+    let mesh = load_mesh(input)?;
+    let positions = &mesh.positions;
+    let mut source = |sink: TriangleSink| mesh.triangles.iter().try_for_each(|&t| sink(t));
+    let pb = progress::bar(0, "encoding");
+    let mut report = |stage: &'static str, done: u64, total: u64| {
+        pb.set_message(stage);
+        pb.set_length(total.max(done));
+        pb.set_position(done);
+    };
+    let mut encoded = None;
+    write_atomic(output, |w| {
+        let e = encode_chunked(positions, &mut source, &opts, &mut report, w).map_err(std::io::Error::other)?;
+        encoded = Some(e);
+        Ok(())
+    })
+    .with_context(|| format!("cannot encode {}", input.display()))?;
     pb.finish_and_clear();
+    let enc = encoded.expect("written");
     let secs = start.elapsed().as_secs_f64();
-    write_bytes(output, &enc.bytes)?;
-    let stats = Stats::of(&enc.bytes)?;
+    let h = &enc.header;
+    let chunks = if h.chunks > 1 { format!(" in {} chunks", h.chunks) } else { String::new() };
     summary(
         output,
         format_args!(
-        "{} -> {}: {} triangles, {} vertices, {} bytes ({:.3} bits/triangle connectivity, {:.2} bits/vertex geometry at {} bits), {:.0} ms",
-        input.display(),
-        output.display(),
-        stats.header.triangles,
-        stats.header.unique_vertices(),
-        stats.bytes,
-        stats.connectivity_bits_per_triangle(),
-        stats.geometry_bits_per_vertex(),
-        quant_bits,
-        secs * 1e3
-    ),
+            "{} -> {}: {} triangles, {} vertices, {} bytes{chunks} ({:.3} bits/triangle at {} bits), {:.0} ms",
+            input.display(),
+            output.display(),
+            h.triangles,
+            h.unique_vertices,
+            enc.bytes,
+            enc.bytes as f64 * 8.0 / h.triangles.max(1) as f64,
+            h.quant_bits,
+            secs * 1e3
+        ),
     );
     Ok(())
 }
@@ -117,6 +142,9 @@ pub struct StatsReport {
     pub commands: u32,
     pub bbox_min: [f32; 3],
     pub bbox_max: [f32; 3],
+    /// Chunks (1 for a single-stream file) and the bytes of their border tables.
+    pub chunks: u32,
+    pub border_bytes: usize,
 }
 
 impl StatsReport {
@@ -141,6 +169,8 @@ impl StatsReport {
             commands: h.commands,
             bbox_min: h.bbox_min,
             bbox_max: h.bbox_max,
+            chunks: s.chunks,
+            border_bytes: s.border_bytes,
         })
     }
 }
@@ -149,8 +179,12 @@ impl StatsReport {
 /// sections pass their checksums but whose streams are inconsistent is reported as corrupt.
 pub fn stats(input: &Path, json: bool) -> Result<()> {
     let bytes = read_input(input)?;
-    let report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
-    bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
+    let mut report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
+    let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
+    if report.chunks > 1 {
+        // The chunks' own counts add up to more components than the model has.
+        report.components = decoded.to_mesh().components() as u32;
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -159,6 +193,9 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         println!("  triangles      {:>12}   ({} components, {} loose)", r.triangles, r.components, r.loose_triangles);
         println!("  vertices       {:>12}   ({} slots, {} duplicated)", r.vertices, r.slots, r.duplicate_slots);
         println!("  bytes          {:>12}", r.bytes);
+        if r.chunks > 1 {
+            println!("  chunks         {:>12}   ({} bytes of border tables)", r.chunks, r.border_bytes);
+        }
         println!(
             "  connectivity   {:>12.3} bits/triangle ({} bytes)",
             r.connectivity_bits_per_triangle, r.connectivity_bytes

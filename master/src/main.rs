@@ -15,7 +15,7 @@ fn main() -> ExitCode {
     master::output::install_signal_handler();
     codec::input::set_max_decompressed_bytes(cli.max_decompressed);
     let result = match &cli.command {
-        Command::Encode { input, output, quant_bits } => commands::encode(input, output, *quant_bits),
+        Command::Encode { input, output, options } => commands::encode(input, output, options),
         Command::Decode { input, output } => commands::decode(input, output),
         Command::Stats { input, json } => commands::stats(input, *json),
         Command::Render(args) => render(args),

@@ -37,6 +37,38 @@ pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     Ok(Model { bytes, tiles })
 }
 
+/// A chunked `.bft` model (version 3), memory-mapped: only its header and directory are read
+/// here, each chunk when a frame needs it.
+pub type Chunked = codec::bft::chunked::sort::ChunkedModel<memmap2::Mmap>;
+
+/// Opens `path` as a chunked model if it is one (`None` otherwise), with a cache of
+/// `cache_bytes` for its straddling chunks' tables.
+pub fn open_chunked(path: &Path, cache_bytes: usize) -> Result<Option<Chunked>> {
+    use std::io::Read;
+    if codec::input::ModelKind::of(path) != codec::input::ModelKind::Bft {
+        return Ok(None);
+    }
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    let mut head = [0u8; 10];
+    if !file.metadata().is_ok_and(|m| m.is_file())
+        || (&file).take(10).read(&mut head).ok() != Some(10)
+        || !codec::bft::chunked::is_chunked(&head)
+    {
+        return Ok(None);
+    }
+    // Safety: the map is read-only; the file must not be truncated or rewritten while the
+    // process runs (as for any memory-mapped input), which the README says of `render`.
+    let map = unsafe { memmap2::Mmap::map(&file) }.with_context(|| format!("cannot map {}", path.display()))?;
+    let file = codec::bft::chunked::ChunkedFile::open(map).with_context(|| format!("{}", path.display()))?;
+    Ok(Some(codec::bft::chunked::sort::ChunkedModel::new(file, cache_bytes)))
+}
+
+/// The camera of a chunked model: the flags given, the rest framing its bounding box.
+pub fn chunked_camera(model: &Chunked, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    let h = model.file.header;
+    args.camera(h.bbox_min, h.bbox_max, grid.aspect())
+}
+
 impl Model {
     pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
         let h = self.tiles.decoded.header;
@@ -72,6 +104,16 @@ pub struct Totals {
     pub tiled_tri_bytes: usize,
 }
 
+/// What a chunked model's frame did with its chunks.
+#[derive(Debug, Serialize)]
+pub struct ChunkSummary {
+    pub chunks: usize,
+    pub culled: u32,
+    pub verbatim: u32,
+    pub straddling: u32,
+    pub straddling_triangles: u64,
+}
+
 #[derive(Debug, Serialize)]
 pub struct SortSummary {
     pub model: String,
@@ -86,6 +128,9 @@ pub struct SortSummary {
     pub sort_ms: f64,
     pub tri_sort_ms: f64,
     pub totals: Totals,
+    /// Chunked models (no Tri sort is run for them: `tri_sort_ms` is 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chunks: Option<ChunkSummary>,
     pub per_tile: Vec<TileSummary>,
 }
 
@@ -144,9 +189,94 @@ pub fn sort_frame(
         sort_ms,
         tri_sort_ms,
         totals,
+        chunks: None,
         per_tile,
     };
     Ok((summary, tiles))
+}
+
+/// One frame of a chunked model's sort, summarised; each tile's streams (verbatim chunks and
+/// sorted pieces) as `.bft` bytes.
+pub fn sort_chunked_frame(
+    model: &Chunked,
+    name: &str,
+    cam: &Camera,
+    grid: &TileGrid,
+    coding: bft::Coding,
+) -> Result<(SortSummary, Vec<(usize, Vec<Vec<u8>>)>)> {
+    use codec::bft::chunked::sort::PieceKind;
+    let vp = cam.view_proj(grid.aspect());
+    let start = Instant::now();
+    let (tiles, counts) = model.sort(vp, grid, coding)?;
+    let sort_ms = start.elapsed().as_secs_f64() * 1e3;
+    let file = &model.file;
+    let tiles: Vec<(usize, Vec<Vec<u8>>, u64, usize)> = tiles
+        .into_iter()
+        .map(|t| {
+            let triangles = t.triangles();
+            let mut vertices = 0;
+            let streams = t
+                .pieces
+                .into_iter()
+                .map(|p| match p.kind {
+                    PieceKind::Verbatim => {
+                        vertices += file.entries[p.chunk as usize].slots as usize;
+                        file.chunk_bft(p.chunk as usize).to_vec()
+                    }
+                    PieceKind::Sorted { bytes, slots, .. } => {
+                        vertices += slots.len();
+                        bytes
+                    }
+                })
+                .collect();
+            (t.index, streams, triangles, vertices)
+        })
+        .collect();
+    let per_tile: Vec<TileSummary> = tiles
+        .iter()
+        .map(|(index, streams, triangles, vertices)| TileSummary {
+            index: *index,
+            col: *index as u32 % grid.cols,
+            row: *index as u32 / grid.cols,
+            triangles: *triangles as u32,
+            vertices: *vertices,
+            bytes: streams.iter().map(Vec::len).sum(),
+            tri_bytes: *triangles as usize * tri_sort::TRIANGLE_BYTES,
+        })
+        .collect();
+    let totals = Totals {
+        triangles: file.header.triangles as usize,
+        visible_triangles: counts.visible_triangles as usize,
+        tiled_triangles: per_tile.iter().map(|t| t.triangles as usize).sum(),
+        nonempty_tiles: tiles.len(),
+        bft_bytes: file.bytes().len(),
+        tri_bytes: counts.visible_triangles as usize * tri_sort::TRIANGLE_BYTES,
+        tiled_bft_bytes: per_tile.iter().map(|t| t.bytes).sum(),
+        tiled_tri_bytes: per_tile.iter().map(|t| t.tri_bytes).sum(),
+    };
+    let summary = SortSummary {
+        model: name.to_string(),
+        size: [grid.width, grid.height],
+        tiles: [grid.cols, grid.rows],
+        eye: cam.eye.to_array(),
+        target: cam.target.to_array(),
+        up: cam.up.to_array(),
+        fovy: cam.fovy,
+        near: cam.near,
+        far: cam.far,
+        sort_ms,
+        tri_sort_ms: 0.0,
+        totals,
+        chunks: Some(ChunkSummary {
+            chunks: model.chunks(),
+            culled: counts.culled,
+            verbatim: counts.verbatim,
+            straddling: counts.straddling,
+            straddling_triangles: counts.straddling_triangles,
+        }),
+        per_tile,
+    };
+    Ok((summary, tiles.into_iter().map(|(i, s, _, _)| (i, s)).collect()))
 }
 
 /// Whether a file name is one that `--dump` writes: `tile-<index>.ply` or `summary.json`.
@@ -217,16 +347,29 @@ pub fn run(
     if let Some(dir) = dump {
         prepare_dump(dir, path)?;
     }
-    let model = load_model(path, EncodeOptions::default())?;
-    let cam = model.camera(camera, &grid)?;
-    crate::cli::check_camera(&cam, grid.height)?;
-    let (summary, tiles) =
-        sort_frame(&model, &path.display().to_string(), &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
+    let name = path.display().to_string();
+    let (summary, tiles) = if let Some(model) = open_chunked(path, 1 << 30)? {
+        let cam = chunked_camera(&model, camera, &grid)?;
+        crate::cli::check_camera(&cam, grid.height)?;
+        sort_chunked_frame(&model, &name, &cam, &grid, coding)?
+    } else {
+        let model = load_model(path, EncodeOptions::default())?;
+        let cam = model.camera(camera, &grid)?;
+        crate::cli::check_camera(&cam, grid.height)?;
+        let (summary, tiles) = sort_frame(&model, &name, &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
+        (summary, tiles.into_iter().map(|t| (t.index, vec![t.bytes])).collect())
+    };
     if let Some(dir) = dump {
         clear_dump(dir)?;
-        for t in &tiles {
-            let mesh = bft::decode(&t.bytes).with_context(|| format!("tile {} does not decode", t.index))?.to_mesh();
-            write_atomic(&dir.join(format!("tile-{}.ply", t.index)), |w| codec::save::write_ply(&mesh, w))?;
+        for (index, streams) in &tiles {
+            let mut mesh = codec::Mesh::default();
+            for s in streams {
+                let m = bft::decode(s).with_context(|| format!("tile {index} does not decode"))?.to_mesh();
+                let base = mesh.positions.len() as u32;
+                mesh.positions.extend(m.positions);
+                mesh.triangles.extend(m.triangles.iter().map(|t| t.map(|v| v + base)));
+            }
+            write_atomic(&dir.join(format!("tile-{index}.ply")), |w| codec::save::write_ply(&mesh, w))?;
         }
         write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     }
@@ -248,7 +391,16 @@ pub fn run(
         println!("  BFT        {:>12} bytes   (whole model)", t.bft_bytes);
         println!("  Tiled BFT  {:>12} bytes   sort {:.1} ms", t.tiled_bft_bytes, summary.sort_ms);
         println!("  Tri        {:>12} bytes", t.tri_bytes);
-        println!("  Tiled Tri  {:>12} bytes   sort {:.1} ms", t.tiled_tri_bytes, summary.tri_sort_ms);
+        match &summary.chunks {
+            None => println!("  Tiled Tri  {:>12} bytes   sort {:.1} ms", t.tiled_tri_bytes, summary.tri_sort_ms),
+            Some(c) => {
+                println!("  Tiled Tri  {:>12} bytes", t.tiled_tri_bytes);
+                println!(
+                    "  chunks     {:>12}   {} culled, {} verbatim, {} straddling ({} triangles sorted)",
+                    c.chunks, c.culled, c.verbatim, c.straddling, c.straddling_triangles
+                );
+            }
+        }
         if let Some(dir) = dump {
             println!("  wrote {} tiles and summary.json to {}", tiles.len(), dir.display());
         }

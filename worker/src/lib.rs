@@ -13,8 +13,9 @@
 //! 4. [`node`]: the worker loop, which drives the three for the [`protocol`] messages it
 //!    receives over a [`transport`], and whose errors are a [`node::WorkerError`].
 //!
-//! `protocol` and `transport` need no GPU; the master uses them too.
+//! `protocol`, `transport` and [`chunk_cache`] need no GPU; the master uses them too.
 
+pub mod chunk_cache;
 pub mod gpu;
 pub mod node;
 pub mod pm_adapt;
@@ -44,6 +45,18 @@ impl RenderMesh {
         let normals = vertex_normals(&positions, &decoded.triangles, &decoded.duplicates);
         let indices = decoded.triangles.iter().flatten().copied().collect();
         RenderMesh { positions, normals, indices }
+    }
+
+    /// The meshes one after the other, as one (a tile's streams).
+    pub fn concat<'a>(parts: impl IntoIterator<Item = &'a RenderMesh>) -> RenderMesh {
+        let mut out = RenderMesh::default();
+        for p in parts {
+            let base = out.positions.len() as u32;
+            out.positions.extend_from_slice(&p.positions);
+            out.normals.extend_from_slice(&p.normals);
+            out.indices.extend(p.indices.iter().map(|&i| i + base));
+        }
+        out
     }
 
     pub fn triangle_count(&self) -> usize {

@@ -21,9 +21,12 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
-use crate::protocol::{FrameJob, PmFrameJob, ProtocolError, TileJob, TilePixels, TileTimes, ToMaster, ToWorker};
+use crate::protocol::{
+    FrameJob, PmFrameJob, ProtocolError, StreamSource, TileJob, TilePixels, TileStream, TileTimes, ToMaster, ToWorker,
+};
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
@@ -76,8 +79,12 @@ pub enum WorkerError {
 pub enum TileError {
     #[error("cannot decode the submesh: {0}")]
     Decode(BftError),
-    #[error("border normal for vertex {slot}, but the tile has {vertices}")]
+    #[error("border normal for vertex {slot}, but the stream has {vertices}")]
     BorderNormal { slot: u32, vertices: usize },
+    #[error("cannot decode chunk {0} of the model: {1}")]
+    ChunkDecode(u32, BftError),
+    #[error("the master named chunk {0}, which this worker does not hold")]
+    MissingChunk(u32),
     #[error("rect {0:?} is not a non-empty part of the frame")]
     BadRect([u32; 4]),
     #[error(transparent)]
@@ -195,6 +202,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     heartbeat.busy(false);
     t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
+    let mut chunks: ChunkCache<Arc<RenderMesh>> = ChunkCache::default();
     let mut first_frame = true;
     loop {
         heartbeat.busy(false);
@@ -244,13 +252,16 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             }
             _ => unreachable!("handled above"),
         };
-        // The tiles decode in parallel (they are independent), then render one after the
-        // other on the one device; the first tile in order that fails is the one reported.
-        let decoded: Vec<Result<(RenderMesh, f64), TileError>> = job.tiles.par_iter().map(decode_tile).collect();
+        // The streams decode in parallel (they are independent), then the tiles render one
+        // after the other on the one device; the first tile in order that fails is the one
+        // reported.
+        let meshes = match tile_meshes(&job, &mut chunks) {
+            Ok(m) => m,
+            Err((index, e)) => return fail(e.at(index)),
+        };
         let mut tiles = Vec::with_capacity(job.tiles.len());
-        for (tile, d) in job.tiles.iter().zip(decoded) {
-            let rendered = d.and_then(|(mesh, decode_ms)| render_tile(&mut renderer, &job, tile, &mesh, decode_ms));
-            match rendered {
+        for (tile, (mesh, decode_ms)) in job.tiles.iter().zip(meshes) {
+            match render_tile(&mut renderer, &job, tile, &mesh, decode_ms) {
                 Ok(p) => tiles.push(p),
                 Err(e) => return fail(e.at(tile.index)),
             }
@@ -259,13 +270,72 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     }
 }
 
-/// Decodes one tile and applies the border normals the master sent; returns the mesh and
+/// Every tile's mesh for a frame, with the milliseconds its streams took to decode: the
+/// streams in the message decode in parallel; then, in message order (the order the master's
+/// mirror of `chunks` follows), chunks to keep go into the cache and chunks kept before come
+/// out of it, and each tile's streams are joined in order.
+fn tile_meshes(
+    job: &FrameJob,
+    chunks: &mut ChunkCache<Arc<RenderMesh>>,
+) -> Result<Vec<(RenderMesh, f64)>, (u32, TileError)> {
+    chunks.set_limit(job.chunk_cache);
+    let streams: Vec<(u32, &TileStream)> =
+        job.tiles.iter().flat_map(|t| t.streams.iter().map(move |s| (t.index, s))).collect();
+    let decoded: Vec<Option<Result<(RenderMesh, f64), TileError>>> = streams
+        .par_iter()
+        .map(|(_, s)| match &s.source {
+            StreamSource::Bytes(b) => Some(decode_stream(b, &s.normals)),
+            StreamSource::Keep { chunk, bft } => Some(decode_stream(bft, &s.normals).map_err(|e| match e {
+                TileError::Decode(e) => TileError::ChunkDecode(*chunk, e),
+                other => other,
+            })),
+            StreamSource::Kept { .. } => None,
+        })
+        .collect();
+    let mut decoded = decoded.into_iter();
+    let mut out = Vec::with_capacity(job.tiles.len());
+    for tile in &job.tiles {
+        let mut parts: Vec<Arc<RenderMesh>> = Vec::with_capacity(tile.streams.len());
+        let mut decode_ms = 0.0;
+        for s in &tile.streams {
+            let d = decoded.next().expect("one result per stream");
+            let mesh = match (&s.source, d) {
+                (_, Some(Err(e))) => return Err((tile.index, e)),
+                (StreamSource::Keep { chunk, .. }, Some(Ok((mesh, ms)))) => {
+                    decode_ms += ms;
+                    let mesh = Arc::new(mesh);
+                    let cost = ChunkCache::<()>::cost(mesh.positions.len() as u32, mesh.triangle_count() as u32);
+                    chunks.insert(*chunk, cost, mesh.clone());
+                    mesh
+                }
+                (_, Some(Ok((mesh, ms)))) => {
+                    decode_ms += ms;
+                    Arc::new(mesh)
+                }
+                (StreamSource::Kept { chunk }, None) => match chunks.get(*chunk) {
+                    Some(m) => m.clone(),
+                    None => return Err((tile.index, TileError::MissingChunk(*chunk))),
+                },
+                (_, None) => unreachable!("every stream with bytes was decoded"),
+            };
+            parts.push(mesh);
+        }
+        let mesh = match parts.len() {
+            1 => Arc::try_unwrap(parts.pop().expect("one part")).unwrap_or_else(|shared| (*shared).clone()),
+            _ => RenderMesh::concat(parts.iter().map(|p| &**p)),
+        };
+        out.push((mesh, decode_ms));
+    }
+    Ok(out)
+}
+
+/// Decodes one stream and applies the border normals the master sent; returns the mesh and
 /// the milliseconds it took.
-fn decode_tile(tile: &TileJob) -> Result<(RenderMesh, f64), TileError> {
+fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh, f64), TileError> {
     let start = Instant::now();
-    let decoded = codec::bft::decode(&tile.bft).map_err(TileError::Decode)?;
+    let decoded = codec::bft::decode(bft).map_err(TileError::Decode)?;
     let mut mesh = RenderMesh::from_decoded(&decoded);
-    for &(slot, n) in &tile.normals {
+    for &(slot, n) in normals {
         let Some(dst) = mesh.normals.get_mut(slot as usize) else {
             return Err(TileError::BorderNormal { slot, vertices: mesh.positions.len() });
         };

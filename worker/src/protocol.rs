@@ -10,9 +10,12 @@
 //! master -> worker
 //!   kind 1 Frame     frame u32, width u32, height u32, view_proj 16 x f32 (column-major),
 //!                    flags u8 (bit 0: decode only, do not rasterize; other bits zero),
-//!                    tile count u32, then per tile:
-//!                      index u32, rect 4 x u32 (x0 y0 x1 y1), bft length u32 + bytes,
-//!                      normal count u32, then per normal: slot u32, 3 x f32
+//!                    chunk cache bound u64 (bytes), tile count u32, then per tile:
+//!                      index u32, rect 4 x u32 (x0 y0 x1 y1), stream count u32, per stream:
+//!                        source u8: 0 bytes: bft length u32 + bytes
+//!                                   1 a chunk to keep: chunk u32, bft length u32 + bytes
+//!                                   2 a chunk kept before: chunk u32
+//!                        normal count u32, then per normal: slot u32, 3 x f32
 //!   kind 2 Shutdown  (nothing)
 //!   kind 6 Model     dpm length u32 + bytes (a .dpm progressive mesh, sent once before
 //!                    its frames)
@@ -28,16 +31,21 @@
 //!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4)
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
 //! ```
-//! The normals of a tile are those of its vertices that have triangles outside the tile:
-//! the worker computes every other normal from the tile's own triangles, and these make
-//! the shading at tile borders the same as in a whole-frame render.
+//! A tile is one or more `.bft` streams (a chunked model's verbatim chunks and sorted
+//! pieces; one stream for a single-stream model), drawn one after the other. The normals of
+//! a stream are those of its vertices that have triangles outside it: the worker computes
+//! every other normal from the stream's own triangles, and these make the shading at tile and
+//! chunk borders the same as in a whole-frame render. A chunk to keep goes into the worker's
+//! [`crate::chunk_cache::ChunkCache`] with its normals applied; a chunk kept before is taken
+//! from there (the master mirrors the cache, so it names only chunks the worker holds).
 
 use thiserror::Error;
 
 const MAGIC: &[u8; 4] = b"TSRM";
-/// The protocol version this build speaks. 2 added the `Frame` flags byte; version 1
-/// messages had no version byte, so they read as version = their kind byte and are refused.
-pub const VERSION: u8 = 2;
+/// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
+/// a tile and the chunk cache; version 1 messages had no version byte, so they read as
+/// version = their kind byte and are refused.
+pub const VERSION: u8 = 3;
 
 /// A message that does not parse.
 #[derive(Debug, Error, PartialEq)]
@@ -65,10 +73,37 @@ pub enum ProtocolError {
 pub struct TileJob {
     pub index: u32,
     pub rect: [u32; 4],
-    /// The tile's compressed submesh (a `.bft` stream).
-    pub bft: Vec<u8>,
-    /// `(tile slot, unit normal)` for vertices with triangles outside the tile.
+    /// The tile's compressed submeshes, drawn in order.
+    pub streams: Vec<TileStream>,
+}
+
+/// One `.bft` stream of a tile.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileStream {
+    pub source: StreamSource,
+    /// `(stream slot, unit normal)` for vertices with triangles outside the stream.
     pub normals: Vec<(u32, [f32; 3])>,
+}
+
+/// Where a stream's bytes are.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StreamSource {
+    /// In the message: a tile submesh.
+    Bytes(Vec<u8>),
+    /// In the message, a verbatim chunk the worker keeps in its chunk cache.
+    Keep { chunk: u32, bft: Vec<u8> },
+    /// A chunk the worker kept before (no normals come with it: they were kept too).
+    Kept { chunk: u32 },
+}
+
+impl TileStream {
+    /// Bytes of `.bft` stream the message carries.
+    pub fn bft_len(&self) -> usize {
+        match &self.source {
+            StreamSource::Bytes(b) | StreamSource::Keep { bft: b, .. } => b.len(),
+            StreamSource::Kept { .. } => 0,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -80,6 +115,8 @@ pub struct FrameJob {
     /// Decode the tiles but do not rasterize them (`render --decode-only`): the answer's
     /// pixels are transparent, so the distribution can be measured apart from the renderer.
     pub decode_only: bool,
+    /// The bound of the worker's chunk cache, in bytes.
+    pub chunk_cache: u64,
     pub tiles: Vec<TileJob>,
 }
 
@@ -261,15 +298,33 @@ impl ToWorker {
                     w.f32(v);
                 }
                 w.0.push(f.decode_only as u8);
+                w.0.extend_from_slice(&f.chunk_cache.to_le_bytes());
                 w.u32(f.tiles.len() as u32);
                 for t in &f.tiles {
                     w.u32(t.index);
                     t.rect.iter().for_each(|&v| w.u32(v));
-                    w.bytes(&t.bft);
-                    w.u32(t.normals.len() as u32);
-                    for (slot, n) in &t.normals {
-                        w.u32(*slot);
-                        n.iter().for_each(|&c| w.f32(c));
+                    w.u32(t.streams.len() as u32);
+                    for st in &t.streams {
+                        match &st.source {
+                            StreamSource::Bytes(b) => {
+                                w.0.push(0);
+                                w.bytes(b);
+                            }
+                            StreamSource::Keep { chunk, bft } => {
+                                w.0.push(1);
+                                w.u32(*chunk);
+                                w.bytes(bft);
+                            }
+                            StreamSource::Kept { chunk } => {
+                                w.0.push(2);
+                                w.u32(*chunk);
+                            }
+                        }
+                        w.u32(st.normals.len() as u32);
+                        for (slot, n) in &st.normals {
+                            w.u32(*slot);
+                            n.iter().for_each(|&c| w.f32(c));
+                        }
                     }
                 }
                 w.0
@@ -316,20 +371,32 @@ impl ToWorker {
                     1 => true,
                     f => return Err(ProtocolError::Invalid(format!("unknown frame flags {f:#04x}"))),
                 };
+                let chunk_cache = u64::from_le_bytes(r.take(8, "chunk cache bound")?.try_into().unwrap());
                 let n = r.count(24, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
                 for _ in 0..n {
                     let index = r.u32("tile index")?;
                     let rect = r.rect()?;
-                    let bft = r.bytes("tile submesh")?.to_vec();
-                    let m = r.count(16, "normals")?;
-                    let mut normals = Vec::with_capacity(m);
-                    for _ in 0..m {
-                        normals.push((r.u32("normal slot")?, [r.f32("normal")?, r.f32("normal")?, r.f32("normal")?]));
+                    let k = r.count(9, "streams")?;
+                    let mut streams = Vec::with_capacity(k);
+                    for _ in 0..k {
+                        let source = match r.take(1, "stream source")?[0] {
+                            0 => StreamSource::Bytes(r.bytes("tile submesh")?.to_vec()),
+                            1 => StreamSource::Keep { chunk: r.u32("chunk")?, bft: r.bytes("chunk stream")?.to_vec() },
+                            2 => StreamSource::Kept { chunk: r.u32("chunk")? },
+                            s => return Err(ProtocolError::Invalid(format!("unknown stream source {s}"))),
+                        };
+                        let m = r.count(16, "normals")?;
+                        let mut normals = Vec::with_capacity(m);
+                        for _ in 0..m {
+                            normals
+                                .push((r.u32("normal slot")?, [r.f32("normal")?, r.f32("normal")?, r.f32("normal")?]));
+                        }
+                        streams.push(TileStream { source, normals });
                     }
-                    tiles.push(TileJob { index, rect, bft, normals });
+                    tiles.push(TileJob { index, rect, streams });
                 }
-                ToWorker::Frame(FrameJob { frame, width, height, view_proj, decode_only, tiles })
+                ToWorker::Frame(FrameJob { frame, width, height, view_proj, decode_only, chunk_cache, tiles })
             }
             2 => ToWorker::Shutdown,
             6 => ToWorker::Model(r.bytes("model")?.to_vec()),
@@ -457,9 +524,21 @@ mod tests {
             height: 480,
             view_proj: std::array::from_fn(|i| i as f32 * 0.5),
             decode_only: true,
+            chunk_cache: 1 << 40,
             tiles: vec![
-                TileJob { index: 3, rect: [0, 0, 80, 60], bft: vec![1, 2, 3], normals: vec![(5, [0.0, 1.0, 0.0])] },
-                TileJob { index: 9, rect: [80, 60, 160, 120], bft: vec![], normals: vec![] },
+                TileJob {
+                    index: 3,
+                    rect: [0, 0, 80, 60],
+                    streams: vec![
+                        TileStream { source: StreamSource::Bytes(vec![1, 2, 3]), normals: vec![(5, [0.0, 1.0, 0.0])] },
+                        TileStream {
+                            source: StreamSource::Keep { chunk: 7, bft: vec![4, 5] },
+                            normals: vec![(0, [1.0, 0.0, 0.0])],
+                        },
+                        TileStream { source: StreamSource::Kept { chunk: 2 }, normals: vec![] },
+                    ],
+                },
+                TileJob { index: 9, rect: [80, 60, 160, 120], streams: vec![] },
             ],
         })
     }

@@ -196,16 +196,27 @@ pub struct Stats {
     pub bytes: usize,
     pub connectivity_bytes: usize,
     pub geometry_bytes: usize,
+    /// Chunks of a chunked file (1 for a single stream).
+    pub chunks: u32,
+    /// A chunked file's border tables (shared vertices' links and normals).
+    pub border_bytes: usize,
 }
 
 impl Stats {
+    /// The sizes of a single-stream or a chunked file
+    /// ([`super::chunked::ChunkedFile::stats`]).
     pub fn of(bytes: &[u8]) -> Result<Stats, BftError> {
+        if super::chunked::is_chunked(bytes) {
+            return super::chunked::ChunkedFile::open(bytes)?.stats();
+        }
         let p = parse(bytes)?;
         Ok(Stats {
             header: p.header,
             bytes: bytes.len(),
             connectivity_bytes: p.sections[0].len() + p.sections[2].len() + p.sections[3].len(),
             geometry_bytes: p.sections[1].len(),
+            chunks: 1,
+            border_bytes: 0,
         })
     }
 

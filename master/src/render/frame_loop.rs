@@ -22,7 +22,7 @@ use crate::output::{Identity, LineLog};
 pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
     // Opened first, so that an unwritable path fails before any work.
     let mut stats = args.stats.as_deref().map(LineLog::create).transpose()?;
-    let mut scene = Scene::load(&args.model, args.tile_coding.into())?;
+    let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
     crate::cli::check_camera(&cam, grid.height)?;
@@ -40,7 +40,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
-        let FrameJobs { messages: msgs, tiles: mut tile_stats } = scene.jobs(&ctx)?;
+        let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks } = scene.jobs(&ctx)?;
         let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
         let sort_ms = ms(start);
 
@@ -83,8 +83,17 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
 
         if let Some(log) = stats.as_mut() {
-            let line =
-                MasterStats { frame: k, rank: 0, sort_ms, send_ms, wait_ms, composite_ms, write_ms, tiles: tile_stats };
+            let line = MasterStats {
+                frame: k,
+                rank: 0,
+                sort_ms,
+                send_ms,
+                wait_ms,
+                composite_ms,
+                write_ms,
+                chunks,
+                tiles: tile_stats,
+            };
             log.line(&serde_json::to_string(&line)?)?;
             worker_lines.sort_by_key(|l| l.rank);
             for l in worker_lines {

@@ -1,13 +1,15 @@
 //! One frame's messages to the workers, and the tile lines of its stats.
 
 use anyhow::Result;
+use codec::bft::chunked::sort::PieceKind;
 use codec::bft::tile_sort;
 use codec::view::{Camera, TileGrid};
-use worker::protocol::{FrameJob, PmFrameJob, TileJob, ToWorker};
+use worker::chunk_cache::ChunkCache;
+use worker::protocol::{FrameJob, PmFrameJob, StreamSource, TileJob, TileStream, ToWorker};
 
-use super::scene::{BftScene, PmScene, Scene};
+use super::scene::{BftScene, ChunkedScene, PmScene, Scene};
 use super::schedule::assign;
-use super::stats::TileStats;
+use super::stats::{ChunkStats, TileStats};
 use crate::cli::RenderArgs;
 
 /// What every frame's jobs are made from.
@@ -34,6 +36,7 @@ impl FrameContext<'_> {
 pub(super) struct FrameJobs {
     pub messages: Vec<(usize, Vec<u8>)>,
     pub tiles: Vec<TileStats>,
+    pub chunks: Option<ChunkStats>,
 }
 
 impl Scene {
@@ -41,6 +44,7 @@ impl Scene {
     pub fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
         match self {
             Scene::Bft(s) => s.jobs(ctx),
+            Scene::Chunked(s) => s.jobs(ctx),
             Scene::Pm(s) => Ok(s.jobs(ctx)),
         }
     }
@@ -58,16 +62,7 @@ impl BftScene {
         let borders = self.normals.for_tiles(model, &self.boxes, &tiles, grid);
         let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
         let owner = ctx.owners(&indices);
-        let mut jobs: Vec<FrameJob> = (0..ctx.workers)
-            .map(|_| FrameJob {
-                frame: ctx.frame,
-                width: grid.width,
-                height: grid.height,
-                view_proj: vp.to_cols_array(),
-                decode_only: ctx.args.decode_only,
-                tiles: vec![],
-            })
-            .collect();
+        let mut jobs = ctx.frame_jobs(vp, 0);
         let mut tile_stats = Vec::with_capacity(tiles.len());
         for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
             tile_stats.push(TileStats {
@@ -81,12 +76,97 @@ impl BftScene {
             jobs[w - 1].tiles.push(TileJob {
                 index: tile.index as u32,
                 rect: grid.tile_rect(tile.index),
-                bft: tile.bytes,
-                normals,
+                streams: vec![TileStream { source: StreamSource::Bytes(tile.bytes), normals }],
             });
         }
-        let messages = jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect();
-        Ok(FrameJobs { messages, tiles: tile_stats })
+        Ok(FrameJobs { messages: frame_messages(jobs), tiles: tile_stats, chunks: None })
+    }
+}
+
+impl FrameContext<'_> {
+    /// One empty frame job per worker.
+    fn frame_jobs(&self, vp: glam::Mat4, chunk_cache: u64) -> Vec<FrameJob> {
+        (0..self.workers)
+            .map(|_| FrameJob {
+                frame: self.frame,
+                width: self.grid.width,
+                height: self.grid.height,
+                view_proj: vp.to_cols_array(),
+                decode_only: self.args.decode_only,
+                chunk_cache,
+                tiles: vec![],
+            })
+            .collect()
+    }
+}
+
+/// Every worker's frame message, by rank.
+fn frame_messages(jobs: Vec<FrameJob>) -> Vec<(usize, Vec<u8>)> {
+    jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect()
+}
+
+impl ChunkedScene {
+    /// One frame of a chunked model: the chunked sort, then each worker's tiles, whose
+    /// verbatim chunks go as bytes (with their border normals) unless the worker kept them,
+    /// as this rank's mirror of its cache says.
+    fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
+        let grid = ctx.grid;
+        let vp = ctx.camera.view_proj(grid.aspect());
+        let (tiles, counts) = self.model.sort(vp, grid, self.coding)?;
+        let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
+        let owner = ctx.owners(&indices);
+        self.mirrors.resize_with(ctx.workers, ChunkCache::default);
+        for m in &mut self.mirrors {
+            m.set_limit(self.worker_cache);
+        }
+        let mut jobs = ctx.frame_jobs(vp, self.worker_cache);
+        let mut stats = ChunkStats {
+            culled: counts.culled,
+            verbatim: counts.verbatim,
+            straddling: counts.straddling,
+            straddling_triangles: counts.straddling_triangles,
+            built: counts.built,
+            cache_mb: self.model.cached_bytes() as f64 / (1 << 20) as f64,
+            ..Default::default()
+        };
+        let file = &self.model.file;
+        let mut tile_stats = Vec::with_capacity(tiles.len());
+        for (tile, &w) in tiles.into_iter().zip(&owner) {
+            let mirror = &mut self.mirrors[w - 1];
+            let triangles = tile.triangles() as u32;
+            let mut streams = Vec::with_capacity(tile.pieces.len());
+            for piece in tile.pieces {
+                streams.push(match piece.kind {
+                    PieceKind::Sorted { bytes, normals, .. } => {
+                        TileStream { source: StreamSource::Bytes(bytes), normals }
+                    }
+                    PieceKind::Verbatim => {
+                        let chunk = piece.chunk;
+                        if mirror.get(chunk).is_some() {
+                            stats.kept += 1;
+                            TileStream { source: StreamSource::Kept { chunk }, normals: vec![] }
+                        } else {
+                            stats.sent += 1;
+                            let e = &file.entries[chunk as usize];
+                            mirror.insert(chunk, ChunkCache::<()>::cost(e.slots, e.triangles), ());
+                            let normals = file.border(chunk as usize)?.slot_normals();
+                            let bft = file.chunk_bft(chunk as usize).to_vec();
+                            TileStream { source: StreamSource::Keep { chunk, bft }, normals }
+                        }
+                    }
+                });
+            }
+            tile_stats.push(TileStats {
+                index: tile.index as u32,
+                worker: w,
+                triangles,
+                bytes: streams.iter().map(TileStream::bft_len).sum(),
+                tri_bytes: triangles as usize * codec::tri_sort::TRIANGLE_BYTES,
+                normal_bytes: streams.iter().map(|s| s.normals.len() * 16).sum(),
+            });
+            jobs[w - 1].tiles.push(TileJob { index: tile.index as u32, rect: grid.tile_rect(tile.index), streams });
+        }
+        Ok(FrameJobs { messages: frame_messages(jobs), tiles: tile_stats, chunks: Some(stats) })
     }
 }
 
@@ -142,6 +222,6 @@ impl PmScene {
             .filter(|(_, j)| !j.tiles.is_empty())
             .map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode()))
             .collect();
-        FrameJobs { messages, tiles: tile_stats }
+        FrameJobs { messages, tiles: tile_stats, chunks: None }
     }
 }

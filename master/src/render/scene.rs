@@ -9,13 +9,29 @@ use codec::bft::tile_sort::{Boxes, Sorter};
 use codec::input::ModelKind;
 use codec::view::{Camera, TileGrid};
 
-use crate::cli::CameraArgs;
-use crate::sort::{load_model, Model};
+use worker::chunk_cache::ChunkCache;
+
+use crate::cli::{CameraArgs, RenderArgs};
+use crate::sort::{chunked_camera, load_model, open_chunked, Chunked, Model};
+
+const MB: usize = 1 << 20;
 
 /// What rank 0 renders.
 pub(super) enum Scene {
     Bft(BftScene),
+    Chunked(ChunkedScene),
     Pm(PmScene),
+}
+
+/// A chunked BFT model, memory-mapped, and rank 0's mirror of every worker's chunk cache
+/// (`worker::chunk_cache`), from which it knows which verbatim chunks a worker holds.
+pub(super) struct ChunkedScene {
+    pub model: Chunked,
+    pub coding: codec::bft::Coding,
+    /// Indexed by worker rank - 1.
+    pub mirrors: Vec<ChunkCache<()>>,
+    /// Each worker's chunk cache bound in bytes.
+    pub worker_cache: u64,
 }
 
 /// A BFT model (or a mesh encoded on load), with what its per-frame sort reuses.
@@ -37,7 +53,11 @@ pub(super) struct PmScene {
 impl Scene {
     /// Loads the model at `path`, of the kind its magic bytes say; BFT tiles will be coded
     /// with `coding`.
-    pub fn load(path: &Path, coding: codec::bft::Coding) -> Result<Scene> {
+    pub fn load(path: &Path, coding: codec::bft::Coding, args: &RenderArgs) -> Result<Scene> {
+        if let Some(model) = open_chunked(path, args.cache_mb as usize * MB)? {
+            let worker_cache = args.worker_cache_mb * MB as u64;
+            return Ok(Scene::Chunked(ChunkedScene { model, coding, mirrors: Vec::new(), worker_cache }));
+        }
         if ModelKind::of(path) != ModelKind::Dpm {
             let model = load_model(path, codec::bft::EncodeOptions::default())?;
             let normals = BorderNormals::of(&model.tiles.decoded);
@@ -62,6 +82,7 @@ impl Scene {
     pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
         match self {
             Scene::Bft(s) => s.model.camera(args, grid),
+            Scene::Chunked(s) => chunked_camera(&s.model, args, grid),
             Scene::Pm(PmScene { bbox: (lo, hi), .. }) => args.camera(*lo, *hi, grid.aspect()),
         }
     }

@@ -14,7 +14,26 @@ pub(super) struct MasterStats {
     pub wait_ms: f64,
     pub composite_ms: f64,
     pub write_ms: f64,
+    /// Chunked models: what the frame did with the chunks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chunks: Option<ChunkStats>,
     pub tiles: Vec<TileStats>,
+}
+
+/// A chunked model's frame: chunks culled, forwarded verbatim and sorted, the triangles of
+/// the sorted ones, how many of those had their tables built (not cached), and how many
+/// verbatim chunks went as bytes or as a name of a chunk the worker kept.
+#[derive(Serialize, Clone, Copy, Debug, Default)]
+pub(super) struct ChunkStats {
+    pub culled: u32,
+    pub verbatim: u32,
+    pub straddling: u32,
+    pub straddling_triangles: u64,
+    pub built: u32,
+    pub sent: u32,
+    pub kept: u32,
+    /// The master's cache of straddling chunks' tables, in MB.
+    pub cache_mb: f64,
 }
 
 #[derive(Serialize)]

@@ -26,8 +26,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 use thiserror::Error;
 
-use super::{write_head, Border, ChunkEntry, ChunkedHeader, DEFAULT_CHUNK_TRIANGLES};
+use super::{oct_decode, oct_encode, write_head, Border, ChunkEntry, ChunkedHeader, DEFAULT_CHUNK_TRIANGLES};
 use crate::bft::encode::encode_quantized;
+use crate::bft::format::Header;
 use crate::bft::normals::{face_normal_sums, unit};
 use crate::load::LoadError;
 use crate::mesh::{bounding_box, Mesh, MeshError, Quantization};
@@ -44,6 +45,9 @@ pub struct ChunkOptions {
     pub temp_dir: Option<PathBuf>,
     /// Return the input vertex of every slot ([`ChunkedEncoded::slot_vertex`]), for tests.
     pub keep_slot_vertex: bool,
+    /// Write a model that makes one chunk as a single-stream file (version 2), which it is
+    /// (the default); else as a chunked file of one chunk.
+    pub one_chunk_as_stream: bool,
 }
 
 impl Default for ChunkOptions {
@@ -53,6 +57,7 @@ impl Default for ChunkOptions {
             chunk_triangles: DEFAULT_CHUNK_TRIANGLES,
             temp_dir: None,
             keep_slot_vertex: false,
+            one_chunk_as_stream: true,
         }
     }
 }
@@ -435,7 +440,7 @@ pub fn encode_chunked(
         .into_iter()
         .map(|(mut border, vertices)| {
             border_slots += border.slots.len() as u64;
-            border.normals = vertices.iter().map(|v| unit(normal_sums[v])).collect();
+            border.normals = vertices.iter().map(|v| oct_decode(oct_encode(unit(normal_sums[v])))).collect();
             border.to_bytes()
         })
         .collect();
@@ -460,6 +465,19 @@ pub fn encode_chunked(
         step: quant.step,
         bbox_max: quant.dequantize(top),
     };
+    if chunks == 1 && options.one_chunk_as_stream {
+        // One chunk is today's model: its stream alone, as a single-stream file, with the
+        // input's vertex count (unused vertices included) in its header, as `bft::encode`
+        // writes it (the chunk numbers the used vertices in input order, so its traversal is
+        // `bft::encode`'s, and so are its bytes).
+        let mut stream = vec![0u8; entries[0].bft_len as usize];
+        streams.reader()?.read_exact(&mut stream)?;
+        let parts = crate::bft::format::parse(&stream).map_err(|e| io::Error::other(e.to_string()))?;
+        let single = crate::bft::format::write(&Header { input_vertices: n as u32, ..parts.header }, parts.sections);
+        out.write_all(&single)?;
+        progress("writing", total, total);
+        return Ok(ChunkedEncoded { header, bytes: single.len() as u64, slot_vertex });
+    }
     out.write_all(&write_head(&header, &entries))?;
     let mut streams = streams.reader()?;
     let mut buf = Vec::new();

@@ -132,10 +132,13 @@ pub struct FrameCounts {
     pub straddling_triangles: u64,
     /// Straddling chunks whose tables were built this frame (not found in the cache).
     pub built: u32,
+    /// Triangles with a non-empty box `[t]`: the verbatim chunks' and the straddling chunks'
+    /// that are on screen.
+    pub visible_triangles: u64,
 }
 
 /// A straddling chunk's index, its `(tile, piece)`s, and whether its tables were built.
-type SortedChunk = (usize, Vec<(usize, Piece)>, bool);
+type SortedChunk = (usize, Vec<(usize, Piece)>, bool, u64);
 
 /// A straddling chunk's tables: its `TileModel` and normals, built on first use.
 pub struct Straddler {
@@ -253,6 +256,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
                 let mut boxes = Boxes::default();
                 boxes_into(&s.model, view_proj, grid, &mut boxes);
                 let tiles = Sorter::new(coding).sort(&s.model, &boxes, grid)?;
+                let visible = boxes.triangles.iter().filter(|b| !b.is_empty()).count() as u64;
                 let normals = s.normals.for_tiles(&s.model, &boxes, &tiles, grid);
                 let pieces = tiles
                     .into_iter()
@@ -262,22 +266,26 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
                         (t.index, Piece { chunk: i as u32, triangles: t.triangles, kind })
                     })
                     .collect();
-                Ok((i, pieces, built))
+                Ok((i, pieces, built, visible))
             })
             .collect::<Result<_, SortError>>()?;
         let mut per_tile: Vec<Vec<Piece>> = (0..grid.tiles()).map(|_| Vec::new()).collect();
         let mut sorted = sorted.into_iter().peekable();
         for (i, c) in classes.iter().enumerate() {
             match c {
-                Class::Verbatim(t) => per_tile[*t as usize].push(Piece {
-                    chunk: i as u32,
-                    triangles: self.file.entries[i].triangles,
-                    kind: PieceKind::Verbatim,
-                }),
+                Class::Verbatim(t) => {
+                    counts.visible_triangles += self.file.entries[i].triangles as u64;
+                    per_tile[*t as usize].push(Piece {
+                        chunk: i as u32,
+                        triangles: self.file.entries[i].triangles,
+                        kind: PieceKind::Verbatim,
+                    })
+                }
                 Class::Straddling => {
-                    let (j, pieces, built) = sorted.next().expect("one result per straddling chunk");
+                    let (j, pieces, built, visible) = sorted.next().expect("one result per straddling chunk");
                     debug_assert_eq!(i, j);
                     counts.built += built as u32;
+                    counts.visible_triangles += visible;
                     for (t, p) in pieces {
                         per_tile[t].push(p);
                     }
