@@ -23,6 +23,7 @@ use thiserror::Error;
 use crate::mesh::Mesh;
 
 mod polygon;
+pub mod stream;
 
 /// A file that could not be read as a mesh.
 #[derive(Debug, Error)]
