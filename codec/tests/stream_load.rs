@@ -197,6 +197,46 @@ element tristrips 1\nproperty list int int vertex_indices\nend_header\n",
     b.bytes
 }
 
+/// Little-endian with the usual layout (faces with only their corner list), which the
+/// reader decodes on a faster path: a triangle, a quad, a dropped 2-corner face with a
+/// negative index, a concave pentagon.
+fn little_endian_usual() -> Vec<u8> {
+    let mut b = Binary::new(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    for p in [[0.0f32, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, 0.0], [1.0, 0.5, 0.0], [0.0, 2.0, 0.0]] {
+        b.f32(p[0]).f32(p[1]).f32(p[2]);
+    }
+    b.u8(3).i32(0).i32(1).i32(2);
+    b.u8(4).i32(0).i32(1).i32(2).i32(4);
+    b.u8(2).i32(-5).i32(1);
+    b.u8(5).i32(0).i32(1).i32(2).i32(3).i32(4);
+    b.bytes
+}
+
+#[test]
+fn binary_ply_little_endian_usual_layout() {
+    let files = Files::new();
+    let bytes = little_endian_usual();
+    let m = files.same("u.ply", &bytes);
+    assert_eq!(&m.triangles[..3], &[[0, 1, 2], [0, 1, 2], [0, 2, 4]]);
+    assert_eq!(m.triangles.len(), 3 + 3, "the pentagon is concave at corner 3: 3 triangles");
+    // Errors in the last face and in the first.
+    let last = bytes.len() - 4;
+    for (at, bad, what) in [(last, 5, "element 'face' 3 uses vertex 5"), (last, -2, "element 'face' 3: vertex index -2")] {
+        let mut b = bytes.clone();
+        b[at..].copy_from_slice(&i32::to_le_bytes(bad));
+        let e = files.refused("u.ply", &b);
+        assert!(e.contains(what), "{e}");
+    }
+    let first = bytes.len() - 4 * 14 - 4 + 1;
+    let mut b = bytes.clone();
+    b[first..first + 4].copy_from_slice(&i32::to_le_bytes(9));
+    let e = files.refused("u.ply", &b);
+    assert!(e.contains("element 'face' 0 uses vertex 9"), "{e}");
+}
+
 #[test]
 fn binary_ply_big_endian_with_odd_types() {
     let m = Files::new().same("b.ply", &big_endian_odd_types());
@@ -232,7 +272,7 @@ property list int int vertex_indices\nend_header\n",
 #[test]
 fn truncated_binary_ply_is_an_error_at_every_length() {
     let files = Files::new();
-    for bytes in [big_endian_odd_types(), little_endian_with_lists()] {
+    for bytes in [big_endian_odd_types(), little_endian_with_lists(), little_endian_usual()] {
         let header = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
         for len in 0..bytes.len() {
             let e = files.refused("t.ply", &bytes[..len]);
@@ -421,11 +461,12 @@ fn mutated(text: &[u8], rng: &mut XorShift) -> Vec<u8> {
 #[test]
 fn corrupted_files_are_read_alike_or_refused_alike() {
     let files = Files::new();
-    let bases: [(&str, Vec<u8>); 5] = [
+    let bases: [(&str, Vec<u8>); 6] = [
         ("m.ply", ASCII_PLY.as_bytes().to_vec()),
         ("m.ply", ASCII_PLY.replace("face 4", "tristrips 1").replace("6 0 1 2 3 4 5", "7 0 1 2 -1 3 4 5").into_bytes()),
         ("m.ply", big_endian_odd_types()),
         ("m.ply", little_endian_with_lists()),
+        ("m.ply", little_endian_usual()),
         ("m.obj", OBJ.as_bytes().to_vec()),
     ];
     let mut rng = XorShift(0x5EED_0F57_12EA);
@@ -454,21 +495,28 @@ fn corrupted_files_are_read_alike_or_refused_alike() {
     assert!(loaded > 300 && refused > 300, "{loaded} loaded, {refused} refused");
 }
 
-/// Times the streaming passes against `load_path` on the dragon, or on the file named by
-/// `STREAM_FILE` (streaming only: for files too large to load whole).
+/// Times the streaming passes and `load_path` on the dragon, or on the file named by
+/// `STREAM_FILE`; `STREAM_READER=stream` or `load_path` times one of them only (the
+/// default for `STREAM_FILE` is `stream`: a file too large to load whole), so that
+/// `/usr/bin/time -v` on the test binary gives that reader's peak memory.
 /// `cargo test --release -p tessera-codec --test stream_load -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn stream_timings() {
-    let (path, compare) = match std::env::var_os("STREAM_FILE") {
-        Some(p) => (PathBuf::from(p), false),
-        None => (mesh_path("stanford/dragon_vrip.ply.gz"), true),
-    };
-    if compare {
+    let file = std::env::var_os("STREAM_FILE").map(PathBuf::from);
+    let reader = std::env::var("STREAM_READER").unwrap_or(if file.is_some() { "stream" } else { "both" }.into());
+    let path = file.unwrap_or_else(|| mesh_path("stanford/dragon_vrip.ply.gz"));
+    let mut mesh = None;
+    if reader == "load_path" || reader == "both" {
         let t = Instant::now();
-        let mesh = load_path(&path).unwrap();
+        let m = load_path(&path).unwrap();
         let s = t.elapsed().as_secs_f64();
-        println!("load_path: {} vertices, {} triangles in {s:.3} s", mesh.positions.len(), mesh.triangles.len());
+        let (v, n) = (m.positions.len(), m.triangles.len());
+        println!("load_path {}: {v} vertices, {n} triangles in {s:.3} s", path.display());
+        mesh = Some(m);
+    }
+    if reader == "load_path" {
+        return;
     }
     let t = Instant::now();
     let positions = read_positions(&path, &mut |_| {}).unwrap();
@@ -481,12 +529,16 @@ fn stream_timings() {
     };
     let n = for_each_triangle(&path, &positions, &mut add, &mut |_| {}).unwrap();
     let f = t.elapsed().as_secs_f64();
+    if let Some(m) = mesh {
+        assert!(identical(&stream(&path).unwrap(), &m), "the readers differ");
+    }
     println!(
         "stream {}: read_positions {} vertices in {p:.3} s, for_each_triangle {n} triangles in {f:.3} s \
-         ({:.1} M triangles/s; both passes {:.3} s, checksum {sum})",
+         ({:.1} M triangles/s; both passes {:.3} s, {:.1} M triangles/s; checksum {sum})",
         path.display(),
         positions.len(),
         n as f64 / f / 1e6,
-        p + f
+        p + f,
+        n as f64 / (p + f) / 1e6,
     );
 }

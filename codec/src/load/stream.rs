@@ -15,9 +15,18 @@
 //! mesh: the same positions in the same order, the same triangles in the same order, made
 //! by the same triangulation of polygons (`load/polygon.rs`), the same unrolling of PLY
 //! triangle strips and the same dropped PLY faces of fewer than three corners, OBJ points
-//! and lines as triangles without area. A file `load_path` refuses is refused here too,
-//! with a one-line message that names the file, what is wrong and where (a line number in
-//! text, an element and record number in binary PLY). A truncated file is an error.
+//! and lines as triangles without area. A file `load_path` refuses is refused here too, with
+//! a one-line message that names the file, what is wrong and where (a line number in text,
+//! an element and record number in binary PLY), and the other way round (a test compares
+//! both on thousands of corrupted files). A truncated file is an error. The exceptions, in
+//! files no writer makes, are refused here and not by `load_path`:
+//! - a PLY header line over 64 KiB (a keyword and a few words, or a comment);
+//! - a PLY number beyond 64 bits in the header (on which ply-rs panics);
+//! - a PLY `vertex` element of more than 2^32 vertices, or of more than 2^24 without
+//!   properties (which hold no bytes of the file but 12 of memory each);
+//! - an OBJ file whose objects need more than 2^32 - 1 vertices in all (tobj wraps its
+//!   32-bit indices around), or with a normal index so far out of range (about -6·10^18)
+//!   that tobj's bounds check wraps around and lets it through.
 //!
 //! * **PLY**: `positions` are the `vertex` element's `x`, `y`, `z`, all of them in file
 //!   order; triangles are those of the `tristrips` element (if any) followed by those of
@@ -64,9 +73,13 @@ pub fn can_stream(path: &Path) -> bool {
 /// vertex in file order, for OBJ the vertices the faces use in tobj's order (see the
 /// [module documentation](self)).
 ///
+/// A PLY file is read up to the end of its `vertex` element (errors in the elements after it
+/// are [`for_each_triangle`]'s to find); an OBJ file is read and checked whole, twice (the
+/// positions are not held while the first read numbers them).
+///
 /// `progress` is called as the file is read with the number of bytes of the file (as stored,
-/// before decompression) read so far by this call; an OBJ file is read twice, so the count
-/// goes up to twice its size.
+/// before decompression) read so far by this call; for OBJ the count goes up to twice the
+/// file's size.
 pub fn read_positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
     match streamed_format(path)? {
         Format::Ply => ply::positions(path, progress),
@@ -130,6 +143,7 @@ impl<'e> Emitter<'e> {
         }
     }
 
+    #[inline]
     fn triangle(&mut self, t: [u32; 3]) -> Result<(), LoadError> {
         (self.f)(t)?;
         self.count += 1;
@@ -291,6 +305,7 @@ impl<'a> Source<'a> {
 
     /// Makes at least `n` unread bytes available in [`Self::unread`]; false if the file
     /// ends first.
+    #[inline]
     fn ensure(&mut self, n: usize) -> Result<bool, LoadError> {
         if n > self.buf.len() {
             self.buf.resize(n, 0);
@@ -303,10 +318,12 @@ impl<'a> Source<'a> {
         Ok(true)
     }
 
+    #[inline]
     fn unread(&self) -> &[u8] {
         &self.buf[self.pos..self.end]
     }
 
+    #[inline]
     fn consume(&mut self, n: usize) {
         self.pos += n;
     }

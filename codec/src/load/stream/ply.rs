@@ -50,6 +50,7 @@ pub(super) enum Scalar {
 }
 
 /// The first `N` bytes of `b` (which the callers have made sure it holds).
+#[inline]
 fn array<const N: usize>(b: &[u8]) -> [u8; N] {
     let mut a = [0; N];
     a.copy_from_slice(&b[..N]);
@@ -96,6 +97,7 @@ impl Scalar {
     }
 
     /// The binary value at the start of `b` as `f64`, as `load.rs` converts ply-rs's values.
+    #[inline(always)]
     fn f64_at(self, b: &[u8], big: bool) -> f64 {
         match self {
             Scalar::I8 => f64::from(decode!(i8, b, big)),
@@ -111,6 +113,7 @@ impl Scalar {
 
     /// The binary integer at the start of `b`. Floating-point types are never indices or
     /// counts here (the callers check); they convert with `as`.
+    #[inline(always)]
     fn int_at(self, b: &[u8], big: bool) -> i64 {
         match self {
             Scalar::I8 => i64::from(decode!(i8, b, big)),
@@ -628,6 +631,7 @@ impl<'a> Reader<'a> {
     }
 
     /// The next `n` bytes of the record at `at`.
+    #[inline]
     fn take(&mut self, n: usize, at: &At, count: u64) -> Result<&[u8], LoadError> {
         if !self.src.ensure(n)? {
             return Err(truncated(self.src.path, at, count));
@@ -793,10 +797,68 @@ impl<'a> Reader<'a> {
             let unread = self.src.unread();
             let k = ((unread.len() / size) as u64).min(e.count - i) as usize;
             for record in unread[..k * size].chunks_exact(size) {
-                positions.push(axes.map(|a| a.map_or(0.0, |(at, ty)| ty.f64_at(&record[at..], big) as f32)));
+                let get = |axis: Option<(usize, Scalar)>| match axis {
+                    Some((at, ty)) => ty.f64_at(&record[at..], big) as f32,
+                    None => 0.0,
+                };
+                positions.push([get(axes[0]), get(axes[1]), get(axes[2])]);
             }
             self.src.consume(k * size);
             i += k as u64;
+        }
+        Ok(())
+    }
+
+    /// Binary faces whose one property is their corner list (`property list uchar int
+    /// vertex_indices`, as most writers have it), decoded record after record where they lie
+    /// in the buffer. A record that is not whole in the buffer, or that is wrong, is left to
+    /// [`Self::binary_record`], which reads past the buffer's end or words the error.
+    fn list_only_faces(
+        &mut self,
+        e: &Element,
+        (count, item): (Scalar, Scalar),
+        roles: &[Role],
+        out: &mut Emitter,
+    ) -> Result<(), LoadError> {
+        let big = self.encoding == Encoding::BigEndian;
+        let (count_size, item_size) = (count.size(), item.size());
+        let vertices = out.positions.len() as u64;
+        // A corner, if it is a vertex.
+        let corner = |b: &[u8]| u32::try_from(item.int_at(b, big)).ok().filter(|&c| u64::from(c) < vertices);
+        let mut i = 0;
+        while i < e.count {
+            let unread = self.src.unread();
+            let mut at = 0;
+            while i < e.count && at + count_size <= unread.len() {
+                let Ok(n) = usize::try_from(count.int_at(&unread[at..], big)) else { break };
+                let list = at + count_size;
+                let end = list.saturating_add(n.saturating_mul(item_size));
+                if end > unread.len() {
+                    break;
+                }
+                if n == 3 {
+                    let c = |k: usize| corner(&unread[list + k * item_size..]);
+                    let (Some(a), Some(b), Some(c)) = (c(0), c(1), c(2)) else { break };
+                    out.triangle([a, b, c])?;
+                } else if n > 3 {
+                    out.corners.clear();
+                    for b in unread[list..end].chunks_exact(item_size) {
+                        let Some(c) = corner(b) else { break };
+                        out.corners.push(c);
+                    }
+                    if out.corners.len() < n {
+                        break;
+                    }
+                    out.polygon()?;
+                }
+                at = end;
+                i += 1;
+            }
+            self.src.consume(at);
+            if i < e.count {
+                self.binary_record(e, i, roles, &mut Faces { out: &mut *out, keep: false })?;
+                i += 1;
+            }
         }
         Ok(())
     }
@@ -817,9 +879,12 @@ impl<'a> Reader<'a> {
             match e.name.as_str() {
                 // Read in the positions pass.
                 "vertex" => self.skip_element(e, false)?,
-                "face" if faces && corners.is_some() => {
-                    self.records(e, &roles, &mut Faces { out: &mut *out, keep: false }, |_| {})?
-                }
+                "face" if faces && corners.is_some() => match (self.ascii(), &e.properties[..]) {
+                    (false, [Property { kind: Kind::List { count, item }, .. }]) if count.is_integer() => {
+                        self.list_only_faces(e, (*count, *item), &roles, out)?
+                    }
+                    _ => self.records(e, &roles, &mut Faces { out: &mut *out, keep: false }, |_| {})?,
+                },
                 "tristrips" if strips && corners.is_some() => {
                     self.records(e, &roles, &mut Strips { out: &mut *out, last: [0; 2], run: 0 }, |_| {})?
                 }
