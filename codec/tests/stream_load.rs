@@ -224,7 +224,9 @@ fn binary_ply_little_endian_usual_layout() {
     assert_eq!(m.triangles.len(), 3 + 3, "the pentagon is concave at corner 3: 3 triangles");
     // Errors in the last face and in the first.
     let last = bytes.len() - 4;
-    for (at, bad, what) in [(last, 5, "element 'face' 3 uses vertex 5"), (last, -2, "element 'face' 3: vertex index -2")] {
+    for (at, bad, what) in
+        [(last, 5, "element 'face' 3 uses vertex 5"), (last, -2, "element 'face' 3: vertex index -2")]
+    {
         let mut b = bytes.clone();
         b[at..].copy_from_slice(&i32::to_le_bytes(bad));
         let e = files.refused("u.ply", &b);

@@ -372,3 +372,44 @@ impl<'a> Source<'a> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::input::{max_decompressed_bytes, set_max_decompressed_bytes};
+
+    #[test]
+    fn gzip_is_capped_and_checked_as_in_core() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = "v 0 0 0\n".repeat(5000) + "f 1 2 3\n";
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut gz, text.as_bytes()).unwrap();
+        let gz = gz.finish().unwrap();
+        let path = dir.path().join("a.obj.gz");
+        std::fs::write(&path, &gz).unwrap();
+        assert_eq!(read_positions(&path, &mut |_| {}).unwrap().len(), 3, "the vertices the face uses");
+        // No other test in this binary decompresses more than 10 kB.
+        let limit = max_decompressed_bytes();
+        set_max_decompressed_bytes(10_000);
+        let (e, in_core) = (read_positions(&path, &mut |_| {}), super::super::load_path(&path));
+        set_max_decompressed_bytes(limit);
+        let (e, in_core) = (e.unwrap_err().to_string(), in_core.unwrap_err().to_string());
+        assert!(e.contains("decompresses to more than 10000 bytes") && e.contains("--max-decompressed"), "{e}");
+        assert_eq!(e, in_core);
+
+        std::fs::write(&path, &gz[..gz.len() / 2]).unwrap();
+        let e = read_positions(&path, &mut |_| {}).unwrap_err().to_string();
+        assert!(e.starts_with(&path.display().to_string()) && e.contains("corrupt gzip data"), "{e}");
+    }
+
+    #[test]
+    fn only_regular_files_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("f.ply");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let e = read_positions(&fifo, &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("not a regular file (a FIFO)"), "{e}");
+        let e = read_positions(&dir.path().join("missing.obj"), &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("cannot read"), "{e}");
+    }
+}
