@@ -34,16 +34,24 @@ pub fn max_decompressed_bytes() -> u64 {
 /// Reads a whole regular file. Anything else (a device, a FIFO, a socket, a directory, or a
 /// symlink to one) is refused without reading, with a message that says what it is.
 pub fn read_file(path: &Path) -> Result<Vec<u8>, String> {
+    let (mut file, len) = open_regular(path)?;
+    let mut out = Vec::with_capacity(len.min(isize::MAX as u64) as usize);
+    // Read no more than the length the file had when opened, so a file that grows while we
+    // read it cannot make us read without end.
+    (&mut file).take(len).read_to_end(&mut out).map_err(|e| format!("cannot read: {e}"))?;
+    Ok(out)
+}
+
+/// Opens a regular file for reading, refusing anything else as [`read_file`] does, and
+/// returns it with its length when opened (the most a reader should take from it). For
+/// readers that stream a file instead of reading it whole (`load::stream`).
+pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, u64), String> {
     let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
     if !meta.is_file() {
         return Err(format!("not a regular file ({}); inputs must be regular files", kind(&meta)));
     }
-    let mut file = std::fs::File::open(path).map_err(|e| format!("cannot read: {e}"))?;
-    let mut out = Vec::with_capacity(meta.len().min(isize::MAX as u64) as usize);
-    // Read no more than the length the file had when opened, so a file that grows while we
-    // read it cannot make us read without end.
-    (&mut file).take(meta.len()).read_to_end(&mut out).map_err(|e| format!("cannot read: {e}"))?;
-    Ok(out)
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read: {e}"))?;
+    Ok((file, meta.len()))
 }
 
 /// The three kinds of model Tessera reads, told apart by their magic bytes.

@@ -12,6 +12,9 @@
 //! zero-area stitching triangles (a repeated index) dropped, as strip writers intend.
 //! An OBJ file with several objects or groups is merged into one mesh by concatenation.
 //! Every error names the file and what is wrong; no input makes a loader panic.
+//!
+//! For files too large to hold, [`stream`] reads PLY and OBJ in two passes (the positions,
+//! then the triangles one by one), with exactly this module's result.
 
 use std::io::{BufRead, BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
@@ -23,6 +26,7 @@ use thiserror::Error;
 use crate::mesh::Mesh;
 
 mod polygon;
+pub mod stream;
 
 /// A file that could not be read as a mesh.
 #[derive(Debug, Error)]
