@@ -14,8 +14,12 @@ use testkit::{canonical, sorted_canonical};
 
 /// A chunked file (of one chunk too), with the input vertex of every slot.
 fn chunked(mesh: &Mesh, chunk: u32) -> (Vec<u8>, Vec<u32>) {
-    let opts =
-        ChunkOptions { chunk_triangles: chunk, keep_slot_vertex: true, one_chunk_as_stream: false, ..Default::default() };
+    let opts = ChunkOptions {
+        chunk_triangles: chunk,
+        keep_slot_vertex: true,
+        one_chunk_as_stream: false,
+        ..Default::default()
+    };
     let (bytes, enc) = encode_mesh_chunked(mesh, &opts).expect("encodes");
     assert_eq!(enc.bytes as usize, bytes.len());
     (bytes, enc.slot_vertex)

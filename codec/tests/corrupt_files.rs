@@ -49,12 +49,16 @@ fn random_byte_flips_are_detected() {
 fn wrong_magic_and_version_are_named() {
     let mut b = encoded("odedstein/cube.obj");
     assert_eq!(u16::from_le_bytes([b[8], b[9]]), bft::VERSION);
-    for v in [0u16, 3, 9, u16::MAX] {
+    for v in [0u16, 4, 9, u16::MAX] {
         b[8..10].copy_from_slice(&v.to_le_bytes());
         let e = bft::decode(&b).unwrap_err();
         assert_eq!(e, FormatError::UnsupportedVersion { format: Format::Bft, found: v, known: bft::READS });
-        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1 and 2)"));
+        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2 and 3)"));
     }
+    // Version 3 is a chunked file, whose header a single stream's is not.
+    b[8..10].copy_from_slice(&3u16.to_le_bytes());
+    let e = bft::decode(&b).unwrap_err().to_string();
+    assert!(e.contains("chunked header is 72 bytes"), "{e}");
     b[0] = b'X';
     assert_eq!(bft::decode(&b).unwrap_err(), BftError::BadMagic(Format::Bft));
     assert_eq!(bft::decode(b"ply\nformat ascii").unwrap_err(), BftError::BadMagic(Format::Bft));

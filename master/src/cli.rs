@@ -272,6 +272,10 @@ pub struct RenderArgs {
     /// Orbit the camera once around the model over the frames.
     #[arg(long)]
     pub orbit: bool,
+    /// The orbit's whole angle in degrees over the frames (with --orbit): 360 goes once
+    /// around; `--frames 31 --orbit-degrees 30` turns one degree a frame.
+    #[arg(long, default_value_t = 360.0, value_parser = parse_non_negative)]
+    pub orbit_degrees: f32,
     /// Output PNG; with several frames, frame-0001.png and so on beside it.
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
@@ -302,8 +306,9 @@ pub struct RenderArgs {
     /// that straddles a tile border is decoded once and kept while it fits).
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
     pub cache_mb: u64,
-    /// Chunked models: each worker's cache of chunks it rendered whole, in MB (decoded
-    /// meshes); rank 0 sends a chunk again only when the worker no longer holds it.
+    /// Chunked models: each worker's cache of the chunks it was sent whole, in MB (kept
+    /// compressed, with their border normals); rank 0 sends a chunk again only when the
+    /// worker no longer holds it.
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
     pub worker_cache_mb: u64,
     /// Progressive meshes: the screen-space error bound in pixels.

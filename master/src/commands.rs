@@ -4,8 +4,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use codec::bft::chunked::{encode_chunked, ChunkOptions, TriangleSink};
+use codec::bft::chunked::{encode_chunked, ChunkOptions, EncodeChunkError, TriangleSink};
 use codec::bft::{self, Stats};
+use codec::load::stream;
 use codec::Mesh;
 use serde::Serialize;
 
@@ -60,9 +61,42 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         temp_dir: options.temp_dir.clone(),
         ..Default::default()
     };
-    let mesh = load_mesh(input)?;
+    let streamed = stream::can_stream(input);
+    // PLY and OBJ are streamed: the positions in one pass, the triangles in another (inside
+    // the encoder's partition pass); STL is loaded whole.
+    let mesh = if streamed {
+        let pb = progress::bytes(std::fs::metadata(input).map_or(0, |m| m.len()), "reading positions");
+        let positions = stream::read_positions(input, &mut |done| pb.set_position(done))?;
+        pb.finish_and_clear();
+        Mesh { positions, triangles: Vec::new() }
+    } else {
+        load_mesh(input)?
+    };
     let positions = &mesh.positions;
-    let mut source = |sink: TriangleSink| mesh.triangles.iter().try_for_each(|&t| sink(t));
+    let mut source = |sink: TriangleSink| -> Result<(), EncodeChunkError> {
+        if !streamed {
+            return mesh.triangles.iter().try_for_each(|&t| sink(t));
+        }
+        // The encoder's error travels through the reader's callback and comes back as it was.
+        let mut failed = None;
+        let read = stream::for_each_triangle(
+            input,
+            positions,
+            &mut |t| {
+                sink(t).map_err(|e| {
+                    let message = e.to_string();
+                    failed = Some(e);
+                    codec::LoadError { path: input.to_path_buf(), message }
+                })
+            },
+            &mut |_| {},
+        );
+        match (read, failed) {
+            (_, Some(e)) => Err(e),
+            (Err(e), None) => Err(e.into()),
+            (Ok(_), None) => Ok(()),
+        }
+    };
     let pb = progress::bar(0, "encoding");
     let mut report = |stage: &'static str, done: u64, total: u64| {
         pb.set_message(stage);

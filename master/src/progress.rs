@@ -24,3 +24,15 @@ pub fn bar(total: u64, msg: impl Into<String>) -> ProgressBar {
     pb.set_message(msg.into());
     pb
 }
+
+/// A bar over `total` bytes of a file.
+pub fn bytes(total: u64, msg: impl Into<String>) -> ProgressBar {
+    let pb = ProgressBar::new(total);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {bytes}/{total_bytes} ({bytes_per_sec}, {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    pb.set_message(msg.into());
+    pb
+}

@@ -195,6 +195,9 @@ pub fn sort_frame(
     Ok((summary, tiles))
 }
 
+/// A tile's index and its `.bft` streams.
+pub type TileStreams = (usize, Vec<Vec<u8>>);
+
 /// One frame of a chunked model's sort, summarised; each tile's streams (verbatim chunks and
 /// sorted pieces) as `.bft` bytes.
 pub fn sort_chunked_frame(
@@ -203,7 +206,7 @@ pub fn sort_chunked_frame(
     cam: &Camera,
     grid: &TileGrid,
     coding: bft::Coding,
-) -> Result<(SortSummary, Vec<(usize, Vec<Vec<u8>>)>)> {
+) -> Result<(SortSummary, Vec<TileStreams>)> {
     use codec::bft::chunked::sort::PieceKind;
     let vp = cam.view_proj(grid.aspect());
     let start = Instant::now();

@@ -8,8 +8,8 @@
 //! message names the chunk only) or else [`ChunkCache::insert`] (the message carries its
 //! bytes). Both caches therefore hold the same chunks after every step, and the master never
 //! names a chunk the worker has dropped, without any message telling it what was dropped.
-//! A chunk's cost is what the worker keeps of it, a decoded mesh: 24 bytes per slot
-//! (position and normal) and 12 per triangle, which the master knows from the directory.
+//! A chunk's cost is what the worker keeps of it: its compressed stream and its border
+//! normals (`node::kept_cost`), which the master knows from the message it sends.
 
 use std::collections::HashMap;
 
@@ -36,11 +36,6 @@ impl<V> Default for ChunkCache<V> {
 }
 
 impl<V> ChunkCache<V> {
-    /// The cost of a chunk of `slots` slots and `triangles` triangles.
-    pub fn cost(slots: u32, triangles: u32) -> u64 {
-        24 * slots as u64 + 12 * triangles as u64
-    }
-
     /// Sets the bound, dropping the least recently used chunks until the cache fits it.
     pub fn set_limit(&mut self, limit: u64) {
         self.limit = limit;

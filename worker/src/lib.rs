@@ -48,7 +48,7 @@ impl RenderMesh {
     }
 
     /// The meshes one after the other, as one (a tile's streams).
-    pub fn concat<'a>(parts: impl IntoIterator<Item = &'a RenderMesh>) -> RenderMesh {
+    pub fn concat(parts: &[RenderMesh]) -> RenderMesh {
         let mut out = RenderMesh::default();
         for p in parts {
             let base = out.positions.len() as u32;

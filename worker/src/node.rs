@@ -25,7 +25,7 @@ use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
 use crate::protocol::{
-    FrameJob, PmFrameJob, ProtocolError, StreamSource, TileJob, TilePixels, TileStream, TileTimes, ToMaster, ToWorker,
+    FrameJob, PmFrameJob, ProtocolError, StreamSource, TileJob, TilePixels, TileTimes, ToMaster, ToWorker,
 };
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
@@ -202,7 +202,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     heartbeat.busy(false);
     t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
-    let mut chunks: ChunkCache<Arc<RenderMesh>> = ChunkCache::default();
+    let mut chunks: ChunkCache<KeptChunk> = ChunkCache::default();
     let mut first_frame = true;
     loop {
         heartbeat.busy(false);
@@ -260,8 +260,8 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             Err((index, e)) => return fail(e.at(index)),
         };
         let mut tiles = Vec::with_capacity(job.tiles.len());
-        for (tile, (mesh, decode_ms)) in job.tiles.iter().zip(meshes) {
-            match render_tile(&mut renderer, &job, tile, &mesh, decode_ms) {
+        for (tile, mesh) in job.tiles.iter().zip(meshes) {
+            match render_tile(&mut renderer, &job, tile, &mesh) {
                 Ok(p) => tiles.push(p),
                 Err(e) => return fail(e.at(tile.index)),
             }
@@ -270,63 +270,81 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     }
 }
 
-/// Every tile's mesh for a frame, with the milliseconds its streams took to decode: the
-/// streams in the message decode in parallel; then, in message order (the order the master's
-/// mirror of `chunks` follows), chunks to keep go into the cache and chunks kept before come
-/// out of it, and each tile's streams are joined in order.
-fn tile_meshes(
-    job: &FrameJob,
-    chunks: &mut ChunkCache<Arc<RenderMesh>>,
-) -> Result<Vec<(RenderMesh, f64)>, (u32, TileError)> {
+/// A verbatim chunk a worker keeps: its stream and its border normals, compressed as it
+/// came, so that a worker holds many more chunks than it could decoded (about 1.5 bytes a
+/// triangle against 36); it decodes them every frame, as it does every tile's stream.
+pub type KeptChunk = Arc<(Vec<u8>, Vec<(u32, [f32; 3])>)>;
+
+/// The cost of a kept chunk in a [`ChunkCache`]: its stream's bytes and 16 per normal, as
+/// the master counts it from the message it sends.
+pub fn kept_cost(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
+    bft.len() as u64 + 16 * normals.len() as u64
+}
+
+/// Every tile's mesh for a frame, with the milliseconds its streams took to decode. First,
+/// in message order (the order the master's mirror of `chunks` follows), chunks to keep go
+/// into the cache and chunks kept before come out of it; then every stream decodes in
+/// parallel, and each tile's streams are joined in order.
+fn tile_meshes(job: &FrameJob, chunks: &mut ChunkCache<KeptChunk>) -> Result<Vec<TileMesh>, (u32, TileError)> {
     chunks.set_limit(job.chunk_cache);
-    let streams: Vec<(u32, &TileStream)> =
-        job.tiles.iter().flat_map(|t| t.streams.iter().map(move |s| (t.index, s))).collect();
-    let decoded: Vec<Option<Result<(RenderMesh, f64), TileError>>> = streams
+    let mut streams: Vec<(u32, Option<u32>, KeptChunk)> = Vec::new();
+    for tile in &job.tiles {
+        for s in &tile.streams {
+            let (chunk, kept) = match &s.source {
+                StreamSource::Bytes(b) => (None, Arc::new((b.clone(), s.normals.clone()))),
+                StreamSource::Keep { chunk, bft } => {
+                    let kept = Arc::new((bft.clone(), s.normals.clone()));
+                    chunks.insert(*chunk, kept_cost(bft, &s.normals), kept.clone());
+                    (Some(*chunk), kept)
+                }
+                StreamSource::Kept { chunk } => match chunks.get(*chunk) {
+                    Some(k) => (Some(*chunk), k.clone()),
+                    None => return Err((tile.index, TileError::MissingChunk(*chunk))),
+                },
+            };
+            streams.push((tile.index, chunk, kept));
+        }
+    }
+    // With --decode-only a stream's mesh is dropped as soon as it is counted: nothing is
+    // drawn, and a whole large model's meshes need not be held at once.
+    type Decoded = Result<(RenderMesh, usize, f64), (u32, TileError)>;
+    let decoded: Vec<Decoded> = streams
         .par_iter()
-        .map(|(_, s)| match &s.source {
-            StreamSource::Bytes(b) => Some(decode_stream(b, &s.normals)),
-            StreamSource::Keep { chunk, bft } => Some(decode_stream(bft, &s.normals).map_err(|e| match e {
-                TileError::Decode(e) => TileError::ChunkDecode(*chunk, e),
-                other => other,
-            })),
-            StreamSource::Kept { .. } => None,
+        .map(|(index, chunk, kept)| {
+            let (mesh, ms) = decode_stream(&kept.0, &kept.1).map_err(|e| match (e, chunk) {
+                (TileError::Decode(e), Some(c)) => (*index, TileError::ChunkDecode(*c, e)),
+                (e, _) => (*index, e),
+            })?;
+            let triangles = mesh.triangle_count();
+            Ok((if job.decode_only { RenderMesh::default() } else { mesh }, triangles, ms))
         })
         .collect();
     let mut decoded = decoded.into_iter();
     let mut out = Vec::with_capacity(job.tiles.len());
     for tile in &job.tiles {
-        let mut parts: Vec<Arc<RenderMesh>> = Vec::with_capacity(tile.streams.len());
-        let mut decode_ms = 0.0;
-        for s in &tile.streams {
-            let d = decoded.next().expect("one result per stream");
-            let mesh = match (&s.source, d) {
-                (_, Some(Err(e))) => return Err((tile.index, e)),
-                (StreamSource::Keep { chunk, .. }, Some(Ok((mesh, ms)))) => {
-                    decode_ms += ms;
-                    let mesh = Arc::new(mesh);
-                    let cost = ChunkCache::<()>::cost(mesh.positions.len() as u32, mesh.triangle_count() as u32);
-                    chunks.insert(*chunk, cost, mesh.clone());
-                    mesh
-                }
-                (_, Some(Ok((mesh, ms)))) => {
-                    decode_ms += ms;
-                    Arc::new(mesh)
-                }
-                (StreamSource::Kept { chunk }, None) => match chunks.get(*chunk) {
-                    Some(m) => m.clone(),
-                    None => return Err((tile.index, TileError::MissingChunk(*chunk))),
-                },
-                (_, None) => unreachable!("every stream with bytes was decoded"),
-            };
+        let mut parts = Vec::with_capacity(tile.streams.len());
+        let (mut decode_ms, mut triangles) = (0.0, 0);
+        for _ in &tile.streams {
+            let (mesh, n, ms) = decoded.next().expect("one result per stream")?;
+            decode_ms += ms;
+            triangles += n;
             parts.push(mesh);
         }
         let mesh = match parts.len() {
-            1 => Arc::try_unwrap(parts.pop().expect("one part")).unwrap_or_else(|shared| (*shared).clone()),
-            _ => RenderMesh::concat(parts.iter().map(|p| &**p)),
+            1 => parts.pop().expect("one part"),
+            _ => RenderMesh::concat(&parts),
         };
-        out.push((mesh, decode_ms));
+        out.push(TileMesh { mesh, triangles: triangles as u32, decode_ms });
     }
     Ok(out)
+}
+
+/// A tile's streams decoded and joined (empty with `--decode-only`), its triangles, and the
+/// milliseconds its streams took to decode.
+struct TileMesh {
+    mesh: RenderMesh,
+    triangles: u32,
+    decode_ms: f64,
 }
 
 /// Decodes one stream and applies the border normals the master sent; returns the mesh and
@@ -349,9 +367,10 @@ fn render_tile(
     renderer: &mut Renderer,
     job: &FrameJob,
     tile: &TileJob,
-    mesh: &RenderMesh,
-    decode_ms: f64,
+    tile_mesh: &TileMesh,
 ) -> Result<TilePixels, TileError> {
+    let TileMesh { mesh, triangles, decode_ms } = tile_mesh;
+    let decode_ms = *decode_ms;
     let (rgba, times) = if job.decode_only {
         let [x0, y0, x1, y1] = tile.rect.map(|v| v as usize);
         (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
@@ -368,7 +387,7 @@ fn render_tile(
             render_ms: times.render_ms,
             readback_ms: times.readback_ms,
         },
-        triangles: mesh.triangle_count() as u32,
+        triangles: *triangles,
         rgba,
     })
 }
@@ -556,7 +575,7 @@ mod tests {
             (TileError::BadRect([4, 0, 2, 9]).at(7), "tile 7: rect [4, 0, 2, 9] is not a non-empty part of the frame"),
             (
                 TileError::BorderNormal { slot: 12, vertices: 10 }.at(2),
-                "tile 2: border normal for vertex 12, but the tile has 10",
+                "tile 2: border normal for vertex 12, but the stream has 10",
             ),
             (
                 TileError::Render(RenderError::NormalCount { positions: 3, normals: 0 }).at(0),

@@ -30,8 +30,9 @@ pub use crate::container::{Format, FormatError};
 pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
 /// The version written.
 pub const VERSION: u16 = 2;
-/// The versions read: 1 (before the coding byte) and 2.
-pub const READS: &[u16] = &[1, 2];
+/// The versions read: 1 (before the coding byte), 2, and 3 (chunked files,
+/// [`super::chunked`]; a single stream is never version 3).
+pub const READS: &[u16] = &[1, 2, 3];
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
 pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
 

@@ -37,7 +37,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
     for k in 0..args.frames {
-        let cam_k = if args.orbit { orbit(&cam, k, args.frames) } else { cam };
+        let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
         let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks } = scene.jobs(&ctx)?;
@@ -91,6 +91,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 wait_ms,
                 composite_ms,
                 write_ms,
+                rss_mb: resident_mb(),
                 chunks,
                 tiles: tile_stats,
             };
@@ -106,13 +107,25 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     Ok(())
 }
 
+/// This process's resident memory in MB (Linux: `/proc/self/statm`), for the stats.
+fn resident_mb() -> Option<f64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: f64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * 4096.0 / (1 << 20) as f64)
+}
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
 /// The camera of frame `k` of `n` on a full orbit around the target, about the up axis.
 pub fn orbit(cam: &Camera, k: u32, n: u32) -> Camera {
-    let angle = std::f32::consts::TAU * k as f32 / n as f32;
+    orbit_by(cam, k, n, 360.0)
+}
+
+/// The camera of frame `k` of `n` on an orbit of `degrees` in all, about the up axis.
+pub fn orbit_by(cam: &Camera, k: u32, n: u32, degrees: f32) -> Camera {
+    let angle = degrees.to_radians() * k as f32 / n as f32;
     let rot = Quat::from_axis_angle(cam.up.normalize(), angle);
     Camera { eye: cam.target + rot * (cam.eye - cam.target), ..*cam }
 }

@@ -147,10 +147,9 @@ impl ChunkedScene {
                             TileStream { source: StreamSource::Kept { chunk }, normals: vec![] }
                         } else {
                             stats.sent += 1;
-                            let e = &file.entries[chunk as usize];
-                            mirror.insert(chunk, ChunkCache::<()>::cost(e.slots, e.triangles), ());
                             let normals = file.border(chunk as usize)?.slot_normals();
                             let bft = file.chunk_bft(chunk as usize).to_vec();
+                            mirror.insert(chunk, worker::node::kept_cost(&bft, &normals), ());
                             TileStream { source: StreamSource::Keep { chunk, bft }, normals }
                         }
                     }

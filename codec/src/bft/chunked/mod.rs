@@ -368,7 +368,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             |from: usize, n: usize, what: &'static str| b.get(from..from + n).ok_or(FormatError::Truncated(what));
         let version = u16::from_le_bytes(take(8, 2, "version")?.try_into().unwrap());
         if version != VERSION {
-            return Err(FormatError::UnsupportedVersion { format: Format::Bft, found: version, known: &[VERSION] });
+            return Err(FormatError::UnsupportedVersion { format: Format::Bft, found: version, known: super::READS });
         }
         let hlen = u16::from_le_bytes(take(10, 2, "header length")?.try_into().unwrap()) as usize;
         let hbytes = take(12, hlen, "header")?;
