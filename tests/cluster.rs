@@ -167,6 +167,38 @@ fn chunked_models_render_the_same_frames_everywhere() {
     assert!(second["kept"].as_u64() > Some(0) && second["sent"] == 0, "{second}");
 }
 
+/// `--sorters K`: rank 0 and K-1 more ranks each sort a share of the chunks and send the
+/// pieces straight to the workers; the frames are the same for K = 1, 2, 3.
+#[test]
+fn several_sorters_render_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let chunked = p("bunny.bft");
+    ok(&alone(&["encode", &model, "-o", &chunked, "--chunk-triangles", "1500"]));
+    let reference = p("ref.png");
+    ok(&alone(&["render", &chunked, "--size", "320x240", "--tiles", "1x1", "--frames", "2", "--out", &reference]));
+    for k in ["1", "2", "3"] {
+        let out = p(&format!("k{k}.png"));
+        let args =
+            ["render", &chunked, "--size", "320x240", "--tiles", "4x3", "--frames", "2", "--sorters", k, "--out", &out];
+        ok(&mpirun(4, &[], &args));
+        for f in 1..=2 {
+            let frame = |name: &str| dir.path().join(format!("{name}-{f:04}.png"));
+            assert!(identical(&frame(&format!("k{k}")), &frame("ref")), "--sorters {k}, frame {f}");
+        }
+    }
+    // More sorters than ranks allow, a single-stream model, or no mpirun: refused.
+    let o = mpirun(2, &[], &["render", &chunked, "--sorters", "2", "--out", &p("x.png")]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--sorters 2 needs at least 3 ranks"));
+    let single = p("single.bft");
+    ok(&alone(&["encode", &model, "-o", &single, "--chunk-triangles", "0"]));
+    let o = mpirun(3, &[], &["render", &single, "--sorters", "2", "--out", &p("x.png")]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("chunked .bft model"));
+    let o = alone(&["render", &chunked, "--sorters", "2", "--out", &p("x.png")]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("needs mpirun"));
+}
+
 #[test]
 fn alone_more_workers_than_tiles_and_orbit() {
     let dir = tempfile::tempdir().unwrap();

@@ -20,9 +20,13 @@ use codec::view::{triangle_tile_boxes, TileBox, TileGrid};
 use glam::Mat4;
 use plotters::prelude::*;
 
+use codec::bft::chunked::sort::{ChunkedModel, PieceKind};
+use codec::bft::chunked::{encode_mesh_chunked, ChunkOptions, ChunkedFile};
+use codec::view::Camera;
 use master::cli::CameraArgs;
 use master::output::write_bytes;
 use master::progress;
+use master::render::orbit_by;
 use master::sort::{load_model, sort_frame, Model, SortSummary};
 
 use crate::peers::{draco_decode, draco_encode, draco_to_mesh, Meshopt};
@@ -33,7 +37,7 @@ const SORT_RUNS: usize = 7;
 
 const CSV_HEADER: &str = "model,triangles,width,height,cols,rows,tile_width,tile_height,tri_bytes,tiled_tri_bytes,\
 bft_bytes,tiled_bft_bytes,draco_per_tile_bytes,meshopt_per_tile_bytes,bft_sort_ms,tri_sort_ms,draco_retile_ms,\
-tiled_bft_prefix_bytes,bft_prefix_sort_ms";
+tiled_bft_prefix_bytes,bft_prefix_sort_ms,chunks,chunked_tiled_bft_bytes,chunked_sort_ms,chunked_orbit_bytes";
 
 /// One model on one tile grid: a CSV row.
 struct Row {
@@ -52,6 +56,14 @@ struct Row {
     /// The same tiles coded with `--tile-coding prefix`, and that sort's time.
     tiled_bft_prefix_bytes: usize,
     bft_prefix_sort_ms: f64,
+    /// The model as a chunked file (`encode`'s default chunk size; 1 chunk is the single
+    /// stream): its chunks, its first frame's tile bytes (range-coded, verbatim chunks whole)
+    /// and sort time (median, tables cached), and the bytes per frame along a slow orbit (one
+    /// degree a frame, frames 2 to 9) when the worker keeps the chunks it was sent.
+    chunks: usize,
+    chunked_tiled_bft_bytes: usize,
+    chunked_sort_ms: f64,
+    chunked_orbit_bytes: usize,
 }
 
 impl Row {
@@ -66,7 +78,7 @@ impl Row {
         let g = &self.grid;
         let (tw, th) = self.tile_size();
         format!(
-            "{},{},{},{},{},{},{tw},{th},{},{},{},{},{},{},{:.3},{:.3},{:.3},{},{:.3}",
+            "{},{},{},{},{},{},{tw},{th},{},{},{},{},{},{},{:.3},{:.3},{:.3},{},{:.3},{},{},{:.3},{}",
             csv_field(&self.model),
             self.triangles,
             g.width,
@@ -83,16 +95,20 @@ impl Row {
             self.tri_sort_ms,
             self.draco_retile_ms,
             self.tiled_bft_prefix_bytes,
-            self.bft_prefix_sort_ms
+            self.bft_prefix_sort_ms,
+            self.chunks,
+            self.chunked_tiled_bft_bytes,
+            self.chunked_sort_ms,
+            self.chunked_orbit_bytes
         )
     }
 
-    const TABLE_HEADER: &str = "model               tiles    tile px         Tri   Tiled Tri         BFT   Tiled BFT  Draco/tile  meshopt/tile  TiledBFT/Draco  BFT sort ms  Tri sort ms  Draco retile ms  BFT/Tri sort  BFT/retile  Tiled BFT prefix  prefix sort ms";
+    const TABLE_HEADER: &str = "model               tiles    tile px         Tri   Tiled Tri         BFT   Tiled BFT  Draco/tile  meshopt/tile  TiledBFT/Draco  BFT sort ms  Tri sort ms  Draco retile ms  BFT/Tri sort  BFT/retile  Tiled BFT prefix  prefix sort ms  chunks  chunked Tiled BFT  chunked sort ms  orbit bytes/frame";
 
     fn table(&self) -> String {
         let (tw, th) = self.tile_size();
         format!(
-            "{:<18} {:>6} {:>10} {:>11} {:>11} {:>11} {:>11} {:>11} {:>13} {:>15.3} {:>12.2} {:>12.2} {:>16.1} {:>13.2} {:>11.4} {:>17} {:>15.2}",
+            "{:<18} {:>6} {:>10} {:>11} {:>11} {:>11} {:>11} {:>11} {:>13} {:>15.3} {:>12.2} {:>12.2} {:>16.1} {:>13.2} {:>11.4} {:>17} {:>15.2} {:>7} {:>18} {:>16.2} {:>18}",
             self.model,
             format!("{}x{}", self.grid.cols, self.grid.rows),
             format!("{tw:.0}x{th:.0}"),
@@ -109,7 +125,11 @@ impl Row {
             self.bft_sort_ms / self.tri_sort_ms,
             self.bft_sort_ms / self.draco_retile_ms,
             self.tiled_bft_prefix_bytes,
-            self.bft_prefix_sort_ms
+            self.bft_prefix_sort_ms,
+            self.chunks,
+            self.chunked_tiled_bft_bytes,
+            self.chunked_sort_ms,
+            self.chunked_orbit_bytes
         )
     }
 }
@@ -133,6 +153,8 @@ struct Subject {
     welded: Vec<[u32; 3]>,
     /// The whole model as one Draco stream, what a Draco-based renderer would hold.
     draco: Vec<u8>,
+    /// The model as a chunked file, if it makes more than one chunk.
+    chunked: Option<ChunkedModel<Vec<u8>>>,
 }
 
 impl Subject {
@@ -147,7 +169,62 @@ impl Subject {
         let mesh = decoded.to_mesh();
         let draco = draco_encode(&mesh.positions, &mesh.triangles, decoded.header.quant_bits)
             .with_context(|| format!("Draco cannot encode {}", path.display()))?;
-        Ok(Subject { name: model_name(path), model, welded, draco })
+        let input = codec::load_path(path)?;
+        let opts = ChunkOptions { quant_bits, ..Default::default() };
+        let (bytes, _) =
+            encode_mesh_chunked(&input, &opts).with_context(|| format!("cannot chunk {}", path.display()))?;
+        let chunked = if codec::bft::chunked::is_chunked(&bytes) {
+            Some(ChunkedModel::new(ChunkedFile::open(bytes)?, 1 << 30))
+        } else {
+            None
+        };
+        Ok(Subject { name: model_name(path), model, welded, draco, chunked })
+    }
+
+    /// The chunked columns of a row: chunks, first-frame tile bytes, sort time, and bytes
+    /// per frame along a slow orbit with the chunks a worker keeps not sent again.
+    fn measure_chunked(
+        &self,
+        cam: &Camera,
+        grid: &TileGrid,
+        single: (usize, f64),
+    ) -> Result<(usize, usize, f64, usize)> {
+        let Some(model) = &self.chunked else {
+            // One chunk: the single stream, which a worker cannot keep (it is a tile sort).
+            return Ok((1, single.0, single.1, single.0));
+        };
+        let frame_bytes = |vp: Mat4, kept: &mut std::collections::HashSet<u32>| -> Result<usize> {
+            let (tiles, _) = model.sort(vp, grid, Coding::Range)?;
+            Ok(tiles
+                .iter()
+                .flat_map(|t| &t.pieces)
+                .map(|p| match &p.kind {
+                    PieceKind::Sorted { bytes, .. } => bytes.len(),
+                    PieceKind::Verbatim if kept.insert(p.chunk) => {
+                        model.file.entries[p.chunk as usize].bft_len as usize
+                    }
+                    PieceKind::Verbatim => 0,
+                })
+                .sum())
+        };
+        let vp = cam.view_proj(grid.aspect());
+        let first = frame_bytes(vp, &mut Default::default())?;
+        let mut times = Vec::new();
+        for _ in 0..SORT_RUNS {
+            let t = Instant::now();
+            model.sort(vp, grid, Coding::Range)?;
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        let mut kept = Default::default();
+        let mut orbit = 0;
+        for k in 0..9 {
+            let bytes = frame_bytes(orbit_by(cam, k, 9, 9.0).view_proj(grid.aspect()), &mut kept)?;
+            if k > 0 {
+                orbit += bytes;
+            }
+        }
+        Ok((model.chunks(), first, times[times.len() / 2], orbit / 8))
     }
 
     /// Measures one row.
@@ -191,6 +268,9 @@ impl Subject {
         let meshopt_per_tile_bytes =
             sets.iter().map(|s| meshopt_bytes(s, &tiles.decoded.positions, bits)).sum::<Result<usize>>()?;
 
+        let bft_sort_ms = median(&runs, |s| s.sort_ms);
+        let (chunks, chunked_tiled_bft_bytes, chunked_sort_ms, chunked_orbit_bytes) =
+            self.measure_chunked(&cam, grid, (totals.tiled_bft_bytes, bft_sort_ms))?;
         Ok(Row {
             model: self.name.clone(),
             triangles: totals.triangles,
@@ -201,11 +281,15 @@ impl Subject {
             tiled_bft_bytes: totals.tiled_bft_bytes,
             draco_per_tile_bytes,
             meshopt_per_tile_bytes,
-            bft_sort_ms: median(&runs, |s| s.sort_ms),
+            bft_sort_ms,
             tri_sort_ms: median(&runs, |s| s.tri_sort_ms),
             draco_retile_ms: draco_retile_ms(&self.draco, view_proj, grid, bits)?,
             tiled_bft_prefix_bytes: prefix_runs[0].totals.tiled_bft_bytes,
             bft_prefix_sort_ms: median(&prefix_runs, |s| s.sort_ms),
+            chunks,
+            chunked_tiled_bft_bytes,
+            chunked_sort_ms,
+            chunked_orbit_bytes,
         })
     }
 }

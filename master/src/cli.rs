@@ -302,6 +302,12 @@ pub struct RenderArgs {
     /// rasterizer. Sorted models only (.bft and mesh files).
     #[arg(long)]
     pub decode_only: bool,
+    /// Chunked models: ranks that share the sort. Under `mpirun -np N`, rank 0 and the last
+    /// K-1 ranks each sort a contiguous share of the chunks and send its pieces straight to
+    /// the workers (ranks 1..=N-K), so that no one rank reads the whole model or carries all
+    /// the traffic; rank 0 still composites. Frames are the same for every K.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=64))]
+    pub sorters: u8,
     /// Chunked models: rank 0's cache of straddling chunks' sort tables, in MB (a chunk
     /// that straddles a tile border is decoded once and kept while it fits).
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]

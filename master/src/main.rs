@@ -59,6 +59,15 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     let mpi = Mpi::init()
         .context("MPI is already initialized, or cannot serialize calls from two threads (MPI_THREAD_SERIALIZED)")?;
+    let sorters = args.sorters as usize;
+    if mpi.size() < sorters + 1 {
+        anyhow::bail!("--sorters {sorters} needs at least {} ranks (the sorters and a worker)", sorters + 1);
+    }
+    // Ranks 1..=N-K are workers; the last K-1 ranks help rank 0 sort (`--sorters K`).
+    let workers = mpi.size() - sorters;
+    if mpi.rank() > workers {
+        return master::render::run_sorter(&mpi, args, &plan, mpi.rank() - workers);
+    }
     if mpi.rank() > 0 {
         return worker::node::run(&mpi).map_err(anyhow::Error::msg);
     }

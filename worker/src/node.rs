@@ -24,9 +24,7 @@ use thiserror::Error;
 use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
-use crate::protocol::{
-    FrameJob, PmFrameJob, ProtocolError, StreamSource, TileJob, TilePixels, TileTimes, ToMaster, ToWorker,
-};
+use crate::protocol::{FrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes, ToMaster, ToWorker};
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
@@ -202,18 +200,26 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     heartbeat.busy(false);
     t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
-    let mut chunks: ChunkCache<KeptChunk> = ChunkCache::default();
+    // One chunk cache per sorter (`render --sorters K`), each mirrored by its sorter.
+    let mut chunks: Vec<ChunkCache<KeptChunk>> = Vec::new();
+    // The shares of the frame received so far, by sorter.
+    let mut shares: Vec<Option<FrameJob>> = Vec::new();
     let mut first_frame = true;
     loop {
         heartbeat.busy(false);
-        let bytes = match t.recv(MASTER_SILENCE) {
-            Ok((0, bytes)) => bytes,
-            Ok((from, _)) => return fail(WorkerError::UnexpectedSender(from)),
+        let (from, bytes) = match t.recv(MASTER_SILENCE) {
+            Ok(m) => m,
             Err(RecvError::Timeout) => return fail(WorkerError::MasterSilent),
             Err(RecvError::Disconnected) => return Err(RankError { rank, reason: WorkerError::MasterGone }),
         };
         heartbeat.busy(true);
-        let msg = match ToWorker::decode(&bytes) {
+        let msg = ToWorker::decode(&bytes);
+        // Sorter ranks (`render --sorters K`) send frame shares; everything else comes from
+        // rank 0.
+        if from != 0 && !matches!(msg, Ok(ToWorker::Frame(_))) {
+            return fail(WorkerError::UnexpectedSender(from));
+        }
+        let msg = match msg {
             Ok(ToWorker::Shutdown) => return Ok(()),
             Ok(ToWorker::Model(dpm)) => {
                 match PmTiles::new(&gpu, &dpm) {
@@ -240,6 +246,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
         }
         let job = match msg {
             ToWorker::Frame(job) => job,
+            ToWorker::Sort(_) => return fail(WorkerError::BadMessage(ProtocolError::Unexpected("Sort".into()))),
             ToWorker::PmFrame(job) => {
                 let Some(pm) = pm.as_mut() else {
                     return fail(WorkerError::FrameBeforeModel);
@@ -252,21 +259,40 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             }
             _ => unreachable!("handled above"),
         };
+        // A frame comes in `sorters` shares (one unless `render --sorters K`); it renders
+        // once every share is here.
+        let n = job.sorters as usize;
+        if shares.len() != n {
+            shares = (0..n).map(|_| None).collect();
+        }
+        if let Some(other) = shares.iter().flatten().find(|s| s.frame != job.frame) {
+            let why = format!("shares of frames {} and {} at once", other.frame, job.frame);
+            return fail(WorkerError::BadMessage(ProtocolError::Unexpected(why)));
+        }
+        let sorter = job.sorter as usize;
+        if shares[sorter].replace(job).is_some() {
+            return fail(WorkerError::BadMessage(ProtocolError::Unexpected(format!("sorter {sorter}'s share twice"))));
+        }
+        if shares.iter().any(Option::is_none) {
+            continue;
+        }
+        let jobs: Vec<FrameJob> = shares.iter_mut().map(|s| s.take().expect("every share")).collect();
+        chunks.resize_with(n, ChunkCache::default);
         // The streams decode in parallel (they are independent), then the tiles render one
         // after the other on the one device; the first tile in order that fails is the one
         // reported.
-        let meshes = match tile_meshes(&job, &mut chunks) {
+        let meshes = match tile_meshes(&jobs, &mut chunks) {
             Ok(m) => m,
             Err((index, e)) => return fail(e.at(index)),
         };
-        let mut tiles = Vec::with_capacity(job.tiles.len());
-        for (tile, mesh) in job.tiles.iter().zip(meshes) {
-            match render_tile(&mut renderer, &job, tile, &mesh) {
+        let mut tiles = Vec::with_capacity(meshes.len());
+        for mesh in meshes {
+            match render_tile(&mut renderer, &jobs[0], &mesh) {
                 Ok(p) => tiles.push(p),
-                Err(e) => return fail(e.at(tile.index)),
+                Err(e) => return fail(e.at(mesh.index)),
             }
         }
-        t.send(0, &ToMaster::Pixels { frame: job.frame, tiles }.encode());
+        t.send(0, &ToMaster::Pixels { frame: jobs[0].frame, tiles }.encode());
     }
 }
 
@@ -281,60 +307,70 @@ pub fn kept_cost(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
     bft.len() as u64 + 16 * normals.len() as u64
 }
 
-/// Every tile's mesh for a frame, with the milliseconds its streams took to decode. First,
-/// in message order (the order the master's mirror of `chunks` follows), chunks to keep go
-/// into the cache and chunks kept before come out of it; then every stream decodes in
-/// parallel, and each tile's streams are joined in order.
-fn tile_meshes(job: &FrameJob, chunks: &mut ChunkCache<KeptChunk>) -> Result<Vec<TileMesh>, (u32, TileError)> {
-    chunks.set_limit(job.chunk_cache);
-    let mut streams: Vec<(u32, Option<u32>, KeptChunk)> = Vec::new();
-    for tile in &job.tiles {
-        for s in &tile.streams {
-            let (chunk, kept) = match &s.source {
-                StreamSource::Bytes(b) => (None, Arc::new((b.clone(), s.normals.clone()))),
-                StreamSource::Keep { chunk, bft } => {
-                    let kept = Arc::new((bft.clone(), s.normals.clone()));
-                    chunks.insert(*chunk, kept_cost(bft, &s.normals), kept.clone());
-                    (Some(*chunk), kept)
-                }
-                StreamSource::Kept { chunk } => match chunks.get(*chunk) {
-                    Some(k) => (Some(*chunk), k.clone()),
-                    None => return Err((tile.index, TileError::MissingChunk(*chunk))),
-                },
-            };
-            streams.push((tile.index, chunk, kept));
+/// Every tile's mesh for a frame, with the milliseconds its streams took to decode, from the
+/// frame's shares in sorter order (a tile's streams from several sorters follow each other in
+/// that order, which is the chunks' order). First, in message order (the order each sorter's
+/// mirror of its cache in `chunks` follows), chunks to keep go into the cache and chunks kept
+/// before come out of it; then every stream decodes in parallel, and each tile's streams are
+/// joined in order.
+fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Result<Vec<TileMesh>, (u32, TileError)> {
+    let mut tiles: Vec<(u32, [u32; 4])> = Vec::new();
+    let mut slot_of: HashMap<u32, usize> = HashMap::new();
+    // (tile slot, chunk, stream), tile by tile in the order of first appearance.
+    let mut streams: Vec<(usize, Option<u32>, KeptChunk)> = Vec::new();
+    for (job, cache) in jobs.iter().zip(chunks.iter_mut()) {
+        cache.set_limit(job.chunk_cache);
+        for tile in &job.tiles {
+            let slot = *slot_of.entry(tile.index).or_insert_with(|| {
+                tiles.push((tile.index, tile.rect));
+                tiles.len() - 1
+            });
+            for s in &tile.streams {
+                let (chunk, kept) = match &s.source {
+                    StreamSource::Bytes(b) => (None, Arc::new((b.clone(), s.normals.clone()))),
+                    StreamSource::Keep { chunk, bft } => {
+                        let kept = Arc::new((bft.clone(), s.normals.clone()));
+                        cache.insert(*chunk, kept_cost(bft, &s.normals), kept.clone());
+                        (Some(*chunk), kept)
+                    }
+                    StreamSource::Kept { chunk } => match cache.get(*chunk) {
+                        Some(k) => (Some(*chunk), k.clone()),
+                        None => return Err((tile.index, TileError::MissingChunk(*chunk))),
+                    },
+                };
+                streams.push((slot, chunk, kept));
+            }
         }
     }
+    let decode_only = jobs[0].decode_only;
     // With --decode-only a stream's mesh is dropped as soon as it is counted: nothing is
     // drawn, and a whole large model's meshes need not be held at once.
     type Decoded = Result<(RenderMesh, usize, f64), (u32, TileError)>;
     let decoded: Vec<Decoded> = streams
         .par_iter()
-        .map(|(index, chunk, kept)| {
+        .map(|(slot, chunk, kept)| {
+            let index = tiles[*slot].0;
             let (mesh, ms) = decode_stream(&kept.0, &kept.1).map_err(|e| match (e, chunk) {
-                (TileError::Decode(e), Some(c)) => (*index, TileError::ChunkDecode(*c, e)),
-                (e, _) => (*index, e),
+                (TileError::Decode(e), Some(c)) => (index, TileError::ChunkDecode(*c, e)),
+                (e, _) => (index, e),
             })?;
             let triangles = mesh.triangle_count();
-            Ok((if job.decode_only { RenderMesh::default() } else { mesh }, triangles, ms))
+            Ok((if decode_only { RenderMesh::default() } else { mesh }, triangles, ms))
         })
         .collect();
-    let mut decoded = decoded.into_iter();
-    let mut out = Vec::with_capacity(job.tiles.len());
-    for tile in &job.tiles {
-        let mut parts = Vec::with_capacity(tile.streams.len());
-        let (mut decode_ms, mut triangles) = (0.0, 0);
-        for _ in &tile.streams {
-            let (mesh, n, ms) = decoded.next().expect("one result per stream")?;
-            decode_ms += ms;
-            triangles += n;
-            parts.push(mesh);
-        }
-        let mesh = match parts.len() {
-            1 => parts.pop().expect("one part"),
-            _ => RenderMesh::concat(&parts),
-        };
-        out.push(TileMesh { mesh, triangles: triangles as u32, decode_ms });
+    let mut parts: Vec<Vec<RenderMesh>> = (0..tiles.len()).map(|_| Vec::new()).collect();
+    let mut out: Vec<TileMesh> = tiles
+        .iter()
+        .map(|&(index, rect)| TileMesh { index, rect, mesh: RenderMesh::default(), triangles: 0, decode_ms: 0.0 })
+        .collect();
+    for ((slot, _, _), d) in streams.iter().zip(decoded) {
+        let (mesh, n, ms) = d?;
+        out[*slot].decode_ms += ms;
+        out[*slot].triangles += n as u32;
+        parts[*slot].push(mesh);
+    }
+    for (t, mut p) in out.iter_mut().zip(parts) {
+        t.mesh = if p.len() == 1 { p.pop().expect("one part") } else { RenderMesh::concat(&p) };
     }
     Ok(out)
 }
@@ -342,6 +378,8 @@ fn tile_meshes(job: &FrameJob, chunks: &mut ChunkCache<KeptChunk>) -> Result<Vec
 /// A tile's streams decoded and joined (empty with `--decode-only`), its triangles, and the
 /// milliseconds its streams took to decode.
 struct TileMesh {
+    index: u32,
+    rect: [u32; 4],
     mesh: RenderMesh,
     triangles: u32,
     decode_ms: f64,
@@ -363,23 +401,18 @@ fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh,
 }
 
 /// Renders one decoded tile of `job`; with `job.decode_only`, answers transparent pixels.
-fn render_tile(
-    renderer: &mut Renderer,
-    job: &FrameJob,
-    tile: &TileJob,
-    tile_mesh: &TileMesh,
-) -> Result<TilePixels, TileError> {
-    let TileMesh { mesh, triangles, decode_ms } = tile_mesh;
-    let decode_ms = *decode_ms;
+fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) -> Result<TilePixels, TileError> {
+    let TileMesh { index, rect, mesh, triangles, decode_ms } = tile_mesh;
+    let (index, rect, decode_ms) = (*index, *rect, *decode_ms);
     let (rgba, times) = if job.decode_only {
-        let [x0, y0, x1, y1] = tile.rect.map(|v| v as usize);
+        let [x0, y0, x1, y1] = rect.map(|v| v as usize);
         (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
     } else {
-        renderer.render(mesh, Mat4::from_cols_array(&job.view_proj), (job.width, job.height), tile.rect)?
+        renderer.render(mesh, Mat4::from_cols_array(&job.view_proj), (job.width, job.height), rect)?
     };
     Ok(TilePixels {
-        index: tile.index,
-        rect: tile.rect,
+        index,
+        rect,
         times: TileTimes {
             decode_ms,
             adapt_ms: 0.0,

@@ -10,6 +10,8 @@
 //! master -> worker
 //!   kind 1 Frame     frame u32, width u32, height u32, view_proj 16 x f32 (column-major),
 //!                    flags u8 (bit 0: decode only, do not rasterize; other bits zero),
+//!                    sorter u8, sorters u8 (this message is sorter's share of the frame;
+//!                    a worker renders once it has all `sorters` shares),
 //!                    chunk cache bound u64 (bytes), tile count u32, then per tile:
 //!                      index u32, rect 4 x u32 (x0 y0 x1 y1), stream count u32, per stream:
 //!                        source u8: 0 bytes: bft length u32 + bytes
@@ -19,6 +21,8 @@
 //!   kind 2 Shutdown  (nothing)
 //!   kind 6 Model     dpm length u32 + bytes (a .dpm progressive mesh, sent once before
 //!                    its frames)
+//!   kind 9 Sort      (to a sorter rank, `render --sorters K`) frame u32, view_proj 16 x f32,
+//!                    tile count u32, then per tile the worker rank that renders it, u32
 //!   kind 7 PmFrame   frame u32, width u32, height u32, view_proj 16 x f32, eye 3 x f32,
 //!                    pixels_per_unit f32, error_px f32, c_lod f32, attribute_scale f32,
 //!                    max_passes u32, tile count u32, then per tile: index u32, rect 4 x u32
@@ -115,7 +119,11 @@ pub struct FrameJob {
     /// Decode the tiles but do not rasterize them (`render --decode-only`): the answer's
     /// pixels are transparent, so the distribution can be measured apart from the renderer.
     pub decode_only: bool,
-    /// The bound of the worker's chunk cache, in bytes.
+    /// Which share of the frame this is (`render --sorters K`: sorter ranks send one each,
+    /// in chunk order by sorter) and how many shares there are.
+    pub sorter: u8,
+    pub sorters: u8,
+    /// The bound of the worker's chunk cache for this sorter's chunks, in bytes.
     pub chunk_cache: u64,
     pub tiles: Vec<TileJob>,
 }
@@ -147,6 +155,17 @@ pub enum ToWorker {
     /// The progressive mesh (`.dpm` bytes) that the following `PmFrame`s show.
     Model(Vec<u8>),
     PmFrame(PmFrameJob),
+    /// To a sorter rank: sort your share of the chunks for this frame.
+    Sort(SortJob),
+}
+
+/// A frame for a sorter rank (`render --sorters K`): the view, and the worker rank of every
+/// tile of the grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SortJob {
+    pub frame: u32,
+    pub view_proj: [f32; 16],
+    pub owners: Vec<u32>,
 }
 
 /// Stage times of one tile on a worker, in milliseconds.
@@ -298,6 +317,7 @@ impl ToWorker {
                     w.f32(v);
                 }
                 w.0.push(f.decode_only as u8);
+                w.0.extend_from_slice(&[f.sorter, f.sorters]);
                 w.0.extend_from_slice(&f.chunk_cache.to_le_bytes());
                 w.u32(f.tiles.len() as u32);
                 for t in &f.tiles {
@@ -330,6 +350,14 @@ impl ToWorker {
                 w.0
             }
             ToWorker::Shutdown => Writer::new(2).0,
+            ToWorker::Sort(j) => {
+                let mut w = Writer::new(9);
+                w.u32(j.frame);
+                j.view_proj.iter().for_each(|&v| w.f32(v));
+                w.u32(j.owners.len() as u32);
+                j.owners.iter().for_each(|&o| w.u32(o));
+                w.0
+            }
             ToWorker::Model(dpm) => {
                 let mut w = Writer::new(6);
                 w.bytes(dpm);
@@ -371,6 +399,11 @@ impl ToWorker {
                     1 => true,
                     f => return Err(ProtocolError::Invalid(format!("unknown frame flags {f:#04x}"))),
                 };
+                let share = r.take(2, "sorter")?;
+                let (sorter, sorters) = (share[0], share[1]);
+                if sorter >= sorters {
+                    return Err(ProtocolError::Invalid(format!("sorter {sorter} of {sorters}")));
+                }
                 let chunk_cache = u64::from_le_bytes(r.take(8, "chunk cache bound")?.try_into().unwrap());
                 let n = r.count(24, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
@@ -396,9 +429,29 @@ impl ToWorker {
                     }
                     tiles.push(TileJob { index, rect, streams });
                 }
-                ToWorker::Frame(FrameJob { frame, width, height, view_proj, decode_only, chunk_cache, tiles })
+                ToWorker::Frame(FrameJob {
+                    frame,
+                    width,
+                    height,
+                    view_proj,
+                    decode_only,
+                    sorter,
+                    sorters,
+                    chunk_cache,
+                    tiles,
+                })
             }
             2 => ToWorker::Shutdown,
+            9 => {
+                let frame = r.u32("frame")?;
+                let mut view_proj = [0.0f32; 16];
+                for v in &mut view_proj {
+                    *v = r.f32("view_proj")?;
+                }
+                let n = r.count(4, "owners")?;
+                let owners = (0..n).map(|_| r.u32("owner")).collect::<Result<_, _>>()?;
+                ToWorker::Sort(SortJob { frame, view_proj, owners })
+            }
             6 => ToWorker::Model(r.bytes("model")?.to_vec()),
             7 => {
                 let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
@@ -524,6 +577,8 @@ mod tests {
             height: 480,
             view_proj: std::array::from_fn(|i| i as f32 * 0.5),
             decode_only: true,
+            sorter: 1,
+            sorters: 2,
             chunk_cache: 1 << 40,
             tiles: vec![
                 TileJob {
@@ -568,6 +623,9 @@ mod tests {
         assert_eq!(ToWorker::decode(&model.encode()), Ok(model));
         let pm = pm_frame();
         assert_eq!(ToWorker::decode(&pm.encode()), Ok(pm));
+        let sort =
+            ToWorker::Sort(SortJob { frame: 3, view_proj: std::array::from_fn(|i| i as f32), owners: vec![1, 2, 0] });
+        assert_eq!(ToWorker::decode(&sort.encode()), Ok(sort));
         let p = ToMaster::Pixels {
             frame: 7,
             tiles: vec![TilePixels {

@@ -55,7 +55,6 @@ pub enum SortError {
 /// command stream. Loaded once; sorted every frame.
 pub struct TileModel {
     pub decoded: Decoded,
-    pub ops: Vec<Op>,
     pub positions: Vec<[f32; 3]>,
     /// Each slot's triangles: pass 1 gathers a vertex's box from them, one vertex per task,
     /// instead of scattering every triangle's box into its vertices one triangle after the
@@ -77,7 +76,7 @@ impl TileModel {
         let fans = Csr::build(positions.len(), || {
             decoded.triangles.iter().enumerate().flat_map(|(t, tri)| tri.map(|s| (s, t as u32)))
         });
-        Ok(TileModel { decoded, ops, positions, fans, steps, tail_start, loose_start })
+        Ok(TileModel { decoded, positions, fans, steps, tail_start, loose_start })
     }
 
     pub fn triangles(&self) -> &[[u32; 3]] {
@@ -91,7 +90,6 @@ impl TileModel {
         size_of_val(&d.positions[..])
             + size_of_val(&d.triangles[..])
             + size_of_val(&d.duplicates[..])
-            + size_of_val(&self.ops[..])
             + size_of_val(&self.positions[..])
             + size_of_val(&self.fans.start[..])
             + size_of_val(&self.fans.values[..])

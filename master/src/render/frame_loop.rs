@@ -26,7 +26,8 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
     crate::cli::check_camera(&cam, grid.height)?;
-    let workers = t.size() - 1;
+    // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
+    let workers = t.size() - args.sorters as usize;
     let adapters = handshake(t, args.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
     if let Scene::Pm(PmScene { bytes, .. }) = &scene {
@@ -40,6 +41,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
+        t.send_many(&scene.announce(&ctx));
         let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks } = scene.jobs(&ctx)?;
         let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
         let sort_ms = ms(start);
@@ -103,7 +105,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         }
     }
     let shutdown = ToWorker::Shutdown.encode();
-    t.send_many(&(1..=workers).map(|w| (w, shutdown.clone())).collect::<Vec<_>>());
+    t.send_many(&(1..t.size()).map(|r| (r, shutdown.clone())).collect::<Vec<_>>());
     Ok(())
 }
 

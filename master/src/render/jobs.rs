@@ -1,11 +1,11 @@
 //! One frame's messages to the workers, and the tile lines of its stats.
 
 use anyhow::Result;
-use codec::bft::chunked::sort::PieceKind;
+use codec::bft::chunked::sort::{share, PieceKind};
 use codec::bft::tile_sort;
 use codec::view::{Camera, TileGrid};
 use worker::chunk_cache::ChunkCache;
-use worker::protocol::{FrameJob, PmFrameJob, StreamSource, TileJob, TileStream, ToWorker};
+use worker::protocol::{FrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
 
 use super::scene::{BftScene, ChunkedScene, PmScene, Scene};
 use super::schedule::assign;
@@ -48,6 +48,14 @@ impl Scene {
             Scene::Pm(s) => Ok(s.jobs(ctx)),
         }
     }
+
+    /// Messages that must leave before this rank sorts (other sorters' orders).
+    pub fn announce(&mut self, ctx: &FrameContext) -> Vec<(usize, Vec<u8>)> {
+        match self {
+            Scene::Chunked(s) => s.announce(ctx),
+            _ => Vec::new(),
+        }
+    }
 }
 
 impl BftScene {
@@ -83,43 +91,127 @@ impl BftScene {
     }
 }
 
+/// One empty frame job per worker: sorter `sorter`'s share of `sorters`.
+fn empty_jobs(ctx: &ShareContext, sorter: usize, chunk_cache: u64) -> Vec<FrameJob> {
+    (0..ctx.workers)
+        .map(|_| FrameJob {
+            frame: ctx.frame,
+            width: ctx.grid.width,
+            height: ctx.grid.height,
+            view_proj: ctx.view_proj.to_cols_array(),
+            decode_only: ctx.decode_only,
+            sorter: sorter as u8,
+            sorters: ctx.sorters as u8,
+            chunk_cache,
+            tiles: vec![],
+        })
+        .collect()
+}
+
 impl FrameContext<'_> {
-    /// One empty frame job per worker.
+    /// One empty frame job per worker, for a frame sorted by rank 0 alone.
     fn frame_jobs(&self, vp: glam::Mat4, chunk_cache: u64) -> Vec<FrameJob> {
-        (0..self.workers)
-            .map(|_| FrameJob {
-                frame: self.frame,
-                width: self.grid.width,
-                height: self.grid.height,
-                view_proj: vp.to_cols_array(),
-                decode_only: self.args.decode_only,
-                chunk_cache,
-                tiles: vec![],
-            })
-            .collect()
+        let share = ShareContext {
+            frame: self.frame,
+            grid: self.grid,
+            view_proj: vp,
+            workers: self.workers,
+            sorters: 1,
+            decode_only: self.args.decode_only,
+        };
+        empty_jobs(&share, 0, chunk_cache)
     }
 }
 
 /// Every worker's frame message, by rank.
-fn frame_messages(jobs: Vec<FrameJob>) -> Vec<(usize, Vec<u8>)> {
+pub(super) fn frame_messages(jobs: Vec<FrameJob>) -> Vec<(usize, Vec<u8>)> {
     jobs.into_iter().enumerate().map(|(i, j)| (i + 1, ToWorker::Frame(j).encode())).collect()
 }
 
+/// What one sorter's share of a chunked frame is made from.
+pub(super) struct ShareContext<'a> {
+    pub frame: u32,
+    pub grid: &'a TileGrid,
+    pub view_proj: glam::Mat4,
+    /// Workers are ranks `1..=workers`.
+    pub workers: usize,
+    pub sorters: usize,
+    pub decode_only: bool,
+}
+
+/// One sorter's share of a chunked frame: its jobs for every worker, their tile lines, and
+/// what the share did with its chunks.
+pub(super) struct Share {
+    pub jobs: Vec<FrameJob>,
+    pub tiles: Vec<TileStats>,
+    pub chunks: ChunkStats,
+}
+
 impl ChunkedScene {
-    /// One frame of a chunked model: the chunked sort, then each worker's tiles, whose
-    /// verbatim chunks go as bytes (with their border normals) unless the worker kept them,
-    /// as this rank's mirror of its cache says.
+    /// With several sorters, the messages that set the others to work on this frame (sent
+    /// before rank 0 sorts its own share): the view, and the worker of every tile, which rank
+    /// 0 decides for all (round robin over the grid's tiles, or `--balance`).
+    pub fn announce(&mut self, ctx: &FrameContext) -> Vec<(usize, Vec<u8>)> {
+        if self.sorters == 1 {
+            return Vec::new();
+        }
+        let all: Vec<usize> = (0..ctx.grid.tiles()).collect();
+        self.owners = ctx.owners(&all);
+        let job = SortJob {
+            frame: ctx.frame,
+            view_proj: ctx.camera.view_proj(ctx.grid.aspect()).to_cols_array(),
+            owners: self.owners.iter().map(|&w| w as u32).collect(),
+        };
+        let msg = ToWorker::Sort(job).encode();
+        (1..self.sorters).map(|s| (ctx.workers + s, msg.clone())).collect()
+    }
+
+    /// One frame of a chunked model on rank 0: its share of the sort (all of it with one
+    /// sorter), as every worker's message.
     fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
-        let grid = ctx.grid;
-        let vp = ctx.camera.view_proj(grid.aspect());
-        let (tiles, counts) = self.model.sort(vp, grid, self.coding)?;
+        let share = ShareContext {
+            frame: ctx.frame,
+            grid: ctx.grid,
+            view_proj: ctx.camera.view_proj(ctx.grid.aspect()),
+            workers: ctx.workers,
+            sorters: self.sorters,
+            decode_only: ctx.args.decode_only,
+        };
+        let owners = std::mem::take(&mut self.owners);
+        let result = self.share_jobs(&share, 0, |tiles| {
+            if owners.is_empty() {
+                ctx.owners(tiles)
+            } else {
+                tiles.iter().map(|&t| owners[t]).collect()
+            }
+        });
+        self.owners = owners;
+        let Share { jobs, tiles, chunks } = result?;
+        Ok(FrameJobs { messages: frame_messages(jobs), tiles, chunks: Some(chunks) })
+    }
+
+    /// Sorter `sorter`'s share of a frame: the chunked sort of its chunks, then each worker's
+    /// tiles (the worker of each from `owner_of`), whose verbatim chunks go as bytes (with
+    /// their border normals) unless the worker kept them, as this rank's mirror of the
+    /// worker's cache for this sorter says.
+    pub fn share_jobs(
+        &mut self,
+        ctx: &ShareContext,
+        sorter: usize,
+        owner_of: impl FnOnce(&[usize]) -> Vec<usize>,
+    ) -> Result<Share> {
+        let (grid, vp) = (ctx.grid, ctx.view_proj);
+        let range = share(self.model.chunks(), sorter, ctx.sorters);
+        let (tiles, counts) = self.model.sort_chunks(vp, grid, self.coding, range)?;
         let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
-        let owner = ctx.owners(&indices);
+        let owner = owner_of(&indices);
+        // Each sorter keeps its share of every worker's cache.
+        let bound = self.worker_cache / ctx.sorters as u64;
         self.mirrors.resize_with(ctx.workers, ChunkCache::default);
         for m in &mut self.mirrors {
-            m.set_limit(self.worker_cache);
+            m.set_limit(bound);
         }
-        let mut jobs = ctx.frame_jobs(vp, self.worker_cache);
+        let mut jobs = empty_jobs(ctx, sorter, bound);
         let mut stats = ChunkStats {
             culled: counts.culled,
             verbatim: counts.verbatim,
@@ -165,7 +257,7 @@ impl ChunkedScene {
             });
             jobs[w - 1].tiles.push(TileJob { index: tile.index as u32, rect: grid.tile_rect(tile.index), streams });
         }
-        Ok(FrameJobs { messages: frame_messages(jobs), tiles: tile_stats, chunks: Some(stats) })
+        Ok(Share { jobs, tiles: tile_stats, chunks: stats })
     }
 }
 

@@ -19,6 +19,7 @@
 //! | `frame_loop.rs` | the frame loop |
 //! | `jobs.rs` | one frame's messages to the workers, from one `FrameContext` |
 //! | `schedule.rs` | which worker renders which tile (round robin, or balanced by cost) |
+//! | `sorter.rs` | a rank that helps rank 0 sort a chunked model (`--sorters K`) |
 //! | `link.rs` | the handshake, heartbeats and silence, receiving the tiles' pixels |
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
 
@@ -28,14 +29,16 @@ mod link;
 mod plan;
 mod scene;
 mod schedule;
+mod sorter;
 mod stats;
 
 use anyhow::Result;
 use worker::transport::{self, Transport};
 
-pub use frame_loop::orbit;
+pub use frame_loop::{orbit, orbit_by};
 pub use plan::{frame_path, plan, Plan};
 pub use schedule::assign;
+pub use sorter::run_sorter;
 
 use crate::cli::RenderArgs;
 
@@ -54,6 +57,9 @@ pub fn run_master(mpi: &transport::Mpi, args: &RenderArgs, plan: &Plan) -> Resul
 
 /// Without mpirun: the frame loop, and one worker on a thread of this process, over channels.
 pub fn run_alone(args: &RenderArgs, plan: &Plan) -> Result<()> {
+    if args.sorters > 1 {
+        anyhow::bail!("--sorters {} needs mpirun: the sorters are ranks of their own", args.sorters);
+    }
     let mut ranks = transport::local_ranks(2);
     let worker_end = ranks.pop().expect("two ranks");
     let handle = std::thread::spawn(move || worker::node::run(&worker_end));

@@ -32,6 +32,10 @@ pub(super) struct ChunkedScene {
     pub mirrors: Vec<ChunkCache<()>>,
     /// Each worker's chunk cache bound in bytes.
     pub worker_cache: u64,
+    /// Ranks sharing the sort (`--sorters`), and this frame's worker of every tile of the
+    /// grid when there are several (rank 0 decides it and tells the others).
+    pub sorters: usize,
+    pub owners: Vec<usize>,
 }
 
 /// A BFT model (or a mesh encoded on load), with what its per-frame sort reuses.
@@ -56,7 +60,21 @@ impl Scene {
     pub fn load(path: &Path, coding: codec::bft::Coding, args: &RenderArgs) -> Result<Scene> {
         if let Some(model) = open_chunked(path, args.cache_mb as usize * MB)? {
             let worker_cache = args.worker_cache_mb * MB as u64;
-            return Ok(Scene::Chunked(ChunkedScene { model, coding, mirrors: Vec::new(), worker_cache }));
+            let sorters = args.sorters as usize;
+            return Ok(Scene::Chunked(ChunkedScene {
+                model,
+                coding,
+                mirrors: Vec::new(),
+                worker_cache,
+                sorters,
+                owners: Vec::new(),
+            }));
+        }
+        if args.sorters > 1 {
+            bail!(
+                "{}: --sorters shares the sort of a chunked .bft model (tessera encode writes one above --chunk-triangles)",
+                path.display()
+            );
         }
         if ModelKind::of(path) != ModelKind::Dpm {
             let model = load_model(path, codec::bft::EncodeOptions::default())?;

@@ -8,7 +8,7 @@
 //!   it is, never decoded.
 //! - **Straddling**: anything else goes through pass 1 and Table 2 (`tile_sort`), on a
 //!   `TileModel` built from the chunk on first use and kept in a cache bounded in bytes
-//!   (least recently used out first).
+//!   (least recently used out first, never one the frame uses).
 //!
 //! The first two tests hold for every point of the box because a point of the box is a
 //! convex combination of its corners, and so are its clip coordinates and (for `w > 0`) its
@@ -147,10 +147,16 @@ pub struct Straddler {
     bytes: usize,
 }
 
+/// The straddling chunks' tables: entries stamped with the frame that last used them.
+/// Least recently used out first, but never one the current frame uses: when a frame's
+/// straddling chunks need more than the bound, the chunks that do not fit are built and
+/// dropped, and the cached ones stay hits next frame, instead of a cyclic scan evicting
+/// each chunk just before it is needed again.
 struct Cache {
     entries: HashMap<u32, (Arc<Straddler>, u64)>,
     bytes: usize,
-    clock: u64,
+    /// The current frame's stamp.
+    frame: u64,
 }
 
 /// A chunked model ready for sorting: the file (its directory read), the chunks' float
@@ -169,7 +175,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
         ChunkedModel {
             file,
             boxes,
-            cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, clock: 0 }),
+            cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, frame: 0 }),
             cache_limit,
         }
     }
@@ -192,8 +198,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
     pub fn straddler(&self, i: usize) -> Result<(Arc<Straddler>, bool), FormatError> {
         {
             let mut c = self.cache.lock().expect("cache lock");
-            c.clock += 1;
-            let now = c.clock;
+            let now = c.frame;
             if let Some((s, used)) = c.entries.get_mut(&(i as u32)) {
                 *used = now;
                 return Ok((s.clone(), false));
@@ -210,18 +215,20 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
         let bytes = model.heap_bytes() + normals.heap_bytes();
         let s = Arc::new(Straddler { model, normals, bytes });
         let mut c = self.cache.lock().expect("cache lock");
-        if bytes <= self.cache_limit {
-            c.clock += 1;
-            let now = c.clock;
+        let now = c.frame;
+        while c.bytes + bytes > self.cache_limit {
+            // The least recently used entry of an earlier frame, if any.
+            let Some((&victim, _)) =
+                c.entries.iter().filter(|(_, (_, used))| *used < now).min_by_key(|(_, (_, used))| *used)
+            else {
+                break;
+            };
+            let (old, _) = c.entries.remove(&victim).expect("present");
+            c.bytes -= old.bytes;
+        }
+        if c.bytes + bytes <= self.cache_limit && !c.entries.contains_key(&(i as u32)) {
             c.bytes += bytes;
-            if let Some((old, _)) = c.entries.insert(i as u32, (s.clone(), now)) {
-                c.bytes -= old.bytes;
-            }
-            while c.bytes > self.cache_limit {
-                let (&victim, _) = c.entries.iter().min_by_key(|(_, (_, used))| *used).expect("over budget, not empty");
-                let (old, _) = c.entries.remove(&victim).expect("present");
-                c.bytes -= old.bytes;
-            }
+            c.entries.insert(i as u32, (s.clone(), now));
         }
         Ok((s, true))
     }
@@ -234,10 +241,28 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
         grid: &TileGrid,
         coding: Coding,
     ) -> Result<(Vec<ChunkedTile>, FrameCounts), SortError> {
-        let classes = self.classify_all(view_proj, grid);
+        self.sort_chunks(view_proj, grid, coding, 0..self.chunks())
+    }
+
+    /// [`Self::sort`] of the chunks `range` alone (one sorter's share when several ranks
+    /// share the sort): the tiles hold those chunks' pieces, in chunk order.
+    pub fn sort_chunks(
+        &self,
+        view_proj: Mat4,
+        grid: &TileGrid,
+        coding: Coding,
+        range: std::ops::Range<usize>,
+    ) -> Result<(Vec<ChunkedTile>, FrameCounts), SortError> {
+        let classes: Vec<Class> = self.boxes[range.clone()]
+            .par_iter()
+            .with_min_len(256)
+            .map(|&(lo, hi)| classify(lo, hi, view_proj, grid))
+            .collect();
+        let first = range.start;
+        self.cache.lock().expect("cache lock").frame += 1;
         let mut counts = FrameCounts::default();
         let mut straddling = Vec::new();
-        for (i, c) in classes.iter().enumerate() {
+        for (i, c) in classes.iter().enumerate().map(|(j, c)| (first + j, c)) {
             match c {
                 Class::Culled => counts.culled += 1,
                 Class::Verbatim(_) => counts.verbatim += 1,
@@ -271,7 +296,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
             .collect::<Result<_, SortError>>()?;
         let mut per_tile: Vec<Vec<Piece>> = (0..grid.tiles()).map(|_| Vec::new()).collect();
         let mut sorted = sorted.into_iter().peekable();
-        for (i, c) in classes.iter().enumerate() {
+        for (i, c) in classes.iter().enumerate().map(|(j, c)| (first + j, c)) {
             match c {
                 Class::Verbatim(t) => {
                     counts.visible_triangles += self.file.entries[i].triangles as u64;
@@ -302,4 +327,10 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
             .collect();
         Ok((tiles, counts))
     }
+}
+
+/// Sorter `s`'s share of `chunks` chunks among `sorters`: contiguous, so that the shares in
+/// sorter order are the chunks in file order.
+pub fn share(chunks: usize, s: usize, sorters: usize) -> std::ops::Range<usize> {
+    s * chunks / sorters..(s + 1) * chunks / sorters
 }

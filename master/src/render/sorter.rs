@@ -1,0 +1,70 @@
+//! A rank that helps rank 0 sort a chunked model (`render --sorters K`): it maps the file
+//! itself, and every frame, when rank 0 sends the view and the worker of every tile, sorts
+//! its contiguous share of the chunks and sends each worker its pieces straight, with its
+//! own mirror of its share of the worker's chunk cache. Rank 0 composites as before; no
+//! rank reads the whole model or carries all the traffic, and the workers join the shares
+//! in sorter order, which is the chunks' order, so frames are the same for every K.
+
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use glam::Mat4;
+use worker::protocol::{ToMaster, ToWorker};
+use worker::transport::{RecvError, Transport};
+
+use super::jobs::{frame_messages, Share, ShareContext};
+use super::plan::Plan;
+use super::scene::Scene;
+use crate::cli::RenderArgs;
+
+/// How long a sorter waits for rank 0's next frame (rank 0 composites and writes between).
+const MASTER_SILENCE: Duration = Duration::from_secs(3600);
+
+/// Sorter `s` (of `--sorters K`, rank 0 being sorter 0) until rank 0 shuts the job down. A
+/// failure is reported to rank 0, which ends the job with it.
+pub fn run_sorter(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
+    let result = sort_frames(t, args, plan, s);
+    if let Err(e) = &result {
+        t.send(0, &ToMaster::Failed { reason: format!("{e:#}") }.encode());
+    }
+    result
+}
+
+fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
+    let Scene::Chunked(mut scene) = Scene::load(&args.model, args.tile_coding.into(), args)? else {
+        bail!("{}: --sorters shares the sort of a chunked .bft model", args.model.display());
+    };
+    t.send(0, &ToMaster::Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }.encode());
+    let workers = t.size() - args.sorters as usize;
+    loop {
+        let (from, bytes) = match t.recv(MASTER_SILENCE) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => bail!("no message from rank 0 for an hour"),
+            Err(RecvError::Disconnected) => return Ok(()),
+        };
+        if from != 0 {
+            bail!("unexpected message from rank {from}");
+        }
+        match ToWorker::decode(&bytes).context("bad message from rank 0")? {
+            ToWorker::Shutdown => return Ok(()),
+            ToWorker::Sort(job) => {
+                let ctx = ShareContext {
+                    frame: job.frame,
+                    grid: &plan.grid,
+                    view_proj: Mat4::from_cols_array(&job.view_proj),
+                    workers,
+                    sorters: args.sorters as usize,
+                    decode_only: args.decode_only,
+                };
+                if job.owners.len() != plan.grid.tiles() || job.owners.iter().any(|&w| w == 0 || w as usize > workers) {
+                    bail!("rank 0 assigned tiles to ranks outside 1..={workers}");
+                }
+                let owners = &job.owners;
+                let Share { jobs, .. } =
+                    scene.share_jobs(&ctx, s, |tiles| tiles.iter().map(|&i| owners[i] as usize).collect())?;
+                t.send_many(&frame_messages(jobs));
+            }
+            other => bail!("unexpected message from rank 0: {other:?}"),
+        }
+    }
+}
