@@ -422,3 +422,47 @@ fn pixels(path: &Path) -> Vec<u8> {
     reader.next_frame(&mut buf).unwrap();
     buf
 }
+
+/// A damaged chunked model: a directory that does not add up is refused when the file is
+/// opened, before any worker starts; a damaged chunk stream is named where it is read, by
+/// rank 0 when the chunk straddles a tile border (its tables are built there) and by the
+/// worker when it is forwarded verbatim; either way the run ends, and no image is written.
+#[test]
+fn damaged_chunked_models_name_the_chunk() {
+    let dir = tempfile::tempdir().unwrap();
+    let bft = dir.path().join("b.bft");
+    ok(&tessera(&["encode", &mesh("classic/cow.obj"), "-o", s(&bft), "--chunk-triangles", "500"]));
+    let bytes = std::fs::read(&bft).unwrap();
+    let file = codec::bft::chunked::ChunkedFile::open(bytes.clone()).expect("a chunked file");
+    assert!(file.entries.len() >= 4);
+    let hlen = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
+    let out = dir.path().join("f.png");
+
+    // The directory: chunk 2's triangle count off by one (checksum refreshed).
+    let mut b = bytes.clone();
+    let entry = 16 + hlen + 2 * codec::bft::chunked::ENTRY_LEN + 16;
+    b[entry] = b[entry].wrapping_add(1);
+    let dir_end = 16 + hlen + file.entries.len() * codec::bft::chunked::ENTRY_LEN;
+    let crc = crc32fast::hash(&b[16 + hlen..dir_end]);
+    b[dir_end..dir_end + 4].copy_from_slice(&crc.to_le_bytes());
+    let bad = dir.path().join("dir.bft");
+    std::fs::write(&bad, &b).unwrap();
+    for args in [vec!["stats", s(&bad)], vec!["render", s(&bad), "--out", s(&out)]] {
+        refused(&tessera(&args), "chunk 3: its first triangle or slot disagrees");
+    }
+
+    // A chunk's stream: a byte flipped in the middle of chunk 1.
+    let mut b = bytes.clone();
+    let e = file.entries[1];
+    b[e.offset as usize + e.bft_len as usize / 2] ^= 0x55;
+    let bad = dir.path().join("chunk.bft");
+    std::fs::write(&bad, &b).unwrap();
+    refused(&tessera(&["stats", s(&bad)]), "chunk 1");
+    // 1x1: every chunk is forwarded verbatim and the worker decodes it; 8x8: most straddle.
+    for tiles in ["1x1", "8x8"] {
+        let o = tessera(&["render", s(&bad), "--size", "320x240", "--tiles", tiles, "--out", s(&out)]);
+        assert!(!o.status.success(), "{tiles}: must fail");
+        assert!(stderr(&o).contains("chunk 1"), "{tiles}: {}", stderr(&o));
+        assert!(!out.exists(), "{tiles}: no image");
+    }
+}

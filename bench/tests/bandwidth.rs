@@ -46,7 +46,11 @@ fn writes_the_figure_8_table_and_plot() {
             "tri_sort_ms",
             "draco_retile_ms",
             "tiled_bft_prefix_bytes",
-            "bft_prefix_sort_ms"
+            "bft_prefix_sort_ms",
+            "chunks",
+            "chunked_tiled_bft_bytes",
+            "chunked_sort_ms",
+            "chunked_orbit_bytes"
         ]
     );
     let rows: Vec<std::collections::HashMap<&str, &str>> =
@@ -73,6 +77,14 @@ fn writes_the_figure_8_table_and_plot() {
     }
     // On one tile every visible triangle travels once.
     assert_eq!(n(&rows[0], "tiled_tri_bytes"), n(&rows[0], "tri_bytes"));
+    // The cow (5,804 triangles) makes 2 chunks of at most 4096; on one tile both are
+    // forwarded verbatim, and a worker that kept them is sent nothing along the orbit.
+    for row in &rows {
+        assert_eq!(n(row, "chunks"), 2.0, "{row:?}");
+        assert!(n(row, "chunked_tiled_bft_bytes") > 0.0, "{row:?}");
+    }
+    assert_eq!(n(&rows[0], "chunked_orbit_bytes"), 0.0);
+    assert!(n(&rows[1], "chunked_orbit_bytes") > 0.0, "pieces of straddling chunks travel every frame");
 
     // The same 14-bit model through the tile sort of `tessera sort`: the same totals.
     let model = load_model(&cow, EncodeOptions { quant_bits: 14 }).unwrap();

@@ -73,7 +73,7 @@ pub use encode::{
 /// The version of chunked files.
 pub const VERSION: u16 = 3;
 /// The default number of triangles per chunk (see `ChunkOptions::chunk_triangles`).
-pub const DEFAULT_CHUNK_TRIANGLES: u32 = 16384;
+pub const DEFAULT_CHUNK_TRIANGLES: u32 = 4096;
 const HEADER_LEN: usize = 4 * 8 + 4 + 4 * 7;
 /// Bytes of one directory entry.
 pub const ENTRY_LEN: usize = 56;
