@@ -167,6 +167,8 @@ pub struct ChunkedModel<B: AsRef<[u8]>> {
     cache: Mutex<Cache>,
     /// The cache's bound in bytes.
     pub cache_limit: usize,
+    /// Sort buffers kept from chunk to chunk and frame to frame, one per task in flight.
+    buffers: Mutex<Vec<(Sorter, Boxes)>>,
 }
 
 impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
@@ -177,6 +179,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
             boxes,
             cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, frame: 0 }),
             cache_limit,
+            buffers: Mutex::new(Vec::new()),
         }
     }
 
@@ -278,11 +281,19 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
             .with_max_len(1)
             .map(|&i| {
                 let (s, built) = self.straddler(i)?;
-                let mut boxes = Boxes::default();
+                // Pass 1 and 2's buffers come from a pool and go back to it, so that the
+                // thousands of small chunks of a frame do not each allocate them afresh (as
+                // the single-stream frame loop keeps its own).
+                let (mut sorter, mut boxes) = self.buffers.lock().expect("buffer pool").pop().unwrap_or_default();
+                sorter.coding = coding;
                 boxes_into(&s.model, view_proj, grid, &mut boxes);
-                let tiles = Sorter::new(coding).sort(&s.model, &boxes, grid)?;
+                let sorted = sorter.sort(&s.model, &boxes, grid).map(|tiles| {
+                    let normals = s.normals.for_tiles(&s.model, &boxes, &tiles, grid);
+                    (tiles, normals)
+                });
                 let visible = boxes.triangles.iter().filter(|b| !b.is_empty()).count() as u64;
-                let normals = s.normals.for_tiles(&s.model, &boxes, &tiles, grid);
+                self.buffers.lock().expect("buffer pool").push((sorter, boxes));
+                let (tiles, normals) = sorted?;
                 let pieces = tiles
                     .into_iter()
                     .zip(normals)
