@@ -19,7 +19,7 @@ const MB: usize = 1 << 20;
 /// What rank 0 renders.
 pub(super) enum Scene {
     Bft(BftScene),
-    Chunked(ChunkedScene),
+    Chunked(Box<ChunkedScene>),
     Pm(PmScene),
 }
 
@@ -61,14 +61,14 @@ impl Scene {
         if let Some(model) = open_chunked(path, args.cache_mb as usize * MB)? {
             let worker_cache = args.worker_cache_mb * MB as u64;
             let sorters = args.sorters as usize;
-            return Ok(Scene::Chunked(ChunkedScene {
+            return Ok(Scene::Chunked(Box::new(ChunkedScene {
                 model,
                 coding,
                 mirrors: Vec::new(),
                 worker_cache,
                 sorters,
                 owners: Vec::new(),
-            }));
+            })));
         }
         if args.sorters > 1 {
             bail!(
