@@ -109,9 +109,7 @@ impl Header {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&[self.quant_bits, self.coding as u8, 0, 0]);
-        for v in self.bbox_min.iter().chain(&[self.step]).chain(&self.bbox_max) {
-            b.extend_from_slice(&v.to_le_bytes());
-        }
+        put_box(&mut b, self.bbox_min, self.step, self.bbox_max);
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
     }
@@ -142,23 +140,35 @@ impl Header {
             step: f(56),
             bbox_max: [f(60), f(64), f(68)],
         };
-        if !(8..=24).contains(&h.quant_bits) {
-            return Err(corrupt(format!("quantization of {} bits is outside 8..=24", h.quant_bits)));
-        }
-        if !(h.step.is_finite() && h.step > 0.0 && h.bbox_min.iter().all(|v| v.is_finite())) {
-            return Err(corrupt("non-finite quantization parameters"));
-        }
-        if !(h.bbox_min.iter().zip(&h.bbox_max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
-            return Err(corrupt(format!(
-                "the bounding box {:?} .. {:?} is not finite and ordered",
-                h.bbox_min, h.bbox_max
-            )));
-        }
+        check_quantization(h.quant_bits, h.bbox_min, h.step, h.bbox_max)?;
         if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
             return Err(corrupt("inconsistent counts in header"));
         }
         Ok(h)
     }
+}
+
+/// Appends the quantization's box both `.bft` headers end with: its min corner, step and max
+/// corner, seven `f32` LE.
+pub(crate) fn put_box(b: &mut Vec<u8>, min: [f32; 3], step: f32, max: [f32; 3]) {
+    for v in min.iter().chain(&[step]).chain(&max) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// The checks of a header's quantization, single-stream or chunked: 8 to 24 bits, a finite
+/// positive step, a finite and ordered box.
+pub(crate) fn check_quantization(bits: u8, min: [f32; 3], step: f32, max: [f32; 3]) -> Result<(), BftError> {
+    if !(8..=24).contains(&bits) {
+        return Err(corrupt(format!("quantization of {bits} bits is outside 8..=24")));
+    }
+    if !(step.is_finite() && step > 0.0 && min.iter().all(|v| v.is_finite())) {
+        return Err(corrupt("non-finite quantization parameters"));
+    }
+    if !(min.iter().zip(&max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
+        return Err(corrupt(format!("the bounding box {min:?} .. {max:?} is not finite and ordered")));
+    }
+    Ok(())
 }
 
 /// The parts of a `.bft` file, borrowed from its bytes.

@@ -61,7 +61,7 @@ use crate::container::{get_varint, put_varint, Format, FormatError};
 use crate::mesh::Quantization;
 
 use super::decode::Decoded;
-use super::format::{Coding, Header, MAGIC};
+use super::format::{check_quantization, put_box, Coding, Header, MAGIC};
 
 mod encode;
 pub mod sort;
@@ -118,6 +118,27 @@ impl ChunkedHeader {
         Quantization { bits: self.quant_bits, min: self.bbox_min, step: self.step }
     }
 
+    /// The whole model as a single-stream header: its counts and quantization, the
+    /// per-chunk counts at zero for [`add_chunk_counts`] to sum.
+    fn model_header(&self) -> Header {
+        Header {
+            input_vertices: self.input_vertices,
+            slots: self.slots,
+            triangles: self.triangles,
+            loose_triangles: 0,
+            commands: 0,
+            seeds: 0,
+            duplicates: 0,
+            tail_slots: 0,
+            components: 0,
+            quant_bits: self.quant_bits,
+            coding: Coding::Range,
+            bbox_min: self.bbox_min,
+            step: self.step,
+            bbox_max: self.bbox_max,
+        }
+    }
+
     fn to_bytes(self) -> Vec<u8> {
         let mut b = Vec::with_capacity(HEADER_LEN);
         for v in [
@@ -133,9 +154,7 @@ impl ChunkedHeader {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&[self.quant_bits, 0, 0, 0]);
-        for v in self.bbox_min.iter().chain(&[self.step]).chain(&self.bbox_max) {
-            b.extend_from_slice(&v.to_le_bytes());
-        }
+        put_box(&mut b, self.bbox_min, self.step, self.bbox_max);
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
     }
@@ -163,18 +182,7 @@ impl ChunkedHeader {
         if b[33..36] != [0, 0, 0] {
             return Err(corrupt("reserved header bytes are not zero"));
         }
-        if !(8..=24).contains(&h.quant_bits) {
-            return Err(corrupt(format!("quantization of {} bits is outside 8..=24", h.quant_bits)));
-        }
-        if !(h.step.is_finite() && h.step > 0.0 && h.bbox_min.iter().all(|v| v.is_finite())) {
-            return Err(corrupt("non-finite quantization parameters"));
-        }
-        if !(h.bbox_min.iter().zip(&h.bbox_max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
-            return Err(corrupt(format!(
-                "the bounding box {:?} .. {:?} is not finite and ordered",
-                h.bbox_min, h.bbox_max
-            )));
-        }
+        check_quantization(h.quant_bits, h.bbox_min, h.step, h.bbox_max)?;
         if h.border_slots > h.slots || h.unique_vertices > h.slots || h.unique_vertices > h.input_vertices {
             return Err(corrupt("inconsistent counts in the chunked header"));
         }
@@ -440,35 +448,15 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
     /// is parsed and checked (not decoded).
     pub fn stats(&self) -> Result<super::Stats, FormatError> {
         let g = &self.header;
-        let mut header = Header {
-            input_vertices: g.input_vertices,
-            slots: g.slots,
-            triangles: g.triangles,
-            loose_triangles: 0,
-            commands: 0,
-            seeds: 0,
-            // Every slot beyond the first of its vertex, in a chunk or across chunks.
-            duplicates: g.slots - g.unique_vertices,
-            tail_slots: 0,
-            components: 0,
-            quant_bits: g.quant_bits,
-            coding: Coding::Range,
-            bbox_min: g.bbox_min,
-            step: g.step,
-            bbox_max: g.bbox_max,
-        };
+        // Every slot beyond the first of its vertex, in a chunk or across chunks.
+        let mut header = Header { duplicates: g.slots - g.unique_vertices, ..g.model_header() };
         let (mut connectivity_bytes, mut geometry_bytes, mut border_bytes) = (0, 0, 0);
         for i in 0..self.entries.len() {
             let p = super::format::parse(self.chunk_bft(i)).map_err(|e| chunk_err(i, e))?;
             connectivity_bytes += p.sections[0].len() + p.sections[2].len() + p.sections[3].len();
             geometry_bytes += p.sections[1].len();
             border_bytes += self.entries[i].border_len as usize;
-            let h = p.header;
-            header.loose_triangles += h.loose_triangles;
-            header.commands += h.commands;
-            header.seeds += h.seeds;
-            header.tail_slots += h.tail_slots;
-            header.components += h.components;
+            add_chunk_counts(&mut header, &p.header);
         }
         Ok(super::Stats {
             header,
@@ -538,22 +526,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             .collect::<Result<_, FormatError>>()?;
         let g = &self.header;
         let mut out = Decoded {
-            header: Header {
-                input_vertices: g.input_vertices,
-                slots: g.slots,
-                triangles: g.triangles,
-                loose_triangles: 0,
-                commands: 0,
-                seeds: 0,
-                duplicates: 0,
-                tail_slots: 0,
-                components: 0,
-                quant_bits: g.quant_bits,
-                coding: Coding::Range,
-                bbox_min: g.bbox_min,
-                step: g.step,
-                bbox_max: g.bbox_max,
-            },
+            header: g.model_header(),
             positions: Vec::with_capacity(g.slots as usize),
             triangles: Vec::with_capacity(g.triangles as usize),
             duplicates: Vec::new(),
@@ -580,16 +553,21 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
                 };
                 out.duplicates.push(next.expect("peeked"));
             }
-            let h = &d.header;
-            out.header.loose_triangles += h.loose_triangles;
-            out.header.commands += h.commands;
-            out.header.seeds += h.seeds;
-            out.header.tail_slots += h.tail_slots;
-            out.header.components += h.components;
+            add_chunk_counts(&mut out.header, &d.header);
         }
         out.header.duplicates = out.duplicates.len() as u32;
         Ok(out)
     }
+}
+
+/// Adds a chunk's own counts (loose triangles, commands, seeds, tail slots, components) to
+/// the whole model's header.
+fn add_chunk_counts(model: &mut Header, chunk: &Header) {
+    model.loose_triangles += chunk.loose_triangles;
+    model.commands += chunk.commands;
+    model.seeds += chunk.seeds;
+    model.tail_slots += chunk.tail_slots;
+    model.components += chunk.components;
 }
 
 /// Writes a chunked file's header and directory (what precedes the chunks).

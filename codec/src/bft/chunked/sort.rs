@@ -194,7 +194,12 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
 
     /// Every chunk's class for a view.
     pub fn classify_all(&self, view_proj: Mat4, grid: &TileGrid) -> Vec<Class> {
-        self.boxes.par_iter().with_min_len(256).map(|&(lo, hi)| classify(lo, hi, view_proj, grid)).collect()
+        self.classify_chunks(view_proj, grid, 0..self.chunks())
+    }
+
+    /// The classes of the chunks `range`, in parallel.
+    fn classify_chunks(&self, view_proj: Mat4, grid: &TileGrid, range: std::ops::Range<usize>) -> Vec<Class> {
+        self.boxes[range].par_iter().with_min_len(256).map(|&(lo, hi)| classify(lo, hi, view_proj, grid)).collect()
     }
 
     /// Chunk `i`'s tables, from the cache or built (and then cached if they fit).
@@ -256,12 +261,8 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
         coding: Coding,
         range: std::ops::Range<usize>,
     ) -> Result<(Vec<ChunkedTile>, FrameCounts), SortError> {
-        let classes: Vec<Class> = self.boxes[range.clone()]
-            .par_iter()
-            .with_min_len(256)
-            .map(|&(lo, hi)| classify(lo, hi, view_proj, grid))
-            .collect();
         let first = range.start;
+        let classes = self.classify_chunks(view_proj, grid, range);
         self.cache.lock().expect("cache lock").frame += 1;
         let mut counts = FrameCounts::default();
         let mut straddling = Vec::new();
