@@ -317,7 +317,12 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
     let mut tiles: Vec<(u32, [u32; 4])> = Vec::new();
     let mut slot_of: HashMap<u32, usize> = HashMap::new();
     // (tile slot, chunk, stream), tile by tile in the order of first appearance.
-    let mut streams: Vec<(usize, Option<u32>, KeptChunk)> = Vec::new();
+    // A stream is read from the message where it came in it, else from the cache.
+    enum Source<'a> {
+        Sent(&'a [u8], &'a [(u32, [f32; 3])]),
+        Kept(KeptChunk),
+    }
+    let mut streams: Vec<(usize, Option<u32>, Source)> = Vec::new();
     for (job, cache) in jobs.iter().zip(chunks.iter_mut()) {
         cache.set_limit(job.chunk_cache);
         for tile in &job.tiles {
@@ -326,19 +331,19 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
                 tiles.len() - 1
             });
             for s in &tile.streams {
-                let (chunk, kept) = match &s.source {
-                    StreamSource::Bytes(b) => (None, Arc::new((b.clone(), s.normals.clone()))),
+                let (chunk, source) = match &s.source {
+                    StreamSource::Bytes(b) => (None, Source::Sent(b, &s.normals)),
                     StreamSource::Keep { chunk, bft } => {
                         let kept = Arc::new((bft.clone(), s.normals.clone()));
-                        cache.insert(*chunk, kept_cost(bft, &s.normals), kept.clone());
-                        (Some(*chunk), kept)
+                        cache.insert(*chunk, kept_cost(bft, &s.normals), kept);
+                        (Some(*chunk), Source::Sent(bft, &s.normals))
                     }
                     StreamSource::Kept { chunk } => match cache.get(*chunk) {
-                        Some(k) => (Some(*chunk), k.clone()),
+                        Some(k) => (Some(*chunk), Source::Kept(k.clone())),
                         None => return Err((tile.index, TileError::MissingChunk(*chunk))),
                     },
                 };
-                streams.push((slot, chunk, kept));
+                streams.push((slot, chunk, source));
             }
         }
     }
@@ -348,9 +353,13 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
     type Decoded = Result<(RenderMesh, usize, f64), (u32, TileError)>;
     let decoded: Vec<Decoded> = streams
         .par_iter()
-        .map(|(slot, chunk, kept)| {
+        .map(|(slot, chunk, source)| {
             let index = tiles[*slot].0;
-            let (mesh, ms) = decode_stream(&kept.0, &kept.1).map_err(|e| match (e, chunk) {
+            let (bft, normals) = match source {
+                Source::Sent(b, n) => (*b, *n),
+                Source::Kept(k) => (&k.0[..], &k.1[..]),
+            };
+            let (mesh, ms) = decode_stream(bft, normals).map_err(|e| match (e, chunk) {
                 (TileError::Decode(e), Some(c)) => (index, TileError::ChunkDecode(*c, e)),
                 (e, _) => (index, e),
             })?;
