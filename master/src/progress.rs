@@ -15,24 +15,17 @@ pub fn spinner(msg: impl Into<String>) -> ProgressBar {
 
 /// A bar over `total` items.
 pub fn bar(total: u64, msg: impl Into<String>) -> ProgressBar {
-    let pb = ProgressBar::new(total);
-    pb.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {human_pos}/{human_len} ({per_sec}, {eta})")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    pb.set_message(msg.into());
-    pb
+    styled(total, msg, "{msg} [{bar:30}] {human_pos}/{human_len} ({per_sec}, {eta})")
 }
 
 /// A bar over `total` bytes of a file.
 pub fn bytes(total: u64, msg: impl Into<String>) -> ProgressBar {
+    styled(total, msg, "{msg} [{bar:30}] {bytes}/{total_bytes} ({bytes_per_sec}, {eta})")
+}
+
+fn styled(total: u64, msg: impl Into<String>, template: &str) -> ProgressBar {
     let pb = ProgressBar::new(total);
-    pb.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {bytes}/{total_bytes} ({bytes_per_sec}, {eta})")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
+    pb.set_style(ProgressStyle::with_template(template).expect("valid template").progress_chars("=> "));
     pb.set_message(msg.into());
     pb
 }

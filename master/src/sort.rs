@@ -88,6 +88,13 @@ pub struct TileSummary {
     pub tri_bytes: usize,
 }
 
+impl TileSummary {
+    fn new(index: usize, grid: &TileGrid, triangles: u32, vertices: usize, bytes: usize, tri_bytes: usize) -> Self {
+        let (col, row) = (index as u32 % grid.cols, index as u32 / grid.cols);
+        TileSummary { index, col, row, triangles, vertices, bytes, tri_bytes }
+    }
+}
+
 #[derive(Debug, Serialize)]
 pub struct Totals {
     pub triangles: usize,
@@ -134,6 +141,29 @@ pub struct SortSummary {
     pub per_tile: Vec<TileSummary>,
 }
 
+impl SortSummary {
+    /// The summary of a frame of `name` seen by `cam` on `grid`, its times at zero and no
+    /// chunks, for the caller to fill in.
+    fn of_view(name: &str, cam: &Camera, grid: &TileGrid, totals: Totals, per_tile: Vec<TileSummary>) -> Self {
+        SortSummary {
+            model: name.to_string(),
+            size: [grid.width, grid.height],
+            tiles: [grid.cols, grid.rows],
+            eye: cam.eye.to_array(),
+            target: cam.target.to_array(),
+            up: cam.up.to_array(),
+            fovy: cam.fovy,
+            near: cam.near,
+            far: cam.far,
+            sort_ms: 0.0,
+            tri_sort_ms: 0.0,
+            totals,
+            chunks: None,
+            per_tile,
+        }
+    }
+}
+
 /// Sorts one frame with both sorts and summarises it. `sorter` and `boxes` keep the BFT
 /// sort's buffers between calls, as a frame loop does.
 pub fn sort_frame(
@@ -155,15 +185,7 @@ pub fn sort_frame(
 
     let per_tile: Vec<TileSummary> = tiles
         .iter()
-        .map(|t| TileSummary {
-            index: t.index,
-            col: t.index as u32 % grid.cols,
-            row: t.index as u32 / grid.cols,
-            triangles: t.triangles,
-            vertices: t.slots.len(),
-            bytes: t.bytes.len(),
-            tri_bytes: tri[t.index].len(),
-        })
+        .map(|t| TileSummary::new(t.index, grid, t.triangles, t.slots.len(), t.bytes.len(), tri[t.index].len()))
         .collect();
     let visible = boxes.triangles.iter().filter(|b| !b.is_empty()).count();
     let totals = Totals {
@@ -176,22 +198,7 @@ pub fn sort_frame(
         tiled_bft_bytes: tiles.iter().map(|t| t.bytes.len()).sum(),
         tiled_tri_bytes: tri.iter().map(Vec::len).sum(),
     };
-    let summary = SortSummary {
-        model: name.to_string(),
-        size: [grid.width, grid.height],
-        tiles: [grid.cols, grid.rows],
-        eye: cam.eye.to_array(),
-        target: cam.target.to_array(),
-        up: cam.up.to_array(),
-        fovy: cam.fovy,
-        near: cam.near,
-        far: cam.far,
-        sort_ms,
-        tri_sort_ms,
-        totals,
-        chunks: None,
-        per_tile,
-    };
+    let summary = SortSummary { sort_ms, tri_sort_ms, ..SortSummary::of_view(name, cam, grid, totals, per_tile) };
     Ok((summary, tiles))
 }
 
@@ -237,14 +244,10 @@ pub fn sort_chunked_frame(
         .collect();
     let per_tile: Vec<TileSummary> = tiles
         .iter()
-        .map(|(index, streams, triangles, vertices)| TileSummary {
-            index: *index,
-            col: *index as u32 % grid.cols,
-            row: *index as u32 / grid.cols,
-            triangles: *triangles as u32,
-            vertices: *vertices,
-            bytes: streams.iter().map(Vec::len).sum(),
-            tri_bytes: *triangles as usize * tri_sort::TRIANGLE_BYTES,
+        .map(|(index, streams, triangles, vertices)| {
+            let bytes = streams.iter().map(Vec::len).sum();
+            let tri_bytes = *triangles as usize * tri_sort::TRIANGLE_BYTES;
+            TileSummary::new(*index, grid, *triangles as u32, *vertices, bytes, tri_bytes)
         })
         .collect();
     let totals = Totals {
@@ -257,28 +260,15 @@ pub fn sort_chunked_frame(
         tiled_bft_bytes: per_tile.iter().map(|t| t.bytes).sum(),
         tiled_tri_bytes: per_tile.iter().map(|t| t.tri_bytes).sum(),
     };
-    let summary = SortSummary {
-        model: name.to_string(),
-        size: [grid.width, grid.height],
-        tiles: [grid.cols, grid.rows],
-        eye: cam.eye.to_array(),
-        target: cam.target.to_array(),
-        up: cam.up.to_array(),
-        fovy: cam.fovy,
-        near: cam.near,
-        far: cam.far,
-        sort_ms,
-        tri_sort_ms: 0.0,
-        totals,
-        chunks: Some(ChunkSummary {
-            chunks: model.chunks(),
-            culled: counts.culled,
-            verbatim: counts.verbatim,
-            straddling: counts.straddling,
-            straddling_triangles: counts.straddling_triangles,
-        }),
-        per_tile,
+    let chunks = ChunkSummary {
+        chunks: model.chunks(),
+        culled: counts.culled,
+        verbatim: counts.verbatim,
+        straddling: counts.straddling,
+        straddling_triangles: counts.straddling_triangles,
     };
+    let summary =
+        SortSummary { sort_ms, chunks: Some(chunks), ..SortSummary::of_view(name, cam, grid, totals, per_tile) };
     Ok((summary, tiles.into_iter().map(|(i, s, _, _)| (i, s)).collect()))
 }
 
