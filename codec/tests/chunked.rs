@@ -104,17 +104,7 @@ fn check_frame(model: &ChunkedModel<Vec<u8>>, whole: &bft::Decoded, cam: &Camera
     let q = whole.quantization();
     let positions: Vec<[f32; 3]> = whole.positions.iter().map(|&p| q.dequantize(p)).collect();
     let boxes = triangle_tile_boxes(&positions, &whole.triangles, vp, grid);
-    let mut expected = vec![Vec::new(); grid.tiles()];
-    for (t, b) in whole.triangles.iter().zip(&boxes) {
-        if b.is_empty() {
-            continue;
-        }
-        for r in b.r0..=b.r1 {
-            for c in b.c0..=b.c1 {
-                expected[r as usize * grid.cols as usize + c as usize].push(canonical(*t));
-            }
-        }
-    }
+    let mut expected = testkit::triangles_by_tile(&whole.triangles, &boxes, grid);
     let classes = model.classify_all(vp, grid);
     for coding in [Coding::Prefix, Coding::Range] {
         let (tiles, counts) = model.sort(vp, grid, coding).expect("sorts");
@@ -148,22 +138,10 @@ fn check_frame(model: &ChunkedModel<Vec<u8>>, whole: &bft::Decoded, cam: &Camera
     [count(&|c| matches!(c, Class::Verbatim(_))), count(&|c| *c == Class::Straddling), count(&|c| *c == Class::Culled)]
 }
 
-/// The default framing, an oblique view with the model partly off-screen, a close-up from
-/// inside the bounding box (triangles cross the near plane, most chunks culled).
+/// Cameras around the model (see [`testkit::cameras_around`]): most chunks are culled in the
+/// close-up from inside the box.
 fn cameras(h: &codec::bft::chunked::ChunkedHeader, aspect: f32) -> Vec<Camera> {
-    let (lo, hi) = (Vec3::from(h.bbox_min), Vec3::from(h.bbox_max));
-    let (center, size) = ((lo + hi) * 0.5, (hi - lo).length());
-    let framed = Camera::framing(h.bbox_min, h.bbox_max, aspect);
-    let offside = Camera { target: center + Vec3::new(size * 0.45, size * 0.2, 0.0), ..framed };
-    let inside = Camera {
-        eye: center + Vec3::new(0.1, 0.05, 0.3) * size,
-        target: center - Vec3::new(0.2, 0.1, 0.4) * size,
-        up: Vec3::Y,
-        fovy: 70.0,
-        near: size * 0.01,
-        far: size * 4.0,
-    };
-    vec![framed, offside, inside]
+    testkit::cameras_around(h.bbox_min, h.bbox_max, aspect)
 }
 
 #[test]
@@ -189,30 +167,6 @@ fn shared_meshes_sort_exactly_from_chunks() {
     assert!(totals.iter().all(|&n| n > 100), "verbatim, straddling, culled: {totals:?}");
 }
 
-fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
-    let mut positions = vec![];
-    let mut rng = testkit::XorShift(seed | 1);
-    for y in 0..=h {
-        for x in 0..=w {
-            positions.push([x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.5, rng.unit() * 0.3]);
-        }
-    }
-    let id = |x: usize, y: usize| (y * (w + 1) + x) as u32;
-    let mut triangles = vec![];
-    let mut k = 0;
-    for y in 0..h {
-        for x in 0..w {
-            for t in [[id(x, y), id(x + 1, y), id(x + 1, y + 1)], [id(x, y), id(x + 1, y + 1), id(x, y + 1)]] {
-                if !holes[k % holes.len()] {
-                    triangles.push(t);
-                }
-                k += 1;
-            }
-        }
-    }
-    Mesh { positions, triangles }
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
@@ -228,13 +182,7 @@ proptest! {
         fovy in 20.0f32..120.0, near in 0.01f32..0.5,
         size in (1u32..700, 1u32..500), tiles in (1u32..65, 1u32..65),
     ) {
-        let mut mesh = Mesh::default();
-        for k in 0..copies {
-            let g = grid_mesh(w, h, &holes, seed.wrapping_add(k as u64));
-            let base = mesh.positions.len() as u32;
-            mesh.positions.extend(g.positions.iter().map(|p| [p[0] + k as f32 * 0.7, p[1] - k as f32 * 0.4, p[2]]));
-            mesh.triangles.extend(g.triangles.iter().map(|t| t.map(|v| v + base)));
-        }
+        let mesh = testkit::holed_grids(w, h, copies, &holes, seed);
         prop_assume!(!mesh.triangles.is_empty());
         let file = assert_chunked_round_trip(&mesh, chunk);
         let whole = bft::decode(file.bytes()).unwrap();

@@ -22,17 +22,7 @@ fn check_coding(model: &TileModel, cam: &Camera, grid: &TileGrid, coding: Coding
     let vp = cam.view_proj(grid.aspect());
     let boxes = tile_sort::boxes(model, vp, grid);
     let tiles = tile_sort::Sorter::new(coding).sort(model, &boxes, grid).expect("sorts");
-    let mut expected = vec![Vec::new(); grid.tiles()];
-    for (t, b) in model.triangles().iter().zip(&boxes.triangles) {
-        if b.is_empty() {
-            continue;
-        }
-        for r in b.r0..=b.r1 {
-            for c in b.c0..=b.c1 {
-                expected[r as usize * grid.cols as usize + c as usize].push(canonical(*t));
-            }
-        }
-    }
+    let mut expected = testkit::triangles_by_tile(model.triangles(), &boxes.triangles, grid);
     let pairs = expected.iter().map(Vec::len).sum();
     let mut seen = vec![false; grid.tiles()];
     for tile in &tiles {
@@ -65,23 +55,10 @@ fn shared(rel: &str) -> TileModel {
     model_of(&codec::load_path(&testkit::shared_meshes().join(rel)).unwrap())
 }
 
-/// Cameras around a model: the default framing, an oblique view with the model partly
-/// off-screen, a close-up from inside the bounding box (triangles cross the near plane).
+/// Cameras around a model (see [`testkit::cameras_around`]).
 fn cameras(model: &TileModel, aspect: f32) -> Vec<Camera> {
     let h = model.decoded.header;
-    let (lo, hi) = (Vec3::from(h.bbox_min), Vec3::from(h.bbox_max));
-    let (center, size) = ((lo + hi) * 0.5, (hi - lo).length());
-    let framed = Camera::framing(h.bbox_min, h.bbox_max, aspect);
-    let offside = Camera { target: center + Vec3::new(size * 0.45, size * 0.2, 0.0), ..framed };
-    let inside = Camera {
-        eye: center + Vec3::new(0.1, 0.05, 0.3) * size,
-        target: center - Vec3::new(0.2, 0.1, 0.4) * size,
-        up: Vec3::Y,
-        fovy: 70.0,
-        near: size * 0.01,
-        far: size * 4.0,
-    };
-    vec![framed, offside, inside]
+    testkit::cameras_around(h.bbox_min, h.bbox_max, aspect)
 }
 
 #[test]
@@ -106,32 +83,6 @@ fn shared_meshes_sort_exactly() {
     }
 }
 
-fn grid_mesh(w: usize, h: usize, holes: &[bool], seed: u64) -> Mesh {
-    let mut positions = vec![];
-    let mut rng = testkit::XorShift(seed | 1);
-    for y in 0..=h {
-        for x in 0..=w {
-            let z = rng.unit() * 0.3;
-            positions.push([x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.5, z]);
-        }
-    }
-    let id = |x: usize, y: usize| (y * (w + 1) + x) as u32;
-    let mut triangles = vec![];
-    for y in 0..h {
-        for x in 0..w {
-            for t in [[id(x, y), id(x + 1, y), id(x + 1, y + 1)], [id(x, y), id(x + 1, y + 1), id(x, y + 1)]] {
-                if !holes[triangles.len() % holes.len()] {
-                    triangles.push(t);
-                } else {
-                    triangles.push([u32::MAX; 3]);
-                }
-            }
-        }
-    }
-    triangles.retain(|t| t[0] != u32::MAX);
-    Mesh { positions, triangles }
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
@@ -147,14 +98,7 @@ proptest! {
         fovy in 20.0f32..120.0, near in 0.01f32..0.5,
         size in (1u32..700, 1u32..500), tiles in (1u32..65, 1u32..65),
     ) {
-        let mut mesh = Mesh::default();
-        for k in 0..copies {
-            let g = grid_mesh(w, h, &holes, seed.wrapping_add(k as u64));
-            let base = mesh.positions.len() as u32;
-            mesh.positions.extend(g.positions.iter().map(|p| [p[0] + k as f32 * 0.7, p[1] - k as f32 * 0.4, p[2]]));
-            mesh.triangles.extend(g.triangles.iter().map(|t| t.map(|v| v + base)));
-        }
-        let model = model_of(&mesh);
+        let model = model_of(&testkit::holed_grids(w, h, copies, &holes, seed));
         let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0 };
         prop_assume!(cam.validate().is_ok());
         let (tw, th) = (tiles.0.min(size.0), tiles.1.min(size.1));

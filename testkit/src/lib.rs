@@ -6,7 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use codec::bft::{self, EncodeOptions, Encoded};
+use codec::view::{Camera, TileBox, TileGrid};
 use codec::{Mesh, Quantization};
+use glam::Vec3;
 use proptest::prelude::*;
 
 /// `../shared/meshes`, next to the repository.
@@ -139,6 +141,71 @@ impl XorShift {
     pub fn bytes(&mut self, len: usize) -> Vec<u8> {
         (0..len).map(|_| self.next_u64() as u8).collect()
     }
+}
+
+/// `copies` bumpy grids of `w x h` quads (two triangles each), the triangle `k` of each left
+/// out where `holes[k % holes.len()]`, at offsets from each other (so many components): the
+/// random meshes of the tile sort's property tests.
+pub fn holed_grids(w: usize, h: usize, copies: usize, holes: &[bool], seed: u64) -> Mesh {
+    let mut mesh = Mesh::default();
+    for k in 0..copies {
+        let base = mesh.positions.len() as u32;
+        let mut rng = XorShift(seed.wrapping_add(k as u64) | 1);
+        for y in 0..=h {
+            for x in 0..=w {
+                let p = [x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.5, rng.unit() * 0.3];
+                mesh.positions.push([p[0] + k as f32 * 0.7, p[1] - k as f32 * 0.4, p[2]]);
+            }
+        }
+        let id = |x: usize, y: usize| base + (y * (w + 1) + x) as u32;
+        let mut t = 0;
+        for y in 0..h {
+            for x in 0..w {
+                for tri in [[id(x, y), id(x + 1, y), id(x + 1, y + 1)], [id(x, y), id(x + 1, y + 1), id(x, y + 1)]] {
+                    if !holes[t % holes.len()] {
+                        mesh.triangles.push(tri);
+                    }
+                    t += 1;
+                }
+            }
+        }
+    }
+    mesh
+}
+
+/// Cameras around a bounding box: the default framing, an oblique view with the model partly
+/// off-screen, a close-up from inside the box (triangles cross the near plane).
+pub fn cameras_around(bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32) -> Vec<Camera> {
+    let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));
+    let (center, size) = ((lo + hi) * 0.5, (hi - lo).length());
+    let framed = Camera::framing(bbox_min, bbox_max, aspect);
+    let offside = Camera { target: center + Vec3::new(size * 0.45, size * 0.2, 0.0), ..framed };
+    let inside = Camera {
+        eye: center + Vec3::new(0.1, 0.05, 0.3) * size,
+        target: center - Vec3::new(0.2, 0.1, 0.4) * size,
+        up: Vec3::Y,
+        fovy: 70.0,
+        near: size * 0.01,
+        far: size * 4.0,
+    };
+    vec![framed, offside, inside]
+}
+
+/// Per tile of `grid`, the triangles (in [`canonical`] form) whose box `[t]` holds it: what
+/// an exact tile sort must give each tile.
+pub fn triangles_by_tile(triangles: &[[u32; 3]], boxes: &[TileBox], grid: &TileGrid) -> Vec<Vec<[u32; 3]>> {
+    let mut tiles = vec![Vec::new(); grid.tiles()];
+    for (t, b) in triangles.iter().zip(boxes) {
+        if b.is_empty() {
+            continue;
+        }
+        for r in b.r0..=b.r1 {
+            for c in b.c0..=b.c1 {
+                tiles[r as usize * grid.cols as usize + c as usize].push(canonical(*t));
+            }
+        }
+    }
+    tiles
 }
 
 /// Positions on a coarse grid so coincident and collinear vertices (zero-area faces) occur.
