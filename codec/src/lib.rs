@@ -29,6 +29,7 @@ pub mod huffman;
 pub mod input;
 pub mod load;
 pub mod mesh;
+pub mod nsp;
 pub mod pm;
 pub mod rangecoder;
 pub mod save;

@@ -119,6 +119,15 @@ impl Encoder {
     }
 }
 
+/// A decoder's position and registers, without its bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DecoderState {
+    pos: usize,
+    range: u32,
+    code: u32,
+    overrun: usize,
+}
+
 /// Range decoder over a byte slice.
 #[derive(Clone, Debug)]
 pub struct Decoder<'a> {
@@ -152,6 +161,18 @@ impl<'a> Decoder<'a> {
         }
     }
 
+    /// Where the decoder stands, to [`Decoder::resume`] later on the same bytes (a viewer
+    /// that refines a cell in steps keeps this instead of a borrow of the bytes).
+    pub fn state(&self) -> DecoderState {
+        DecoderState { pos: self.pos, range: self.range, code: self.code, overrun: self.overrun }
+    }
+
+    /// A decoder over `data` that continues from `state`, taken from a decoder over the same
+    /// bytes.
+    pub fn resume(data: &'a [u8], state: DecoderState) -> Self {
+        Decoder { data, pos: state.pos, range: state.range, code: state.code, overrun: state.overrun }
+    }
+
     /// Number of bytes the decoder wanted beyond the end of its buffer. A well-formed stream
     /// never overruns; callers turn an overrun into a "stream ends early" error.
     #[inline]
@@ -172,7 +193,10 @@ impl<'a> Decoder<'a> {
             *prob -= *prob >> MOVE_BITS;
             true
         };
-        if self.range < TOP {
+        // A loop, not LZMA's single step: an adaptive probability stays within 31..2017 of
+        // 2048, so one byte always renormalizes, but the static tables of `.nsp` files go
+        // down to 1/2048, which can shrink the range by more than a byte at once.
+        while self.range < TOP {
             self.range <<= 8;
             self.code = (self.code << 8) | self.next_byte() as u32;
         }

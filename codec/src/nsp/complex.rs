@@ -1,0 +1,466 @@
+//! The state of one cell: its kd-cells (the vertices at their current precision) and its
+//! top-simplices, and the two operations that refine it by one kd level, shared by the
+//! encoder and the decoder so that both run exactly the same steps.
+//!
+//! The paper's minimal structure (section 6.1): a list of top-simplices, each naming its
+//! kd-cells, and per kd-cell the list of its incident top-simplices; no face hierarchy.
+//! Kd-cells are never freed while a cell refines (a split keeps `v` as `v0` and adds `v1`),
+//! top-simplices are recycled through a free list. Ids are arena positions and never decide
+//! anything: every order that the stream depends on is the kd-index order.
+
+use std::collections::{HashMap, HashSet};
+
+use super::canonical::{top_simplices, Simplex};
+
+/// Contexts: two per kd level for geometry, then connectivity, then orientation.
+pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::MAX_BITS as usize;
+const CONN_BASE: usize = GEOMETRY_CONTEXTS;
+const CONN_CONTEXTS: usize = 3 * 16 * 3;
+const ORIENT_BASE: usize = CONN_BASE + CONN_CONTEXTS;
+/// Total number of contexts, so of probabilities in a file's table.
+pub const CONTEXTS: usize = ORIENT_BASE + 4;
+
+/// One binary decision, coded or decoded. The encoder records `value` and returns it; the
+/// decoder ignores it and returns what the stream says.
+pub trait BitIo {
+    fn bit(&mut self, ctx: usize, value: bool) -> bool;
+}
+
+/// What the encoder knows and the decoder learns from the stream. The decoder's oracle
+/// answers anything: its answers go to [`BitIo::bit`] as values, which the decoder ignores.
+pub trait Oracle {
+    /// The occupancy of kd-cell `cell`'s two halves at kd `level`: (both, second only).
+    fn geometry(&mut self, cell: u32, level: u8) -> (bool, bool);
+    /// Called when `v0` (the old `v`) splits off `v1`, before the connectivity is coded.
+    fn before_split(&mut self, v0: u32, v1: u32);
+    /// The symbol of the star simplex `v·τ` (0 `v0·τ`, 1 `v1·τ`, 2 both, 3 both and the cone).
+    fn symbol(&mut self, v0: u32, v1: u32, tau: &[u32]) -> u8;
+    /// Whether `t` has the true orientation of the triangle on its vertex set.
+    fn oriented(&mut self, t: [u32; 3]) -> bool;
+}
+
+/// The decoder's oracle: it knows nothing.
+pub struct Blind;
+
+impl Oracle for Blind {
+    fn geometry(&mut self, _: u32, _: u8) -> (bool, bool) {
+        (false, false)
+    }
+    fn before_split(&mut self, _: u32, _: u32) {}
+    fn symbol(&mut self, _: u32, _: u32, _: &[u32]) -> u8 {
+        0
+    }
+    fn oriented(&mut self, _: [u32; 3]) -> bool {
+        true
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct KdCell {
+    pub level: u8,
+    pub prefix: u128,
+    /// Incident top-simplices.
+    pub tops: Vec<u32>,
+}
+
+impl KdCell {
+    /// The kd-index: a total order on kd-cells of any levels (`1 << level | prefix`).
+    #[inline]
+    pub fn index(&self) -> u128 {
+        (1u128 << self.level) | self.prefix
+    }
+}
+
+/// A top-simplex on kd-cell ids; `dim` is `DEAD` for a free slot.
+#[derive(Clone, Copy, Debug)]
+pub struct Top {
+    pub v: [u32; 3],
+    pub dim: u8,
+}
+
+const DEAD: u8 = u8::MAX;
+
+/// Why a stream cannot be applied (only a corrupt stream gets here).
+#[derive(Debug, PartialEq)]
+pub enum ApplyError {
+    /// A triangle of the star has no possible image: the stream is not one the encoder wrote.
+    NoSymbol,
+    /// More kd-cells or top-simplices than the cell table allows.
+    TooLarge,
+}
+
+/// The complex of one cell at a uniform or (during a level) mixed precision.
+#[derive(Clone, Debug, Default)]
+pub struct Complex {
+    pub cells: Vec<KdCell>,
+    pub tops: Vec<Top>,
+    free: Vec<u32>,
+    live_tops: usize,
+    /// The most live top-simplices there have been at once.
+    pub peak_tops: usize,
+    /// Kd-cells sorted by kd-index at the current level (all cells are at `level`).
+    pub order: Vec<u32>,
+    pub level: u8,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Tau {
+    dim: u8,
+    keys: [u128; 2],
+    w: [u32; 2],
+}
+
+impl Complex {
+    /// The root's starting state: one kd-cell (the cube) and one point.
+    pub fn root() -> Complex {
+        let mut c = Complex::default();
+        c.cells.push(KdCell { level: 0, prefix: 0, tops: Vec::new() });
+        c.add_top(Top { v: [0, 0, 0], dim: 0 });
+        c.order = vec![0];
+        c
+    }
+
+    /// The clustering of `simplices` (on point ids) at kd `level`, `prefix[i]` being point
+    /// `i`'s kd-cell there. Returns the complex and each point's kd-cell id.
+    pub fn cluster(level: u8, prefix: &[u128], simplices: &[Simplex]) -> (Complex, Vec<u32>) {
+        let mut distinct: Vec<u128> = prefix.to_vec();
+        distinct.sort_unstable();
+        distinct.dedup();
+        let id: HashMap<u128, u32> = distinct.iter().enumerate().map(|(i, &p)| (p, i as u32)).collect();
+        let pcell: Vec<u32> = prefix.iter().map(|p| id[p]).collect();
+        let mut c = Complex { level, ..Complex::default() };
+        c.cells = distinct.iter().map(|&prefix| KdCell { level, prefix, tops: Vec::new() }).collect();
+        let images = simplices.iter().map(|s| {
+            let mut t = *s;
+            for k in 0..=s.dim as usize {
+                t.v[k] = pcell[s.v[k] as usize];
+            }
+            t
+        });
+        for s in top_simplices(distinct.len(), images) {
+            c.add_top(Top { v: s.v, dim: s.dim });
+        }
+        c.order = (0..c.cells.len() as u32).collect();
+        (c, pcell)
+    }
+
+    /// The part of `self` (at a uniform level) that touches the kd-cells `inside` accepts: the
+    /// top-simplices with a vertex there, and all their vertices.
+    pub fn restrict(&self, inside: impl Fn(&KdCell) -> bool) -> Complex {
+        let mut c = Complex { level: self.level, ..Complex::default() };
+        let mut map: HashMap<u32, u32> = HashMap::new();
+        let mut keep: Vec<u32> = Vec::new();
+        for &v in &self.order {
+            if inside(&self.cells[v as usize]) {
+                keep.extend_from_slice(&self.cells[v as usize].tops);
+            }
+        }
+        keep.sort_unstable();
+        keep.dedup();
+        let mut verts: Vec<u32> = keep.iter().flat_map(|&t| self.top_verts(t).to_vec()).collect();
+        verts.sort_unstable_by_key(|&v| self.cells[v as usize].index());
+        verts.dedup();
+        for &v in &verts {
+            map.insert(v, c.cells.len() as u32);
+            let k = &self.cells[v as usize];
+            c.cells.push(KdCell { level: k.level, prefix: k.prefix, tops: Vec::new() });
+        }
+        for &t in &keep {
+            let mut top = self.tops[t as usize];
+            for k in 0..=top.dim as usize {
+                top.v[k] = map[&top.v[k]];
+            }
+            c.add_top(top);
+        }
+        c.order = (0..c.cells.len() as u32).collect();
+        c
+    }
+
+    pub fn top_verts(&self, t: u32) -> &[u32] {
+        let top = &self.tops[t as usize];
+        &top.v[..top.dim as usize + 1]
+    }
+
+    /// Live top-simplices.
+    pub fn live_tops(&self) -> usize {
+        self.live_tops
+    }
+
+    /// Live top-simplices, in arena order.
+    pub fn iter_tops(&self) -> impl Iterator<Item = &Top> {
+        self.tops.iter().filter(|t| t.dim != DEAD)
+    }
+
+    fn add_top(&mut self, top: Top) -> u32 {
+        let id = match self.free.pop() {
+            Some(id) => {
+                self.tops[id as usize] = top;
+                id
+            }
+            None => {
+                self.tops.push(top);
+                self.tops.len() as u32 - 1
+            }
+        };
+        for k in 0..=top.dim as usize {
+            self.cells[top.v[k] as usize].tops.push(id);
+        }
+        self.live_tops += 1;
+        self.peak_tops = self.peak_tops.max(self.live_tops);
+        id
+    }
+
+    /// Refines every kd-cell by one kd level, in kd-index order.
+    pub fn refine_level(
+        &mut self,
+        io: &mut impl BitIo,
+        oracle: &mut impl Oracle,
+        max_cells: usize,
+        max_tops: usize,
+    ) -> Result<(), ApplyError> {
+        let level = self.level;
+        let order = std::mem::take(&mut self.order);
+        let mut next = Vec::with_capacity(order.len() * 2);
+        for &v in &order {
+            let (both, second) = oracle.geometry(v, level);
+            let both = io.bit(2 * level as usize, both);
+            let cell = &mut self.cells[v as usize];
+            cell.level = level + 1;
+            cell.prefix <<= 1;
+            if !both {
+                let second = io.bit(2 * level as usize + 1, second);
+                cell.prefix |= second as u128;
+                next.push(v);
+                continue;
+            }
+            let prefix = cell.prefix | 1;
+            if self.cells.len() >= max_cells {
+                return Err(ApplyError::TooLarge);
+            }
+            let v1 = self.cells.len() as u32;
+            self.cells.push(KdCell { level: level + 1, prefix, tops: Vec::new() });
+            oracle.before_split(v, v1);
+            self.split(v, v1, io, oracle)?;
+            if self.live_tops > max_tops {
+                return Err(ApplyError::TooLarge);
+            }
+            next.push(v);
+            next.push(v1);
+        }
+        self.order = next;
+        self.level = level + 1;
+        Ok(())
+    }
+
+    /// The generalised vertex split of `v` (now `v0`) into `v0` and `v1` (NSP.md 1.6).
+    fn split(&mut self, v0: u32, v1: u32, io: &mut impl BitIo, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
+        let old = std::mem::take(&mut self.cells[v0 as usize].tops);
+        // The star of v: every τ with v·τ in the closure of v's top-simplices.
+        let mut taus: Vec<Tau> = Vec::with_capacity(old.len() * 3 + 1);
+        let mut old_tri: HashMap<[u32; 2], [u32; 3]> = HashMap::new();
+        taus.push(Tau { dim: 0, keys: [0; 2], w: [u32::MAX; 2] });
+        for &t in &old {
+            let top = self.tops[t as usize];
+            let others: Vec<u32> = top.v[..top.dim as usize + 1].iter().copied().filter(|&u| u != v0).collect();
+            for &w in &others {
+                taus.push(Tau { dim: 1, keys: [self.cells[w as usize].index(), 0], w: [w, u32::MAX] });
+            }
+            if others.len() == 2 {
+                let (mut a, mut b) = (others[0], others[1]);
+                if self.cells[a as usize].index() > self.cells[b as usize].index() {
+                    std::mem::swap(&mut a, &mut b);
+                }
+                taus.push(Tau { dim: 2, keys: [self.cells[a as usize].index(), self.cells[b as usize].index()], w: [a, b] });
+                old_tri.insert([a, b], top.v);
+            }
+        }
+        taus.sort_unstable();
+        taus.dedup();
+
+        // Symbols, coarse faces first; a vertex τ's symbol constrains its triangles.
+        let mut vsym: HashMap<u32, u8> = HashMap::new();
+        let mut cone_edge = false;
+        let mut edges: Vec<[u32; 2]> = Vec::new();
+        let mut tris: Vec<([u32; 3], usize, bool)> = Vec::new(); // (triangle, ctx kind, is cone)
+        for tau in &taus {
+            let tv: &[u32] = match tau.dim {
+                0 => &[],
+                1 => &tau.w[..1],
+                _ => &tau.w[..],
+            };
+            let allowed: u8 = match tau.dim {
+                0 => 0b1100,
+                1 => 0b0111 | if cone_edge { 0b1000 } else { 0 },
+                _ => {
+                    let (a, b) = (vsym[&tau.w[0]], vsym[&tau.w[1]]);
+                    let has0 = |s: u8| s != 1;
+                    let has1 = |s: u8| s != 0;
+                    let m0 = has0(a) && has0(b);
+                    let m1 = has1(a) && has1(b);
+                    (m0 as u8) | (m1 as u8) << 1 | ((m0 && m1) as u8) << 2
+                }
+            };
+            if allowed == 0 {
+                return Err(ApplyError::NoSymbol);
+            }
+            let truth = oracle.symbol(v0, v1, tv);
+            let sym = code_symbol(io, tau.dim as usize, allowed, truth);
+            match tau.dim {
+                0 => cone_edge = sym == 3,
+                1 => {
+                    let w = tau.w[0];
+                    vsym.insert(w, sym);
+                    if sym != 1 {
+                        edges.push([v0, w]);
+                    }
+                    if sym != 0 {
+                        edges.push([v1, w]);
+                    }
+                    if sym == 3 {
+                        tris.push(([v0, v1, w], 0, true));
+                    }
+                }
+                _ => {
+                    let t = old_tri[&tau.w];
+                    let sub = |x: u32| t.map(|u| if u == v0 { x } else { u });
+                    if sym != 1 {
+                        tris.push((sub(v0), (sym == 2) as usize, false));
+                    }
+                    if sym != 0 {
+                        tris.push((sub(v1), (sym == 2) as usize, false));
+                    }
+                }
+            }
+        }
+        if cone_edge {
+            edges.push([v0, v1]);
+        }
+
+        // Orientation: inherited triangles first (against their parent), then cones
+        // (against a neighbour across v0·w or v1·w among the inherited ones).
+        for (t, kind, cone) in tris.iter_mut() {
+            if *cone {
+                continue;
+            }
+            let right = oracle.oriented(*t);
+            if io.bit(ORIENT_BASE + *kind, !right) {
+                t.swap(1, 2);
+            }
+        }
+        let n_inherited = tris.len();
+        for i in 0..n_inherited {
+            if !tris[i].2 {
+                continue;
+            }
+            let w = tris[i].0[2];
+            let mut predicted = [v0, v1, w];
+            let mut found = false;
+            for (t, _, cone) in tris.iter() {
+                if *cone {
+                    continue;
+                }
+                if let Some(dir) = directed(t, v0, w) {
+                    predicted = if dir { [v0, v1, w] } else { [v1, v0, w] };
+                    found = true;
+                    break;
+                }
+                if let Some(dir) = directed(t, v1, w) {
+                    predicted = if dir { [v1, v0, w] } else { [v0, v1, w] };
+                    found = true;
+                    break;
+                }
+            }
+            let right = oracle.oriented(predicted);
+            let flip = io.bit(ORIENT_BASE + 2 + found as usize, !right);
+            tris[i].0 = if flip { [predicted[1], predicted[0], predicted[2]] } else { predicted };
+        }
+
+        // Replace the old star by the new top-simplices.
+        for &t in &old {
+            let top = self.tops[t as usize];
+            for &u in &top.v[..top.dim as usize + 1] {
+                if u != v0 {
+                    let list = &mut self.cells[u as usize].tops;
+                    if let Some(pos) = list.iter().position(|&x| x == t) {
+                        list.swap_remove(pos);
+                    }
+                }
+            }
+            self.tops[t as usize].dim = DEAD;
+            self.free.push(t);
+            self.live_tops -= 1;
+        }
+        let mut covered: HashSet<[u32; 2]> = HashSet::new();
+        for (t, _, _) in &tris {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])] {
+                covered.insert([a.min(b), a.max(b)]);
+            }
+        }
+        let mut has_edge = [false; 2];
+        for e in &edges {
+            has_edge[(e[0] == v1) as usize] = true;
+            if e[1] == v1 {
+                has_edge[1] = true;
+            }
+        }
+        for (t, _, _) in &tris {
+            if t.contains(&v0) {
+                has_edge[0] = true;
+            }
+            if t.contains(&v1) {
+                has_edge[1] = true;
+            }
+        }
+        for (t, _, _) in &tris {
+            self.add_top(Top { v: *t, dim: 2 });
+        }
+        for e in &edges {
+            if !covered.contains(&[e[0].min(e[1]), e[0].max(e[1])]) {
+                self.add_top(Top { v: [e[0], e[1], 0], dim: 1 });
+            }
+        }
+        for (k, &v) in [v0, v1].iter().enumerate() {
+            if !has_edge[k] {
+                self.add_top(Top { v: [v, 0, 0], dim: 0 });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether triangle `t` holds the directed edge a→b (`Some(true)`), b→a (`Some(false)`), or
+/// neither.
+fn directed(t: &[u32; 3], a: u32, b: u32) -> Option<bool> {
+    for k in 0..3 {
+        let (x, y) = (t[k], t[(k + 1) % 3]);
+        if x == a && y == b {
+            return Some(true);
+        }
+        if x == b && y == a {
+            return Some(false);
+        }
+    }
+    None
+}
+
+/// Codes one symbol from the `allowed` set (bit `s` for symbol `s`) in at most two binary
+/// decisions: the group ({0,1} or {2,3}), then the member; forced decisions cost nothing.
+fn code_symbol(io: &mut impl BitIo, dim: usize, allowed: u8, truth: u8) -> u8 {
+    let ctx = CONN_BASE + (dim * 16 + allowed as usize) * 3;
+    let lo = allowed & 0b0011 != 0;
+    let hi = allowed & 0b1100 != 0;
+    let group = if lo && hi { io.bit(ctx, truth >= 2) } else { hi };
+    let (a, b) = if group { (2u8, 3u8) } else { (0u8, 1u8) };
+    let (has_a, has_b) = (allowed >> a & 1 != 0, allowed >> b & 1 != 0);
+    if has_a && has_b {
+        if io.bit(ctx + 1 + group as usize, truth == b) {
+            b
+        } else {
+            a
+        }
+    } else if has_a {
+        a
+    } else {
+        b
+    }
+}

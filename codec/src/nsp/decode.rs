@@ -1,0 +1,305 @@
+//! Reading an `.nsp`: the file's tables, and the state of one cell refined from its parent's.
+
+use std::io::{Read, Seek, SeekFrom};
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+use super::complex::{ApplyError, BitIo, Blind, Complex};
+use super::format::{self, CellEntry, Header, ENTRY_LEN, FOOTER_LEN, PREFIX_LEN, TABLE_LEN};
+use super::tree::Tree;
+use super::view::{draw, Drawn};
+use super::NspError;
+use crate::rangecoder::{Decoder, DecoderState};
+
+enum Source {
+    Bytes(Arc<[u8]>),
+    File(std::fs::File),
+}
+
+/// An opened `.nsp`: header, probability table, tree and cell table in memory; cell streams
+/// read one at a time when asked for.
+pub struct NspFile {
+    pub header: Header,
+    pub table: Arc<[u16]>,
+    pub tree: Tree,
+    pub entries: Vec<CellEntry>,
+    source: Source,
+    /// Bytes read from the file so far (header and tables included).
+    pub bytes_read: AtomicU64,
+    pub file_len: u64,
+}
+
+impl NspFile {
+    /// Opens a file in memory.
+    pub fn from_bytes(bytes: impl Into<Arc<[u8]>>) -> Result<NspFile, NspError> {
+        let bytes: Arc<[u8]> = bytes.into();
+        let n = bytes.len();
+        if n < PREFIX_LEN + TABLE_LEN + FOOTER_LEN {
+            return Err(NspError::Format(format!("{n} bytes is shorter than any .nsp file")));
+        }
+        let (header, table) = format::read_prefix(&bytes[..PREFIX_LEN + TABLE_LEN])?;
+        let (offset, _cells) = format::read_footer(&bytes[n - FOOTER_LEN..], n as u64)?;
+        let entries = format::read_entries(&bytes[offset as usize..n - FOOTER_LEN], offset)?;
+        let read = (PREFIX_LEN + TABLE_LEN + (n - offset as usize)) as u64;
+        Self::assemble(header, table, entries, Source::Bytes(bytes), read, n as u64)
+    }
+
+    /// Opens a file on disk, reading only its header, tables and footer.
+    pub fn open(path: &Path) -> Result<NspFile, NspError> {
+        let io = |e: std::io::Error| NspError::Format(format!("cannot read: {e}"));
+        let (mut file, len) = crate::input::open_regular(path).map_err(NspError::Format)?;
+        if len < (PREFIX_LEN + TABLE_LEN + FOOTER_LEN) as u64 {
+            return Err(NspError::Format(format!("{len} bytes is shorter than any .nsp file")));
+        }
+        let mut prefix = vec![0u8; PREFIX_LEN + TABLE_LEN];
+        file.read_exact(&mut prefix).map_err(io)?;
+        let (header, table) = format::read_prefix(&prefix)?;
+        let mut footer = [0u8; FOOTER_LEN];
+        file.seek(SeekFrom::Start(len - FOOTER_LEN as u64)).map_err(io)?;
+        file.read_exact(&mut footer).map_err(io)?;
+        let (offset, cells) = format::read_footer(&footer, len)?;
+        let mut rows = vec![0u8; cells as usize * ENTRY_LEN + 4];
+        file.seek(SeekFrom::Start(offset)).map_err(io)?;
+        file.read_exact(&mut rows).map_err(io)?;
+        let entries = format::read_entries(&rows, offset)?;
+        let read = (prefix.len() + rows.len() + FOOTER_LEN) as u64;
+        Self::assemble(header, table, entries, Source::File(file), read, len)
+    }
+
+    fn assemble(
+        header: Header,
+        table: Vec<u16>,
+        entries: Vec<CellEntry>,
+        source: Source,
+        read: u64,
+        file_len: u64,
+    ) -> Result<NspFile, NspError> {
+        if header.cells as usize != entries.len() {
+            return Err(NspError::Format(format!(
+                "the header counts {} cells, the cell table {}",
+                header.cells,
+                entries.len()
+            )));
+        }
+        let split: Vec<bool> = entries.iter().map(|e| e.split).collect();
+        let tree = Tree::from_split_flags(header.params, &split)?;
+        Ok(NspFile { header, table: table.into(), tree, entries, source, bytes_read: AtomicU64::new(read), file_len })
+    }
+
+    /// The compressed stream of cell `c`, checked against its CRC.
+    pub fn cell_bytes(&self, c: u32) -> Result<Arc<[u8]>, NspError> {
+        let e = self.entries.get(c as usize).ok_or(NspError::Cell { cell: c, what: "no such cell".into() })?;
+        let bytes: Arc<[u8]> = match &self.source {
+            Source::Bytes(b) => b[e.offset as usize..e.offset as usize + e.len as usize].into(),
+            Source::File(f) => {
+                use std::os::unix::fs::FileExt;
+                let mut buf = vec![0u8; e.len as usize];
+                f.read_exact_at(&mut buf, e.offset)
+                    .map_err(|err| NspError::Cell { cell: c, what: format!("cannot read its stream: {err}") })?;
+                buf.into()
+            }
+        };
+        self.bytes_read.fetch_add(e.len as u64, Ordering::Relaxed);
+        if crc32fast::hash(&bytes) != e.crc {
+            return Err(NspError::Cell { cell: c, what: "stream checksum mismatch".into() });
+        }
+        Ok(bytes)
+    }
+
+    /// The root's state at its minimal precision (0 bits: one point).
+    pub fn root_state(&self) -> Result<CellState, NspError> {
+        let c = self.tree.root();
+        CellState::new(self, c, Complex::root(), self.cell_bytes(c)?)
+    }
+
+    /// Child `c`'s state at its minimal precision, from its parent's state at the parent's
+    /// maximal precision.
+    pub fn child_state(&self, parent: &CellState, c: u32) -> Result<CellState, NspError> {
+        let node = &self.tree.nodes[c as usize];
+        debug_assert_eq!(node.parent, parent.cell);
+        let bits = self.tree.min_prec(c);
+        if parent.precision() != bits {
+            return Err(NspError::Cell { cell: c, what: "its parent is not at its maximal precision".into() });
+        }
+        let pl = self.header.params.level_bits() as u32;
+        let shift = bits as u32 - pl * node.depth as u32;
+        let coords = node.coords;
+        let cx = parent.cx.restrict(|k| {
+            let (q, _) = super::kd_corner(k.prefix, k.level, bits);
+            (0..3).all(|a| q[a] >> shift == coords[a])
+        });
+        CellState::new(self, c, cx, self.cell_bytes(c)?)
+    }
+}
+
+/// One cell's decoded state: its complex at its current precision and where its stream
+/// stands.
+#[derive(Clone)]
+pub struct CellState {
+    pub cell: u32,
+    pub cx: Complex,
+    /// The state the cell started from (for coarsening by re-decoding).
+    start: Complex,
+    bytes: Arc<[u8]>,
+    table: Arc<[u16]>,
+    at: Option<DecoderState>,
+    min_level: u8,
+    max_level: u8,
+    max_cells: usize,
+    max_tops: usize,
+    /// Kd-cells split so far (vertex splits decoded), for throughput figures.
+    pub splits: u64,
+}
+
+struct Static<'a, 'b> {
+    dec: &'a mut Decoder<'b>,
+    table: &'a [u16],
+}
+
+impl BitIo for Static<'_, '_> {
+    #[inline]
+    fn bit(&mut self, ctx: usize, _: bool) -> bool {
+        let mut p = self.table[ctx];
+        self.dec.bit(&mut p)
+    }
+}
+
+impl CellState {
+    fn new(file: &NspFile, c: u32, cx: Complex, bytes: Arc<[u8]>) -> Result<CellState, NspError> {
+        let e = &file.entries[c as usize];
+        let (min_level, max_level) = (3 * file.tree.min_prec(c), 3 * file.tree.max_prec(c));
+        if cx.cells.len() > e.max_cells as usize || cx.live_tops() > e.max_tops as usize {
+            return Err(NspError::Cell { cell: c, what: "its parent's state is larger than the cell table allows".into() });
+        }
+        if cx.cells.is_empty() != bytes.is_empty() {
+            return Err(NspError::Cell {
+                cell: c,
+                what: if bytes.is_empty() { "holds simplices but has no stream" } else { "is empty but has a stream" }
+                    .into(),
+            });
+        }
+        Ok(CellState {
+            cell: c,
+            start: cx.clone(),
+            cx,
+            bytes,
+            table: file.table.clone(),
+            at: None,
+            min_level,
+            max_level,
+            max_cells: e.max_cells as usize,
+            max_tops: e.max_tops as usize,
+            splits: 0,
+        })
+    }
+
+    /// The current precision in bits.
+    pub fn precision(&self) -> u8 {
+        self.cx.level / 3
+    }
+
+    pub fn min_precision(&self) -> u8 {
+        self.min_level / 3
+    }
+
+    pub fn max_precision(&self) -> u8 {
+        self.max_level / 3
+    }
+
+    /// Brings the cell to `bits` of precision (clamped to its range): refining continues the
+    /// stream; coarsening re-decodes it from the start.
+    pub fn set_precision(&mut self, bits: u8) -> Result<(), NspError> {
+        let target = (3 * bits).clamp(self.min_level, self.max_level);
+        if self.cx.cells.is_empty() {
+            self.cx.level = target;
+            return Ok(());
+        }
+        if target < self.cx.level {
+            self.cx = self.start.clone();
+            self.at = None;
+        }
+        let mut dec = match self.at {
+            Some(s) => Decoder::resume(&self.bytes, s),
+            None => Decoder::new(&self.bytes),
+        };
+        let cell = self.cell;
+        let err = |what: &str| NspError::Cell { cell, what: what.into() };
+        while self.cx.level < target {
+            let before = self.cx.cells.len();
+            self.cx
+                .refine_level(&mut Static { dec: &mut dec, table: &self.table }, &mut Blind, self.max_cells, self.max_tops)
+                .map_err(|e| match e {
+                    ApplyError::NoSymbol => err("corrupt stream (a connectivity symbol with no possible value)"),
+                    ApplyError::TooLarge => err("corrupt stream (more kd-cells or simplices than its table entry allows)"),
+                })?;
+            self.splits += (self.cx.cells.len() - before) as u64;
+            if dec.overrun() > 4 {
+                return Err(err("truncated stream (it ends before its last decision)"));
+            }
+        }
+        self.at = Some(dec.state());
+        Ok(())
+    }
+}
+
+/// The cells to draw at a uniform precision `bits`, decoded: the cut of the tree where each
+/// cell's precision range holds `bits` (a split cell at exactly its maximal precision gives
+/// way to its children). Returns the states of the drawn cells.
+pub fn decode_uniform_states(file: &NspFile, bits: u8) -> Result<Vec<CellState>, NspError> {
+    let bits = bits.min(file.header.params.bits);
+    let mut out = Vec::new();
+    let mut root = file.root_state()?;
+    let mut todo = Vec::new();
+    let tree = &file.tree;
+    let root_id = tree.root();
+    if tree.is_leaf(root_id) || bits < tree.max_prec(root_id) {
+        root.set_precision(bits)?;
+        out.push(root);
+    } else {
+        root.set_precision(tree.max_prec(root_id))?;
+        todo.push(root);
+    }
+    while let Some(parent) = todo.pop() {
+        let children = tree.nodes[parent.cell as usize].children.clone();
+        let states: Vec<Result<(CellState, bool), NspError>> = {
+            use rayon::prelude::*;
+            children
+                .par_iter()
+                .filter(|&&c| file.entries[c as usize].len > 0)
+                .map(|&c| {
+                    let mut s = file.child_state(&parent, c)?;
+                    let leaf = tree.is_leaf(c);
+                    if leaf || bits < tree.max_prec(c) {
+                        s.set_precision(bits)?;
+                        Ok((s, true))
+                    } else {
+                        s.set_precision(tree.max_prec(c))?;
+                        Ok((s, false))
+                    }
+                })
+                .collect()
+        };
+        for r in states {
+            let (s, drawn) = r?;
+            if drawn {
+                out.push(s);
+            } else {
+                todo.push(s);
+            }
+        }
+    }
+    out.sort_by_key(|s| s.cell);
+    Ok(out)
+}
+
+/// Decodes every cell to a uniform precision and draws them with the border rule.
+pub fn decode_uniform(file: &NspFile, bits: u8) -> Result<Drawn, NspError> {
+    let states = decode_uniform_states(file, bits)?;
+    Ok(draw(file, &states.iter().collect::<Vec<_>>()))
+}
+
+/// Decodes every cell to full precision: the canonical complex.
+pub fn decode_all(file: &NspFile) -> Result<Drawn, NspError> {
+    decode_uniform(file, file.header.params.bits)
+}

@@ -1,0 +1,225 @@
+//! The `.nsp` layout (NSP.md 5.3, simplified). All integers little-endian.
+//!
+//! ```text
+//! 0     4   magic b"TNSP"
+//! 4     2   version = 1
+//! 6     2   flags = 0
+//! 8     H   header (HEADER_LEN bytes, below), then its CRC-32
+//!       2C  the static probability table: one u16 per context, then its CRC-32
+//!       ... the cell streams, back to back, in postorder (an empty cell has none)
+//!       17N the cell table, in postorder: split flag u8, stream length u32, stream CRC-32,
+//!           kd-cells at most u32, top-simplices at most u32; then its CRC-32
+//! end-20    footer: u64 offset of the cell table, u32 cells, u32 CRC-32 of those 12 bytes,
+//!           magic b"TNSP"
+//! ```
+//! The header holds the parameters, the cube and the canonical complex's counts. The
+//! "at most" figures bound what a decoder of that cell may allocate, so a corrupt stream
+//! cannot make it grow without end. A reader reads the header, table and footer and then
+//! single cells; no checksum covers the whole file, so a file larger than memory is opened
+//! without reading it.
+
+use super::canonical::Canonical;
+use super::complex::CONTEXTS;
+use super::{Cube, NspError, Params};
+
+pub const MAGIC: [u8; 4] = *b"TNSP";
+pub const VERSION: u16 = 1;
+pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4;
+pub const ENTRY_LEN: usize = 17;
+pub const FOOTER_LEN: usize = 20;
+/// Bytes before the table: magic, version, flags, header and its CRC.
+pub const PREFIX_LEN: usize = 8 + HEADER_LEN + 4;
+pub const TABLE_LEN: usize = 2 * CONTEXTS + 4;
+
+/// What the header says.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Header {
+    pub params: Params,
+    pub cube: Cube,
+    pub points: u64,
+    pub triangles: u64,
+    pub edges: u64,
+    pub isolated: u64,
+    pub input_triangles: u64,
+    pub input_vertices: u64,
+    pub cells: u32,
+}
+
+impl Header {
+    pub fn new(params: Params, canon: &Canonical) -> Header {
+        let count = |d: u8| canon.simplices.iter().filter(|s| s.dim == d).count() as u64;
+        Header {
+            params,
+            cube: canon.cube,
+            points: canon.points.len() as u64,
+            triangles: count(2),
+            edges: count(1),
+            isolated: count(0),
+            input_triangles: canon.input_triangles,
+            input_vertices: canon.input_vertices,
+            cells: 0,
+        }
+    }
+
+    fn put(&self, out: &mut Vec<u8>) {
+        let p = &self.params;
+        out.extend_from_slice(&[p.bits, p.root_bits, p.splits as u8, p.advance]);
+        out.extend_from_slice(&p.min_simplices.to_le_bytes());
+        for a in 0..3 {
+            out.extend_from_slice(&self.cube.origin[a].to_le_bytes());
+        }
+        out.extend_from_slice(&self.cube.side.to_le_bytes());
+        for v in [self.points, self.triangles, self.edges, self.isolated, self.input_triangles, self.input_vertices] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&self.cells.to_le_bytes());
+        out.extend_from_slice(&(CONTEXTS as u32).to_le_bytes());
+    }
+
+    fn get(b: &[u8]) -> Result<Header, NspError> {
+        let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+        let f64_at = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        let params =
+            Params { bits: b[0], root_bits: b[1], splits: b[2] as u32, advance: b[3], min_simplices: u32_at(4) };
+        params.validate().map_err(|e| NspError::Format(format!("header: {e}")))?;
+        let cube = Cube { origin: [f64_at(8), f64_at(16), f64_at(24)], side: f64_at(32), bits: params.bits };
+        if !(cube.origin.iter().all(|x| x.is_finite()) && cube.side.is_finite() && cube.side > 0.0) {
+            return Err(NspError::Format("header: the cube is not finite".into()));
+        }
+        let h = Header {
+            params,
+            cube,
+            points: u64_at(40),
+            triangles: u64_at(48),
+            edges: u64_at(56),
+            isolated: u64_at(64),
+            input_triangles: u64_at(72),
+            input_vertices: u64_at(80),
+            cells: u32_at(88),
+        };
+        if u32_at(92) as usize != CONTEXTS {
+            return Err(NspError::Format(format!("header: {} contexts, this reader knows {CONTEXTS}", u32_at(92))));
+        }
+        Ok(h)
+    }
+}
+
+/// One row of the cell table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellEntry {
+    pub split: bool,
+    /// Byte offset of the stream in the file (not stored: running sums of the lengths).
+    pub offset: u64,
+    pub len: u32,
+    pub crc: u32,
+    pub max_cells: u32,
+    pub max_tops: u32,
+}
+
+/// Writes a whole file.
+pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[CellEntry]) -> Vec<u8> {
+    let mut header = *header;
+    header.cells = entries.len() as u32;
+    let total: usize = streams.iter().map(|s| s.len()).sum();
+    let mut out = Vec::with_capacity(PREFIX_LEN + TABLE_LEN + total + entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    let h0 = out.len();
+    header.put(&mut out);
+    debug_assert_eq!(out.len() - h0, HEADER_LEN);
+    let crc = crc32fast::hash(&out[h0..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    let t0 = out.len();
+    for &p in table {
+        out.extend_from_slice(&p.to_le_bytes());
+    }
+    let crc = crc32fast::hash(&out[t0..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    for s in streams {
+        out.extend_from_slice(s);
+    }
+    let table_offset = out.len() as u64;
+    let e0 = out.len();
+    for e in entries {
+        out.push(e.split as u8);
+        for v in [e.len, e.crc, e.max_cells, e.max_tops] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let crc = crc32fast::hash(&out[e0..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    let f0 = out.len();
+    out.extend_from_slice(&table_offset.to_le_bytes());
+    out.extend_from_slice(&(entries.len() as u32).to_le_bytes());
+    let crc = crc32fast::hash(&out[f0..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out.extend_from_slice(&MAGIC);
+    out
+}
+
+fn check_crc<'a>(bytes: &'a [u8], what: &str) -> Result<&'a [u8], NspError> {
+    let (body, crc) = bytes.split_at(bytes.len() - 4);
+    if crc32fast::hash(body).to_le_bytes() != crc {
+        return Err(NspError::Format(format!("{what}: checksum mismatch")));
+    }
+    Ok(body)
+}
+
+/// Parses the fixed prefix (magic, header, table) of a file.
+pub fn read_prefix(b: &[u8]) -> Result<(Header, Vec<u16>), NspError> {
+    if b.len() < PREFIX_LEN + TABLE_LEN || b[..4] != MAGIC {
+        return Err(NspError::Format("no TNSP magic, or the file is shorter than its header".into()));
+    }
+    let version = u16::from_le_bytes([b[4], b[5]]);
+    if version != VERSION {
+        return Err(NspError::Format(format!("version {version}; this reader reads version {VERSION}")));
+    }
+    let header = Header::get(check_crc(&b[8..PREFIX_LEN], "header")?)?;
+    let table: Vec<u16> = check_crc(&b[PREFIX_LEN..PREFIX_LEN + TABLE_LEN], "probability table")?
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    if let Some(i) = table.iter().position(|&p| p == 0 || p >= 2048) {
+        return Err(NspError::Format(format!("probability table: entry {i} is {} (must be 1 to 2047)", table[i])));
+    }
+    Ok((header, table))
+}
+
+/// Parses the footer: (table offset, cells).
+pub fn read_footer(b: &[u8], file_len: u64) -> Result<(u64, u32), NspError> {
+    if b.len() != FOOTER_LEN || b[16..] != MAGIC {
+        return Err(NspError::Format("the footer is missing (truncated file?)".into()));
+    }
+    let body = check_crc(&b[..16], "footer")?;
+    let offset = u64::from_le_bytes(body[..8].try_into().unwrap());
+    let cells = u32::from_le_bytes(body[8..12].try_into().unwrap());
+    let table_len = cells as u64 * ENTRY_LEN as u64 + 4;
+    if offset < (PREFIX_LEN + TABLE_LEN) as u64 || offset.checked_add(table_len) != Some(file_len - FOOTER_LEN as u64) {
+        return Err(NspError::Format(format!("footer: a cell table of {cells} cells at {offset} does not fit the file")));
+    }
+    Ok((offset, cells))
+}
+
+/// Parses the cell table, giving each entry its offset and checking that the streams fill
+/// exactly the bytes between the probability table and the cell table.
+pub fn read_entries(b: &[u8], table_offset: u64) -> Result<Vec<CellEntry>, NspError> {
+    let body = check_crc(b, "cell table")?;
+    let mut offset = (PREFIX_LEN + TABLE_LEN) as u64;
+    let mut out = Vec::with_capacity(body.len() / ENTRY_LEN);
+    for (i, e) in body.chunks_exact(ENTRY_LEN).enumerate() {
+        let u = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap());
+        if e[0] > 1 {
+            return Err(NspError::Cell { cell: i as u32, what: format!("split flag {} in the cell table", e[0]) });
+        }
+        out.push(CellEntry { split: e[0] == 1, offset, len: u(1), crc: u(5), max_cells: u(9), max_tops: u(13) });
+        offset += u(1) as u64;
+    }
+    if offset != table_offset {
+        return Err(NspError::Format(format!(
+            "cell table: the streams end at byte {offset}, but the table starts at {table_offset}"
+        )));
+    }
+    Ok(out)
+}

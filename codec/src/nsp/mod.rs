@@ -1,0 +1,253 @@
+//! The nSP-tree store (Jamin, Gandoin & Akkouche, "A Compact Data Structure For The
+//! Interactive Navigation Into Arbitrary Meshes"; `../shared/NSP.md` is our reading of it):
+//! a lossless, progressive `.nsp` file cut into cubic cells that decode independently, so a
+//! viewer loads and refines only the cells a view needs, each to the precision it needs.
+//!
+//! # What is coded
+//!
+//! Points are quantized to `p` bits per coordinate over a **cube** anchored at the minimum
+//! corner of the bounding box ([`Cube`]). A kd-tree splits space with axes cycling x, y, z
+//! (kd level `L` splits axis `L mod 3` at bit `p-1-L/3`); a precision of `b` bits is kd level
+//! `3b`. Each split of a non-empty kd-cell codes one of three **occupancy** events (first
+//! half, second half, both: two binary decisions, one static probability per kd level each).
+//! When both halves are occupied the kd-cell `v` becomes `v0` and `v1` and the
+//! **connectivity** change is coded as a generalised vertex split (NSP.md 1.6): one symbol per
+//! simplex `v·τ` of the star of `v` (the vertex, its edges, its triangles, in kd-index order),
+//! saying whether it becomes `v0·τ`, `v1·τ`, both, or both plus the cone `v0·v1·τ`. Symbols
+//! the faces already force cost nothing. Every triangle a split creates gets an **orientation**
+//! bit against a prediction (its parent triangle's orientation, or for a cone the orientation
+//! that agrees with a neighbour across `v0 w` or `v1 w`). The decoder applies exactly the
+//! operations the encoder applied ([`complex`]), so nothing is ever re-derived differently.
+//!
+//! All probabilities are **static**: the encoder first records every binary decision of
+//! every cell with its context, then counts them and writes one 11-bit probability per
+//! context into the file (the paper's "pre-calculated statistical prediction"), then
+//! range-codes each cell with those fixed probabilities. A cell's stream is a separately
+//! flushed range-coder stream, so any cell decodes alone.
+//!
+//! # The nSP partition
+//!
+//! The cube is cut into an nSP-tree ([`tree`]): a cell at depth `k` splits into `n^3` equal
+//! children when it holds at least `N_min` top-simplices (duplicates across cells included)
+//! and its maximal precision `p_r + p_l·k` (`p_l = log2 n`) is below `p`. A simplex belongs to
+//! every cell holding one of its vertices. A cell's stream refines all of its simplices'
+//! vertices, those outside it included, from its minimal precision (its parent's maximal
+//! precision, 0 for the root) to its maximal one (`p` for a leaf). A child's starting state
+//! is the part of its parent's final state that touches it, which equals the clustering of
+//! the child's own simplices at that precision; that is why a child decodes from its parent
+//! alone. The paper's parameters reproduce Table 1's cell counts exactly (1,473 for the
+//! dragon at 28 bits, 65 for the bunny at 16; golden tests).
+//!
+//! # What lossless means (the contract)
+//!
+//! An `.nsp` decodes, when every cell is refined to `p` bits, to the **canonical complex** of
+//! its input ([`Canonical`]), the paper's semantics (NSP.md 5.4.1):
+//! - positions are quantized to `p` bits and drawn at their grid cell's centre;
+//! - input vertices with the same quantized position are one vertex;
+//! - a triangle whose corners merge becomes an edge or a point, and a simplex that is a face
+//!   of another disappears (an edge of a triangle, a vertex of an edge);
+//! - the complex is a set: repeated triangles (same three vertices, either orientation) are
+//!   one triangle, with the orientation of its first occurrence in the input;
+//! - every input vertex is a point of the model, unreferenced ones included (the paper's
+//!   bunny counts its 1,113 isolated vertices).
+//!
+//! At any uniform precision `b < p` the decoded complex is the **vertex clustering** of the
+//! canonical complex on the `b`-bit grid, under the same rules (tested).
+//!
+//! # Decisions where the paper is silent
+//!
+//! - Contexts: two per kd level for geometry; per (dimension of `v·τ`, set of allowed
+//!   symbols, binary node) for connectivity; four for orientation (NSP.md 1.5 measured one
+//!   table per level to be the best of the static choices).
+//! - Coarsening re-decodes a cell from the start of its stream to the lower precision
+//!   (NSP.md 5.4.5 proposes this first): the state at a precision is a pure function of the
+//!   stream, so refine-then-coarsen gives back the same state (tested). Refining keeps the
+//!   coder's position and continues.
+//! - The geometry advance of section 7 is not built yet (`m` = 0 in every file written).
+//! - Edges and points are kept, counted, and not drawn.
+
+pub mod canonical;
+pub mod complex;
+pub mod decode;
+pub mod encode;
+pub mod format;
+pub mod tree;
+pub mod view;
+
+pub use canonical::{Canonical, Cube, Simplex};
+pub use decode::{decode_all, decode_uniform, CellState, NspFile};
+pub use encode::{encode, Built};
+pub use tree::Tree;
+
+use thiserror::Error;
+
+/// Why an `.nsp` cannot be built or read.
+#[derive(Debug, Error, PartialEq)]
+pub enum NspError {
+    #[error("{0}")]
+    Params(String),
+    #[error("{0}")]
+    Input(String),
+    #[error("the input has no points")]
+    Empty,
+    #[error("not an .nsp file: {0}")]
+    Format(String),
+    #[error("cell {cell}: {what}")]
+    Cell { cell: u32, what: String },
+}
+
+/// Build parameters (NSP.md 1.2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// `p`: bits per quantized coordinate.
+    pub bits: u8,
+    /// `p_r`: the root's maximal precision.
+    pub root_bits: u8,
+    /// `n`: splits per axis of a cell (a power of 2, at least 2).
+    pub splits: u32,
+    /// `N_min`: a cell splits only if it holds at least this many top-simplices.
+    pub min_simplices: u32,
+    /// `m`: bits of geometry advance (section 7); only 0 is built.
+    pub advance: u8,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params { bits: 16, root_bits: 7, splits: 4, min_simplices: 8000, advance: 0 }
+    }
+}
+
+/// The largest precision (kd keys of `3p` bits and the level bit live in a `u128`; grid
+/// coordinates and their shifts stay inside a `u32`).
+pub const MAX_BITS: u8 = 30;
+
+impl Params {
+    pub fn validate(&self) -> Result<(), NspError> {
+        if !(1..=MAX_BITS).contains(&self.bits) {
+            return Err(NspError::Params(format!("--bits must be 1 to {MAX_BITS}, not {}", self.bits)));
+        }
+        if !(self.splits.is_power_of_two() && (2..=16).contains(&self.splits)) {
+            return Err(NspError::Params(format!("--splits must be 2, 4, 8 or 16, not {}", self.splits)));
+        }
+        if self.root_bits < self.level_bits() || self.root_bits > self.bits {
+            return Err(NspError::Params(format!(
+                "--root-bits must be at least log2(--splits) = {} and at most --bits = {}, not {}",
+                self.level_bits(),
+                self.bits,
+                self.root_bits
+            )));
+        }
+        if self.min_simplices == 0 {
+            return Err(NspError::Params("--min-simplices must be at least 1".into()));
+        }
+        if self.advance != 0 {
+            return Err(NspError::Params("--advance: the geometry advance of section 7 is not built yet; use 0".into()));
+        }
+        Ok(())
+    }
+
+    /// `p_l = log2 n`.
+    pub fn level_bits(&self) -> u8 {
+        self.splits.trailing_zeros() as u8
+    }
+
+    /// Children per split cell, `n^3`.
+    pub fn fan_out(&self) -> u32 {
+        self.splits.pow(3)
+    }
+
+    /// The maximal precision of an internal cell at `depth`, capped at `p`.
+    pub fn max_prec_at(&self, depth: u8) -> u8 {
+        (self.root_bits as u32 + self.level_bits() as u32 * depth as u32).min(self.bits as u32) as u8
+    }
+
+    /// The Morton index of a child from its local coordinates (x the most significant).
+    pub fn child_index(&self, local: [u32; 3]) -> u32 {
+        let mut i = 0;
+        for b in (0..self.level_bits()).rev() {
+            i = (i << 3) | ((local[0] >> b) & 1) << 2 | ((local[1] >> b) & 1) << 1 | ((local[2] >> b) & 1);
+        }
+        i
+    }
+
+    /// The coordinates of child `k` of the cell at `coords`.
+    pub fn child_coords(&self, coords: [u32; 3], k: u32) -> [u32; 3] {
+        let pl = self.level_bits() as u32;
+        let mut local = [0u32; 3];
+        for b in 0..pl {
+            let bits = k >> (3 * b);
+            local[0] |= ((bits >> 2) & 1) << b;
+            local[1] |= ((bits >> 1) & 1) << b;
+            local[2] |= (bits & 1) << b;
+        }
+        [(coords[0] << pl) | local[0], (coords[1] << pl) | local[1], (coords[2] << pl) | local[2]]
+    }
+}
+
+/// The Morton code of a point of `bits` bits per coordinate: bit `b` of x, y, z from the top,
+/// x first, so that the prefix of length `L` is the point's kd-cell at kd level `L`.
+#[inline]
+pub fn morton(q: [u32; 3], bits: u8) -> u128 {
+    let mut m = 0u128;
+    for b in (0..bits).rev() {
+        m = (m << 3) | (((q[0] >> b) & 1) << 2 | ((q[1] >> b) & 1) << 1 | ((q[2] >> b) & 1)) as u128;
+    }
+    m
+}
+
+/// The lower corner of the kd-cell `prefix` at kd `level`, in grid units of `bits` bits, and
+/// the number of bits each axis has consumed.
+#[inline]
+pub fn kd_corner(prefix: u128, level: u8, bits: u8) -> ([u32; 3], [u8; 3]) {
+    let mut q = [0u32; 3];
+    for i in 0..level as u32 {
+        let bit = ((prefix >> (level as u32 - 1 - i)) & 1) as u32;
+        let axis = (i % 3) as usize;
+        q[axis] = (q[axis] << 1) | bit;
+    }
+    let mut used = [0u8; 3];
+    for (a, u) in used.iter_mut().enumerate() {
+        *u = ((level as usize + 2 - a) / 3) as u8;
+        q[a] <<= bits - *u;
+    }
+    (q, used)
+}
+
+/// The centre of a kd-cell in grid units of `bits` bits.
+pub fn kd_centre(prefix: u128, level: u8, bits: u8) -> [f64; 3] {
+    let (q, used) = kd_corner(prefix, level, bits);
+    let mut c = [0.0; 3];
+    for a in 0..3 {
+        c[a] = q[a] as f64 + (1u64 << (bits - used[a])) as f64 * 0.5;
+    }
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_prefixes_are_kd_cells() {
+        let q = [0b1011, 0b0110, 0b1100];
+        let m = morton(q, 4);
+        for level in 0..=12u8 {
+            let prefix = m >> (12 - level);
+            let (corner, used) = kd_corner(prefix, level, 4);
+            for a in 0..3 {
+                assert_eq!(corner[a], (q[a] >> (4 - used[a])) << (4 - used[a]), "level {level} axis {a}");
+            }
+        }
+    }
+
+    #[test]
+    fn children_round_trip() {
+        let p = Params::default();
+        for k in 0..64 {
+            let c = p.child_coords([1, 2, 3], k);
+            let local = [c[0] & 3, c[1] & 3, c[2] & 3];
+            assert_eq!(p.child_index(local), k);
+            assert_eq!([c[0] >> 2, c[1] >> 2, c[2] >> 2], [1, 2, 3]);
+        }
+    }
+}

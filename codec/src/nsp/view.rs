@@ -1,0 +1,303 @@
+//! View-dependent navigation: which cells a view draws at which precision, and drawing
+//! cells of different precisions together with the paper's border rule (section 5.3).
+
+use std::collections::HashMap;
+
+use glam::{Mat4, Vec3};
+
+use super::decode::{CellState, NspFile};
+use super::{kd_centre, kd_corner, NspError};
+use crate::view::{box_screen_rect, Camera};
+
+/// Triangles drawn from a set of cells, with shared vertices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Drawn {
+    pub positions: Vec<[f32; 3]>,
+    /// Triangles, oriented as the stream says.
+    pub triangles: Vec<[u32; 3]>,
+    /// Edges and points among the drawn cells' top-simplices (not drawn).
+    pub edges: u64,
+    pub points: u64,
+    /// Copies of border triangles left to another cell by the border rule.
+    pub left_to_others: u64,
+    /// Triangles whose corners were moved to a coarser neighbour's kd-cell.
+    pub stitched: u64,
+}
+
+impl Drawn {
+    pub fn to_mesh(&self) -> crate::Mesh {
+        crate::Mesh { positions: self.positions.clone(), triangles: self.triangles.clone() }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Loc {
+    /// In drawn cell (state index).
+    Drawn(usize),
+    /// Larger than a cell of the tree whose drawn descendants inside it reach this
+    /// (precision, cell).
+    Spanning(u8, u32),
+    /// In no drawn cell.
+    Nowhere,
+}
+
+/// Draws `states` (an antichain of the tree: no cell drawn with an ancestor) with the border
+/// rule: a border triangle is drawn once, by the cell of highest (precision, postorder index)
+/// among the drawn cells its corners lie in; its corners in coarser drawn cells move to the
+/// kd-cell of that cell that holds them. Cells not drawn count as `-inf` (NSP.md 1.10: the
+/// paper's `p_i = p_c` would drop triangles at the edge of the view).
+pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
+    let tree = &file.tree;
+    let bits = file.header.params.bits;
+    let pl = file.header.params.level_bits() as u32;
+    let mut drawn_at: Vec<Option<usize>> = vec![None; tree.nodes.len()];
+    for (i, s) in states.iter().enumerate() {
+        drawn_at[s.cell as usize] = Some(i);
+    }
+    // Per state: kd prefix → id (all its kd-cells are at one level).
+    let maps: Vec<HashMap<u128, u32>> = states
+        .iter()
+        .map(|s| s.cx.order.iter().map(|&k| (s.cx.cells[k as usize].prefix, k)).collect())
+        .collect();
+    let locate = |prefix: u128, level: u8| -> Loc {
+        let (corner, used) = kd_corner(prefix, level, bits);
+        let mut node = tree.root();
+        loop {
+            if let Some(i) = drawn_at[node as usize] {
+                return Loc::Drawn(i);
+            }
+            let n = &tree.nodes[node as usize];
+            if n.children.is_empty() {
+                return Loc::Nowhere;
+            }
+            let need = pl * (n.depth as u32 + 1);
+            if used.iter().all(|&u| u as u32 >= need) {
+                let shift = bits as u32 - need;
+                let mask = (1u32 << pl) - 1;
+                let local = [(corner[0] >> shift) & mask, (corner[1] >> shift) & mask, (corner[2] >> shift) & mask];
+                node = n.children[file.header.params.child_index(local) as usize];
+                continue;
+            }
+            // The kd-cell spans several children: the best drawn cell below it.
+            let mut best: Option<(u8, u32)> = None;
+            let mut stack = vec![node];
+            while let Some(x) = stack.pop() {
+                if let Some(i) = drawn_at[x as usize] {
+                    let cand = (states[i].precision(), x);
+                    if best.is_none_or(|b| cand > b) {
+                        best = Some(cand);
+                    }
+                    continue;
+                }
+                for &ch in &tree.nodes[x as usize].children {
+                    if overlaps(tree, ch, corner, used, bits, pl) {
+                        stack.push(ch);
+                    }
+                }
+            }
+            return match best {
+                Some((p, c)) => Loc::Spanning(p, c),
+                None => Loc::Nowhere,
+            };
+        }
+    };
+    let mut out = Drawn::default();
+    let mut vertex: HashMap<(u8, u128), u32> = HashMap::new();
+    for (si, s) in states.iter().enumerate() {
+        let pc = s.precision();
+        let me = (pc, s.cell);
+        let mut locs: HashMap<u32, Loc> = HashMap::new();
+        for top in s.cx.iter_tops() {
+            match top.dim {
+                0 => out.points += 1,
+                1 => out.edges += 1,
+                _ => {}
+            }
+            if top.dim != 2 {
+                continue;
+            }
+            let mut corners = [(0u8, 0u128); 3];
+            let mut dropped = false;
+            let mut moved = false;
+            for k in 0..3 {
+                let kd = &s.cx.cells[top.v[k] as usize];
+                let loc = *locs.entry(top.v[k]).or_insert_with(|| locate(kd.prefix, kd.level));
+                corners[k] = (kd.level, kd.prefix);
+                match loc {
+                    Loc::Drawn(i) if i == si => {}
+                    Loc::Drawn(i) => {
+                        let other = (states[i].precision(), states[i].cell);
+                        if other > me {
+                            dropped = true;
+                            break;
+                        }
+                        let level = 3 * other.0;
+                        let prefix = kd.prefix >> (kd.level - level);
+                        if maps[i].contains_key(&prefix) {
+                            corners[k] = (level, prefix);
+                            moved |= level != kd.level;
+                        }
+                    }
+                    Loc::Spanning(p, c) => {
+                        if (p, c) > me {
+                            dropped = true;
+                            break;
+                        }
+                    }
+                    Loc::Nowhere => {}
+                }
+            }
+            if dropped {
+                out.left_to_others += 1;
+                continue;
+            }
+            out.stitched += moved as u64;
+            let ids = corners.map(|(level, prefix)| {
+                *vertex.entry((level, prefix)).or_insert_with(|| {
+                    out.positions.push(file.header.cube.world(kd_centre(prefix, level, bits)));
+                    out.positions.len() as u32 - 1
+                })
+            });
+            if ids[0] != ids[1] && ids[1] != ids[2] && ids[0] != ids[2] {
+                out.triangles.push(ids);
+            }
+        }
+    }
+    out
+}
+
+fn overlaps(tree: &super::Tree, c: u32, corner: [u32; 3], used: [u8; 3], bits: u8, pl: u32) -> bool {
+    let n = &tree.nodes[c as usize];
+    let side = bits as u32 - pl * n.depth as u32;
+    (0..3).all(|a| {
+        let (lo, hi) = ((n.coords[a] as u64) << side, ((n.coords[a] as u64) + 1) << side);
+        let klo = corner[a] as u64;
+        let khi = klo + (1u64 << (bits - used[a]));
+        lo < khi && klo < hi
+    })
+}
+
+/// A view: camera, screen and the error allowed on screen.
+#[derive(Clone, Copy, Debug)]
+pub struct View {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    /// Allowed projected error of a vertex, in pixels.
+    pub error_px: f32,
+}
+
+impl View {
+    fn view_proj(&self) -> Mat4 {
+        self.camera.view_proj(self.width as f32 / self.height as f32)
+    }
+
+    /// The precision (bits) that keeps a vertex of a cell at distance `dist` from the eye
+    /// within the error: the kd-cell's half diagonal `S 2^-b sqrt(3)/2` projects to at most
+    /// `error_px` pixels, `f = (H/2) / tan(fovy/2)` being the focal length in pixels.
+    pub fn wanted_bits(&self, side: f64, dist: f64) -> f64 {
+        let f = self.height as f64 * 0.5 / (self.camera.fovy as f64 * 0.5).to_radians().tan();
+        let need = side * 3f64.sqrt() * 0.5 * f / (self.error_px as f64 * dist.max(1e-30));
+        need.log2().ceil()
+    }
+}
+
+/// The cells a view draws, with their precisions (postorder index, bits), from the cell
+/// boxes alone: cells outside the frustum are not drawn; a cell whose wanted precision is
+/// above its maximal precision gives way to its non-empty children.
+pub fn select(file: &NspFile, view: &View) -> Vec<(u32, u8)> {
+    let tree = &file.tree;
+    let cube = file.header.cube;
+    let vp = view.view_proj();
+    let pl = file.header.params.level_bits() as u32;
+    let eye = view.camera.eye.as_dvec3();
+    let mut out = Vec::new();
+    let mut todo = vec![tree.root()];
+    while let Some(c) = todo.pop() {
+        let n = &tree.nodes[c as usize];
+        let size = cube.side / (1u64 << (pl * n.depth as u32)) as f64;
+        let lo = [
+            cube.origin[0] + n.coords[0] as f64 * size,
+            cube.origin[1] + n.coords[1] as f64 * size,
+            cube.origin[2] + n.coords[2] as f64 * size,
+        ];
+        let lo32 = [lo[0] as f32, lo[1] as f32, lo[2] as f32];
+        let hi32 = [(lo[0] + size) as f32, (lo[1] + size) as f32, (lo[2] + size) as f32];
+        if box_screen_rect(lo32, hi32, vp, view.width, view.height).is_none() {
+            continue;
+        }
+        let closest = glam::DVec3::new(
+            eye.x.clamp(lo[0], lo[0] + size),
+            eye.y.clamp(lo[1], lo[1] + size),
+            eye.z.clamp(lo[2], lo[2] + size),
+        );
+        let want = view.wanted_bits(cube.side, (closest - eye).length());
+        let (min, max) = (tree.min_prec(c), tree.max_prec(c));
+        if !n.children.is_empty() && want > max as f64 {
+            todo.extend(n.children.iter().copied().filter(|&ch| file.entries[ch as usize].len > 0));
+            continue;
+        }
+        out.push((c, (want.max(min as f64).min(max as f64)) as u8));
+    }
+    out.sort_unstable();
+    out
+}
+
+/// A viewer's decoded cells: drawn cells at their precisions, and their ancestors at their
+/// maximal precisions (a child starts from its parent's state).
+#[derive(Default)]
+pub struct Navigator {
+    states: HashMap<u32, CellState>,
+    /// Vertex splits decoded over the navigator's life.
+    pub splits: u64,
+}
+
+impl Navigator {
+    /// Brings the decoded cells to `selection` (from [`select`]): decodes what is missing,
+    /// refines or coarsens what changed, drops what is no longer needed. Returns the drawn
+    /// cells' states in selection order.
+    pub fn update(&mut self, file: &NspFile, selection: &[(u32, u8)]) -> Result<Vec<&CellState>, NspError> {
+        let tree = &file.tree;
+        let mut want: HashMap<u32, u8> = HashMap::new();
+        for &(c, b) in selection {
+            want.insert(c, b);
+            let mut a = tree.nodes[c as usize].parent;
+            while a != u32::MAX {
+                want.insert(a, tree.max_prec(a));
+                a = tree.nodes[a as usize].parent;
+            }
+        }
+        self.states.retain(|c, _| want.contains_key(c));
+        // Top-down: a parent is ready before its children.
+        let mut order: Vec<u32> = want.keys().copied().collect();
+        order.sort_by_key(|&c| tree.nodes[c as usize].depth);
+        for c in order {
+            let b = want[&c];
+            if !self.states.contains_key(&c) {
+                let parent = tree.nodes[c as usize].parent;
+                let s = if parent == u32::MAX { file.root_state()? } else { file.child_state(&self.states[&parent], c)? };
+                self.states.insert(c, s);
+            }
+            let s = self.states.get_mut(&c).expect("inserted above");
+            let before = s.splits;
+            s.set_precision(b)?;
+            self.splits += s.splits - before;
+        }
+        Ok(selection.iter().map(|(c, _)| &self.states[c]).collect())
+    }
+
+    /// Decoded cells (drawn and ancestors).
+    pub fn cells(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Kd-cells and top-simplices held by the decoded cells.
+    pub fn held(&self) -> (usize, usize) {
+        self.states.values().fold((0, 0), |(k, t), s| (k + s.cx.cells.len(), t + s.cx.live_tops()))
+    }
+}
+
+/// The eye-distance precision of a point, for tests and figures.
+pub fn wanted_at(view: &View, side: f64, p: Vec3) -> f64 {
+    view.wanted_bits(side, (p - view.camera.eye).length() as f64)
+}
