@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use codec::nsp::{self, decode, Canonical, NspFile, Params};
+use codec::nsp::{self, decode, view, Canonical, NspFile, Params};
 use codec::Mesh;
 use testkit;
 
@@ -103,3 +103,153 @@ fn every_uniform_precision_is_vertex_clustering() {
     }
 }
 
+
+/// Table 1 of the paper: with p_r = 7 and n = 4, the dragon at 28 bits with N_min = 6000
+/// makes 1,473 cells and the bunny at 16 bits with N_min = 5000 makes 65.
+#[test]
+fn the_papers_partition_is_reproduced() {
+    for (rel, bits, min, cells) in
+        [("stanford/bunny_zipper_c3d.obj.gz", 16u8, 5000u32, 65usize), ("stanford/dragon_vrip.ply.gz", 28, 6000, 1473)]
+    {
+        let mesh = testkit::load_mesh(rel);
+        let canon = Canonical::of_mesh(&mesh, bits).unwrap();
+        let params = Params { bits, root_bits: 7, splits: 4, min_simplices: min, advance: 0 };
+        let part = nsp::tree::partition(params, &canon.points, &canon.simplices);
+        assert_eq!(part.tree.nodes.len(), cells, "{rel}");
+        if bits == 28 {
+            // The paper's dragon has 871,306 triangles: ours merged at 28 bits.
+            assert_eq!(canon.triangles(), 871_306);
+        }
+    }
+}
+
+fn views(file: &NspFile) -> Vec<view::View> {
+    let c = &file.header.cube;
+    let lo = [c.origin[0] as f32, c.origin[1] as f32, c.origin[2] as f32];
+    let e = file.header.extent;
+    let hi = [(c.origin[0] + e[0]) as f32, (c.origin[1] + e[1]) as f32, (c.origin[2] + e[2]) as f32];
+    testkit::cameras_around(lo, hi, 4.0 / 3.0)
+        .into_iter()
+        .flat_map(|camera| {
+            [0.5f32, 4.0].map(|error_px| view::View { camera, width: 640, height: 480, error_px })
+        })
+        .collect()
+}
+
+#[test]
+fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
+    let mesh = testkit::load_mesh("stanford/armadillo_100k.obj.gz");
+    let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance: 0 });
+    let mut nav = view::Navigator::default();
+    let mut mixed = 0;
+    for v in views(&file) {
+        let sel = view::select(&file, &v);
+        let precisions: std::collections::HashSet<u8> = sel.iter().map(|s| s.1).collect();
+        mixed += (precisions.len() > 1) as usize;
+        let drawn = view::draw(&file, &nav.update(&file, &sel).unwrap());
+        let set = oriented_set(&drawn.positions, &drawn.triangles);
+        let mut unoriented: Vec<_> = set.iter().map(|t| { let mut t = *t; t.sort(); t }).collect();
+        unoriented.sort();
+        let n = unoriented.len();
+        unoriented.dedup();
+        assert_eq!(unoriented.len(), n, "a triangle is drawn twice");
+        assert!(drawn.triangles.len() > 100);
+    }
+    assert!(mixed >= 3, "the views must mix precisions");
+    // Refine every drawn cell two bits, then coarsen back: the same complex.
+    let sel = view::select(&file, &views(&file)[0]);
+    let before = view::draw(&file, &nav.update(&file, &sel).unwrap());
+    let finer: Vec<(u32, u8)> = sel.iter().map(|&(c, b)| (c, b + 2)).collect();
+    let refined = view::draw(&file, &nav.update(&file, &finer).unwrap());
+    assert!(refined.triangles.len() > before.triangles.len());
+    let after = view::draw(&file, &nav.update(&file, &sel).unwrap());
+    assert_eq!(oriented_set(&after.positions, &after.triangles), oriented_set(&before.positions, &before.triangles));
+}
+
+/// Edges used by exactly one drawn triangle (a closed input has none).
+fn open_edges(d: &view::Drawn) -> usize {
+    let mut count: HashMap<[[u32; 3]; 2], u32> = HashMap::new();
+    for t in &d.triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let (pa, pb) = (d.positions[a as usize].map(f32::to_bits), d.positions[b as usize].map(f32::to_bits));
+            *count.entry([pa.min(pb), pa.max(pb)]).or_default() += 1;
+        }
+    }
+    count.values().filter(|&&c| c == 1).count()
+}
+
+/// The border rule on a closed model: every open edge of a mixed-precision drawing is
+/// counted against the drawing at one precision (clustering can itself open edges, where a
+/// triangle collapses to an edge); the figure is printed for the README.
+#[test]
+fn border_rule_cracks_are_counted_on_a_closed_model() {
+    let mesh = testkit::load_mesh("stanford/bunny00_cgal_75k.obj.gz");
+    let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance: 0 });
+    let full = decode::decode_all(&file).unwrap();
+    assert_eq!(open_edges(&full), 0, "the full decode of a closed mesh is closed");
+    let mut nav = view::Navigator::default();
+    for v in views(&file).iter().take(4) {
+        let sel = view::select(&file, v);
+        let d = view::draw(&file, &nav.update(&file, &sel).unwrap());
+        let max = sel.iter().map(|s| s.1).max().unwrap();
+        let uniform = decode::decode_uniform(&file, max).unwrap();
+        eprintln!(
+            "view: {} cells, precisions {}..{} bits: {} open edges (uniform at {max} bits: {}), {} triangles, {} stitched",
+            sel.len(),
+            sel.iter().map(|s| s.1).min().unwrap(),
+            max,
+            open_edges(&d),
+            open_edges(&uniform),
+            d.triangles.len(),
+            d.stitched
+        );
+    }
+}
+
+#[test]
+fn damaged_files_name_the_problem() {
+    let mesh = testkit::load_mesh("stanford/dragon_vrip_res4.ply.gz");
+    let canon = Canonical::of_mesh(&mesh, 14).unwrap();
+    let bytes = nsp::encode(&canon, small_params(14, 300), &|_| {}).unwrap().bytes;
+    let file = NspFile::from_bytes(bytes.clone()).unwrap();
+    // A flipped byte inside a cell's stream: that cell is named.
+    let (c, e) = file.entries.iter().enumerate().find(|(_, e)| e.len > 40).map(|(c, e)| (c, *e)).unwrap();
+    let mut bad = bytes.clone();
+    bad[e.offset as usize + 20] ^= 0x10;
+    let err = decode::decode_all(&NspFile::from_bytes(bad).unwrap()).unwrap_err().to_string();
+    assert!(err.starts_with(&format!("cell {c}:")), "{err}");
+    // Truncated, or a damaged header or table: refused when opened.
+    for cut in [bytes.len() - 1, bytes.len() / 2, 10] {
+        let err = NspFile::from_bytes(bytes[..cut].to_vec()).err().expect("refused").to_string();
+        assert!(err.starts_with("not an .nsp file"), "{err}");
+    }
+    for pos in [12usize, 200, bytes.len() - 30] {
+        let mut bad = bytes.clone();
+        bad[pos] ^= 1;
+        let err = NspFile::from_bytes(bad).err().expect("refused").to_string();
+        assert!(err.contains("checksum") || err.contains("not an .nsp"), "{err}");
+    }
+    // Damage with the checksums made to match again (as a fuzzer would): an error or a
+    // decode, never a panic or a hang.
+    let table_offset = u64::from_le_bytes(bytes[bytes.len() - 20..bytes.len() - 12].try_into().unwrap()) as usize;
+    let rows = file.entries.len();
+    let mut rng = testkit::XorShift(5);
+    let mut errors = 0;
+    for _ in 0..300 {
+        let mut bad = bytes.clone();
+        let (start, len) = (e.offset as usize, e.len as usize);
+        for _ in 0..1 + rng.next_u64() % 3 {
+            bad[start + (rng.next_u64() % len as u64) as usize] = rng.next_u64() as u8;
+        }
+        let crc = crc32fast::hash(&bad[start..start + len]);
+        bad[table_offset + 17 * c + 5..table_offset + 17 * c + 9].copy_from_slice(&crc.to_le_bytes());
+        let tcrc = crc32fast::hash(&bad[table_offset..table_offset + 17 * rows]);
+        bad[table_offset + 17 * rows..table_offset + 17 * rows + 4].copy_from_slice(&tcrc.to_le_bytes());
+        let f = NspFile::from_bytes(bad).unwrap();
+        if let Err(err) = decode::decode_all(&f) {
+            assert!(err.to_string().starts_with("cell "), "{err}");
+            errors += 1;
+        }
+    }
+    assert!(errors > 0, "some damage must be caught");
+}

@@ -184,6 +184,60 @@ pub enum Command {
         #[command(subcommand)]
         pm: Pm,
     },
+    /// The nSP-tree store: lossless, progressive, view-dependent (.nsp files).
+    Nsp {
+        #[command(subcommand)]
+        nsp: Nsp,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum Nsp {
+    /// Build an .nsp file from a mesh file.
+    Build {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// p: bits per quantized coordinate (1 to 30).
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u8).range(1..=30))]
+        bits: u8,
+        /// p_r: the root cell's maximal precision in bits.
+        #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u8).range(1..=30))]
+        root_bits: u8,
+        /// n: splits per axis of a cell (2, 4, 8 or 16).
+        #[arg(long, default_value_t = 4)]
+        splits: u32,
+        /// N_min: a cell splits only if it holds at least this many top-simplices.
+        #[arg(long, default_value_t = 8000)]
+        min_simplices: u32,
+        /// m: bits of geometry advance (section 7; only 0 is built).
+        #[arg(long, default_value_t = 0)]
+        advance: u8,
+    },
+    /// Print an .nsp file's parameters, counts and bytes by part (reads its tables only).
+    Stats {
+        input: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Refine an .nsp file's cells for a view (or fully) and write the mesh as PLY or OBJ.
+    Adapt {
+        input: PathBuf,
+        #[command(flatten)]
+        camera: CameraArgs,
+        /// Frame size in pixels, WIDTHxHEIGHT.
+        #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
+        size: (u32, u32),
+        /// Allowed projected error of a vertex, in pixels.
+        #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+        error_px: f32,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Refine every cell to full precision (ignores the view).
+        #[arg(long)]
+        full: bool,
+    },
 }
 
 #[derive(Subcommand)]

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use master::cli::{Cli, Command, Pm, RenderArgs};
+use master::cli::{Cli, Command, Nsp, Pm, RenderArgs};
 use master::commands;
 use worker::transport::{self, Mpi, Transport};
 
@@ -37,6 +37,20 @@ fn main() -> ExitCode {
                 gpu: *gpu,
             };
             master::pm::adapt(input, camera, &opts, output)
+        }
+        Command::Nsp { nsp: Nsp::Build { input, output, bits, root_bits, splits, min_simplices, advance } } => {
+            let params = codec::nsp::Params {
+                bits: *bits,
+                root_bits: *root_bits,
+                splits: *splits,
+                min_simplices: *min_simplices,
+                advance: *advance,
+            };
+            master::nsp::build(input, output, params)
+        }
+        Command::Nsp { nsp: Nsp::Stats { input, json } } => master::nsp::stats(input, *json),
+        Command::Nsp { nsp: Nsp::Adapt { input, camera, size, error_px, output, full } } => {
+            master::nsp::adapt(input, camera, *size, *error_px, *full, output)
         }
     };
     match result {

@@ -97,9 +97,16 @@ pub struct Canonical {
     /// Input triangles and vertices, before merging.
     pub input_triangles: u64,
     pub input_vertices: u64,
+    /// The bounding box's extent per axis (the cube's side is the largest).
+    pub cube_extent: [f64; 3],
 }
 
 impl Canonical {
+    /// The extent of the input's bounding box from the cube's origin, per axis.
+    pub fn extent(&self) -> [f64; 3] {
+        self.cube_extent
+    }
+
     pub fn triangles(&self) -> usize {
         self.simplices.iter().filter(|s| s.dim == 2).count()
     }
@@ -108,6 +115,12 @@ impl Canonical {
     pub fn of_mesh(mesh: &Mesh, bits: u8) -> Result<Canonical, NspError> {
         mesh.validate().map_err(|e| NspError::Input(e.to_string()))?;
         let cube = Cube::fit(&mesh.positions, bits).ok_or(NspError::Empty)?;
+        let mut cube_extent = [0f64; 3];
+        for p in &mesh.positions {
+            for a in 0..3 {
+                cube_extent[a] = cube_extent[a].max(p[a] as f64 - cube.origin[a]);
+            }
+        }
         let mut ids: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
         let mut points = Vec::new();
         let remap: Vec<u32> = mesh
@@ -132,6 +145,7 @@ impl Canonical {
             simplices,
             input_triangles: mesh.triangles.len() as u64,
             input_vertices: mesh.positions.len() as u64,
+            cube_extent,
         })
     }
 

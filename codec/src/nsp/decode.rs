@@ -122,13 +122,28 @@ impl NspFile {
         if parent.precision() != bits {
             return Err(NspError::Cell { cell: c, what: "its parent is not at its maximal precision".into() });
         }
-        let pl = self.header.params.level_bits() as u32;
-        let shift = bits as u32 - pl * node.depth as u32;
-        let coords = node.coords;
-        let cx = parent.cx.restrict(|k| {
-            let (q, _) = super::kd_corner(k.prefix, k.level, bits);
-            (0..3).all(|a| q[a] >> shift == coords[a])
+        let groups = parent.by_child.get_or_init(|| {
+            // Each kd-cell of the parent (all inside the parent or outside it) grouped by the
+            // child holding it, once per parent state rather than once per child.
+            let params = &self.header.params;
+            let pl = params.level_bits() as u32;
+            let pnode = &self.tree.nodes[parent.cell as usize];
+            let shift = bits as u32 - pl * (pnode.depth as u32 + 1);
+            let mask = (1u32 << pl) - 1;
+            let mut groups = vec![Vec::new(); params.fan_out() as usize];
+            for &k in &parent.cx.order {
+                let kd = &parent.cx.cells[k as usize];
+                let (q, _) = super::kd_corner(kd.prefix, kd.level, bits);
+                if (0..3).all(|a| q[a] >> (shift + pl) == pnode.coords[a]) {
+                    let local = [(q[0] >> shift) & mask, (q[1] >> shift) & mask, (q[2] >> shift) & mask];
+                    groups[params.child_index(local) as usize].push(k);
+                }
+            }
+            groups
         });
+        let k = self.tree.nodes[parent.cell as usize].children.iter().position(|&x| x == c);
+        let inside = k.map(|k| groups[k].as_slice()).unwrap_or(&[]);
+        let cx = parent.cx.restrict(inside);
         CellState::new(self, c, cx, self.cell_bytes(c)?)
     }
 }
@@ -150,6 +165,8 @@ pub struct CellState {
     max_tops: usize,
     /// Kd-cells split so far (vertex splits decoded), for throughput figures.
     pub splits: u64,
+    /// At the maximal precision of a split cell: its kd-cells grouped by child.
+    by_child: std::sync::OnceLock<Vec<Vec<u32>>>,
 }
 
 struct Static<'a, 'b> {
@@ -191,6 +208,7 @@ impl CellState {
             max_cells: e.max_cells as usize,
             max_tops: e.max_tops as usize,
             splits: 0,
+            by_child: std::sync::OnceLock::new(),
         })
     }
 
@@ -215,6 +233,7 @@ impl CellState {
             self.cx.level = target;
             return Ok(());
         }
+        self.by_child = std::sync::OnceLock::new();
         if target < self.cx.level {
             self.cx = self.start.clone();
             self.at = None;

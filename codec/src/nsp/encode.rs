@@ -25,6 +25,9 @@ pub struct Built {
     pub header: Header,
     /// Recorded binary decisions by kind: geometry, connectivity, orientation.
     pub decisions: [u64; 3],
+    /// Their cost in bits under the static tables (the streams' size before range-coder
+    /// overhead), by kind.
+    pub cost_bits: [f64; 3],
     /// Bytes of cell streams (all cells).
     pub stream_bytes: u64,
     /// Sum over the leaves of the simplices each holds (duplicates across cells counted).
@@ -81,6 +84,11 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
         }
     }
     let table: Vec<u16> = counts.iter().map(|c| static_prob(c[0], c[1])).collect();
+    let mut cost_bits = [0f64; 3];
+    for (ctx, c) in counts.iter().enumerate() {
+        let p0 = table[ctx] as f64 / 2048.0;
+        cost_bits[kind_of(ctx)] -= c[0] as f64 * p0.log2() + c[1] as f64 * (1.0 - p0).log2();
+    }
     let streams: Vec<Vec<u8>> = recorded.par_iter().map(|r| code_cell(&r.bits, &table)).collect();
     let entries: Vec<CellEntry> = streams
         .iter()
@@ -97,10 +105,11 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
         .collect();
     let leaf_simplices =
         (0..tree.nodes.len()).filter(|&c| tree.is_leaf(c as u32)).map(|c| part.members[c].len() as u64).sum();
-    let header = Header::new(params, canon);
+    let mut header = Header::new(params, canon);
+    header.leaf_simplices = leaf_simplices;
     let stream_bytes = streams.iter().map(|s| s.len() as u64).sum();
     let bytes = format::write(&header, &table, &streams, &entries);
-    Ok(Built { bytes, tree: part.tree, header, decisions, stream_bytes, leaf_simplices })
+    Ok(Built { bytes, tree: part.tree, header, decisions, cost_bits, stream_bytes, leaf_simplices })
 }
 
 fn kind_of(ctx: usize) -> usize {

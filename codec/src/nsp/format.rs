@@ -24,7 +24,7 @@ use super::{Cube, NspError, Params};
 
 pub const MAGIC: [u8; 4] = *b"TNSP";
 pub const VERSION: u16 = 1;
-pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4;
+pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4 + 3 * 8 + 8;
 pub const ENTRY_LEN: usize = 17;
 pub const FOOTER_LEN: usize = 20;
 /// Bytes before the table: magic, version, flags, header and its CRC.
@@ -43,6 +43,10 @@ pub struct Header {
     pub input_triangles: u64,
     pub input_vertices: u64,
     pub cells: u32,
+    /// The points' bounding box's extent from the cube's origin (for the default camera).
+    pub extent: [f64; 3],
+    /// Sum over the leaves of the top-simplices each holds (border duplicates counted).
+    pub leaf_simplices: u64,
 }
 
 impl Header {
@@ -58,6 +62,8 @@ impl Header {
             input_triangles: canon.input_triangles,
             input_vertices: canon.input_vertices,
             cells: 0,
+            extent: canon.extent(),
+            leaf_simplices: 0,
         }
     }
 
@@ -74,6 +80,10 @@ impl Header {
         }
         out.extend_from_slice(&self.cells.to_le_bytes());
         out.extend_from_slice(&(CONTEXTS as u32).to_le_bytes());
+        for a in 0..3 {
+            out.extend_from_slice(&self.extent[a].to_le_bytes());
+        }
+        out.extend_from_slice(&self.leaf_simplices.to_le_bytes());
     }
 
     fn get(b: &[u8]) -> Result<Header, NspError> {
@@ -97,7 +107,12 @@ impl Header {
             input_triangles: u64_at(72),
             input_vertices: u64_at(80),
             cells: u32_at(88),
+            extent: [f64_at(96), f64_at(104), f64_at(112)],
+            leaf_simplices: u64_at(120),
         };
+        if !h.extent.iter().all(|&e| e.is_finite() && (0.0..=h.cube.side).contains(&e)) {
+            return Err(NspError::Format("header: the bounding box does not fit the cube".into()));
+        }
         if u32_at(92) as usize != CONTEXTS {
             return Err(NspError::Format(format!("header: {} contexts, this reader knows {CONTEXTS}", u32_at(92))));
         }

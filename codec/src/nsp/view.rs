@@ -22,6 +22,10 @@ pub struct Drawn {
     pub left_to_others: u64,
     /// Triangles whose corners were moved to a coarser neighbour's kd-cell.
     pub stitched: u64,
+    /// Stitched triangles that collapsed (two corners in one coarse kd-cell) or repeated
+    /// another stitched triangle, so were not drawn.
+    pub collapsed: u64,
+    pub merged: u64,
 }
 
 impl Drawn {
@@ -103,6 +107,7 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
     };
     let mut out = Drawn::default();
     let mut vertex: HashMap<(u8, u128), u32> = HashMap::new();
+    let mut stitched_seen: std::collections::HashSet<[u32; 3]> = std::collections::HashSet::new();
     for (si, s) in states.iter().enumerate() {
         let pc = s.precision();
         let me = (pc, s.cell);
@@ -158,9 +163,19 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
                     out.positions.len() as u32 - 1
                 })
             });
-            if ids[0] != ids[1] && ids[1] != ids[2] && ids[0] != ids[2] {
-                out.triangles.push(ids);
+            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
+                out.collapsed += 1;
+                continue;
             }
+            // Stitching can map two border triangles of a finer cell onto the same coarse
+            // triangle; the complex is a set, so it is drawn once.
+            let mut key = ids;
+            key.sort_unstable();
+            if !stitched_seen.insert(key) {
+                out.merged += 1;
+                continue;
+            }
+            out.triangles.push(ids);
         }
     }
     out
@@ -268,20 +283,46 @@ impl Navigator {
             }
         }
         self.states.retain(|c, _| want.contains_key(c));
-        // Top-down: a parent is ready before its children.
-        let mut order: Vec<u32> = want.keys().copied().collect();
-        order.sort_by_key(|&c| tree.nodes[c as usize].depth);
-        for c in order {
-            let b = want[&c];
-            if !self.states.contains_key(&c) {
-                let parent = tree.nodes[c as usize].parent;
-                let s = if parent == u32::MAX { file.root_state()? } else { file.child_state(&self.states[&parent], c)? };
+        // Depth by depth, top-down: a parent is ready before its children, and the cells of
+        // one depth decode in parallel.
+        let mut by_depth: Vec<Vec<u32>> = Vec::new();
+        for &c in want.keys() {
+            let d = tree.nodes[c as usize].depth as usize;
+            if by_depth.len() <= d {
+                by_depth.resize(d + 1, Vec::new());
+            }
+            by_depth[d].push(c);
+        }
+        for mut cells in by_depth {
+            use rayon::prelude::*;
+            cells.sort_unstable();
+            let mut mine: Vec<(u32, Option<CellState>)> = cells.iter().map(|&c| (c, self.states.remove(&c))).collect();
+            let states = &self.states;
+            let done: Vec<Result<(u32, CellState, u64), NspError>> = mine
+                .par_iter_mut()
+                .map(|(c, existing)| {
+                    let mut s = match existing.take() {
+                        Some(s) => s,
+                        None => {
+                            let parent = tree.nodes[*c as usize].parent;
+                            if parent == u32::MAX {
+                                file.root_state()?
+                            } else {
+                                file.child_state(&states[&parent], *c)?
+                            }
+                        }
+                    };
+                    let before = s.splits;
+                    s.set_precision(want[c])?;
+                    let n = s.splits - before;
+                    Ok((*c, s, n))
+                })
+                .collect();
+            for r in done {
+                let (c, s, n) = r?;
+                self.splits += n;
                 self.states.insert(c, s);
             }
-            let s = self.states.get_mut(&c).expect("inserted above");
-            let before = s.splits;
-            s.set_precision(b)?;
-            self.splits += s.splits - before;
         }
         Ok(selection.iter().map(|(c, _)| &self.states[c]).collect())
     }

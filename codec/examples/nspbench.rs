@@ -1,0 +1,73 @@
+//! Builds an `.nsp` from a mesh and reports size, cells, build and decode speed:
+//! `cargo run --release -p tessera-codec --example nspbench -- MESH BITS ROOT_BITS SPLITS N_MIN`.
+
+use std::time::Instant;
+
+use codec::nsp::{self, Canonical, NspFile, Params};
+
+fn main() {
+    let a: Vec<String> = std::env::args().collect();
+    let path = std::path::Path::new(&a[1]);
+    let num = |i: usize, d: u32| a.get(i).map(|s| s.parse().unwrap()).unwrap_or(d);
+    let params = Params {
+        bits: num(2, 16) as u8,
+        root_bits: num(3, 7) as u8,
+        splits: num(4, 4),
+        min_simplices: num(5, 8000),
+        advance: 0,
+    };
+    let t = Instant::now();
+    let mesh = codec::load_path(path).unwrap();
+    let load = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let canon = Canonical::of_mesh(&mesh, params.bits).unwrap();
+    let t_canon = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let built = nsp::encode(&canon, params, &|_| {}).unwrap();
+    let t_enc = t.elapsed().as_secs_f64();
+    let bytes = built.bytes.len();
+    let v = canon.points.len() as f64;
+    println!(
+        "{}: {} input triangles, {} canonical triangles, {} points; load {load:.2}s",
+        path.display(),
+        mesh.triangles.len(),
+        canon.triangles(),
+        canon.points.len()
+    );
+    println!(
+        "p={} p_r={} n={} N_min={}: {} cells, {} bytes ({:.2} bpv), build {:.2}s + canonical {t_canon:.2}s = {:.0} tri/s",
+        params.bits,
+        params.root_bits,
+        params.splits,
+        params.min_simplices,
+        built.tree.nodes.len(),
+        bytes,
+        bytes as f64 * 8.0 / v,
+        t_enc,
+        mesh.triangles.len() as f64 / (t_enc + t_canon)
+    );
+    println!(
+        "decisions (bpv): geometry {} ({:.2}) connectivity {} ({:.2}) orientation {} ({:.2}); leaf duplication {:.3}",
+        built.decisions[0],
+        built.cost_bits[0] / v,
+        built.decisions[1],
+        built.cost_bits[1] / v,
+        built.decisions[2],
+        built.cost_bits[2] / v,
+        built.leaf_simplices as f64 / canon.simplices.len() as f64
+    );
+    let file = NspFile::from_bytes(built.bytes).unwrap();
+    let t = Instant::now();
+    let states = nsp::decode::decode_uniform_states(&file, params.bits).unwrap();
+    let t_dec = t.elapsed().as_secs_f64();
+    let splits: u64 = states.iter().map(|s| s.splits).sum();
+    let t = Instant::now();
+    let drawn = nsp::view::draw(&file, &states.iter().collect::<Vec<_>>());
+    println!(
+        "full decode {t_dec:.2}s ({} drawn cells, {splits} splits in drawn cells, {:.2} M splits/s over 2 cores), draw {:.2}s: {} triangles",
+        states.len(),
+        splits as f64 / t_dec / 1e6,
+        t.elapsed().as_secs_f64(),
+        drawn.triangles.len()
+    );
+}

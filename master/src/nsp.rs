@@ -1,0 +1,202 @@
+//! `tessera nsp`: the nSP-tree store (`.nsp` files; `codec::nsp`): build, stats, adapt.
+
+use std::path::Path;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use codec::nsp::{self, view, Canonical, NspFile, Params};
+use serde::Serialize;
+
+use crate::cli::CameraArgs;
+use crate::commands::{load_mesh, mesh_output, summary};
+use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
+use crate::progress;
+
+/// `tessera nsp build IN -o OUT.nsp`.
+pub fn build(input: &Path, output: &Path, params: Params) -> Result<()> {
+    check_extension(output, &["nsp"], "the output of nsp build")?;
+    check_distinct(&[input], &[output])?;
+    params.validate()?;
+    let mesh = load_mesh(input)?;
+    let start = Instant::now();
+    let canon = Canonical::of_mesh(&mesh, params.bits).with_context(|| format!("{}", input.display()))?;
+    drop(mesh);
+    // The partition is known only inside `encode`; the bar counts cells once it is.
+    let pb = progress::bar(0, "encoding cells");
+    let built = nsp::encode(&canon, params, &|done| {
+        pb.set_position(done);
+    })
+    .with_context(|| format!("cannot build {}", input.display()))?;
+    pb.finish_and_clear();
+    write_bytes(output, &built.bytes)?;
+    let secs = start.elapsed().as_secs_f64();
+    let h = &built.header;
+    let points = h.points.max(1) as f64;
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles ({} in the input), {} points, {} cells, {} bytes ({:.2} bits/point), \
+             built in {:.2} s ({:.0} triangles/s)",
+            input.display(),
+            output.display(),
+            h.triangles,
+            h.input_triangles,
+            h.points,
+            built.tree.nodes.len(),
+            built.bytes.len(),
+            built.bytes.len() as f64 * 8.0 / points,
+            secs,
+            h.input_triangles as f64 / secs.max(1e-9)
+        ),
+    );
+    summary(
+        output,
+        format_args!(
+            "  bits/point: geometry {:.2}, connectivity {:.2}, orientation {:.2} (at the static tables' entropy)",
+            built.cost_bits[0] / points,
+            built.cost_bits[1] / points,
+            built.cost_bits[2] / points
+        ),
+    );
+    Ok(())
+}
+
+/// What `tessera nsp stats --json` prints.
+#[derive(Debug, Serialize)]
+pub struct NspStatsReport {
+    pub bytes: u64,
+    pub bits: u8,
+    pub root_bits: u8,
+    pub splits: u32,
+    pub min_simplices: u32,
+    pub input_triangles: u64,
+    pub input_vertices: u64,
+    pub points: u64,
+    pub triangles: u64,
+    pub edges: u64,
+    pub isolated_points: u64,
+    pub cells: u32,
+    pub split_cells: u32,
+    pub empty_cells: u32,
+    pub depth: u8,
+    /// Top-simplices held by the leaves over top-simplices of the model.
+    pub duplication: f64,
+    pub header_and_table_bytes: u64,
+    pub stream_bytes: u64,
+    pub cell_table_bytes: u64,
+    pub bits_per_point: f64,
+}
+
+impl NspStatsReport {
+    pub fn of(file: &NspFile) -> NspStatsReport {
+        let h = &file.header;
+        let stream_bytes: u64 = file.entries.iter().map(|e| e.len as u64).sum();
+        let cell_table_bytes = (file.entries.len() * codec::nsp::format::ENTRY_LEN + 4 + codec::nsp::format::FOOTER_LEN) as u64;
+        let tops = h.triangles + h.edges + h.isolated;
+        NspStatsReport {
+            bytes: file.file_len,
+            bits: h.params.bits,
+            root_bits: h.params.root_bits,
+            splits: h.params.splits,
+            min_simplices: h.params.min_simplices,
+            input_triangles: h.input_triangles,
+            input_vertices: h.input_vertices,
+            points: h.points,
+            triangles: h.triangles,
+            edges: h.edges,
+            isolated_points: h.isolated,
+            cells: h.cells,
+            split_cells: file.entries.iter().filter(|e| e.split).count() as u32,
+            empty_cells: file.entries.iter().filter(|e| e.len == 0).count() as u32,
+            depth: file.tree.nodes.iter().map(|n| n.depth).max().unwrap_or(0),
+            duplication: h.leaf_simplices as f64 / tops.max(1) as f64,
+            header_and_table_bytes: (codec::nsp::format::PREFIX_LEN + codec::nsp::format::TABLE_LEN) as u64,
+            stream_bytes,
+            cell_table_bytes,
+            bits_per_point: file.file_len as f64 * 8.0 / h.points.max(1) as f64,
+        }
+    }
+}
+
+fn open(input: &Path) -> Result<NspFile> {
+    NspFile::open(input).with_context(|| format!("{}", input.display()))
+}
+
+/// `tessera nsp stats X.nsp [--json]` (reads the header and the cell table only).
+pub fn stats(input: &Path, json: bool) -> Result<()> {
+    let file = open(input)?;
+    let r = NspStatsReport::of(&file);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(());
+    }
+    println!("{}", input.display());
+    println!(
+        "  parameters     p = {} bits, p_r = {}, n = {}, N_min = {}",
+        r.bits, r.root_bits, r.splits, r.min_simplices
+    );
+    println!("  input          {:>12} triangles, {} vertices", r.input_triangles, r.input_vertices);
+    println!(
+        "  canonical      {:>12} triangles, {} edges, {} isolated points, {} points (coincident vertices merged)",
+        r.triangles, r.edges, r.isolated_points, r.points
+    );
+    println!(
+        "  cells          {:>12}   ({} split, {} empty, depth {}; duplication {:.3})",
+        r.cells, r.split_cells, r.empty_cells, r.depth, r.duplication
+    );
+    println!("  bytes          {:>12}   ({:.2} bits/point)", r.bytes, r.bits_per_point);
+    println!("    header+table {:>12}", r.header_and_table_bytes);
+    println!("    cell streams {:>12}", r.stream_bytes);
+    println!("    cell table   {:>12}", r.cell_table_bytes);
+    Ok(())
+}
+
+/// `tessera nsp adapt X.nsp [camera] --size WxH --error-px E -o OUT.ply [--full]`.
+pub fn adapt(input: &Path, camera: &CameraArgs, size: (u32, u32), error_px: f32, full: bool, output: &Path) -> Result<()> {
+    let writer = mesh_output(input, output, "the output of nsp adapt")?;
+    let file = open(input)?;
+    let start = Instant::now();
+    let (drawn, cells) = if full {
+        let states = nsp::decode::decode_uniform_states(&file, file.header.params.bits)
+            .with_context(|| format!("{}", input.display()))?;
+        (view::draw(&file, &states.iter().collect::<Vec<_>>()), states.len())
+    } else {
+        let (lo, hi) = bbox(&file);
+        let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
+        crate::cli::check_camera(&cam, size.1)?;
+        let v = view::View { camera: cam, width: size.0, height: size.1, error_px };
+        let selection = view::select(&file, &v);
+        let mut nav = view::Navigator::default();
+        let states = nav.update(&file, &selection).with_context(|| format!("{}", input.display()))?;
+        (view::draw(&file, &states), selection.len())
+    };
+    let secs = start.elapsed().as_secs_f64();
+    let mesh = drawn.to_mesh();
+    write_atomic(output, |w| writer(&mesh, w))?;
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles from {} cells ({} edges and {} points not drawn), {} of {} bytes read, in {:.1} ms",
+            input.display(),
+            output.display(),
+            mesh.triangles.len(),
+            cells,
+            drawn.edges,
+            drawn.points,
+            file.bytes_read.load(Ordering::Relaxed),
+            file.file_len,
+            secs * 1e3
+        ),
+    );
+    Ok(())
+}
+
+/// The model's bounding box, from the header.
+pub fn bbox(file: &NspFile) -> ([f32; 3], [f32; 3]) {
+    let c = &file.header.cube;
+    let e = file.header.extent;
+    let lo = [c.origin[0] as f32, c.origin[1] as f32, c.origin[2] as f32];
+    let hi = [(c.origin[0] + e[0]) as f32, (c.origin[1] + e[1]) as f32, (c.origin[2] + e[2]) as f32];
+    (lo, hi)
+}
