@@ -222,3 +222,48 @@ fn sort_dumps_tiles_in_either_coding() {
     let ratio = tiles_of[1].1 / tiles_of[0].1;
     assert!((1.0..1.15).contains(&ratio), "prefix / range bytes {ratio}");
 }
+
+#[test]
+fn nsp_build_stats_adapt_and_corrupt_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = mesh("stanford/dragon_vrip_res4.ply.gz");
+    let nsp = dir.path().join("d.nsp");
+    let o = tessera(&["nsp", "build", s(&input), "-o", s(&nsp), "--bits", "14", "--root-bits", "5", "--min-simplices", "500"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let o = tessera(&["nsp", "stats", s(&nsp), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["bytes"], std::fs::metadata(&nsp).unwrap().len());
+    assert_eq!(j["bits"], 14);
+    assert!(j["cells"].as_u64().unwrap() > 64 && j["duplication"].as_f64().unwrap() > 1.0);
+
+    // Refined fully: the canonical complex (here, the input's triangles less the repeated ones).
+    let canon = codec::nsp::Canonical::of_mesh(&codec::load_path(&input).unwrap(), 14).unwrap();
+    let full = dir.path().join("full.ply");
+    let o = tessera(&["nsp", "adapt", s(&nsp), "--full", "-o", s(&full)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(codec::load_path(&full).unwrap().triangles.len(), canon.triangles());
+
+    let view = dir.path().join("view.obj");
+    let o = tessera(&["nsp", "adapt", s(&nsp), "--size", "64x48", "--error-px", "4", "-o", s(&view)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let coarse = codec::load_path(&view).unwrap().triangles.len();
+    assert!(coarse > 0 && coarse < canon.triangles() / 2, "{coarse} of {}", canon.triangles());
+
+    // A damaged cell: one line naming the cell, a non-zero exit, no output file.
+    let mut bytes = std::fs::read(&nsp).unwrap();
+    bytes[j["header_and_table_bytes"].as_u64().unwrap() as usize + 20] ^= 0x5a;
+    let bad = dir.path().join("bad.nsp");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("bad.ply");
+    let o = tessera(&["nsp", "adapt", s(&bad), "--full", "-o", s(&out)]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.lines().count() == 1 && err.contains("bad.nsp: cell ") && err.contains("checksum"), "{err}");
+    assert!(!out.exists());
+    // A .bft given to nsp stats.
+    std::fs::write(&bad, b"TESSBFT\x1a").unwrap();
+    let o = tessera(&["nsp", "stats", s(&bad)]);
+    assert!(!o.status.success() && stderr(&o).contains("not an .nsp file"), "{}", stderr(&o));
+}

@@ -238,3 +238,32 @@ pub fn read_entries(b: &[u8], table_offset: u64) -> Result<Vec<CellEntry>, NspEr
     }
     Ok(out)
 }
+
+/// A valid file whose only cell (a leaf root at 10 bits, decisions at even odds, at most
+/// 4,096 kd-cells and 16,384 top-simplices) has `stream` as its bytes: lets a fuzzer reach
+/// the cell decoder past the checksums (`fuzz/fuzz_targets/decode_nsp.rs`).
+pub fn wrap_for_fuzzing(stream: &[u8]) -> Vec<u8> {
+    let params = Params { bits: 10, root_bits: 7, splits: 4, min_simplices: 8000, advance: 0 };
+    let header = Header {
+        params,
+        cube: Cube { origin: [0.0; 3], side: 1.0, bits: 10 },
+        points: 0,
+        triangles: 0,
+        edges: 0,
+        isolated: 0,
+        input_triangles: 0,
+        input_vertices: 0,
+        cells: 1,
+        extent: [1.0; 3],
+        leaf_simplices: 0,
+    };
+    let entry = CellEntry {
+        split: false,
+        offset: 0,
+        len: stream.len() as u32,
+        crc: crc32fast::hash(stream),
+        max_cells: 4096,
+        max_tops: 16384,
+    };
+    write(&header, &[1024; CONTEXTS], &[stream.to_vec()], &[entry])
+}
