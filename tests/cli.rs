@@ -228,7 +228,19 @@ fn nsp_build_stats_adapt_and_corrupt_file() {
     let dir = tempfile::tempdir().unwrap();
     let input = mesh("stanford/dragon_vrip_res4.ply.gz");
     let nsp = dir.path().join("d.nsp");
-    let o = tessera(&["nsp", "build", s(&input), "-o", s(&nsp), "--bits", "14", "--root-bits", "5", "--min-simplices", "500"]);
+    let o = tessera(&[
+        "nsp",
+        "build",
+        s(&input),
+        "-o",
+        s(&nsp),
+        "--bits",
+        "14",
+        "--root-bits",
+        "5",
+        "--min-simplices",
+        "500",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
 
     let o = tessera(&["nsp", "stats", s(&nsp), "--json"]);

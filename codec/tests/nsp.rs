@@ -5,7 +5,6 @@ use std::collections::HashMap;
 
 use codec::nsp::{self, decode, view, Canonical, NspFile, Params};
 use codec::Mesh;
-use testkit;
 
 fn build(mesh: &Mesh, params: Params) -> (Canonical, NspFile) {
     let canon = Canonical::of_mesh(mesh, params.bits).unwrap();
@@ -103,7 +102,6 @@ fn every_uniform_precision_is_vertex_clustering() {
     }
 }
 
-
 /// Table 1 of the paper: with p_r = 7 and n = 4, the dragon at 28 bits with N_min = 6000
 /// makes 1,473 cells and the bunny at 16 bits with N_min = 5000 makes 65.
 #[test]
@@ -130,9 +128,7 @@ fn views(file: &NspFile) -> Vec<view::View> {
     let hi = [(c.origin[0] + e[0]) as f32, (c.origin[1] + e[1]) as f32, (c.origin[2] + e[2]) as f32];
     testkit::cameras_around(lo, hi, 4.0 / 3.0)
         .into_iter()
-        .flat_map(|camera| {
-            [0.5f32, 4.0].map(|error_px| view::View { camera, width: 640, height: 480, error_px })
-        })
+        .flat_map(|camera| [0.5f32, 4.0].map(|error_px| view::View { camera, width: 640, height: 480, error_px }))
         .collect()
 }
 
@@ -148,7 +144,14 @@ fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
         mixed += (precisions.len() > 1) as usize;
         let drawn = view::draw(&file, &nav.update(&file, &sel).unwrap());
         let set = oriented_set(&drawn.positions, &drawn.triangles);
-        let mut unoriented: Vec<_> = set.iter().map(|t| { let mut t = *t; t.sort(); t }).collect();
+        let mut unoriented: Vec<_> = set
+            .iter()
+            .map(|t| {
+                let mut t = *t;
+                t.sort();
+                t
+            })
+            .collect();
         unoriented.sort();
         let n = unoriented.len();
         unoriented.dedup();

@@ -92,7 +92,8 @@ impl NspStatsReport {
     pub fn of(file: &NspFile) -> NspStatsReport {
         let h = &file.header;
         let stream_bytes: u64 = file.entries.iter().map(|e| e.len as u64).sum();
-        let cell_table_bytes = (file.entries.len() * codec::nsp::format::ENTRY_LEN + 4 + codec::nsp::format::FOOTER_LEN) as u64;
+        let cell_table_bytes =
+            (file.entries.len() * codec::nsp::format::ENTRY_LEN + 4 + codec::nsp::format::FOOTER_LEN) as u64;
         let tops = h.triangles + h.edges + h.isolated;
         NspStatsReport {
             bytes: file.file_len,
@@ -153,7 +154,14 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
 }
 
 /// `tessera nsp adapt X.nsp [camera] --size WxH --error-px E -o OUT.ply [--full]`.
-pub fn adapt(input: &Path, camera: &CameraArgs, size: (u32, u32), error_px: f32, full: bool, output: &Path) -> Result<()> {
+pub fn adapt(
+    input: &Path,
+    camera: &CameraArgs,
+    size: (u32, u32),
+    error_px: f32,
+    full: bool,
+    output: &Path,
+) -> Result<()> {
     let writer = mesh_output(input, output, "the output of nsp adapt")?;
     let file = open(input)?;
     let start = Instant::now();

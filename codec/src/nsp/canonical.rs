@@ -134,10 +134,10 @@ impl Canonical {
                 })
             })
             .collect();
-        let tris = mesh.triangles.iter().map(|t| Simplex {
-            v: [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]],
-            dim: 2,
-        });
+        let tris = mesh
+            .triangles
+            .iter()
+            .map(|t| Simplex { v: [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]], dim: 2 });
         let simplices = top_simplices(points.len(), tris);
         Ok(Canonical {
             cube,
@@ -170,11 +170,8 @@ pub(crate) fn top_simplices(points: usize, simplices: impl Iterator<Item = Simpl
     for s in simplices {
         let s = reduce(s);
         match s.dim {
-            2 => {
-                if seen_tri.insert(s.key()) {
-                    out.push(s);
-                }
-            }
+            2 if seen_tri.insert(s.key()) => out.push(s),
+            2 => {}
             1 => edges.push([s.v[0], s.v[1]]),
             _ => {}
         }
@@ -229,4 +226,3 @@ fn edge_or_point(a: u32, b: u32) -> Simplex {
         Simplex { v: [a.min(b), a.max(b), 0], dim: 1 }
     }
 }
-

@@ -167,7 +167,10 @@ impl Complex {
             let k = &self.cells[v as usize];
             c.cells.push(KdCell { level: k.level, prefix: k.prefix, tops: Vec::new() });
         }
-        let map = |v: u32| verts.binary_search_by_key(&self.cells[v as usize].index(), |x| x.0).expect("a vertex of a kept simplex") as u32;
+        let map = |v: u32| {
+            verts.binary_search_by_key(&self.cells[v as usize].index(), |x| x.0).expect("a vertex of a kept simplex")
+                as u32
+        };
         for &t in &keep {
             let mut top = self.tops[t as usize];
             for k in 0..=top.dim as usize {

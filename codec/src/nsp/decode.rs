@@ -187,7 +187,10 @@ impl CellState {
         let e = &file.entries[c as usize];
         let (min_level, max_level) = (3 * file.tree.min_prec(c), 3 * file.tree.max_prec(c));
         if cx.cells.len() > e.max_cells as usize || cx.live_tops() > e.max_tops as usize {
-            return Err(NspError::Cell { cell: c, what: "its parent's state is larger than the cell table allows".into() });
+            return Err(NspError::Cell {
+                cell: c,
+                what: "its parent's state is larger than the cell table allows".into(),
+            });
         }
         if cx.cells.is_empty() != bytes.is_empty() {
             return Err(NspError::Cell {
@@ -247,10 +250,17 @@ impl CellState {
         while self.cx.level < target {
             let before = self.cx.cells.len();
             self.cx
-                .refine_level(&mut Static { dec: &mut dec, table: &self.table }, &mut Blind, self.max_cells, self.max_tops)
+                .refine_level(
+                    &mut Static { dec: &mut dec, table: &self.table },
+                    &mut Blind,
+                    self.max_cells,
+                    self.max_tops,
+                )
                 .map_err(|e| match e {
                     ApplyError::NoSymbol => err("corrupt stream (a connectivity symbol with no possible value)"),
-                    ApplyError::TooLarge => err("corrupt stream (more kd-cells or simplices than its table entry allows)"),
+                    ApplyError::TooLarge => {
+                        err("corrupt stream (more kd-cells or simplices than its table entry allows)")
+                    }
                 })?;
             self.splits += (self.cx.cells.len() - before) as u64;
             if dec.overrun() > 4 {

@@ -349,4 +349,3 @@ impl Oracle for Truth<'_> {
         (0..3).any(|r| [truth[r], truth[(r + 1) % 3], truth[(r + 2) % 3]] == t)
     }
 }
-

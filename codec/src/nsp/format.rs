@@ -212,7 +212,9 @@ pub fn read_footer(b: &[u8], file_len: u64) -> Result<(u64, u32), NspError> {
     let cells = u32::from_le_bytes(body[8..12].try_into().unwrap());
     let table_len = cells as u64 * ENTRY_LEN as u64 + 4;
     if offset < (PREFIX_LEN + TABLE_LEN) as u64 || offset.checked_add(table_len) != Some(file_len - FOOTER_LEN as u64) {
-        return Err(NspError::Format(format!("footer: a cell table of {cells} cells at {offset} does not fit the file")));
+        return Err(NspError::Format(format!(
+            "footer: a cell table of {cells} cells at {offset} does not fit the file"
+        )));
     }
     Ok((offset, cells))
 }

@@ -141,7 +141,9 @@ impl Params {
             return Err(NspError::Params("--min-simplices must be at least 1".into()));
         }
         if self.advance != 0 {
-            return Err(NspError::Params("--advance: the geometry advance of section 7 is not built yet; use 0".into()));
+            return Err(NspError::Params(
+                "--advance: the geometry advance of section 7 is not built yet; use 0".into(),
+            ));
         }
         Ok(())
     }

@@ -72,7 +72,9 @@ impl Tree {
             let mut children = Vec::new();
             if s {
                 if stack.len() < fan {
-                    return Err(NspError::Format(format!("cell table: split cell {i} has fewer than {fan} cells before it")));
+                    return Err(NspError::Format(format!(
+                        "cell table: split cell {i} has fewer than {fan} cells before it"
+                    )));
                 }
                 children = stack.split_off(stack.len() - fan);
                 for &ch in &children {

@@ -59,10 +59,8 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
         drawn_at[s.cell as usize] = Some(i);
     }
     // Per state: kd prefix → id (all its kd-cells are at one level).
-    let maps: Vec<HashMap<u128, u32>> = states
-        .iter()
-        .map(|s| s.cx.order.iter().map(|&k| (s.cx.cells[k as usize].prefix, k)).collect())
-        .collect();
+    let maps: Vec<HashMap<u128, u32>> =
+        states.iter().map(|s| s.cx.order.iter().map(|&k| (s.cx.cells[k as usize].prefix, k)).collect()).collect();
     let locate = |prefix: u128, level: u8| -> Loc {
         let (corner, used) = kd_corner(prefix, level, bits);
         let mut node = tree.root();
@@ -124,6 +122,7 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
             let mut corners = [(0u8, 0u128); 3];
             let mut dropped = false;
             let mut moved = false;
+            #[allow(clippy::needless_range_loop)] // k indexes the corners and the triangle alike
             for k in 0..3 {
                 let kd = &s.cx.cells[top.v[k] as usize];
                 let loc = *locs.entry(top.v[k]).or_insert_with(|| locate(kd.prefix, kd.level));
