@@ -66,7 +66,7 @@ fn main() {
     let states = nav.update(&file, &cut).unwrap();
     let t_dec = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let drawn = nsp::view::draw(&file, &states);
+    let drawn = nsp::view::draw(&file, &cut, &states);
     println!(
         "full decode {t_dec:.2}s: {} cells decoded, {} vertex splits ({:.2} M/s over 2 cores), draw {:.2}s: {} triangles",
         nav.cells(),

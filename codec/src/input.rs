@@ -61,6 +61,8 @@ pub enum ModelKind {
     Bft,
     /// A `.dpm` file (dependency-free progressive mesh), which workers adapt.
     Dpm,
+    /// An `.nsp` file (nSP-tree store), whose cells workers refine.
+    Nsp,
     /// Anything else: a mesh file for the loaders (OBJ, PLY, STL, optionally gzipped).
     Mesh,
 }
@@ -80,9 +82,13 @@ impl ModelKind {
         if read && magic == crate::pm::format::MAGIC {
             return ModelKind::Dpm;
         }
+        if read && magic[..4] == crate::nsp::format::MAGIC {
+            return ModelKind::Nsp;
+        }
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("bft") => ModelKind::Bft,
             Some("dpm") => ModelKind::Dpm,
+            Some("nsp") => ModelKind::Nsp,
             _ => ModelKind::Mesh,
         }
     }

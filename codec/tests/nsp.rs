@@ -142,7 +142,7 @@ fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
         let sel = view::select(&file, &v);
         let precisions: std::collections::HashSet<u8> = sel.iter().map(|s| s.1).collect();
         mixed += (precisions.len() > 1) as usize;
-        let drawn = view::draw(&file, &nav.update(&file, &sel).unwrap());
+        let drawn = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
         let set = oriented_set(&drawn.positions, &drawn.triangles);
         let mut unoriented: Vec<_> = set
             .iter()
@@ -161,11 +161,11 @@ fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
     assert!(mixed >= 3, "the views must mix precisions");
     // Refine every drawn cell two bits, then coarsen back: the same complex.
     let sel = view::select(&file, &views(&file)[0]);
-    let before = view::draw(&file, &nav.update(&file, &sel).unwrap());
+    let before = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
     let finer: Vec<(u32, u8)> = sel.iter().map(|&(c, b)| (c, b + 2)).collect();
-    let refined = view::draw(&file, &nav.update(&file, &finer).unwrap());
+    let refined = view::draw(&file, &finer, &nav.update(&file, &finer).unwrap());
     assert!(refined.triangles.len() > before.triangles.len());
-    let after = view::draw(&file, &nav.update(&file, &sel).unwrap());
+    let after = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
     assert_eq!(oriented_set(&after.positions, &after.triangles), oriented_set(&before.positions, &before.triangles));
 }
 
@@ -193,7 +193,7 @@ fn border_rule_cracks_are_counted_on_a_closed_model() {
     let mut nav = view::Navigator::default();
     for v in views(&file).iter().take(4) {
         let sel = view::select(&file, v);
-        let d = view::draw(&file, &nav.update(&file, &sel).unwrap());
+        let d = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
         let max = sel.iter().map(|s| s.1).max().unwrap();
         let uniform = decode::decode_uniform(&file, max).unwrap();
         eprintln!(
@@ -245,9 +245,11 @@ fn damaged_files_name_the_problem() {
             bad[start + (rng.next_u64() % len as u64) as usize] = rng.next_u64() as u8;
         }
         let crc = crc32fast::hash(&bad[start..start + len]);
-        bad[table_offset + 17 * c + 5..table_offset + 17 * c + 9].copy_from_slice(&crc.to_le_bytes());
-        let tcrc = crc32fast::hash(&bad[table_offset..table_offset + 17 * rows]);
-        bad[table_offset + 17 * rows..table_offset + 17 * rows + 4].copy_from_slice(&tcrc.to_le_bytes());
+        let row = table_offset + nsp::format::ENTRY_LEN * c;
+        bad[row + 5..row + 9].copy_from_slice(&crc.to_le_bytes());
+        let end = table_offset + nsp::format::ENTRY_LEN * rows;
+        let tcrc = crc32fast::hash(&bad[table_offset..end]);
+        bad[end..end + 4].copy_from_slice(&tcrc.to_le_bytes());
         let f = NspFile::from_bytes(bad).unwrap();
         if let Err(err) = decode::decode_all(&f) {
             assert!(err.to_string().starts_with("cell "), "{err}");

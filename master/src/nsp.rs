@@ -112,7 +112,7 @@ impl NspStatsReport {
             empty_cells: file.entries.iter().filter(|e| e.len == 0).count() as u32,
             depth: file.tree.nodes.iter().map(|n| n.depth).max().unwrap_or(0),
             duplication: h.leaf_simplices as f64 / tops.max(1) as f64,
-            header_and_table_bytes: (codec::nsp::format::PREFIX_LEN + codec::nsp::format::TABLE_LEN) as u64,
+            header_and_table_bytes: file.prefix_len,
             stream_bytes,
             cell_table_bytes,
             bits_per_point: file.file_len as f64 * 8.0 / h.points.max(1) as f64,
@@ -168,7 +168,8 @@ pub fn adapt(
     let (drawn, cells) = if full {
         let states = nsp::decode::decode_uniform_states(&file, file.header.params.bits)
             .with_context(|| format!("{}", input.display()))?;
-        (view::draw(&file, &states.iter().collect::<Vec<_>>()), states.len())
+        let selection: Vec<(u32, u8)> = states.iter().map(|s| (s.cell, s.precision())).collect();
+        (view::draw(&file, &selection, &states.iter().collect::<Vec<_>>()), states.len())
     } else {
         let (lo, hi) = bbox(&file);
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
@@ -177,7 +178,7 @@ pub fn adapt(
         let selection = view::select(&file, &v);
         let mut nav = view::Navigator::default();
         let states = nav.update(&file, &selection).with_context(|| format!("{}", input.display()))?;
-        (view::draw(&file, &states), selection.len())
+        (view::draw(&file, &selection, &states), selection.len())
     };
     let secs = start.elapsed().as_secs_f64();
     let mesh = drawn.to_mesh();

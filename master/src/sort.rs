@@ -27,6 +27,12 @@ pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     if kind == codec::input::ModelKind::Dpm {
         bail!("{}: a progressive mesh (.dpm); this command takes a .bft or a mesh file", path.display());
     }
+    if kind == codec::input::ModelKind::Nsp {
+        bail!(
+            "{}: an nSP-tree store (.nsp); this command takes a .bft or a mesh file (see tessera nsp)",
+            path.display()
+        );
+    }
     let bytes = if kind == codec::input::ModelKind::Bft {
         crate::commands::read_input(path)?
     } else {

@@ -24,7 +24,9 @@ use thiserror::Error;
 use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
-use crate::protocol::{FrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes, ToMaster, ToWorker};
+use crate::protocol::{
+    FrameJob, NspFrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes, ToMaster, ToWorker,
+};
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
@@ -64,6 +66,12 @@ pub enum WorkerError {
     /// GPU: the progressive mesh could not be uploaded.
     #[error(transparent)]
     Upload(AdaptError),
+    /// The `.nsp` model or one of its cells.
+    #[error("the .nsp model: {0}")]
+    Nsp(codec::nsp::NspError),
+    /// Protocol: an `NspFrame` before any `NspModel`, or naming a cell it does not select.
+    #[error("an .nsp frame {0}")]
+    NspFrame(&'static str),
     /// The `fail` hook of `TESSERA_FAULT`.
     #[error("injected failure (TESSERA_FAULT)")]
     Injected,
@@ -200,6 +208,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
     heartbeat.busy(false);
     t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
     let mut pm: Option<PmTiles> = None;
+    let mut nsp: Option<NspView> = None;
     // One chunk cache per sorter (`render --sorters K`), each mirrored by its sorter.
     let mut chunks: Vec<ChunkCache<KeptChunk>> = Vec::new();
     // The shares of the frame received so far, by sorter.
@@ -228,6 +237,13 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                 }
                 continue;
             }
+            Ok(ToWorker::NspModel(skeleton)) => {
+                match codec::nsp::NspFile::from_skeleton(skeleton) {
+                    Ok(file) => nsp = Some(NspView { file, nav: Default::default() }),
+                    Err(e) => return fail(WorkerError::Nsp(e)),
+                }
+                continue;
+            }
             Ok(msg) => msg,
             Err(e) => return fail(WorkerError::BadMessage(e)),
         };
@@ -247,6 +263,16 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
         let job = match msg {
             ToWorker::Frame(job) => job,
             ToWorker::Sort(_) => return fail(WorkerError::BadMessage(ProtocolError::Unexpected("Sort".into()))),
+            ToWorker::NspFrame(job) => {
+                let Some(view) = nsp.as_mut() else {
+                    return fail(WorkerError::NspFrame("arrived before its model"));
+                };
+                match view.render(&mut renderer, job) {
+                    Ok((frame, tiles)) => t.send(0, &ToMaster::Pixels { frame, tiles }.encode()),
+                    Err(e) => return fail(e),
+                }
+                continue;
+            }
             ToWorker::PmFrame(job) => {
                 let Some(pm) = pm.as_mut() else {
                     return fail(WorkerError::FrameBeforeModel);
@@ -447,6 +473,67 @@ const MIN_TILE_SLACK: u32 = 256;
 pub const MAX_ADAPTERS: usize = 16;
 
 /// Tiles adapted together (see [`MAX_ADAPTERS`]).
+/// An `.nsp` model on a worker: the file's skeleton with the cell streams received so far,
+/// and the cells decoded for the last frame (drawn ones and their ancestors).
+struct NspView {
+    file: codec::nsp::NspFile,
+    nav: codec::nsp::view::Navigator,
+}
+
+impl NspView {
+    /// Refines the cells this worker draws to the frame's selection, draws them with the
+    /// border rule against the whole selection, and renders every tile (flat shaded: a
+    /// triangle's pixels depend on it alone, so any subset of the drawing renders the same
+    /// pixels as the whole).
+    fn render(&mut self, renderer: &mut Renderer, job: NspFrameJob) -> Result<(u32, Vec<TilePixels>), WorkerError> {
+        for (c, bytes) in job.cells {
+            self.file.receive(c, bytes).map_err(WorkerError::Nsp)?;
+        }
+        let bits: HashMap<u32, u8> = job.selection.iter().copied().collect();
+        let mut want = Vec::with_capacity(job.draw.len());
+        for c in &job.draw {
+            want.push((*c, *bits.get(c).ok_or(WorkerError::NspFrame("draws a cell it does not select"))?));
+        }
+        let start = Instant::now();
+        let states = self.nav.update(&self.file, &want).map_err(WorkerError::Nsp)?;
+        let drawn = codec::nsp::view::draw(&self.file, &job.selection, &states);
+        let mesh = RenderMesh::flat(&drawn.positions, &drawn.triangles);
+        let decode_ms = start.elapsed().as_secs_f64() * 1e3;
+        let view_proj = Mat4::from_cols_array(&job.view_proj);
+        for &(index, [x0, y0, x1, y1]) in &job.tiles {
+            if !(x0 < x1 && x1 <= job.width && y0 < y1 && y1 <= job.height) {
+                return Err(TileError::BadRect([x0, y0, x1, y1]).at(index));
+            }
+        }
+        let groups = tile_groups(&job.tiles, job.width, job.height);
+        let share = 1.0 / job.tiles.len().max(1) as f64;
+        let mut out = Vec::with_capacity(job.tiles.len());
+        for group in &groups {
+            let first = group.tiles[0].0;
+            let (rgba, times) = renderer
+                .render(&mesh, view_proj, (job.width, job.height), group.rect)
+                .map_err(|e| TileError::from(e).at(first))?;
+            let part = 1.0 / group.tiles.len() as f64;
+            for &(index, rect) in &group.tiles {
+                out.push(TilePixels {
+                    index,
+                    rect,
+                    times: TileTimes {
+                        decode_ms: decode_ms * share,
+                        adapt_ms: 0.0,
+                        upload_ms: times.upload_ms * part,
+                        render_ms: times.render_ms * part,
+                        readback_ms: times.readback_ms * part,
+                    },
+                    triangles: drawn.triangles.len() as u32,
+                    rgba: crop(&rgba, group.rect, rect),
+                });
+            }
+        }
+        Ok((job.frame, out))
+    }
+}
+
 struct TileGroup {
     /// The adaptation's key: the tile index for a tile alone, `1 << 31 | block` for a block.
     key: u32,

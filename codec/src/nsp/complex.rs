@@ -12,10 +12,17 @@ use std::collections::HashMap;
 
 use super::canonical::{top_simplices, Simplex};
 
-/// Contexts: two per kd level for geometry, then connectivity, then orientation.
-pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::MAX_BITS as usize;
+/// Contexts: geometry per (kd level, valence bucket, binary node), then connectivity per
+/// (dimension, allowed symbols, binary node, side of the split plane), then orientation.
+pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::MAX_BITS as usize * VALENCE_BUCKETS;
+/// A kd-cell's number of incident top-simplices, bucketed: more simplices, more likely
+/// several points inside.
+const VALENCE_BUCKETS: usize = 4;
 const CONN_BASE: usize = GEOMETRY_CONTEXTS;
-const CONN_CONTEXTS: usize = 3 * 16 * 3;
+/// Where the other vertex `w` of an edge `v·w` lies against the plane that splits `v`:
+/// across it, or on `v0`'s or `v1`'s side, adjacent or farther.
+const SIDES: usize = 5;
+const CONN_CONTEXTS: usize = 3 * 16 * 3 * SIDES;
 const ORIENT_BASE: usize = CONN_BASE + CONN_CONTEXTS;
 /// Total number of contexts, so of probabilities in a file's table.
 pub const CONTEXTS: usize = ORIENT_BASE + 4;
@@ -59,8 +66,36 @@ impl Oracle for Blind {
 pub struct KdCell {
     pub level: u8,
     pub prefix: u128,
+    /// The cell's integer coordinates: axis `a` holds the bits consumed so far on it.
+    pub xyz: [u32; 3],
     /// Incident top-simplices.
     pub tops: Vec<u32>,
+}
+
+/// The per-axis coordinates of the kd-cell `prefix` at `level` (bits consumed per axis).
+pub fn xyz_of(prefix: u128, level: u8) -> [u32; 3] {
+    let mut q = [0u32; 3];
+    for i in 0..level as u32 {
+        let axis = (i % 3) as usize;
+        q[axis] = (q[axis] << 1) | ((prefix >> (level as u32 - 1 - i)) & 1) as u32;
+    }
+    q
+}
+
+/// Bits consumed on `axis` at kd `level`.
+#[inline]
+fn used(level: u8, axis: usize) -> u32 {
+    (level as u32 + 2 - axis as u32) / 3
+}
+
+#[inline]
+fn valence_bucket(tops: usize) -> usize {
+    match tops {
+        0..=3 => 0,
+        4..=6 => 1,
+        7..=9 => 2,
+        _ => 3,
+    }
 }
 
 impl KdCell {
@@ -122,7 +157,7 @@ impl Complex {
     /// The root's starting state: one kd-cell (the cube) and one point.
     pub fn root() -> Complex {
         let mut c = Complex::default();
-        c.cells.push(KdCell { level: 0, prefix: 0, tops: Vec::new() });
+        c.cells.push(KdCell { level: 0, prefix: 0, xyz: [0; 3], tops: Vec::new() });
         c.add_top(Top { v: [0, 0, 0], dim: 0 });
         c.order = vec![0];
         c
@@ -137,7 +172,10 @@ impl Complex {
         let id: HashMap<u128, u32> = distinct.iter().enumerate().map(|(i, &p)| (p, i as u32)).collect();
         let pcell: Vec<u32> = prefix.iter().map(|p| id[p]).collect();
         let mut c = Complex { level, ..Complex::default() };
-        c.cells = distinct.iter().map(|&prefix| KdCell { level, prefix, tops: Vec::new() }).collect();
+        c.cells = distinct
+            .iter()
+            .map(|&prefix| KdCell { level, prefix, xyz: xyz_of(prefix, level), tops: Vec::new() })
+            .collect();
         let images = simplices.iter().map(|s| {
             let mut t = *s;
             for k in 0..=s.dim as usize {
@@ -165,7 +203,7 @@ impl Complex {
         verts.dedup();
         for &(_, v) in &verts {
             let k = &self.cells[v as usize];
-            c.cells.push(KdCell { level: k.level, prefix: k.prefix, tops: Vec::new() });
+            c.cells.push(KdCell { level: k.level, prefix: k.prefix, xyz: k.xyz, tops: Vec::new() });
         }
         let map = |v: u32| {
             verts.binary_search_by_key(&self.cells[v as usize].index(), |x| x.0).expect("a vertex of a kept simplex")
@@ -227,24 +265,30 @@ impl Complex {
         let level = self.level;
         let order = std::mem::take(&mut self.order);
         let mut next = Vec::with_capacity(order.len() * 2);
+        let axis = (level % 3) as usize;
         for &v in &order {
             let (both, second) = oracle.geometry(v, level);
-            let both = io.bit(2 * level as usize, both);
             let cell = &mut self.cells[v as usize];
+            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(cell.tops.len()));
+            let both = io.bit(ctx, both);
             cell.level = level + 1;
             cell.prefix <<= 1;
+            cell.xyz[axis] <<= 1;
             if !both {
-                let second = io.bit(2 * level as usize + 1, second);
+                let second = io.bit(ctx + 1, second);
                 cell.prefix |= second as u128;
+                cell.xyz[axis] |= second as u32;
                 next.push(v);
                 continue;
             }
             let prefix = cell.prefix | 1;
+            let mut xyz = cell.xyz;
+            xyz[axis] |= 1;
             if self.cells.len() >= max_cells {
                 return Err(ApplyError::TooLarge);
             }
             let v1 = self.cells.len() as u32;
-            self.cells.push(KdCell { level: level + 1, prefix, tops: Vec::new() });
+            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: Vec::new() });
             oracle.before_split(v, v1);
             self.split(v, v1, io, oracle)?;
             if self.live_tops > max_tops {
@@ -331,7 +375,8 @@ impl Complex {
                 return Err(ApplyError::NoSymbol);
             }
             let truth = oracle.symbol(v0, v1, tv);
-            let sym = code_symbol(io, tau.dim as usize, allowed, truth);
+            let side = if tau.dim == 1 { self.side(v1, tau.w[0]) } else { 0 };
+            let sym = code_symbol(io, tau.dim as usize, allowed, side, truth);
             debug_assert_eq!(syms.len(), i);
             syms.push(sym);
             match tau.dim {
@@ -453,6 +498,27 @@ impl Complex {
         Ok(())
     }
 
+    /// Where `w` lies against the plane between `v0` and `v1` (the lower face of `v1`):
+    /// 0 across it, 1 or 2 on `v0`'s side (adjacent to the plane within one cell of `v1`'s
+    /// size along the axis, or farther), 3 or 4 on `v1`'s.
+    fn side(&self, v1: u32, w: u32) -> usize {
+        let (a, b) = (&self.cells[v1 as usize], &self.cells[w as usize]);
+        let axis = ((a.level - 1) % 3) as usize;
+        let (ua, ub) = (used(a.level, axis), used(b.level, axis));
+        let u = ua.max(ub);
+        let plane = (a.xyz[axis] as u64) << (u - ua);
+        let size = 1u64 << (u - ua);
+        let lo = (b.xyz[axis] as u64) << (u - ub);
+        let hi = (b.xyz[axis] as u64 + 1) << (u - ub);
+        if hi <= plane {
+            1 + (plane - hi >= size) as usize
+        } else if lo >= plane {
+            3 + (lo - plane >= size) as usize
+        } else {
+            0
+        }
+    }
+
     fn restore(&mut self, taus: Vec<Tau>, syms: Vec<u8>, edges: Vec<[u32; 2]>, tris: Vec<([u32; 3], usize, bool)>) {
         self.scratch_taus = taus;
         self.scratch_syms = syms;
@@ -478,15 +544,15 @@ fn directed(t: &[u32; 3], a: u32, b: u32) -> Option<bool> {
 
 /// Codes one symbol from the `allowed` set (bit `s` for symbol `s`) in at most two binary
 /// decisions: the group ({0,1} or {2,3}), then the member; forced decisions cost nothing.
-fn code_symbol(io: &mut impl BitIo, dim: usize, allowed: u8, truth: u8) -> u8 {
-    let ctx = CONN_BASE + (dim * 16 + allowed as usize) * 3;
+fn code_symbol(io: &mut impl BitIo, dim: usize, allowed: u8, side: usize, truth: u8) -> u8 {
+    let node = |n: usize| CONN_BASE + ((dim * 16 + allowed as usize) * 3 + n) * SIDES + side;
     let lo = allowed & 0b0011 != 0;
     let hi = allowed & 0b1100 != 0;
-    let group = if lo && hi { io.bit(ctx, truth >= 2) } else { hi };
+    let group = if lo && hi { io.bit(node(0), truth >= 2) } else { hi };
     let (a, b) = if group { (2u8, 3u8) } else { (0u8, 1u8) };
     let (has_a, has_b) = (allowed >> a & 1 != 0, allowed >> b & 1 != 0);
     if has_a && has_b {
-        if io.bit(ctx + 1 + group as usize, truth == b) {
+        if io.bit(node(1 + group as usize), truth == b) {
             b
         } else {
             a

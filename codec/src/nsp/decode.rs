@@ -1,12 +1,13 @@
 //! Reading an `.nsp`: the file's tables, and the state of one cell refined from its parent's.
 
+use std::collections::HashMap;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use super::complex::{ApplyError, BitIo, Blind, Complex};
-use super::format::{self, CellEntry, Header, ENTRY_LEN, FOOTER_LEN, PREFIX_LEN, TABLE_LEN};
+use super::format::{self, CellEntry, Header, ENTRY_LEN, FOOTER_LEN, MIN_TABLE_LEN, PREFIX_LEN};
 use super::tree::Tree;
 use super::view::{draw, Drawn};
 use super::NspError;
@@ -15,6 +16,8 @@ use crate::rangecoder::{Decoder, DecoderState};
 enum Source {
     Bytes(Arc<[u8]>),
     File(std::fs::File),
+    /// A worker's: the cells it was sent.
+    Received(HashMap<u32, Arc<[u8]>>),
 }
 
 /// An opened `.nsp`: header, probability table, tree and cell table in memory; cell streams
@@ -28,6 +31,10 @@ pub struct NspFile {
     /// Bytes read from the file so far (header and tables included).
     pub bytes_read: AtomicU64,
     pub file_len: u64,
+    /// Bytes of header and probability table (where the cell streams start).
+    pub prefix_len: u64,
+    /// The file without its cell streams: prefix, cell table and footer.
+    skeleton: Vec<u8>,
 }
 
 impl NspFile {
@@ -35,36 +42,44 @@ impl NspFile {
     pub fn from_bytes(bytes: impl Into<Arc<[u8]>>) -> Result<NspFile, NspError> {
         let bytes: Arc<[u8]> = bytes.into();
         let n = bytes.len();
-        if n < PREFIX_LEN + TABLE_LEN + FOOTER_LEN {
+        if n < PREFIX_LEN + MIN_TABLE_LEN + FOOTER_LEN {
             return Err(NspError::Format(format!("{n} bytes is shorter than any .nsp file")));
         }
-        let (header, table) = format::read_prefix(&bytes[..PREFIX_LEN + TABLE_LEN])?;
-        let (offset, _cells) = format::read_footer(&bytes[n - FOOTER_LEN..], n as u64)?;
-        let entries = format::read_entries(&bytes[offset as usize..n - FOOTER_LEN], offset)?;
-        let read = (PREFIX_LEN + TABLE_LEN + (n - offset as usize)) as u64;
-        Self::assemble(header, table, entries, Source::Bytes(bytes), read, n as u64)
+        let (header, table, start) = format::read_prefix(&bytes[..n - FOOTER_LEN])?;
+        let (offset, _cells) = format::read_footer(&bytes[n - FOOTER_LEN..], n as u64, start)?;
+        let entries = format::read_entries(&bytes[offset as usize..n - FOOTER_LEN], offset, start)?;
+        let read = (start + (n - offset as usize)) as u64;
+        let skeleton = [&bytes[..start], &bytes[offset as usize..]].concat();
+        Self::assemble(header, table, entries, Source::Bytes(bytes), read, n as u64, skeleton)
     }
 
     /// Opens a file on disk, reading only its header, tables and footer.
     pub fn open(path: &Path) -> Result<NspFile, NspError> {
         let io = |e: std::io::Error| NspError::Format(format!("cannot read: {e}"));
         let (mut file, len) = crate::input::open_regular(path).map_err(NspError::Format)?;
-        if len < (PREFIX_LEN + TABLE_LEN + FOOTER_LEN) as u64 {
+        if len < (PREFIX_LEN + MIN_TABLE_LEN + FOOTER_LEN) as u64 {
             return Err(NspError::Format(format!("{len} bytes is shorter than any .nsp file")));
         }
-        let mut prefix = vec![0u8; PREFIX_LEN + TABLE_LEN];
+        let mut prefix = vec![0u8; PREFIX_LEN + 2];
         file.read_exact(&mut prefix).map_err(io)?;
-        let (header, table) = format::read_prefix(&prefix)?;
+        let want = format::prefix_len(&prefix)?;
+        if want as u64 + FOOTER_LEN as u64 > len {
+            return Err(NspError::Format("the file is shorter than its probability table".into()));
+        }
+        prefix.resize(want, 0);
+        file.read_exact(&mut prefix[PREFIX_LEN + 2..]).map_err(io)?;
+        let (header, table, start) = format::read_prefix(&prefix)?;
         let mut footer = [0u8; FOOTER_LEN];
         file.seek(SeekFrom::Start(len - FOOTER_LEN as u64)).map_err(io)?;
         file.read_exact(&mut footer).map_err(io)?;
-        let (offset, cells) = format::read_footer(&footer, len)?;
+        let (offset, cells) = format::read_footer(&footer, len, start)?;
         let mut rows = vec![0u8; cells as usize * ENTRY_LEN + 4];
         file.seek(SeekFrom::Start(offset)).map_err(io)?;
         file.read_exact(&mut rows).map_err(io)?;
-        let entries = format::read_entries(&rows, offset)?;
+        let entries = format::read_entries(&rows, offset, start)?;
         let read = (prefix.len() + rows.len() + FOOTER_LEN) as u64;
-        Self::assemble(header, table, entries, Source::File(file), read, len)
+        let skeleton = [&prefix[..], &rows, &footer].concat();
+        Self::assemble(header, table, entries, Source::File(file), read, len, skeleton)
     }
 
     fn assemble(
@@ -74,7 +89,9 @@ impl NspFile {
         source: Source,
         read: u64,
         file_len: u64,
+        skeleton: Vec<u8>,
     ) -> Result<NspFile, NspError> {
+        let prefix_len = format::prefix_len(&skeleton)?;
         if header.cells as usize != entries.len() {
             return Err(NspError::Format(format!(
                 "the header counts {} cells, the cell table {}",
@@ -84,7 +101,56 @@ impl NspFile {
         }
         let split: Vec<bool> = entries.iter().map(|e| e.split).collect();
         let tree = Tree::from_split_flags(header.params, &split)?;
-        Ok(NspFile { header, table: table.into(), tree, entries, source, bytes_read: AtomicU64::new(read), file_len })
+        Ok(NspFile {
+            header,
+            table: table.into(),
+            tree,
+            entries,
+            source,
+            bytes_read: AtomicU64::new(read),
+            file_len,
+            prefix_len: prefix_len as u64,
+            skeleton,
+        })
+    }
+
+    /// The file without its cell streams (header, tables, cell table, footer): what a
+    /// worker needs before any cell ([`NspFile::from_skeleton`]).
+    pub fn skeleton(&self) -> &[u8] {
+        &self.skeleton
+    }
+
+    /// A file known by its skeleton, whose cells arrive later ([`NspFile::receive`]).
+    pub fn from_skeleton(skeleton: Vec<u8>) -> Result<NspFile, NspError> {
+        let n = skeleton.len();
+        let start = format::prefix_len(&skeleton)?;
+        if n < start + 4 + FOOTER_LEN {
+            return Err(NspError::Format("a skeleton shorter than its tables".into()));
+        }
+        let (header, table, start) = format::read_prefix(&skeleton[..n - FOOTER_LEN])?;
+        let footer = &skeleton[n - FOOTER_LEN..];
+        let offset = u64::from_le_bytes(footer[..8].try_into().unwrap());
+        let rows = &skeleton[start..n - FOOTER_LEN];
+        // The footer names the table's place in the whole file; the skeleton holds it right
+        // after the prefix.
+        let whole_len = offset + (n - start) as u64;
+        let (offset, _) = format::read_footer(footer, whole_len, start)?;
+        let entries = format::read_entries(rows, offset, start)?;
+        Self::assemble(header, table, entries, Source::Received(HashMap::new()), n as u64, whole_len, skeleton)
+    }
+
+    /// Stores a received cell stream (checked against the cell table when used).
+    pub fn receive(&mut self, c: u32, bytes: Vec<u8>) -> Result<(), NspError> {
+        if c as usize >= self.entries.len() {
+            return Err(NspError::Cell { cell: c, what: "no such cell".into() });
+        }
+        match &mut self.source {
+            Source::Received(cells) => {
+                cells.insert(c, bytes.into());
+                Ok(())
+            }
+            _ => Err(NspError::Cell { cell: c, what: "received for a file read from disk".into() }),
+        }
     }
 
     /// The compressed stream of cell `c`, checked against its CRC.
@@ -99,6 +165,11 @@ impl NspFile {
                     .map_err(|err| NspError::Cell { cell: c, what: format!("cannot read its stream: {err}") })?;
                 buf.into()
             }
+            Source::Received(cells) => match cells.get(&c) {
+                Some(b) => b.clone(),
+                None if e.len == 0 => Arc::from(&[][..]),
+                None => return Err(NspError::Cell { cell: c, what: "not received".into() }),
+            },
         };
         self.bytes_read.fetch_add(e.len as u64, Ordering::Relaxed);
         if crc32fast::hash(&bytes) != e.crc {
@@ -325,7 +396,8 @@ pub fn decode_uniform_states(file: &NspFile, bits: u8) -> Result<Vec<CellState>,
 /// Decodes every cell to a uniform precision and draws them with the border rule.
 pub fn decode_uniform(file: &NspFile, bits: u8) -> Result<Drawn, NspError> {
     let states = decode_uniform_states(file, bits)?;
-    Ok(draw(file, &states.iter().collect::<Vec<_>>()))
+    let selection: Vec<(u32, u8)> = states.iter().map(|s| (s.cell, s.precision())).collect();
+    Ok(draw(file, &selection, &states.iter().collect::<Vec<_>>()))
 }
 
 /// Decodes every cell to full precision: the canonical complex.

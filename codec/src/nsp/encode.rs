@@ -39,6 +39,7 @@ struct Recorded {
     bits: Vec<u16>,
     max_cells: u32,
     max_tops: u32,
+    reach: [[u32; 3]; 2],
 }
 
 struct Record<'a>(&'a mut Vec<u16>);
@@ -101,6 +102,7 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
             crc: crc32fast::hash(s),
             max_cells: r.max_cells,
             max_tops: r.max_tops,
+            reach: r.reach,
         })
         .collect();
     let leaf_simplices =
@@ -146,7 +148,17 @@ fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
 fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recorded {
     let mut bits = Vec::new();
     if members.is_empty() {
-        return Recorded { bits, max_cells: 0, max_tops: 0 };
+        return Recorded { bits, max_cells: 0, max_tops: 0, reach: [[u32::MAX; 3], [0; 3]] };
+    }
+    let mut reach = [[u32::MAX; 3], [0u32; 3]];
+    for &s in members {
+        for &v in canon.simplices[s as usize].verts() {
+            let g = canon.points[v as usize];
+            for a in 0..3 {
+                reach[0][a] = reach[0][a].min(g[a]);
+                reach[1][a] = reach[1][a].max(g[a]);
+            }
+        }
     }
     let p = tree.params.bits;
     let q = tree.max_prec(c);
@@ -184,7 +196,7 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
         max_cells = max_cells.max(cx.cells.len());
         max_tops = max_tops.max(cx.peak_tops);
     }
-    Recorded { bits, max_cells: max_cells as u32, max_tops: max_tops as u32 }
+    Recorded { bits, max_cells: max_cells as u32, max_tops: max_tops as u32, reach }
 }
 
 /// The encoder's knowledge: which points each kd-cell holds, and after each split, the

@@ -5,10 +5,14 @@
 //! 4     2   version = 1
 //! 6     2   flags = 0
 //! 8     H   header (HEADER_LEN bytes, below), then its CRC-32
-//!       2C  the static probability table: one u16 per context, then its CRC-32
+//!       T   the static probability table: u16 count N, then N pairs (u16 context, u16
+//!           probability of a 0 in 1/2048), contexts increasing; every other context is
+//!           1024; then its CRC-32
 //!       ... the cell streams, back to back, in postorder (an empty cell has none)
-//!       17N the cell table, in postorder: split flag u8, stream length u32, stream CRC-32,
-//!           kd-cells at most u32, top-simplices at most u32; then its CRC-32
+//!       41N the cell table, in postorder: split flag u8, stream length u32, stream CRC-32,
+//!           kd-cells at most u32, top-simplices at most u32, and the bounding box of the
+//!           cell's simplices (inside and outside it) on the full-precision grid, 6 x u32
+//!           (lo, hi inclusive); then its CRC-32
 //! end-20    footer: u64 offset of the cell table, u32 cells, u32 CRC-32 of those 12 bytes,
 //!           magic b"TNSP"
 //! ```
@@ -25,11 +29,19 @@ use super::{Cube, NspError, Params};
 pub const MAGIC: [u8; 4] = *b"TNSP";
 pub const VERSION: u16 = 1;
 pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4 + 3 * 8 + 8;
-pub const ENTRY_LEN: usize = 17;
+pub const ENTRY_LEN: usize = 41;
 pub const FOOTER_LEN: usize = 20;
 /// Bytes before the table: magic, version, flags, header and its CRC.
 pub const PREFIX_LEN: usize = 8 + HEADER_LEN + 4;
-pub const TABLE_LEN: usize = 2 * CONTEXTS + 4;
+/// Bytes of the smallest table (no entries).
+pub const MIN_TABLE_LEN: usize = 2 + 4;
+/// A context's probability when the table does not list it.
+pub const DEFAULT_PROB: u16 = 1024;
+
+/// Bytes of the table written for `table`.
+pub fn table_len(table: &[u16]) -> usize {
+    MIN_TABLE_LEN + 4 * table.iter().filter(|&&p| p != DEFAULT_PROB).count()
+}
 
 /// What the header says.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,6 +142,9 @@ pub struct CellEntry {
     pub crc: u32,
     pub max_cells: u32,
     pub max_tops: u32,
+    /// The bounding box of the cell's simplices on the full-precision grid (lo, hi
+    /// inclusive); what a view must see of the cell to need it.
+    pub reach: [[u32; 3]; 2],
 }
 
 /// Writes a whole file.
@@ -137,7 +152,8 @@ pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[Cel
     let mut header = *header;
     header.cells = entries.len() as u32;
     let total: usize = streams.iter().map(|s| s.len()).sum();
-    let mut out = Vec::with_capacity(PREFIX_LEN + TABLE_LEN + total + entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
+    let mut out =
+        Vec::with_capacity(PREFIX_LEN + table_len(table) + total + entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&0u16.to_le_bytes());
@@ -147,7 +163,10 @@ pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[Cel
     let crc = crc32fast::hash(&out[h0..]);
     out.extend_from_slice(&crc.to_le_bytes());
     let t0 = out.len();
-    for &p in table {
+    let listed: Vec<(usize, u16)> = table.iter().copied().enumerate().filter(|&(_, p)| p != DEFAULT_PROB).collect();
+    out.extend_from_slice(&(listed.len() as u16).to_le_bytes());
+    for (ctx, p) in listed {
+        out.extend_from_slice(&(ctx as u16).to_le_bytes());
         out.extend_from_slice(&p.to_le_bytes());
     }
     let crc = crc32fast::hash(&out[t0..]);
@@ -159,7 +178,7 @@ pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[Cel
     let e0 = out.len();
     for e in entries {
         out.push(e.split as u8);
-        for v in [e.len, e.crc, e.max_cells, e.max_tops] {
+        for v in [e.len, e.crc, e.max_cells, e.max_tops].iter().chain(e.reach.iter().flatten()) {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
@@ -182,28 +201,47 @@ fn check_crc<'a>(bytes: &'a [u8], what: &str) -> Result<&'a [u8], NspError> {
     Ok(body)
 }
 
-/// Parses the fixed prefix (magic, header, table) of a file.
-pub fn read_prefix(b: &[u8]) -> Result<(Header, Vec<u16>), NspError> {
-    if b.len() < PREFIX_LEN + TABLE_LEN || b[..4] != MAGIC {
+/// The length of the prefix (magic, header, table) from its first `PREFIX_LEN + 2` bytes.
+pub fn prefix_len(b: &[u8]) -> Result<usize, NspError> {
+    if b.len() < PREFIX_LEN + 2 || b[..4] != MAGIC {
         return Err(NspError::Format("no TNSP magic, or the file is shorter than its header".into()));
+    }
+    let n = u16::from_le_bytes([b[PREFIX_LEN], b[PREFIX_LEN + 1]]) as usize;
+    Ok(PREFIX_LEN + MIN_TABLE_LEN + 4 * n)
+}
+
+/// Parses the prefix (magic, header, table) of a file: the header, the table, and where
+/// the cell streams start.
+pub fn read_prefix(b: &[u8]) -> Result<(Header, Vec<u16>, usize), NspError> {
+    let end = prefix_len(b)?;
+    if b.len() < end {
+        return Err(NspError::Format("the file is shorter than its probability table".into()));
     }
     let version = u16::from_le_bytes([b[4], b[5]]);
     if version != VERSION {
         return Err(NspError::Format(format!("version {version}; this reader reads version {VERSION}")));
     }
     let header = Header::get(check_crc(&b[8..PREFIX_LEN], "header")?)?;
-    let table: Vec<u16> = check_crc(&b[PREFIX_LEN..PREFIX_LEN + TABLE_LEN], "probability table")?
-        .chunks_exact(2)
-        .map(|c| u16::from_le_bytes([c[0], c[1]]))
-        .collect();
-    if let Some(i) = table.iter().position(|&p| p == 0 || p >= 2048) {
-        return Err(NspError::Format(format!("probability table: entry {i} is {} (must be 1 to 2047)", table[i])));
+    let body = check_crc(&b[PREFIX_LEN..end], "probability table")?;
+    let mut table = vec![DEFAULT_PROB; CONTEXTS];
+    let mut last: Option<usize> = None;
+    for pair in body[2..].chunks_exact(4) {
+        let ctx = u16::from_le_bytes([pair[0], pair[1]]) as usize;
+        let p = u16::from_le_bytes([pair[2], pair[3]]);
+        if ctx >= CONTEXTS || last.is_some_and(|l| ctx <= l) {
+            return Err(NspError::Format(format!("probability table: context {ctx} out of order or range")));
+        }
+        if p == 0 || p >= 2048 {
+            return Err(NspError::Format(format!("probability table: context {ctx} has {p} (must be 1 to 2047)")));
+        }
+        table[ctx] = p;
+        last = Some(ctx);
     }
-    Ok((header, table))
+    Ok((header, table, end))
 }
 
 /// Parses the footer: (table offset, cells).
-pub fn read_footer(b: &[u8], file_len: u64) -> Result<(u64, u32), NspError> {
+pub fn read_footer(b: &[u8], file_len: u64, streams_start: usize) -> Result<(u64, u32), NspError> {
     if b.len() != FOOTER_LEN || b[16..] != MAGIC {
         return Err(NspError::Format("the footer is missing (truncated file?)".into()));
     }
@@ -211,7 +249,7 @@ pub fn read_footer(b: &[u8], file_len: u64) -> Result<(u64, u32), NspError> {
     let offset = u64::from_le_bytes(body[..8].try_into().unwrap());
     let cells = u32::from_le_bytes(body[8..12].try_into().unwrap());
     let table_len = cells as u64 * ENTRY_LEN as u64 + 4;
-    if offset < (PREFIX_LEN + TABLE_LEN) as u64 || offset.checked_add(table_len) != Some(file_len - FOOTER_LEN as u64) {
+    if offset < streams_start as u64 || offset.checked_add(table_len) != Some(file_len - FOOTER_LEN as u64) {
         return Err(NspError::Format(format!(
             "footer: a cell table of {cells} cells at {offset} does not fit the file"
         )));
@@ -221,16 +259,20 @@ pub fn read_footer(b: &[u8], file_len: u64) -> Result<(u64, u32), NspError> {
 
 /// Parses the cell table, giving each entry its offset and checking that the streams fill
 /// exactly the bytes between the probability table and the cell table.
-pub fn read_entries(b: &[u8], table_offset: u64) -> Result<Vec<CellEntry>, NspError> {
+pub fn read_entries(b: &[u8], table_offset: u64, streams_start: usize) -> Result<Vec<CellEntry>, NspError> {
     let body = check_crc(b, "cell table")?;
-    let mut offset = (PREFIX_LEN + TABLE_LEN) as u64;
+    let mut offset = streams_start as u64;
     let mut out = Vec::with_capacity(body.len() / ENTRY_LEN);
     for (i, e) in body.chunks_exact(ENTRY_LEN).enumerate() {
         let u = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap());
         if e[0] > 1 {
             return Err(NspError::Cell { cell: i as u32, what: format!("split flag {} in the cell table", e[0]) });
         }
-        out.push(CellEntry { split: e[0] == 1, offset, len: u(1), crc: u(5), max_cells: u(9), max_tops: u(13) });
+        let reach = [[u(17), u(21), u(25)], [u(29), u(33), u(37)]];
+        if (0..3).any(|a| reach[0][a] > reach[1][a]) && u(1) > 0 {
+            return Err(NspError::Cell { cell: i as u32, what: "its bounding box in the cell table is empty".into() });
+        }
+        out.push(CellEntry { split: e[0] == 1, offset, len: u(1), crc: u(5), max_cells: u(9), max_tops: u(13), reach });
         offset += u(1) as u64;
     }
     if offset != table_offset {
@@ -266,6 +308,7 @@ pub fn wrap_for_fuzzing(stream: &[u8]) -> Vec<u8> {
         crc: crc32fast::hash(stream),
         max_cells: 4096,
         max_tops: 16384,
+        reach: [[0; 3], [1023; 3]],
     };
-    write(&header, &[1024; CONTEXTS], &[stream.to_vec()], &[entry])
+    write(&header, &[DEFAULT_PROB; CONTEXTS], &[stream.to_vec()], &[entry])
 }

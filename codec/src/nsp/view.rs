@@ -36,8 +36,8 @@ impl Drawn {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Loc {
-    /// In drawn cell (state index).
-    Drawn(usize),
+    /// In the selected cell (precision, cell).
+    Drawn(u8, u32),
     /// Larger than a cell of the tree whose drawn descendants inside it reach this
     /// (precision, cell).
     Spanning(u8, u32),
@@ -45,28 +45,29 @@ enum Loc {
     Nowhere,
 }
 
-/// Draws `states` (an antichain of the tree: no cell drawn with an ancestor) with the border
-/// rule: a border triangle is drawn once, by the cell of highest (precision, postorder index)
-/// among the drawn cells its corners lie in; its corners in coarser drawn cells move to the
-/// kd-cell of that cell that holds them. Cells not drawn count as `-inf` (NSP.md 1.10: the
-/// paper's `p_i = p_c` would drop triangles at the edge of the view).
-pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
+/// Draws the cells of `states` as members of the view `selection` (the cells drawn and
+/// their precisions, an antichain of the tree; every state's cell is in it), with the border
+/// rule: a border triangle is drawn once, by the cell of highest (precision, postorder
+/// index) among the selected cells its corners lie in; its corners in coarser selected cells
+/// move to those cells' kd-cells that hold them (the ancestor at that precision). Cells not
+/// selected count as `-inf` (NSP.md 1.10: the paper's `p_i = p_c` would drop triangles at the
+/// edge of the view). A triangle depends only on its own cell's state and the selection, so
+/// drawing any subset of the selected cells gives exactly those cells' triangles of the
+/// whole drawing, in the same order (the cluster relies on it).
+pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Drawn {
     let tree = &file.tree;
     let bits = file.header.params.bits;
     let pl = file.header.params.level_bits() as u32;
-    let mut drawn_at: Vec<Option<usize>> = vec![None; tree.nodes.len()];
-    for (i, s) in states.iter().enumerate() {
-        drawn_at[s.cell as usize] = Some(i);
+    let mut selected: Vec<Option<u8>> = vec![None; tree.nodes.len()];
+    for &(c, b) in selection {
+        selected[c as usize] = Some(b.clamp(tree.min_prec(c), tree.max_prec(c)));
     }
-    // Per state: kd prefix → id (all its kd-cells are at one level).
-    let maps: Vec<HashMap<u128, u32>> =
-        states.iter().map(|s| s.cx.order.iter().map(|&k| (s.cx.cells[k as usize].prefix, k)).collect()).collect();
     let locate = |prefix: u128, level: u8| -> Loc {
         let (corner, used) = kd_corner(prefix, level, bits);
         let mut node = tree.root();
         loop {
-            if let Some(i) = drawn_at[node as usize] {
-                return Loc::Drawn(i);
+            if let Some(b) = selected[node as usize] {
+                return Loc::Drawn(b, node);
             }
             let n = &tree.nodes[node as usize];
             if n.children.is_empty() {
@@ -80,14 +81,13 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
                 node = n.children[file.header.params.child_index(local) as usize];
                 continue;
             }
-            // The kd-cell spans several children: the best drawn cell below it.
+            // The kd-cell spans several children: the best selected cell below it.
             let mut best: Option<(u8, u32)> = None;
             let mut stack = vec![node];
             while let Some(x) = stack.pop() {
-                if let Some(i) = drawn_at[x as usize] {
-                    let cand = (states[i].precision(), x);
-                    if best.is_none_or(|b| cand > b) {
-                        best = Some(cand);
+                if let Some(b) = selected[x as usize] {
+                    if best.is_none_or(|old| (b, x) > old) {
+                        best = Some((b, x));
                     }
                     continue;
                 }
@@ -105,8 +105,10 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
     };
     let mut out = Drawn::default();
     let mut vertex: HashMap<(u8, u128), u32> = HashMap::new();
-    let mut stitched_seen: std::collections::HashSet<[u32; 3]> = std::collections::HashSet::new();
-    for (si, s) in states.iter().enumerate() {
+    let mut seen: std::collections::HashSet<[u32; 3]> = std::collections::HashSet::new();
+    let mut states: Vec<&CellState> = states.to_vec();
+    states.sort_by_key(|s| s.cell);
+    for s in states {
         let pc = s.precision();
         let me = (pc, s.cell);
         let mut locs: HashMap<u32, Loc> = HashMap::new();
@@ -122,30 +124,23 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
             let mut corners = [(0u8, 0u128); 3];
             let mut dropped = false;
             let mut moved = false;
-            #[allow(clippy::needless_range_loop)] // k indexes the corners and the triangle alike
-            for k in 0..3 {
-                let kd = &s.cx.cells[top.v[k] as usize];
-                let loc = *locs.entry(top.v[k]).or_insert_with(|| locate(kd.prefix, kd.level));
-                corners[k] = (kd.level, kd.prefix);
+            for (corner, &v) in corners.iter_mut().zip(&top.v) {
+                let kd = &s.cx.cells[v as usize];
+                let loc = *locs.entry(v).or_insert_with(|| locate(kd.prefix, kd.level));
+                *corner = (kd.level, kd.prefix);
                 match loc {
-                    Loc::Drawn(i) if i == si => {}
-                    Loc::Drawn(i) => {
-                        let other = (states[i].precision(), states[i].cell);
-                        if other > me {
-                            dropped = true;
-                            break;
-                        }
-                        let level = 3 * other.0;
-                        let prefix = kd.prefix >> (kd.level - level);
-                        if maps[i].contains_key(&prefix) {
-                            corners[k] = (level, prefix);
-                            moved |= level != kd.level;
-                        }
-                    }
-                    Loc::Spanning(p, c) => {
+                    Loc::Drawn(_, c) if c == s.cell => {}
+                    Loc::Drawn(p, c) | Loc::Spanning(p, c) => {
                         if (p, c) > me {
                             dropped = true;
                             break;
+                        }
+                        if let Loc::Drawn(..) = loc {
+                            let level = 3 * p;
+                            if level < kd.level {
+                                *corner = (level, kd.prefix >> (kd.level - level));
+                                moved = true;
+                            }
                         }
                     }
                     Loc::Nowhere => {}
@@ -170,7 +165,7 @@ pub fn draw(file: &NspFile, states: &[&CellState]) -> Drawn {
             // triangle; the complex is a set, so it is drawn once.
             let mut key = ids;
             key.sort_unstable();
-            if !stitched_seen.insert(key) {
+            if !seen.insert(key) {
                 out.merged += 1;
                 continue;
             }
@@ -189,6 +184,18 @@ fn overlaps(tree: &super::Tree, c: u32, corner: [u32; 3], used: [u8; 3], bits: u
         let khi = klo + (1u64 << (bits - used[a]));
         lo < khi && klo < hi
     })
+}
+
+/// The world box a cell's triangles can be drawn in: its simplices' bounding box, grown by
+/// two kd-cells at its minimal precision (a drawn corner is the centre of a kd-cell holding
+/// its vertex, at the cell's precision or, stitched, at a coarser neighbour's).
+pub fn reach_box(file: &NspFile, c: u32) -> ([f32; 3], [f32; 3]) {
+    let cube = &file.header.cube;
+    let e = &file.entries[c as usize];
+    let margin = (1u64 << (file.header.params.bits - file.tree.min_prec(c))) as f64 * 2.0;
+    let lo = cube.world([0, 1, 2].map(|a| e.reach[0][a] as f64 - margin));
+    let hi = cube.world([0, 1, 2].map(|a| e.reach[1][a] as f64 + 1.0 + margin));
+    (lo, hi)
 }
 
 /// A view: camera, screen and the error allowed on screen.
@@ -235,9 +242,8 @@ pub fn select(file: &NspFile, view: &View) -> Vec<(u32, u8)> {
             cube.origin[1] + n.coords[1] as f64 * size,
             cube.origin[2] + n.coords[2] as f64 * size,
         ];
-        let lo32 = [lo[0] as f32, lo[1] as f32, lo[2] as f32];
-        let hi32 = [(lo[0] + size) as f32, (lo[1] + size) as f32, (lo[2] + size) as f32];
-        if box_screen_rect(lo32, hi32, vp, view.width, view.height).is_none() {
+        let (rlo, rhi) = reach_box(file, c);
+        if box_screen_rect(rlo, rhi, vp, view.width, view.height).is_none() {
             continue;
         }
         let closest = glam::DVec3::new(

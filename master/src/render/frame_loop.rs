@@ -12,7 +12,7 @@ use worker::transport::Transport;
 use super::jobs::{FrameContext, FrameJobs};
 use super::link::{handshake, receive_pixels, Silence};
 use super::plan::{frame_outputs, frame_path, save_wall, Plan};
-use super::scene::{PmScene, Scene};
+use super::scene::{NspScene, PmScene, Scene};
 use super::stats::{worker_stats, MasterStats};
 use crate::cli::RenderArgs;
 use crate::composite::Image;
@@ -34,6 +34,11 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         let model = ToWorker::Model(bytes.clone()).encode();
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
     }
+    if let Scene::Nsp(nsp) = &scene {
+        let NspScene { file, .. } = nsp.as_ref();
+        let model = ToWorker::NspModel(file.skeleton().to_vec()).encode();
+        t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
+    }
 
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
@@ -42,7 +47,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
         t.send_many(&scene.announce(&ctx));
-        let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks } = scene.jobs(&ctx)?;
+        let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks, nsp } = scene.jobs(&ctx)?;
         let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
         let sort_ms = ms(start);
 
@@ -95,6 +100,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 write_ms,
                 rss_mb: resident_mb(),
                 chunks,
+                nsp,
                 tiles: tile_stats,
             };
             log.line(&serde_json::to_string(&line)?)?;

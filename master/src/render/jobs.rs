@@ -5,11 +5,11 @@ use codec::bft::chunked::sort::{share, PieceKind};
 use codec::bft::tile_sort;
 use codec::view::{Camera, TileGrid};
 use worker::chunk_cache::ChunkCache;
-use worker::protocol::{FrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
+use worker::protocol::{FrameJob, NspFrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
 
-use super::scene::{BftScene, ChunkedScene, PmScene, Scene};
+use super::scene::{BftScene, ChunkedScene, NspScene, PmScene, Scene};
 use super::schedule::assign;
-use super::stats::{ChunkStats, TileStats};
+use super::stats::{ChunkStats, NspStats, TileStats};
 use crate::cli::RenderArgs;
 
 /// What every frame's jobs are made from.
@@ -37,6 +37,7 @@ pub(super) struct FrameJobs {
     pub messages: Vec<(usize, Vec<u8>)>,
     pub tiles: Vec<TileStats>,
     pub chunks: Option<ChunkStats>,
+    pub nsp: Option<NspStats>,
 }
 
 impl Scene {
@@ -46,6 +47,7 @@ impl Scene {
             Scene::Bft(s) => s.jobs(ctx),
             Scene::Chunked(s) => s.jobs(ctx),
             Scene::Pm(s) => Ok(s.jobs(ctx)),
+            Scene::Nsp(s) => s.jobs(ctx),
         }
     }
 
@@ -87,7 +89,7 @@ impl BftScene {
                 streams: vec![TileStream { source: StreamSource::Bytes(tile.bytes), normals }],
             });
         }
-        Ok(FrameJobs { messages: frame_messages(jobs), tiles: tile_stats, chunks: None })
+        Ok(FrameJobs { messages: frame_messages(jobs), tiles: tile_stats, chunks: None, nsp: None })
     }
 }
 
@@ -187,7 +189,7 @@ impl ChunkedScene {
         });
         self.owners = owners;
         let Share { jobs, tiles, chunks } = result?;
-        Ok(FrameJobs { messages: frame_messages(jobs), tiles, chunks: Some(chunks) })
+        Ok(FrameJobs { messages: frame_messages(jobs), tiles, chunks: Some(chunks), nsp: None })
     }
 
     /// Sorter `sorter`'s share of a frame: the chunked sort of its chunks, then each worker's
@@ -313,6 +315,102 @@ impl PmScene {
             .filter(|(_, j)| !j.tiles.is_empty())
             .map(|(i, j)| (i + 1, ToWorker::PmFrame(j).encode()))
             .collect();
-        FrameJobs { messages, tiles: tile_stats, chunks: None }
+        FrameJobs { messages, tiles: tile_stats, chunks: None, nsp: None }
+    }
+}
+
+impl NspScene {
+    /// One frame of an `.nsp` model: the view's cells and precisions from the cell table
+    /// alone; each worker draws the selected cells whose triangles can reach its tiles, and
+    /// gets the streams of those cells and their ancestors that it does not hold yet. Rank 0
+    /// reads those streams from the file and never decodes them.
+    fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
+        use codec::nsp::view;
+        let (grid, file) = (ctx.grid, &self.file);
+        let vp = ctx.camera.view_proj(grid.aspect());
+        let v = view::View { camera: ctx.camera, width: grid.width, height: grid.height, error_px: ctx.args.error_px };
+        let selection = view::select(file, &v);
+        let reach: Vec<Option<[u32; 4]>> = selection
+            .iter()
+            .map(|&(c, _)| {
+                let (lo, hi) = view::reach_box(file, c);
+                codec::view::box_screen_rect(lo, hi, vp, grid.width, grid.height)
+            })
+            .collect();
+        let overlaps = |a: [u32; 4], b: [u32; 4]| a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+        let indices: Vec<usize> =
+            (0..grid.tiles()).filter(|&i| reach.iter().flatten().any(|&r| overlaps(r, grid.tile_rect(i)))).collect();
+        let owner = ctx.owners(&indices);
+        if self.held.len() < ctx.workers {
+            self.held.resize(ctx.workers, Default::default());
+        }
+        let mut stats = NspStats { selected: selection.len() as u32, ..NspStats::default() };
+        let mut tile_stats = Vec::with_capacity(indices.len());
+        let mut messages = Vec::new();
+        for w in 1..=ctx.workers {
+            let tiles: Vec<(u32, [u32; 4])> = indices
+                .iter()
+                .zip(&owner)
+                .filter(|&(_, &o)| o == w)
+                .map(|(&i, _)| (i as u32, grid.tile_rect(i)))
+                .collect();
+            if tiles.is_empty() {
+                continue;
+            }
+            let draw: Vec<u32> = selection
+                .iter()
+                .zip(&reach)
+                .filter(|(_, r)| r.is_some_and(|r| tiles.iter().any(|&(_, t)| overlaps(r, t))))
+                .map(|(&(c, _), _)| c)
+                .collect();
+            // The streams of the drawn cells and of their ancestors that this worker lacks.
+            let mut need: Vec<u32> = Vec::new();
+            for &c in &draw {
+                let mut x = c;
+                while x != u32::MAX && !need.contains(&x) {
+                    need.push(x);
+                    x = file.tree.nodes[x as usize].parent;
+                }
+            }
+            need.sort_unstable();
+            let held = &mut self.held[w - 1];
+            let mut cells = Vec::new();
+            let mut bytes = 0;
+            for c in need {
+                if file.entries[c as usize].len > 0 && held.insert(c) {
+                    let b = file.cell_bytes(c)?.to_vec();
+                    bytes += b.len();
+                    cells.push((c, b));
+                }
+            }
+            stats.drawn += draw.len() as u32;
+            stats.sent += cells.len() as u32;
+            stats.bytes_sent += bytes as u64;
+            for (k, &(index, _)) in tiles.iter().enumerate() {
+                // The worker's streams are counted on its first tile.
+                tile_stats.push(TileStats {
+                    index,
+                    worker: w,
+                    triangles: 0,
+                    bytes: if k == 0 { bytes } else { 0 },
+                    tri_bytes: 0,
+                    normal_bytes: 0,
+                });
+            }
+            let job = NspFrameJob {
+                frame: ctx.frame,
+                width: grid.width,
+                height: grid.height,
+                view_proj: vp.to_cols_array(),
+                selection: selection.clone(),
+                draw,
+                cells,
+                tiles,
+            };
+            messages.push((w, ToWorker::NspFrame(job).encode()));
+        }
+        stats.bytes_read = file.bytes_read.load(std::sync::atomic::Ordering::Relaxed);
+        tile_stats.sort_by_key(|t| t.index);
+        Ok(FrameJobs { messages, tiles: tile_stats, chunks: None, nsp: Some(stats) })
     }
 }

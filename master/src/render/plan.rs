@@ -32,6 +32,9 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Dpm {
         anyhow::bail!("--decode-only applies to sorted models; a progressive mesh (.dpm) has no tiles to decode");
     }
+    if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Nsp {
+        anyhow::bail!("--decode-only applies to sorted models; an .nsp model has no tiles to decode");
+    }
     // No output may be an input or another output.
     let mut inputs: Vec<&Path> = vec![&args.model];
     inputs.extend(args.wall.as_deref());

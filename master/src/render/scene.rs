@@ -21,6 +21,15 @@ pub(super) enum Scene {
     Bft(BftScene),
     Chunked(Box<ChunkedScene>),
     Pm(PmScene),
+    Nsp(Box<NspScene>),
+}
+
+/// An `.nsp` model: its header and cell tables (the streams stay on disk until a worker
+/// needs one), and the cells each worker holds (workers keep every stream they are sent).
+pub(super) struct NspScene {
+    pub file: codec::nsp::NspFile,
+    /// Indexed by worker rank - 1.
+    pub held: Vec<std::collections::HashSet<u32>>,
 }
 
 /// A chunked BFT model, memory-mapped, and rank 0's mirror of every worker's chunk cache
@@ -76,6 +85,10 @@ impl Scene {
                 path.display()
             );
         }
+        if ModelKind::of(path) == ModelKind::Nsp {
+            let file = codec::nsp::NspFile::open(path).with_context(|| format!("{}", path.display()))?;
+            return Ok(Scene::Nsp(Box::new(NspScene { file, held: Vec::new() })));
+        }
         if ModelKind::of(path) != ModelKind::Dpm {
             let model = load_model(path, codec::bft::EncodeOptions::default())?;
             let normals = BorderNormals::of(&model.tiles.decoded);
@@ -102,6 +115,10 @@ impl Scene {
             Scene::Bft(s) => s.model.camera(args, grid),
             Scene::Chunked(s) => chunked_camera(&s.model, args, grid),
             Scene::Pm(PmScene { bbox: (lo, hi), .. }) => args.camera(*lo, *hi, grid.aspect()),
+            Scene::Nsp(s) => {
+                let (lo, hi) = crate::nsp::bbox(&s.file);
+                args.camera(lo, hi, grid.aspect())
+            }
         }
     }
 }

@@ -20,7 +20,22 @@ pub(super) struct MasterStats {
     /// Chunked models: what the frame did with the chunks.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chunks: Option<ChunkStats>,
+    /// `.nsp` models: the cells the view selected and what went to the workers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nsp: Option<NspStats>,
     pub tiles: Vec<TileStats>,
+}
+
+/// An `.nsp` model's frame: cells selected (drawn) for the view, cells the workers draw in
+/// all (a cell near a tile border is drawn by each worker it reaches), cell streams sent and
+/// their bytes, and the bytes rank 0 has read from the file so far (tables included).
+#[derive(Serialize, Clone, Copy, Debug, Default)]
+pub(super) struct NspStats {
+    pub selected: u32,
+    pub drawn: u32,
+    pub sent: u32,
+    pub bytes_sent: u64,
+    pub bytes_read: u64,
 }
 
 /// A chunked model's frame: chunks culled, forwarded verbatim and sorted, the triangles of
