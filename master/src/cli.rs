@@ -330,6 +330,11 @@ pub struct RenderArgs {
     /// around; `--frames 31 --orbit-degrees 30` turns one degree a frame.
     #[arg(long, default_value_t = 360.0, value_parser = parse_non_negative)]
     pub orbit_degrees: f32,
+    /// Moves the eye toward the target over the frames so that the last frame's distance is
+    /// this fraction of the first's (geometrically: each frame closer by the same factor);
+    /// 1 keeps the distance. With --orbit, the eye orbits and zooms at once.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    pub zoom: f32,
     /// Output PNG; with several frames, frame-0001.png and so on beside it.
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,

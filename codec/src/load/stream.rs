@@ -101,6 +101,53 @@ pub fn for_each_triangle(
     f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     progress: &mut dyn FnMut(u64),
 ) -> Result<u64, LoadError> {
+    for_each_triangle_from(path, &positions, f, progress)
+}
+
+/// Where the triangle pass finds positions: how many vertices the file has, and the
+/// positions of a few of them (the corners of a polygon to triangulate).
+pub trait PositionSource {
+    fn count(&self) -> usize;
+    /// Appends the positions of `indices` (all below [`PositionSource::count`]) to `out`.
+    fn gather(&self, indices: &[u32], out: &mut Vec<[f32; 3]>);
+}
+
+impl PositionSource for &[[f32; 3]] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+    fn gather(&self, indices: &[u32], out: &mut Vec<[f32; 3]>) {
+        out.extend(indices.iter().map(|&i| self[i as usize]));
+    }
+}
+
+/// Pass 1 without holding the positions: calls `sink` with every vertex position in the
+/// order [`read_positions`] returns them, and returns how many there were. PLY is read once;
+/// OBJ's order needs its positions numbered first, so OBJ is read with [`read_positions`]
+/// (holding them for the pass).
+pub fn for_each_position(
+    path: &Path,
+    sink: &mut dyn FnMut([f32; 3]),
+    progress: &mut dyn FnMut(u64),
+) -> Result<u64, LoadError> {
+    match streamed_format(path)? {
+        Format::Ply => ply::each_position(path, sink, progress),
+        _ => {
+            let positions = obj::positions(path, progress)?;
+            positions.iter().for_each(|&p| sink(p));
+            Ok(positions.len() as u64)
+        }
+    }
+}
+
+/// [`for_each_triangle`] with the positions from any source (a file of them, for a model
+/// whose positions are not held): they are read only to triangulate polygons.
+pub fn for_each_triangle_from(
+    path: &Path,
+    positions: &dyn PositionSource,
+    f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
+    progress: &mut dyn FnMut(u64),
+) -> Result<u64, LoadError> {
     let format = streamed_format(path)?;
     let mut out = Emitter::new(path, positions, f);
     match format {
@@ -121,17 +168,23 @@ fn streamed_format(path: &Path) -> Result<Format, LoadError> {
 /// and counting what it hands out.
 struct Emitter<'e> {
     path: &'e Path,
-    positions: &'e [[f32; 3]],
+    positions: &'e dyn PositionSource,
     f: &'e mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     count: u64,
     triangulator: Triangulator,
     /// The current polygon's corners, filled by the format readers.
     corners: Vec<u32>,
     tris: Vec<[u32; 3]>,
+    /// The polygon's corner positions.
+    local: Vec<[f32; 3]>,
 }
 
 impl<'e> Emitter<'e> {
-    fn new(path: &'e Path, positions: &'e [[f32; 3]], f: &'e mut dyn FnMut([u32; 3]) -> Result<(), LoadError>) -> Self {
+    fn new(
+        path: &'e Path,
+        positions: &'e dyn PositionSource,
+        f: &'e mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
+    ) -> Self {
         Emitter {
             path,
             positions,
@@ -140,6 +193,7 @@ impl<'e> Emitter<'e> {
             triangulator: Triangulator::default(),
             corners: Vec::new(),
             tris: Vec::new(),
+            local: Vec::new(),
         }
     }
 
@@ -152,7 +206,7 @@ impl<'e> Emitter<'e> {
 
     /// The first corner of [`Self::corners`] that is not a vertex of `positions`.
     fn missing_corner(&self) -> Option<u32> {
-        self.corners.iter().copied().find(|&c| c as usize >= self.positions.len())
+        self.corners.iter().copied().find(|&c| c as usize >= self.positions.count())
     }
 
     /// Triangulates [`Self::corners`] (at least three, every one a vertex of `positions`).
@@ -162,7 +216,17 @@ impl<'e> Emitter<'e> {
         }
         let mut tris = std::mem::take(&mut self.tris);
         tris.clear();
-        self.triangulator.polygon(self.positions, &self.corners, &mut tris);
+        // Triangulated on the corners' own positions (numbered 0..n), then renumbered: the
+        // triangulation reads nothing else, and the positions need not all be held.
+        let mut local = std::mem::take(&mut self.local);
+        local.clear();
+        self.positions.gather(&self.corners, &mut local);
+        let numbered: Vec<u32> = (0..self.corners.len() as u32).collect();
+        self.triangulator.polygon(&local, &numbered, &mut tris);
+        for t in tris.iter_mut() {
+            *t = t.map(|i| self.corners[i as usize]);
+        }
+        self.local = local;
         let result = tris.iter().try_for_each(|&t| self.triangle(t));
         self.tris = tris;
         result

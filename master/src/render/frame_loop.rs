@@ -44,6 +44,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut silence = Silence::new(workers, args.timeout);
     for k in 0..args.frames {
         let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
+        let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
         let start = Instant::now();
         let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
         t.send_many(&scene.announce(&ctx));
@@ -129,6 +130,16 @@ fn ms(since: Instant) -> f64 {
 /// The camera of frame `k` of `n` on a full orbit around the target, about the up axis.
 pub fn orbit(cam: &Camera, k: u32, n: u32) -> Camera {
     orbit_by(cam, k, n, 360.0)
+}
+
+/// Frame `k` of `n` of a zoom whose last frame is at `last` times the first's distance
+/// from the target (the near plane follows the eye; the far plane stays).
+pub fn zoom_by(cam: &Camera, k: u32, n: u32, last: f32) -> Camera {
+    if last == 1.0 || n < 2 {
+        return *cam;
+    }
+    let f = last.powf(k as f32 / (n - 1) as f32);
+    Camera { eye: cam.target + (cam.eye - cam.target) * f, near: cam.near * f, ..*cam }
 }
 
 /// The camera of frame `k` of `n` on an orbit of `degrees` in all, about the up axis.

@@ -329,7 +329,7 @@ fn emit(out: &mut Emitter, slots: &mut Slots, corners: &[Corner], line: u64) -> 
         out.corners.push(s);
     }
     if let Some(s) = out.missing_corner() {
-        let n = out.positions.len();
+        let n = out.positions.count();
         let what = format!("line {line}: the positions given are not this file's: a face has vertex {s} of {n}");
         return Err(err(out.path, what));
     }
@@ -379,10 +379,10 @@ pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Ve
 pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
     let mut slots = Slots::new(false);
     scan(path, progress, &mut slots, Some(&mut *out))?;
-    if slots.next != out.positions.len() as u64 {
+    if slots.next != out.positions.count() as u64 {
         let what = format!(
             "the positions given are not this file's: {} of them for {} slots",
-            out.positions.len(),
+            out.positions.count(),
             slots.next
         );
         return Err(err(path, what));

@@ -470,7 +470,7 @@ impl Sink for Vertex {
 }
 
 fn out_of_range(out: &Emitter, at: &At, vertex: u32) -> LoadError {
-    err(out.path, format!("{at} uses vertex {vertex}, but the file has only {} vertices", out.positions.len()))
+    err(out.path, format!("{at} uses vertex {vertex}, but the file has only {} vertices", out.positions.count()))
 }
 
 /// Faces, triangulated as `load_path` does once a record has been read.
@@ -529,7 +529,7 @@ impl Sink for Strips<'_, '_> {
         let [a, b] = self.last;
         if self.run >= 2 && a != b && b != c && a != c {
             let t = if self.run & 1 == 0 { [a, b, c] } else { [b, a, c] };
-            if let Some(&v) = t.iter().find(|&&v| v as usize >= self.out.positions.len()) {
+            if let Some(&v) = t.iter().find(|&&v| v as usize >= self.out.positions.count()) {
                 return Err(out_of_range(self.out, at, v));
             }
             self.out.triangle(t)?;
@@ -737,6 +737,15 @@ impl<'a> Reader<'a> {
     }
 
     fn vertices(&mut self, e: &Element) -> Result<Vec<[f32; 3]>, LoadError> {
+        // Reserve no more than the file can hold, whatever the header claims.
+        let min = e.min_record_bytes(self.ascii());
+        let mut positions = Vec::with_capacity(e.count.min(self.src.size_bound() / min.max(1)).min(MAX_VERTICES) as usize);
+        self.each_vertex(e, &mut |p| positions.push(p))?;
+        Ok(positions)
+    }
+
+    /// The `vertex` element's positions, one by one, in file order.
+    fn each_vertex(&mut self, e: &Element, sink: &mut dyn FnMut([f32; 3])) -> Result<(), LoadError> {
         let path = self.src.path;
         if e.count > MAX_VERTICES {
             let what = format!("element 'vertex' claims {} vertices, more than 32-bit indices address", e.count);
@@ -746,8 +755,6 @@ impl<'a> Reader<'a> {
         if min == 0 && e.count > MAX_EMPTY_VERTICES {
             return Err(err(path, format!("element 'vertex' claims {} vertices without properties", e.count)));
         }
-        // Reserve no more than the file can hold, whatever the header claims.
-        let mut positions = Vec::with_capacity(e.count.min(self.src.size_bound() / min.max(1)) as usize);
         let roles: Vec<Role> = e
             .properties
             .iter()
@@ -758,13 +765,22 @@ impl<'a> Reader<'a> {
                 _ => Role::Skip,
             })
             .collect();
+        let mut done = 0u64;
         match (self.ascii(), e.fixed_size()) {
-            (false, Some(size)) if size > 0 => self.fixed_vertices(e, size as usize, &roles, &mut positions)?,
-            _ => self.records(e, &roles, &mut Vertex([0.0; 3]), |v| positions.push(std::mem::take(&mut v.0)))?,
+            (false, Some(size)) if size > 0 => self.fixed_vertices(e, size as usize, &roles, &mut |p| {
+                done += 1;
+                sink(p)
+            })?,
+            _ => self.records(e, &roles, &mut Vertex([0.0; 3]), |v| {
+                done += 1;
+                sink(std::mem::take(&mut v.0))
+            })?,
         }
         // Records without properties, which hold no bytes: ply-rs reads each as (0, 0, 0).
-        positions.resize(e.count as usize, [0.0; 3]);
-        Ok(positions)
+        for _ in done..e.count {
+            sink([0.0; 3]);
+        }
+        Ok(())
     }
 
     /// Binary vertices of `size` bytes each, decoded where they lie in the buffer.
@@ -773,7 +789,7 @@ impl<'a> Reader<'a> {
         e: &Element,
         size: usize,
         roles: &[Role],
-        positions: &mut Vec<[f32; 3]>,
+        sink: &mut dyn FnMut([f32; 3]),
     ) -> Result<(), LoadError> {
         let big = self.encoding == Encoding::BigEndian;
         // Where each coordinate is in a record, and its type.
@@ -801,7 +817,7 @@ impl<'a> Reader<'a> {
                     Some((at, ty)) => ty.f64_at(&record[at..], big) as f32,
                     None => 0.0,
                 };
-                positions.push([get(axes[0]), get(axes[1]), get(axes[2])]);
+                sink([get(axes[0]), get(axes[1]), get(axes[2])]);
             }
             self.src.consume(k * size);
             i += k as u64;
@@ -822,7 +838,7 @@ impl<'a> Reader<'a> {
     ) -> Result<(), LoadError> {
         let big = self.encoding == Encoding::BigEndian;
         let (count_size, item_size) = (count.size(), item.size());
-        let vertices = out.positions.len() as u64;
+        let vertices = out.positions.count() as u64;
         // A corner, if it is a vertex.
         let corner = |b: &[u8]| u32::try_from(item.int_at(b, big)).ok().filter(|&c| u64::from(c) < vertices);
         let mut i = 0;
@@ -912,15 +928,32 @@ pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Ve
     reader.vertices(&header.elements[vertex])
 }
 
+/// Pass 1 for PLY without holding the positions: each is handed to `sink`; returns how
+/// many there were.
+pub(super) fn each_position(
+    path: &Path,
+    sink: &mut dyn FnMut([f32; 3]),
+    progress: &mut dyn FnMut(u64),
+) -> Result<u64, LoadError> {
+    let (mut reader, header) = Reader::open(path, progress)?;
+    let vertex = vertex_element(path, &header)?;
+    for e in &header.elements[..vertex] {
+        reader.skip_element(e, true)?;
+    }
+    let e = &header.elements[vertex];
+    reader.each_vertex(e, sink)?;
+    Ok(e.count)
+}
+
 /// Pass 2 for PLY: strips, then faces, as `load_path` orders them. When the `face` element
 /// comes before the `tristrips` one, the file is read twice: for the strips, then for the
 /// faces.
 pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
     let (mut reader, header) = Reader::open(path, &mut *progress)?;
     let vertices = header.elements[vertex_element(path, &header)?].count;
-    if vertices != out.positions.len() as u64 {
+    if vertices != out.positions.count() as u64 {
         let what =
-            format!("the positions given are not this file's: {} of them for {vertices} vertices", out.positions.len());
+            format!("the positions given are not this file's: {} of them for {vertices} vertices", out.positions.count());
         return Err(err(path, what));
     }
     let find = |name: &str| header.elements.iter().position(|e| e.name == name);
