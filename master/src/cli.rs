@@ -213,6 +213,10 @@ pub enum Nsp {
         /// m: bits of geometry advance (section 7; only 0 is built).
         #[arg(long, default_value_t = 0)]
         advance: u8,
+        /// Where temporary files go (the system's temporary folder by default). PLY and OBJ
+        /// input is built out of core there; STL is loaded whole.
+        #[arg(long)]
+        temp_dir: Option<PathBuf>,
     },
     /// Print an .nsp file's parameters, counts and bytes by part (reads its tables only).
     Stats {

@@ -38,7 +38,9 @@ fn main() -> ExitCode {
             };
             master::pm::adapt(input, camera, &opts, output)
         }
-        Command::Nsp { nsp: Nsp::Build { input, output, bits, root_bits, splits, min_simplices, advance } } => {
+        Command::Nsp {
+            nsp: Nsp::Build { input, output, bits, root_bits, splits, min_simplices, advance, temp_dir },
+        } => {
             let params = codec::nsp::Params {
                 bits: *bits,
                 root_bits: *root_bits,
@@ -46,7 +48,7 @@ fn main() -> ExitCode {
                 min_simplices: *min_simplices,
                 advance: *advance,
             };
-            master::nsp::build(input, output, params)
+            master::nsp::build(input, output, params, temp_dir.as_deref())
         }
         Command::Nsp { nsp: Nsp::Stats { input, json } } => master::nsp::stats(input, *json),
         Command::Nsp { nsp: Nsp::Adapt { input, camera, size, error_px, output, full } } => {

@@ -13,25 +13,58 @@ use crate::commands::{load_mesh, mesh_output, summary};
 use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
 
-/// `tessera nsp build IN -o OUT.nsp`.
-pub fn build(input: &Path, output: &Path, params: Params) -> Result<()> {
+/// `tessera nsp build IN -o OUT.nsp`: PLY and OBJ out of core (`codec::nsp::ooc`, memory
+/// that does not grow with the model), STL in core.
+pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path>) -> Result<()> {
     check_extension(output, &["nsp"], "the output of nsp build")?;
     check_distinct(&[input], &[output])?;
     params.validate()?;
-    let mesh = load_mesh(input)?;
     let start = Instant::now();
-    let canon = Canonical::of_mesh(&mesh, params.bits).with_context(|| format!("{}", input.display()))?;
-    drop(mesh);
-    // The partition is known only inside `encode`; the bar counts cells once it is.
-    let pb = progress::bar(0, "encoding cells");
-    let built = nsp::encode(&canon, params, &|done| {
-        pb.set_position(done);
-    })
-    .with_context(|| format!("cannot build {}", input.display()))?;
-    pb.finish_and_clear();
-    write_bytes(output, &built.bytes)?;
+    let mut temp_mb = None;
+    let (header, cells, bytes, cost_bits) = if codec::load::stream::can_stream(input) {
+        let pb = progress::bar(0, "reading");
+        let report = |stage: &str, done: u64, total: u64| {
+            if pb.message() != stage {
+                pb.set_message(stage.to_string());
+                pb.set_length(total);
+            }
+            pb.set_position(done);
+        };
+        let mut built = None;
+        let mut failure = None;
+        write_atomic(output, |w| match nsp::ooc::build_file(input, params, temp_dir, w, &report) {
+            Ok(b) => {
+                built = Some(b);
+                Ok(())
+            }
+            Err(e) => {
+                failure = Some(e);
+                Err(std::io::Error::other("the build failed"))
+            }
+        })
+        .map_err(|e| match failure.take() {
+            Some(f) => anyhow::Error::new(f).context(format!("cannot build {}", input.display())),
+            None => e,
+        })?;
+        pb.finish_and_clear();
+        let b = built.expect("built when written");
+        temp_mb = Some(b.temp_bytes as f64 / (1 << 20) as f64);
+        (b.header, b.cells, b.bytes, b.cost_bits)
+    } else {
+        let mesh = load_mesh(input)?;
+        let canon = Canonical::of_mesh(&mesh, params.bits).with_context(|| format!("{}", input.display()))?;
+        drop(mesh);
+        let pb = progress::bar(0, "encoding cells");
+        let built = nsp::encode(&canon, params, &|done| {
+            pb.set_position(done);
+        })
+        .with_context(|| format!("cannot build {}", input.display()))?;
+        pb.finish_and_clear();
+        write_bytes(output, &built.bytes)?;
+        (built.header, built.tree.nodes.len(), built.bytes.len() as u64, built.cost_bits)
+    };
     let secs = start.elapsed().as_secs_f64();
-    let h = &built.header;
+    let h = &header;
     let points = h.points.max(1) as f64;
     summary(
         output,
@@ -43,9 +76,9 @@ pub fn build(input: &Path, output: &Path, params: Params) -> Result<()> {
             h.triangles,
             h.input_triangles,
             h.points,
-            built.tree.nodes.len(),
-            built.bytes.len(),
-            built.bytes.len() as f64 * 8.0 / points,
+            cells,
+            bytes,
+            bytes as f64 * 8.0 / points,
             secs,
             h.input_triangles as f64 / secs.max(1e-9)
         ),
@@ -53,10 +86,11 @@ pub fn build(input: &Path, output: &Path, params: Params) -> Result<()> {
     summary(
         output,
         format_args!(
-            "  bits/point: geometry {:.2}, connectivity {:.2}, orientation {:.2} (at the static tables' entropy)",
-            built.cost_bits[0] / points,
-            built.cost_bits[1] / points,
-            built.cost_bits[2] / points
+            "  bits/point: geometry {:.2}, connectivity {:.2}, orientation {:.2} (at the static tables' entropy){}",
+            cost_bits[0] / points,
+            cost_bits[1] / points,
+            cost_bits[2] / points,
+            temp_mb.map_or(String::new(), |mb| format!("; out of core, temporary files up to {mb:.0} MB"))
         ),
     );
     Ok(())

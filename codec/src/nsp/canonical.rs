@@ -22,7 +22,8 @@ impl Cube {
     pub fn fit<'a>(points: impl IntoIterator<Item = &'a [f32; 3]>, bits: u8) -> Option<Cube> {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
-        for p in points {
+        // Non-finite points are left out: they are unused vertices (a used one is refused).
+        for p in points.into_iter().filter(|p| p.iter().all(|c| c.is_finite())) {
             for a in 0..3 {
                 lo[a] = lo[a].min(p[a] as f64);
                 hi[a] = hi[a].max(p[a] as f64);
@@ -116,7 +117,7 @@ impl Canonical {
         mesh.validate().map_err(|e| NspError::Input(e.to_string()))?;
         let cube = Cube::fit(&mesh.positions, bits).ok_or(NspError::Empty)?;
         let mut cube_extent = [0f64; 3];
-        for p in &mesh.positions {
+        for p in mesh.positions.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
             for a in 0..3 {
                 cube_extent[a] = cube_extent[a].max(p[a] as f64 - cube.origin[a]);
             }

@@ -35,11 +35,17 @@ pub struct Built {
 }
 
 /// One cell's recorded decisions: context in the low 15 bits, the bit in the top one.
-struct Recorded {
-    bits: Vec<u16>,
-    max_cells: u32,
-    max_tops: u32,
-    reach: [[u32; 3]; 2],
+pub(super) struct Recorded {
+    pub bits: Vec<u16>,
+    pub max_cells: u32,
+    pub max_tops: u32,
+    pub reach: [[u32; 3]; 2],
+}
+
+impl Recorded {
+    pub(super) fn empty() -> Recorded {
+        Recorded { bits: Vec::new(), max_cells: 0, max_tops: 0, reach: [[u32::MAX; 3], [0; 3]] }
+    }
 }
 
 struct Record<'a>(&'a mut Vec<u16>);
@@ -114,7 +120,7 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
     Ok(Built { bytes, tree: part.tree, header, decisions, cost_bits, stream_bytes, leaf_simplices })
 }
 
-fn kind_of(ctx: usize) -> usize {
+pub(super) fn kind_of(ctx: usize) -> usize {
     use super::complex::GEOMETRY_CONTEXTS;
     if ctx < GEOMETRY_CONTEXTS {
         0
@@ -126,12 +132,12 @@ fn kind_of(ctx: usize) -> usize {
 }
 
 /// The static probability of a 0 (11 bits, never 0 or 1) from the counts of 0s and 1s.
-fn static_prob(zeros: u64, ones: u64) -> u16 {
+pub(super) fn static_prob(zeros: u64, ones: u64) -> u16 {
     let p = (zeros as f64 + 0.5) / ((zeros + ones) as f64 + 1.0);
     ((p * 2048.0).round() as i64).clamp(1, 2047) as u16
 }
 
-fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
+pub(super) fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
     if bits.is_empty() {
         return Vec::new();
     }
@@ -146,9 +152,8 @@ fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
 /// Runs cell `c`'s refinement from its minimal to its maximal precision on its simplices
 /// (ids into `canon.simplices`, ascending), recording every decision.
 fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recorded {
-    let mut bits = Vec::new();
     if members.is_empty() {
-        return Recorded { bits, max_cells: 0, max_tops: 0, reach: [[u32::MAX; 3], [0; 3]] };
+        return Recorded::empty();
     }
     let mut reach = [[u32::MAX; 3], [0u32; 3]];
     for &s in members {
@@ -181,6 +186,20 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
             t
         })
         .collect();
+    record_local(tree, c, &coords, mapped, reach)
+}
+
+/// Records cell `c`'s decisions from its simplices `mapped` on points `coords` at its
+/// maximal precision (simplices in input order: triangles by first occurrence first).
+pub(super) fn record_local(
+    tree: &Tree,
+    c: u32,
+    coords: &[[u32; 3]],
+    mapped: Vec<Simplex>,
+    reach: [[u32; 3]; 2],
+) -> Recorded {
+    let mut bits = Vec::new();
+    let q = tree.max_prec(c);
     let simplices = top_simplices(coords.len(), mapped.into_iter());
     let codes: Vec<u128> = coords.iter().map(|&g| morton(g, q)).collect();
     let l0 = 3 * tree.min_prec(c);

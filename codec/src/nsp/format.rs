@@ -151,9 +151,18 @@ pub struct CellEntry {
 pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[CellEntry]) -> Vec<u8> {
     let mut header = *header;
     header.cells = entries.len() as u32;
-    let total: usize = streams.iter().map(|s| s.len()).sum();
-    let mut out =
-        Vec::with_capacity(PREFIX_LEN + table_len(table) + total + entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
+    let mut out = write_prefix(&header, table);
+    for s in streams {
+        out.extend_from_slice(s);
+    }
+    let offset = out.len() as u64;
+    out.extend_from_slice(&write_cell_table(entries, offset));
+    out
+}
+
+/// The bytes before the cell streams: magic, version, flags, header, probability table.
+pub fn write_prefix(header: &Header, table: &[u16]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(PREFIX_LEN + table_len(table));
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&0u16.to_le_bytes());
@@ -171,18 +180,20 @@ pub fn write(header: &Header, table: &[u16], streams: &[Vec<u8>], entries: &[Cel
     }
     let crc = crc32fast::hash(&out[t0..]);
     out.extend_from_slice(&crc.to_le_bytes());
-    for s in streams {
-        out.extend_from_slice(s);
-    }
-    let table_offset = out.len() as u64;
-    let e0 = out.len();
+    out
+}
+
+/// The bytes after the cell streams, which end at `table_offset`: the cell table and the
+/// footer.
+pub fn write_cell_table(entries: &[CellEntry], table_offset: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
     for e in entries {
         out.push(e.split as u8);
         for v in [e.len, e.crc, e.max_cells, e.max_tops].iter().chain(e.reach.iter().flatten()) {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    let crc = crc32fast::hash(&out[e0..]);
+    let crc = crc32fast::hash(&out);
     out.extend_from_slice(&crc.to_le_bytes());
     let f0 = out.len();
     out.extend_from_slice(&table_offset.to_le_bytes());

@@ -71,6 +71,7 @@ pub mod complex;
 pub mod decode;
 pub mod encode;
 pub mod format;
+pub mod ooc;
 pub mod tree;
 pub mod view;
 

@@ -739,7 +739,8 @@ impl<'a> Reader<'a> {
     fn vertices(&mut self, e: &Element) -> Result<Vec<[f32; 3]>, LoadError> {
         // Reserve no more than the file can hold, whatever the header claims.
         let min = e.min_record_bytes(self.ascii());
-        let mut positions = Vec::with_capacity(e.count.min(self.src.size_bound() / min.max(1)).min(MAX_VERTICES) as usize);
+        let mut positions =
+            Vec::with_capacity(e.count.min(self.src.size_bound() / min.max(1)).min(MAX_VERTICES) as usize);
         self.each_vertex(e, &mut |p| positions.push(p))?;
         Ok(positions)
     }
@@ -952,8 +953,10 @@ pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut
     let (mut reader, header) = Reader::open(path, &mut *progress)?;
     let vertices = header.elements[vertex_element(path, &header)?].count;
     if vertices != out.positions.count() as u64 {
-        let what =
-            format!("the positions given are not this file's: {} of them for {vertices} vertices", out.positions.count());
+        let what = format!(
+            "the positions given are not this file's: {} of them for {vertices} vertices",
+            out.positions.count()
+        );
         return Err(err(path, what));
     }
     let find = |name: &str| header.elements.iter().position(|e| e.name == name);
