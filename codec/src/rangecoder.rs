@@ -161,6 +161,12 @@ impl<'a> Decoder<'a> {
         }
     }
 
+    /// Bytes of its buffer the decoder has read so far: a prefix of this length is all it
+    /// needed for the decisions decoded so far.
+    pub fn position(&self) -> usize {
+        self.pos
+    }
+
     /// Where the decoder stands, to [`Decoder::resume`] later on the same bytes (a viewer
     /// that refines a cell in steps keeps this instead of a borrow of the bytes).
     pub fn state(&self) -> DecoderState {

@@ -126,8 +126,7 @@ impl NspStatsReport {
     pub fn of(file: &NspFile) -> NspStatsReport {
         let h = &file.header;
         let stream_bytes: u64 = file.entries.iter().map(|e| e.len as u64).sum();
-        let cell_table_bytes =
-            (file.entries.len() * codec::nsp::format::ENTRY_LEN + 4 + codec::nsp::format::FOOTER_LEN) as u64;
+        let cell_table_bytes = file.file_len - file.prefix_len - stream_bytes;
         let tops = h.triangles + h.edges + h.isolated;
         NspStatsReport {
             bytes: file.file_len,

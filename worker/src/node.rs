@@ -486,8 +486,8 @@ impl NspView {
     /// triangle's pixels depend on it alone, so any subset of the drawing renders the same
     /// pixels as the whole).
     fn render(&mut self, renderer: &mut Renderer, job: NspFrameJob) -> Result<(u32, Vec<TilePixels>), WorkerError> {
-        for (c, bytes) in job.cells {
-            self.file.receive(c, bytes).map_err(WorkerError::Nsp)?;
+        for (c, from, bytes) in job.cells {
+            self.file.receive(c, from, bytes).map_err(WorkerError::Nsp)?;
         }
         let bits: HashMap<u32, u8> = job.selection.iter().copied().collect();
         let mut want = Vec::with_capacity(job.draw.len());

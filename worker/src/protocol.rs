@@ -30,8 +30,9 @@
 //!                    sent once before its frames)
 //!   kind 11 NspFrame frame u32, width u32, height u32, view_proj 16 x f32, selection count
 //!                    u32, then per selected cell: cell u32, bits u8; draw count u32, then the
-//!                    cells this worker draws, u32 each; stream count u32, then per cell
-//!                    stream new to this worker: cell u32, length u32 + bytes; tile count
+//!                    cells this worker draws, u32 each; piece count u32, then per piece of
+//!                    a cell stream new to this worker: cell u32, offset u32 (the bytes it
+//!                    holds already), length u32 + bytes; tile count
 //!                    u32, then per tile: index u32, rect 4 x u32
 //! worker -> master
 //!   kind 3 Ready     adapter name length u32 + UTF-8 bytes, largest texture side u32
@@ -156,8 +157,9 @@ pub struct PmFrameJob {
 }
 
 /// A frame of an `.nsp` model: the view's selection (every cell drawn, with its precision),
-/// the cells of it this worker draws (those whose triangles can reach its tiles), the cell
-/// streams it lacks (it keeps every stream it was sent), and its tiles.
+/// the cells of it this worker draws (those whose triangles can reach its tiles), the pieces
+/// of cell streams it lacks for those precisions (it keeps what it was sent: a piece
+/// continues the bytes it holds of that cell), and its tiles.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NspFrameJob {
     pub frame: u32,
@@ -166,7 +168,7 @@ pub struct NspFrameJob {
     pub view_proj: [f32; 16],
     pub selection: Vec<(u32, u8)>,
     pub draw: Vec<u32>,
-    pub cells: Vec<(u32, Vec<u8>)>,
+    pub cells: Vec<(u32, u32, Vec<u8>)>,
     pub tiles: Vec<(u32, [u32; 4])>,
 }
 
@@ -426,8 +428,9 @@ impl ToWorker {
                 w.u32(f.draw.len() as u32);
                 f.draw.iter().for_each(|&c| w.u32(c));
                 w.u32(f.cells.len() as u32);
-                for (c, bytes) in &f.cells {
+                for (c, from, bytes) in &f.cells {
                     w.u32(*c);
+                    w.u32(*from);
                     w.bytes(bytes);
                 }
                 w.u32(f.tiles.len() as u32);
@@ -551,10 +554,10 @@ impl ToWorker {
                 }
                 let n = r.count(4, "drawn cells")?;
                 let draw = (0..n).map(|_| r.u32("drawn cell")).collect::<Result<_, _>>()?;
-                let n = r.count(8, "cell streams")?;
+                let n = r.count(12, "cell stream pieces")?;
                 let mut cells = Vec::with_capacity(n);
                 for _ in 0..n {
-                    cells.push((r.u32("cell")?, r.bytes("cell stream")?.to_vec()));
+                    cells.push((r.u32("cell")?, r.u32("piece offset")?, r.bytes("cell stream piece")?.to_vec()));
                 }
                 let n = r.count(20, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
@@ -703,7 +706,7 @@ mod tests {
             view_proj: std::array::from_fn(|i| i as f32 * 0.5),
             selection: vec![(3, 9), (70, 11)],
             draw: vec![70],
-            cells: vec![(70, vec![1, 2, 3]), (64, vec![])],
+            cells: vec![(70, 0, vec![1, 2, 3]), (64, 9, vec![])],
             tiles: vec![(1, [32, 0, 64, 24])],
         })
     }

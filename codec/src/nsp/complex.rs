@@ -10,6 +10,8 @@
 
 use std::collections::HashMap;
 
+use smallvec::SmallVec;
+
 use super::canonical::{top_simplices, Simplex};
 
 /// Contexts: geometry per (kd level, valence bucket, binary node), then connectivity per
@@ -68,8 +70,8 @@ pub struct KdCell {
     pub prefix: u128,
     /// The cell's integer coordinates: axis `a` holds the bits consumed so far on it.
     pub xyz: [u32; 3],
-    /// Incident top-simplices.
-    pub tops: Vec<u32>,
+    /// Incident top-simplices (inline up to a typical valence: no allocation per vertex).
+    pub tops: SmallVec<[u32; 8]>,
 }
 
 /// The per-axis coordinates of the kd-cell `prefix` at `level` (bits consumed per axis).
@@ -136,20 +138,21 @@ pub struct Complex {
     /// Kd-cells sorted by kd-index at the current level (all cells are at `level`).
     pub order: Vec<u32>,
     pub level: u8,
-    scratch_taus: Vec<Tau>,
+    scratch_verts: Vec<(u128, u32)>,
+    scratch_opposite: Vec<Opposite>,
     scratch_syms: Vec<u8>,
     scratch_edges: Vec<[u32; 2]>,
     scratch_tris: Vec<([u32; 3], usize, bool)>,
     scratch_covered: Vec<[u32; 2]>,
-    scratch_old: Vec<u32>,
+    scratch_old: SmallVec<[u32; 8]>,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
-struct Tau {
-    dim: u8,
+/// A triangle `v·w·x` of the star: the kd-indices of `w` and `x` (in order), their ids, and
+/// the oriented triangle.
+#[derive(Clone, Copy, Debug, Default)]
+struct Opposite {
     keys: [u128; 2],
     w: [u32; 2],
-    /// For a triangle τ, the oriented old triangle `v·τ`.
     tri: [u32; 3],
 }
 
@@ -157,7 +160,7 @@ impl Complex {
     /// The root's starting state: one kd-cell (the cube) and one point.
     pub fn root() -> Complex {
         let mut c = Complex::default();
-        c.cells.push(KdCell { level: 0, prefix: 0, xyz: [0; 3], tops: Vec::new() });
+        c.cells.push(KdCell { level: 0, prefix: 0, xyz: [0; 3], tops: SmallVec::new() });
         c.add_top(Top { v: [0, 0, 0], dim: 0 });
         c.order = vec![0];
         c
@@ -174,7 +177,7 @@ impl Complex {
         let mut c = Complex { level, ..Complex::default() };
         c.cells = distinct
             .iter()
-            .map(|&prefix| KdCell { level, prefix, xyz: xyz_of(prefix, level), tops: Vec::new() })
+            .map(|&prefix| KdCell { level, prefix, xyz: xyz_of(prefix, level), tops: SmallVec::new() })
             .collect();
         let images = simplices.iter().map(|s| {
             let mut t = *s;
@@ -203,7 +206,7 @@ impl Complex {
         verts.dedup();
         for &(_, v) in &verts {
             let k = &self.cells[v as usize];
-            c.cells.push(KdCell { level: k.level, prefix: k.prefix, xyz: k.xyz, tops: Vec::new() });
+            c.cells.push(KdCell { level: k.level, prefix: k.prefix, xyz: k.xyz, tops: SmallVec::new() });
         }
         let map = |v: u32| {
             verts.binary_search_by_key(&self.cells[v as usize].index(), |x| x.0).expect("a vertex of a kept simplex")
@@ -288,7 +291,7 @@ impl Complex {
                 return Err(ApplyError::TooLarge);
             }
             let v1 = self.cells.len() as u32;
-            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: Vec::new() });
+            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: SmallVec::new() });
             oracle.before_split(v, v1);
             self.split(v, v1, io, oracle)?;
             if self.live_tops > max_tops {
@@ -308,101 +311,81 @@ impl Complex {
     /// fine levels, and this runs once per vertex split (measured 5x faster than with
     /// `HashMap`/`HashSet` scratch).
     fn split(&mut self, v0: u32, v1: u32, io: &mut impl BitIo, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
-        let old = std::mem::take(&mut self.cells[v0 as usize].tops);
-        // The star of v: every τ with v·τ in the closure of v's top-simplices.
-        let mut taus = std::mem::take(&mut self.scratch_taus);
-        taus.clear();
-        taus.push(Tau { dim: 0, keys: [0; 2], w: [u32::MAX; 2], tri: [0; 3] });
+        // v0's list starts afresh (reusing the spare list's room); the old one is read.
+        let spare = std::mem::take(&mut self.scratch_old);
+        let old = std::mem::replace(&mut self.cells[v0 as usize].tops, spare);
+        // The star of v: every τ with v·τ in the closure of v's top-simplices: the vertex
+        // itself, its neighbours (edges v·w) and its opposite edges (triangles v·w·x), each in
+        // kd-index order.
+        let mut verts = std::mem::take(&mut self.scratch_verts);
+        verts.clear();
+        let mut opposite = std::mem::take(&mut self.scratch_opposite);
+        opposite.clear();
         for &t in &old {
             let top = self.tops[t as usize];
-            let mut others = [0u32; 2];
+            let mut others = [(0u128, 0u32); 2];
             let mut n = 0;
             for &u in &top.v[..top.dim as usize + 1] {
                 if u != v0 {
-                    others[n] = u;
+                    others[n] = (self.cells[u as usize].index(), u);
                     n += 1;
                 }
             }
-            for &w in &others[..n] {
-                taus.push(Tau { dim: 1, keys: [self.cells[w as usize].index(), 0], w: [w, u32::MAX], tri: [0; 3] });
-            }
+            verts.extend_from_slice(&others[..n]);
             if n == 2 {
-                let (mut a, mut b) = (others[0], others[1]);
-                let (mut ka, mut kb) = (self.cells[a as usize].index(), self.cells[b as usize].index());
-                if ka > kb {
-                    std::mem::swap(&mut a, &mut b);
-                    std::mem::swap(&mut ka, &mut kb);
-                }
-                taus.push(Tau { dim: 2, keys: [ka, kb], w: [a, b], tri: top.v });
+                let (a, b) = if others[0].0 < others[1].0 { (others[0], others[1]) } else { (others[1], others[0]) };
+                opposite.push(Opposite { keys: [a.0, b.0], w: [a.1, b.1], tri: top.v });
             }
         }
-        taus.sort_unstable();
-        taus.dedup();
-        let n_vertex_taus = taus.iter().filter(|t| t.dim <= 1).count();
+        verts.sort_unstable();
+        verts.dedup();
+        opposite.sort_unstable_by_key(|o| o.keys);
 
         // Symbols, coarse faces first; a vertex τ's symbol constrains its triangles.
         let mut syms = std::mem::take(&mut self.scratch_syms);
         syms.clear();
-        let mut cone_edge = false;
         let mut edges = std::mem::take(&mut self.scratch_edges);
         edges.clear();
         let mut tris = std::mem::take(&mut self.scratch_tris);
         tris.clear();
-        for (i, tau) in taus.iter().enumerate() {
-            let tv: &[u32] = match tau.dim {
-                0 => &[],
-                1 => &tau.w[..1],
-                _ => &tau.w[..],
-            };
-            let allowed: u8 = match tau.dim {
-                0 => 0b1100,
-                1 => 0b0111 | if cone_edge { 0b1000 } else { 0 },
-                _ => {
-                    let sym_of = |key: u128| {
-                        let vt = &taus[1..n_vertex_taus];
-                        vt.binary_search_by(|t| t.keys[0].cmp(&key)).map(|j| syms[j + 1]).unwrap_or(0)
-                    };
-                    let (a, b) = (sym_of(tau.keys[0]), sym_of(tau.keys[1]));
-                    let has0 = |s: u8| s != 1;
-                    let has1 = |s: u8| s != 0;
-                    let m0 = has0(a) && has0(b);
-                    let m1 = has1(a) && has1(b);
-                    (m0 as u8) | (m1 as u8) << 1 | ((m0 && m1) as u8) << 2
-                }
-            };
+        let cone_edge = code_symbol(io, 0, 0b1100, 0, oracle.symbol(v0, v1, &[])) == 3;
+        for &(_, w) in verts.iter() {
+            let allowed = 0b0111 | if cone_edge { 0b1000 } else { 0 };
+            let truth = oracle.symbol(v0, v1, &[w]);
+            let side = self.side(v1, w);
+            let sym = code_symbol(io, 1, allowed, side, truth);
+            syms.push(sym);
+            if sym != 1 {
+                edges.push([v0, w]);
+            }
+            if sym != 0 {
+                edges.push([v1, w]);
+            }
+            if sym == 3 {
+                tris.push(([v0, v1, w], 0, true));
+            }
+        }
+        for o in opposite.iter() {
+            let sym_of = |key: u128| verts.binary_search_by(|v| v.0.cmp(&key)).map(|j| syms[j]).unwrap_or(0);
+            let (a, b) = (sym_of(o.keys[0]), sym_of(o.keys[1]));
+            let has0 = |s: u8| s != 1;
+            let has1 = |s: u8| s != 0;
+            let m0 = has0(a) && has0(b);
+            let m1 = has1(a) && has1(b);
+            let allowed = (m0 as u8) | (m1 as u8) << 1 | ((m0 && m1) as u8) << 2;
             if allowed == 0 {
-                self.restore(taus, syms, edges, tris);
+                self.restore(verts, opposite, syms, edges, tris);
                 return Err(ApplyError::NoSymbol);
             }
-            let truth = oracle.symbol(v0, v1, tv);
-            let side = if tau.dim == 1 { self.side(v1, tau.w[0]) } else { 0 };
-            let sym = code_symbol(io, tau.dim as usize, allowed, side, truth);
-            debug_assert_eq!(syms.len(), i);
-            syms.push(sym);
-            match tau.dim {
-                0 => cone_edge = sym == 3,
-                1 => {
-                    let w = tau.w[0];
-                    if sym != 1 {
-                        edges.push([v0, w]);
-                    }
-                    if sym != 0 {
-                        edges.push([v1, w]);
-                    }
-                    if sym == 3 {
-                        tris.push(([v0, v1, w], 0, true));
-                    }
-                }
-                _ => {
-                    let t = tau.tri;
-                    let sub = |x: u32| t.map(|u| if u == v0 { x } else { u });
-                    if sym != 1 {
-                        tris.push((sub(v0), (sym == 2) as usize, false));
-                    }
-                    if sym != 0 {
-                        tris.push((sub(v1), (sym == 2) as usize, false));
-                    }
-                }
+            let truth = oracle.symbol(v0, v1, &o.w);
+            let sym = code_symbol(io, 2, allowed, 0, truth);
+            let t = o.tri;
+            let sub = |x: u32| t.map(|u| if u == v0 { x } else { u });
+            if sym != 1 {
+                tris.push((sub(v0), (sym == 2) as usize, false));
+            }
+            if sym != 0 {
+                tris.push((sub(v1), (sym == 2) as usize, false));
             }
         }
         if cone_edge {
@@ -494,7 +477,7 @@ impl Complex {
         old.clear();
         self.scratch_old = old;
         self.scratch_covered = covered;
-        self.restore(taus, syms, edges, tris);
+        self.restore(verts, opposite, syms, edges, tris);
         Ok(())
     }
 
@@ -519,8 +502,16 @@ impl Complex {
         }
     }
 
-    fn restore(&mut self, taus: Vec<Tau>, syms: Vec<u8>, edges: Vec<[u32; 2]>, tris: Vec<([u32; 3], usize, bool)>) {
-        self.scratch_taus = taus;
+    fn restore(
+        &mut self,
+        verts: Vec<(u128, u32)>,
+        opposite: Vec<Opposite>,
+        syms: Vec<u8>,
+        edges: Vec<[u32; 2]>,
+        tris: Vec<([u32; 3], usize, bool)>,
+    ) {
+        self.scratch_verts = verts;
+        self.scratch_opposite = opposite;
         self.scratch_syms = syms;
         self.scratch_edges = edges;
         self.scratch_tris = tris;

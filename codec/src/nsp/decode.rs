@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use super::complex::{ApplyError, BitIo, Blind, Complex};
-use super::format::{self, CellEntry, Header, ENTRY_LEN, FOOTER_LEN, MIN_TABLE_LEN, PREFIX_LEN};
+use super::format::{self, CellEntry, Header, FOOTER_LEN, MIN_TABLE_LEN, PREFIX_LEN};
 use super::tree::Tree;
 use super::view::{draw, Drawn};
 use super::NspError;
@@ -16,8 +16,8 @@ use crate::rangecoder::{Decoder, DecoderState};
 enum Source {
     Bytes(Arc<[u8]>),
     File(std::fs::File),
-    /// A worker's: the cells it was sent.
-    Received(HashMap<u32, Arc<[u8]>>),
+    /// A worker's: the prefixes of cell streams it was sent.
+    Received(HashMap<u32, Vec<u8>>),
 }
 
 /// An opened `.nsp`: header, probability table, tree and cell table in memory; cell streams
@@ -73,7 +73,8 @@ impl NspFile {
         file.seek(SeekFrom::Start(len - FOOTER_LEN as u64)).map_err(io)?;
         file.read_exact(&mut footer).map_err(io)?;
         let (offset, cells) = format::read_footer(&footer, len, start)?;
-        let mut rows = vec![0u8; cells as usize * ENTRY_LEN + 4];
+        let _ = cells;
+        let mut rows = vec![0u8; (len - FOOTER_LEN as u64 - offset) as usize];
         file.seek(SeekFrom::Start(offset)).map_err(io)?;
         file.read_exact(&mut rows).map_err(io)?;
         let entries = format::read_entries(&rows, offset, start)?;
@@ -139,49 +140,65 @@ impl NspFile {
         Self::assemble(header, table, entries, Source::Received(HashMap::new()), n as u64, whole_len, skeleton)
     }
 
-    /// Stores a received cell stream (checked against the cell table when used).
-    pub fn receive(&mut self, c: u32, bytes: Vec<u8>) -> Result<(), NspError> {
-        if c as usize >= self.entries.len() {
-            return Err(NspError::Cell { cell: c, what: "no such cell".into() });
-        }
+    /// Stores received bytes `from..` of cell `c`'s stream (whole segments, checked when
+    /// used); they continue what was received before.
+    pub fn receive(&mut self, c: u32, from: u32, bytes: Vec<u8>) -> Result<(), NspError> {
+        let e = self.entries.get(c as usize).ok_or(NspError::Cell { cell: c, what: "no such cell".into() })?;
+        let len = e.len;
         match &mut self.source {
             Source::Received(cells) => {
-                cells.insert(c, bytes.into());
+                let held = cells.entry(c).or_default();
+                if from as usize != held.len() || from as u64 + bytes.len() as u64 > len as u64 {
+                    return Err(NspError::Cell {
+                        cell: c,
+                        what: format!("received bytes {from}.. of its stream, holding {} of {len}", held.len()),
+                    });
+                }
+                held.extend_from_slice(&bytes);
                 Ok(())
             }
             _ => Err(NspError::Cell { cell: c, what: "received for a file read from disk".into() }),
         }
     }
 
-    /// The compressed stream of cell `c`, checked against its CRC.
-    pub fn cell_bytes(&self, c: u32) -> Result<Arc<[u8]>, NspError> {
+    /// Bytes `from..to` of cell `c`'s stream (segment boundaries), checked against their
+    /// segments' CRCs.
+    pub fn cell_range(&self, c: u32, from: u32, to: u32) -> Result<Vec<u8>, NspError> {
         let e = self.entries.get(c as usize).ok_or(NspError::Cell { cell: c, what: "no such cell".into() })?;
-        let bytes: Arc<[u8]> = match &self.source {
-            Source::Bytes(b) => b[e.offset as usize..e.offset as usize + e.len as usize].into(),
+        if from > to || to > e.len || !e.is_boundary(from) || !e.is_boundary(to) {
+            return Err(NspError::Cell { cell: c, what: format!("bytes {from}..{to} are not whole segments") });
+        }
+        let whole: Vec<u8> = match &self.source {
+            Source::Bytes(b) => b[e.offset as usize..(e.offset + to as u64) as usize].to_vec(),
             Source::File(f) => {
                 use std::os::unix::fs::FileExt;
-                let mut buf = vec![0u8; e.len as usize];
-                f.read_exact_at(&mut buf, e.offset)
+                let mut buf = vec![0u8; to as usize];
+                f.read_exact_at(&mut buf[from as usize..], e.offset + from as u64)
                     .map_err(|err| NspError::Cell { cell: c, what: format!("cannot read its stream: {err}") })?;
-                buf.into()
+                buf
             }
-            Source::Received(cells) => match cells.get(&c) {
-                Some(b) => b.clone(),
-                None if e.len == 0 => Arc::from(&[][..]),
-                None => return Err(NspError::Cell { cell: c, what: "not received".into() }),
-            },
+            Source::Received(cells) => {
+                let held = cells.get(&c).map(Vec::as_slice).unwrap_or(&[]);
+                if held.len() < to as usize {
+                    return Err(NspError::Cell {
+                        cell: c,
+                        what: format!("needs {to} bytes of its stream, {} were received", held.len()),
+                    });
+                }
+                held[..to as usize].to_vec()
+            }
         };
-        self.bytes_read.fetch_add(e.len as u64, Ordering::Relaxed);
-        if crc32fast::hash(&bytes) != e.crc {
-            return Err(NspError::Cell { cell: c, what: "stream checksum mismatch".into() });
+        self.bytes_read.fetch_add((to - from) as u64, Ordering::Relaxed);
+        if let Err(k) = e.check(&whole, from, to) {
+            return Err(NspError::Cell { cell: c, what: format!("stream checksum mismatch (segment {k})") });
         }
-        Ok(bytes)
+        Ok(whole[from as usize..].to_vec())
     }
 
     /// The root's state at its minimal precision (0 bits: one point).
     pub fn root_state(&self) -> Result<CellState, NspError> {
         let c = self.tree.root();
-        CellState::new(self, c, Complex::root(), self.cell_bytes(c)?)
+        CellState::new(self, c, Complex::root())
     }
 
     /// Child `c`'s state at its minimal precision, from its parent's state at the parent's
@@ -215,7 +232,7 @@ impl NspFile {
         let k = self.tree.nodes[parent.cell as usize].children.iter().position(|&x| x == c);
         let inside = k.map(|k| groups[k].as_slice()).unwrap_or(&[]);
         let cx = parent.cx.restrict(inside);
-        CellState::new(self, c, cx, self.cell_bytes(c)?)
+        CellState::new(self, c, cx)
     }
 }
 
@@ -227,7 +244,8 @@ pub struct CellState {
     pub cx: Complex,
     /// The state the cell started from (for coarsening by re-decoding).
     start: Complex,
-    bytes: Arc<[u8]>,
+    /// The stream's bytes fetched so far (a prefix, whole segments).
+    bytes: Vec<u8>,
     table: Arc<[u16]>,
     at: Option<DecoderState>,
     min_level: u8,
@@ -254,7 +272,7 @@ impl BitIo for Static<'_, '_> {
 }
 
 impl CellState {
-    fn new(file: &NspFile, c: u32, cx: Complex, bytes: Arc<[u8]>) -> Result<CellState, NspError> {
+    fn new(file: &NspFile, c: u32, cx: Complex) -> Result<CellState, NspError> {
         let e = &file.entries[c as usize];
         let (min_level, max_level) = (3 * file.tree.min_prec(c), 3 * file.tree.max_prec(c));
         if cx.cells.len() > e.max_cells as usize || cx.live_tops() > e.max_tops as usize {
@@ -263,18 +281,17 @@ impl CellState {
                 what: "its parent's state is larger than the cell table allows".into(),
             });
         }
-        if cx.cells.is_empty() != bytes.is_empty() {
+        if cx.cells.is_empty() != (e.len == 0) {
             return Err(NspError::Cell {
                 cell: c,
-                what: if bytes.is_empty() { "holds simplices but has no stream" } else { "is empty but has a stream" }
-                    .into(),
+                what: if e.len == 0 { "holds simplices but has no stream" } else { "is empty but has a stream" }.into(),
             });
         }
         Ok(CellState {
             cell: c,
             start: cx.clone(),
             cx,
-            bytes,
+            bytes: Vec::new(),
             table: file.table.clone(),
             at: None,
             min_level,
@@ -301,11 +318,17 @@ impl CellState {
 
     /// Brings the cell to `bits` of precision (clamped to its range): refining continues the
     /// stream; coarsening re-decodes it from the start.
-    pub fn set_precision(&mut self, bits: u8) -> Result<(), NspError> {
+    pub fn set_precision(&mut self, file: &NspFile, bits: u8) -> Result<(), NspError> {
         let target = (3 * bits).clamp(self.min_level, self.max_level);
         if self.cx.cells.is_empty() {
             self.cx.level = target;
             return Ok(());
+        }
+        // Only the segments up to the target precision are read.
+        let need = file.entries[self.cell as usize].needed(self.min_level / 3, target / 3);
+        if (self.bytes.len() as u32) < need {
+            let more = file.cell_range(self.cell, self.bytes.len() as u32, need)?;
+            self.bytes.extend_from_slice(&more);
         }
         self.by_child = std::sync::OnceLock::new();
         if target < self.cx.level {
@@ -354,10 +377,10 @@ pub fn decode_uniform_states(file: &NspFile, bits: u8) -> Result<Vec<CellState>,
     let tree = &file.tree;
     let root_id = tree.root();
     if tree.is_leaf(root_id) || bits < tree.max_prec(root_id) {
-        root.set_precision(bits)?;
+        root.set_precision(file, bits)?;
         out.push(root);
     } else {
-        root.set_precision(tree.max_prec(root_id))?;
+        root.set_precision(file, tree.max_prec(root_id))?;
         todo.push(root);
     }
     while let Some(parent) = todo.pop() {
@@ -371,10 +394,10 @@ pub fn decode_uniform_states(file: &NspFile, bits: u8) -> Result<Vec<CellState>,
                     let mut s = file.child_state(&parent, c)?;
                     let leaf = tree.is_leaf(c);
                     if leaf || bits < tree.max_prec(c) {
-                        s.set_precision(bits)?;
+                        s.set_precision(file, bits)?;
                         Ok((s, true))
                     } else {
-                        s.set_precision(tree.max_prec(c))?;
+                        s.set_precision(file, tree.max_prec(c))?;
                         Ok((s, false))
                     }
                 })

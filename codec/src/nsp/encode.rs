@@ -37,6 +37,8 @@ pub struct Built {
 /// One cell's recorded decisions: context in the low 15 bits, the bit in the top one.
 pub(super) struct Recorded {
     pub bits: Vec<u16>,
+    /// Decisions recorded by the end of each bit of precision (every third kd level).
+    pub level_ends: Vec<u32>,
     pub max_cells: u32,
     pub max_tops: u32,
     pub reach: [[u32; 3]; 2],
@@ -44,7 +46,7 @@ pub(super) struct Recorded {
 
 impl Recorded {
     pub(super) fn empty() -> Recorded {
-        Recorded { bits: Vec::new(), max_cells: 0, max_tops: 0, reach: [[u32::MAX; 3], [0; 3]] }
+        Recorded { bits: Vec::new(), level_ends: Vec::new(), max_cells: 0, max_tops: 0, reach: [[u32::MAX; 3], [0; 3]] }
     }
 }
 
@@ -98,17 +100,22 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
     }
     let streams: Vec<Vec<u8>> = recorded.par_iter().map(|r| code_cell(&r.bits, &table)).collect();
     let entries: Vec<CellEntry> = streams
-        .iter()
+        .par_iter()
         .zip(&recorded)
         .enumerate()
-        .map(|(c, (s, r))| CellEntry {
-            split: !tree.is_leaf(c as u32),
-            offset: 0,
-            len: s.len() as u32,
-            crc: crc32fast::hash(s),
-            max_cells: r.max_cells,
-            max_tops: r.max_tops,
-            reach: r.reach,
+        .map(|(c, (s, r))| {
+            let (ends, segment_crcs) = segments(&r.bits, &r.level_ends, &table, s);
+            CellEntry {
+                split: !tree.is_leaf(c as u32),
+                offset: 0,
+                len: s.len() as u32,
+                crc: crc32fast::hash(s),
+                max_cells: r.max_cells,
+                max_tops: r.max_tops,
+                reach: r.reach,
+                ends,
+                segment_crcs,
+            }
         })
         .collect();
     let leaf_simplices =
@@ -135,6 +142,35 @@ pub(super) fn kind_of(ctx: usize) -> usize {
 pub(super) fn static_prob(zeros: u64, ones: u64) -> u16 {
     let p = (zeros as f64 + 0.5) / ((zeros + ones) as f64 + 1.0);
     ((p * 2048.0).round() as i64).clamp(1, 2047) as u16
+}
+
+/// The end of each precision's bytes in a coded cell (decode its decisions, noting where
+/// the decoder stands at each precision's last one), and each segment's CRC-32.
+pub(super) fn segments(bits: &[u16], level_ends: &[u32], table: &[u16], stream: &[u8]) -> (Vec<u32>, Vec<u32>) {
+    if stream.is_empty() {
+        return (Vec::new(), Vec::new());
+    }
+    let mut dec = crate::rangecoder::Decoder::new(stream);
+    let mut ends = Vec::with_capacity(level_ends.len());
+    let mut done = 0usize;
+    for &end in level_ends {
+        while done < end as usize {
+            let mut p = table[(bits[done] & 0x7fff) as usize];
+            dec.bit(&mut p);
+            done += 1;
+        }
+        ends.push(dec.position().min(stream.len()) as u32);
+    }
+    if let Some(last) = ends.last_mut() {
+        *last = stream.len() as u32;
+    }
+    let mut crcs = Vec::with_capacity(ends.len());
+    let mut start = 0;
+    for &end in &ends {
+        crcs.push(crc32fast::hash(&stream[start as usize..end as usize]));
+        start = end;
+    }
+    (ends, crcs)
 }
 
 pub(super) fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
@@ -209,13 +245,17 @@ pub(super) fn record_local(
     let mut oracle = Truth::new(codes, q, pcell, &simplices, cx.cells.len());
     let mut max_cells = cx.cells.len();
     let mut max_tops = cx.live_tops();
-    for _ in l0..top {
+    let mut level_ends = Vec::with_capacity((top - l0) as usize / 3);
+    for level in l0..top {
         cx.refine_level(&mut Record(&mut bits), &mut oracle, usize::MAX, usize::MAX)
             .expect("the encoder's own answers are always consistent");
         max_cells = max_cells.max(cx.cells.len());
         max_tops = max_tops.max(cx.peak_tops);
+        if (level + 1 - l0) % 3 == 0 {
+            level_ends.push(bits.len() as u32);
+        }
     }
-    Recorded { bits, max_cells: max_cells as u32, max_tops: max_tops as u32, reach }
+    Recorded { bits, level_ends, max_cells: max_cells as u32, max_tops: max_tops as u32, reach }
 }
 
 /// The encoder's knowledge: which points each kd-cell holds, and after each split, the

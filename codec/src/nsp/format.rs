@@ -9,10 +9,13 @@
 //!           probability of a 0 in 1/2048), contexts increasing; every other context is
 //!           1024; then its CRC-32
 //!       ... the cell streams, back to back, in postorder (an empty cell has none)
-//!       41N the cell table, in postorder: split flag u8, stream length u32, stream CRC-32,
-//!           kd-cells at most u32, top-simplices at most u32, and the bounding box of the
-//!           cell's simplices (inside and outside it) on the full-precision grid, 6 x u32
-//!           (lo, hi inclusive); then its CRC-32
+//!       ... the cell table, in postorder, a row per cell: flags u8 (bit 0 split, bit 1
+//!           empty: an empty cell's row ends here), stream length u32,
+//!           stream CRC-32, kd-cells at most u32, top-simplices at most u32, the bounding box
+//!           of the cell's simplices (inside and outside it) on the full-precision grid, 6 x
+//!           u32 (lo, hi inclusive), then the stream's segments: count u8 (one per bit of
+//!           precision the cell refines, 0 for an empty cell), each segment's length (LEB128),
+//!           each segment's CRC-32; then the table's CRC-32
 //! end-20    footer: u64 offset of the cell table, u32 cells, u32 CRC-32 of those 12 bytes,
 //!           magic b"TNSP"
 //! ```
@@ -29,7 +32,8 @@ use super::{Cube, NspError, Params};
 pub const MAGIC: [u8; 4] = *b"TNSP";
 pub const VERSION: u16 = 1;
 pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4 + 3 * 8 + 8;
-pub const ENTRY_LEN: usize = 41;
+/// Bytes of a cell table row before its segments.
+pub const ROW_FIXED: usize = 41;
 pub const FOOTER_LEN: usize = 20;
 /// Bytes before the table: magic, version, flags, header and its CRC.
 pub const PREFIX_LEN: usize = 8 + HEADER_LEN + 4;
@@ -133,7 +137,7 @@ impl Header {
 }
 
 /// One row of the cell table.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct CellEntry {
     pub split: bool,
     /// Byte offset of the stream in the file (not stored: running sums of the lengths).
@@ -145,6 +149,40 @@ pub struct CellEntry {
     /// The bounding box of the cell's simplices on the full-precision grid (lo, hi
     /// inclusive); what a view must see of the cell to need it.
     pub reach: [[u32; 3]; 2],
+    /// Per bit of precision above the minimal one, the stream's end of the bytes a decoder
+    /// needs to reach it (increasing; the last is `len`), and the CRC-32 of each segment
+    /// (the bytes since the previous end): a view sends and checks only what it decodes.
+    pub ends: Vec<u32>,
+    pub segment_crcs: Vec<u32>,
+}
+
+impl CellEntry {
+    /// Bytes of the stream a decoder needs to reach `bits` of precision (the cell's
+    /// precision range clamps it; 0 for an empty cell or at its minimal precision).
+    pub fn needed(&self, min_prec: u8, bits: u8) -> u32 {
+        if bits <= min_prec || self.ends.is_empty() {
+            return 0;
+        }
+        self.ends[((bits - min_prec) as usize).min(self.ends.len()) - 1]
+    }
+
+    /// Checks `bytes[from..to]`, made of whole segments, against their CRCs; the index of the
+    /// first bad segment otherwise.
+    pub fn check(&self, bytes: &[u8], from: u32, to: u32) -> Result<(), usize> {
+        let mut start = 0u32;
+        for (k, (&end, &crc)) in self.ends.iter().zip(&self.segment_crcs).enumerate() {
+            if start >= from && end <= to && crc32fast::hash(&bytes[start as usize..end as usize]) != crc {
+                return Err(k);
+            }
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// Whether `at` is the end of a segment (or 0).
+    pub fn is_boundary(&self, at: u32) -> bool {
+        at == 0 || self.ends.contains(&at)
+    }
 }
 
 /// Writes a whole file.
@@ -186,11 +224,24 @@ pub fn write_prefix(header: &Header, table: &[u16]) -> Vec<u8> {
 /// The bytes after the cell streams, which end at `table_offset`: the cell table and the
 /// footer.
 pub fn write_cell_table(entries: &[CellEntry], table_offset: u64) -> Vec<u8> {
-    let mut out = Vec::with_capacity(entries.len() * ENTRY_LEN + 4 + FOOTER_LEN);
+    let mut out = Vec::with_capacity(entries.len() * (ROW_FIXED + 32) + 4 + FOOTER_LEN);
     for e in entries {
+        if e.len == 0 {
+            out.push(e.split as u8 | 2);
+            continue;
+        }
         out.push(e.split as u8);
         for v in [e.len, e.crc, e.max_cells, e.max_tops].iter().chain(e.reach.iter().flatten()) {
             out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.push(e.ends.len() as u8);
+        let mut prev = 0;
+        for &end in &e.ends {
+            crate::container::put_varint(&mut out, (end - prev) as u64);
+            prev = end;
+        }
+        for crc in &e.segment_crcs {
+            out.extend_from_slice(&crc.to_le_bytes());
         }
     }
     let crc = crc32fast::hash(&out);
@@ -259,8 +310,9 @@ pub fn read_footer(b: &[u8], file_len: u64, streams_start: usize) -> Result<(u64
     let body = check_crc(&b[..16], "footer")?;
     let offset = u64::from_le_bytes(body[..8].try_into().unwrap());
     let cells = u32::from_le_bytes(body[8..12].try_into().unwrap());
-    let table_len = cells as u64 * ENTRY_LEN as u64 + 4;
-    if offset < streams_start as u64 || offset.checked_add(table_len) != Some(file_len - FOOTER_LEN as u64) {
+    let min_len = cells as u64 + 4;
+    if offset < streams_start as u64 || offset.checked_add(min_len).is_none_or(|end| end > file_len - FOOTER_LEN as u64)
+    {
         return Err(NspError::Format(format!(
             "footer: a cell table of {cells} cells at {offset} does not fit the file"
         )));
@@ -273,17 +325,69 @@ pub fn read_footer(b: &[u8], file_len: u64, streams_start: usize) -> Result<(u64
 pub fn read_entries(b: &[u8], table_offset: u64, streams_start: usize) -> Result<Vec<CellEntry>, NspError> {
     let body = check_crc(b, "cell table")?;
     let mut offset = streams_start as u64;
-    let mut out = Vec::with_capacity(body.len() / ENTRY_LEN);
-    for (i, e) in body.chunks_exact(ENTRY_LEN).enumerate() {
+    let mut out = Vec::new();
+    let mut at = 0usize;
+    while at < body.len() {
+        let i = out.len() as u32;
+        let bad = |what: &str| NspError::Cell { cell: i, what: format!("its cell table row {what}") };
+        let flags = body[at];
+        if flags > 3 {
+            return Err(bad(&format!("has flags {flags}")));
+        }
+        if flags & 2 != 0 {
+            at += 1;
+            out.push(CellEntry {
+                split: flags & 1 == 1,
+                offset,
+                len: 0,
+                crc: 0,
+                max_cells: 0,
+                max_tops: 0,
+                reach: [[u32::MAX; 3], [0; 3]],
+                ends: Vec::new(),
+                segment_crcs: Vec::new(),
+            });
+            continue;
+        }
+        let e = body.get(at..at + ROW_FIXED + 1).ok_or_else(|| bad("is truncated"))?;
         let u = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap());
-        if e[0] > 1 {
-            return Err(NspError::Cell { cell: i as u32, what: format!("split flag {} in the cell table", e[0]) });
+        if u(1) == 0 {
+            return Err(bad("has an empty stream without the empty flag"));
         }
         let reach = [[u(17), u(21), u(25)], [u(29), u(33), u(37)]];
         if (0..3).any(|a| reach[0][a] > reach[1][a]) && u(1) > 0 {
-            return Err(NspError::Cell { cell: i as u32, what: "its bounding box in the cell table is empty".into() });
+            return Err(bad("has an empty bounding box"));
         }
-        out.push(CellEntry { split: e[0] == 1, offset, len: u(1), crc: u(5), max_cells: u(9), max_tops: u(13), reach });
+        let n = e[ROW_FIXED] as usize;
+        at += ROW_FIXED + 1;
+        let mut ends = Vec::with_capacity(n);
+        let mut end = 0u64;
+        for _ in 0..n {
+            let (d, used) = leb128(&body[at.min(body.len())..]).ok_or_else(|| bad("is truncated"))?;
+            at += used;
+            end += d;
+            if end > u(1) as u64 {
+                return Err(bad("has segments longer than the stream"));
+            }
+            ends.push(end as u32);
+        }
+        if ends.last().copied().unwrap_or(0) != u(1) {
+            return Err(bad("has segments that do not end with the stream"));
+        }
+        let crcs = body.get(at..at + 4 * n).ok_or_else(|| bad("is truncated"))?;
+        let segment_crcs = crcs.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
+        at += 4 * n;
+        out.push(CellEntry {
+            split: e[0] == 1,
+            offset,
+            len: u(1),
+            crc: u(5),
+            max_cells: u(9),
+            max_tops: u(13),
+            reach,
+            ends,
+            segment_crcs,
+        });
         offset += u(1) as u64;
     }
     if offset != table_offset {
@@ -292,6 +396,39 @@ pub fn read_entries(b: &[u8], table_offset: u64, streams_start: usize) -> Result
         )));
     }
     Ok(out)
+}
+
+/// Recomputes every checksum of the cell table from the streams as they are (for tests and
+/// fuzzing: damage a stream, then make its checksums match so the decoder sees the damage).
+pub fn refresh_checksums(file: &mut Vec<u8>) -> Result<(), NspError> {
+    let n = file.len();
+    let (_, _, start) = read_prefix(&file[..n - FOOTER_LEN])?;
+    let (offset, _) = read_footer(&file[n - FOOTER_LEN..], n as u64, start)?;
+    let mut entries = read_entries(&file[offset as usize..n - FOOTER_LEN], offset, start)?;
+    for e in &mut entries {
+        let stream = &file[e.offset as usize..(e.offset + e.len as u64) as usize];
+        e.crc = crc32fast::hash(stream);
+        let mut from = 0;
+        for (k, &end) in e.ends.iter().enumerate() {
+            e.segment_crcs[k] = crc32fast::hash(&stream[from as usize..end as usize]);
+            from = end;
+        }
+    }
+    file.truncate(offset as usize);
+    file.extend_from_slice(&write_cell_table(&entries, offset));
+    Ok(())
+}
+
+/// A LEB128 number and its length in bytes; `None` if it is cut short or wider than 64 bits.
+fn leb128(b: &[u8]) -> Option<(u64, usize)> {
+    let mut v = 0u64;
+    for (i, &byte) in b.iter().enumerate().take(10) {
+        v |= ((byte & 0x7f) as u64).checked_shl(7 * i as u32)?;
+        if byte & 0x80 == 0 {
+            return Some((v, i + 1));
+        }
+    }
+    None
 }
 
 /// A valid file whose only cell (a leaf root at 10 bits, decisions at even odds, at most
@@ -320,6 +457,8 @@ pub fn wrap_for_fuzzing(stream: &[u8]) -> Vec<u8> {
         max_cells: 4096,
         max_tops: 16384,
         reach: [[0; 3], [1023; 3]],
+        ends: if stream.is_empty() { vec![] } else { vec![stream.len() as u32; 10] },
+        segment_crcs: if stream.is_empty() { vec![] } else { vec![crc32fast::hash(stream), 0, 0, 0, 0, 0, 0, 0, 0, 0] },
     };
     write(&header, &[DEFAULT_PROB; CONTEXTS], &[stream.to_vec()], &[entry])
 }

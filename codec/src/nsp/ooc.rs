@@ -34,7 +34,7 @@ use rayon::prelude::*;
 
 use super::canonical::{reduce, top_simplices, Cube, Simplex};
 use super::complex::CONTEXTS;
-use super::encode::{code_cell, kind_of, record_local, static_prob, Recorded};
+use super::encode::{code_cell, kind_of, record_local, segments, static_prob, Recorded};
 use super::format::{self, CellEntry, Header};
 use super::tree::{Node, Tree};
 use super::{NspError, Params};
@@ -367,6 +367,7 @@ pub fn build_file_with(
         bits.extend(raw.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
         let stream = code_cell(&bits, &table);
         out.write_all(&stream).map_err(io("cannot write"))?;
+        let (ends, segment_crcs) = segments(&bits, &info.level_ends, &table, &stream);
         entries.push(CellEntry {
             split: !tree.is_leaf(c as u32),
             offset: written,
@@ -375,6 +376,8 @@ pub fn build_file_with(
             max_cells: info.max_cells,
             max_tops: info.max_tops,
             reach: info.reach,
+            ends,
+            segment_crcs,
         });
         written += stream.len() as u64;
     }
@@ -722,9 +725,10 @@ impl Batches {
 }
 
 /// What the output needs of a cell once it is encoded.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Default)]
 struct CellInfo {
     decisions: u64,
+    level_ends: Vec<u32>,
     max_cells: u32,
     max_tops: u32,
     reach: [[u32; 3]; 2],
@@ -817,8 +821,13 @@ impl Encoding {
             self.counts[(b & 0x7fff) as usize][(b >> 15) as usize] += 1;
             self.decisions.write_all(&b.to_le_bytes()).map_err(io("temporary file"))?;
         }
-        self.cells[c as usize] =
-            CellInfo { decisions: rec.bits.len() as u64, max_cells: rec.max_cells, max_tops: rec.max_tops, reach };
+        self.cells[c as usize] = CellInfo {
+            decisions: rec.bits.len() as u64,
+            level_ends: rec.level_ends,
+            max_cells: rec.max_cells,
+            max_tops: rec.max_tops,
+            reach,
+        };
         let parent = tree.nodes[c as usize].parent;
         if parent != u32::MAX {
             let entry = self.pending.entry(parent).or_insert_with(empty_pending);

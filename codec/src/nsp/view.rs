@@ -318,7 +318,7 @@ impl Navigator {
                         }
                     };
                     let before = s.splits;
-                    s.set_precision(want[c])?;
+                    s.set_precision(file, want[c])?;
                     let n = s.splits - before;
                     Ok((*c, s, n))
                 })

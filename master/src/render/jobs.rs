@@ -363,24 +363,29 @@ impl NspScene {
                 .filter(|(_, r)| r.is_some_and(|r| tiles.iter().any(|&(_, t)| overlaps(r, t))))
                 .map(|(&(c, _), _)| c)
                 .collect();
-            // The streams of the drawn cells and of their ancestors that this worker lacks.
-            let mut need: Vec<u32> = Vec::new();
+            // The stream segments this worker lacks: of the drawn cells up to their
+            // precisions, of their ancestors up to their maximal ones.
+            let precision: std::collections::HashMap<u32, u8> = selection.iter().copied().collect();
+            let mut need: std::collections::BTreeMap<u32, u8> = std::collections::BTreeMap::new();
             for &c in &draw {
-                let mut x = c;
-                while x != u32::MAX && !need.contains(&x) {
-                    need.push(x);
+                need.insert(c, precision[&c]);
+                let mut x = file.tree.nodes[c as usize].parent;
+                while x != u32::MAX {
+                    need.insert(x, file.tree.max_prec(x));
                     x = file.tree.nodes[x as usize].parent;
                 }
             }
-            need.sort_unstable();
             let held = &mut self.held[w - 1];
             let mut cells = Vec::new();
             let mut bytes = 0;
-            for c in need {
-                if file.entries[c as usize].len > 0 && held.insert(c) {
-                    let b = file.cell_bytes(c)?.to_vec();
-                    bytes += b.len();
-                    cells.push((c, b));
+            for (c, b) in need {
+                let upto = file.entries[c as usize].needed(file.tree.min_prec(c), b);
+                let have = held.entry(c).or_insert(0);
+                if upto > *have {
+                    let piece = file.cell_range(c, *have, upto)?;
+                    bytes += piece.len();
+                    cells.push((c, *have, piece));
+                    *have = upto;
                 }
             }
             stats.drawn += draw.len() as u32;

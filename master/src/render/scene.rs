@@ -25,11 +25,12 @@ pub(super) enum Scene {
 }
 
 /// An `.nsp` model: its header and cell tables (the streams stay on disk until a worker
-/// needs one), and the cells each worker holds (workers keep every stream they are sent).
+/// needs them), and the bytes of each cell's stream each worker holds (workers keep what
+/// they are sent: the segments up to the highest precision they were asked for).
 pub(super) struct NspScene {
     pub file: codec::nsp::NspFile,
-    /// Indexed by worker rank - 1.
-    pub held: Vec<std::collections::HashSet<u32>>,
+    /// Indexed by worker rank - 1: cell -> bytes held.
+    pub held: Vec<std::collections::HashMap<u32, u32>>,
 }
 
 /// A chunked BFT model, memory-mapped, and rank 0's mirror of every worker's chunk cache
