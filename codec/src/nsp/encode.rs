@@ -251,7 +251,7 @@ pub(super) fn record_local(
             .expect("the encoder's own answers are always consistent");
         max_cells = max_cells.max(cx.cells.len());
         max_tops = max_tops.max(cx.peak_tops);
-        if (level + 1 - l0) % 3 == 0 {
+        if (level + 1 - l0).is_multiple_of(3) {
             level_ends.push(bits.len() as u32);
         }
     }
