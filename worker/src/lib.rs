@@ -39,14 +39,14 @@ pub struct RenderMesh {
 impl RenderMesh {
     /// Flat-shaded buffers: three vertices of its own per triangle, each with the
     /// triangle's unit normal (+Z for a degenerate one).
-    pub fn flat(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> RenderMesh {
+    pub fn flat(triangles: &[[[f32; 3]; 3]]) -> RenderMesh {
         let mut out = RenderMesh {
             positions: Vec::with_capacity(triangles.len() * 3),
             normals: Vec::with_capacity(triangles.len() * 3),
             indices: (0..triangles.len() as u32 * 3).collect(),
         };
         for t in triangles {
-            let [a, b, c] = t.map(|i| glam::Vec3::from(positions[i as usize]));
+            let [a, b, c] = t.map(glam::Vec3::from);
             let n = (b - a).cross(c - a).try_normalize().unwrap_or(glam::Vec3::Z).to_array();
             for p in [a, b, c] {
                 out.positions.push(p.to_array());

@@ -496,8 +496,8 @@ impl NspView {
         }
         let start = Instant::now();
         let states = self.nav.update(&self.file, &want).map_err(WorkerError::Nsp)?;
-        let drawn = codec::nsp::view::draw(&self.file, &job.selection, &states);
-        let mesh = RenderMesh::flat(&drawn.positions, &drawn.triangles);
+        let drawn = codec::nsp::view::draw_flat(&self.file, &job.selection, &states);
+        let mesh = RenderMesh::flat(&drawn);
         let decode_ms = start.elapsed().as_secs_f64() * 1e3;
         let view_proj = Mat4::from_cols_array(&job.view_proj);
         for &(index, [x0, y0, x1, y1]) in &job.tiles {
@@ -525,7 +525,7 @@ impl NspView {
                         render_ms: times.render_ms * part,
                         readback_ms: times.readback_ms * part,
                     },
-                    triangles: drawn.triangles.len() as u32,
+                    triangles: drawn.len() as u32,
                     rgba: crop(&rgba, group.rect, rect),
                 });
             }

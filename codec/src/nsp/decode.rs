@@ -221,7 +221,8 @@ impl NspFile {
             let mut groups = vec![Vec::new(); params.fan_out() as usize];
             for &k in &parent.cx.order {
                 let kd = &parent.cx.cells[k as usize];
-                let (q, _) = super::kd_corner(kd.prefix, kd.level, bits);
+                // At the parent's maximal precision every axis has `bits` bits.
+                let q = kd.xyz;
                 if (0..3).all(|a| q[a] >> (shift + pl) == pnode.coords[a]) {
                     let local = [(q[0] >> shift) & mask, (q[1] >> shift) & mask, (q[2] >> shift) & mask];
                     groups[params.child_index(local) as usize].push(k);

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use glam::{Mat4, Vec3};
 
 use super::decode::{CellState, NspFile};
-use super::{kd_centre, kd_corner, NspError};
+use super::NspError;
 use crate::view::{box_screen_rect, Camera};
 
 /// Triangles drawn from a set of cells, with shared vertices.
@@ -45,16 +45,34 @@ enum Loc {
     Nowhere,
 }
 
-/// Draws the cells of `states` as members of the view `selection` (the cells drawn and
-/// their precisions, an antichain of the tree; every state's cell is in it), with the border
-/// rule: a border triangle is drawn once, by the cell of highest (precision, postorder
-/// index) among the selected cells its corners lie in; its corners in coarser selected cells
-/// move to those cells' kd-cells that hold them (the ancestor at that precision). Cells not
-/// selected count as `-inf` (NSP.md 1.10: the paper's `p_i = p_c` would drop triangles at the
-/// edge of the view). A triangle depends only on its own cell's state and the selection, so
-/// drawing any subset of the selected cells gives exactly those cells' triangles of the
-/// whole drawing, in the same order (the cluster relies on it).
-pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Drawn {
+/// A drawn corner: a kd-cell's level and its per-axis coordinates there.
+type Corner = (u8, [u32; 3]);
+
+/// The centre of a kd-cell in world units.
+fn centre(file: &NspFile, (level, xyz): Corner) -> [f32; 3] {
+    let bits = file.header.params.bits as u32;
+    let mut g = [0f64; 3];
+    for a in 0..3 {
+        let free = bits - (level as u32 + 2 - a as u32) / 3;
+        g[a] = (xyz[a] as f64 + 0.5) * (1u64 << free) as f64;
+    }
+    file.header.cube.world(g)
+}
+
+/// What [`walk`] counts besides the triangles it hands out.
+#[derive(Default)]
+struct Counts {
+    edges: u64,
+    points: u64,
+    left_to_others: u64,
+    stitched: u64,
+    collapsed: u64,
+    merged: u64,
+}
+
+/// The border rule over `states`, as [`draw`] describes it: calls `emit` with each drawn
+/// triangle's corners, cell by cell in postorder, each cell's triangles in arena order.
+fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit: impl FnMut([Corner; 3])) -> Counts {
     let tree = &file.tree;
     let bits = file.header.params.bits;
     let pl = file.header.params.level_bits() as u32;
@@ -62,8 +80,9 @@ pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> D
     for &(c, b) in selection {
         selected[c as usize] = Some(b.clamp(tree.min_prec(c), tree.max_prec(c)));
     }
-    let locate = |prefix: u128, level: u8| -> Loc {
-        let (corner, used) = kd_corner(prefix, level, bits);
+    let locate = |level: u8, xyz: [u32; 3]| -> Loc {
+        let used: [u8; 3] = [0, 1, 2].map(|a| ((level as usize + 2 - a) / 3) as u8);
+        let corner: [u32; 3] = [0, 1, 2].map(|a| xyz[a] << (bits - used[a]));
         let mut node = tree.root();
         loop {
             if let Some(b) = selected[node as usize] {
@@ -103,31 +122,35 @@ pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> D
             };
         }
     };
-    let mut out = Drawn::default();
-    let mut vertex: HashMap<(u8, u128), u32> = HashMap::new();
-    let mut seen: std::collections::HashSet<[u32; 3]> = std::collections::HashSet::new();
+    let mut counts = Counts::default();
+    // Stitching can map two border triangles of finer cells onto the same coarse triangle;
+    // the complex is a set, so it is drawn once. (A stitched triangle keeps a corner finer
+    // than any coarser cell's, so it can only repeat another stitched one.)
+    let mut stitched_seen: std::collections::HashSet<[Corner; 3]> = std::collections::HashSet::new();
     let mut states: Vec<&CellState> = states.to_vec();
     states.sort_by_key(|s| s.cell);
+    let mut locs: Vec<Option<Loc>> = Vec::new();
     for s in states {
         let pc = s.precision();
         let me = (pc, s.cell);
-        let mut locs: HashMap<u32, Loc> = HashMap::new();
+        locs.clear();
+        locs.resize(s.cx.cells.len(), None);
         for top in s.cx.iter_tops() {
             match top.dim {
-                0 => out.points += 1,
-                1 => out.edges += 1,
+                0 => counts.points += 1,
+                1 => counts.edges += 1,
                 _ => {}
             }
             if top.dim != 2 {
                 continue;
             }
-            let mut corners = [(0u8, 0u128); 3];
+            let mut corners = [(0u8, [0u32; 3]); 3];
             let mut dropped = false;
             let mut moved = false;
             for (corner, &v) in corners.iter_mut().zip(&top.v) {
                 let kd = &s.cx.cells[v as usize];
-                let loc = *locs.entry(v).or_insert_with(|| locate(kd.prefix, kd.level));
-                *corner = (kd.level, kd.prefix);
+                let loc = *locs[v as usize].get_or_insert_with(|| locate(kd.level, kd.xyz));
+                *corner = (kd.level, kd.xyz);
                 match loc {
                     Loc::Drawn(_, c) if c == s.cell => {}
                     Loc::Drawn(p, c) | Loc::Spanning(p, c) => {
@@ -138,7 +161,11 @@ pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> D
                         if let Loc::Drawn(..) = loc {
                             let level = 3 * p;
                             if level < kd.level {
-                                *corner = (level, kd.prefix >> (kd.level - level));
+                                let xyz = [0, 1, 2].map(|a| {
+                                    let (fine, coarse) = ((kd.level as u32 + 2 - a) / 3, (level as u32 + 2 - a) / 3);
+                                    kd.xyz[a as usize] >> (fine - coarse)
+                                });
+                                *corner = (level, xyz);
                                 moved = true;
                             }
                         }
@@ -147,31 +174,63 @@ pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> D
                 }
             }
             if dropped {
-                out.left_to_others += 1;
+                counts.left_to_others += 1;
                 continue;
             }
-            out.stitched += moved as u64;
-            let ids = corners.map(|(level, prefix)| {
-                *vertex.entry((level, prefix)).or_insert_with(|| {
-                    out.positions.push(file.header.cube.world(kd_centre(prefix, level, bits)));
-                    out.positions.len() as u32 - 1
-                })
-            });
-            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
-                out.collapsed += 1;
+            if corners[0] == corners[1] || corners[1] == corners[2] || corners[0] == corners[2] {
+                counts.collapsed += 1;
                 continue;
             }
-            // Stitching can map two border triangles of a finer cell onto the same coarse
-            // triangle; the complex is a set, so it is drawn once.
-            let mut key = ids;
-            key.sort_unstable();
-            if !seen.insert(key) {
-                out.merged += 1;
-                continue;
+            if moved {
+                counts.stitched += 1;
+                let mut key = corners;
+                key.sort_unstable();
+                if !stitched_seen.insert(key) {
+                    counts.merged += 1;
+                    continue;
+                }
             }
-            out.triangles.push(ids);
+            emit(corners);
         }
     }
+    counts
+}
+
+/// Draws the cells of `states` as members of the view `selection` (the cells drawn and
+/// their precisions, an antichain of the tree; every state's cell is in it), with the border
+/// rule: a border triangle is drawn once, by the cell of highest (precision, postorder
+/// index) among the selected cells its corners lie in; its corners in coarser selected cells
+/// move to those cells' kd-cells that hold them (the ancestor at that precision). Cells not
+/// selected count as `-inf` (NSP.md 1.10: the paper's `p_i = p_c` would drop triangles at the
+/// edge of the view). A triangle depends only on its own cell's state and the selection, so
+/// drawing any subset of the selected cells gives exactly those cells' triangles of the
+/// whole drawing, in the same order (the cluster relies on it).
+pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Drawn {
+    let mut out = Drawn::default();
+    let mut vertex: HashMap<Corner, u32> = HashMap::new();
+    let counts = walk(file, selection, states, |corners| {
+        let ids = corners.map(|c| {
+            *vertex.entry(c).or_insert_with(|| {
+                out.positions.push(centre(file, c));
+                out.positions.len() as u32 - 1
+            })
+        });
+        out.triangles.push(ids);
+    });
+    out.edges = counts.edges;
+    out.points = counts.points;
+    out.left_to_others = counts.left_to_others;
+    out.stitched = counts.stitched;
+    out.collapsed = counts.collapsed;
+    out.merged = counts.merged;
+    out
+}
+
+/// [`draw`]'s triangles as three positions each (what a flat-shaded render needs; no
+/// vertex is shared, so none is looked up).
+pub fn draw_flat(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Vec<[[f32; 3]; 3]> {
+    let mut out = Vec::new();
+    walk(file, selection, states, |corners| out.push(corners.map(|c| centre(file, c))));
     out
 }
 
