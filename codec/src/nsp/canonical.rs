@@ -1,7 +1,7 @@
 //! Quantization over a cubic box and the canonical complex an `.nsp` file stores (the
 //! lossless contract of the module docs).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use crate::mesh::Mesh;
 
@@ -122,7 +122,8 @@ impl Canonical {
                 cube_extent[a] = cube_extent[a].max(p[a] as f64 - cube.origin[a]);
             }
         }
-        let mut ids: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
+        let mut ids: HashMap<[u32; 3], u32> =
+            HashMap::with_capacity_and_hasher(mesh.positions.len(), Default::default());
         let mut points = Vec::new();
         let remap: Vec<u32> = mesh
             .positions
@@ -165,7 +166,7 @@ impl Canonical {
 /// kept, degenerate images reduced to edges or points, faces of other simplices dropped.
 /// Triangles come first in order of first occurrence, then edges, then points, both sorted.
 pub(crate) fn top_simplices(points: usize, simplices: impl Iterator<Item = Simplex>) -> Vec<Simplex> {
-    let mut seen_tri: std::collections::HashSet<[u32; 3]> = std::collections::HashSet::new();
+    let mut seen_tri: rustc_hash::FxHashSet<[u32; 3]> = rustc_hash::FxHashSet::default();
     let mut out = Vec::new();
     let mut edges = Vec::new();
     for s in simplices {
@@ -177,7 +178,7 @@ pub(crate) fn top_simplices(points: usize, simplices: impl Iterator<Item = Simpl
             _ => {}
         }
     }
-    let mut covered_edge: std::collections::HashSet<[u32; 2]> = std::collections::HashSet::new();
+    let mut covered_edge: rustc_hash::FxHashSet<[u32; 2]> = rustc_hash::FxHashSet::default();
     let mut used = vec![false; points];
     for s in &out {
         let k = s.key();

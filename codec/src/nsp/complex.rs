@@ -8,7 +8,7 @@
 //! top-simplices are recycled through a free list. Ids are arena positions and never decide
 //! anything: every order that the stream depends on is the kd-index order.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use smallvec::SmallVec;
 

@@ -1,6 +1,6 @@
 //! Reading an `.nsp`: the file's tables, and the state of one cell refined from its parent's.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -137,7 +137,7 @@ impl NspFile {
         let whole_len = offset + (n - start) as u64;
         let (offset, _) = format::read_footer(footer, whole_len, start)?;
         let entries = format::read_entries(rows, offset, start)?;
-        Self::assemble(header, table, entries, Source::Received(HashMap::new()), n as u64, whole_len, skeleton)
+        Self::assemble(header, table, entries, Source::Received(HashMap::default()), n as u64, whole_len, skeleton)
     }
 
     /// Stores received bytes `from..` of cell `c`'s stream (whole segments, checked when

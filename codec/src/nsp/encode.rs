@@ -7,7 +7,7 @@
 //! state machine ([`Complex::refine_level`]) and answers its questions from the truth, the
 //! clustering of the cell's simplices at the current (mixed) precision.
 
-use std::collections::{HashMap, HashSet};
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use rayon::prelude::*;
 
@@ -205,7 +205,7 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
     let q = tree.max_prec(c);
     let shift = p - q;
     // The cell's points at precision q, and its simplices clustered there.
-    let mut local: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut local: HashMap<[u32; 3], u32> = HashMap::default();
     let mut coords: Vec<[u32; 3]> = Vec::new();
     let mapped: Vec<Simplex> = members
         .iter()
@@ -310,8 +310,8 @@ impl<'a> Truth<'a> {
             inc,
             mark: vec![u32::MAX; simplices.len()],
             epoch: 0,
-            star: HashSet::new(),
-            orient: HashMap::new(),
+            star: HashSet::default(),
+            orient: HashMap::default(),
         }
     }
 

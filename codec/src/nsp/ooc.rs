@@ -24,7 +24,7 @@
 //! 7. **Output**: header and tables, then each cell's decisions range-coded in turn, then the
 //!    cell table.
 
-use std::collections::{HashMap, HashSet};
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -399,7 +399,7 @@ struct Buckets {
 impl Buckets {
     fn create(dir: &Path, p: u8, bits: u8) -> Result<Buckets, NspError> {
         std::fs::create_dir_all(dir).map_err(io("temporary folder"))?;
-        Ok(Buckets { dir: dir.to_path_buf(), p, bits: bits.min(p), writers: Mutex::new(HashMap::new()) })
+        Ok(Buckets { dir: dir.to_path_buf(), p, bits: bits.min(p), writers: Mutex::new(HashMap::default()) })
     }
 
     fn key(&self, q: [u32; 3]) -> [u32; 3] {
@@ -513,7 +513,7 @@ fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: 
     let mut recs = read_recs(path)?;
     recs.sort_unstable_by_key(Rec::order);
     let inside = |q: [u32; 3]| (0..3).all(|a| q[a] >> (p - bits) == key[a]);
-    let mut ids: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut ids: HashMap<[u32; 3], u32> = HashMap::default();
     let mut coords: Vec<[u32; 3]> = Vec::new();
     let mut order: Vec<u32> = Vec::new();
     let mut simplices = Vec::with_capacity(recs.len());
@@ -533,7 +533,7 @@ fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: 
     canon.counts.points += coords.iter().filter(|&&q| inside(q)).count() as u64;
     // `top_simplices` keeps triangles in first-occurrence order: the first of each is the
     // record of smallest `t` among its copies.
-    let mut first_t: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut first_t: HashMap<[u32; 3], u32> = HashMap::default();
     for (s, r) in simplices.iter().zip(&recs) {
         let img = reduce(*s);
         if img.dim == 2 {
@@ -577,14 +577,14 @@ fn for_each_rec(path: &Path, mut f: impl FnMut(&Rec) -> Result<(), NspError>) ->
 fn partition(params: Params, canon: &Path, progress: &Progress) -> Result<(Tree, CellCounts), NspError> {
     let p = params.bits;
     let pl = params.level_bits();
-    let mut counts: CellCounts = HashMap::new();
+    let mut counts: CellCounts = HashMap::default();
     let mut total = 0u64;
     for_each_rec(canon, |_| {
         total += 1;
         Ok(())
     })?;
     counts.insert((0, [0; 3]), total);
-    let mut splitting: HashSet<[u32; 3]> = HashSet::new();
+    let mut splitting: HashSet<[u32; 3]> = HashSet::default();
     if total >= params.min_simplices as u64 && params.max_prec_at(0) < p {
         splitting.insert([0; 3]);
     }
@@ -593,7 +593,7 @@ fn partition(params: Params, canon: &Path, progress: &Progress) -> Result<(Tree,
     while !splitting.is_empty() {
         progress("partitioning", depth as u64 + 1, 0);
         let shift = p - pl * (depth + 1);
-        let mut child: HashMap<[u32; 3], u64> = HashMap::new();
+        let mut child: HashMap<[u32; 3], u64> = HashMap::default();
         for_each_rec(canon, |r| {
             let mut seen: [[u32; 3]; 3] = [[u32::MAX; 3]; 3];
             for (k, q) in r.corners().iter().enumerate() {
@@ -609,7 +609,7 @@ fn partition(params: Params, canon: &Path, progress: &Progress) -> Result<(Tree,
             Ok(())
         })?;
         depth += 1;
-        let mut next = HashSet::new();
+        let mut next = HashSet::default();
         for (&c, &n) in &child {
             counts.insert((depth, c), n);
             if n >= params.min_simplices as u64 && params.max_prec_at(depth) < p {
@@ -759,7 +759,7 @@ impl Encoding {
         Ok(Encoding {
             next: 0,
             cells: vec![CellInfo::default(); tree.nodes.len()],
-            pending: HashMap::new(),
+            pending: HashMap::default(),
             decisions: BufWriter::with_capacity(1 << 20, File::create(path).map_err(io("temporary file"))?),
             counts: vec![[0; 2]; CONTEXTS],
             leaf_simplices: 0,
@@ -768,7 +768,7 @@ impl Encoding {
 
     /// Encodes the leaves of `batch` (in parallel) and every cell before its last in postorder.
     fn batch(&mut self, tree: &Tree, batch: &Batch) -> Result<(), NspError> {
-        let mut by_leaf: HashMap<u32, Vec<Rec>> = HashMap::new();
+        let mut by_leaf: HashMap<u32, Vec<Rec>> = HashMap::default();
         let mut raw = Vec::new();
         File::open(&batch.path).and_then(|mut f| f.read_to_end(&mut raw)).map_err(io("temporary file"))?;
         for b in raw.chunks_exact(4 + REC_BYTES) {
@@ -860,7 +860,7 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
         }
     }
     let shift = have - q;
-    let mut ids: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut ids: HashMap<[u32; 3], u32> = HashMap::default();
     let mut coords: Vec<[u32; 3]> = Vec::new();
     let mapped: Vec<Simplex> = members
         .iter()
@@ -881,7 +881,7 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
     // with the order of its first copy.
     let min = tree.min_prec(c);
     let down = have - min;
-    let mut seen: HashSet<(u8, [[u32; 3]; 3])> = HashSet::new();
+    let mut seen: HashSet<(u8, [[u32; 3]; 3])> = HashSet::default();
     let mut up = Vec::new();
     for r in &members {
         let mut img = Rec { t: r.t, dim: r.dim, q: [[0; 3]; 3] };
@@ -900,13 +900,18 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
 
 /// A record reduced to its image when corners coincide (orientation kept), as `reduce`.
 fn reduce_rec(r: Rec) -> Rec {
-    let mut ids: Vec<[u32; 3]> = Vec::with_capacity(3);
+    let mut ids = [[0u32; 3]; 3];
+    let mut n = 0;
     let mut s = Simplex { v: [0; 3], dim: r.dim };
     for (k, q) in r.corners().iter().enumerate() {
-        let i = ids.iter().position(|x| x == q).unwrap_or_else(|| {
-            ids.push(*q);
-            ids.len() - 1
-        });
+        let i = match ids[..n].iter().position(|x| x == q) {
+            Some(i) => i,
+            None => {
+                ids[n] = *q;
+                n += 1;
+                n - 1
+            }
+        };
         s.v[k] = i as u32;
     }
     let s = reduce(s);

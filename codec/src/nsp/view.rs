@@ -1,7 +1,7 @@
 //! View-dependent navigation: which cells a view draws at which precision, and drawing
 //! cells of different precisions together with the paper's border rule (section 5.3).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use glam::{Mat4, Vec3};
 
@@ -126,7 +126,7 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
     // Stitching can map two border triangles of finer cells onto the same coarse triangle;
     // the complex is a set, so it is drawn once. (A stitched triangle keeps a corner finer
     // than any coarser cell's, so it can only repeat another stitched one.)
-    let mut stitched_seen: std::collections::HashSet<[Corner; 3]> = std::collections::HashSet::new();
+    let mut stitched_seen: rustc_hash::FxHashSet<[Corner; 3]> = rustc_hash::FxHashSet::default();
     let mut states: Vec<&CellState> = states.to_vec();
     states.sort_by_key(|s| s.cell);
     let mut locs: Vec<Option<Loc>> = Vec::new();
@@ -207,7 +207,7 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
 /// whole drawing, in the same order (the cluster relies on it).
 pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Drawn {
     let mut out = Drawn::default();
-    let mut vertex: HashMap<Corner, u32> = HashMap::new();
+    let mut vertex: HashMap<Corner, u32> = HashMap::default();
     let counts = walk(file, selection, states, |corners| {
         let ids = corners.map(|c| {
             *vertex.entry(c).or_insert_with(|| {
@@ -337,7 +337,7 @@ impl Navigator {
     /// cells' states in selection order.
     pub fn update(&mut self, file: &NspFile, selection: &[(u32, u8)]) -> Result<Vec<&CellState>, NspError> {
         let tree = &file.tree;
-        let mut want: HashMap<u32, u8> = HashMap::new();
+        let mut want: HashMap<u32, u8> = HashMap::default();
         for &(c, b) in selection {
             want.insert(c, b);
             let mut a = tree.nodes[c as usize].parent;
