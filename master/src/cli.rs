@@ -229,10 +229,7 @@ pub enum Nsp {
     Adapt {
         input: PathBuf,
         #[command(flatten)]
-        camera: CameraArgs,
-        /// Frame size in pixels, WIDTHxHEIGHT.
-        #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
-        size: (u32, u32),
+        view: ViewArgs,
         /// Allowed projected error of a vertex, in pixels.
         #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
         error_px: f32,
@@ -269,10 +266,7 @@ pub enum Pm {
     Adapt {
         input: PathBuf,
         #[command(flatten)]
-        camera: CameraArgs,
-        /// Frame size in pixels, WIDTHxHEIGHT.
-        #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
-        size: (u32, u32),
+        view: ViewArgs,
         /// Screen-space error threshold in pixels.
         #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
         error_px: f32,
@@ -417,6 +411,16 @@ impl GridArgs {
     pub fn grid(&self) -> Result<TileGrid> {
         Ok(TileGrid::new(self.size.0, self.size.1, self.tiles.0, self.tiles.1)?)
     }
+}
+
+/// The view a model is adapted to (`pm adapt`, `nsp adapt`): the camera and the frame size.
+#[derive(Args, Clone, Debug)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// Frame size in pixels, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
+    pub size: (u32, u32),
 }
 
 /// The camera; every flag left out comes from the default camera, which frames the model.

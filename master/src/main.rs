@@ -28,15 +28,15 @@ fn main() -> ExitCode {
             codec::pm::DpmOptions { position_bits: *position_bits, normal_bits: *normal_bits },
         ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
-        Command::Pm { pm: Pm::Adapt { input, camera, size, error_px, output, full, normal_weight, gpu } } => {
+        Command::Pm { pm: Pm::Adapt { input, view, error_px, output, full, normal_weight, gpu } } => {
             let opts = master::pm::AdaptOptions {
-                size: *size,
+                size: view.size,
                 error_px: *error_px,
                 normal_weight: *normal_weight,
                 full: *full,
                 gpu: *gpu,
             };
-            master::pm::adapt(input, camera, &opts, output)
+            master::pm::adapt(input, &view.camera, &opts, output)
         }
         Command::Nsp {
             nsp: Nsp::Build { input, output, bits, root_bits, splits, min_simplices, advance, temp_dir },
@@ -51,8 +51,8 @@ fn main() -> ExitCode {
             master::nsp::build(input, output, params, temp_dir.as_deref())
         }
         Command::Nsp { nsp: Nsp::Stats { input, json } } => master::nsp::stats(input, *json),
-        Command::Nsp { nsp: Nsp::Adapt { input, camera, size, error_px, output, full } } => {
-            master::nsp::adapt(input, camera, *size, *error_px, *full, output)
+        Command::Nsp { nsp: Nsp::Adapt { input, view, error_px, output, full } } => {
+            master::nsp::adapt(input, &view.camera, view.size, *error_px, *full, output)
         }
     };
     match result {
