@@ -46,8 +46,9 @@ impl NspFile {
             return Err(NspError::Format(format!("{n} bytes is shorter than any .nsp file")));
         }
         let (header, table, start) = format::read_prefix(&bytes[..n - FOOTER_LEN])?;
-        let (offset, _cells) = format::read_footer(&bytes[n - FOOTER_LEN..], n as u64, start)?;
+        let (offset, cells) = format::read_footer(&bytes[n - FOOTER_LEN..], n as u64, start)?;
         let entries = format::read_entries(&bytes[offset as usize..n - FOOTER_LEN], offset, start)?;
+        check_count(cells, &entries)?;
         let read = (start + (n - offset as usize)) as u64;
         let skeleton = [&bytes[..start], &bytes[offset as usize..]].concat();
         Self::assemble(header, table, entries, Source::Bytes(bytes), read, n as u64, skeleton)
@@ -73,11 +74,11 @@ impl NspFile {
         file.seek(SeekFrom::Start(len - FOOTER_LEN as u64)).map_err(io)?;
         file.read_exact(&mut footer).map_err(io)?;
         let (offset, cells) = format::read_footer(&footer, len, start)?;
-        let _ = cells;
         let mut rows = vec![0u8; (len - FOOTER_LEN as u64 - offset) as usize];
         file.seek(SeekFrom::Start(offset)).map_err(io)?;
         file.read_exact(&mut rows).map_err(io)?;
         let entries = format::read_entries(&rows, offset, start)?;
+        check_count(cells, &entries)?;
         let read = (prefix.len() + rows.len() + FOOTER_LEN) as u64;
         let skeleton = [&prefix[..], &rows, &footer].concat();
         Self::assemble(header, table, entries, Source::File(file), read, len, skeleton)
@@ -135,8 +136,9 @@ impl NspFile {
         // The footer names the table's place in the whole file; the skeleton holds it right
         // after the prefix.
         let whole_len = offset + (n - start) as u64;
-        let (offset, _) = format::read_footer(footer, whole_len, start)?;
+        let (offset, cells) = format::read_footer(footer, whole_len, start)?;
         let entries = format::read_entries(rows, offset, start)?;
+        check_count(cells, &entries)?;
         Self::assemble(header, table, entries, Source::Received(HashMap::default()), n as u64, whole_len, skeleton)
     }
 
@@ -235,6 +237,14 @@ impl NspFile {
         let cx = parent.cx.restrict(inside);
         CellState::new(self, c, cx)
     }
+}
+
+/// The footer's count of cells against the cell table's rows.
+fn check_count(cells: u32, entries: &[CellEntry]) -> Result<(), NspError> {
+    if cells as usize != entries.len() {
+        return Err(NspError::Format(format!("the footer counts {cells} cells, the cell table has {}", entries.len())));
+    }
+    Ok(())
 }
 
 /// One cell's decoded state: its complex at its current precision and where its stream

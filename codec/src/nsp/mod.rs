@@ -198,34 +198,6 @@ pub fn morton(q: [u32; 3], bits: u8) -> u128 {
     m
 }
 
-/// The lower corner of the kd-cell `prefix` at kd `level`, in grid units of `bits` bits, and
-/// the number of bits each axis has consumed.
-#[inline]
-pub fn kd_corner(prefix: u128, level: u8, bits: u8) -> ([u32; 3], [u8; 3]) {
-    let mut q = [0u32; 3];
-    for i in 0..level as u32 {
-        let bit = ((prefix >> (level as u32 - 1 - i)) & 1) as u32;
-        let axis = (i % 3) as usize;
-        q[axis] = (q[axis] << 1) | bit;
-    }
-    let mut used = [0u8; 3];
-    for (a, u) in used.iter_mut().enumerate() {
-        *u = ((level as usize + 2 - a) / 3) as u8;
-        q[a] <<= bits - *u;
-    }
-    (q, used)
-}
-
-/// The centre of a kd-cell in grid units of `bits` bits.
-pub fn kd_centre(prefix: u128, level: u8, bits: u8) -> [f64; 3] {
-    let (q, used) = kd_corner(prefix, level, bits);
-    let mut c = [0.0; 3];
-    for a in 0..3 {
-        c[a] = q[a] as f64 + (1u64 << (bits - used[a])) as f64 * 0.5;
-    }
-    c
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -236,9 +208,11 @@ mod tests {
         let m = morton(q, 4);
         for level in 0..=12u8 {
             let prefix = m >> (12 - level);
-            let (corner, used) = kd_corner(prefix, level, 4);
+            let xyz = complex::xyz_of(prefix, level);
             for a in 0..3 {
-                assert_eq!(corner[a], (q[a] >> (4 - used[a])) << (4 - used[a]), "level {level} axis {a}");
+                // Axis a has consumed ceil((level - a) / 3) bits: the top ones of q[a].
+                let used = (level as u32 + 2 - a as u32) / 3;
+                assert_eq!(xyz[a], q[a] >> (4 - used), "level {level} axis {a}");
             }
         }
     }
