@@ -188,31 +188,39 @@ pub(super) fn code_cell(bits: &[u16], table: &[u16]) -> Vec<u8> {
 /// Runs cell `c`'s refinement from its minimal to its maximal precision on its simplices
 /// (ids into `canon.simplices`, ascending), recording every decision.
 fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recorded {
-    if members.is_empty() {
-        return Recorded::empty();
-    }
-    let mut reach = [[u32::MAX; 3], [0u32; 3]];
-    for &s in members {
-        for &v in canon.simplices[s as usize].verts() {
-            let g = canon.points[v as usize];
-            for a in 0..3 {
-                reach[0][a] = reach[0][a].min(g[a]);
-                reach[1][a] = reach[1][a].max(g[a]);
-            }
+    let shift = tree.params.bits - tree.max_prec(c);
+    let corners = members.iter().map(|&s| {
+        let t = canon.simplices[s as usize];
+        let mut q = [[0u32; 3]; 3];
+        for (corner, &v) in q.iter_mut().zip(t.verts()) {
+            *corner = canon.points[v as usize];
         }
-    }
-    let p = tree.params.bits;
-    let q = tree.max_prec(c);
-    let shift = p - q;
-    // The cell's points at precision q, and its simplices clustered there.
+        (t.dim, q)
+    });
+    record_local(tree, c, corners, shift)
+}
+
+/// Records cell `c`'s decisions from its simplices, each given by its dimension and corners
+/// on a grid `shift` bits finer than the cell's maximal precision, in input order (triangles
+/// by first occurrence first). The reach is the box of the corners as given.
+pub(super) fn record_local(
+    tree: &Tree,
+    c: u32,
+    simplices: impl Iterator<Item = (u8, [[u32; 3]; 3])>,
+    shift: u8,
+) -> Recorded {
+    // The cell's points at its maximal precision, and its simplices on them.
+    let mut reach = [[u32::MAX; 3], [0u32; 3]];
     let mut local: HashMap<[u32; 3], u32> = HashMap::default();
     let mut coords: Vec<[u32; 3]> = Vec::new();
-    let mapped: Vec<Simplex> = members
-        .iter()
-        .map(|&s| {
-            let mut t = canon.simplices[s as usize];
-            for k in 0..=t.dim as usize {
-                let g = canon.points[t.v[k] as usize];
+    let mapped: Vec<Simplex> = simplices
+        .map(|(dim, corners)| {
+            let mut t = Simplex { v: [0; 3], dim };
+            for (k, g) in corners[..dim as usize + 1].iter().enumerate() {
+                for a in 0..3 {
+                    reach[0][a] = reach[0][a].min(g[a]);
+                    reach[1][a] = reach[1][a].max(g[a]);
+                }
                 let g = [g[0] >> shift, g[1] >> shift, g[2] >> shift];
                 t.v[k] = *local.entry(g).or_insert_with(|| {
                     coords.push(g);
@@ -222,18 +230,9 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
             t
         })
         .collect();
-    record_local(tree, c, &coords, mapped, reach)
-}
-
-/// Records cell `c`'s decisions from its simplices `mapped` on points `coords` at its
-/// maximal precision (simplices in input order: triangles by first occurrence first).
-pub(super) fn record_local(
-    tree: &Tree,
-    c: u32,
-    coords: &[[u32; 3]],
-    mapped: Vec<Simplex>,
-    reach: [[u32; 3]; 2],
-) -> Recorded {
+    if mapped.is_empty() {
+        return Recorded::empty();
+    }
     let mut bits = Vec::new();
     let q = tree.max_prec(c);
     let simplices = top_simplices(coords.len(), mapped.into_iter());

@@ -848,35 +848,9 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
     members.sort_unstable_by_key(Rec::order);
     let q = tree.max_prec(c);
     let have = if tree.is_leaf(c) { tree.params.bits } else { q };
-    let mut reach = [[u32::MAX; 3], [0u32; 3]];
-    if tree.is_leaf(c) {
-        for r in &members {
-            for q in r.corners() {
-                for a in 0..3 {
-                    reach[0][a] = reach[0][a].min(q[a]);
-                    reach[1][a] = reach[1][a].max(q[a]);
-                }
-            }
-        }
-    }
-    let shift = have - q;
-    let mut ids: HashMap<[u32; 3], u32> = HashMap::default();
-    let mut coords: Vec<[u32; 3]> = Vec::new();
-    let mapped: Vec<Simplex> = members
-        .iter()
-        .map(|r| {
-            let mut s = Simplex { v: [0; 3], dim: r.dim };
-            for (k, g) in r.corners().iter().enumerate() {
-                let g = [g[0] >> shift, g[1] >> shift, g[2] >> shift];
-                s.v[k] = *ids.entry(g).or_insert_with(|| {
-                    coords.push(g);
-                    coords.len() as u32 - 1
-                });
-            }
-            s
-        })
-        .collect();
-    let rec = record_local(tree, c, &coords, mapped, reach);
+    // An internal cell's reach computed here is at its maximal precision; the caller
+    // replaces it with its children's.
+    let rec = record_local(tree, c, members.iter().map(|r| (r.dim, r.q)), have - q);
     // For the parent: the simplices clustered at this cell's minimal precision, each once,
     // with the order of its first copy.
     let min = tree.min_prec(c);
