@@ -57,10 +57,12 @@ fn main() {
         built.leaf_simplices as f64 / canon.simplices.len() as f64
     );
     let file = NspFile::from_bytes(built.bytes).unwrap();
-    // Every leaf at full precision through a navigator, which counts every vertex split
-    // (ancestors' included).
-    let cut: Vec<(u32, u8)> =
-        nsp::decode::decode_uniform_states(&file, params.bits).unwrap().iter().map(|s| (s.cell, params.bits)).collect();
+    // Every non-empty leaf at full precision through a navigator, which counts every vertex
+    // split (ancestors' included).
+    let cut: Vec<(u32, u8)> = (0..file.tree.nodes.len() as u32)
+        .filter(|&c| file.tree.is_leaf(c) && file.entries[c as usize].len > 0)
+        .map(|c| (c, params.bits))
+        .collect();
     let t = Instant::now();
     let mut nav = nsp::view::Navigator::default();
     let states = nav.update(&file, &cut).unwrap();

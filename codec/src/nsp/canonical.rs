@@ -103,11 +103,6 @@ pub struct Canonical {
 }
 
 impl Canonical {
-    /// The extent of the input's bounding box from the cube's origin, per axis.
-    pub fn extent(&self) -> [f64; 3] {
-        self.cube_extent
-    }
-
     pub fn triangles(&self) -> usize {
         self.simplices.iter().filter(|s| s.dim == 2).count()
     }

@@ -170,12 +170,13 @@ impl NspFile {
         if from > to || to > e.len || !e.is_boundary(from) || !e.is_boundary(to) {
             return Err(NspError::Cell { cell: c, what: format!("bytes {from}..{to} are not whole segments") });
         }
-        let whole: Vec<u8> = match &self.source {
-            Source::Bytes(b) => b[e.offset as usize..(e.offset + to as u64) as usize].to_vec(),
+        let range = (e.offset + from as u64) as usize..(e.offset + to as u64) as usize;
+        let bytes: Vec<u8> = match &self.source {
+            Source::Bytes(b) => b[range].to_vec(),
             Source::File(f) => {
                 use std::os::unix::fs::FileExt;
-                let mut buf = vec![0u8; to as usize];
-                f.read_exact_at(&mut buf[from as usize..], e.offset + from as u64)
+                let mut buf = vec![0u8; (to - from) as usize];
+                f.read_exact_at(&mut buf, range.start as u64)
                     .map_err(|err| NspError::Cell { cell: c, what: format!("cannot read its stream: {err}") })?;
                 buf
             }
@@ -187,14 +188,14 @@ impl NspFile {
                         what: format!("needs {to} bytes of its stream, {} were received", held.len()),
                     });
                 }
-                held[..to as usize].to_vec()
+                held[from as usize..to as usize].to_vec()
             }
         };
         self.bytes_read.fetch_add((to - from) as u64, Ordering::Relaxed);
-        if let Err(k) = e.check(&whole, from, to) {
+        if let Err(k) = e.check(&bytes, from) {
             return Err(NspError::Cell { cell: c, what: format!("stream checksum mismatch (segment {k})") });
         }
-        Ok(whole[from as usize..].to_vec())
+        Ok(bytes)
     }
 
     /// The root's state at its minimal precision (0 bits: one point).

@@ -78,7 +78,7 @@ impl Header {
             input_triangles: canon.input_triangles,
             input_vertices: canon.input_vertices,
             cells: 0,
-            extent: canon.extent(),
+            extent: canon.cube_extent,
             leaf_simplices: 0,
         }
     }
@@ -166,12 +166,16 @@ impl CellEntry {
         self.ends[((bits - min_prec) as usize).min(self.ends.len()) - 1]
     }
 
-    /// Checks `bytes[from..to]`, made of whole segments, against their CRCs; the index of the
-    /// first bad segment otherwise.
-    pub fn check(&self, bytes: &[u8], from: u32, to: u32) -> Result<(), usize> {
+    /// Checks `bytes`, the stream's bytes `from..from + bytes.len()` (whole segments),
+    /// against their segments' CRCs; the index of the first bad segment otherwise.
+    pub fn check(&self, bytes: &[u8], from: u32) -> Result<(), usize> {
+        let to = from + bytes.len() as u32;
         let mut start = 0u32;
         for (k, (&end, &crc)) in self.ends.iter().zip(&self.segment_crcs).enumerate() {
-            if start >= from && end <= to && crc32fast::hash(&bytes[start as usize..end as usize]) != crc {
+            if start >= from
+                && end <= to
+                && crc32fast::hash(&bytes[(start - from) as usize..(end - from) as usize]) != crc
+            {
                 return Err(k);
             }
             start = end;

@@ -3,7 +3,7 @@
 
 use rustc_hash::FxHashMap as HashMap;
 
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 
 use super::decode::{CellState, NspFile};
 use super::NspError;
@@ -395,14 +395,4 @@ impl Navigator {
     pub fn cells(&self) -> usize {
         self.states.len()
     }
-
-    /// Kd-cells and top-simplices held by the decoded cells.
-    pub fn held(&self) -> (usize, usize) {
-        self.states.values().fold((0, 0), |(k, t), s| (k + s.cx.cells.len(), t + s.cx.live_tops()))
-    }
-}
-
-/// The eye-distance precision of a point, for tests and figures.
-pub fn wanted_at(view: &View, side: f64, p: Vec3) -> f64 {
-    view.wanted_bits(side, (p - view.camera.eye).length() as f64)
 }

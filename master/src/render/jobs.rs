@@ -357,18 +357,17 @@ impl NspScene {
             if tiles.is_empty() {
                 continue;
             }
-            let draw: Vec<u32> = selection
+            let drawn: Vec<(u32, u8)> = selection
                 .iter()
                 .zip(&reach)
                 .filter(|(_, r)| r.is_some_and(|r| tiles.iter().any(|&(_, t)| overlaps(r, t))))
-                .map(|(&(c, _), _)| c)
+                .map(|(&cell, _)| cell)
                 .collect();
             // The stream segments this worker lacks: of the drawn cells up to their
             // precisions, of their ancestors up to their maximal ones.
-            let precision: std::collections::HashMap<u32, u8> = selection.iter().copied().collect();
             let mut need: std::collections::BTreeMap<u32, u8> = std::collections::BTreeMap::new();
-            for &c in &draw {
-                need.insert(c, precision[&c]);
+            for &(c, b) in &drawn {
+                need.insert(c, b);
                 let mut x = file.tree.nodes[c as usize].parent;
                 while x != u32::MAX {
                     need.insert(x, file.tree.max_prec(x));
@@ -388,7 +387,7 @@ impl NspScene {
                     *have = upto;
                 }
             }
-            stats.drawn += draw.len() as u32;
+            stats.drawn += drawn.len() as u32;
             stats.sent += cells.len() as u32;
             stats.bytes_sent += bytes as u64;
             for (k, &(index, _)) in tiles.iter().enumerate() {
@@ -408,7 +407,7 @@ impl NspScene {
                 height: grid.height,
                 view_proj: vp.to_cols_array(),
                 selection: selection.clone(),
-                draw,
+                draw: drawn.iter().map(|&(c, _)| c).collect(),
                 cells,
                 tiles,
             };
