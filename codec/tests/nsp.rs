@@ -135,14 +135,20 @@ fn views(file: &NspFile) -> Vec<view::View> {
 #[test]
 fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
     let mesh = testkit::load_mesh("stanford/armadillo_100k.obj.gz");
-    let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance: 0 });
+    for advance in [0, 2] {
+        let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance });
+        views_once_and_reversible(&file);
+    }
+}
+
+fn views_once_and_reversible(file: &NspFile) {
     let mut nav = view::Navigator::default();
     let mut mixed = 0;
-    for v in views(&file) {
-        let sel = view::select(&file, &v);
+    for v in views(file) {
+        let sel = view::select(file, &v);
         let precisions: std::collections::HashSet<u8> = sel.iter().map(|s| s.1).collect();
         mixed += (precisions.len() > 1) as usize;
-        let drawn = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
+        let drawn = view::draw(file, &sel, &nav.update(file, &sel).unwrap());
         let set = oriented_set(&drawn.positions, &drawn.triangles);
         let mut unoriented: Vec<_> = set
             .iter()
@@ -160,12 +166,12 @@ fn views_draw_each_triangle_once_and_coarsening_gives_back_the_same_state() {
     }
     assert!(mixed >= 3, "the views must mix precisions");
     // Refine every drawn cell two bits, then coarsen back: the same complex.
-    let sel = view::select(&file, &views(&file)[0]);
-    let before = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
+    let sel = view::select(file, &views(file)[0]);
+    let before = view::draw(file, &sel, &nav.update(file, &sel).unwrap());
     let finer: Vec<(u32, u8)> = sel.iter().map(|&(c, b)| (c, b + 2)).collect();
-    let refined = view::draw(&file, &finer, &nav.update(&file, &finer).unwrap());
+    let refined = view::draw(file, &finer, &nav.update(file, &finer).unwrap());
     assert!(refined.triangles.len() > before.triangles.len());
-    let after = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
+    let after = view::draw(file, &sel, &nav.update(file, &sel).unwrap());
     assert_eq!(oriented_set(&after.positions, &after.triangles), oriented_set(&before.positions, &before.triangles));
 }
 
@@ -187,25 +193,34 @@ fn open_edges(d: &view::Drawn) -> usize {
 #[test]
 fn border_rule_cracks_are_counted_on_a_closed_model() {
     let mesh = testkit::load_mesh("stanford/bunny00_cgal_75k.obj.gz");
-    let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance: 0 });
-    let full = decode::decode_all(&file).unwrap();
-    assert_eq!(open_edges(&full), 0, "the full decode of a closed mesh is closed");
-    let mut nav = view::Navigator::default();
-    for v in views(&file).iter().take(4) {
-        let sel = view::select(&file, v);
-        let d = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
-        let max = sel.iter().map(|s| s.1).max().unwrap();
-        let uniform = decode::decode_uniform(&file, max).unwrap();
-        eprintln!(
-            "view: {} cells, precisions {}..{} bits: {} open edges (uniform at {max} bits: {}), {} triangles, {} stitched",
-            sel.len(),
-            sel.iter().map(|s| s.1).min().unwrap(),
-            max,
-            open_edges(&d),
-            open_edges(&uniform),
-            d.triangles.len(),
-            d.stitched
-        );
+    for advance in [0, 2] {
+        let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance });
+        let full = decode::decode_all(&file).unwrap();
+        assert_eq!(open_edges(&full), 0, "the full decode of a closed mesh is closed");
+        let mut nav = view::Navigator::default();
+        for v in views(&file).iter().take(4) {
+            let sel = view::select(&file, v);
+            let d = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
+            let max = sel.iter().map(|s| s.1).max().unwrap();
+            let uniform = decode::decode_uniform(&file, max).unwrap();
+            // With the advance a vertex is drawn where the cell it lies in puts it; only a
+            // kd-cell spanning several cells (or outside every drawn one) can be drawn at two
+            // positions, both inside it.
+            let min = sel.iter().map(|s| s.1).min().unwrap();
+            assert!(d.split_distance as f64 <= file.header.cube.side * 3f64.sqrt() / (1u64 << min) as f64);
+            assert!(d.split_vertices as usize <= d.triangles.len() / 1000, "{} split vertices", d.split_vertices);
+            eprintln!(
+                "--advance {advance}: {} cells, precisions {min}..{max} bits: {} open edges (uniform at {max} bits: {}), \
+                 {} triangles, {} stitched, {} vertices drawn at two positions (at most {:.2} kd-cells of {min} bits apart)",
+                sel.len(),
+                open_edges(&d),
+                open_edges(&uniform),
+                d.triangles.len(),
+                d.stitched,
+                d.split_vertices,
+                d.split_distance as f64 / (file.header.cube.side / (1u64 << min) as f64)
+            );
+        }
     }
 }
 
@@ -274,5 +289,104 @@ fn the_out_of_core_build_writes_the_in_core_file() {
         assert_eq!(built.bytes as usize, out.len());
         assert!(out == in_core.bytes, "{rel}: {} bytes out of core, {} in core", out.len(), in_core.bytes.len());
         assert_eq!(built.cells, in_core.tree.nodes.len());
+    }
+}
+
+/// Triangles as the `b`-bit grid cells their corners lie in, rotated so the smallest comes
+/// first (orientation kept).
+fn cell_set(cube: &nsp::Cube, b: u8, positions: &[[f32; 3]], tris: &[[u32; 3]]) -> Vec<[[u32; 3]; 3]> {
+    let cell = |i: u32| cube.quantize(positions[i as usize]).map(|x| x >> (cube.bits - b));
+    let mut out: Vec<[[u32; 3]; 3]> = tris
+        .iter()
+        .map(|t| {
+            let p = t.map(cell);
+            let r = (0..3).min_by_key(|&r| p[r]).unwrap();
+            [p[r], p[(r + 1) % 3], p[(r + 2) % 3]]
+        })
+        .collect();
+    out.sort_unstable();
+    out
+}
+
+/// Section 7's geometry advance: with `m` bits of advance the full decode is still the
+/// canonical complex (the files differ), at every uniform precision `b` the connectivity is
+/// still the vertex clustering at `b`, and a kd-cell inside the cell that holds it is drawn
+/// at the mean of the centres of its non-empty descendants at `min(b + m, p)` bits.
+#[test]
+fn the_geometry_advance_draws_clustering_at_descendant_means_and_stays_lossless() {
+    for rel in ["classic/suzanne.obj", "degenerate/non_manifold_face_graph.obj", "stanford/bunny_zipper_c3d.obj.gz"] {
+        let mesh = testkit::load_mesh(rel);
+        for m in [1u8, 3] {
+            let (canon, file) = build(&mesh, Params { advance: m, ..small_params(12, 400) });
+            let drawn = decode::decode_all(&file).unwrap();
+            let want = canon.to_mesh();
+            assert_eq!(
+                oriented_set(&drawn.positions, &drawn.triangles),
+                oriented_set(&want.positions, &want.triangles),
+                "{rel} with m = {m}"
+            );
+        }
+    }
+    let mesh = testkit::load_mesh("stanford/dragon_vrip_res4.ply.gz");
+    let p = 14u8;
+    let m = 2u8;
+    let (canon, file) = build(&mesh, Params { advance: m, ..small_params(p, 300) });
+    let (_, plain) = build(&mesh, small_params(p, 300));
+    assert!(file.tree.nodes.len() > 64, "the test needs a split tree");
+    assert!(file.tree.nodes == plain.tree.nodes, "the advance does not change the partition");
+    let mut inside = 0usize;
+    for b in 0..=p {
+        let drawn = decode::decode_uniform(&file, b).unwrap();
+        let (pos, tris) = clustering(&canon, b);
+        assert_eq!(
+            cell_set(&canon.cube, b, &drawn.positions, &drawn.triangles),
+            cell_set(&canon.cube, b, &pos, &tris),
+            "connectivity at {b} bits"
+        );
+        // The descendants of each b-bit cell among all the model's points.
+        let f = (b + m).min(p);
+        let mut desc: HashMap<[u32; 3], Vec<[u32; 3]>> = HashMap::new();
+        for q in &canon.points {
+            desc.entry(q.map(|x| x >> (p - b))).or_default().push(q.map(|x| x >> (p - f)));
+        }
+        for s in decode::decode_uniform_states(&file, b).unwrap() {
+            for &v in &s.cx.order {
+                let kd = &s.cx.cells[v as usize];
+                let full = kd.xyz.map(|x| x << (p - b));
+                if !file.tree.contains(s.cell, full, p) {
+                    continue;
+                }
+                let mut d = desc[&kd.xyz].clone();
+                d.sort_unstable();
+                d.dedup();
+                let unit = (1u64 << (p - f)) as f64;
+                let mean =
+                    [0, 1, 2].map(|a| d.iter().map(|g| (g[a] as f64 + 0.5) * unit).sum::<f64>() / d.len() as f64);
+                let got = s.cx.position(v, p);
+                for a in 0..3 {
+                    assert!((got[a] - mean[a]).abs() < 1e-6, "cell {} at {b} bits: {got:?} != {mean:?}", s.cell);
+                }
+                inside += 1;
+            }
+        }
+    }
+    assert!(inside > 10_000, "{inside} kd-cells checked");
+}
+
+/// The out-of-core builder writes the in-core file with the geometry advance too (its
+/// children hand their parents points `m` bits finer).
+#[test]
+fn the_out_of_core_build_writes_the_in_core_file_with_the_advance() {
+    let limits = nsp::ooc::Limits { bucket_records: 700, batch_records: 900 };
+    for (rel, bits, min, m) in
+        [("stanford/dragon_vrip_res3.ply.gz", 14u8, 1500u32, 2u8), ("classic/suzanne.obj", 12, 200, 3)]
+    {
+        let path = testkit::mesh_path(rel);
+        let params = Params { bits, root_bits: 5, splits: 4, min_simplices: min, advance: m };
+        let mesh = codec::load_path(&path).unwrap();
+        let in_core = nsp::encode(&Canonical::of_mesh(&mesh, bits).unwrap(), params, &|_| {}).unwrap();
+        let mut out = Vec::new();
+        nsp::ooc::build_file_with(&path, params, None, &mut out, &|_, _, _| {}, limits).unwrap();
+        assert!(out == in_core.bytes, "{rel}: {} bytes out of core, {} in core", out.len(), in_core.bytes.len());
     }
 }

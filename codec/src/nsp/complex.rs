@@ -46,6 +46,9 @@ pub trait Oracle {
     fn symbol(&mut self, v0: u32, v1: u32, tau: &[u32]) -> u8;
     /// Whether `t` has the true orientation of the triangle on its vertex set.
     fn oriented(&mut self, t: [u32; 3]) -> bool;
+    /// With a geometry advance: the occupancy of the halves of the kd-cell `prefix` at kd
+    /// `level` among the cell's finest points (both, second only).
+    fn occupancy(&mut self, prefix: u128, level: u8) -> (bool, bool);
 }
 
 /// The decoder's oracle: it knows nothing.
@@ -62,6 +65,34 @@ impl Oracle for Blind {
     fn oriented(&mut self, _: [u32; 3]) -> bool {
         true
     }
+    fn occupancy(&mut self, _: u128, _: u8) -> (bool, bool) {
+        (false, false)
+    }
+}
+
+/// A [`BitIo`] that codes nothing and keeps the oracle's answers (the encoder's way of
+/// deriving what the decoder inherits rather than reads).
+pub struct Silent;
+
+impl BitIo for Silent {
+    #[inline]
+    fn bit(&mut self, _: usize, value: bool) -> bool {
+        value
+    }
+}
+
+/// The geometry advance of section 7: geometry runs `levels` kd levels ahead of
+/// connectivity, so each kd-cell knows its non-empty descendants that many levels below it
+/// (fewer near `top`, the kd level of the cell's finest points), and is drawn at their mean.
+#[derive(Clone, Debug, Default)]
+pub struct Ahead {
+    /// `3m` (0: no advance).
+    pub levels: u8,
+    /// The kd level where geometry stops: `3 min(q + m, p)` for a cell of maximal precision `q`.
+    pub top: u8,
+    /// Per kd-cell: its non-empty descendants [`Complex::ahead_depth`] levels below it, as
+    /// suffixes of that many bits, ascending.
+    pub desc: Vec<SmallVec<[u16; 4]>>,
 }
 
 #[derive(Clone, Debug)]
@@ -145,6 +176,7 @@ pub struct Complex {
     scratch_tris: Vec<([u32; 3], usize, bool)>,
     scratch_covered: Vec<[u32; 2]>,
     scratch_old: SmallVec<[u32; 8]>,
+    pub ahead: Ahead,
 }
 
 /// A triangle `v·w·x` of the star: the kd-indices of `w` and `x` (in order), their ids, and
@@ -208,6 +240,11 @@ impl Complex {
             let k = &self.cells[v as usize];
             c.cells.push(KdCell { level: k.level, prefix: k.prefix, xyz: k.xyz, tops: SmallVec::new() });
         }
+        if self.ahead.levels > 0 {
+            c.ahead.levels = self.ahead.levels;
+            c.ahead.top = self.ahead.top;
+            c.ahead.desc = verts.iter().map(|&(_, v)| self.ahead.desc[v as usize].clone()).collect();
+        }
         let map = |v: u32| {
             verts.binary_search_by_key(&self.cells[v as usize].index(), |x| x.0).expect("a vertex of a kept simplex")
                 as u32
@@ -265,6 +302,9 @@ impl Complex {
         max_cells: usize,
         max_tops: usize,
     ) -> Result<(), ApplyError> {
+        if self.ahead.levels > 0 {
+            return self.refine_level_ahead(io, oracle, max_cells, max_tops);
+        }
         let level = self.level;
         let order = std::mem::take(&mut self.order);
         let mut next = Vec::with_capacity(order.len() * 2);
@@ -303,6 +343,158 @@ impl Complex {
         self.order = next;
         self.level = level + 1;
         Ok(())
+    }
+
+    /// Turns the geometry advance on: `levels` kd levels ahead, up to kd level `top`. Every
+    /// kd-cell starts with no known descendant ([`Complex::grow_fresh`] or an inherited list
+    /// fills them in).
+    pub fn enable_ahead(&mut self, levels: u8, top: u8) {
+        self.ahead = Ahead { levels, top, desc: vec![SmallVec::new(); self.cells.len()] };
+    }
+
+    /// How many kd levels below a kd-cell at `level` its known descendants lie.
+    #[inline]
+    pub fn ahead_depth(&self, level: u8) -> u8 {
+        self.ahead.levels.min(self.ahead.top.saturating_sub(level))
+    }
+
+    /// Codes kd-cell `v`'s descendants from `v` itself down to [`Complex::ahead_depth`]
+    /// levels (a cell stream's prologue: the root's kd-cell, and a child's kd-cells that lie
+    /// outside it, whose descendants the parent knew only as its own simplices see them).
+    pub fn grow_fresh(&mut self, v: u32, io: &mut impl BitIo, oracle: &mut impl Oracle) {
+        let depth = self.ahead_depth(self.cells[v as usize].level);
+        let mut list: SmallVec<[u16; 4]> = SmallVec::new();
+        list.push(0);
+        for rel in 0..depth {
+            list = self.extend(v, &list, rel, io, oracle);
+        }
+        self.ahead.desc[v as usize] = list;
+    }
+
+    /// The known descendants of `v`, `rel` levels below it, each refined by one kd level:
+    /// one occupancy code (both halves, or which one) per descendant, in kd order.
+    fn extend(
+        &self,
+        v: u32,
+        list: &[u16],
+        rel: u8,
+        io: &mut impl BitIo,
+        oracle: &mut impl Oracle,
+    ) -> SmallVec<[u16; 4]> {
+        let kd = &self.cells[v as usize];
+        let level = kd.level + rel;
+        let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(kd.tops.len()));
+        let mut out = SmallVec::with_capacity(list.len() * 2);
+        for &s in list {
+            let (both, second) = oracle.occupancy((kd.prefix << rel) | s as u128, level);
+            if io.bit(ctx, both) {
+                out.push(s << 1);
+                out.push(s << 1 | 1);
+            } else {
+                out.push(s << 1 | io.bit(ctx + 1, second) as u16);
+            }
+        }
+        out
+    }
+
+    /// [`Complex::refine_level`] with the geometry advance: each kd-cell splits as its known
+    /// descendants say (no geometry code), its connectivity change is coded as without the
+    /// advance, then the descendants of the new kd-cells are refined one level further.
+    fn refine_level_ahead(
+        &mut self,
+        io: &mut impl BitIo,
+        oracle: &mut impl Oracle,
+        max_cells: usize,
+        max_tops: usize,
+    ) -> Result<(), ApplyError> {
+        let level = self.level;
+        let order = std::mem::take(&mut self.order);
+        let mut next = Vec::with_capacity(order.len() * 2);
+        let axis = (level % 3) as usize;
+        let depth = self.ahead_depth(level);
+        if depth == 0 {
+            return Err(ApplyError::NoSymbol);
+        }
+        let top_bit = 1u16 << (depth - 1);
+        let mask = top_bit - 1;
+        let grows = self.ahead_depth(level + 1) == depth;
+        for &v in &order {
+            let desc = std::mem::take(&mut self.ahead.desc[v as usize]);
+            let has0 = desc.iter().any(|&s| s & top_bit == 0);
+            let has1 = desc.iter().any(|&s| s & top_bit != 0);
+            if !has0 && !has1 {
+                return Err(ApplyError::NoSymbol);
+            }
+            // The encoder's truth follows the split (and learns the level) here.
+            oracle.geometry(v, level);
+            let cell = &mut self.cells[v as usize];
+            cell.level = level + 1;
+            cell.prefix <<= 1;
+            cell.xyz[axis] <<= 1;
+            if !(has0 && has1) {
+                cell.prefix |= has1 as u128;
+                cell.xyz[axis] |= has1 as u32;
+                let list: SmallVec<[u16; 4]> = desc.iter().map(|&s| s & mask).collect();
+                self.ahead.desc[v as usize] = if grows { self.extend(v, &list, depth - 1, io, oracle) } else { list };
+                next.push(v);
+                continue;
+            }
+            let prefix = cell.prefix | 1;
+            let mut xyz = cell.xyz;
+            xyz[axis] |= 1;
+            if self.cells.len() >= max_cells {
+                return Err(ApplyError::TooLarge);
+            }
+            let v1 = self.cells.len() as u32;
+            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: SmallVec::new() });
+            let (zeros, ones): (SmallVec<[u16; 4]>, SmallVec<[u16; 4]>) =
+                desc.iter().copied().partition(|&s| s & top_bit == 0);
+            self.ahead.desc.push(SmallVec::new());
+            oracle.before_split(v, v1);
+            self.split(v, v1, io, oracle)?;
+            if self.live_tops > max_tops {
+                return Err(ApplyError::TooLarge);
+            }
+            for (w, list) in [(v, zeros), (v1, ones)] {
+                let list: SmallVec<[u16; 4]> = list.iter().map(|&s| s & mask).collect();
+                self.ahead.desc[w as usize] = if grows { self.extend(w, &list, depth - 1, io, oracle) } else { list };
+            }
+            next.push(v);
+            next.push(v1);
+        }
+        self.order = next;
+        self.level = level + 1;
+        Ok(())
+    }
+
+    /// Where kd-cell `v` is drawn, in grid units of `bits` bits per axis: its centre, or with
+    /// the advance the mean of its known descendants' centres.
+    pub fn position(&self, v: u32, bits: u8) -> [f64; 3] {
+        let kd = &self.cells[v as usize];
+        let centre = |level: u8, xyz: [u32; 3]| {
+            [0, 1, 2].map(|a| {
+                let free = bits as u32 - used(level, a);
+                (xyz[a] as f64 + 0.5) * (1u64 << free) as f64
+            })
+        };
+        let depth = if self.ahead.levels > 0 { self.ahead_depth(kd.level) } else { 0 };
+        let desc = self.ahead.desc.get(v as usize).map(SmallVec::as_slice).unwrap_or(&[]);
+        if depth == 0 || desc.is_empty() {
+            return centre(kd.level, kd.xyz);
+        }
+        let mut sum = [0f64; 3];
+        for &s in desc {
+            let mut xyz = kd.xyz;
+            for i in 0..depth {
+                let a = ((kd.level + i) % 3) as usize;
+                xyz[a] = (xyz[a] << 1) | ((s >> (depth - 1 - i)) & 1) as u32;
+            }
+            let c = centre(kd.level + depth, xyz);
+            for a in 0..3 {
+                sum[a] += c[a];
+            }
+        }
+        sum.map(|x| x / desc.len() as f64)
     }
 
     /// The generalised vertex split of `v` (now `v0`) into `v0` and `v1` (NSP.md 1.6).

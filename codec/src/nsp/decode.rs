@@ -199,6 +199,15 @@ impl NspFile {
     }
 
     /// The root's state at its minimal precision (0 bits: one point).
+    /// The bytes of cell `c`'s stream a decoder needs to hold it at `bits` of precision (with
+    /// the geometry advance, the first segment even at its minimal precision: it starts with
+    /// the prologue).
+    pub fn needed(&self, c: u32, bits: u8) -> u32 {
+        let min = self.tree.min_prec(c);
+        let bits = if self.header.params.advance > 0 { bits.max(min + 1) } else { bits };
+        self.entries[c as usize].needed(min, bits)
+    }
+
     pub fn root_state(&self) -> Result<CellState, NspError> {
         let c = self.tree.root();
         CellState::new(self, c, Complex::root())
@@ -241,6 +250,31 @@ impl NspFile {
 }
 
 /// The footer's count of cells against the cell table's rows.
+/// The kd level where cell `c`'s geometry stops with the advance: `3 min(q + m, p)`.
+pub(super) fn ahead_top(tree: &Tree, c: u32) -> u8 {
+    3 * (tree.max_prec(c) + tree.params.advance).min(tree.params.bits)
+}
+
+/// The kd-cells of cell `c`'s starting state (at its minimal precision, in kd order) whose
+/// descendants its stream's prologue codes: all of the root's, and a child's kd-cells that
+/// lie outside it (its parent knew their descendants as the parent's simplices see them, a
+/// child knows them as its own do; inside the child the two agree).
+pub(super) fn fresh_cells(tree: &Tree, c: u32, cx: &Complex) -> Vec<u32> {
+    let node = &tree.nodes[c as usize];
+    if node.parent == u32::MAX {
+        return cx.order.clone();
+    }
+    let shift = tree.min_prec(c) as u32 - tree.params.level_bits() as u32 * node.depth as u32;
+    cx.order
+        .iter()
+        .copied()
+        .filter(|&v| {
+            let q = cx.cells[v as usize].xyz;
+            (0..3).any(|a| q[a] >> shift != node.coords[a])
+        })
+        .collect()
+}
+
 fn check_count(cells: u32, entries: &[CellEntry]) -> Result<(), NspError> {
     if cells as usize != entries.len() {
         return Err(NspError::Format(format!("the footer counts {cells} cells, the cell table has {}", entries.len())));
@@ -268,6 +302,8 @@ pub struct CellState {
     pub splits: u64,
     /// At the maximal precision of a split cell: its kd-cells grouped by child.
     by_child: std::sync::OnceLock<Vec<Vec<u32>>>,
+    /// With the geometry advance: the kd-cells whose descendants the stream's prologue codes.
+    fresh: Vec<u32>,
 }
 
 struct Static<'a, 'b> {
@@ -284,8 +320,19 @@ impl BitIo for Static<'_, '_> {
 }
 
 impl CellState {
-    fn new(file: &NspFile, c: u32, cx: Complex) -> Result<CellState, NspError> {
+    fn new(file: &NspFile, c: u32, mut cx: Complex) -> Result<CellState, NspError> {
         let e = &file.entries[c as usize];
+        let m = file.header.params.advance;
+        let fresh = if m > 0 {
+            let top = ahead_top(&file.tree, c);
+            if cx.ahead.levels == 0 {
+                cx.enable_ahead(3 * m, top);
+            }
+            cx.ahead.top = top;
+            fresh_cells(&file.tree, c, &cx)
+        } else {
+            Vec::new()
+        };
         let (min_level, max_level) = (3 * file.tree.min_prec(c), 3 * file.tree.max_prec(c));
         if cx.cells.len() > e.max_cells as usize || cx.live_tops() > e.max_tops as usize {
             return Err(NspError::Cell {
@@ -312,6 +359,7 @@ impl CellState {
             max_tops: e.max_tops as usize,
             splits: 0,
             by_child: std::sync::OnceLock::new(),
+            fresh,
         })
     }
 
@@ -337,7 +385,7 @@ impl CellState {
             return Ok(());
         }
         // Only the segments up to the target precision are read.
-        let need = file.entries[self.cell as usize].needed(self.min_level / 3, target / 3);
+        let need = file.needed(self.cell, target / 3);
         if (self.bytes.len() as u32) < need {
             let more = file.cell_range(self.cell, self.bytes.len() as u32, need)?;
             self.bytes.extend_from_slice(&more);
@@ -347,12 +395,25 @@ impl CellState {
             self.cx = self.start.clone();
             self.at = None;
         }
-        let mut dec = match self.at {
-            Some(s) => Decoder::resume(&self.bytes, s),
-            None => Decoder::new(&self.bytes),
-        };
         let cell = self.cell;
         let err = |what: &str| NspError::Cell { cell, what: what.into() };
+        let mut dec = match self.at {
+            Some(s) => Decoder::resume(&self.bytes, s),
+            None => {
+                let mut dec = Decoder::new(&self.bytes);
+                if self.cx.ahead.levels > 0 {
+                    for &v in &self.fresh {
+                        self.cx.grow_fresh(v, &mut Static { dec: &mut dec, table: &self.table }, &mut Blind);
+                    }
+                    if self.cx.ahead.desc.iter().map(|d| d.len()).sum::<usize>()
+                        > self.max_cells << self.cx.ahead.levels
+                    {
+                        return Err(err("corrupt stream (more descendants in its prologue than its table allows)"));
+                    }
+                }
+                dec
+            }
+        };
         while self.cx.level < target {
             let before = self.cx.cells.len();
             self.cx

@@ -12,7 +12,7 @@ use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use rayon::prelude::*;
 
 use super::canonical::{top_simplices, Canonical, Simplex};
-use super::complex::{BitIo, Complex, Oracle, CONTEXTS};
+use super::complex::{BitIo, Complex, Oracle, Silent, CONTEXTS};
 use super::format::{self, CellEntry, Header};
 use super::tree::{partition, Tree};
 use super::{morton, NspError, Params};
@@ -201,8 +201,9 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
 }
 
 /// Records cell `c`'s decisions from its simplices, each given by its dimension and corners
-/// on a grid `shift` bits finer than the cell's maximal precision, in input order (triangles
-/// by first occurrence first). The reach is the box of the corners as given.
+/// on a grid `shift` bits finer than the cell's maximal precision (at least the advance's
+/// `min(m, p - q)`), in input order (triangles by first occurrence first). The reach is the
+/// box of the corners as given.
 pub(super) fn record_local(
     tree: &Tree,
     c: u32,
@@ -213,6 +214,11 @@ pub(super) fn record_local(
     let mut reach = [[u32::MAX; 3], [0u32; 3]];
     let mut local: HashMap<[u32; 3], u32> = HashMap::default();
     let mut coords: Vec<[u32; 3]> = Vec::new();
+    // With the advance: the cell's points on the grid geometry runs to, min(q + m, p) bits.
+    let q = tree.max_prec(c);
+    let fine_bits = (q + tree.params.advance).min(tree.params.bits);
+    let fine_shift = shift - (fine_bits - q);
+    let mut fine: Vec<u128> = Vec::new();
     let mapped: Vec<Simplex> = simplices
         .map(|(dim, corners)| {
             let mut t = Simplex { v: [0; 3], dim };
@@ -220,6 +226,9 @@ pub(super) fn record_local(
                 for a in 0..3 {
                     reach[0][a] = reach[0][a].min(g[a]);
                     reach[1][a] = reach[1][a].max(g[a]);
+                }
+                if tree.params.advance > 0 {
+                    fine.push(morton([g[0] >> fine_shift, g[1] >> fine_shift, g[2] >> fine_shift], fine_bits));
                 }
                 let g = [g[0] >> shift, g[1] >> shift, g[2] >> shift];
                 t.v[k] = *local.entry(g).or_insert_with(|| {
@@ -234,7 +243,6 @@ pub(super) fn record_local(
         return Recorded::empty();
     }
     let mut bits = Vec::new();
-    let q = tree.max_prec(c);
     let simplices = top_simplices(coords.len(), mapped.into_iter());
     let codes: Vec<u128> = coords.iter().map(|&g| morton(g, q)).collect();
     let l0 = 3 * tree.min_prec(c);
@@ -242,6 +250,23 @@ pub(super) fn record_local(
     let prefixes: Vec<u128> = codes.iter().map(|&m| if top == l0 { m } else { m >> (top - l0) }).collect();
     let (mut cx, pcell) = Complex::cluster(l0, &prefixes, &simplices);
     let mut oracle = Truth::new(codes, q, pcell, &simplices, cx.cells.len());
+    if tree.params.advance > 0 {
+        fine.sort_unstable();
+        fine.dedup();
+        oracle.fine = fine;
+        oracle.fine_levels = 3 * fine_bits;
+        cx.enable_ahead(3 * tree.params.advance, super::decode::ahead_top(tree, c));
+        // The prologue codes the descendants the decoder cannot inherit; the others it
+        // inherits from the parent, which saw them exactly as this cell does.
+        let fresh = super::decode::fresh_cells(tree, c, &cx);
+        for v in 0..cx.cells.len() as u32 {
+            if fresh.binary_search(&v).is_ok() {
+                cx.grow_fresh(v, &mut Record(&mut bits), &mut oracle);
+            } else {
+                cx.grow_fresh(v, &mut Silent, &mut oracle);
+            }
+        }
+    }
     let mut max_cells = cx.cells.len();
     let mut max_tops = cx.live_tops();
     let mut level_ends = Vec::with_capacity((top - l0) as usize / 3);
@@ -273,6 +298,10 @@ struct Truth<'a> {
     epoch: u32,
     star: HashSet<[u32; 4]>,
     orient: HashMap<[u32; 3], (u32, [u32; 3])>,
+    /// With the advance: the Morton codes of the cell's points at `fine_levels / 3` bits,
+    /// ascending and distinct.
+    fine: Vec<u128>,
+    fine_levels: u8,
 }
 
 impl<'a> Truth<'a> {
@@ -311,6 +340,8 @@ impl<'a> Truth<'a> {
             epoch: 0,
             star: HashSet::default(),
             orient: HashMap::default(),
+            fine: Vec::new(),
+            fine_levels: 0,
         }
     }
 
@@ -410,6 +441,18 @@ impl Oracle for Truth<'_> {
             (_, _, false) => 2,
             _ => 3,
         }
+    }
+
+    fn occupancy(&mut self, prefix: u128, level: u8) -> (bool, bool) {
+        let free = (self.fine_levels - level) as u32;
+        let lo = prefix << free;
+        let mid = (2 * prefix + 1) << (free - 1);
+        let hi = (prefix + 1) << free;
+        let a = self.fine.partition_point(|&x| x < lo);
+        let b = self.fine.partition_point(|&x| x < mid);
+        let has0 = b > a;
+        let has1 = self.fine.get(b).is_some_and(|&x| x < hi);
+        (has0 && has1, !has0)
     }
 
     fn oriented(&mut self, t: [u32; 3]) -> bool {

@@ -63,7 +63,21 @@
 //!   (NSP.md 5.4.5 proposes this first): the state at a precision is a pure function of the
 //!   stream, so refine-then-coarsen gives back the same state (tested). Refining keeps the
 //!   coder's position and continues.
-//! - The geometry advance of section 7 is not built yet (`m` = 0 in every file written).
+//! - The **geometry advance** of section 7 (`--advance m`, 0 by default): geometry runs
+//!   `3m` kd levels ahead of connectivity ([`complex::Ahead`]). Each kd-cell keeps its
+//!   non-empty descendants `3m` levels below (fewer near the cell's finest points,
+//!   `min(q + m, p)` bits for a cell of maximal precision `q`), so its split needs no code,
+//!   and each new kd-cell's descendants are refined one level (one occupancy code each) right
+//!   after its connectivity change. A kd-cell is drawn at the unweighted mean of its
+//!   descendants' centres (NSP.md 1.8). The root's stream starts with a prologue coding the
+//!   first `3m` levels. A child inherits from its parent the descendants of its kd-cells
+//!   that lie inside it (there both saw all points); those outside it the child codes again
+//!   in its own prologue as its own simplices see them (the paper's bold red box of Fig. 5;
+//!   we code them for every child that holds them rather than leave one copy in the
+//!   parent). A vertex is drawn where the cell it lies in puts it, so neighbours agree (a
+//!   worker holds that cell whenever the triangle is in its tiles: its reach box holds the
+//!   triangle). The view asks for connectivity `m` bits below the precision the error
+//!   bound wants. The partition and the full-precision decode are unchanged (tested).
 //! - Edges and points are kept, counted, and not drawn.
 
 pub mod canonical;
@@ -108,7 +122,7 @@ pub struct Params {
     pub splits: u32,
     /// `N_min`: a cell splits only if it holds at least this many top-simplices.
     pub min_simplices: u32,
-    /// `m`: bits of geometry advance (section 7); only 0 is built.
+    /// `m`: bits of geometry advance (section 7).
     pub advance: u8,
 }
 
@@ -117,6 +131,9 @@ impl Default for Params {
         Params { bits: 16, root_bits: 7, splits: 4, min_simplices: 8000, advance: 0 }
     }
 }
+
+/// The largest geometry advance, in bits (descendants are kept as suffixes of `3m` bits).
+pub const MAX_ADVANCE: u8 = 4;
 
 /// The largest precision (kd keys of `3p` bits and the level bit live in a `u128`; grid
 /// coordinates and their shifts stay inside a `u32`).
@@ -141,10 +158,8 @@ impl Params {
         if self.min_simplices == 0 {
             return Err(NspError::Params("--min-simplices must be at least 1".into()));
         }
-        if self.advance != 0 {
-            return Err(NspError::Params(
-                "--advance: the geometry advance of section 7 is not built yet; use 0".into(),
-            ));
+        if self.advance > MAX_ADVANCE {
+            return Err(NspError::Params(format!("--advance must be 0 to {MAX_ADVANCE}, not {}", self.advance)));
         }
         Ok(())
     }

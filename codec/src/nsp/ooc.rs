@@ -847,14 +847,17 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
     }
     members.sort_unstable_by_key(Rec::order);
     let q = tree.max_prec(c);
-    let have = if tree.is_leaf(c) { tree.params.bits } else { q };
+    let m = tree.params.advance;
+    // With the geometry advance a cell needs its points `m` bits finer than its maximal
+    // precision (capped at `p`), so each child hands its parent that much more.
+    let have = if tree.is_leaf(c) { tree.params.bits } else { (q + m).min(tree.params.bits) };
     // An internal cell's reach computed here is at its maximal precision; the caller
     // replaces it with its children's.
     let rec = record_local(tree, c, members.iter().map(|r| (r.dim, r.q)), have - q);
-    // For the parent: the simplices clustered at this cell's minimal precision, each once,
-    // with the order of its first copy.
+    // For the parent: the simplices clustered at its points' precision (this cell's minimal
+    // precision, plus the advance), each once, with the order of its first copy.
     let min = tree.min_prec(c);
-    let down = have - min;
+    let down = have - (min + m).min(tree.params.bits);
     let mut seen: HashSet<(u8, [[u32; 3]; 3])> = HashSet::default();
     let mut up = Vec::new();
     for r in &members {

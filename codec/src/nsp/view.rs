@@ -26,6 +26,11 @@ pub struct Drawn {
     /// another stitched triangle, so were not drawn.
     pub collapsed: u64,
     pub merged: u64,
+    /// With the geometry advance: kd-cells that two cells draw at different positions (each
+    /// cell knows the descendants its own simplices reach), and the largest such distance in
+    /// world units.
+    pub split_vertices: u64,
+    pub split_distance: f32,
 }
 
 impl Drawn {
@@ -48,15 +53,15 @@ enum Loc {
 /// A drawn corner: a kd-cell's level and its per-axis coordinates there.
 type Corner = (u8, [u32; 3]);
 
-/// The centre of a kd-cell in world units.
-fn centre(file: &NspFile, (level, xyz): Corner) -> [f32; 3] {
+/// The centre of a kd-cell in grid units.
+fn centre(file: &NspFile, (level, xyz): Corner) -> [f64; 3] {
     let bits = file.header.params.bits as u32;
     let mut g = [0f64; 3];
     for a in 0..3 {
         let free = bits - (level as u32 + 2 - a as u32) / 3;
         g[a] = (xyz[a] as f64 + 0.5) * (1u64 << free) as f64;
     }
-    file.header.cube.world(g)
+    g
 }
 
 /// What [`walk`] counts besides the triangles it hands out.
@@ -71,8 +76,14 @@ struct Counts {
 }
 
 /// The border rule over `states`, as [`draw`] describes it: calls `emit` with each drawn
-/// triangle's corners, cell by cell in postorder, each cell's triangles in arena order.
-fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit: impl FnMut([Corner; 3])) -> Counts {
+/// triangle's corners and their positions in grid units, cell by cell in postorder, each
+/// cell's triangles in arena order.
+fn walk(
+    file: &NspFile,
+    selection: &[(u32, u8)],
+    states: &[&CellState],
+    mut emit: impl FnMut([Corner; 3], [[f64; 3]; 3]),
+) -> Counts {
     let tree = &file.tree;
     let bits = file.header.params.bits;
     let pl = file.header.params.level_bits() as u32;
@@ -129,12 +140,27 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
     let mut stitched_seen: rustc_hash::FxHashSet<[Corner; 3]> = rustc_hash::FxHashSet::default();
     let mut states: Vec<&CellState> = states.to_vec();
     states.sort_by_key(|s| s.cell);
+    // With the geometry advance a kd-cell is drawn where the cell it lies in puts it: that
+    // cell sees all of its descendants, a neighbour only those its own simplices reach.
+    let ahead = file.header.params.advance > 0;
+    let owner_position = |o: u32, level: u8, prefix: u128| -> Option<[f64; 3]> {
+        let st = states[states.binary_search_by_key(&o, |s| s.cell).ok()?];
+        if st.cx.level != level {
+            return None;
+        }
+        let cells = &st.cx.cells;
+        let k = st.cx.order.binary_search_by_key(&prefix, |&id| cells[id as usize].prefix).ok()?;
+        Some(st.cx.position(st.cx.order[k], bits))
+    };
     let mut locs: Vec<Option<Loc>> = Vec::new();
-    for s in states {
+    let mut own: Vec<Option<[f64; 3]>> = Vec::new();
+    for &s in &states {
         let pc = s.precision();
         let me = (pc, s.cell);
         locs.clear();
         locs.resize(s.cx.cells.len(), None);
+        own.clear();
+        own.resize(s.cx.cells.len(), None);
         for top in s.cx.iter_tops() {
             match top.dim {
                 0 => counts.points += 1,
@@ -145,12 +171,14 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
                 continue;
             }
             let mut corners = [(0u8, [0u32; 3]); 3];
+            let mut at = [[0f64; 3]; 3];
             let mut dropped = false;
             let mut moved = false;
-            for (corner, &v) in corners.iter_mut().zip(&top.v) {
+            for ((corner, pos), &v) in corners.iter_mut().zip(at.iter_mut()).zip(&top.v) {
                 let kd = &s.cx.cells[v as usize];
                 let loc = *locs[v as usize].get_or_insert_with(|| locate(kd.level, kd.xyz));
                 *corner = (kd.level, kd.xyz);
+                *pos = *own[v as usize].get_or_insert_with(|| s.cx.position(v, bits));
                 match loc {
                     Loc::Drawn(_, c) if c == s.cell => {}
                     Loc::Drawn(p, c) | Loc::Spanning(p, c) => {
@@ -166,7 +194,13 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
                                     kd.xyz[a as usize] >> (fine - coarse)
                                 });
                                 *corner = (level, xyz);
+                                *pos = centre(file, *corner);
                                 moved = true;
+                            }
+                            if ahead {
+                                if let Some(there) = owner_position(c, corner.0, kd.prefix >> (kd.level - corner.0)) {
+                                    *pos = there;
+                                }
                             }
                         }
                     }
@@ -190,7 +224,7 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
                     continue;
                 }
             }
-            emit(corners);
+            emit(corners, at);
         }
     }
     counts
@@ -207,12 +241,27 @@ fn walk(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState], mut emit
 /// whole drawing, in the same order (the cluster relies on it).
 pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Drawn {
     let mut out = Drawn::default();
-    let mut vertex: HashMap<Corner, u32> = HashMap::default();
-    let counts = walk(file, selection, states, |corners| {
-        let ids = corners.map(|c| {
-            *vertex.entry(c).or_insert_with(|| {
-                out.positions.push(centre(file, c));
-                out.positions.len() as u32 - 1
+    // A vertex is a kd-cell at a position: with the geometry advance a kd-cell spanning
+    // several cells can be drawn at two (rare: a second map holds those).
+    let mut vertex: HashMap<Corner, (u32, [f64; 3])> = HashMap::default();
+    let mut apart: HashMap<(Corner, [u64; 3]), u32> = HashMap::default();
+    let cube = &file.header.cube;
+    let counts = walk(file, selection, states, |corners, at| {
+        let ids = [0, 1, 2].map(|k| {
+            let positions = &mut out.positions;
+            let (id, there) = *vertex.entry(corners[k]).or_insert_with(|| {
+                positions.push(cube.world(at[k]));
+                (positions.len() as u32 - 1, at[k])
+            });
+            if there == at[k] {
+                return id;
+            }
+            *apart.entry((corners[k], at[k].map(f64::to_bits))).or_insert_with(|| {
+                out.split_vertices += 1;
+                let d = (0..3).map(|a| (there[a] - at[k][a]).powi(2)).sum::<f64>().sqrt();
+                out.split_distance = out.split_distance.max((d * cube.side / (1u64 << cube.bits) as f64) as f32);
+                positions.push(cube.world(at[k]));
+                positions.len() as u32 - 1
             })
         });
         out.triangles.push(ids);
@@ -230,7 +279,8 @@ pub fn draw(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> D
 /// vertex is shared, so none is looked up).
 pub fn draw_flat(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState]) -> Vec<[[f32; 3]; 3]> {
     let mut out = Vec::new();
-    walk(file, selection, states, |corners| out.push(corners.map(|c| centre(file, c))));
+    let cube = &file.header.cube;
+    walk(file, selection, states, |_, at| out.push(at.map(|g| cube.world(g))));
     out
 }
 
@@ -284,7 +334,8 @@ impl View {
 
 /// The cells a view draws, with their precisions (postorder index, bits), from the cell
 /// boxes alone: cells outside the frustum are not drawn; a cell whose wanted precision is
-/// above its maximal precision gives way to its non-empty children.
+/// above its maximal precision gives way to its non-empty children. With the geometry
+/// advance the precision is the connectivity's, `m` bits below the positions' precision.
 pub fn select(file: &NspFile, view: &View) -> Vec<(u32, u8)> {
     let tree = &file.tree;
     let cube = file.header.cube;
@@ -310,7 +361,9 @@ pub fn select(file: &NspFile, view: &View) -> Vec<(u32, u8)> {
             eye.y.clamp(lo[1], lo[1] + size),
             eye.z.clamp(lo[2], lo[2] + size),
         );
-        let want = view.wanted_bits(cube.side, (closest - eye).length());
+        // With `m` bits of geometry advance the positions are refined `m` bits beyond the
+        // connectivity (section 7): the error bound asks for connectivity `m` bits coarser.
+        let want = view.wanted_bits(cube.side, (closest - eye).length()) - file.header.params.advance as f64;
         let (min, max) = (tree.min_prec(c), tree.max_prec(c));
         if !n.children.is_empty() && want > max as f64 {
             todo.extend(n.children.iter().copied().filter(|&ch| file.entries[ch as usize].len > 0));

@@ -378,7 +378,7 @@ impl NspScene {
             let mut cells = Vec::new();
             let mut bytes = 0;
             for (c, b) in need {
-                let upto = file.entries[c as usize].needed(file.tree.min_prec(c), b);
+                let upto = file.needed(c, b);
                 let have = held.entry(c).or_insert(0);
                 if upto > *have {
                     let piece = file.cell_range(c, *have, upto)?;
