@@ -70,10 +70,11 @@ fn main() {
     let t = Instant::now();
     let drawn = nsp::view::draw(&file, &cut, &states);
     println!(
-        "full decode {t_dec:.2}s: {} cells decoded, {} vertex splits ({:.2} M/s over 2 cores), draw {:.2}s: {} triangles",
+        "full decode {t_dec:.2}s: {} cells decoded, {} vertex splits ({:.2} M/s on {} threads; RAYON_NUM_THREADS=1 for one core), draw {:.2}s: {} triangles",
         nav.cells(),
         nav.splits,
         nav.splits as f64 / t_dec / 1e6,
+        rayon::current_num_threads(),
         t.elapsed().as_secs_f64(),
         drawn.triangles.len()
     );

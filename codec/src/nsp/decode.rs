@@ -231,6 +231,10 @@ impl NspFile {
             let shift = bits as u32 - pl * (pnode.depth as u32 + 1);
             let mask = (1u32 << pl) - 1;
             let mut groups = vec![Vec::new(); params.fan_out() as usize];
+            let mut rank = vec![0u32; parent.cx.cells.len()];
+            for (r, &k) in parent.cx.order.iter().enumerate() {
+                rank[k as usize] = r as u32;
+            }
             for &k in &parent.cx.order {
                 let kd = &parent.cx.cells[k as usize];
                 // At the parent's maximal precision every axis has `bits` bits.
@@ -240,11 +244,12 @@ impl NspFile {
                     groups[params.child_index(local) as usize].push(k);
                 }
             }
-            groups
+            (groups, rank)
         });
+        let (groups, rank) = (&groups.0, &groups.1);
         let k = self.tree.nodes[parent.cell as usize].children.iter().position(|&x| x == c);
         let inside = k.map(|k| groups[k].as_slice()).unwrap_or(&[]);
-        let cx = parent.cx.restrict(inside);
+        let cx = parent.cx.restrict(inside, rank);
         CellState::new(self, c, cx)
     }
 }
@@ -300,8 +305,9 @@ pub struct CellState {
     max_tops: usize,
     /// Kd-cells split so far (vertex splits decoded), for throughput figures.
     pub splits: u64,
-    /// At the maximal precision of a split cell: its kd-cells grouped by child.
-    by_child: std::sync::OnceLock<Vec<Vec<u32>>>,
+    /// At the maximal precision of a split cell: its kd-cells grouped by child, and each
+    /// kd-cell's rank in kd-index order.
+    by_child: std::sync::OnceLock<(Vec<Vec<u32>>, Vec<u32>)>,
     /// With the geometry advance: the kd-cells whose descendants the stream's prologue codes.
     fresh: Vec<u32>,
 }

@@ -30,7 +30,9 @@ use super::complex::CONTEXTS;
 use super::{Cube, NspError, Params};
 
 pub const MAGIC: [u8; 4] = *b"TNSP";
-pub const VERSION: u16 = 1;
+/// 2: a split's star is coded in kd-cell id order (1: kd-index order), and files may carry
+/// the geometry advance.
+pub const VERSION: u16 = 2;
 pub const HEADER_LEN: usize = 4 + 4 + 4 * 8 + 6 * 8 + 4 + 4 + 3 * 8 + 8;
 /// Bytes of a cell table row before its segments.
 pub const ROW_FIXED: usize = 41;
@@ -285,7 +287,9 @@ pub fn read_prefix(b: &[u8]) -> Result<(Header, Vec<u16>, usize), NspError> {
     }
     let version = u16::from_le_bytes([b[4], b[5]]);
     if version != VERSION {
-        return Err(NspError::Format(format!("version {version}; this reader reads version {VERSION}")));
+        return Err(NspError::Format(format!(
+            "version {version}; this reader reads version {VERSION} (rebuild it with tessera nsp build)"
+        )));
     }
     let header = Header::get(check_crc(&b[8..PREFIX_LEN], "header")?)?;
     let body = check_crc(&b[PREFIX_LEN..end], "probability table")?;
