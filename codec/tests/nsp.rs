@@ -228,7 +228,14 @@ fn border_rule_cracks_are_counted_on_a_closed_model() {
 fn damaged_files_name_the_problem() {
     let mesh = testkit::load_mesh("stanford/dragon_vrip_res4.ply.gz");
     let canon = Canonical::of_mesh(&mesh, 14).unwrap();
-    let bytes = nsp::encode(&canon, small_params(14, 300), &|_| {}).unwrap().bytes;
+    // Without and with the geometry advance (its prologues and descendant lists decode
+    // from the stream too).
+    for advance in [0, 2] {
+        damaged(nsp::encode(&canon, Params { advance, ..small_params(14, 300) }, &|_| {}).unwrap().bytes);
+    }
+}
+
+fn damaged(bytes: Vec<u8>) {
     let file = NspFile::from_bytes(bytes.clone()).unwrap();
     // A flipped byte inside a cell's stream: that cell is named.
     let (c, e) = file.entries.iter().enumerate().find(|(_, e)| e.len > 40).map(|(c, e)| (c, e.clone())).unwrap();
