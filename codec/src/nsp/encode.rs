@@ -197,18 +197,20 @@ fn record_cell(tree: &Tree, c: u32, members: &[u32], canon: &Canonical) -> Recor
         }
         (t.dim, q)
     });
-    record_local(tree, c, corners, shift)
+    record_local(tree, c, corners, shift, None)
 }
 
 /// Records cell `c`'s decisions from its simplices, each given by its dimension and corners
-/// on a grid `shift` bits finer than the cell's maximal precision (at least the advance's
-/// `min(m, p - q)`), in input order (triangles by first occurrence first). The reach is the
-/// box of the corners as given.
+/// on a grid `shift` bits finer than the cell's maximal precision `q`, in input order
+/// (triangles by first occurrence first). The reach is the box of the corners as given.
+/// With the geometry advance the cell's points at `min(q + m, p)` bits are `fine` (distinct,
+/// ascending), or when `None` the corners, which must then be at least that fine.
 pub(super) fn record_local(
     tree: &Tree,
     c: u32,
     simplices: impl Iterator<Item = (u8, [[u32; 3]; 3])>,
     shift: u8,
+    fine_points: Option<&[[u32; 3]]>,
 ) -> Recorded {
     // The cell's points at its maximal precision, and its simplices on them.
     let mut reach = [[u32::MAX; 3], [0u32; 3]];
@@ -217,8 +219,9 @@ pub(super) fn record_local(
     // With the advance: the cell's points on the grid geometry runs to, min(q + m, p) bits.
     let q = tree.max_prec(c);
     let fine_bits = (q + tree.params.advance).min(tree.params.bits);
-    let fine_shift = shift - (fine_bits - q);
-    let mut fine: Vec<u128> = Vec::new();
+    let from_corners = tree.params.advance > 0 && fine_points.is_none();
+    let fine_shift = if from_corners { shift - (fine_bits - q) } else { 0 };
+    let mut fine: Vec<u128> = fine_points.unwrap_or(&[]).iter().map(|&g| morton(g, fine_bits)).collect();
     let mapped: Vec<Simplex> = simplices
         .map(|(dim, corners)| {
             let mut t = Simplex { v: [0; 3], dim };
@@ -227,7 +230,7 @@ pub(super) fn record_local(
                     reach[0][a] = reach[0][a].min(g[a]);
                     reach[1][a] = reach[1][a].max(g[a]);
                 }
-                if tree.params.advance > 0 {
+                if from_corners {
                     fine.push(morton([g[0] >> fine_shift, g[1] >> fine_shift, g[2] >> fine_shift], fine_bits));
                 }
                 let g = [g[0] >> shift, g[1] >> shift, g[2] >> shift];

@@ -12,7 +12,8 @@
 //! half, second half, both: two binary decisions, one static probability per kd level each).
 //! When both halves are occupied the kd-cell `v` becomes `v0` and `v1` and the
 //! **connectivity** change is coded as a generalised vertex split (NSP.md 1.6): one symbol per
-//! simplex `v·τ` of the star of `v` (the vertex, its edges, its triangles, in kd-index order),
+//! simplex `v·τ` of the star of `v` (the vertex, its edges, its triangles, in kd-cell id order:
+//! encoder and decoder create kd-cells in the same order, [`complex`]),
 //! saying whether it becomes `v0·τ`, `v1·τ`, both, or both plus the cone `v0·v1·τ`. Symbols
 //! the faces already force cost nothing. Every triangle a split creates gets an **orientation**
 //! bit against a prediction (its parent triangle's orientation, or for a cone the orientation

@@ -739,16 +739,27 @@ struct Encoding {
     next: u32,
     cells: Vec<CellInfo>,
     /// Per internal cell not yet encoded: its children's simplices clustered at its maximal
-    /// precision, and their reach.
-    pending: HashMap<u32, (Vec<Rec>, [[u32; 3]; 2])>,
+    /// precision, their reach, and with the geometry advance their points `m` bits finer.
+    pending: HashMap<u32, Pending>,
     decisions: BufWriter<File>,
     counts: Vec<[u64; 2]>,
     leaf_simplices: u64,
 }
 
-fn empty_pending() -> (Vec<Rec>, [[u32; 3]; 2]) {
-    (Vec::new(), [[u32::MAX; 3], [0; 3]])
+/// What a cell's children hand it (see [`Encoding::pending`]).
+struct Pending {
+    members: Vec<Rec>,
+    reach: [[u32; 3]; 2],
+    fine: Vec<[u32; 3]>,
 }
+
+fn empty_pending() -> Pending {
+    Pending { members: Vec::new(), reach: [[u32::MAX; 3], [0; 3]], fine: Vec::new() }
+}
+
+/// What a cell hands its parent: its simplices clustered at its minimal precision and, with
+/// the advance, its points at the parent's geometry precision (distinct).
+type Up = (Vec<Rec>, Vec<[u32; 3]>);
 
 fn union(a: [[u32; 3]; 2], b: [[u32; 3]; 2]) -> [[u32; 3]; 2] {
     [[0, 1, 2].map(|k| a[0][k].min(b[0][k])), [0, 1, 2].map(|k| a[1][k].max(b[1][k]))]
@@ -782,15 +793,15 @@ impl Encoding {
             .map(|c| (c, by_leaf.remove(&c).unwrap_or_default()))
             .collect();
         let sizes: HashMap<u32, u64> = leaves.iter().map(|(c, m)| (*c, m.len() as u64)).collect();
-        let mut done: HashMap<u32, (Recorded, Vec<Rec>)> =
-            leaves.into_par_iter().map(|(c, members)| (c, encode_cell(tree, c, members))).collect();
+        let mut done: HashMap<u32, (Recorded, Up)> =
+            leaves.into_par_iter().map(|(c, members)| (c, encode_cell(tree, c, members, Vec::new()))).collect();
         for c in self.next..=batch.last {
             let (rec, up) = match done.remove(&c) {
                 Some(r) => r,
                 None => {
-                    let (members, reach) = self.pending.remove(&c).unwrap_or_else(empty_pending);
-                    let (mut rec, up) = encode_cell(tree, c, members);
-                    rec.reach = reach;
+                    let p = self.pending.remove(&c).unwrap_or_else(empty_pending);
+                    let (mut rec, up) = encode_cell(tree, c, p.members, p.fine);
+                    rec.reach = p.reach;
                     (rec, up)
                 }
             };
@@ -804,9 +815,9 @@ impl Encoding {
     /// Encodes the internal cells left before `end`.
     fn finish_to(&mut self, tree: &Tree, end: u32) -> Result<(), NspError> {
         for c in self.next..end {
-            let (members, reach) = self.pending.remove(&c).unwrap_or_else(empty_pending);
-            let (mut rec, up) = encode_cell(tree, c, members);
-            rec.reach = reach;
+            let p = self.pending.remove(&c).unwrap_or_else(empty_pending);
+            let (mut rec, up) = encode_cell(tree, c, p.members, p.fine);
+            rec.reach = p.reach;
             self.done(tree, c, rec, up)?;
         }
         self.next = end;
@@ -815,7 +826,7 @@ impl Encoding {
 
     /// Records cell `c`'s decisions, and hands its simplices and reach to its parent (an
     /// internal cell's reach is the union of its children's: the box of its simplices).
-    fn done(&mut self, tree: &Tree, c: u32, rec: Recorded, up: Vec<Rec>) -> Result<(), NspError> {
+    fn done(&mut self, tree: &Tree, c: u32, rec: Recorded, (up, fine): Up) -> Result<(), NspError> {
         let reach = rec.reach;
         for &b in &rec.bits {
             self.counts[(b & 0x7fff) as usize][(b >> 15) as usize] += 1;
@@ -831,33 +842,51 @@ impl Encoding {
         let parent = tree.nodes[c as usize].parent;
         if parent != u32::MAX {
             let entry = self.pending.entry(parent).or_insert_with(empty_pending);
-            entry.0.extend(up);
-            entry.1 = union(entry.1, reach);
+            entry.members.extend(up);
+            entry.reach = union(entry.reach, reach);
+            entry.fine.extend(fine);
         }
         Ok(())
     }
 }
 
 /// Encodes cell `c` from its simplices (at its maximal precision for an internal cell, at
-/// full precision for a leaf); returns its decisions and its simplices clustered at its
-/// minimal precision, for its parent.
-fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec>) {
+/// full precision for a leaf) and, for an internal cell with the geometry advance, its
+/// points at its geometry precision `min(q + m, p)` (repeats allowed); returns its decisions
+/// and what it hands its parent ([`Up`]).
+fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>, mut fine: Vec<[u32; 3]>) -> (Recorded, Up) {
     if members.is_empty() {
-        return (Recorded::empty(), Vec::new());
+        return (Recorded::empty(), (Vec::new(), Vec::new()));
     }
     members.sort_unstable_by_key(Rec::order);
-    let q = tree.max_prec(c);
+    let p = tree.params.bits;
     let m = tree.params.advance;
-    // With the geometry advance a cell needs its points `m` bits finer than its maximal
-    // precision (capped at `p`), so each child hands its parent that much more.
-    let have = if tree.is_leaf(c) { tree.params.bits } else { (q + m).min(tree.params.bits) };
+    let q = tree.max_prec(c);
+    let leaf = tree.is_leaf(c);
+    let have = if leaf { p } else { q };
+    let fine_bits = (q + m).min(p);
+    if m > 0 && leaf {
+        fine = members.iter().flat_map(|r| r.corners().iter().copied()).collect();
+    }
+    fine.sort_unstable();
+    fine.dedup();
     // An internal cell's reach computed here is at its maximal precision; the caller
     // replaces it with its children's.
-    let rec = record_local(tree, c, members.iter().map(|r| (r.dim, r.q)), have - q);
-    // For the parent: the simplices clustered at its points' precision (this cell's minimal
-    // precision, plus the advance), each once, with the order of its first copy.
+    let rec = record_local(tree, c, members.iter().map(|r| (r.dim, r.q)), have - q, (m > 0).then_some(&fine[..]));
+    // For the parent: the simplices clustered at this cell's minimal precision, each once,
+    // with the order of its first copy; with the advance, the points at the parent's
+    // geometry precision (the parent's simplices are its children's, so are its points).
     let min = tree.min_prec(c);
-    let down = have - (min + m).min(tree.params.bits);
+    let down = have - min;
+    let up_fine = if m > 0 {
+        let shift = fine_bits - (min + m).min(p);
+        let mut f: Vec<[u32; 3]> = fine.iter().map(|g| g.map(|x| x >> shift)).collect();
+        f.dedup();
+        f
+    } else {
+        Vec::new()
+    };
+    drop(fine);
     let mut seen: HashSet<(u8, [[u32; 3]; 3])> = HashSet::default();
     let mut up = Vec::new();
     for r in &members {
@@ -872,7 +901,7 @@ fn encode_cell(tree: &Tree, c: u32, mut members: Vec<Rec>) -> (Recorded, Vec<Rec
             up.push(img);
         }
     }
-    (rec, up)
+    (rec, (up, up_fine))
 }
 
 /// A record reduced to its image when corners coincide (orientation kept), as `reduce`.
