@@ -447,18 +447,53 @@ fn progressive_mesh_tiles_match_the_full_mesh() {
             eprintln!("{rel} -np {np} --tiles {tiles}: {covered} covered pixels, {fraction:.4} match within 8/255");
             assert!(covered > 10_000, "{rel}: the model is in view");
             assert!(fraction >= 0.99, "{rel} -np {np} --tiles {tiles}: only {fraction:.4} of covered pixels match");
-            // Each tile's mesh is adapted to the tile: refined inside, coarse outside.
+            // Each worker adapts one mesh for all of its tiles: refined in its region, coarse
+            // outside, so every tile of a worker has that mesh's triangle count, under the
+            // full mesh's.
             let line: serde_json::Value =
                 serde_json::from_str(std::fs::read_to_string(&stats).unwrap().lines().next().unwrap()).unwrap();
-            let counts: Vec<u64> =
-                line["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).collect();
-            assert!(counts.iter().all(|&t| t < full), "{rel}: {counts:?} against {full}");
-            assert!(counts.iter().sum::<u64>() < full * counts.len() as u64 / 2, "{rel}: {counts:?} against {full}");
+            let mut by_worker: std::collections::BTreeMap<u64, Vec<u64>> = Default::default();
+            for t in line["tiles"].as_array().unwrap() {
+                by_worker.entry(t["worker"].as_u64().unwrap()).or_default().push(t["triangles"].as_u64().unwrap());
+            }
+            assert_eq!(by_worker.len(), np - 1, "{rel}: every worker has tiles");
+            for counts in by_worker.values() {
+                assert!(counts.iter().all(|&t| t == counts[0] && t < full), "{rel}: {by_worker:?} against {full}");
+            }
             let (c, r) = tiles.split_once('x').unwrap();
             let holes = border_holes(&produced, &reference, c.parse().unwrap(), r.parse().unwrap());
             assert_eq!(holes, 0, "{rel} -np {np} --tiles {tiles}: {holes} uncovered pixels at tile borders");
         }
     }
+}
+
+/// A worker adapts one mesh for all of its tiles, so one worker's frame does not depend on
+/// how the frame is cut: 6x4 tiles give the 1x1 frame pixel for pixel (the model's box lies
+/// inside the reached tiles, so both adapt to the same refinement).
+#[test]
+fn one_worker_adapts_once_whatever_its_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let dpm = dir.path().join("model.dpm");
+    ok(&alone(&["pm", "build", &mesh("stanford/bunny_zipper_c3d.obj.gz"), "-o", dpm.to_str().unwrap()]));
+    let mut frames = Vec::new();
+    for tiles in ["1x1", "6x4"] {
+        let out = dir.path().join(format!("t{tiles}.png"));
+        let stats = dir.path().join(format!("t{tiles}.jsonl"));
+        let args = ["render", dpm.to_str().unwrap(), "--size", "960x540", "--tiles", tiles, "--frames", "2", "--orbit"];
+        ok(&mpirun(
+            2,
+            &[],
+            &[&args[..], &["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]].concat(),
+        ));
+        let line: serde_json::Value =
+            serde_json::from_str(std::fs::read_to_string(&stats).unwrap().lines().next().unwrap()).unwrap();
+        let counts: Vec<u64> =
+            line["tiles"].as_array().unwrap().iter().map(|t| t["triangles"].as_u64().unwrap()).collect();
+        assert!(counts.iter().all(|&c| c == counts[0]), "{tiles}: one mesh for every tile, {counts:?}");
+        frames.push(pixels(&dir.path().join(format!("t{tiles}-0002.png"))));
+    }
+    assert!(covered(&dir.path().join("t1x1-0002.png")) > 10_000, "the model is in view");
+    assert!(frames[0] == frames[1], "6x4 tiles differ from 1x1");
 }
 
 #[test]

@@ -460,19 +460,12 @@ fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) ->
     })
 }
 
-/// The least `n_alloc` a tile's adapter gets (elements of spare buffer space).
-const MIN_TILE_SLACK: u32 = 256;
+/// The most draws a worker makes of its adapted mesh per frame: up to this many tiles, each
+/// tile is drawn under its own rectangle; beyond it, a worker's tiles are grouped by the 4x4
+/// block of the frame they lie in, each group drawn once under its tiles' bounding rectangle
+/// and cut into tiles (a 64x64 grid would otherwise cost 4,096 draws).
+pub const MAX_DRAWS: usize = 16;
 
-/// The most adaptations a worker keeps, and so the most adaptation groups of its tiles: up to
-/// this many tiles, each tile is its own group and keeps its own adaptation from frame to
-/// frame; beyond it, a worker's tiles are grouped by the 4x4 block of the frame they lie in,
-/// each group adapted once to the sub-frustum of its tiles' bounding rectangle (which holds
-/// every tile of the group, so each meets the error bound) and rendered tile by tile from
-/// the same adapted mesh. Memory and adaptation passes then follow the frame, not the tile
-/// count: a 64x64 grid would otherwise hold 4,096 adaptations and run a pass loop for each.
-pub const MAX_ADAPTERS: usize = 16;
-
-/// Tiles adapted together (see [`MAX_ADAPTERS`]).
 /// An `.nsp` model on a worker: the file's skeleton with the cell streams received so far,
 /// and the cells decoded for the last frame (drawn ones and their ancestors).
 struct NspView {
@@ -534,8 +527,9 @@ impl NspView {
     }
 }
 
+/// Tiles drawn together (see [`MAX_DRAWS`]).
 struct TileGroup {
-    /// The adaptation's key: the tile index for a tile alone, `1 << 31 | block` for a block.
+    /// The group's key: the tile index for a tile alone, `1 << 31 | block` for a block.
     key: u32,
     /// The bounding rectangle of the group's tiles.
     rect: [u32; 4],
@@ -556,10 +550,10 @@ fn crop(pixels: &[u8], outer: [u32; 4], rect: [u32; 4]) -> Vec<u8> {
         .collect()
 }
 
-/// Groups a worker's tiles for adaptation: one group per tile up to [`MAX_ADAPTERS`] tiles,
-/// else one per 4x4 block of the frame (by each tile's top-left corner), in the job's order.
+/// Groups a worker's tiles for drawing: one group per tile up to [`MAX_DRAWS`] tiles, else one
+/// per 4x4 block of the frame (by each tile's top-left corner), in the job's order.
 fn tile_groups(tiles: &[(u32, [u32; 4])], width: u32, height: u32) -> Vec<TileGroup> {
-    if tiles.len() <= MAX_ADAPTERS {
+    if tiles.len() <= MAX_DRAWS {
         return tiles.iter().map(|&(index, rect)| TileGroup { key: index, rect, tiles: vec![(index, rect)] }).collect();
     }
     let mut groups: Vec<TileGroup> = Vec::new();
@@ -578,43 +572,27 @@ fn tile_groups(tiles: &[(u32, [u32; 4])], width: u32, height: u32) -> Vec<TileGr
     groups
 }
 
-/// A progressive mesh on this worker's GPU, with one adaptation per tile, at most
-/// [`MAX_ADAPTERS`] of them.
+/// A progressive mesh on this worker's GPU, adapted once per frame for all of the worker's
+/// tiles: to the sub-frustum of their bounding rectangle (refined inside it, coarsened
+/// outside with the c_LOD falloff), then drawn once under that rectangle and cut into tiles. The adaptation's cost follows the worker's screen
+/// region and the change of view, not its tile count (issue 16: per-tile adaptations cost
+/// 2.5x one adaptation of the same screen in 8x8 tiles, each tile converging separately).
+/// Rank 0 deals a progressive mesh's tiles to workers in contiguous runs, so a worker's
+/// rectangle is its share of the frame. It also keeps the mesh coherent from frame to frame:
+/// one adaptation state, whatever tiles come.
 struct PmTiles {
-    /// At the base mesh; each tile's adapter starts as its sibling.
-    template: GpuAdapter,
-    /// Per tile: its adapter, and when it was last used (a counter of uses).
-    tiles: HashMap<u32, (GpuAdapter, u64)>,
-    uses: u64,
+    adapter: GpuAdapter,
 }
 
 impl PmTiles {
     fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, WorkerError> {
         let decoded = codec::pm::format::decode(dpm).map_err(WorkerError::Model)?;
-        let template = GpuAdapter::new(gpu, &decoded.pm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
-        Ok(PmTiles { template, tiles: HashMap::new(), uses: 0 })
+        let adapter = GpuAdapter::new(gpu, &decoded.pm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        Ok(PmTiles { adapter })
     }
 
-    /// Tile `index`'s adapter: its own, a new one while fewer than [`MAX_ADAPTERS`] exist, or
-    /// the least recently used tile's.
-    fn adapter(&mut self, index: u32, slack: u32) -> &mut GpuAdapter {
-        self.uses += 1;
-        if !self.tiles.contains_key(&index) {
-            let adapter = if self.tiles.len() < MAX_ADAPTERS {
-                self.template.sibling_with_slack(slack)
-            } else {
-                let lru = *self.tiles.iter().min_by_key(|(_, (_, used))| *used).expect("a full pool").0;
-                self.tiles.remove(&lru).expect("present").0
-            };
-            self.tiles.insert(index, (adapter, 0));
-        }
-        let entry = self.tiles.get_mut(&index).expect("inserted");
-        entry.1 = self.uses;
-        &mut entry.0
-    }
-
-    /// Adapts every tile of `job` to its sub-frustum (until converged or `max_passes`) and
-    /// renders it.
+    /// Adapts the mesh to the sub-frustum of `job`'s tiles' bounding rectangle (until
+    /// converged or `max_passes`) and renders every tile from it.
     fn render(&mut self, renderer: &mut Renderer, job: &PmFrameJob) -> Result<Vec<TilePixels>, WorkerError> {
         let view_proj = Mat4::from_cols_array(&job.view_proj);
         let view = Viewpoint {
@@ -627,55 +605,56 @@ impl PmTiles {
             c_lod: job.c_lod,
             attribute_scale: job.attribute_scale,
         };
+        let Some(&(first, _)) = job.tiles.first() else {
+            return Ok(Vec::new());
+        };
+        let mut region = [u32::MAX, u32::MAX, 0, 0];
         for &(index, [x0, y0, x1, y1]) in &job.tiles {
             if !(x0 < x1 && x1 <= job.width && y0 < y1 && y1 <= job.height) {
                 return Err(TileError::BadRect([x0, y0, x1, y1]).at(index));
             }
+            region = [region[0].min(x0), region[1].min(y0), region[2].max(x1), region[3].max(y1)];
         }
-        // The paper's n_alloc is for one adapter; each of this worker's adapters gets a share,
-        // so that many small ones do not each hold a whole one's spare buffer space.
-        let groups = tile_groups(&job.tiles, job.width, job.height);
-        let slack = (DEFAULT_N_ALLOC / groups.len().max(1) as u32).max(MIN_TILE_SLACK);
+        let region_view = view.for_tile(region);
+        let start = Instant::now();
+        for _ in 0..job.max_passes.max(1) {
+            if self.adapter.adapt(&region_view).map_err(|e| TileError::from(e).at(first))?.converged() {
+                break;
+            }
+        }
+        // The one adaptation, shared out among the tiles for the load balancer.
+        let adapt_ms = start.elapsed().as_secs_f64() * 1e3 / job.tiles.len() as f64;
+        let triangles = self.adapter.counts().1;
+        // The region is drawn once and the tiles are cut out of it (a tile is an exact crop
+        // of the frame however large the scissor, `worker::render`): every draw processes the
+        // whole adapted mesh, so one draw costs what one tile's would (measured on the dragon
+        // in 8x8 tiles: 105-192 ms a frame against 390-811 ms in 4x4-block groups). A region
+        // larger than a texture falls back to groups.
+        let groups = if region[2] - region[0] <= renderer.max_side() && region[3] - region[1] <= renderer.max_side() {
+            vec![TileGroup { key: 0, rect: region, tiles: job.tiles.clone() }]
+        } else {
+            tile_groups(&job.tiles, job.width, job.height)
+        };
         let mut out = Vec::with_capacity(job.tiles.len());
         for group in &groups {
-            let adapter = self.adapter(group.key, slack);
-            let group_view = view.for_tile(group.rect);
-            let start = Instant::now();
-            for _ in 0..job.max_passes.max(1) {
-                if adapter.adapt(&group_view).map_err(|e| TileError::from(e).at(group.tiles[0].0))?.converged() {
-                    break;
-                }
-            }
-            // The group's adaptation, shared out among its tiles for the load balancer.
-            let adapt_ms = start.elapsed().as_secs_f64() * 1e3 / group.tiles.len() as f64;
-            // A group is drawn once, under its bounding rectangle, and its tiles are cut out of
-            // that: a tile is an exact crop of the frame however large the scissor
-            // (`worker::render`), and one draw per group costs what one draw per tile would
-            // cost 4,096 times in a 64x64 grid.
             let first = group.tiles[0].0;
             let (group_rgba, group_times) = renderer
-                .render_pm(adapter.mesh(), view_proj, (job.width, job.height), group.rect)
+                .render_pm(self.adapter.mesh(), view_proj, (job.width, job.height), group.rect)
                 .map_err(|e| TileError::from(e).at(first))?;
             let share = 1.0 / group.tiles.len() as f64;
             for &(index, rect) in &group.tiles {
-                let rgba = crop(&group_rgba, group.rect, rect);
-                let times = crate::render::RenderTimes {
-                    upload_ms: group_times.upload_ms * share,
-                    render_ms: group_times.render_ms * share,
-                    readback_ms: group_times.readback_ms * share,
-                };
                 out.push(TilePixels {
                     index,
                     rect,
                     times: TileTimes {
                         decode_ms: 0.0,
                         adapt_ms,
-                        upload_ms: times.upload_ms,
-                        render_ms: times.render_ms,
-                        readback_ms: times.readback_ms,
+                        upload_ms: group_times.upload_ms * share,
+                        render_ms: group_times.render_ms * share,
+                        readback_ms: group_times.readback_ms * share,
                     },
-                    triangles: adapter.counts().1,
-                    rgba,
+                    triangles,
+                    rgba: crop(&group_rgba, group.rect, rect),
                 });
             }
         }

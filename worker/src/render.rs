@@ -364,6 +364,11 @@ impl Renderer {
         self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
     }
 
+    /// The largest rectangle side one render can have (the device's texture limit).
+    pub fn max_side(&self) -> u32 {
+        self.gpu.limits().max_texture_dimension_2d
+    }
+
     /// Renders an adapted mesh (`GpuAdapter::mesh`) as [`Renderer::render`] renders a
     /// [`RenderMesh`], but straight from its GPU buffers: nothing is uploaded or read back but
     /// the pixels (its upload time is the frame uniform's). `pm` must live on this renderer's

@@ -280,7 +280,11 @@ impl PmScene {
                 reach.is_some_and(|[rx0, ry0, rx1, ry1]| x0 < rx1 && rx0 < x1 && y0 < ry1 && ry0 < y1)
             })
             .collect();
-        let owner = ctx.owners(&indices);
+        // Each worker adapts one mesh to its tiles' bounding rectangle: contiguous runs of
+        // tiles keep it to the worker's share of the frame (with --balance, the balancer's
+        // assignment, whose rectangles may be larger).
+        let owner =
+            if args.balance { ctx.owners(&indices) } else { super::schedule::contiguous(indices.len(), ctx.workers) };
         let mut jobs: Vec<PmFrameJob> = (0..ctx.workers)
             .map(|_| PmFrameJob {
                 frame: ctx.frame,

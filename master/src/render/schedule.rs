@@ -24,9 +24,26 @@ pub fn assign(tiles: &[usize], workers: usize, costs: Option<&[f64]>) -> Vec<usi
     owner
 }
 
+/// Tiles (by index, in the grid's row-major order) to workers in contiguous runs: worker `w`
+/// gets the `w`-th of `workers` nearly equal runs, so its tiles are a band of the frame. A
+/// progressive mesh's worker adapts one mesh to the bounding rectangle of its tiles, so a
+/// band keeps that rectangle to its share of the frame (round robin would make it the whole
+/// frame for every worker).
+pub fn contiguous(tiles: usize, workers: usize) -> Vec<usize> {
+    (0..tiles).map(|k| 1 + k * workers / tiles.max(1)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn contiguous_runs() {
+        assert_eq!(contiguous(5, 2), vec![1, 1, 1, 2, 2]);
+        assert_eq!(contiguous(2, 4), vec![1, 3]);
+        assert_eq!(contiguous(8, 3), vec![1, 1, 1, 2, 2, 2, 3, 3]);
+        assert!(contiguous(0, 3).is_empty());
+    }
 
     #[test]
     fn round_robin_and_balanced_assignment() {
