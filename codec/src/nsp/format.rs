@@ -440,10 +440,17 @@ fn leb128(b: &[u8]) -> Option<(u64, usize)> {
 }
 
 /// A valid file whose only cell (a leaf root at 10 bits, decisions at even odds, at most
-/// 4,096 kd-cells and 16,384 top-simplices) has `stream` as its bytes: lets a fuzzer reach
-/// the cell decoder past the checksums (`fuzz/fuzz_targets/decode_nsp.rs`).
-pub fn wrap_for_fuzzing(stream: &[u8]) -> Vec<u8> {
-    let params = Params { bits: 10, root_bits: 7, splits: 4, min_simplices: 8000, advance: 0 };
+/// 4,096 kd-cells and 16,384 top-simplices) has `data` after its first byte as its stream,
+/// with the geometry advance that byte picks: lets a fuzzer reach the cell decoder past the
+/// checksums (`fuzz/fuzz_targets/decode_nsp.rs`).
+pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
+    // The first byte picks the geometry advance (0 to 3), so its prologue and descendant
+    // lists are fuzzed too; the rest is the stream.
+    let (advance, stream) = match data.split_first() {
+        Some((&a, rest)) => (a % 4, rest),
+        None => (0, data),
+    };
+    let params = Params { bits: 10, root_bits: 7, splits: 4, min_simplices: 8000, advance };
     let header = Header {
         params,
         cube: Cube { origin: [0.0; 3], side: 1.0, bits: 10 },
