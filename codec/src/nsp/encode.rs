@@ -305,6 +305,24 @@ struct Truth<'a> {
     /// ascending and distinct.
     fine: Vec<u128>,
     fine_levels: u8,
+    /// Where the last occupancy question's range started in `fine`.
+    cursor: usize,
+}
+
+/// The first index at or after `from` whose value is at least `key` (`v` ascending, every
+/// value before `from` below `key`), by doubling steps then a binary search: a walk in kd
+/// order over `v` costs the log of each step, not of `v`'s length.
+fn gallop(v: &[u128], from: usize, key: u128) -> usize {
+    let mut lo = from;
+    let mut step = 1;
+    let mut hi = from;
+    while hi < v.len() && v[hi] < key {
+        lo = hi + 1;
+        hi = from + step;
+        step *= 2;
+    }
+    let hi = hi.min(v.len());
+    lo + v[lo..hi].partition_point(|&x| x < key)
 }
 
 impl<'a> Truth<'a> {
@@ -345,6 +363,7 @@ impl<'a> Truth<'a> {
             orient: HashMap::default(),
             fine: Vec::new(),
             fine_levels: 0,
+            cursor: 0,
         }
     }
 
@@ -451,8 +470,13 @@ impl Oracle for Truth<'_> {
         let lo = prefix << free;
         let mid = (2 * prefix + 1) << (free - 1);
         let hi = (prefix + 1) << free;
-        let a = self.fine.partition_point(|&x| x < lo);
-        let b = self.fine.partition_point(|&x| x < mid);
+        // Within a level the questions come in kd order: search onward from the last answer
+        // (galloping), from the start when the order restarts.
+        let from =
+            if self.cursor > 0 && self.fine.get(self.cursor - 1).is_some_and(|&x| x >= lo) { 0 } else { self.cursor };
+        let a = gallop(&self.fine, from, lo);
+        let b = gallop(&self.fine, a, mid);
+        self.cursor = a;
         let has0 = b > a;
         let has1 = self.fine.get(b).is_some_and(|&x| x < hi);
         (has0 && has1, !has0)
