@@ -310,41 +310,60 @@ impl Complex {
         let level = self.level;
         let order = std::mem::take(&mut self.order);
         let mut next = Vec::with_capacity(order.len() * 2);
-        let axis = (level % 3) as usize;
         for &v in &order {
             let (both, second) = oracle.geometry(v, level);
-            let cell = &mut self.cells[v as usize];
-            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(cell.tops.len()));
+            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(self.cells[v as usize].tops.len()));
             let both = io.bit(ctx, both);
-            cell.level = level + 1;
-            cell.prefix <<= 1;
-            cell.xyz[axis] <<= 1;
-            if !both {
-                let second = io.bit(ctx + 1, second);
-                cell.prefix |= second as u128;
-                cell.xyz[axis] |= second as u32;
-                next.push(v);
-                continue;
-            }
-            let prefix = cell.prefix | 1;
-            let mut xyz = cell.xyz;
-            xyz[axis] |= 1;
-            if self.cells.len() >= max_cells {
-                return Err(ApplyError::TooLarge);
-            }
-            let v1 = self.cells.len() as u32;
-            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: SmallVec::new() });
-            oracle.before_split(v, v1);
-            self.split(v, v1, io, oracle)?;
-            if self.live_tops > max_tops {
-                return Err(ApplyError::TooLarge);
-            }
+            let second = !both && io.bit(ctx + 1, second);
             next.push(v);
-            next.push(v1);
+            if let Some(v1) = self.descend(v, both, second, io, oracle, max_cells, max_tops)? {
+                next.push(v1);
+            }
         }
         self.order = next;
         self.level = level + 1;
         Ok(())
+    }
+
+    /// Moves kd-cell `v` one kd level down, into its second half if `second`, or when `both`
+    /// halves are occupied keeps `v` as the first and appends the second as `v1`, applying the
+    /// connectivity change of the split; returns `v1`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn descend(
+        &mut self,
+        v: u32,
+        both: bool,
+        second: bool,
+        io: &mut impl BitIo,
+        oracle: &mut impl Oracle,
+        max_cells: usize,
+        max_tops: usize,
+    ) -> Result<Option<u32>, ApplyError> {
+        let cell = &mut self.cells[v as usize];
+        let axis = (cell.level % 3) as usize;
+        cell.level += 1;
+        cell.prefix <<= 1;
+        cell.xyz[axis] <<= 1;
+        if !both {
+            cell.prefix |= second as u128;
+            cell.xyz[axis] |= second as u32;
+            return Ok(None);
+        }
+        let (level, prefix) = (cell.level, cell.prefix | 1);
+        let mut xyz = cell.xyz;
+        xyz[axis] |= 1;
+        if self.cells.len() >= max_cells {
+            return Err(ApplyError::TooLarge);
+        }
+        let v1 = self.cells.len() as u32;
+        self.cells.push(KdCell { level, prefix, xyz, tops: SmallVec::new() });
+        oracle.before_split(v, v1);
+        self.split(v, v1, io, oracle)?;
+        if self.live_tops > max_tops {
+            return Err(ApplyError::TooLarge);
+        }
+        Ok(Some(v1))
     }
 
     /// Turns the geometry advance on: `levels` kd levels ahead, up to kd level `top`. Every
@@ -412,7 +431,6 @@ impl Complex {
         let level = self.level;
         let order = std::mem::take(&mut self.order);
         let mut next = Vec::with_capacity(order.len() * 2);
-        let axis = (level % 3) as usize;
         let depth = self.ahead_depth(level);
         if depth == 0 {
             return Err(ApplyError::NoSymbol);
@@ -429,40 +447,20 @@ impl Complex {
             }
             // The encoder's truth follows the split (and learns the level) here.
             oracle.geometry(v, level);
-            let cell = &mut self.cells[v as usize];
-            cell.level = level + 1;
-            cell.prefix <<= 1;
-            cell.xyz[axis] <<= 1;
-            if !(has0 && has1) {
-                cell.prefix |= has1 as u128;
-                cell.xyz[axis] |= has1 as u32;
+            next.push(v);
+            let Some(v1) = self.descend(v, has0 && has1, has1, io, oracle, max_cells, max_tops)? else {
                 let list: SmallVec<[u16; 4]> = desc.iter().map(|&s| s & mask).collect();
                 self.ahead.desc[v as usize] = if grows { self.extend(v, &list, depth - 1, io, oracle) } else { list };
-                next.push(v);
                 continue;
-            }
-            let prefix = cell.prefix | 1;
-            let mut xyz = cell.xyz;
-            xyz[axis] |= 1;
-            if self.cells.len() >= max_cells {
-                return Err(ApplyError::TooLarge);
-            }
-            let v1 = self.cells.len() as u32;
-            self.cells.push(KdCell { level: level + 1, prefix, xyz, tops: SmallVec::new() });
+            };
+            next.push(v1);
+            self.ahead.desc.push(SmallVec::new());
             let (zeros, ones): (SmallVec<[u16; 4]>, SmallVec<[u16; 4]>) =
                 desc.iter().copied().partition(|&s| s & top_bit == 0);
-            self.ahead.desc.push(SmallVec::new());
-            oracle.before_split(v, v1);
-            self.split(v, v1, io, oracle)?;
-            if self.live_tops > max_tops {
-                return Err(ApplyError::TooLarge);
-            }
             for (w, list) in [(v, zeros), (v1, ones)] {
                 let list: SmallVec<[u16; 4]> = list.iter().map(|&s| s & mask).collect();
                 self.ahead.desc[w as usize] = if grows { self.extend(w, &list, depth - 1, io, oracle) } else { list };
             }
-            next.push(v);
-            next.push(v1);
         }
         self.order = next;
         self.level = level + 1;
