@@ -119,6 +119,12 @@ pub fn xyz_of(prefix: u128, level: u8) -> [u32; 3] {
     q
 }
 
+/// The centre of the kd-cell at `level` with per-axis coordinates `xyz`, in grid units of
+/// `bits` bits per axis.
+pub fn centre(level: u8, xyz: [u32; 3], bits: u8) -> [f64; 3] {
+    [0, 1, 2].map(|a| (xyz[a] as f64 + 0.5) * (1u64 << (bits as u32 - used(level, a))) as f64)
+}
+
 /// Bits consumed on `axis` at kd `level`.
 #[inline]
 fn used(level: u8, axis: usize) -> u32 {
@@ -471,16 +477,10 @@ impl Complex {
     /// the advance the mean of its known descendants' centres.
     pub fn position(&self, v: u32, bits: u8) -> [f64; 3] {
         let kd = &self.cells[v as usize];
-        let centre = |level: u8, xyz: [u32; 3]| {
-            [0, 1, 2].map(|a| {
-                let free = bits as u32 - used(level, a);
-                (xyz[a] as f64 + 0.5) * (1u64 << free) as f64
-            })
-        };
         let depth = if self.ahead.levels > 0 { self.ahead_depth(kd.level) } else { 0 };
         let desc = self.ahead.desc.get(v as usize).map(SmallVec::as_slice).unwrap_or(&[]);
         if depth == 0 || desc.is_empty() {
-            return centre(kd.level, kd.xyz);
+            return centre(kd.level, kd.xyz, bits);
         }
         let mut sum = [0f64; 3];
         for &s in desc {
@@ -489,7 +489,7 @@ impl Complex {
                 let a = ((kd.level + i) % 3) as usize;
                 xyz[a] = (xyz[a] << 1) | ((s >> (depth - 1 - i)) & 1) as u32;
             }
-            let c = centre(kd.level + depth, xyz);
+            let c = centre(kd.level + depth, xyz, bits);
             for a in 0..3 {
                 sum[a] += c[a];
             }

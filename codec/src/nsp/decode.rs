@@ -198,7 +198,6 @@ impl NspFile {
         Ok(bytes)
     }
 
-    /// The root's state at its minimal precision (0 bits: one point).
     /// The bytes of cell `c`'s stream a decoder needs to hold it at `bits` of precision (with
     /// the geometry advance, the first segment even at its minimal precision: it starts with
     /// the prologue).
@@ -208,6 +207,7 @@ impl NspFile {
         self.entries[c as usize].needed(min, bits)
     }
 
+    /// The root's state at its minimal precision (0 bits: one point).
     pub fn root_state(&self) -> Result<CellState, NspError> {
         let c = self.tree.root();
         CellState::new(self, c, Complex::root())
@@ -254,7 +254,6 @@ impl NspFile {
     }
 }
 
-/// The footer's count of cells against the cell table's rows.
 /// The kd level where cell `c`'s geometry stops with the advance: `3 min(q + m, p)`.
 pub(super) fn ahead_top(tree: &Tree, c: u32) -> u8 {
     3 * (tree.max_prec(c) + tree.params.advance).min(tree.params.bits)
@@ -269,17 +268,12 @@ pub(super) fn fresh_cells(tree: &Tree, c: u32, cx: &Complex) -> Vec<u32> {
     if node.parent == u32::MAX {
         return cx.order.clone();
     }
-    let shift = tree.min_prec(c) as u32 - tree.params.level_bits() as u32 * node.depth as u32;
-    cx.order
-        .iter()
-        .copied()
-        .filter(|&v| {
-            let q = cx.cells[v as usize].xyz;
-            (0..3).any(|a| q[a] >> shift != node.coords[a])
-        })
-        .collect()
+    // At the cell's minimal precision every axis of a kd-cell has that many bits.
+    let bits = tree.min_prec(c);
+    cx.order.iter().copied().filter(|&v| !tree.contains(c, cx.cells[v as usize].xyz, bits)).collect()
 }
 
+/// The footer's count of cells against the cell table's rows.
 fn check_count(cells: u32, entries: &[CellEntry]) -> Result<(), NspError> {
     if cells as usize != entries.len() {
         return Err(NspError::Format(format!("the footer counts {cells} cells, the cell table has {}", entries.len())));

@@ -5,6 +5,7 @@ use rustc_hash::FxHashMap as HashMap;
 
 use glam::Mat4;
 
+use super::complex::centre;
 use super::decode::{CellState, NspFile};
 use super::NspError;
 use crate::view::{box_screen_rect, Camera};
@@ -26,9 +27,9 @@ pub struct Drawn {
     /// another stitched triangle, so were not drawn.
     pub collapsed: u64,
     pub merged: u64,
-    /// With the geometry advance: kd-cells that two cells draw at different positions (each
-    /// cell knows the descendants its own simplices reach), and the largest such distance in
-    /// world units.
+    /// With the geometry advance: kd-cells drawn at two positions (a kd-cell is drawn where
+    /// the cell it lies in puts it, but one spanning several cells, or in none drawn, where
+    /// the drawing cell puts it), and the largest such distance in world units.
     pub split_vertices: u64,
     pub split_distance: f32,
 }
@@ -52,17 +53,6 @@ enum Loc {
 
 /// A drawn corner: a kd-cell's level and its per-axis coordinates there.
 type Corner = (u8, [u32; 3]);
-
-/// The centre of a kd-cell in grid units.
-fn centre(file: &NspFile, (level, xyz): Corner) -> [f64; 3] {
-    let bits = file.header.params.bits as u32;
-    let mut g = [0f64; 3];
-    for a in 0..3 {
-        let free = bits - (level as u32 + 2 - a as u32) / 3;
-        g[a] = (xyz[a] as f64 + 0.5) * (1u64 << free) as f64;
-    }
-    g
-}
 
 /// What [`walk`] counts besides the triangles it hands out.
 #[derive(Default)]
@@ -194,7 +184,7 @@ fn walk(
                                     kd.xyz[a as usize] >> (fine - coarse)
                                 });
                                 *corner = (level, xyz);
-                                *pos = centre(file, *corner);
+                                *pos = centre(level, xyz, bits);
                                 moved = true;
                             }
                             if ahead {
