@@ -186,6 +186,25 @@ impl<'a> Decoder<'a> {
         self.overrun
     }
 
+    /// Decodes a bit whose probability of a 0 is the fixed `prob` (a static table: nothing to
+    /// adapt, so no write back).
+    #[inline]
+    pub fn bit_static(&mut self, prob: u16) -> bool {
+        let bound = (self.range >> PROB_BITS) * (prob as u32);
+        let bit = self.code >= bound;
+        if bit {
+            self.code -= bound;
+            self.range -= bound;
+        } else {
+            self.range = bound;
+        }
+        while self.range < TOP {
+            self.range <<= 8;
+            self.code = (self.code << 8) | self.next_byte() as u32;
+        }
+        bit
+    }
+
     #[inline]
     pub fn bit(&mut self, prob: &mut u16) -> bool {
         let bound = (self.range >> PROB_BITS) * (*prob as u32);

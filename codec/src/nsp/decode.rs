@@ -314,8 +314,7 @@ struct Static<'a, 'b> {
 impl BitIo for Static<'_, '_> {
     #[inline]
     fn bit(&mut self, ctx: usize, _: bool) -> bool {
-        let mut p = self.table[ctx];
-        self.dec.bit(&mut p)
+        self.dec.bit_static(self.table[ctx])
     }
 }
 
