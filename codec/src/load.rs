@@ -6,9 +6,11 @@
 //! and OBJ faces are triangulated by one function (in `load/polygon.rs`): convex ones are
 //! fanned from their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones ear-clipped in the
 //! plane of their Newell normal, every triangle oriented like the polygon; degenerate ones
-//! (no area) are fanned. OBJ faces of one or two corners (and `l` lines) become triangles
-//! `(a, a, a)` and `(a, b, b)`, as `tobj` makes them; PLY faces of fewer than three corners
-//! are dropped. Strips are unrolled with alternating orientation and their
+//! (no area) are fanned. OBJ points and lines (`p`, `l`, and `f` with one or two
+//! corners) are no triangles: they are skipped and counted ([`Loaded::ignored`]), never made
+//! into triangles without area; PLY faces of fewer than three corners are dropped. A file
+//! that gives no triangle at all (a point cloud, an empty file) is an error, not an empty
+//! mesh. Strips are unrolled with alternating orientation and their
 //! zero-area stitching triangles (a repeated index) dropped, as strip writers intend.
 //! An OBJ file with several objects or groups is merged into one mesh by concatenation.
 //! Every error names the file and what is wrong; no input makes a loader panic.
@@ -62,16 +64,44 @@ impl Format {
     }
 }
 
+/// A loaded mesh, and what the file held that is not a triangle.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Loaded {
+    pub mesh: Mesh,
+    /// Elements skipped because they are not triangles: OBJ points (`p`, `f` of one corner)
+    /// and lines (`l`, `f` of two corners).
+    pub ignored: u64,
+}
+
+/// The message for a file that gives no triangle.
+pub(crate) fn no_triangles(ignored: u64) -> String {
+    if ignored > 0 {
+        format!("no triangles, only points or lines ({ignored} elements; Tessera renders triangle meshes)")
+    } else {
+        "no triangles (an empty file or a point cloud is not a mesh)".to_string()
+    }
+}
+
 /// Reads a mesh file, decompressing gzip if the bytes start with its magic number.
 pub fn load_path(path: &Path) -> Result<Mesh, LoadError> {
+    load_path_counted(path).map(|l| l.mesh)
+}
+
+/// [`load_path`], with the count of elements skipped.
+pub fn load_path_counted(path: &Path) -> Result<Loaded, LoadError> {
     let format = Format::from_path(path)
         .ok_or_else(|| err(path, "unknown mesh format: expected .obj, .ply or .stl, optionally .gz"))?;
     let raw = crate::input::read_file(path).map_err(|e| err(path, e))?;
-    load_bytes(path, &raw, format)
+    load_bytes_counted(path, &raw, format)
 }
 
 /// Parses mesh bytes (gzip or plain) in the given format; `path` is used in error messages.
 pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadError> {
+    load_bytes_counted(path, raw, format).map(|l| l.mesh)
+}
+
+/// [`load_bytes`], with the count of elements skipped.
+pub fn load_bytes_counted(path: &Path, raw: &[u8], format: Format) -> Result<Loaded, LoadError> {
     let bytes = if raw.starts_with(&[0x1f, 0x8b]) {
         let mut out =
             Vec::with_capacity(raw.len().saturating_mul(4).min(crate::input::max_decompressed_bytes() as usize));
@@ -85,10 +115,10 @@ pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadE
     } else {
         raw.to_vec()
     };
-    let mesh = match format {
+    let (mesh, ignored) = match format {
         Format::Obj => load_obj(path, &bytes)?,
-        Format::Ply => load_ply(path, &bytes)?,
-        Format::Stl => load_stl(path, &bytes)?,
+        Format::Ply => (load_ply(path, &bytes)?, 0),
+        Format::Stl => (load_stl(path, &bytes)?, 0),
     };
     if let Some(bad) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= mesh.positions.len()) {
         return Err(err(
@@ -96,10 +126,30 @@ pub fn load_bytes(path: &Path, raw: &[u8], format: Format) -> Result<Mesh, LoadE
             format!("a face uses vertex {bad}, but the file has only {} vertices", mesh.positions.len()),
         ));
     }
-    Ok(mesh)
+    if mesh.triangles.is_empty() {
+        return Err(err(path, no_triangles(ignored)));
+    }
+    Ok(Loaded { mesh, ignored })
 }
 
-fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
+/// The mesh and the number of points and lines skipped.
+fn load_obj(path: &Path, bytes: &[u8]) -> Result<(Mesh, u64), LoadError> {
+    // Points (`p`) and polylines (`l`) are no faces, but tobj gives an `l` of three corners
+    // as a triangle: such lines are counted and turned into comments (same length) before
+    // tobj reads the file.
+    let mut owned = None;
+    let mut ignored = 0u64;
+    let mut start = 0;
+    for line in bytes.split_inclusive(|&b| b == b'\n') {
+        let first = std::str::from_utf8(line).ok().and_then(|t| t.split_whitespace().next());
+        if matches!(first, Some("p" | "l")) {
+            ignored += 1;
+            let at = start + line.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(0);
+            owned.get_or_insert_with(|| bytes.to_vec())[at] = b'#';
+        }
+        start += line.len();
+    }
+    let bytes = owned.as_deref().unwrap_or(bytes);
     // Faces come as polygons (`face_arities`, empty when all are triangles) and are
     // triangulated here, as PLY faces are: tobj's own triangulation fans every polygon.
     let options = tobj::LoadOptions { triangulate: false, single_index: false, ..Default::default() };
@@ -134,10 +184,9 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
             let face = &m.indices[next..next + arity as usize];
             next += arity as usize;
             match *face {
-                // What tobj's triangulation made of points and lines: triangles without area.
+                // Faces of one or two corners are points and lines: skipped, counted.
                 [] => return Err(err(path, "malformed OBJ: a face without vertices")),
-                [a] => mesh.triangles.push([base + a; 3]),
-                [a, b] => mesh.triangles.push([base + a, base + b, base + b]),
+                [_] | [_, _] => ignored += 1,
                 _ => {
                     corners.clear();
                     corners.extend(face.iter().map(|&i| base + i));
@@ -146,7 +195,7 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
             }
         }
     }
-    Ok(mesh)
+    Ok((mesh, ignored))
 }
 
 /// A PLY vertex: `x`, `y`, `z` of any numeric type; other properties are ignored.
@@ -208,7 +257,34 @@ impl PropertyAccess for PlyIndices {
     }
 }
 
+/// A PLY file whose lines end in bare carriage returns (as some CAD exporters write them),
+/// with its line breaks made line feeds for ply-rs, which reads `\n` and `\r\n` only: in the
+/// header, and in the whole file if it is ASCII (same length, so binary records stay where
+/// they are). `None` for other files. A line feed inside such a file's lines is an error, as
+/// in the streaming reader, which splits these files' lines at carriage returns.
+fn cr_lines_to_lf(path: &Path, bytes: &[u8]) -> Result<Option<Vec<u8>>, LoadError> {
+    if !(bytes.starts_with(b"ply\r") && bytes.get(4) != Some(&b'\n')) {
+        return Ok(None);
+    }
+    let marker = b"end_header\r";
+    let header_end = bytes.windows(marker.len()).position(|w| w == marker).map_or(bytes.len(), |i| i + marker.len());
+    let ascii = bytes[..header_end].split(|&b| b == b'\r').any(|l| l.starts_with(b"format ascii"));
+    let upto = if ascii { bytes.len() } else { header_end };
+    if bytes[..header_end].contains(&b'\n') {
+        return Err(err(path, "malformed PLY header: a line feed inside a line (its lines end in carriage returns)"));
+    }
+    let mut out = bytes.to_vec();
+    for b in &mut out[..upto] {
+        if *b == b'\r' {
+            *b = b'\n';
+        }
+    }
+    Ok(Some(out))
+}
+
 fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
+    let converted = cr_lines_to_lf(path, bytes)?;
+    let bytes = converted.as_deref().unwrap_or(bytes);
     let mut reader = BufReader::new(Cursor::new(bytes));
     let header = Parser::<DefaultElement>::new()
         .read_header(&mut reader)
@@ -348,10 +424,25 @@ element face 2\nproperty list uchar int vertex_indices\nend_header\n{verts}6 0 1
     }
 
     #[test]
-    fn obj_points_and_lines_stay_triangles_without_area() {
-        let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1\nf 1 2\nl 2 3\nf 1 2 3\n";
-        let m = load_bytes(Path::new("p.obj"), obj, Format::Obj).unwrap();
-        assert_eq!(m.triangles, vec![[0, 0, 0], [0, 1, 1], [1, 2, 2], [0, 1, 2]]);
+    fn obj_points_and_lines_are_skipped_and_counted() {
+        // `l 1 2 3` is a polyline of three vertices, not a triangle.
+        let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1\nf 1 2\nl 2 3\n  l 1 2 3\np 1\nf 1 2 3\n";
+        let l = load_bytes_counted(Path::new("p.obj"), obj, Format::Obj).unwrap();
+        assert_eq!(l.mesh.triangles, vec![[0, 1, 2]]);
+        assert_eq!(l.ignored, 5);
+        let only_lines = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\nl 3 1\n";
+        let e = load_bytes(Path::new("l.obj"), only_lines, Format::Obj).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "l.obj: no triangles, only points or lines (2 elements; Tessera renders triangle meshes)"
+        );
+        for (name, bytes) in [("e.obj", &b""[..]), ("c.obj", b"v 0 0 0\nv 1 0 0\n")] {
+            let e = load_bytes(Path::new(name), bytes, Format::Obj).unwrap_err();
+            assert!(e.to_string().ends_with("no triangles (an empty file or a point cloud is not a mesh)"), "{e}");
+        }
+        let cloud = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 1 1\n";
+        let e = load_bytes(Path::new("c.ply"), cloud, Format::Ply).unwrap_err();
+        assert!(e.to_string().contains("no triangles"), "{e}");
     }
 
     #[test]

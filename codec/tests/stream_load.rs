@@ -27,7 +27,7 @@ fn stream(path: &Path) -> Result<Mesh, LoadError> {
         triangles.push(t);
         Ok(())
     };
-    let count = for_each_triangle(path, &positions, &mut collect, &mut progress())?;
+    let count = for_each_triangle(path, &positions, &mut collect, &mut progress())?.triangles;
     assert_eq!(count, triangles.len() as u64);
     Ok(Mesh { positions, triangles })
 }
@@ -300,7 +300,9 @@ fn obj_relative_indices_objects_points_and_lines() {
     assert_eq!(m.positions.len(), 4 + 6 + 7);
     assert_eq!(m.positions[3], [0.0, 1.0, 0.0], "w divides the position");
     assert_eq!(m.positions[4], [9.0, 9.0, 9.0]);
-    assert_eq!(&m.triangles[..4], &[[0, 1, 2], [0, 2, 3], [1, 2, 2], [1, 1, 1]]);
+    // The line `l 2 3` and the point `f 2` are skipped, not made triangles without area.
+    assert_eq!(&m.triangles[..3], &[[0, 1, 2], [0, 2, 3], [4, 5, 6]]);
+    assert!(m.triangles.iter().all(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]), "{:?}", m.triangles);
     // Colours on every vertex are fine; on some but not all, tobj refuses the file.
     files.same("c.obj", b"v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n");
     let e = files.refused("c2.obj", b"v 0 0 0\nv 1 0 0 0 1 0\nv 0 1 0\nf 1 2 3\n");
@@ -529,7 +531,7 @@ fn stream_timings() {
         sum = sum.wrapping_add(u64::from(t[0] ^ t[1] ^ t[2]));
         Ok(())
     };
-    let n = for_each_triangle(&path, &positions, &mut add, &mut |_| {}).unwrap();
+    let n = for_each_triangle(&path, &positions, &mut add, &mut |_| {}).unwrap().triangles;
     let f = t.elapsed().as_secs_f64();
     if let Some(m) = mesh {
         assert!(identical(&stream(&path).unwrap(), &m), "the readers differ");
@@ -543,4 +545,46 @@ fn stream_timings() {
         p + f,
         n as f64 / (p + f) / 1e6,
     );
+}
+
+#[test]
+fn ply_lines_may_end_in_bare_carriage_returns() {
+    // As some CAD exporters write them: the ASCII file with `\r` for `\r\n` reads as the
+    // original, and so does a binary file whose header lines end in `\r`.
+    let files = Files::new();
+    let lf = files.same("lf.ply", ASCII_PLY.as_bytes());
+    let cr = files.same("cr.ply", ASCII_PLY.replace("\r\n", "\r").as_bytes());
+    assert!(identical(&lf, &cr));
+    assert!(!lf.triangles.is_empty());
+    let binary = little_endian_usual();
+    let end = binary.windows(11).position(|w| w == b"end_header\n").expect("a header") + 11;
+    let mut bare = binary[..end].to_vec();
+    for b in &mut bare {
+        if *b == b'\n' {
+            *b = b'\r';
+        }
+    }
+    bare.extend_from_slice(&binary[end..]);
+    let a = files.same("b.ply", &binary);
+    let b = files.same("bcr.ply", &bare);
+    assert!(identical(&a, &b));
+    // Two kinds of line break in one header: refused by both readers, naming the line.
+    let mixed = ASCII_PLY.replace("\r\n", "\r").replacen("element vertex 6\r", "element vertex 6\n", 1);
+    let e = files.refused("mixed.ply", mixed.as_bytes());
+    assert!(e.contains("line feed") || e.contains("line break"), "{e}");
+}
+
+#[test]
+fn points_and_lines_are_counted_and_a_file_without_triangles_is_refused() {
+    let files = Files::new();
+    let path = files.put("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\np 1\nf 1 2\nf 1 2 3\n");
+    let positions = read_positions(&path, &mut |_| {}).unwrap();
+    let counts = for_each_triangle(&path, &positions, &mut |_| Ok(()), &mut |_| {}).unwrap();
+    assert_eq!((counts.triangles, counts.ignored), (1, 3));
+    for (name, bytes) in
+        [("l.obj", &b"v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\n"[..]), ("e.obj", b""), ("p.obj", b"v 1 2 3\n")]
+    {
+        let e = files.refused(name, bytes);
+        assert!(e.contains("no triangles"), "{e}");
+    }
 }

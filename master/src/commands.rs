@@ -36,12 +36,22 @@ pub fn read_input(path: &Path) -> Result<Vec<u8>> {
     codec::input::read_file(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
-/// Loads a mesh file (OBJ, PLY, STL, optionally gzipped), with a spinner while it parses.
+/// Loads a mesh file (OBJ, PLY, STL, optionally gzipped), with a spinner while it parses;
+/// points and lines it skipped are reported on stderr.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
     let pb = progress::spinner(format!("loading {}", path.display()));
-    let mesh = codec::load_path(path);
+    let loaded = codec::load::load_path_counted(path);
     pb.finish_and_clear();
-    Ok(mesh?)
+    let loaded = loaded?;
+    note_ignored(path, loaded.ignored);
+    Ok(loaded.mesh)
+}
+
+/// Says on stderr how many points and lines a mesh file held that were skipped.
+fn note_ignored(path: &Path, ignored: u64) {
+    if ignored > 0 {
+        eprintln!("note: {}: {ignored} point and line elements skipped (only triangles are kept)", path.display());
+    }
 }
 
 /// `tessera encode IN -o OUT.bft [--quant-bits N] [--chunk-triangles N] [--temp-dir DIR]`.
@@ -73,6 +83,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         load_mesh(input)?
     };
     let positions = &mesh.positions;
+    let mut ignored = 0;
     let mut source = |sink: TriangleSink| -> Result<(), EncodeChunkError> {
         if !streamed {
             return mesh.triangles.iter().try_for_each(|&t| sink(t));
@@ -94,7 +105,10 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         match (read, failed) {
             (_, Some(e)) => Err(e),
             (Err(e), None) => Err(e.into()),
-            (Ok(_), None) => Ok(()),
+            (Ok(counts), None) => {
+                ignored = counts.ignored;
+                Ok(())
+            }
         }
     };
     let pb = progress::bar(0, "encoding");
@@ -104,13 +118,25 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         pb.set_position(done);
     };
     let mut encoded = None;
-    write_atomic(output, |w| {
-        let e = encode_chunked(positions, &mut source, &opts, &mut report, w).map_err(std::io::Error::other)?;
-        encoded = Some(e);
-        Ok(())
-    })
-    .with_context(|| format!("cannot encode {}", input.display()))?;
+    // An error of the input (or the encoder) is reported as itself, not as one of writing.
+    let mut failed = None;
+    let written = write_atomic(output, |w| match encode_chunked(positions, &mut source, &opts, &mut report, w) {
+        Ok(e) => {
+            encoded = Some(e);
+            Ok(())
+        }
+        Err(e) => {
+            let io = std::io::Error::other(e.to_string());
+            failed = Some(e);
+            Err(io)
+        }
+    });
+    if let Some(e) = failed {
+        return Err(anyhow::Error::new(e).context(format!("cannot encode {}", input.display())));
+    }
+    written.with_context(|| format!("cannot encode {}", input.display()))?;
     pb.finish_and_clear();
+    note_ignored(input, ignored);
     let enc = encoded.expect("written");
     let secs = start.elapsed().as_secs_f64();
     let h = &enc.header;

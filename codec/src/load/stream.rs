@@ -14,8 +14,9 @@
 //! The result is exactly `load_path`'s, which the tests check on every shared PLY and OBJ
 //! mesh: the same positions in the same order, the same triangles in the same order, made
 //! by the same triangulation of polygons (`load/polygon.rs`), the same unrolling of PLY
-//! triangle strips and the same dropped PLY faces of fewer than three corners, OBJ points
-//! and lines as triangles without area. A file `load_path` refuses is refused here too, with
+//! triangle strips and the same dropped PLY faces of fewer than three corners, the same
+//! OBJ points and lines skipped and counted ([`Counts::ignored`]), and the same error for a
+//! file without triangles. A file `load_path` refuses is refused here too, with
 //! a one-line message that names the file, what is wrong and where (a line number in text,
 //! an element and record number in binary PLY), and the other way round (a test compares
 //! both on thousands of corrupted files). A truncated file is an error. The exceptions, in
@@ -100,8 +101,17 @@ pub fn for_each_triangle(
     positions: &[[f32; 3]],
     f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     progress: &mut dyn FnMut(u64),
-) -> Result<u64, LoadError> {
+) -> Result<Counts, LoadError> {
     for_each_triangle_from(path, &positions, f, progress)
+}
+
+/// What a triangle pass handed out, and what it skipped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counts {
+    pub triangles: u64,
+    /// Elements that are not triangles and were skipped: OBJ points (`p`, or `f` with one
+    /// corner) and lines (`l`, or `f` with two corners).
+    pub ignored: u64,
 }
 
 /// Where the triangle pass finds positions: how many vertices the file has, and the
@@ -147,14 +157,17 @@ pub fn for_each_triangle_from(
     positions: &dyn PositionSource,
     f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     progress: &mut dyn FnMut(u64),
-) -> Result<u64, LoadError> {
+) -> Result<Counts, LoadError> {
     let format = streamed_format(path)?;
     let mut out = Emitter::new(path, positions, f);
     match format {
         Format::Ply => ply::triangles(path, &mut out, progress)?,
         _ => obj::triangles(path, &mut out, progress)?,
     }
-    Ok(out.count)
+    if out.count == 0 {
+        return Err(err(path, super::no_triangles(out.ignored)));
+    }
+    Ok(Counts { triangles: out.count, ignored: out.ignored })
 }
 
 fn streamed_format(path: &Path) -> Result<Format, LoadError> {
@@ -171,6 +184,8 @@ struct Emitter<'e> {
     positions: &'e dyn PositionSource,
     f: &'e mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     count: u64,
+    /// Elements that are no triangles (OBJ points and lines), skipped.
+    ignored: u64,
     triangulator: Triangulator,
     /// The current polygon's corners, filled by the format readers.
     corners: Vec<u32>,
@@ -190,6 +205,7 @@ impl<'e> Emitter<'e> {
             positions,
             f,
             count: 0,
+            ignored: 0,
             triangulator: Triangulator::default(),
             corners: Vec::new(),
             tris: Vec::new(),
@@ -291,6 +307,9 @@ struct Source<'a> {
     /// Unread bytes are `buf[pos..end]`.
     pos: usize,
     end: usize,
+    /// Whether [`Source::line`] ends lines at a carriage return instead of a line feed (a PLY
+    /// file whose lines end in bare carriage returns, see [`Source::detect_cr_lines`]).
+    cr_lines: bool,
 }
 
 impl<'a> Source<'a> {
@@ -312,7 +331,7 @@ impl<'a> Source<'a> {
         } else {
             Inner::Plain(raw)
         };
-        Ok(Source { path, inner, raw_len: len, buf: vec![0; BUFFER], pos: 0, end: 0 })
+        Ok(Source { path, inner, raw_len: len, buf: vec![0; BUFFER], pos: 0, end: 0, cr_lines: false })
     }
 
     /// An upper bound on the bytes this source yields: the file's length, or the cap on
@@ -415,13 +434,26 @@ impl<'a> Source<'a> {
         Ok(true)
     }
 
-    /// Reads the next line, with its line break (`\n`), into `line` (cleared first); false
-    /// at the end of the file. Refuses a line longer than `max` bytes.
+    /// Whether the unread bytes start with `magic` followed by a bare carriage return (not
+    /// `\r\n`): then lines end at carriage returns from here on, as some CAD exporters write
+    /// PLY headers. Looks no further than the first `magic.len() + 2` bytes.
+    fn detect_cr_lines(&mut self, magic: &[u8]) -> Result<bool, LoadError> {
+        while self.end - self.pos < magic.len() + 2 && self.fill()? {}
+        let head = &self.buf[self.pos..self.end];
+        let n = magic.len();
+        self.cr_lines = head.starts_with(magic) && head.get(n) == Some(&b'\r') && head.get(n + 1) != Some(&b'\n');
+        Ok(self.cr_lines)
+    }
+
+    /// Reads the next line, with its line break (`\n`, or `\r` after
+    /// [`Source::detect_cr_lines`] found bare carriage returns), into `line` (cleared first);
+    /// false at the end of the file. Refuses a line longer than `max` bytes.
     fn line(&mut self, line: &mut Vec<u8>, max: usize) -> Result<bool, LoadError> {
         line.clear();
+        let end = if self.cr_lines { b'\r' } else { b'\n' };
         loop {
             let unread = &self.buf[self.pos..self.end];
-            let (take, done) = match unread.iter().position(|&b| b == b'\n') {
+            let (take, done) = match unread.iter().position(|&b| b == end) {
                 Some(i) => (i + 1, true),
                 None => (unread.len(), false),
             };

@@ -347,7 +347,7 @@ pub fn build_file_with(
         triangles: counts.triangles,
         edges: counts.edges,
         isolated: counts.isolated,
-        input_triangles: triangles,
+        input_triangles: triangles.triangles,
         input_vertices: vertices,
         cells: tree.nodes.len() as u32,
         extent,

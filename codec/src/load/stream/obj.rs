@@ -54,6 +54,9 @@ enum Line {
     /// A face or line, its corners in the scanner's buffer.
     Face,
     Group,
+    /// A `p` (points) or `l` (polyline) element: no triangle, counted as ignored; its
+    /// vertices are not used (as `load_path` skips these lines before tobj reads the file).
+    Points,
     Other,
 }
 
@@ -132,7 +135,7 @@ fn parse(text: &str, counts: &Counts, corners: &mut Vec<Corner>) -> Result<Line,
         Some("vt") => return Err("a 'vt' line needs two numbers".into()),
         Some("vn") if floats(&mut words, 3) => Line::Normal,
         Some("vn") => return Err("a 'vn' line needs three numbers".into()),
-        Some("f" | "l") => {
+        Some("f") => {
             corners.clear();
             for w in words {
                 corners.push(corner(w, counts).ok_or_else(|| format!("'{w}' is not a face corner"))?);
@@ -143,6 +146,7 @@ fn parse(text: &str, counts: &Counts, corners: &mut Vec<Corner>) -> Result<Line,
             Line::Face
         }
         Some("o" | "g") => Line::Group,
+        Some("p" | "l") => Line::Points,
         Some("usemtl") if text.split_once(' ').unwrap_or_default().1.trim().is_empty() => {
             return Err("'usemtl' without a material name".into())
         }
@@ -313,6 +317,11 @@ fn scan(
                 }
             }
             Line::Group if slots.faces => slots.end_object(&counts).map_err(|e| err(path, e))?,
+            Line::Points => {
+                if let Some(out) = out.as_deref_mut() {
+                    out.ignored += 1;
+                }
+            }
             Line::Group | Line::Other => {}
         }
     }
@@ -320,8 +329,8 @@ fn scan(
     Ok((counts, src.raw_len))
 }
 
-/// Hands out a face's triangles as `load_path` makes them: a point `(a, a, a)`, a line
-/// `(a, b, b)`, a polygon triangulated.
+/// Hands out a face's triangles as `load_path` makes them: a polygon triangulated; a point
+/// or a line (an `f` of one or two corners, a `p` or an `l`) is counted as ignored.
 fn emit(out: &mut Emitter, slots: &mut Slots, corners: &[Corner], line: u64) -> Result<(), LoadError> {
     out.corners.clear();
     for c in corners {
@@ -333,11 +342,11 @@ fn emit(out: &mut Emitter, slots: &mut Slots, corners: &[Corner], line: u64) -> 
         let what = format!("line {line}: the positions given are not this file's: a face has vertex {s} of {n}");
         return Err(err(out.path, what));
     }
-    match out.corners[..] {
-        [a] => out.triangle([a; 3]),
-        [a, b] => out.triangle([a, b, b]),
-        _ => out.polygon(),
+    if out.corners.len() < 3 {
+        out.ignored += 1;
+        return Ok(());
     }
+    out.polygon()
 }
 
 /// Pass 1 for OBJ: numbers the slots in one read, then fills them from the `v` lines in a

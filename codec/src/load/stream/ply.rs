@@ -254,7 +254,8 @@ enum Line<'s> {
 }
 
 /// A header line without its line break (`\r\n`, `\n` or `\r`) and trailing spaces and
-/// tabs; `None` if a carriage return is left inside it (which ply-rs's grammar refuses).
+/// tabs; `None` if another line break is left inside it (a line feed in a file whose lines
+/// end in carriage returns, or the other way round).
 fn header_content(text: &str) -> Option<&str> {
     let t = text.strip_suffix("\r\n").or_else(|| text.strip_suffix(['\n', '\r'])).unwrap_or(text);
     if t.contains(['\r', '\n']) {
@@ -324,6 +325,7 @@ pub(super) fn read_header(src: &mut Source) -> Result<Header, LoadError> {
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut n = 0;
+    src.detect_cr_lines(b"ply")?;
     loop {
         n += 1;
         let bad = |what: &str| err(path, format!("malformed PLY header, line {n}: {what}"));
@@ -331,7 +333,7 @@ pub(super) fn read_header(src: &mut Source) -> Result<Header, LoadError> {
             return Err(bad(if n == 1 { "the file is empty" } else { "the file ends before 'end_header'" }));
         }
         let text = std::str::from_utf8(&line).map_err(|_| bad("not UTF-8 text"))?;
-        let content = header_content(text).ok_or_else(|| bad("a carriage return inside the line"))?;
+        let content = header_content(text).ok_or_else(|| bad("a line break of another kind inside the line"))?;
         let parsed = header_line(content).map_err(|e| bad(&e));
         if n == 1 {
             if parsed.ok() != Some(Line::Magic) {
