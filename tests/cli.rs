@@ -277,5 +277,13 @@ fn nsp_build_stats_adapt_and_corrupt_file() {
     // A .bft given to nsp stats.
     std::fs::write(&bad, b"TESSBFT\x1a").unwrap();
     let o = tessera(&["nsp", "stats", s(&bad)]);
-    assert!(!o.status.success() && stderr(&o).contains("not an .nsp file"), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("this is a .bft model") && err.contains("use tessera stats"), "{err}");
+    // And the other way round, a mesh given where a model is read; a model given to encode.
+    let mesh = dir.path().join("m.obj");
+    std::fs::write(&mesh, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let o = tessera(&["stats", s(&mesh)]);
+    assert!(!o.status.success() && stderr(&o).contains("this is a mesh file; tessera stats reads a .bft model"));
+    let o = tessera(&["encode", s(&bad), "-o", s(&dir.path().join("x.bft"))]);
+    assert!(!o.status.success() && stderr(&o).contains("this is a .bft model"), "{}", stderr(&o));
 }

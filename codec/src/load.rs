@@ -1,33 +1,41 @@
-//! Mesh loaders: OBJ (`tobj`), PLY (`ply-rs-bw`: ASCII and binary, face lists and
-//! triangle strips) and STL (`stl_io`), each optionally gzip-compressed (`flate2`).
+//! Mesh loaders: OBJ, PLY (ASCII and binary, face lists and triangle strips) and STL (ASCII
+//! and binary), each optionally gzip-compressed (`flate2`).
 //!
-//! The format comes from the file name (`.obj`, `.ply`, `.stl`, each optionally followed by
-//! `.gz`); gzip is recognised by its magic bytes, whatever the name says. Polygons of PLY
-//! and OBJ faces are triangulated by one function (in `load/polygon.rs`): convex ones are
-//! fanned from their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones ear-clipped in the
-//! plane of their Newell normal, every triangle oriented like the polygon; degenerate ones
-//! (no area) are fanned. OBJ points and lines (`p`, `l`, and `f` with one or two
-//! corners) are no triangles: they are skipped and counted ([`Loaded::ignored`]), never made
-//! into triangles without area; PLY faces of fewer than three corners are dropped. A file
-//! that gives no triangle at all (a point cloud, an empty file) is an error, not an empty
-//! mesh. Strips are unrolled with alternating orientation and their
-//! zero-area stitching triangles (a repeated index) dropped, as strip writers intend.
-//! An OBJ file with several objects or groups is merged into one mesh by concatenation.
-//! Every error names the file and what is wrong; no input makes a loader panic.
+//! All three readers are ours. PLY and OBJ are read by [`stream`]'s readers, here over the
+//! bytes in memory, in a file's two passes; STL by `load/stl.rs`. The crates we used before
+//! (ply-rs, tobj, stl_io, still the peers of the tests and the loading benchmark) refuse
+//! files other tools read and write: PLY headers whose lines end in bare carriage returns,
+//! OBJ comments after a line's values and texture or normal indices out of range, ASCII STL
+//! with a bare `solid` line or upper-case keywords; and tobj turns `l` polylines into faces.
 //!
-//! For files too large to hold, [`stream`] reads PLY and OBJ in two passes (the positions,
-//! then the triangles one by one), with exactly this module's result.
+//! The format comes from the content ([`Format::of_file`]: PLY's first line, STL's size or
+//! `solid`, OBJ's first keyword), and from the name (`.obj`, `.ply`, `.stl`, optionally
+//! `.gz`) only where the content is silent; gzip is recognised by its magic bytes. Polygons
+//! of PLY and OBJ faces are triangulated by one function (in `load/polygon.rs`): convex ones
+//! are fanned from their first corner, `(v0, v1, v2), (v0, v2, v3), ...`, concave ones
+//! ear-clipped in the plane of their Newell normal, every triangle oriented like the
+//! polygon; degenerate ones (no area) are fanned. OBJ points and lines (`p`, `l`, and `f`
+//! with one or two corners) are no triangles: they are skipped and counted
+//! ([`Loaded::ignored`]), never made into triangles without area; PLY faces of fewer than
+//! three corners are dropped. A file that gives no triangle at all (a point cloud, an empty
+//! file) is an error, not an empty mesh. Strips are unrolled with alternating orientation
+//! and their zero-area stitching triangles (a repeated index) dropped, as strip writers
+//! intend. An OBJ file with several objects or groups is merged into one mesh by
+//! concatenation. Every error is one line that names the file, what is wrong and where; no
+//! input makes a loader panic.
+//!
+//! For files too large to hold, [`stream`] reads PLY and OBJ from the file in the same two
+//! passes (the positions, then the triangles one by one), so with exactly this module's
+//! result.
 
-use std::io::{BufRead, BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
-use ply_rs_bw::parser::Parser;
-use ply_rs_bw::ply::{DefaultElement, Property, PropertyAccess};
 use thiserror::Error;
 
 use crate::mesh::Mesh;
 
 mod polygon;
+mod stl;
 pub mod stream;
 
 /// A file that could not be read as a mesh.
@@ -62,6 +70,81 @@ impl Format {
             _ => None,
         }
     }
+
+    /// The format of the file at `path`, told by its content (looking through gzip) and
+    /// only where the content is silent by its name: PLY by its first line, STL by a binary
+    /// file's exact size or an ASCII file's `solid`, OBJ by the keyword of its first line
+    /// that is not blank or a comment. A file that cannot be read gets the format its name
+    /// says, so that reading it reports why. A Tessera model (`.bft`, `.dpm`, `.nsp`) or
+    /// anything else is an error that says what the file is.
+    pub fn of_file(path: &Path) -> Result<Format, LoadError> {
+        let Ok((file, len)) = crate::input::open_regular(path) else {
+            return Format::from_path(path).ok_or_else(|| err(path, UNKNOWN));
+        };
+        let mut head = Vec::with_capacity(SNIFF);
+        let mut magic = [0u8; 2];
+        let mut raw = std::io::BufReader::new(file);
+        let gzip = std::io::Read::read_exact(&mut raw, &mut magic).is_ok() && magic == [0x1f, 0x8b];
+        let rest = std::io::Read::chain(&magic[..], raw);
+        // A prefix is enough; a read error past it is for the loader to report.
+        let _ = if gzip {
+            std::io::Read::read_to_end(
+                &mut std::io::Read::take(flate2::read::MultiGzDecoder::new(rest), SNIFF as u64),
+                &mut head,
+            )
+        } else {
+            std::io::Read::read_to_end(&mut std::io::Read::take(rest, SNIFF as u64), &mut head)
+        };
+        if let Some(kind) = tessera_model(&head) {
+            return Err(err(path, format!("this is {kind}, not a mesh file (OBJ, PLY or STL)")));
+        }
+        Format::sniff(&head, (!gzip).then_some(len))
+            .or_else(|| Format::from_path(path))
+            .ok_or_else(|| err(path, UNKNOWN))
+    }
+
+    /// The format of a file starting with `head`, of `len` bytes if known uncompressed.
+    fn sniff(head: &[u8], len: Option<u64>) -> Option<Format> {
+        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r") {
+            return Some(Format::Ply);
+        }
+        if let (Some(len), Some(count)) = (len, head.get(80..84)) {
+            let n = u32::from_le_bytes([count[0], count[1], count[2], count[3]]) as u64;
+            if len >= 84 && 84 + 50 * n == len {
+                return Some(Format::Stl);
+            }
+        }
+        let text = head.trim_ascii_start();
+        if text.len() >= 5 && text[..5].eq_ignore_ascii_case(b"solid") {
+            return Some(Format::Stl);
+        }
+        // The first line that says something (the prefix may cut the last line short).
+        let line = head
+            .split(|&b| b == b'\n' || b == b'\r')
+            .map(<[u8]>::trim_ascii)
+            .find(|l| !l.is_empty() && !l.starts_with(b"#"))?;
+        let word = line.split(|b| b.is_ascii_whitespace()).next()?;
+        const OBJ: [&[u8]; 12] = [b"v", b"vt", b"vn", b"vp", b"f", b"l", b"p", b"o", b"g", b"s", b"mtllib", b"usemtl"];
+        OBJ.contains(&word).then_some(Format::Obj)
+    }
+}
+
+/// How much of a file [`Format::of_file`] reads.
+const SNIFF: usize = 4096;
+
+const UNKNOWN: &str = "not a mesh file Tessera reads: expected OBJ, PLY or STL (optionally gzipped)";
+
+/// What Tessera model a file starting with `head` is, in words, if it is one.
+fn tessera_model(head: &[u8]) -> Option<&'static str> {
+    if head.starts_with(&crate::bft::MAGIC) {
+        Some("a .bft model (tessera decode writes it as a mesh)")
+    } else if head.starts_with(&crate::pm::format::MAGIC) {
+        Some("a .dpm progressive mesh (tessera pm stats describes it)")
+    } else if head.starts_with(&crate::nsp::format::MAGIC) {
+        Some("an .nsp model (tessera nsp stats describes it)")
+    } else {
+        None
+    }
 }
 
 /// A loaded mesh, and what the file held that is not a triangle.
@@ -89,8 +172,7 @@ pub fn load_path(path: &Path) -> Result<Mesh, LoadError> {
 
 /// [`load_path`], with the count of elements skipped.
 pub fn load_path_counted(path: &Path) -> Result<Loaded, LoadError> {
-    let format = Format::from_path(path)
-        .ok_or_else(|| err(path, "unknown mesh format: expected .obj, .ply or .stl, optionally .gz"))?;
+    let format = Format::of_file(path)?;
     let raw = crate::input::read_file(path).map_err(|e| err(path, e))?;
     load_bytes_counted(path, &raw, format)
 }
@@ -116,9 +198,8 @@ pub fn load_bytes_counted(path: &Path, raw: &[u8], format: Format) -> Result<Loa
         raw.to_vec()
     };
     let (mesh, ignored) = match format {
-        Format::Obj => load_obj(path, &bytes)?,
-        Format::Ply => (load_ply(path, &bytes)?, 0),
-        Format::Stl => (load_stl(path, &bytes)?, 0),
+        Format::Obj | Format::Ply => stream::load_memory(path, &bytes, format)?,
+        Format::Stl => (stl::load(path, &bytes)?, 0),
     };
     if let Some(bad) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= mesh.positions.len()) {
         return Err(err(
@@ -130,244 +211,6 @@ pub fn load_bytes_counted(path: &Path, raw: &[u8], format: Format) -> Result<Loa
         return Err(err(path, no_triangles(ignored)));
     }
     Ok(Loaded { mesh, ignored })
-}
-
-/// The mesh and the number of points and lines skipped.
-fn load_obj(path: &Path, bytes: &[u8]) -> Result<(Mesh, u64), LoadError> {
-    // Points (`p`) and polylines (`l`) are no faces, but tobj gives an `l` of three corners
-    // as a triangle: such lines are counted and turned into comments (same length) before
-    // tobj reads the file.
-    let mut owned = None;
-    let mut ignored = 0u64;
-    let mut start = 0;
-    for line in bytes.split_inclusive(|&b| b == b'\n') {
-        let first = std::str::from_utf8(line).ok().and_then(|t| t.split_whitespace().next());
-        if matches!(first, Some("p" | "l")) {
-            ignored += 1;
-            let at = start + line.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(0);
-            owned.get_or_insert_with(|| bytes.to_vec())[at] = b'#';
-        }
-        start += line.len();
-    }
-    let bytes = owned.as_deref().unwrap_or(bytes);
-    // Faces come as polygons (`face_arities`, empty when all are triangles) and are
-    // triangulated here, as PLY faces are: tobj's own triangulation fans every polygon.
-    let options = tobj::LoadOptions { triangulate: false, single_index: false, ..Default::default() };
-    let mut reader = BufReader::new(Cursor::new(bytes));
-    // Materials are irrelevant to geometry; a missing .mtl must not fail the load.
-    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| Err(tobj::LoadError::OpenFileFailed))
-        .map_err(|e| err(path, format!("malformed OBJ: {e}")))?;
-    let mut mesh = Mesh::default();
-    let mut triangulator = polygon::Triangulator::default();
-    let mut corners = Vec::new();
-    for model in models {
-        let m = model.mesh;
-        let arities_sum: u64 = m.face_arities.iter().map(|&a| u64::from(a)).sum();
-        if m.positions.len() % 3 != 0
-            || (m.face_arities.is_empty() && m.indices.len() % 3 != 0)
-            || (!m.face_arities.is_empty() && arities_sum != m.indices.len() as u64)
-        {
-            return Err(err(path, "malformed OBJ: ragged position or index arrays"));
-        }
-        let base = mesh.positions.len() as u32;
-        let count = m.positions.len() / 3;
-        if m.indices.iter().any(|&i| i as usize >= count) {
-            return Err(err(path, format!("object '{}' has a face index out of range", model.name)));
-        }
-        mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-        if m.face_arities.is_empty() {
-            mesh.triangles.extend(m.indices.chunks_exact(3).map(|t| [base + t[0], base + t[1], base + t[2]]));
-            continue;
-        }
-        let mut next = 0usize;
-        for &arity in &m.face_arities {
-            let face = &m.indices[next..next + arity as usize];
-            next += arity as usize;
-            match *face {
-                // Faces of one or two corners are points and lines: skipped, counted.
-                [] => return Err(err(path, "malformed OBJ: a face without vertices")),
-                [_] | [_, _] => ignored += 1,
-                _ => {
-                    corners.clear();
-                    corners.extend(face.iter().map(|&i| base + i));
-                    triangulator.polygon(&mesh.positions, &corners, &mut mesh.triangles);
-                }
-            }
-        }
-    }
-    Ok((mesh, ignored))
-}
-
-/// A PLY vertex: `x`, `y`, `z` of any numeric type; other properties are ignored.
-#[derive(Default)]
-struct PlyVertex([f32; 3]);
-
-/// A PLY face or strip: its index list, whatever the integer type.
-#[derive(Default)]
-struct PlyIndices(Vec<i64>);
-
-fn scalar(p: &Property) -> Option<f64> {
-    Some(match *p {
-        Property::Char(v) => v as f64,
-        Property::UChar(v) => v as f64,
-        Property::Short(v) => v as f64,
-        Property::UShort(v) => v as f64,
-        Property::Int(v) => v as f64,
-        Property::UInt(v) => v as f64,
-        Property::Float(v) => v as f64,
-        Property::Double(v) => v,
-        _ => return None,
-    })
-}
-
-impl PropertyAccess for PlyVertex {
-    fn new() -> Self {
-        PlyVertex::default()
-    }
-    fn set_property(&mut self, name: String, property: Property) {
-        let axis = match name.as_str() {
-            "x" => 0,
-            "y" => 1,
-            "z" => 2,
-            _ => return,
-        };
-        if let Some(v) = scalar(&property) {
-            self.0[axis] = v as f32;
-        }
-    }
-}
-
-impl PropertyAccess for PlyIndices {
-    fn new() -> Self {
-        PlyIndices::default()
-    }
-    fn set_property(&mut self, name: String, property: Property) {
-        if name != "vertex_indices" && name != "vertex_index" {
-            return;
-        }
-        self.0 = match property {
-            Property::ListChar(v) => v.into_iter().map(i64::from).collect(),
-            Property::ListUChar(v) => v.into_iter().map(i64::from).collect(),
-            Property::ListShort(v) => v.into_iter().map(i64::from).collect(),
-            Property::ListUShort(v) => v.into_iter().map(i64::from).collect(),
-            Property::ListInt(v) => v.into_iter().map(i64::from).collect(),
-            Property::ListUInt(v) => v.into_iter().map(i64::from).collect(),
-            _ => return,
-        };
-    }
-}
-
-/// A PLY file whose lines end in bare carriage returns (as some CAD exporters write them),
-/// with its line breaks made line feeds for ply-rs, which reads `\n` and `\r\n` only: in the
-/// header, and in the whole file if it is ASCII (same length, so binary records stay where
-/// they are). `None` for other files. A line feed inside such a file's lines is an error, as
-/// in the streaming reader, which splits these files' lines at carriage returns.
-fn cr_lines_to_lf(path: &Path, bytes: &[u8]) -> Result<Option<Vec<u8>>, LoadError> {
-    if !(bytes.starts_with(b"ply\r") && bytes.get(4) != Some(&b'\n')) {
-        return Ok(None);
-    }
-    let marker = b"end_header\r";
-    let header_end = bytes.windows(marker.len()).position(|w| w == marker).map_or(bytes.len(), |i| i + marker.len());
-    let ascii = bytes[..header_end].split(|&b| b == b'\r').any(|l| l.starts_with(b"format ascii"));
-    let upto = if ascii { bytes.len() } else { header_end };
-    if bytes[..header_end].contains(&b'\n') {
-        return Err(err(path, "malformed PLY header: a line feed inside a line (its lines end in carriage returns)"));
-    }
-    let mut out = bytes.to_vec();
-    for b in &mut out[..upto] {
-        if *b == b'\r' {
-            *b = b'\n';
-        }
-    }
-    Ok(Some(out))
-}
-
-fn load_ply(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
-    let converted = cr_lines_to_lf(path, bytes)?;
-    let bytes = converted.as_deref().unwrap_or(bytes);
-    let mut reader = BufReader::new(Cursor::new(bytes));
-    let header = Parser::<DefaultElement>::new()
-        .read_header(&mut reader)
-        .map_err(|e| err(path, format!("malformed PLY header: {e}")))?;
-    let vertex_parser = Parser::<PlyVertex>::new();
-    let index_parser = Parser::<PlyIndices>::new();
-    let skip_parser = Parser::<DefaultElement>::new();
-    let mut mesh = Mesh::default();
-    let mut saw_vertices = false;
-    // Faces are triangulated once the positions are known (a file may list them first):
-    // their corners in one list, and where each face ends.
-    let (mut corners, mut face_ends) = (Vec::new(), Vec::new());
-    for (name, def) in &header.elements {
-        let bad = |e: std::io::Error| err(path, format!("malformed PLY element '{name}': {e}"));
-        match name.as_str() {
-            "vertex" => {
-                let verts = vertex_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
-                mesh.positions = verts.into_iter().map(|v| v.0).collect();
-                saw_vertices = true;
-            }
-            "face" => {
-                let faces = index_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
-                for f in faces.iter().filter(|f| f.0.len() >= 3) {
-                    for &i in &f.0 {
-                        corners.push(index(path, i)?);
-                    }
-                    face_ends.push(corners.len());
-                }
-            }
-            "tristrips" => {
-                let strips = index_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
-                for s in strips {
-                    unroll_strip(path, &s.0, &mut mesh.triangles)?;
-                }
-            }
-            _ => {
-                skip_parser.read_payload_for_element(&mut reader, def, &header).map_err(bad)?;
-            }
-        }
-    }
-    if !saw_vertices {
-        return Err(err(path, "PLY file has no 'vertex' element"));
-    }
-    let mut triangulator = polygon::Triangulator::default();
-    let mut start = 0;
-    for end in face_ends {
-        triangulator.polygon(&mesh.positions, &corners[start..end], &mut mesh.triangles);
-        start = end;
-    }
-    let mut rest = [0u8; 1];
-    let _ = reader.fill_buf();
-    let _ = reader.read(&mut rest);
-    Ok(mesh)
-}
-
-fn index(path: &Path, i: i64) -> Result<u32, LoadError> {
-    u32::try_from(i).map_err(|_| err(path, format!("vertex index {i} is out of range")))
-}
-
-/// Unrolls a triangle strip; a negative index restarts the strip.
-fn unroll_strip(path: &Path, strip: &[i64], out: &mut Vec<[u32; 3]>) -> Result<(), LoadError> {
-    for run in strip.split(|&i| i < 0) {
-        for (k, w) in run.windows(3).enumerate() {
-            let (a, b, c) = (index(path, w[0])?, index(path, w[1])?, index(path, w[2])?);
-            if a == b || b == c || a == c {
-                continue;
-            }
-            out.push(if k % 2 == 0 { [a, b, c] } else { [b, a, c] });
-        }
-    }
-    Ok(())
-}
-
-fn load_stl(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
-    let indexed = stl_io::read_stl(&mut Cursor::new(bytes)).map_err(|e| err(path, format!("malformed STL: {e}")))?;
-    let positions = indexed.vertices.iter().map(|v| [v[0], v[1], v[2]]).collect();
-    let mut triangles = Vec::with_capacity(indexed.faces.len());
-    for f in &indexed.faces {
-        let [a, b, c] = f.vertices;
-        let conv = |i: usize| u32::try_from(i).map_err(|_| err(path, "too many STL vertices"));
-        triangles.push([conv(a)?, conv(b)?, conv(c)?]);
-    }
-    Ok(Mesh { positions, triangles })
 }
 
 #[cfg(test)]
@@ -385,8 +228,12 @@ mod tests {
 
     #[test]
     fn strips_alternate_and_skip_stitches() {
-        let mut out = vec![];
-        unroll_strip(Path::new("s"), &[0, 1, 2, 3, 3, 4, -1, 5, 6, 7], &mut out).unwrap();
+        let verts = "0 0 0\n1 0 0\n0 1 0\n1 1 0\n2 0 0\n5 0 0\n6 0 0\n5 1 0\n";
+        let ply = format!(
+            "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n\
+element tristrips 1\nproperty list int int vertex_indices\nend_header\n{verts}10 0 1 2 3 3 4 -1 5 6 7\n"
+        );
+        let out = load_bytes(Path::new("s.ply"), ply.as_bytes(), Format::Ply).unwrap().triangles;
         assert_eq!(out, vec![[0, 1, 2], [2, 1, 3], [5, 6, 7]]);
         assert!(out.iter().all(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]));
     }

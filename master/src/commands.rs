@@ -6,6 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use codec::bft::chunked::{encode_chunked, ChunkOptions, EncodeChunkError, TriangleSink};
 use codec::bft::{self, Stats};
+use codec::input::ModelKind;
 use codec::load::stream;
 use codec::Mesh;
 use serde::Serialize;
@@ -29,6 +30,50 @@ pub fn mesh_output(input: &Path, output: &Path, what: &str) -> Result<codec::sav
     check_extension(output, &["ply", "obj"], what)?;
     check_distinct(&[input], &[output])?;
     Ok(codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w)))
+}
+
+/// The kind of the file at `path` by its content alone: a Tessera model by its magic number,
+/// a mesh file by [`codec::load::Format::of_file`]; `None` if it is neither (its reader
+/// then says what is wrong).
+fn content_kind(path: &Path) -> Option<ModelKind> {
+    let mut magic = Vec::with_capacity(8);
+    let file = std::fs::File::open(path).ok()?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, 8), &mut magic).ok()?;
+    if magic.starts_with(&codec::bft::MAGIC) {
+        Some(ModelKind::Bft)
+    } else if magic.starts_with(&codec::pm::format::MAGIC) {
+        Some(ModelKind::Dpm)
+    } else if magic.starts_with(&codec::nsp::format::MAGIC) {
+        Some(ModelKind::Nsp)
+    } else {
+        codec::load::Format::of_file(path).ok().map(|_| ModelKind::Mesh)
+    }
+}
+
+/// Refuses, before any work, an input whose content is another kind of file than `want`,
+/// saying which command takes it: `verb` is what the user asked for (`stats`, `adapt`,
+/// `decode`), `command` the command that refuses.
+pub fn expect_kind(path: &Path, want: ModelKind, command: &str, verb: &str) -> Result<()> {
+    let Some(kind) = content_kind(path) else { return Ok(()) };
+    if kind == want {
+        return Ok(());
+    }
+    let what = |k: ModelKind| match k {
+        ModelKind::Bft => "a .bft model",
+        ModelKind::Dpm => "a .dpm progressive mesh",
+        ModelKind::Nsp => "an .nsp model",
+        ModelKind::Mesh => "a mesh file",
+    };
+    let instead = match (kind, verb) {
+        (ModelKind::Bft, "stats") => "tessera stats",
+        (ModelKind::Bft, _) => "tessera decode",
+        (ModelKind::Dpm, "stats") => "tessera pm stats",
+        (ModelKind::Dpm, _) => "tessera pm adapt",
+        (ModelKind::Nsp, "stats") => "tessera nsp stats",
+        (ModelKind::Nsp, _) => "tessera nsp adapt",
+        (ModelKind::Mesh, _) => "tessera encode, pm build or nsp build to make a model of it",
+    };
+    anyhow::bail!("{}: this is {}; tessera {command} reads {}: use {instead}", path.display(), what(kind), what(want))
 }
 
 /// Reads an input file whole: regular files only (see [`codec::input::read_file`]).
@@ -161,6 +206,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
 /// `tessera decode IN.bft -o OUT.ply|OUT.obj`.
 pub fn decode(input: &Path, output: &Path) -> Result<()> {
     let writer = mesh_output(input, output, "the output of decode")?;
+    expect_kind(input, ModelKind::Bft, "decode", "decode")?;
     let bytes = read_input(input)?;
     let start = Instant::now();
     let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
@@ -238,6 +284,7 @@ impl StatsReport {
 /// `tessera stats IN.bft [--json]`. The whole file is decoded too, so a file whose
 /// sections pass their checksums but whose streams are inconsistent is reported as corrupt.
 pub fn stats(input: &Path, json: bool) -> Result<()> {
+    expect_kind(input, ModelKind::Bft, "stats", "stats")?;
     let bytes = read_input(input)?;
     let mut report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
     let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;

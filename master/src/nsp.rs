@@ -9,9 +9,10 @@ use codec::nsp::{self, view, Canonical, NspFile, Params};
 use serde::Serialize;
 
 use crate::cli::CameraArgs;
-use crate::commands::{load_mesh, mesh_output, summary};
+use crate::commands::{expect_kind, load_mesh, mesh_output, summary};
 use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
+use codec::input::ModelKind;
 
 /// `tessera nsp build IN -o OUT.nsp`: PLY and OBJ out of core (`codec::nsp::ooc`, memory
 /// that does not grow with the model), STL in core.
@@ -159,6 +160,7 @@ fn open(input: &Path) -> Result<NspFile> {
 
 /// `tessera nsp stats X.nsp [--json]` (reads the header and the cell table only).
 pub fn stats(input: &Path, json: bool) -> Result<()> {
+    expect_kind(input, ModelKind::Nsp, "nsp stats", "stats")?;
     let file = open(input)?;
     let r = NspStatsReport::of(&file);
     if json {
@@ -196,6 +198,7 @@ pub fn adapt(
     output: &Path,
 ) -> Result<()> {
     let writer = mesh_output(input, output, "the output of nsp adapt")?;
+    expect_kind(input, ModelKind::Nsp, "nsp adapt", "adapt")?;
     let file = open(input)?;
     let start = Instant::now();
     let (drawn, cells) = if full {

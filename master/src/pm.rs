@@ -11,9 +11,10 @@ use serde::Serialize;
 
 use crate::cli::CameraArgs;
 use crate::commands::load_mesh;
-use crate::commands::{mesh_output, read_input, summary};
+use crate::commands::{expect_kind, mesh_output, read_input, summary};
 use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
 use crate::progress;
+use codec::input::ModelKind;
 
 /// `tessera pm build IN -o OUT.dpm`.
 pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
@@ -117,6 +118,7 @@ impl PmStatsReport {
 
 /// `tessera pm stats IN.dpm [--json]` (decodes every operation, so corruption is reported).
 pub fn stats(input: &Path, json: bool) -> Result<()> {
+    expect_kind(input, ModelKind::Dpm, "pm stats", "stats")?;
     let bytes = read_input(input)?;
     let r = PmStatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
     if json {
@@ -162,6 +164,7 @@ pub struct AdaptOptions {
 pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
     let (size, error_px) = (opts.size, opts.error_px);
     let writer = mesh_output(input, output, "the output of pm adapt")?;
+    expect_kind(input, ModelKind::Dpm, "pm adapt", "adapt")?;
     let bytes = read_input(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));

@@ -52,7 +52,7 @@
 //!
 //! [`max_decompressed_bytes`]: crate::input::max_decompressed_bytes
 
-use std::fs::File;
+use crate::Mesh;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
@@ -64,10 +64,10 @@ use super::{err, Format, LoadError};
 mod obj;
 mod ply;
 
-/// Whether the streaming reader reads the file at `path`: a PLY or OBJ file (by its name,
-/// as [`Format::from_path`] tells; optionally gzipped).
+/// Whether the streaming reader reads the file at `path`: a PLY or OBJ file (by its content,
+/// or its name where that is silent, as [`Format::of_file`] tells; optionally gzipped).
 pub fn can_stream(path: &Path) -> bool {
-    matches!(Format::from_path(path), Some(Format::Ply | Format::Obj))
+    matches!(Format::of_file(path), Ok(Format::Ply | Format::Obj))
 }
 
 /// Pass 1: the vertex positions, exactly `load_path(path)?.positions`: for PLY every
@@ -82,10 +82,54 @@ pub fn can_stream(path: &Path) -> bool {
 /// before decompression) read so far by this call; for OBJ the count goes up to twice the
 /// file's size.
 pub fn read_positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
-    match streamed_format(path)? {
-        Format::Ply => ply::positions(path, progress),
-        _ => obj::positions(path, progress),
+    positions_of(Input::file(path), streamed_format(path)?, progress)
+}
+
+fn positions_of(input: Input, format: Format, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+    match format {
+        Format::Ply => {
+            let positions = ply::positions(input, progress)?;
+            if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+                let what = format!("element 'vertex' {i}: a non-finite coordinate {:?}", positions[i]);
+                return Err(err(input.path, what));
+            }
+            Ok(positions)
+        }
+        _ => obj::positions(input, progress),
     }
+}
+
+/// Where a pass reads: a file, or bytes already in memory (plain or gzip) that stand for the
+/// file at `path` (named in messages).
+#[derive(Clone, Copy)]
+pub(crate) struct Input<'a> {
+    pub path: &'a Path,
+    pub bytes: Option<&'a [u8]>,
+}
+
+impl<'a> Input<'a> {
+    pub fn file(path: &'a Path) -> Self {
+        Input { path, bytes: None }
+    }
+}
+
+/// Both passes over bytes in memory (the in-core loader's way to read PLY and OBJ): the
+/// positions, the triangles, and the count of skipped points and lines.
+pub(crate) fn load_memory(path: &Path, bytes: &[u8], format: Format) -> Result<(Mesh, u64), LoadError> {
+    let input = Input { path, bytes: Some(bytes) };
+    let positions = positions_of(input, format, &mut |_| {})?;
+    let mut triangles = Vec::new();
+    let counts = triangles_of(
+        input,
+        format,
+        &positions.as_slice(),
+        &mut |t| {
+            triangles.push(t);
+            Ok(())
+        },
+        &mut |_| {},
+    )?;
+    Ok((Mesh { positions, triangles }, counts.ignored))
 }
 
 /// Pass 2: calls `f` with every triangle, exactly the triangles of `load_path(path)?` in
@@ -140,10 +184,11 @@ pub fn for_each_position(
     sink: &mut dyn FnMut([f32; 3]),
     progress: &mut dyn FnMut(u64),
 ) -> Result<u64, LoadError> {
+    let input = Input::file(path);
     match streamed_format(path)? {
-        Format::Ply => ply::each_position(path, sink, progress),
+        Format::Ply => ply::each_position(input, sink, progress),
         _ => {
-            let positions = obj::positions(path, progress)?;
+            let positions = obj::positions(input, progress)?;
             positions.iter().for_each(|&p| sink(p));
             Ok(positions.len() as u64)
         }
@@ -158,11 +203,21 @@ pub fn for_each_triangle_from(
     f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Counts, LoadError> {
-    let format = streamed_format(path)?;
+    triangles_of(Input::file(path), streamed_format(path)?, positions, f, progress)
+}
+
+fn triangles_of(
+    input: Input,
+    format: Format,
+    positions: &dyn PositionSource,
+    f: &mut dyn FnMut([u32; 3]) -> Result<(), LoadError>,
+    progress: &mut dyn FnMut(u64),
+) -> Result<Counts, LoadError> {
+    let path = input.path;
     let mut out = Emitter::new(path, positions, f);
     match format {
-        Format::Ply => ply::triangles(path, &mut out, progress)?,
-        _ => obj::triangles(path, &mut out, progress)?,
+        Format::Ply => ply::triangles(input, &mut out, progress)?,
+        _ => obj::triangles(input, &mut out, progress)?,
     }
     if out.count == 0 {
         return Err(err(path, super::no_triangles(out.ignored)));
@@ -171,9 +226,9 @@ pub fn for_each_triangle_from(
 }
 
 fn streamed_format(path: &Path) -> Result<Format, LoadError> {
-    match Format::from_path(path) {
-        Some(f @ (Format::Ply | Format::Obj)) => Ok(f),
-        _ => Err(err(path, "the streaming reader reads .ply and .obj files (optionally .gz) only")),
+    match Format::of_file(path)? {
+        f @ (Format::Ply | Format::Obj) => Ok(f),
+        Format::Stl => Err(err(path, "the streaming reader reads PLY and OBJ files (optionally gzipped) only")),
     }
 }
 
@@ -252,7 +307,7 @@ impl<'e> Emitter<'e> {
 /// The bytes the file holds: read no further than its length when opened (a file that grows
 /// while read cannot make a reader go on without end), reporting progress.
 struct RawFile<'p> {
-    file: File,
+    file: Box<dyn ReadSeek + 'p>,
     pos: u64,
     len: u64,
     progress: &'p mut dyn FnMut(u64),
@@ -293,6 +348,11 @@ enum Inner<'p> {
     },
 }
 
+/// What a [`RawFile`] reads: a file, or bytes in memory.
+trait ReadSeek: Read + Seek {}
+
+impl<T: Read + Seek> ReadSeek for T {}
+
 /// Buffer size of a [`Source`]: the bound on what a pass holds of the file.
 const BUFFER: usize = 1 << 20;
 
@@ -315,8 +375,15 @@ struct Source<'a> {
 impl<'a> Source<'a> {
     /// Opens `path` (a regular file), decompressing it if it starts with gzip's magic bytes,
     /// and reporting the bytes of the file read to `progress`.
-    fn open(path: &'a Path, progress: &'a mut dyn FnMut(u64)) -> Result<Self, LoadError> {
-        let (mut file, len) = crate::input::open_regular(path).map_err(|e| err(path, e))?;
+    fn open(input: Input<'a>, progress: &'a mut dyn FnMut(u64)) -> Result<Self, LoadError> {
+        let path = input.path;
+        let (mut file, len): (Box<dyn ReadSeek + 'a>, u64) = match input.bytes {
+            Some(bytes) => (Box::new(std::io::Cursor::new(bytes)), bytes.len() as u64),
+            None => {
+                let (file, len) = crate::input::open_regular(path).map_err(|e| err(path, e))?;
+                (Box::new(file), len)
+            }
+        };
         let cannot = |e: std::io::Error| err(path, format!("cannot read: {e}"));
         let mut magic = Vec::with_capacity(2);
         (&mut file).take(2).read_to_end(&mut magic).map_err(cannot)?;

@@ -20,10 +20,9 @@
 //! * anything else is ignored.
 
 use std::collections::HashMap;
-use std::path::Path;
 use std::str::SplitWhitespace;
 
-use super::{Emitter, Source};
+use super::{Emitter, Input, Source};
 use crate::load::{err, LoadError};
 
 /// "No slot": a file vertex no object has used yet.
@@ -60,12 +59,14 @@ enum Line {
     Other,
 }
 
-/// A line's text, as `BufRead::lines` makes it: without `\n` (and a `\r` before it).
+/// A line's text: without `\n` (and a `\r` before it), and without a comment (from `#` to
+/// the end of the line, which tobj would read as words of the line).
 fn text(line: &[u8]) -> Option<&str> {
     let line = match line.strip_suffix(b"\n") {
         Some(l) => l.strip_suffix(b"\r").unwrap_or(l),
         None => line,
     };
+    let line = line.iter().position(|&b| b == b'#').map_or(line, |k| &line[..k]);
     std::str::from_utf8(line).ok()
 }
 
@@ -87,6 +88,9 @@ fn vertex(mut words: SplitWhitespace) -> Result<([f32; 3], usize), &'static str>
     let mut p = [0.0f32; 3];
     for c in &mut p {
         *c = words.next().and_then(|w| w.parse().ok()).ok_or("a 'v' line needs three numbers")?;
+    }
+    if !p.iter().all(|c| c.is_finite()) {
+        return Err("a 'v' line with a non-finite coordinate");
     }
     let Some(first) = words.next() else {
         return Ok((p, 0));
@@ -172,8 +176,6 @@ struct Slots {
     /// line of each, checked when the object ends.
     faces: bool,
     max_v: Option<(usize, u64)>,
-    max_vt: Option<(usize, u64)>,
-    max_vn: Option<(usize, u64)>,
 }
 
 /// Describes a resolved 0-based index as its line could have written it.
@@ -195,8 +197,6 @@ impl Slots {
             older: keep_older.then(Vec::new),
             faces: false,
             max_v: None,
-            max_vt: None,
-            max_vn: None,
         }
     }
 
@@ -235,18 +235,11 @@ impl Slots {
     /// Notes a face's indices, to be checked when its object ends.
     fn face(&mut self, corners: &[Corner], line: u64) {
         self.faces = true;
-        let raise = |max: &mut Option<(usize, u64)>, i: usize| {
-            if i != MISSING && max.is_none_or(|(m, _)| i > m) {
-                *max = Some((i, line));
-            }
-        };
         for c in corners {
             // A position index of 0 or none is MISSING too, and out of range.
             if self.max_v.is_none_or(|(m, _)| c[0] > m) {
                 self.max_v = Some((c[0], line));
             }
-            raise(&mut self.max_vt, c[1]);
-            raise(&mut self.max_vn, c[2]);
         }
     }
 
@@ -260,36 +253,28 @@ impl Slots {
                     counts.v
                 ));
             }
-            if counts.colors > 0 && v * 3 + 2 >= counts.colors {
-                return Err(format!(
-                    "line {line}: a face uses vertex {}, which has no colour, but earlier vertices have colours",
-                    v + 1
-                ));
-            }
         }
-        for (max, count, kind) in [(self.max_vt, counts.vt, "texture coordinate"), (self.max_vn, counts.vn, "normal")] {
-            if let Some((i, line)) = max.filter(|&(i, _)| count > 0 && i >= count) {
-                return Err(format!("line {line}: a face uses {kind} {}, but the file has {count}", describe(i)));
-            }
-        }
+        // Texture coordinate and normal indices are not checked: positions are what is read,
+        // and a file whose positions are fine loads whatever its other indices say.
         // Every vertex used ahead of its definition is defined now (checked above).
         for (v, s) in self.ahead.drain() {
             self.remap[v] = s;
         }
         self.base = self.next;
-        (self.faces, self.max_v, self.max_vt, self.max_vn) = (false, None, None, None);
+        (self.faces, self.max_v) = (false, None);
         Ok(())
     }
 }
 
 /// Reads the file through, numbering slots; with `out`, hands it the triangles.
 fn scan(
-    path: &Path,
+    input: Input,
     progress: &mut dyn FnMut(u64),
     slots: &mut Slots,
     mut out: Option<&mut Emitter>,
 ) -> Result<(Counts, u64), LoadError> {
-    let mut src = Source::open(path, progress)?;
+    let path = input.path;
+    let mut src = Source::open(input, progress)?;
     let (mut line, mut corners) = (Vec::new(), Vec::new());
     let mut counts = Counts::default();
     let mut line_no = 0u64;
@@ -351,14 +336,15 @@ fn emit(out: &mut Emitter, slots: &mut Slots, corners: &[Corner], line: u64) -> 
 
 /// Pass 1 for OBJ: numbers the slots in one read, then fills them from the `v` lines in a
 /// second.
-pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+    let path = input.path;
     let mut slots = Slots::new(true);
-    let (counts, read) = scan(path, &mut *progress, &mut slots, None)?;
+    let (counts, read) = scan(input, &mut *progress, &mut slots, None)?;
     let mut older = slots.older.take().unwrap_or_default();
     older.sort_unstable();
     let mut positions = vec![[0.0f32; 3]; slots.next as usize];
     let mut base_progress = |n: u64| progress(read + n);
-    let mut src = Source::open(path, &mut base_progress)?;
+    let mut src = Source::open(input, &mut base_progress)?;
     let (mut line, mut v, mut k, mut line_no) = (Vec::new(), 0usize, 0usize, 0u64);
     let changed = || err(path, "the file changed while it was read");
     while v < counts.v {
@@ -385,9 +371,10 @@ pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Ve
 }
 
 /// Pass 2 for OBJ.
-pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
+pub(super) fn triangles(input: Input, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
+    let path = input.path;
     let mut slots = Slots::new(false);
-    scan(path, progress, &mut slots, Some(&mut *out))?;
+    scan(input, progress, &mut slots, Some(&mut *out))?;
     if slots.next != out.positions.count() as u64 {
         let what = format!(
             "the positions given are not this file's: {} of them for {} slots",

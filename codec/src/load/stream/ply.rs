@@ -21,7 +21,7 @@
 use std::fmt;
 use std::path::Path;
 
-use super::{Emitter, Source};
+use super::{Emitter, Input, Source};
 use crate::load::{err, LoadError};
 
 /// The longest header line read. ply-rs has no limit, but a header line is a keyword and a
@@ -552,8 +552,8 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
-    fn open(path: &'a Path, progress: &'a mut dyn FnMut(u64)) -> Result<(Self, Header), LoadError> {
-        let mut src = Source::open(path, progress)?;
+    fn open(input: Input<'a>, progress: &'a mut dyn FnMut(u64)) -> Result<(Self, Header), LoadError> {
+        let mut src = Source::open(input, progress)?;
         let header = read_header(&mut src)?;
         let reader = Reader { src, encoding: header.encoding, line_no: header.lines, line: Vec::new() };
         Ok((reader, header))
@@ -922,8 +922,9 @@ fn vertex_element(path: &Path, header: &Header) -> Result<usize, LoadError> {
 }
 
 /// Pass 1 for PLY: the `vertex` element, read after the elements before it.
-pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
-    let (mut reader, header) = Reader::open(path, progress)?;
+pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+    let path = input.path;
+    let (mut reader, header) = Reader::open(input, progress)?;
     let vertex = vertex_element(path, &header)?;
     for e in &header.elements[..vertex] {
         reader.skip_element(e, true)?;
@@ -934,11 +935,12 @@ pub(super) fn positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Ve
 /// Pass 1 for PLY without holding the positions: each is handed to `sink`; returns how
 /// many there were.
 pub(super) fn each_position(
-    path: &Path,
+    input: Input,
     sink: &mut dyn FnMut([f32; 3]),
     progress: &mut dyn FnMut(u64),
 ) -> Result<u64, LoadError> {
-    let (mut reader, header) = Reader::open(path, progress)?;
+    let path = input.path;
+    let (mut reader, header) = Reader::open(input, progress)?;
     let vertex = vertex_element(path, &header)?;
     for e in &header.elements[..vertex] {
         reader.skip_element(e, true)?;
@@ -951,8 +953,9 @@ pub(super) fn each_position(
 /// Pass 2 for PLY: strips, then faces, as `load_path` orders them. When the `face` element
 /// comes before the `tristrips` one, the file is read twice: for the strips, then for the
 /// faces.
-pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
-    let (mut reader, header) = Reader::open(path, &mut *progress)?;
+pub(super) fn triangles(input: Input, out: &mut Emitter, progress: &mut dyn FnMut(u64)) -> Result<(), LoadError> {
+    let path = input.path;
+    let (mut reader, header) = Reader::open(input, &mut *progress)?;
     let vertices = header.elements[vertex_element(path, &header)?].count;
     if vertices != out.positions.count() as u64 {
         let what = format!(
@@ -968,7 +971,7 @@ pub(super) fn triangles(path: &Path, out: &mut Emitter, progress: &mut dyn FnMut
             let read = reader.src.raw_len;
             drop(reader);
             let mut progress = |n| progress(read + n);
-            let (mut reader, header) = Reader::open(path, &mut progress)?;
+            let (mut reader, header) = Reader::open(input, &mut progress)?;
             reader.triangles_pass(&header, out, (true, false), Some(face))
         }
         _ => reader.triangles_pass(&header, out, (true, true), None),
@@ -986,7 +989,7 @@ mod tests {
         let path = dir.path().join("h.ply");
         std::fs::write(&path, text).map_err(|e| e.to_string())?;
         let mut progress = |_| {};
-        let mut src = Source::open(&path, &mut progress).map_err(|e| e.to_string())?;
+        let mut src = Source::open(Input::file(&path), &mut progress).map_err(|e| e.to_string())?;
         read_header(&mut src).map_err(|e| e.to_string())
     }
 
