@@ -63,7 +63,7 @@ pub enum ModelKind {
     Dpm,
     /// An `.nsp` file (nSP-tree store), whose cells workers refine.
     Nsp,
-    /// Anything else: a mesh file for the loaders (OBJ, PLY, STL, optionally gzipped).
+    /// Anything else: a mesh file for the loaders (OBJ, PLY, STL, glTF, optionally gzipped).
     Mesh,
 }
 

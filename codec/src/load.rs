@@ -1,5 +1,6 @@
-//! Mesh loaders: OBJ, PLY (ASCII and binary, face lists and triangle strips) and STL (ASCII
-//! and binary), each optionally gzip-compressed (`flate2`).
+//! Mesh loaders: OBJ, PLY (ASCII and binary, face lists and triangle strips), STL (ASCII
+//! and binary) and glTF 2.0 (`.gltf`, `.glb`, Draco- or meshopt-compressed; `load/gltf.rs`),
+//! each optionally gzip-compressed (`flate2`).
 //!
 //! All three readers are ours. PLY and OBJ are read by [`stream`]'s readers, here over the
 //! bytes in memory, in a file's two passes; STL by `load/stl.rs`. The crates we used before
@@ -34,6 +35,7 @@ use thiserror::Error;
 
 use crate::mesh::Mesh;
 
+mod gltf;
 mod polygon;
 mod stl;
 pub mod stream;
@@ -56,6 +58,8 @@ pub enum Format {
     Obj,
     Ply,
     Stl,
+    /// glTF 2.0: `.gltf` (JSON) or `.glb` (binary container).
+    Gltf,
 }
 
 impl Format {
@@ -67,6 +71,7 @@ impl Format {
             "obj" => Some(Format::Obj),
             "ply" => Some(Format::Ply),
             "stl" => Some(Format::Stl),
+            "gltf" | "glb" => Some(Format::Gltf),
             _ => None,
         }
     }
@@ -96,7 +101,7 @@ impl Format {
             std::io::Read::read_to_end(&mut std::io::Read::take(rest, SNIFF as u64), &mut head)
         };
         if let Some(kind) = tessera_model(&head) {
-            return Err(err(path, format!("this is {kind}, not a mesh file (OBJ, PLY or STL)")));
+            return Err(err(path, format!("this is {kind}, not a mesh file (OBJ, PLY, STL or glTF)")));
         }
         Format::sniff(&head, (!gzip).then_some(len))
             .or_else(|| Format::from_path(path))
@@ -107,6 +112,11 @@ impl Format {
     fn sniff(head: &[u8], len: Option<u64>) -> Option<Format> {
         if head.starts_with(b"ply\n") || head.starts_with(b"ply\r") {
             return Some(Format::Ply);
+        }
+        // A GLB container, or a JSON object with glTF's mandatory `asset`.
+        let json = head.trim_ascii_start();
+        if head.starts_with(b"glTF") || (json.starts_with(b"{") && json.windows(7).any(|w| w == b"\"asset\"")) {
+            return Some(Format::Gltf);
         }
         if let (Some(len), Some(count)) = (len, head.get(80..84)) {
             let n = u32::from_le_bytes([count[0], count[1], count[2], count[3]]) as u64;
@@ -132,7 +142,7 @@ impl Format {
 /// How much of a file [`Format::of_file`] reads.
 const SNIFF: usize = 4096;
 
-const UNKNOWN: &str = "not a mesh file Tessera reads: expected OBJ, PLY or STL (optionally gzipped)";
+const UNKNOWN: &str = "not a mesh file Tessera reads: expected OBJ, PLY, STL or glTF (optionally gzipped)";
 
 /// What Tessera model a file starting with `head` is, in words, if it is one.
 fn tessera_model(head: &[u8]) -> Option<&'static str> {
@@ -200,6 +210,10 @@ pub fn load_bytes_counted(path: &Path, raw: &[u8], format: Format) -> Result<Loa
     let (mesh, ignored) = match format {
         Format::Obj | Format::Ply => stream::load_memory(path, &bytes, format)?,
         Format::Stl => (stl::load(path, &bytes)?, 0),
+        Format::Gltf => {
+            let l = gltf::load(path, &bytes)?;
+            (l.mesh, l.ignored)
+        }
     };
     if let Some(bad) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= mesh.positions.len()) {
         return Err(err(

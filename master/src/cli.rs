@@ -135,7 +135,7 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
-    /// Compress a mesh (OBJ, PLY or STL, optionally .gz) into a .bft file.
+    /// Compress a mesh (OBJ, PLY, STL or glTF, optionally .gz) into a .bft file.
     Encode {
         input: PathBuf,
         #[arg(short, long)]
@@ -307,7 +307,7 @@ pub struct EncodeArgs {
 /// Flags of `tessera render`.
 #[derive(Args, Clone, Debug)]
 pub struct RenderArgs {
-    /// A .bft file, a mesh file (OBJ, PLY, STL; encoded on load), or a progressive mesh
+    /// A .bft file, a mesh file (OBJ, PLY, STL, glTF; encoded on load), or a progressive mesh
     /// (.dpm, from `tessera pm build`), which the workers adapt per tile on the GPU.
     pub model: PathBuf,
     /// Frame size in pixels, WIDTHxHEIGHT (ignored with --wall, which sets it), at most

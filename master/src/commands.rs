@@ -81,7 +81,7 @@ pub fn read_input(path: &Path) -> Result<Vec<u8>> {
     codec::input::read_file(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
-/// Loads a mesh file (OBJ, PLY, STL, optionally gzipped), with a spinner while it parses;
+/// Loads a mesh file (OBJ, PLY, STL, glTF, optionally gzipped), with a spinner while it parses;
 /// points and lines it skipped are reported on stderr.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
     let pb = progress::spinner(format!("loading {}", path.display()));

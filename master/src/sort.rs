@@ -21,7 +21,7 @@ pub struct Model {
     pub tiles: TileModel,
 }
 
-/// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL) on load with `options`.
+/// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL, glTF) on load with `options`.
 pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     let kind = codec::input::ModelKind::of(path);
     if kind == codec::input::ModelKind::Dpm {

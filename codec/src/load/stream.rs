@@ -228,7 +228,9 @@ fn triangles_of(
 fn streamed_format(path: &Path) -> Result<Format, LoadError> {
     match Format::of_file(path)? {
         f @ (Format::Ply | Format::Obj) => Ok(f),
-        Format::Stl => Err(err(path, "the streaming reader reads PLY and OBJ files (optionally gzipped) only")),
+        Format::Stl | Format::Gltf => {
+            Err(err(path, "the streaming reader reads PLY and OBJ files (optionally gzipped) only"))
+        }
     }
 }
 
