@@ -67,6 +67,79 @@ impl Camera {
         }
     }
 
+    /// A three-quarter view: from `azimuth` degrees about the up axis (+Y) away from the
+    /// default camera's side (+Z; 45 is a quarter turn towards +X) and 30 degrees above, the
+    /// eye as close as keeps every corner of the bounding box inside the frustum with
+    /// `margin` (a fraction of the half-width and half-height) to spare, so the model fills
+    /// the frame rather than its bounding sphere.
+    pub fn three_quarter(bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32, azimuth: f32, margin: f32) -> Camera {
+        let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));
+        let corners: Vec<[f32; 3]> = (0..8)
+            .map(|i| {
+                [
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                ]
+            })
+            .collect();
+        Self::three_quarter_fit(bbox_min, bbox_max, &corners, aspect, azimuth, margin)
+    }
+
+    /// [`Camera::three_quarter`] fitted to `points` (the model's vertices, inside the box)
+    /// rather than to the box's corners: closer, as a model rarely fills its box's silhouette.
+    pub fn three_quarter_fit(
+        bbox_min: [f32; 3],
+        bbox_max: [f32; 3],
+        points: &[[f32; 3]],
+        aspect: f32,
+        azimuth: f32,
+        margin: f32,
+    ) -> Camera {
+        let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));
+        let center = (lo + hi) * 0.5;
+        let (az, el) = (azimuth.to_radians(), 30f32.to_radians());
+        let d = Vec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos());
+        let right = Vec3::Y.cross(d).normalize();
+        let up = d.cross(right);
+        let tv = (Self::DEFAULT_FOVY * 0.5).to_radians().tan() * (1.0 - margin);
+        let th = (Self::DEFAULT_FOVY * 0.5).to_radians().tan() * aspect * (1.0 - margin);
+        // A point at offset p from the target is at depth dist - p.d: inside when its
+        // sideways offsets over that depth are within the half-angles' tangents. Then the
+        // target moves to centre the points' screen extent, and the distance is fitted again
+        // (twice: the extent shifts a little as the depths change).
+        let mut center = center;
+        let mut dist = 0f32;
+        for pass in 0..3 {
+            let offsets = points.iter().map(|&p| Vec3::from(p) - center);
+            dist = offsets
+                .clone()
+                .map(|p| p.dot(d) + (p.dot(right).abs() / th).max(p.dot(up).abs() / tv))
+                .fold(1e-6f32, f32::max);
+            if pass == 2 {
+                break;
+            }
+            let (mut x, mut y) = ((f32::MAX, f32::MIN), (f32::MAX, f32::MIN));
+            for p in offsets {
+                let z = (dist - p.dot(d)).max(1e-6);
+                let (sx, sy) = (p.dot(right) / z, p.dot(up) / z);
+                (x, y) = ((x.0.min(sx), x.1.max(sx)), (y.0.min(sy), y.1.max(sy)));
+            }
+            center += (right * (x.0 + x.1) * 0.5 + up * (y.0 + y.1) * 0.5) * dist;
+        }
+        let depths = points.iter().map(|&p| dist - (Vec3::from(p) - center).dot(d));
+        let (nearest, farthest) = depths.fold((f32::MAX, 0f32), |(a, b), z| (a.min(z), b.max(z)));
+        let radius = ((hi - lo).length() * 0.5).max(1e-6);
+        Camera {
+            eye: center + d * dist,
+            target: center,
+            up: Vec3::Y,
+            fovy: Self::DEFAULT_FOVY,
+            near: (nearest * 0.5).max(radius * 1e-3),
+            far: farthest * 1.5 + radius * 1e-3,
+        }
+    }
+
     pub fn validate(&self) -> Result<(), ViewError> {
         let vals = [self.eye.to_array(), self.target.to_array(), self.up.to_array()];
         if !vals.iter().flatten().chain(&[self.fovy, self.near, self.far]).all(|v| v.is_finite()) {
@@ -517,6 +590,33 @@ mod tests {
                 let n = c / c.w;
                 assert!(n.x.abs() <= 1.0 && n.y.abs() <= 1.0 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
             }
+        }
+    }
+
+    #[test]
+    fn three_quarter_view_fills_the_frame_with_the_box() {
+        let (lo, hi) = ([-1.0, 2.0, 0.5], [3.0, 2.5, 4.0]);
+        for aspect in [0.5, 1.0, 16.0 / 9.0] {
+            let cam = Camera::three_quarter(lo, hi, aspect, 45.0, 0.05);
+            assert_eq!(cam.validate(), Ok(()));
+            let vp = cam.view_proj(aspect);
+            let mut widest = 0f32;
+            for i in 0..8 {
+                let p = Vec3::new(
+                    if i & 1 == 0 { lo[0] } else { hi[0] },
+                    if i & 2 == 0 { lo[1] } else { hi[1] },
+                    if i & 4 == 0 { lo[2] } else { hi[2] },
+                );
+                let c = vp * p.extend(1.0);
+                let n = c / c.w;
+                assert!(n.x.abs() <= 0.951 && n.y.abs() <= 0.951 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
+                widest = widest.max(n.x.abs()).max(n.y.abs());
+            }
+            // Some corner touches the margin: the box fills the frame.
+            assert!(widest > 0.94, "aspect {aspect}: {widest}");
+            // Seen from above, right and in front of the centre.
+            let dir = cam.eye - cam.target;
+            assert!(dir.x > 0.0 && dir.y > 0.0 && dir.z > 0.0);
         }
     }
 

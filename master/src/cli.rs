@@ -427,6 +427,16 @@ pub struct ViewArgs {
 /// The camera; every flag left out comes from the default camera, which frames the model.
 #[derive(Args, Clone, Debug, Default)]
 pub struct CameraArgs {
+    /// Where the camera starts before --eye, --target and the rest: `front` looks down -Z
+    /// with the model's bounding sphere in view (the figures' camera); `three-quarter`
+    /// looks from above, right and in front, close enough that the model's box fills the
+    /// frame.
+    #[arg(long, value_enum, default_value = "front")]
+    pub view: ViewPreset,
+    /// With --view three-quarter: degrees about +Y from the +Z side (45: front right;
+    /// -135: back left, for a model that faces -Z).
+    #[arg(long, default_value_t = 45.0, allow_hyphen_values = true)]
+    pub azimuth: f32,
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<Vec3>,
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
@@ -442,12 +452,39 @@ pub struct CameraArgs {
     pub far: Option<f32>,
 }
 
+/// The starting camera of [`CameraArgs`].
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ViewPreset {
+    #[default]
+    Front,
+    ThreeQuarter,
+}
+
 impl CameraArgs {
     /// The camera for a model with this bounding box, at this aspect ratio. When the eye or
     /// target moves and no clip planes are given, near and far follow the model's bounding
     /// sphere from the new eye.
     pub fn camera(&self, bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32) -> Result<Camera> {
-        let mut cam = Camera::framing(bbox_min, bbox_max, aspect);
+        self.camera_fitting(bbox_min, bbox_max, None, aspect)
+    }
+
+    /// [`CameraArgs::camera`], where the three-quarter view fits `points` (the model's
+    /// vertices, when the caller holds them) rather than the box's corners.
+    pub fn camera_fitting(
+        &self,
+        bbox_min: [f32; 3],
+        bbox_max: [f32; 3],
+        points: Option<&[[f32; 3]]>,
+        aspect: f32,
+    ) -> Result<Camera> {
+        const MARGIN: f32 = 0.04;
+        let mut cam = match (self.view, points) {
+            (ViewPreset::Front, _) => Camera::framing(bbox_min, bbox_max, aspect),
+            (ViewPreset::ThreeQuarter, Some(p)) if !p.is_empty() => {
+                Camera::three_quarter_fit(bbox_min, bbox_max, p, aspect, self.azimuth, MARGIN)
+            }
+            (ViewPreset::ThreeQuarter, _) => Camera::three_quarter(bbox_min, bbox_max, aspect, self.azimuth, MARGIN),
+        };
         if let Some(v) = self.eye {
             cam.eye = v;
         }

@@ -77,8 +77,14 @@ pub fn chunked_camera(model: &Chunked, args: &CameraArgs, grid: &TileGrid) -> Re
 
 impl Model {
     pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
-        let h = self.tiles.decoded.header;
-        args.camera(h.bbox_min, h.bbox_max, grid.aspect())
+        let d = &self.tiles.decoded;
+        let h = d.header;
+        // The three-quarter view fits the vertices (dequantized: the box's own scale).
+        let points: Option<Vec<[f32; 3]>> = (args.view == crate::cli::ViewPreset::ThreeQuarter).then(|| {
+            let q = d.quantization();
+            d.positions.iter().map(|&p| q.dequantize(p)).collect()
+        });
+        args.camera_fitting(h.bbox_min, h.bbox_max, points.as_deref(), grid.aspect())
     }
 }
 
