@@ -2,7 +2,8 @@
 # Installs every system package Tessera needs, idempotently, on Debian (as root, or with sudo).
 #   Open MPI (mpirun + headers) for the cluster path, libclang for the `mpi` crate's bindgen,
 #   Mesa's Vulkan drivers (lavapipe) so wgpu runs headless without a GPU, and GNU time
-#   (/usr/bin/time), with which a test and the scale scripts measure peak memory.
+#   (/usr/bin/time), with which a test and the scale scripts measure peak memory, and ffmpeg
+#   (with ffprobe), to which `render --out movie.mp4` pipes its frames.
 # Safe to run again: packages already present are skipped and nothing is reinstalled.
 set -euo pipefail
 
@@ -12,6 +13,7 @@ PACKAGES=(
   libclang-dev clang
   mesa-vulkan-drivers libvulkan1 vulkan-tools
   time
+  ffmpeg
 )
 
 missing=()

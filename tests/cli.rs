@@ -287,3 +287,49 @@ fn nsp_build_stats_adapt_and_corrupt_file() {
     let o = tessera(&["encode", s(&bad), "-o", s(&dir.path().join("x.bft"))]);
     assert!(!o.status.success() && stderr(&o).contains("this is a .bft model"), "{}", stderr(&o));
 }
+
+/// `render --out movie.mp4` pipes every frame to ffmpeg: ffprobe counts them and reads their
+/// size; a failing ffmpeg leaves a one-line error and no file, temporary or not.
+#[test]
+fn render_writes_a_movie_through_ffmpeg() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_oded_6k.obj");
+    for (name, (w, h)) in [("m.mp4", (160, 120)), ("m.mkv", (97, 61))] {
+        let out = dir.path().join(name);
+        let size = format!("{w}x{h}");
+        let o = tessera(&["render", s(&model), "--size", &size, "--frames", "4", "--orbit", "--out", s(&out)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let probe = Command::new("ffprobe")
+            .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
+            .args(["-show_entries", "stream=nb_read_frames,width,height", "-of", "csv=p=0", s(&out)])
+            .output()
+            .expect("ffprobe runs (scripts/setup.sh installs it)");
+        let text = String::from_utf8_lossy(&probe.stdout).trim().to_string();
+        // Odd sizes are padded by a pixel for 4:2:0 video.
+        assert_eq!(text, format!("{},{},4", w + w % 2, h + h % 2), "{name}");
+    }
+    // An ffmpeg that starts but fails to encode.
+    let fake = dir.path().join("bin");
+    std::fs::create_dir(&fake).unwrap();
+    let script = fake.join("ffmpeg");
+    std::fs::write(&script, "#!/bin/sh\n[ \"$1\" = -version ] && exit 0\necho 'Unknown encoder' >&2\nexit 1\n")
+        .unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let out = dir.path().join("bad.mp4");
+    let path = format!("{}:{}", fake.display(), std::env::var("PATH").unwrap_or_default());
+    let o = Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .env("PATH", path)
+        .args(["render", s(&model), "--size", "64x48", "--frames", "3", "--out", s(&out)])
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("ffmpeg failed") && err.contains("Unknown encoder"), "{err}");
+    assert_eq!(err.lines().filter(|l| l.contains("ffmpeg failed")).count(), 1, "{err}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(!out.exists() && !left.iter().any(|n| n.to_string_lossy().starts_with(".tessera")), "{left:?}");
+    // A wall writes an image per display: no movie.
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(&wall, "columns = 2\nrows = 1\ndisplay_width = 32\ndisplay_height = 32\n").unwrap();
+    let o = tessera(&["render", s(&model), "--wall", s(&wall), "--out", s(&dir.path().join("w.mp4"))]);
+    assert!(!o.status.success() && stderr(&o).contains("--out must be a .png with --wall"), "{}", stderr(&o));
+}

@@ -334,9 +334,13 @@ pub struct RenderArgs {
     /// 1 keeps the distance. With --orbit, the eye orbits and zooms at once.
     #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
     pub zoom: f32,
-    /// Output PNG; with several frames, frame-0001.png and so on beside it.
+    /// Output PNG; with several frames, frame-0001.png and so on beside it. Or a movie
+    /// (.mp4, .mkv, .mov, .webm, .avi): every frame piped to ffmpeg, one file.
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
+    /// Frames a second of a movie output.
+    #[arg(long, default_value_t = 30.0, value_parser = parse_positive)]
+    pub fps: f32,
     /// Write one JSON line per frame per rank.
     #[arg(long)]
     pub stats: Option<PathBuf>,

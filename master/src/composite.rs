@@ -75,6 +75,9 @@ pub fn encode_png(width: u32, height: u32, color: png::ColorType, pixels: &[u8])
     let mut encoder = png::Encoder::new(&mut out, width, height);
     encoder.set_color(color);
     encoder.set_depth(png::BitDepth::Eight);
+    // fdeflate's fast mode: 6 ms for a 1920x1080 frame of the dragon against 82 ms at the
+    // crate's default level, for a file 1.9 times larger (`pngbench` example).
+    encoder.set_compression(png::Compression::Fast);
     let mut writer = encoder.write_header().context("PNG encoding failed")?;
     writer.write_image_data(pixels).context("PNG encoding failed")?;
     writer.finish().context("PNG encoding failed")?;

@@ -8,6 +8,7 @@
 pub mod cli;
 pub mod commands;
 pub mod composite;
+pub mod movie;
 pub mod nsp;
 pub mod output;
 pub mod pm;

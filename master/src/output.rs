@@ -24,6 +24,17 @@ use anyhow::{bail, Context, Result};
 /// Temporary files not yet renamed into place.
 static IN_FLIGHT: Mutex<Option<HashSet<PathBuf>>> = Mutex::new(None);
 
+/// Registers a temporary file another process writes (ffmpeg's movie), so that a signal
+/// removes it as it removes this process's own.
+pub fn register_in_flight(path: &Path) {
+    IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert_with(HashSet::new).insert(path.to_path_buf());
+}
+
+/// The file registered with [`register_in_flight`] is in place or gone.
+pub fn unregister_in_flight(path: &Path) {
+    unregister(path);
+}
+
 fn unregister(path: &Path) {
     if let Some(set) = IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner()).as_mut() {
         set.remove(path);

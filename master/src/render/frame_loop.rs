@@ -40,6 +40,11 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
     }
 
+    let mut movie = if crate::movie::is_movie(&args.out) {
+        Some(crate::movie::Movie::start(&args.out, grid.width, grid.height, args.fps)?)
+    } else {
+        None
+    };
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
     for k in 0..args.frames {
@@ -83,9 +88,10 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
             }
         }
-        match &plan.wall {
-            None => frame.save_png(&out)?,
-            Some(wall) => save_wall(wall, &frame, &out)?,
+        match (&plan.wall, movie.as_mut()) {
+            (_, Some(m)) => m.frame(&frame.rgba)?,
+            (None, None) => frame.save_png(&out)?,
+            (Some(wall), None) => save_wall(wall, &frame, &out)?,
         }
         let write_ms = ms(start);
         eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
@@ -113,6 +119,9 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     }
     let shutdown = ToWorker::Shutdown.encode();
     t.send_many(&(1..t.size()).map(|r| (r, shutdown.clone())).collect::<Vec<_>>());
+    if let Some(m) = movie {
+        m.finish().with_context(|| format!("cannot write {}", args.out.display()))?;
+    }
     Ok(())
 }
 

@@ -28,7 +28,17 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     let (w, h) = wall.as_ref().map_or(args.size, Wall::frame_size);
     crate::cli::check_frame_size(w as u64, h as u64)?;
     let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
-    check_extension(&args.out, &["png"], "--out")?;
+    let movie = crate::movie::is_movie(&args.out);
+    if movie {
+        if wall.is_some() {
+            anyhow::bail!("a wall writes one image per display: --out must be a .png with --wall");
+        }
+        crate::movie::check_ffmpeg()?;
+    } else {
+        let mut allowed = vec!["png"];
+        allowed.extend(crate::movie::EXTENSIONS);
+        check_extension(&args.out, &allowed, "--out")?;
+    }
     if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Dpm {
         anyhow::bail!("--decode-only applies to sorted models; a progressive mesh (.dpm) has no tiles to decode");
     }
@@ -40,7 +50,9 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     inputs.extend(args.wall.as_deref());
     let displays = wall.as_ref().map_or(0, |w| w.columns as u64 * w.rows as u64);
     let per_frame = 1 + displays;
-    let frames: Vec<u32> = if per_frame * args.frames as u64 <= CHECKED_OUTPUTS {
+    let frames: Vec<u32> = if movie {
+        vec![0]
+    } else if per_frame * args.frames as u64 <= CHECKED_OUTPUTS {
         (0..args.frames).collect()
     } else {
         vec![0, args.frames - 1]
@@ -72,9 +84,9 @@ fn display_path(path: &Path, c: u32, r: u32) -> PathBuf {
     path.with_file_name(format!("{stem}-display-{c}-{r}.png"))
 }
 
-/// `frame.png` for one frame; `frame-0001.png`, ... for several.
+/// `frame.png` for one frame; `frame-0001.png`, ... for several; a movie is one file.
 pub fn frame_path(out: &Path, k: u32, frames: u32) -> PathBuf {
-    if frames == 1 {
+    if frames == 1 || crate::movie::is_movie(out) {
         return out.to_path_buf();
     }
     let stem = out.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
