@@ -420,3 +420,48 @@ fn the_out_of_core_build_writes_the_in_core_file_with_the_advance() {
         assert!(out == in_core.bytes, "{rel}: {} bytes out of core, {} in core", out.len(), in_core.bytes.len());
     }
 }
+
+/// A worker's cells arrive in steps: a cell first drawn at its minimal precision (no bytes
+/// of its stream held), later refined when its next segments arrive, decodes exactly as the
+/// whole file does. (A decoder started over no bytes used to read zeros ahead, and resuming
+/// it decoded from them: "truncated stream" on the next frame.)
+#[test]
+fn cells_refined_as_their_segments_arrive_decode_as_the_whole_file() {
+    let mesh = codec::load_path(&testkit::mesh_path("stanford/bunny_oded_6k.obj")).unwrap();
+    let (_, whole) = build(&mesh, small_params(12, 800));
+    let mut parts = NspFile::from_skeleton(whole.skeleton().to_vec()).unwrap();
+    let tree = &whole.tree;
+    let leaves: Vec<u32> =
+        (0..tree.nodes.len() as u32).filter(|&c| tree.is_leaf(c) && whole.entries[c as usize].len > 0).collect();
+    assert!(leaves.len() > 4, "the bunny is cut into cells");
+    let mut held: HashMap<u32, u32> = HashMap::new();
+    let mut nav = view::Navigator::default();
+    let mut fresh = view::Navigator::default();
+    // Every leaf at its minimal precision, then one bit more at a time up to the full one.
+    let max = leaves.iter().map(|&c| tree.max_prec(c)).max().unwrap();
+    for step in 0..=max {
+        let cut: Vec<(u32, u8)> =
+            leaves.iter().map(|&c| (c, tree.min_prec(c).max(step.min(tree.max_prec(c))))).collect();
+        let mut need: Vec<(u32, u8)> = cut.clone();
+        for &(c, _) in &cut {
+            let mut a = tree.nodes[c as usize].parent;
+            while a != u32::MAX {
+                need.push((a, tree.max_prec(a)));
+                a = tree.nodes[a as usize].parent;
+            }
+        }
+        for (c, b) in need {
+            let upto = whole.needed(c, b);
+            let have = held.entry(c).or_insert(0);
+            if upto > *have {
+                parts.receive(c, *have, whole.cell_range(c, *have, upto).unwrap()).unwrap();
+                *have = upto;
+            }
+        }
+        let got = view::draw(&parts, &cut, &nav.update(&parts, &cut).unwrap());
+        let want = view::draw(&whole, &cut, &fresh.update(&whole, &cut).unwrap());
+        assert_eq!(got.triangles.len(), want.triangles.len(), "step {step}");
+        assert_eq!(oriented_set(&got.positions, &got.triangles), oriented_set(&want.positions, &want.triangles));
+        fresh = view::Navigator::default();
+    }
+}

@@ -394,6 +394,13 @@ impl CellState {
             self.cx = self.start.clone();
             self.at = None;
         }
+        // Nothing to decode: no decoder is started, as one started over the bytes held so
+        // far (none at the minimal precision) would read zeros ahead, and resuming it once
+        // more bytes came would decode from those zeros. (With the geometry advance the
+        // prologue is decoded even at the minimal precision; its segment is always held.)
+        if self.cx.level >= target && (self.at.is_some() || self.cx.ahead.levels == 0) {
+            return Ok(());
+        }
         let cell = self.cell;
         let err = |what: &str| NspError::Cell { cell, what: what.into() };
         let mut dec = match self.at {
