@@ -338,6 +338,10 @@ pub struct RenderArgs {
     /// (.mp4, .mkv, .mov, .webm, .avi): every frame piped to ffmpeg, one file.
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
+    /// Frames rank 0 sorts and sends ahead of the one it composites (1: no pipelining).
+    /// `--balance` keeps 1, as it sorts each frame from the costs of the one before.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub frames_in_flight: u32,
     /// Frames a second of a movie output.
     #[arg(long, default_value_t = 30.0, value_parser = parse_positive)]
     pub fps: f32,

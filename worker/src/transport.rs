@@ -48,6 +48,9 @@ pub fn launched_by_mpirun() -> bool {
 pub struct Mpi {
     world: SimpleCommunicator,
     _universe: mpi::environment::Universe,
+    /// Messages received while [`Transport::send_many`] waited for its sends to complete,
+    /// handed out by [`Transport::recv`] first.
+    stash: Mutex<std::collections::VecDeque<(usize, Vec<u8>)>>,
 }
 
 /// Held around every MPI call (see [`Mpi`]).
@@ -66,7 +69,7 @@ impl Mpi {
         if !matches!(level, Threading::Serialized | Threading::Multiple) {
             return None;
         }
-        Some(Mpi { world: universe.world(), _universe: universe })
+        Some(Mpi { world: universe.world(), _universe: universe, stash: Mutex::new(Default::default()) })
     }
 }
 
@@ -84,15 +87,44 @@ impl Transport for Mpi {
         self.world.process_at_rank(to as i32).send(msg);
     }
 
+    /// Posts every send, then receives whatever arrives until they have all completed: with
+    /// frames in flight, rank 0 sends frame k+1's tiles to a worker that is itself sending
+    /// frame k's pixels, and two large sends facing each other would wait for each other's
+    /// receive for ever. What is received meanwhile waits in the stash for [`Transport::recv`].
     fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
         let _calls = mpi_lock();
         mpi::request::scope(|scope| {
-            let requests: Vec<_> = msgs
+            let mut pending: Vec<_> = msgs
                 .iter()
-                .map(|(to, m)| self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..]))
+                .map(|(to, m)| Some(self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..])))
                 .collect();
-            for r in requests {
-                r.wait();
+            let mut spins = 0u32;
+            loop {
+                let mut left = false;
+                for slot in pending.iter_mut() {
+                    if let Some(r) = slot.take() {
+                        if let Err(r) = r.test() {
+                            *slot = Some(r);
+                            left = true;
+                        }
+                    }
+                }
+                if !left {
+                    break;
+                }
+                if let Some(probed) = self.world.any_process().immediate_matched_probe() {
+                    let (bytes, status) = probed.matched_receive_vec::<u8>();
+                    self.stash
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push_back((status.source_rank() as usize, bytes));
+                    spins = 0;
+                } else {
+                    spins += 1;
+                    if spins > 1000 {
+                        std::thread::sleep(Duration::from_micros(50));
+                    }
+                }
             }
         });
     }
@@ -101,6 +133,9 @@ impl Transport for Mpi {
         // MPI has no receive with a deadline: probe, and sleep briefly between probes.
         let deadline =
             Instant::now().checked_add(timeout).unwrap_or_else(|| Instant::now() + Duration::from_secs(1 << 40));
+        if let Some(m) = self.stash.lock().unwrap_or_else(|e| e.into_inner()).pop_front() {
+            return Ok(m);
+        }
         let mut spins = 0u32;
         loop {
             {

@@ -1,6 +1,7 @@
 //! The frame loop of rank 0: per frame the camera, the jobs, sending, receiving and
 //! compositing the tiles, writing the images and the stats lines.
 
+use std::collections::VecDeque;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -10,18 +11,45 @@ use worker::protocol::ToWorker;
 use worker::transport::Transport;
 
 use super::jobs::{FrameContext, FrameJobs};
-use super::link::{handshake, receive_pixels, Silence};
+use super::link::{handshake, receive_pixels, Early, Silence};
 use super::plan::{frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{NspScene, PmScene, Scene};
-use super::stats::{worker_stats, MasterStats};
+use super::stats::{worker_stats, ChunkStats, MasterStats, NspStats, TileStats, WorkerStats};
 use crate::cli::RenderArgs;
 use crate::composite::Image;
 use crate::output::{Identity, LineLog};
 
+/// A frame sent to the workers and not yet composited.
+struct InFlight {
+    k: u32,
+    answering: Vec<usize>,
+    tiles: Vec<TileStats>,
+    chunks: Option<ChunkStats>,
+    nsp: Option<NspStats>,
+    sort_ms: f64,
+    send_ms: f64,
+}
+
+/// What the writer thread does with a composited frame: write its image (or movie frame)
+/// and its stats lines, in frame order.
+struct Written {
+    k: u32,
+    frame: Image,
+    stats: MasterStats,
+    workers: Vec<WorkerStats>,
+}
+
 /// Runs every frame of `tessera render` over `t`, whose rank 0 this process is.
+///
+/// Frames are pipelined: rank 0 sorts and sends frame k+1 (up to `--frames-in-flight`
+/// frames ahead) before it waits for frame k's pixels, and a writer thread encodes and
+/// writes the images and stats lines while rank 0 goes on. Workers take their messages in
+/// order, so every frame's pixels, and so its image, are those of the unpipelined loop.
+/// `--balance` sorts each frame from the costs of the frame before, so it keeps one frame
+/// in flight.
 pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
     // Opened first, so that an unwritable path fails before any work.
-    let mut stats = args.stats.as_deref().map(LineLog::create).transpose()?;
+    let stats = args.stats.as_deref().map(LineLog::create).transpose()?;
     let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
@@ -39,90 +67,177 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         let model = ToWorker::NspModel(file.skeleton().to_vec()).encode();
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
     }
-
-    let mut movie = if crate::movie::is_movie(&args.out) {
+    let movie = if crate::movie::is_movie(&args.out) {
         Some(crate::movie::Movie::start(&args.out, grid.width, grid.height, args.fps)?)
     } else {
         None
     };
+    let depth = if args.balance { 1 } else { args.frames_in_flight.max(1) as usize };
+    let writer = Writer::start(args, plan, movie, stats, depth);
+
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
-    for k in 0..args.frames {
-        let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
-        let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
-        let start = Instant::now();
-        let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
-        t.send_many(&scene.announce(&ctx));
-        let FrameJobs { messages: msgs, tiles: mut tile_stats, chunks, nsp } = scene.jobs(&ctx)?;
-        let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
-        let sort_ms = ms(start);
-
-        let start = Instant::now();
-        t.send_many(&msgs);
-        let send_ms = ms(start);
-
-        let start = Instant::now();
-        let mut frame = Image::new(grid.width, grid.height);
-        let mut composite_ms = 0.0;
-        let mut worker_lines = Vec::new();
-        silence.expect(&answering);
-        for _ in 0..answering.len() {
-            let (rank, pixels) = receive_pixels(t, k, &mut silence)?;
-            let c = Instant::now();
-            for p in &pixels {
-                frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
-                costs[p.index as usize] = p.times.total_ms();
-                if let Some(s) = tile_stats.iter_mut().find(|s| s.index == p.index) {
-                    s.triangles = p.triangles;
-                }
-            }
-            composite_ms += ms(c);
-            worker_lines.push(worker_stats(k, rank, &pixels));
-        }
-        let wait_ms = ms(start) - composite_ms;
-
-        let start = Instant::now();
-        let out = frame_path(&args.out, k, args.frames);
-        for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref()) {
-            if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
-                bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+    let mut early = Early::default();
+    let mut flight: VecDeque<InFlight> = VecDeque::new();
+    let result = (|| -> Result<()> {
+        for k in 0..args.frames {
+            let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
+            let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
+            let start = Instant::now();
+            let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
+            t.send_many(&scene.announce(&ctx));
+            let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
+            let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
+            let sort_ms = ms(start);
+            let start = Instant::now();
+            t.send_many(&msgs);
+            let send_ms = ms(start);
+            silence.expect(&answering);
+            flight.push_back(InFlight { k, answering, tiles, chunks, nsp, sort_ms, send_ms });
+            if flight.len() >= depth {
+                let f = flight.pop_front().expect("a frame in flight");
+                let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early)?;
+                writer.send(done)?;
             }
         }
-        match (&plan.wall, movie.as_mut()) {
-            (_, Some(m)) => m.frame(&frame.rgba)?,
-            (None, None) => frame.save_png(&out)?,
-            (Some(wall), None) => save_wall(wall, &frame, &out)?,
+        while let Some(f) = flight.pop_front() {
+            let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early)?;
+            writer.send(done)?;
         }
-        let write_ms = ms(start);
-        eprintln!("frame {}: {} tiles, sort {:.1} ms, {}", k + 1, tile_stats.len(), sort_ms, out.display());
-
-        if let Some(log) = stats.as_mut() {
-            let line = MasterStats {
-                frame: k,
-                rank: 0,
-                sort_ms,
-                send_ms,
-                wait_ms,
-                composite_ms,
-                write_ms,
-                rss_mb: resident_mb(),
-                chunks,
-                nsp,
-                tiles: tile_stats,
-            };
-            log.line(&serde_json::to_string(&line)?)?;
-            worker_lines.sort_by_key(|l| l.rank);
-            for l in worker_lines {
-                log.line(&serde_json::to_string(&l)?)?;
-            }
-        }
-    }
+        Ok(())
+    })();
     let shutdown = ToWorker::Shutdown.encode();
     t.send_many(&(1..t.size()).map(|r| (r, shutdown.clone())).collect::<Vec<_>>());
-    if let Some(m) = movie {
-        m.finish().with_context(|| format!("cannot write {}", args.out.display()))?;
+    // The writer's own error (a full disk, ffmpeg) is the cause when sending to it failed.
+    let written = writer.finish();
+    result.and(written)
+}
+
+/// Receives and composites frame `f`'s pixels.
+fn complete(
+    t: &dyn Transport,
+    f: InFlight,
+    args: &RenderArgs,
+    plan: &Plan,
+    costs: &mut [f64],
+    silence: &mut Silence,
+    early: &mut Early,
+) -> Result<Written> {
+    let InFlight { k, answering, mut tiles, chunks, nsp, sort_ms, send_ms } = f;
+    let start = Instant::now();
+    let mut frame = Image::new(plan.grid.width, plan.grid.height);
+    let mut composite_ms = 0.0;
+    let mut worker_lines = Vec::new();
+    for _ in 0..answering.len() {
+        let (rank, pixels) = receive_pixels(t, k, silence, early)?;
+        let c = Instant::now();
+        for p in &pixels {
+            frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+            costs[p.index as usize] = p.times.total_ms();
+            if let Some(s) = tiles.iter_mut().find(|s| s.index == p.index) {
+                s.triangles = p.triangles;
+            }
+        }
+        composite_ms += ms(c);
+        worker_lines.push(worker_stats(k, rank, &pixels));
     }
-    Ok(())
+    let wait_ms = ms(start) - composite_ms;
+    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref()) {
+        if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
+            bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+        }
+    }
+    worker_lines.sort_by_key(|l| l.rank);
+    let stats = MasterStats {
+        frame: k,
+        rank: 0,
+        sort_ms,
+        send_ms,
+        wait_ms,
+        composite_ms,
+        write_ms: 0.0,
+        frame_ms: 0.0,
+        rss_mb: resident_mb(),
+        chunks,
+        nsp,
+        tiles,
+    };
+    Ok(Written { k, frame, stats, workers: worker_lines })
+}
+
+/// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
+/// 0's critical path; at most `depth` frames wait for it.
+struct Writer {
+    tx: Option<std::sync::mpsc::SyncSender<Written>>,
+    thread: Option<std::thread::JoinHandle<Result<()>>>,
+}
+
+impl Writer {
+    fn start(
+        args: &RenderArgs,
+        plan: &Plan,
+        mut movie: Option<crate::movie::Movie>,
+        mut stats: Option<LineLog>,
+        depth: usize,
+    ) -> Writer {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
+        let (out, frames, wall) = (args.out.clone(), args.frames, plan.wall.clone());
+        let thread = std::thread::spawn(move || -> Result<()> {
+            let begin = Instant::now();
+            let mut last = begin;
+            for Written { k, frame, stats: mut line, workers } in rx {
+                let start = Instant::now();
+                let path = frame_path(&out, k, frames);
+                match (&wall, movie.as_mut()) {
+                    (_, Some(m)) => m.frame(&frame.rgba)?,
+                    (None, None) => frame.save_png(&path)?,
+                    (Some(wall), None) => save_wall(wall, &frame, &path)?,
+                }
+                line.write_ms = ms(start);
+                let now = Instant::now();
+                line.frame_ms = (now - last).as_secs_f64() * 1e3;
+                last = now;
+                let fps = (k + 1) as f64 / (now - begin).as_secs_f64().max(1e-9);
+                eprintln!(
+                    "frame {}: {} tiles, sort {:.1} ms, {} ({fps:.1} frames/s)",
+                    k + 1,
+                    line.tiles.len(),
+                    line.sort_ms,
+                    path.display()
+                );
+                if let Some(log) = stats.as_mut() {
+                    log.line(&serde_json::to_string(&line)?)?;
+                    for l in workers {
+                        log.line(&serde_json::to_string(&l)?)?;
+                    }
+                }
+            }
+            if let Some(m) = movie {
+                m.finish().with_context(|| format!("cannot write {}", out.display()))?;
+            }
+            Ok(())
+        });
+        Writer { tx: Some(tx), thread: Some(thread) }
+    }
+
+    /// Hands a frame to the writer (waiting while `depth` frames wait already); an error if
+    /// the writer stopped, which [`Writer::finish`] reports.
+    fn send(&self, w: Written) -> Result<()> {
+        match self.tx.as_ref().map(|tx| tx.send(w).is_ok()) {
+            Some(true) => Ok(()),
+            _ => bail!("the image writer stopped"),
+        }
+    }
+
+    /// Waits for every frame to be written; the writer's error, if any.
+    fn finish(mut self) -> Result<()> {
+        drop(self.tx.take());
+        match self.thread.take().map(|h| h.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => bail!("the image writer panicked"),
+            None => Ok(()),
+        }
+    }
 }
 
 /// This process's resident memory in MB (Linux: `/proc/self/statm`), for the stats.

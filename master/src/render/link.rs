@@ -14,20 +14,23 @@ pub(super) struct Silence {
     timeout: Duration,
     last: Vec<Instant>,
     /// The workers whose answer the current wait needs.
-    pending: Vec<bool>,
+    /// Answers each rank owes (frames in flight it was sent work for).
+    pending: Vec<u32>,
 }
 
 impl Silence {
     pub(super) fn new(workers: usize, timeout: Duration) -> Silence {
-        Silence { timeout, last: vec![Instant::now(); workers + 1], pending: vec![false; workers + 1] }
+        Silence { timeout, last: vec![Instant::now(); workers + 1], pending: vec![0; workers + 1] }
     }
 
     /// Starts a wait for answers from `ranks`, counting their silence from now.
     pub(super) fn expect(&mut self, ranks: &[usize]) {
         let now = Instant::now();
         for &r in ranks {
-            self.pending[r] = true;
-            self.last[r] = now;
+            if self.pending[r] == 0 {
+                self.last[r] = now;
+            }
+            self.pending[r] += 1;
         }
     }
 
@@ -39,14 +42,19 @@ impl Silence {
 
     fn answered(&mut self, rank: usize) {
         if let Some(p) = self.pending.get_mut(rank) {
-            *p = false;
+            *p = p.saturating_sub(1);
         }
+    }
+
+    /// How many answers `rank` owes.
+    fn owes(&self, rank: usize) -> u32 {
+        self.pending.get(rank).copied().unwrap_or(0)
     }
 
     /// How long to wait for the next message, and the worker silent the longest.
     fn next_wait(&self) -> (Duration, usize) {
         let (rank, last) = (1..self.last.len())
-            .filter(|&r| self.pending[r])
+            .filter(|&r| self.pending[r] > 0)
             .map(|r| (r, self.last[r]))
             .min_by_key(|&(_, t)| t)
             .unwrap_or((0, Instant::now()));
@@ -96,7 +104,20 @@ fn missing(flags: &[bool]) -> String {
 
 /// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
 /// a worker silent for the whole timeout ends the run.
-pub(super) fn receive_pixels(t: &dyn Transport, frame: u32, silence: &mut Silence) -> Result<(usize, Vec<TilePixels>)> {
+/// Pixels that came in for a frame later than the one being composited (with frames in
+/// flight, a fast worker answers frame k+1 before a slow one answers frame k).
+#[derive(Default)]
+pub(super) struct Early(std::collections::BTreeMap<u32, Vec<(usize, Vec<TilePixels>)>>);
+
+pub(super) fn receive_pixels(
+    t: &dyn Transport,
+    frame: u32,
+    silence: &mut Silence,
+    early: &mut Early,
+) -> Result<(usize, Vec<TilePixels>)> {
+    if let Some(answer) = early.0.get_mut(&frame).and_then(Vec::pop) {
+        return Ok(answer);
+    }
     loop {
         let (wait, quiet) = silence.next_wait();
         let (rank, bytes) = match t.recv(wait) {
@@ -114,6 +135,10 @@ pub(super) fn receive_pixels(t: &dyn Transport, frame: u32, silence: &mut Silenc
             ToMaster::Pixels { frame: f, tiles } if f == frame => {
                 silence.answered(rank);
                 return Ok((rank, tiles));
+            }
+            ToMaster::Pixels { frame: f, tiles } if f > frame && silence.owes(rank) > 0 => {
+                silence.answered(rank);
+                early.0.entry(f).or_default().insert(0, (rank, tiles));
             }
             ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
             ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),

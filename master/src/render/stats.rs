@@ -14,6 +14,9 @@ pub(super) struct MasterStats {
     pub wait_ms: f64,
     pub composite_ms: f64,
     pub write_ms: f64,
+    /// Time from the previous frame's image written to this one's (the frame period; from
+    /// the start of writing for the first frame).
+    pub frame_ms: f64,
     /// Rank 0's resident memory after the frame, in MB (Linux).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rss_mb: Option<f64>,
