@@ -110,7 +110,11 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     t.send_many(&(1..t.size()).map(|r| (r, shutdown.clone())).collect::<Vec<_>>());
     // The writer's own error (a full disk, ffmpeg) is the cause when sending to it failed.
     let written = writer.finish();
-    result.and(written)
+    match (result, written) {
+        // The loop stopped because the writer did: the writer's error says why.
+        (Err(_), Err(w)) => Err(w),
+        (r, w) => r.and(w),
+    }
 }
 
 /// Receives and composites frame `f`'s pixels.
