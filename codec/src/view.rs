@@ -574,20 +574,27 @@ mod tests {
         assert_eq!(cam.validate(), Err(ViewError::BadUp));
     }
 
-    #[test]
-    fn default_camera_sees_the_whole_box() {
-        let (lo, hi) = ([-1.0, 2.0, 0.5], [3.0, 2.5, 4.0]);
-        for aspect in [0.5, 1.0, 16.0 / 9.0] {
-            let cam = Camera::framing(lo, hi, aspect);
-            let vp = cam.view_proj(aspect);
-            for i in 0..8 {
+    /// The eight corners of the box `lo..hi` in normalized device coordinates under `vp`.
+    fn corners_ndc(lo: [f32; 3], hi: [f32; 3], vp: Mat4) -> Vec<glam::Vec4> {
+        (0..8)
+            .map(|i| {
                 let p = Vec3::new(
                     if i & 1 == 0 { lo[0] } else { hi[0] },
                     if i & 2 == 0 { lo[1] } else { hi[1] },
                     if i & 4 == 0 { lo[2] } else { hi[2] },
                 );
                 let c = vp * p.extend(1.0);
-                let n = c / c.w;
+                c / c.w
+            })
+            .collect()
+    }
+
+    #[test]
+    fn default_camera_sees_the_whole_box() {
+        let (lo, hi) = ([-1.0, 2.0, 0.5], [3.0, 2.5, 4.0]);
+        for aspect in [0.5, 1.0, 16.0 / 9.0] {
+            let cam = Camera::framing(lo, hi, aspect);
+            for n in corners_ndc(lo, hi, cam.view_proj(aspect)) {
                 assert!(n.x.abs() <= 1.0 && n.y.abs() <= 1.0 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
             }
         }
@@ -599,16 +606,8 @@ mod tests {
         for aspect in [0.5, 1.0, 16.0 / 9.0] {
             let cam = Camera::three_quarter(lo, hi, aspect, 45.0, 0.05);
             assert_eq!(cam.validate(), Ok(()));
-            let vp = cam.view_proj(aspect);
             let mut widest = 0f32;
-            for i in 0..8 {
-                let p = Vec3::new(
-                    if i & 1 == 0 { lo[0] } else { hi[0] },
-                    if i & 2 == 0 { lo[1] } else { hi[1] },
-                    if i & 4 == 0 { lo[2] } else { hi[2] },
-                );
-                let c = vp * p.extend(1.0);
-                let n = c / c.w;
+            for n in corners_ndc(lo, hi, cam.view_proj(aspect)) {
                 assert!(n.x.abs() <= 0.951 && n.y.abs() <= 0.951 && n.z >= 0.0 && n.z <= 1.0, "{n:?}");
                 widest = widest.max(n.x.abs()).max(n.y.abs());
             }
