@@ -68,6 +68,20 @@ pub enum ModelKind {
 }
 
 impl ModelKind {
+    /// The Tessera model whose magic number `head` (a file's first bytes) starts with, if
+    /// any: never [`ModelKind::Mesh`].
+    pub fn by_magic(head: &[u8]) -> Option<ModelKind> {
+        if head.starts_with(&crate::bft::MAGIC) {
+            Some(ModelKind::Bft)
+        } else if head.starts_with(&crate::pm::format::MAGIC) {
+            Some(ModelKind::Dpm)
+        } else if head.starts_with(&crate::nsp::format::MAGIC) {
+            Some(ModelKind::Nsp)
+        } else {
+            None
+        }
+    }
+
     /// The kind of the model at `path`, from its first 8 bytes. A file without either magic
     /// number whose extension is `.bft` or `.dpm` is taken for that kind, so that the
     /// format's reader reports what is wrong with it ("bad magic number") rather than the
@@ -76,14 +90,8 @@ impl ModelKind {
         let mut magic = [0u8; 8];
         let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
         let read = regular && std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok();
-        if read && magic == crate::bft::MAGIC {
-            return ModelKind::Bft;
-        }
-        if read && magic == crate::pm::format::MAGIC {
-            return ModelKind::Dpm;
-        }
-        if read && magic[..4] == crate::nsp::format::MAGIC {
-            return ModelKind::Nsp;
+        if let Some(kind) = read.then(|| ModelKind::by_magic(&magic)).flatten() {
+            return kind;
         }
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("bft") => ModelKind::Bft,

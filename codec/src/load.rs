@@ -114,8 +114,8 @@ impl Format {
             return Some(Format::Ply);
         }
         // A GLB container, or a JSON object with glTF's mandatory `asset`.
-        let json = head.trim_ascii_start();
-        if head.starts_with(b"glTF") || (json.starts_with(b"{") && json.windows(7).any(|w| w == b"\"asset\"")) {
+        let text = head.trim_ascii_start();
+        if head.starts_with(b"glTF") || (text.starts_with(b"{") && text.windows(7).any(|w| w == b"\"asset\"")) {
             return Some(Format::Gltf);
         }
         if let (Some(len), Some(count)) = (len, head.get(80..84)) {
@@ -124,7 +124,6 @@ impl Format {
                 return Some(Format::Stl);
             }
         }
-        let text = head.trim_ascii_start();
         if text.len() >= 5 && text[..5].eq_ignore_ascii_case(b"solid") {
             return Some(Format::Stl);
         }
@@ -146,14 +145,12 @@ const UNKNOWN: &str = "not a mesh file Tessera reads: expected OBJ, PLY, STL or 
 
 /// What Tessera model a file starting with `head` is, in words, if it is one.
 fn tessera_model(head: &[u8]) -> Option<&'static str> {
-    if head.starts_with(&crate::bft::MAGIC) {
-        Some("a .bft model (tessera decode writes it as a mesh)")
-    } else if head.starts_with(&crate::pm::format::MAGIC) {
-        Some("a .dpm progressive mesh (tessera pm stats describes it)")
-    } else if head.starts_with(&crate::nsp::format::MAGIC) {
-        Some("an .nsp model (tessera nsp stats describes it)")
-    } else {
-        None
+    use crate::input::ModelKind;
+    match ModelKind::by_magic(head)? {
+        ModelKind::Bft => Some("a .bft model (tessera decode writes it as a mesh)"),
+        ModelKind::Dpm => Some("a .dpm progressive mesh (tessera pm stats describes it)"),
+        ModelKind::Nsp => Some("an .nsp model (tessera nsp stats describes it)"),
+        ModelKind::Mesh => None,
     }
 }
 

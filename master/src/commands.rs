@@ -39,15 +39,7 @@ fn content_kind(path: &Path) -> Option<ModelKind> {
     let mut magic = Vec::with_capacity(8);
     let file = std::fs::File::open(path).ok()?;
     std::io::Read::read_to_end(&mut std::io::Read::take(file, 8), &mut magic).ok()?;
-    if magic.starts_with(&codec::bft::MAGIC) {
-        Some(ModelKind::Bft)
-    } else if magic.starts_with(&codec::pm::format::MAGIC) {
-        Some(ModelKind::Dpm)
-    } else if magic.starts_with(&codec::nsp::format::MAGIC) {
-        Some(ModelKind::Nsp)
-    } else {
-        codec::load::Format::of_file(path).ok().map(|_| ModelKind::Mesh)
-    }
+    ModelKind::by_magic(&magic).or_else(|| codec::load::Format::of_file(path).ok().map(|_| ModelKind::Mesh))
 }
 
 /// Refuses, before any work, an input whose content is another kind of file than `want`,

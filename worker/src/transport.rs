@@ -61,6 +61,13 @@ fn mpi_lock() -> std::sync::MutexGuard<'static, ()> {
 }
 
 impl Mpi {
+    /// A message waiting from any rank, received; the caller holds the MPI lock.
+    fn try_receive(&self) -> Option<(usize, Vec<u8>)> {
+        let probed = self.world.any_process().immediate_matched_probe()?;
+        let (bytes, status) = probed.matched_receive_vec::<u8>();
+        Some((status.source_rank() as usize, bytes))
+    }
+
     /// Initializes MPI; `None` if it was already initialized or the library cannot serialize
     /// calls from several threads.
     pub fn init() -> Option<Mpi> {
@@ -112,12 +119,8 @@ impl Transport for Mpi {
                 if !left {
                     break;
                 }
-                if let Some(probed) = self.world.any_process().immediate_matched_probe() {
-                    let (bytes, status) = probed.matched_receive_vec::<u8>();
-                    self.stash
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .push_back((status.source_rank() as usize, bytes));
+                if let Some(m) = self.try_receive() {
+                    self.stash.lock().unwrap_or_else(|e| e.into_inner()).push_back(m);
                     spins = 0;
                 } else {
                     spins += 1;
@@ -140,9 +143,8 @@ impl Transport for Mpi {
         loop {
             {
                 let _calls = mpi_lock();
-                if let Some(probed) = self.world.any_process().immediate_matched_probe() {
-                    let (bytes, status) = probed.matched_receive_vec::<u8>();
-                    return Ok((status.source_rank() as usize, bytes));
+                if let Some(m) = self.try_receive() {
+                    return Ok(m);
                 }
             }
             if Instant::now() >= deadline {

@@ -33,6 +33,7 @@ use std::collections::HashSet;
 use std::path::Path;
 
 use base64::Engine as _;
+use glam::{DMat3, DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::{Mode, Semantic};
 
@@ -88,13 +89,13 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
     let scene = doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| fail("no scene".into()))?;
     let mut out = Loaded::default();
     let mut seen = HashSet::new();
-    let mut stack: Vec<(gltf::Node, [[f64; 4]; 4])> = scene.nodes().map(|n| (n, IDENTITY)).collect();
+    let mut stack: Vec<(gltf::Node, DMat4)> = scene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
     stack.reverse();
     while let Some((node, parent)) = stack.pop() {
         if !seen.insert(node.index()) {
             return Err(fail(format!("node {} appears twice in the scene's hierarchy", node.index())));
         }
-        let world = mul(&parent, &node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
         if let Some(mesh) = node.mesh() {
             for prim in mesh.primitives() {
                 let at = |what: String| fail(format!("mesh {} primitive {}: {what}", mesh.index(), prim.index()));
@@ -107,24 +108,6 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
         return Err(err(path, super::no_triangles(out.ignored)));
     }
     Ok(out)
-}
-
-const IDENTITY: [[f64; 4]; 4] =
-    [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-
-/// `a b` for column-major 4x4 matrices (`m[column][row]`).
-fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
-    std::array::from_fn(|c| std::array::from_fn(|r| (0..4).map(|k| a[k][r] * b[c][k]).sum()))
-}
-
-fn transform(m: &[[f64; 4]; 4], p: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r])
-}
-
-/// The determinant of the upper 3x3 part: negative for a mirroring transform.
-fn det3(m: &[[f64; 4]; 4]) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[2][1] * m[1][2]) - m[1][0] * (m[0][1] * m[2][2] - m[2][1] * m[0][2])
-        + m[2][0] * (m[0][1] * m[1][2] - m[1][1] * m[0][2])
 }
 
 /// Every buffer's bytes: a data URI decoded, a file beside the glTF read, the GLB's binary
@@ -296,7 +279,7 @@ fn read_primitive(
     doc: &gltf::Document,
     prim: &gltf::Primitive,
     buffers: &[Vec<u8>],
-    world: &[[f64; 4]; 4],
+    world: &DMat4,
     out: &mut Loaded,
 ) -> Result<(), String> {
     let mode = prim.mode();
@@ -331,13 +314,14 @@ fn read_primitive(
         .filter(|b| b.checked_add(n as u32).is_some())
         .ok_or("more than 2^32 vertices")?;
     for (k, p) in positions.iter().enumerate() {
-        let q = transform(world, *p).map(|c| c as f32);
+        let q = world.transform_point3(DVec3::from(*p)).to_array().map(|c| c as f32);
         if !q.iter().all(|c| c.is_finite()) {
             return Err(format!("vertex {k}: a non-finite position {q:?}"));
         }
         out.mesh.positions.push(q);
     }
-    let mirror = det3(world) < 0.0;
+    // A negative determinant of the linear part: a mirroring transform.
+    let mirror = DMat3::from_mat4(*world).determinant() < 0.0;
     let mut push = |t: [u32; 3]| {
         let t = t.map(|i| base + i);
         out.mesh.triangles.push(if mirror { [t[0], t[2], t[1]] } else { t });

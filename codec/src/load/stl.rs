@@ -27,21 +27,19 @@ use crate::mesh::Mesh;
 
 /// Reads an STL file's bytes (already decompressed).
 pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Mesh, LoadError> {
-    if bytes.len() >= 84 {
-        let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
-        if 84 + 50 * n == bytes.len() as u64 {
-            return binary(path, bytes, n as usize);
-        }
+    // The triangle count of a binary file.
+    let count = bytes.get(80..84).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as u64);
+    if let Some(n) = count.filter(|&n| 84 + 50 * n == bytes.len() as u64) {
+        return binary(path, bytes, n as usize);
     }
-    let start = bytes.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(bytes.len());
+    let text = bytes.trim_ascii_start();
     // A truncated binary file whose header starts with `solid` holds NUL bytes; text does not.
-    if bytes[start..].len() >= 5 && bytes[start..start + 5].eq_ignore_ascii_case(b"solid") && !bytes.contains(&0) {
+    if text.len() >= 5 && text[..5].eq_ignore_ascii_case(b"solid") && !bytes.contains(&0) {
         return ascii(path, bytes);
     }
-    if bytes.len() < 84 {
+    let Some(n) = count else {
         return Err(err(path, format!("malformed STL: {} bytes, neither ASCII (no 'solid') nor binary", bytes.len())));
-    }
-    let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
+    };
     Err(err(
         path,
         format!(

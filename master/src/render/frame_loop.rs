@@ -33,8 +33,8 @@ struct InFlight {
 /// What the writer thread does with a composited frame: write its image (or movie frame)
 /// and its stats lines, in frame order.
 struct Written {
-    k: u32,
     frame: Image,
+    /// Rank 0's stats line, whose `frame` is this frame's number.
     stats: MasterStats,
     workers: Vec<WorkerStats>,
 }
@@ -72,7 +72,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     } else {
         None
     };
-    let depth = if args.balance { 1 } else { args.frames_in_flight.max(1) as usize };
+    let depth = if args.balance { 1 } else { args.frames_in_flight as usize };
     let writer = Writer::start(args, plan, movie, stats, depth);
 
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
@@ -166,7 +166,7 @@ fn complete(
         nsp,
         tiles,
     };
-    Ok(Written { k, frame, stats, workers: worker_lines })
+    Ok(Written { frame, stats, workers: worker_lines })
 }
 
 /// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
@@ -189,7 +189,8 @@ impl Writer {
         let thread = std::thread::spawn(move || -> Result<()> {
             let begin = Instant::now();
             let mut last = begin;
-            for Written { k, frame, stats: mut line, workers } in rx {
+            for Written { frame, stats: mut line, workers } in rx {
+                let k = line.frame;
                 let start = Instant::now();
                 let path = frame_path(&out, k, frames);
                 match (&wall, movie.as_mut()) {
