@@ -339,7 +339,8 @@ pub struct RenderArgs {
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
     /// Frames rank 0 sorts and sends ahead of the one it composites (1: no pipelining).
-    /// `--balance` keeps 1, as it sorts each frame from the costs of the one before.
+    /// `--balance` keeps 1, as it sorts each frame from the costs of the one before, and so
+    /// does `--sorters` above 1.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub frames_in_flight: u32,
     /// Frames a second of a movie output.

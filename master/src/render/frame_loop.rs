@@ -72,7 +72,9 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     } else {
         None
     };
-    let depth = if args.balance { 1 } else { args.frames_in_flight as usize };
+    // Sorter ranks send the workers their shares of one frame at a time (the protocol has no
+    // frame in flight beside another), so with --sorters a frame waits for the one before.
+    let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
     let writer = Writer::start(args, plan, movie, stats, depth);
 
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
