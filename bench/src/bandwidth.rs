@@ -159,7 +159,7 @@ struct Subject {
 
 impl Subject {
     fn load(path: &Path, quant_bits: u8) -> Result<Subject> {
-        let model = load_model(path, EncodeOptions { quant_bits })?;
+        let model = load_model(path, EncodeOptions { quant_bits, ..Default::default() })?;
         let decoded = &model.tiles.decoded;
         let mut source: Vec<u32> = (0..decoded.positions.len() as u32).collect();
         for &(slot, from) in &decoded.duplicates {

@@ -56,7 +56,7 @@ pub fn draco_to_mesh(mesh: &draco_core::Mesh) -> Result<codec::Mesh> {
     let flat = position.read_f32s(mesh.num_points(), 3);
     let positions = flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
     let triangles = mesh.faces().iter().map(|f| f.map(|p| p.0)).collect();
-    Ok(codec::Mesh { positions, triangles })
+    Ok(codec::Mesh::new(positions, triangles))
 }
 
 /// meshopt's encoded streams, with the counts its decoder has to be told.
@@ -122,7 +122,7 @@ mod tests {
                 })
             })
             .collect();
-        codec::Mesh { positions, triangles }
+        codec::Mesh::new(positions, triangles)
     }
 
     #[test]

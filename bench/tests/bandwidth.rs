@@ -87,7 +87,7 @@ fn writes_the_figure_8_table_and_plot() {
     assert!(n(&rows[1], "chunked_orbit_bytes") > 0.0, "pieces of straddling chunks travel every frame");
 
     // The same 14-bit model through the tile sort of `tessera sort`: the same totals.
-    let model = load_model(&cow, EncodeOptions { quant_bits: 14 }).unwrap();
+    let model = load_model(&cow, EncodeOptions { quant_bits: 14, ..Default::default() }).unwrap();
     for row in &rows {
         let grid = TileGrid::new(1920, 1080, n(row, "cols") as u32, n(row, "rows") as u32).unwrap();
         let cam = model.camera(&CameraArgs::default(), &grid).unwrap();

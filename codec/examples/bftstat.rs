@@ -3,7 +3,8 @@ fn main() {
     for arg in std::env::args().skip(1) {
         let mesh = codec::load_path(std::path::Path::new(&arg)).expect("load");
         let t = std::time::Instant::now();
-        let enc = codec::bft::encode(&mesh, codec::bft::EncodeOptions { quant_bits: 14 }).expect("encode");
+        let enc = codec::bft::encode(&mesh, codec::bft::EncodeOptions { quant_bits: 14, ..Default::default() })
+            .expect("encode");
         let et = t.elapsed();
         let t = std::time::Instant::now();
         let dec = codec::bft::decode(&enc.bytes).expect("decode");

@@ -29,7 +29,7 @@ fn main() {
     let grid = TileGrid::new(1920, 1080, c.parse().unwrap(), r.parse().unwrap()).expect("grid");
     let mesh = codec::load_path(std::path::Path::new(&path)).expect("a mesh");
     let bits = 14;
-    let single = bft::encode(&mesh, EncodeOptions { quant_bits: bits }).unwrap();
+    let single = bft::encode(&mesh, EncodeOptions { quant_bits: bits, ..Default::default() }).unwrap();
     let model = TileModel::from_bytes(&single.bytes).unwrap();
     let h = model.decoded.header;
     let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());

@@ -22,7 +22,7 @@ fn fan(n: usize) -> Mesh {
         positions.push([a.cos(), a.sin(), 0.05 * (7.0 * a).sin()]);
     }
     let triangles = (1..=n as u32).map(|i| [0, i, i + 1]).collect();
-    Mesh { positions, triangles }
+    Mesh::new(positions, triangles)
 }
 
 /// The shapes of [`polygon_obj`].

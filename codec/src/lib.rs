@@ -16,6 +16,7 @@
 //! let mesh = Mesh {
 //!     positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]],
 //!     triangles: vec![[0, 1, 2], [2, 1, 3]],
+//!     ..Default::default()
 //! };
 //! let encoded = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
 //! let decoded = bft::decode(&encoded.bytes).unwrap().to_mesh();

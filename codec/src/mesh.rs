@@ -2,7 +2,8 @@
 
 use thiserror::Error;
 
-/// An indexed triangle mesh: positions and counter-clockwise triangles.
+/// An indexed triangle mesh: positions and counter-clockwise triangles, and optionally a
+/// colour and a normal per vertex.
 ///
 /// Nothing is assumed about the topology: triangles may share vertices in non-manifold
 /// ways, repeat, or be degenerate, and vertices may be unused.
@@ -10,6 +11,10 @@ use thiserror::Error;
 pub struct Mesh {
     pub positions: Vec<[f32; 3]>,
     pub triangles: Vec<[u32; 3]>,
+    /// RGBA per vertex (alpha 255 where the file has none), or empty.
+    pub colors: Vec<[u8; 4]>,
+    /// A normal per vertex (of any length; it is a direction), or empty.
+    pub normals: Vec<[f32; 3]>,
 }
 
 /// Why a mesh cannot be encoded.
@@ -25,12 +30,29 @@ pub enum MeshError {
     TooManyTriangles(usize),
     #[error("quantization must be 8 to 24 bits per coordinate, not {0}")]
     QuantBits(u8),
+    #[error("normal quantization must be 4 to 16 bits per octahedral coordinate, not {0}")]
+    NormalBits(u8),
+    #[error("the mesh has {found} {what} for {vertices} vertices")]
+    AttributeCount { what: &'static str, found: usize, vertices: usize },
+    #[error("vertex {vertex} has a non-finite normal {value:?}")]
+    NonFiniteNormal { vertex: usize, value: [f32; 3] },
 }
 
 impl Mesh {
-    /// Checks that indices are in range and that every vertex a triangle uses is finite.
-    /// Unused vertices may hold anything: they are not encoded.
+    /// A mesh without colours or normals.
+    pub fn new(positions: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
+        Mesh { positions, triangles, colors: Vec::new(), normals: Vec::new() }
+    }
+
+    /// Checks that indices are in range, that every vertex a triangle uses is finite (its
+    /// normal too), and that each attribute has a value per vertex. Unused vertices may hold
+    /// anything: they are not encoded.
     pub fn validate(&self) -> Result<(), MeshError> {
+        for (what, found) in [("colours", self.colors.len()), ("normals", self.normals.len())] {
+            if found != 0 && found != self.positions.len() {
+                return Err(MeshError::AttributeCount { what, found, vertices: self.positions.len() });
+            }
+        }
         if self.positions.len() > (1 << 31) {
             return Err(MeshError::TooManyVertices(self.positions.len()));
         }
@@ -45,6 +67,9 @@ impl Mesh {
                 };
                 if !p.iter().all(|c| c.is_finite()) {
                     return Err(MeshError::NonFinite { vertex: i as usize, value: *p });
+                }
+                if let Some(n) = self.normals.get(i as usize).filter(|n| !n.iter().all(|c| c.is_finite())) {
+                    return Err(MeshError::NonFiniteNormal { vertex: i as usize, value: *n });
                 }
             }
         }
@@ -158,7 +183,7 @@ mod tests {
 
     #[test]
     fn validation_names_the_problem() {
-        let mut m = Mesh { positions: vec![[0.0; 3]; 3], triangles: vec![[0, 1, 3]] };
+        let mut m = Mesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 3]]);
         assert_eq!(m.validate(), Err(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 }));
         m.triangles[0] = [0, 1, 2];
         m.positions[1][2] = f32::NAN;

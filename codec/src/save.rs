@@ -68,6 +68,7 @@ mod tests {
         Mesh {
             positions: vec![[0.0, 0.0, 0.0], [1.5, -2.25, 1e-7], [0.1, 0.2, 0.3], [3.0, 1.0, -1.0]],
             triangles: vec![[0, 1, 2], [2, 1, 3]],
+            ..Default::default()
         }
     }
 

@@ -49,12 +49,24 @@ fn random_byte_flips_are_detected() {
 fn wrong_magic_and_version_are_named() {
     let mut b = encoded("odedstein/cube.obj");
     assert_eq!(u16::from_le_bytes([b[8], b[9]]), bft::VERSION);
-    for v in [0u16, 4, 9, u16::MAX] {
+    for v in [0u16, 5, 9, u16::MAX] {
         b[8..10].copy_from_slice(&v.to_le_bytes());
         let e = bft::decode(&b).unwrap_err();
         assert_eq!(e, FormatError::UnsupportedVersion { format: Format::Bft, found: v, known: bft::READS });
-        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2 and 3)"));
+        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2, 3 and 4)"));
     }
+    // Version 4 has seven sections: a version 2 file relabelled is truncated; a version 2
+    // file whose attribute flags are set is corrupt.
+    b[8..10].copy_from_slice(&4u16.to_le_bytes());
+    assert!(matches!(bft::decode(&b).unwrap_err(), BftError::Truncated(_)));
+    b[8..10].copy_from_slice(&2u16.to_le_bytes());
+    let mut flagged = b.clone();
+    flagged[12 + 42] = 1;
+    let h = u16::from_le_bytes([flagged[10], flagged[11]]) as usize;
+    let crc = crc32fast::hash(&flagged[12..12 + h]);
+    flagged[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
+    let e = bft::decode(&flagged).unwrap_err().to_string();
+    assert!(e.contains("version 2 file has non-zero reserved bytes 42 and 43"), "{e}");
     // Version 3 is a chunked file, whose header a single stream's is not.
     b[8..10].copy_from_slice(&3u16.to_le_bytes());
     let e = bft::decode(&b).unwrap_err().to_string();

@@ -17,6 +17,7 @@ fn square() -> Mesh {
     Mesh {
         positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
         triangles: vec![[0, 1, 2], [0, 2, 3]],
+        ..Default::default()
     }
 }
 
@@ -40,7 +41,7 @@ fn load(name: &str) -> Result<Loaded, String> {
                 },
                 &mut |_| {},
             )?;
-            Ok((Mesh { positions, triangles }, counts.ignored))
+            Ok((Mesh::new(positions, triangles), counts.ignored))
         });
         match (&loaded, streamed) {
             (Ok(l), Ok((m, ignored))) => assert_eq!((&l.mesh, l.ignored), (&m, ignored), "{name}: the readers differ"),

@@ -286,6 +286,7 @@ fn base_mesh_and_refine_fully_on_a_tetrahedron() {
     let mesh = Mesh {
         positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         triangles: vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]],
+        ..Default::default()
     };
     let pm = build(&mesh).unwrap();
     let mut a = Adapter::new(&pm);

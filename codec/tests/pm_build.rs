@@ -131,6 +131,7 @@ fn tetrahedron_ends_as_two_vertices_and_no_faces() {
     let mesh = Mesh {
         positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         triangles: vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]],
+        ..Default::default()
     };
     let pm = build_and_check(&mesh);
     assert_eq!((pm.base_vertices.len(), pm.base_faces.len(), pm.splits.len()), (2, 0, 2));
@@ -154,6 +155,7 @@ fn degenerate_and_duplicate_triangles_are_kept() {
             [1, 0, 4],
             [0, 1, 5],
         ],
+        ..Default::default()
     };
     let pm = build_and_check(&mesh);
     assert_eq!(pm.fvid_of_input[3], u32::MAX);
@@ -163,19 +165,19 @@ fn degenerate_and_duplicate_triangles_are_kept() {
 
 #[test]
 fn empty_mesh_builds_an_empty_progressive_mesh() {
-    let pm = build_and_check(&Mesh { positions: vec![[0.0; 3]], triangles: vec![] });
+    let pm = build_and_check(&Mesh::new(vec![[0.0; 3]], vec![]));
     assert_eq!(pm, ProgressiveMesh { fvid_of_input: vec![u32::MAX], ..Default::default() });
     assert!(refine_all(&pm).is_empty());
 }
 
 #[test]
 fn invalid_input_is_an_error() {
-    let bad_index = Mesh { positions: vec![[0.0; 3]; 3], triangles: vec![[0, 1, 3]] };
+    let bad_index = Mesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 3]]);
     assert_eq!(
         build(&bad_index),
         Err(PmError::Mesh(MeshError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 }))
     );
-    let nan = Mesh { positions: vec![[0.0; 3], [0.0, f32::INFINITY, 0.0], [1.0; 3]], triangles: vec![[0, 1, 2]] };
+    let nan = Mesh::new(vec![[0.0; 3], [0.0, f32::INFINITY, 0.0], [1.0; 3]], vec![[0, 1, 2]]);
     assert!(matches!(build(&nan), Err(PmError::Mesh(MeshError::NonFinite { vertex: 1, .. }))));
 }
 
@@ -191,7 +193,7 @@ fn hubs_refine_back_to_their_input() {
         [a.cos(), a.sin(), 0.1 * (3.0 * a).sin()]
     };
     // Apex 0, base centre 1, rim 2..k+2.
-    let mut cone = Mesh { positions: vec![[0.0, 0.0, 1.0], [0.0, 0.0, -0.2]], triangles: vec![] };
+    let mut cone = Mesh::new(vec![[0.0, 0.0, 1.0], [0.0, 0.0, -0.2]], vec![]);
     cone.positions.extend((0..k).map(ring));
     for i in 0..k as u32 {
         let (a, b) = (2 + i, 2 + (i + 1) % k as u32);
@@ -199,7 +201,7 @@ fn hubs_refine_back_to_their_input() {
         cone.triangles.push([1, b, a]);
     }
     // Vertices 0 and 1 share k faces, and 0 has a fan too.
-    let mut shared = Mesh { positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], triangles: vec![] };
+    let mut shared = Mesh::new(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], vec![]);
     shared.positions.extend((0..k).map(ring));
     for i in 0..k as u32 {
         shared.triangles.push([0, 1, 2 + i]);
@@ -209,7 +211,7 @@ fn hubs_refine_back_to_their_input() {
     }
     // Random triangles around vertex 0 from 300 others, some degenerate, some repeated.
     let mut rng = testkit::XorShift(0x9e37_79b9_7f4a_7c15);
-    let mut soup = Mesh { positions: vec![[0.0; 3]], triangles: vec![] };
+    let mut soup = Mesh::new(vec![[0.0; 3]], vec![]);
     soup.positions.extend((0..300).map(|_| [rng.unit(), rng.unit(), rng.unit()]));
     for _ in 0..2 * k {
         let (a, b) = (1 + rng.next_u64() as u32 % 300, 1 + rng.next_u64() as u32 % 300);

@@ -94,7 +94,7 @@ fn shared_meshes_round_trip_and_ops_decode_alone() {
 fn empty_and_tiny_meshes() {
     let pm = build(&Mesh::default()).unwrap();
     round_trip(&pm);
-    let tri = Mesh { positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], triangles: vec![[0, 1, 2]] };
+    let tri = Mesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]);
     let pm = build(&tri).unwrap();
     let enc = round_trip(&pm);
     single_ops(&pm, &enc);

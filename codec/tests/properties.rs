@@ -48,7 +48,7 @@ proptest! {
     fn random_soups(n in 3usize..40, tris in prop::collection::vec((0u32..40, 0u32..40, 0u32..40), 1..120),
                     seed: u64, bits in 8u8..=24) {
         let triangles = tris.into_iter().map(|(a, b, c)| [a % n as u32, b % n as u32, c % n as u32]).collect();
-        let mesh = Mesh { positions: positions(n, seed), triangles };
+        let mesh = Mesh::new(positions(n, seed), triangles);
         assert_round_trip(&mesh, bits);
     }
 
@@ -58,7 +58,7 @@ proptest! {
                         flips in prop::collection::vec(prop::bool::weighted(0.05), 1..40), seed: u64) {
         let mut triangles = grid(w, h, &holes, &flips, 0);
         shuffle(&mut triangles, seed);
-        let mesh = Mesh { positions: positions((w + 1) * (h + 1), seed), triangles };
+        let mesh = Mesh::new(positions((w + 1) * (h + 1), seed), triangles);
         assert_round_trip(&mesh, 16);
     }
 
@@ -83,7 +83,7 @@ proptest! {
             next += 1;
         }
         shuffle(&mut triangles, seed);
-        let mesh = Mesh { positions: positions(next as usize, seed), triangles };
+        let mesh = Mesh::new(positions(next as usize, seed), triangles);
         assert_round_trip(&mesh, 12);
     }
 
@@ -105,7 +105,7 @@ proptest! {
         let mut perm: Vec<u32> = (0..n).collect();
         shuffle(&mut perm, seed);
         let triangles: Vec<[u32; 3]> = triangles.into_iter().map(|t| t.map(|v| perm[v as usize])).collect();
-        let mesh = Mesh { positions: positions(n as usize, seed), triangles };
+        let mesh = Mesh::new(positions(n as usize, seed), triangles);
         let enc = assert_round_trip(&mesh, 16);
         prop_assert_eq!(enc.header.components as usize, parts.len());
     }
@@ -114,12 +114,12 @@ proptest! {
 #[test]
 fn empty_and_tiny_meshes() {
     assert_round_trip(&Mesh::default(), 16);
-    let one = Mesh { positions: positions(3, 7), triangles: vec![[0, 1, 2]] };
+    let one = Mesh::new(positions(3, 7), vec![[0, 1, 2]]);
     assert_round_trip(&one, 16);
-    let degenerate = Mesh { positions: positions(2, 7), triangles: vec![[0, 0, 1], [1, 1, 1]] };
+    let degenerate = Mesh::new(positions(2, 7), vec![[0, 0, 1], [1, 1, 1]]);
     let enc = assert_round_trip(&degenerate, 16);
     assert_eq!(enc.stats.loose_triangles, 2);
     // All vertices at one point: a zero-extent bounding box.
-    let flat = Mesh { positions: vec![[1.0, 2.0, 3.0]; 4], triangles: vec![[0, 1, 2], [0, 2, 3]] };
+    let flat = Mesh::new(vec![[1.0, 2.0, 3.0]; 4], vec![[0, 1, 2], [0, 2, 3]]);
     assert_round_trip(&flat, 16);
 }

@@ -29,7 +29,7 @@ fn stream(path: &Path) -> Result<Mesh, LoadError> {
     };
     let count = for_each_triangle(path, &positions, &mut collect, &mut progress())?.triangles;
     assert_eq!(count, triangles.len() as u64);
-    Ok(Mesh { positions, triangles })
+    Ok(Mesh::new(positions, triangles))
 }
 
 /// Whether two meshes are the same to the bit (NaN equal to itself, -0 unequal to 0).

@@ -33,6 +33,17 @@ fn check_coding(model: &TileModel, cam: &Camera, grid: &TileGrid, coding: Coding
         for (i, p) in dec.positions.iter().enumerate() {
             assert_eq!(*p, model.decoded.positions[tile.slots[i] as usize], "tile {} vertex {i}", tile.index);
         }
+        // Attributes travel with the vertices a tile keeps, exactly.
+        let (a, m) = (&dec.attributes, &model.decoded.attributes);
+        assert_eq!((a.alpha, a.normal_bits), (m.alpha, m.normal_bits));
+        assert_eq!(a.colors.len(), if m.colors.is_empty() { 0 } else { tile.slots.len() });
+        assert_eq!(a.normals.len(), if m.normals.is_empty() { 0 } else { tile.slots.len() });
+        for (i, c) in a.colors.iter().enumerate() {
+            assert_eq!(*c, m.colors[tile.slots[i] as usize], "tile {} vertex {i}'s colour", tile.index);
+        }
+        for (i, n) in a.normals.iter().enumerate() {
+            assert_eq!(*n, m.normals[tile.slots[i] as usize], "tile {} vertex {i}'s normal", tile.index);
+        }
         let mut got: Vec<_> = dec.triangles.iter().map(|t| canonical(t.map(|s| tile.slots[s as usize]))).collect();
         got.sort_unstable();
         let want = &mut expected[tile.index];
@@ -47,7 +58,7 @@ fn check_coding(model: &TileModel, cam: &Camera, grid: &TileGrid, coding: Coding
 }
 
 fn model_of(mesh: &Mesh) -> TileModel {
-    let enc = bft::encode(mesh, EncodeOptions { quant_bits: 16 }).unwrap();
+    let enc = bft::encode(mesh, EncodeOptions { quant_bits: 16, ..Default::default() }).unwrap();
     TileModel::from_bytes(&enc.bytes).unwrap()
 }
 
@@ -78,6 +89,24 @@ fn shared_meshes_sort_exactly() {
             for cam in cameras(&model, grid.aspect()) {
                 let (tiles, pairs) = check_sort(&model, &cam, &grid);
                 assert!(tiles > 0 && pairs > 0, "{rel}: nothing on screen");
+            }
+        }
+    }
+}
+
+#[test]
+fn colours_and_normals_travel_with_their_vertices() {
+    for rel in ["classic/teapot.obj", "classic/beetle.obj", "degenerate/fused_vertices.obj"] {
+        let mesh = codec::load_path(&testkit::shared_meshes().join(rel)).unwrap();
+        for alpha in [false, true] {
+            let model = model_of(&testkit::paint(mesh.clone(), alpha, 5));
+            assert!(!model.decoded.attributes.colors.is_empty() && !model.decoded.attributes.normals.is_empty());
+            for (w, h, c, r) in [(1000, 601, 7, 3), (333, 257, 16, 16)] {
+                let grid = TileGrid::new(w, h, c, r).unwrap();
+                for cam in cameras(&model, grid.aspect()) {
+                    let (tiles, _) = check_sort(&model, &cam, &grid);
+                    assert!(tiles > 1, "{rel}");
+                }
             }
         }
     }

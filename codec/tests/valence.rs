@@ -29,7 +29,7 @@ fn fan(n: usize) -> Mesh {
         let a = i as f32 / (n + 1) as f32 * std::f32::consts::TAU;
         positions.push([a.cos(), a.sin(), 0.05 * (7.0 * a).sin()]);
     }
-    Mesh { positions, triangles: (1..=n as u32).map(|i| [0, i, i + 1]).collect() }
+    Mesh::new(positions, (1..=n as u32).map(|i| [0, i, i + 1]).collect())
 }
 
 /// One polygon face of `n` corners on a circle, every other one at `inner` times the radius.

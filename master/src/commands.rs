@@ -115,7 +115,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         let pb = progress::bytes(std::fs::metadata(input).map_or(0, |m| m.len()), "reading positions");
         let positions = stream::read_positions(input, &mut |done| pb.set_position(done))?;
         pb.finish_and_clear();
-        Mesh { positions, triangles: Vec::new() }
+        Mesh::new(positions, Vec::new())
     } else {
         load_mesh(input)?
     };
@@ -157,7 +157,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
     let mut encoded = None;
     // An error of the input (or the encoder) is reported as itself, not as one of writing.
     let mut failed = None;
-    let written = write_atomic(output, |w| match encode_chunked(positions, &mut source, &opts, &mut report, w) {
+    let written = write_atomic(output, |w| match encode_chunked(&mesh, &mut source, &opts, &mut report, w) {
         Ok(e) => {
             encoded = Some(e);
             Ok(())

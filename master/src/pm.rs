@@ -203,7 +203,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     };
     let secs = start.elapsed().as_secs_f64();
     faces.sort_unstable();
-    let mesh = Mesh { positions: active.iter().map(|&f| pm.positions[f as usize]).collect(), triangles: faces };
+    let mesh = Mesh::new(active.iter().map(|&f| pm.positions[f as usize]).collect(), faces);
     write_atomic(output, |w| writer(&mesh, w))?;
     summary(
         output,

@@ -82,7 +82,7 @@ pub fn sorted_canonical(tris: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3
 /// to input vertex indices, are the input's multiset with orientation kept; every slot's
 /// position is its input vertex quantized; the welded mesh has the same triangles by position.
 pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
-    let enc = bft::encode(mesh, EncodeOptions { quant_bits: bits }).expect("encodes");
+    let enc = bft::encode(mesh, EncodeOptions { quant_bits: bits, ..Default::default() }).expect("encodes");
     let dec = bft::decode(&enc.bytes).expect("decodes");
     assert_eq!(dec.triangles.len(), mesh.triangles.len());
     let back = dec.triangles.iter().map(|t| t.map(|s| enc.slot_vertex[s as usize]));
@@ -99,6 +99,20 @@ pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
     for &(slot, source) in &dec.duplicates {
         assert_eq!(enc.slot_vertex[slot as usize], enc.slot_vertex[source as usize]);
     }
+    // Attributes, exact at their quantization: colours as they were, normals as their
+    // octahedral codes.
+    let a = &dec.attributes;
+    assert_eq!(a.colors.len(), if mesh.colors.is_empty() { 0 } else { dec.positions.len() });
+    for (slot, c) in a.colors.iter().enumerate() {
+        let want = mesh.colors[enc.slot_vertex[slot] as usize];
+        assert_eq!(*c, if a.alpha { want } else { [want[0], want[1], want[2], 255] }, "colour of slot {slot}");
+    }
+    assert_eq!(a.alpha, used_alpha(mesh));
+    assert_eq!(a.normals.len(), if mesh.normals.is_empty() { 0 } else { dec.positions.len() });
+    for (slot, n) in a.normals.iter().enumerate() {
+        let want = bft::attributes::oct_encode(mesh.normals[enc.slot_vertex[slot] as usize], a.normal_bits);
+        assert_eq!(*n, want, "normal of slot {slot}");
+    }
     // The welded mesh: one vertex per used input vertex, triangles equal by position.
     let welded = dec.to_mesh();
     assert_eq!(welded.positions.len(), used.iter().filter(|&&u| u).count());
@@ -113,6 +127,35 @@ pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
     b.sort_unstable();
     assert!(a == b, "welded mesh differs by position");
     enc
+}
+
+/// Whether a used vertex has an alpha below 255 (unused vertices are not coded).
+fn used_alpha(mesh: &Mesh) -> bool {
+    let used = mesh.used_vertices();
+    mesh.colors.iter().zip(&used).any(|(c, &u)| u && c[3] != 255)
+}
+
+/// `mesh` with colours and normals a scan might carry: colours a smooth function of
+/// position plus a little sensor noise (alpha too when `alpha`), normals the area-weighted
+/// vertex normals plus a little noise.
+pub fn paint(mut mesh: Mesh, alpha: bool, seed: u64) -> Mesh {
+    let mut rng = XorShift(seed | 1);
+    let (lo, hi) = codec::mesh::bounding_box(&mesh.positions).unwrap_or(([0.0; 3], [1.0; 3]));
+    let normals = bft::normals::vertex_normals(&mesh.positions, &mesh.triangles, &[]);
+    mesh.colors = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let t = |a: usize| if hi[a] > lo[a] { (p[a] - lo[a]) / (hi[a] - lo[a]) } else { 0.5 };
+            let mut noise = || (rng.unit() * 6.0 - 3.0) as i32;
+            let c = |v: f32, n: i32| ((v * 255.0) as i32 + n).clamp(0, 255) as u8;
+            let a = if alpha { c(0.5 + 0.5 * (6.0 * t(0)).sin(), 0) } else { 255 };
+            [c(t(0), noise()), c(0.5 + 0.4 * (4.0 * t(1)).sin(), noise()), c(1.0 - t(2), noise()), a]
+        })
+        .collect();
+    mesh.normals =
+        normals.iter().map(|n| [n[0] + 0.02 * (rng.unit() - 0.5), n[1] + 0.02 * (rng.unit() - 0.5), n[2]]).collect();
+    mesh
 }
 
 /// The lexicographically smallest rotation: canonical even when entries repeat.
@@ -241,7 +284,7 @@ pub fn soup() -> impl Strategy<Value = Mesh> {
                 };
                 triangles.push(t);
             }
-            Mesh { positions: grid_positions(n as usize, seed), triangles }
+            Mesh::new(grid_positions(n as usize, seed), triangles)
         })
 }
 

@@ -94,6 +94,7 @@ mod tests {
         let mesh = Mesh {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
         };
         let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
         let rm = RenderMesh::from_decoded(&bft::decode(&enc.bytes).unwrap());

@@ -8,6 +8,7 @@
 
 use std::path::Path;
 
+use super::attributes::{self, SlotAttributes};
 use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{basis_position, command_context, predict, Prediction, RangeSource, SymbolSource};
@@ -24,6 +25,8 @@ pub struct Decoded {
     pub triangles: Vec<[u32; 3]>,
     /// `(slot, source)`: `slot` is the same input vertex as the earlier slot `source`.
     pub duplicates: Vec<(u32, u32)>,
+    /// Colours and normals per slot, where the stream has them.
+    pub attributes: SlotAttributes,
 }
 
 impl Decoded {
@@ -42,14 +45,22 @@ impl Decoded {
         }
         let mut remap = vec![NONE; n];
         let mut positions = Vec::with_capacity(n - self.duplicates.len());
+        let a = &self.attributes;
+        let (mut colors, mut normals) = (Vec::new(), Vec::new());
         for s in 0..n {
             if target[s] as usize == s {
                 remap[s] = positions.len() as u32;
                 positions.push(q.dequantize(self.positions[s]));
+                if !a.colors.is_empty() {
+                    colors.push(a.colors[s]);
+                }
+                if !a.normals.is_empty() {
+                    normals.push(a.normal(s));
+                }
             }
         }
         let triangles = self.triangles.iter().map(|t| t.map(|s| remap[target[s as usize] as usize])).collect();
-        Mesh { positions, triangles }
+        Mesh { positions, triangles, colors, normals }
     }
 }
 
@@ -86,7 +97,7 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
     }
     let parts = format::parse(bytes)?;
     let h = parts.header;
-    let [conn, geom, dup_bytes, loose_bytes] = parts.sections;
+    let [conn, geom, dup_bytes, loose_bytes, color_bytes, normal_bytes, _order] = parts.sections;
 
     let mut duplicates = Vec::new();
     let mut pos = 0usize;
@@ -109,10 +120,25 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
         return Err(corrupt("trailing bytes in the duplicate table"));
     }
 
-    match h.coding {
+    let (mut decoded, ops) = match h.coding {
         Coding::Range => decode_streams(h, RangeSource::new(conn, geom), duplicates, loose_bytes, record),
         Coding::Prefix => decode_streams(h, PrefixSource::new(conn, geom)?, duplicates, loose_bytes, record),
+    }?;
+    let flags = h.attributes;
+    let input = attributes::Input {
+        positions: &decoded.positions,
+        triangles: &decoded.triangles,
+        duplicates: &decoded.duplicates,
+    };
+    let mut a = SlotAttributes { alpha: flags.alpha, normal_bits: flags.normal_bits, ..Default::default() };
+    if flags.colors {
+        a.colors = attributes::decode_colors(&input, color_bytes, flags.alpha)?;
     }
+    if flags.normal_bits > 0 {
+        a.normals = attributes::decode_normals(&input, normal_bytes, flags.normal_bits)?;
+    }
+    decoded.attributes = a;
+    Ok((decoded, ops))
 }
 
 fn decode_streams<S: SymbolSource>(
@@ -170,7 +196,7 @@ fn decode_streams<S: SymbolSource>(
         return Err(corrupt("trailing bytes in the loose triangle section"));
     }
     let State { positions, triangles, ops, .. } = st;
-    Ok((Decoded { header: h, positions, triangles, duplicates }, ops))
+    Ok((Decoded { header: h, positions, triangles, duplicates, attributes: SlotAttributes::default() }, ops))
 }
 
 struct State<'a, S> {

@@ -8,7 +8,8 @@
 //! rotation without a triangle, or a frontier without unvisited triangles, starts a `SEED`
 //! at the next unvisited triangle in input order.
 
-use super::format::{self, put_varint, Coding, Header};
+use super::attributes::{self, oct_encode, DEFAULT_NORMAL_BITS};
+use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
 use super::Command;
@@ -21,11 +22,29 @@ use crate::rangecoder::Encoder;
 pub struct EncodeOptions {
     /// Bits per quantized coordinate, 8 to 24.
     pub quant_bits: u8,
+    /// Bits per octahedral normal coordinate, 4 to 16.
+    pub normal_bits: u8,
+    /// Code the mesh's colours, if it has any.
+    pub colors: bool,
+    /// Code the mesh's normals, if it has any.
+    pub normals: bool,
 }
 
 impl Default for EncodeOptions {
     fn default() -> Self {
-        EncodeOptions { quant_bits: Quantization::DEFAULT_BITS }
+        EncodeOptions {
+            quant_bits: Quantization::DEFAULT_BITS,
+            normal_bits: DEFAULT_NORMAL_BITS,
+            colors: true,
+            normals: true,
+        }
+    }
+}
+
+impl EncodeOptions {
+    /// Whether `mesh`'s colours and normals are coded.
+    fn coded(&self, mesh: &Mesh) -> (bool, bool) {
+        (self.colors && !mesh.colors.is_empty(), self.normals && !mesh.normals.is_empty())
     }
 }
 
@@ -73,7 +92,7 @@ pub fn encode_with_progress(
     mesh.validate()?;
     let used = mesh.used_vertices();
     let quant = Quantization::fit(&mesh.positions, Some(&used), options.quant_bits)?;
-    encode_quantized(mesh, &used, quant, progress)
+    encode_quantized(mesh, &used, quant, &options, progress)
 }
 
 /// As [`encode_with_progress`], on a quantization given by the caller (a chunked file's
@@ -83,13 +102,19 @@ pub(crate) fn encode_quantized(
     mesh: &Mesh,
     used: &[bool],
     quant: Quantization,
+    options: &EncodeOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Encoded, MeshError> {
+    let (colors, normals) = options.coded(mesh);
+    if normals && !(4..=16).contains(&options.normal_bits) {
+        return Err(MeshError::NormalBits(options.normal_bits));
+    }
     let q: Vec<[u32; 3]> =
         mesh.positions.iter().zip(used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
     let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
 
     let mut tr = Traversal::new(mesh, q, quant.max_level(), &loose);
+    tr.record = colors || normals;
     tr.run(progress);
 
     // Vertices that only loose triangles use get slots after the traversal.
@@ -107,6 +132,28 @@ pub(crate) fn encode_quantized(
                 tail_slots += 1;
             }
             put_varint(&mut loose_bytes, tr.slot_of[v as usize] as u64);
+        }
+        if tr.record {
+            tr.slot_triangles.push(tri.map(|v| tr.slot_of[v as usize]));
+        }
+    }
+    let mut flags = AttributeFlags::default();
+    let (mut color_bytes, mut normal_bytes) = (Vec::new(), Vec::new());
+    if tr.record {
+        let slot_q: Vec<[u32; 3]> = tr.vertex_of.iter().map(|&v| tr.q[v as usize]).collect();
+        let input = attributes::Input { positions: &slot_q, triangles: &tr.slot_triangles, duplicates: &tr.dups };
+        if colors {
+            let values: Vec<[u8; 4]> = tr.vertex_of.iter().map(|&v| mesh.colors[v as usize]).collect();
+            flags.colors = true;
+            flags.alpha = values.iter().any(|c| c[3] != 255);
+            color_bytes = attributes::encode_colors(&input, &values, flags.alpha);
+        }
+        if normals {
+            let bits = options.normal_bits;
+            let values: Vec<[u16; 2]> =
+                tr.vertex_of.iter().map(|&v| oct_encode(mesh.normals[v as usize], bits)).collect();
+            flags.normal_bits = bits;
+            normal_bytes = attributes::encode_normals(&input, &values, bits);
         }
     }
     let mut dup_bytes = Vec::new();
@@ -138,6 +185,7 @@ pub(crate) fn encode_quantized(
         bbox_min: quant.min,
         step: quant.step,
         bbox_max,
+        attributes: flags,
     };
     let stats = EncodeStats {
         triangles: mesh.triangles.len(),
@@ -152,7 +200,7 @@ pub(crate) fn encode_quantized(
     };
     let Traversal { conn, geom, vertex_of, .. } = tr;
     let (conn, geom) = (conn.finish(), geom.finish());
-    let bytes = format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes]);
+    let bytes = format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes, &color_bytes, &normal_bytes, &[]]);
     Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of })
 }
 
@@ -201,6 +249,10 @@ struct Traversal<'a> {
     offset_histogram: [usize; 5],
     seeds: usize,
     done: usize,
+    /// Whether to keep `slot_triangles` (the attributes' predictions need them).
+    record: bool,
+    /// The triangles over slots, in the order the decoder will have them.
+    slot_triangles: Vec<[u32; 3]>,
 }
 
 impl<'a> Traversal<'a> {
@@ -251,6 +303,8 @@ impl<'a> Traversal<'a> {
             offset_histogram: [0; 5],
             seeds: 0,
             done: 0,
+            record: false,
+            slot_triangles: Vec::new(),
         }
     }
 
@@ -425,6 +479,9 @@ impl<'a> Traversal<'a> {
 
     fn visit(&mut self, t: u32, slots: [u32; 3]) {
         self.visited[t as usize] = true;
+        if self.record {
+            self.slot_triangles.push(slots);
+        }
         self.done += 1;
         for s in slots {
             let v = self.vertex_of[s as usize] as usize;

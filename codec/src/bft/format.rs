@@ -1,14 +1,15 @@
-//! The `.bft` file: a magic number, a version, a checksummed header and four checksummed
-//! sections.
+//! The `.bft` file: a magic number, a version, a checksummed header and four (or seven)
+//! checksummed sections.
 //!
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSBFT\x1a"
-//! 8       2     version (u16 LE): 2 is written; 1 and 2 are read
+//! 8       2     version (u16 LE): 2, or 4 for a stream with attributes; 1 to 4 are read
 //! 10      2     header length H in bytes (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
-//! then four sections, in this order: CONN, GEOM, DUPS, LOOS, each
+//! then four sections, in this order: CONN, GEOM, DUPS, LOOS (version 4: then COLR, NORM,
+//! ORDR), each
 //!         4     tag (ASCII)
 //!         4     payload length N (u32 LE)
 //!         N     payload
@@ -22,19 +23,68 @@
 //! table (LEB128: count, then per entry the slot's gap from the previous entry and the
 //! source slot); `LOOS` holds loose triangles (LEB128: three slots each). Nothing may follow
 //! the last section.
+//!
+//! Version 4 adds per-vertex attributes ([`super::attributes`]): header byte 42 flags them
+//! (bit 0 colours, bit 1 their alpha, bit 2 normals, bit 3 the input order), byte 43 gives the
+//! normals' octahedral bits. `COLR` and `NORM` are range-coded streams, `ORDR` the input
+//! vertex order (`super::order`); a section whose flag is clear is empty. A file without
+//! attributes is written as version 2, byte for byte as before; a version 2 file has zero in
+//! both bytes.
 
 pub(crate) use crate::container::put_varint;
 use crate::container::Layout;
 pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
-/// The version written.
+/// The version written for a stream without attributes.
 pub const VERSION: u16 = 2;
-/// The versions read: 1 (before the coding byte), 2, and 3 (chunked files,
-/// [`super::chunked`]; a single stream is never version 3).
-pub const READS: &[u16] = &[1, 2, 3];
+/// The version written for a stream with attributes.
+pub const VERSION_ATTRIBUTES: u16 = 4;
+/// The versions read: 1 (before the coding byte), 2, 3 (chunked files, [`super::chunked`];
+/// a single stream is never version 3) and 4 (a stream with attributes).
+pub const READS: &[u16] = &[1, 2, 3, 4];
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
 pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
+/// The sections of a stream, attributes included (version 4 has them all).
+pub(crate) const SECTIONS: usize = 7;
+
+/// Which attributes a stream carries (header bytes 42 and 43).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AttributeFlags {
+    pub colors: bool,
+    /// Colours with alpha (only with `colors`).
+    pub alpha: bool,
+    /// Bits per octahedral normal coordinate; 0 for no normals.
+    pub normal_bits: u8,
+    /// The input vertex order is stored (`encode --keep-order`).
+    pub order: bool,
+}
+
+impl AttributeFlags {
+    pub fn is_none(&self) -> bool {
+        *self == AttributeFlags::default()
+    }
+
+    fn byte(&self) -> u8 {
+        self.colors as u8 | (self.alpha as u8) << 1 | ((self.normal_bits > 0) as u8) << 2 | (self.order as u8) << 3
+    }
+
+    fn from_bytes(flags: u8, bits: u8) -> Result<Self, BftError> {
+        let f = AttributeFlags {
+            colors: flags & 1 != 0,
+            alpha: flags & 2 != 0,
+            normal_bits: if flags & 4 != 0 { bits } else { 0 },
+            order: flags & 8 != 0,
+        };
+        if flags >> 4 != 0 || (f.alpha && !f.colors) || (flags & 4 == 0 && bits != 0) {
+            return Err(corrupt(format!("unknown attribute flags {flags:#x}/{bits}")));
+        }
+        if flags & 4 != 0 && !(4..=16).contains(&bits) {
+            return Err(corrupt(format!("normals of {bits} bits are outside 4..=16")));
+        }
+        Ok(f)
+    }
+}
 
 /// Everything that can be wrong with `.bft` bytes: the container error type both formats
 /// share.
@@ -85,6 +135,8 @@ pub struct Header {
     pub bbox_min: [f32; 3],
     pub step: f32,
     pub bbox_max: [f32; 3],
+    /// Per-vertex attributes (version 4).
+    pub attributes: AttributeFlags,
 }
 
 impl Header {
@@ -108,7 +160,7 @@ impl Header {
         ] {
             b.extend_from_slice(&v.to_le_bytes());
         }
-        b.extend_from_slice(&[self.quant_bits, self.coding as u8, 0, 0]);
+        b.extend_from_slice(&[self.quant_bits, self.coding as u8, self.attributes.byte(), self.attributes.normal_bits]);
         put_box(&mut b, self.bbox_min, self.step, self.bbox_max);
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
@@ -139,6 +191,7 @@ impl Header {
             bbox_min: [f(44), f(48), f(52)],
             step: f(56),
             bbox_max: [f(60), f(64), f(68)],
+            attributes: AttributeFlags::from_bytes(b[42], b[43])?,
         };
         check_quantization(h.quant_bits, h.bbox_min, h.step, h.bbox_max)?;
         if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
@@ -171,10 +224,11 @@ pub(crate) fn check_quantization(bits: u8, min: [f32; 3], step: f32, max: [f32; 
     Ok(())
 }
 
-/// The parts of a `.bft` file, borrowed from its bytes.
+/// The parts of a `.bft` file, borrowed from its bytes: CONN, GEOM, DUPS, LOOS, COLR, NORM,
+/// ORDR (the last three empty before version 4).
 pub(crate) struct Parts<'a> {
     pub header: Header,
-    pub sections: [&'a [u8]; 4],
+    pub sections: [&'a [u8]; SECTIONS],
 }
 
 /// The `.bft` container: sections CONN, GEOM, DUPS, LOOS.
@@ -187,17 +241,56 @@ const LAYOUT: Layout<4> = Layout {
     names: ["connectivity section", "geometry section", "duplicate table", "loose triangles"],
 };
 
-pub(crate) fn write(header: &Header, sections: [&[u8]; 4]) -> Vec<u8> {
-    LAYOUT.write(&header.to_bytes(), sections)
+/// The version 4 container: the attribute sections too.
+const LAYOUT_ATTRIBUTES: Layout<SECTIONS> = Layout {
+    format: Format::Bft,
+    magic: MAGIC,
+    version: VERSION_ATTRIBUTES,
+    reads: READS,
+    tags: [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS", *b"COLR", *b"NORM", *b"ORDR"],
+    names: [
+        "connectivity section",
+        "geometry section",
+        "duplicate table",
+        "loose triangles",
+        "colour section",
+        "normal section",
+        "vertex order",
+    ],
+};
+
+/// Writes a stream: version 2 when the header flags no attribute (the last three sections
+/// are then empty), else version 4.
+pub(crate) fn write(header: &Header, sections: [&[u8]; SECTIONS]) -> Vec<u8> {
+    if header.attributes.is_none() {
+        debug_assert!(sections[4..].iter().all(|s| s.is_empty()));
+        LAYOUT.write(&header.to_bytes(), [sections[0], sections[1], sections[2], sections[3]])
+    } else {
+        LAYOUT_ATTRIBUTES.write(&header.to_bytes(), sections)
+    }
 }
 
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
-    let c = LAYOUT.parse(bytes)?;
-    let header = Header::from_bytes(c.header)?;
-    if c.version == 1 && header.coding != Coding::Range {
+    let version = bytes.get(8..10).map(|v| u16::from_le_bytes([v[0], v[1]]));
+    let (header, version, sections) = if version == Some(VERSION_ATTRIBUTES) {
+        let c = LAYOUT_ATTRIBUTES.parse(bytes)?;
+        (c.header, c.version, c.sections)
+    } else {
+        let c = LAYOUT.parse(bytes)?;
+        let [a, b, d, e] = c.sections;
+        (c.header, c.version, [a, b, d, e, &[][..], &[][..], &[][..]])
+    };
+    let header = Header::from_bytes(header)?;
+    if version == 1 && header.coding != Coding::Range {
         return Err(corrupt("a version 1 file has a non-zero reserved byte 41"));
     }
-    Ok(Parts { header, sections: c.sections })
+    if version != VERSION_ATTRIBUTES && !header.attributes.is_none() {
+        return Err(corrupt(format!("a version {version} file has non-zero reserved bytes 42 and 43")));
+    }
+    if version == VERSION_ATTRIBUTES && header.attributes.is_none() {
+        return Err(corrupt("a version 4 file flags no attribute"));
+    }
+    Ok(Parts { header, sections })
 }
 
 /// Sizes and rates of a `.bft` file, as `tessera stats` reports them.
@@ -207,6 +300,10 @@ pub struct Stats {
     pub bytes: usize,
     pub connectivity_bytes: usize,
     pub geometry_bytes: usize,
+    /// The attribute sections: colours, normals, input order.
+    pub color_bytes: usize,
+    pub normal_bytes: usize,
+    pub order_bytes: usize,
     /// Chunks of a chunked file (1 for a single stream).
     pub chunks: u32,
     /// A chunked file's border tables (shared vertices' links and normals).
@@ -226,6 +323,9 @@ impl Stats {
             bytes: bytes.len(),
             connectivity_bytes: p.sections[0].len() + p.sections[2].len() + p.sections[3].len(),
             geometry_bytes: p.sections[1].len(),
+            color_bytes: p.sections[4].len(),
+            normal_bytes: p.sections[5].len(),
+            order_bytes: p.sections[6].len(),
             chunks: 1,
             border_bytes: 0,
         })
@@ -237,7 +337,12 @@ impl Stats {
     }
 
     pub fn geometry_bits_per_vertex(&self) -> f64 {
-        self.geometry_bytes as f64 * 8.0 / self.header.unique_vertices().max(1) as f64
+        self.per_vertex(self.geometry_bytes)
+    }
+
+    /// Bits per (unique) vertex of `bytes`.
+    pub fn per_vertex(&self, bytes: usize) -> f64 {
+        bytes as f64 * 8.0 / self.header.unique_vertices().max(1) as f64
     }
 }
 
@@ -263,10 +368,22 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         bbox_min: [0.0; 3],
         step: 1.0,
         bbox_max: [1.0; 3],
+        attributes: AttributeFlags {
+            colors: byte(13) & 1 != 0,
+            alpha: byte(13) & 3 == 3,
+            normal_bits: if byte(13) & 4 != 0 { 4 + byte(14) as u8 % 13 } else { 0 },
+            order: false,
+        },
     };
-    let rest = data.get(13..).unwrap_or(&[]);
+    let rest = data.get(15..).unwrap_or(&[]);
     let (conn, rest) = rest.split_at(rest.len() / 2);
     let (geom, rest) = rest.split_at(rest.len() * 3 / 4);
-    let (dups, loose) = rest.split_at(rest.len() / 2);
-    write(&header, [conn, geom, dups, loose])
+    let (dups, rest) = rest.split_at(rest.len() / 2);
+    let (loose, rest) = rest.split_at(rest.len() / 2);
+    let (colors, normals) = rest.split_at(rest.len() / 2);
+    let (colors, normals) = (
+        if header.attributes.colors { colors } else { &[][..] },
+        if header.attributes.normal_bits > 0 { normals } else { &[][..] },
+    );
+    write(&header, [conn, geom, dups, loose, colors, normals, &[]])
 }

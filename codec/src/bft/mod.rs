@@ -84,6 +84,7 @@
 //! stored at its head. The tile sort writes its tiles that way when asked, because it codes
 //! every tile anew each frame; files from `tessera encode` are always range-coded.
 
+pub mod attributes;
 pub mod chunked;
 mod decode;
 mod encode;
@@ -97,7 +98,7 @@ mod tile_writer;
 
 pub use decode::{decode, decode_file, decode_ops, Decoded, Op};
 pub use encode::{encode, encode_with_progress, EncodeOptions, EncodeStats, Encoded};
-pub use format::{wrap_for_fuzzing, BftError, Coding, Header, Stats, MAGIC, READS, VERSION};
+pub use format::{wrap_for_fuzzing, AttributeFlags, BftError, Coding, Header, Stats, MAGIC, READS, VERSION};
 
 /// The commands of the BFT stream, with `ADD` split by operand form and the paper's
 /// offsets carried beside `Rf`, `Lf` and `AddRef`.

@@ -149,7 +149,7 @@ mod tests {
                 triangles.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
             }
         }
-        Mesh { positions, triangles }
+        Mesh::new(positions, triangles)
     }
 
     /// A worker's normals for a tile, with the border normals the master sends, equal the
@@ -192,6 +192,7 @@ mod tests {
         let mesh = Mesh {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.5], [0.0, -1.0, 0.5]],
             triangles: vec![[0, 1, 2], [0, 3, 4]],
+            ..Default::default()
         };
         let dec = decode(&encode(&mesh, EncodeOptions::default()).unwrap().bytes).unwrap();
         assert!(!dec.duplicates.is_empty(), "expected the shared vertex to be duplicated");

@@ -517,7 +517,7 @@ fn write_tile<'a, S: SymbolSink>(
 ) -> Option<Tile> {
     let d = &model.decoded;
     let q = &d.positions;
-    let mut w = TileWriter::<S>::new(d.header.quant_bits, records);
+    let mut w = TileWriter::<S>::new(d.header.quant_bits, records, !d.attributes.is_empty());
     // The model frontier position of each of this tile's frontier entries, by the tile's
     // position: both queues grow in the same order, so this is sorted, and an entry of the
     // model is found in the tile by binary search. These are the paper's counters of
@@ -612,7 +612,7 @@ fn write_tile<'a, S: SymbolSink>(
     }
     (w.triangles > 0).then(|| {
         let triangles = w.triangles;
-        let (bytes, slots) = w.finish(&d.header, coding);
+        let (bytes, slots) = w.finish(&d.header, &d.attributes, coding);
         Tile { index, bytes, triangles, slots }
     })
 }

@@ -6,7 +6,8 @@
 //! will. It is the decoder of `decode.rs` run forwards: same frontier methods, same models,
 //! same predictions, encoding where the decoder decodes.
 
-use super::format::{self, put_varint, Coding, Header};
+use super::attributes::{self, SlotAttributes};
+use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{basis_position, command_context, predict, Prediction, SymbolSink};
 use super::Command;
@@ -25,12 +26,15 @@ pub(crate) struct TileWriter<S> {
     pub triangles: u32,
     tail_slots: u32,
     loose: Vec<[u32; 3]>,
+    /// The tile's triangles over its slots, kept when the model has attributes (whose
+    /// predictions use them), in the order the decoder will have them.
+    record: Option<Vec<[u32; 3]>>,
 }
 
 impl<S: SymbolSink> TileWriter<S> {
     /// A writer for about `commands` commands: its buffers start that large, so that they
     /// do not grow and copy themselves while the tile is written.
-    pub fn new(quant_bits: u8, commands: usize) -> Self {
+    pub fn new(quant_bits: u8, commands: usize, attributes: bool) -> Self {
         let vertices = commands / 2 + 16;
         TileWriter {
             f: Frontier { entries: Vec::with_capacity(commands * 2), head: 0 },
@@ -45,6 +49,7 @@ impl<S: SymbolSink> TileWriter<S> {
             triangles: 0,
             tail_slots: 0,
             loose: Vec::new(),
+            record: attributes.then(|| Vec::with_capacity(commands)),
         }
     }
 
@@ -84,6 +89,9 @@ impl<S: SymbolSink> TileWriter<S> {
             *d = d.saturating_add(1);
         }
         self.triangles += 1;
+        if let Some(r) = &mut self.record {
+            r.push(t);
+        }
     }
 
     /// `NEW` with the model's slot `global` at position `q`.
@@ -186,8 +194,9 @@ impl<S: SymbolSink> TileWriter<S> {
     }
 
     /// The tile's `.bft` bytes: the model's quantization, this tile's counts and streams,
-    /// coded as `coding` (the sink's); and the model slot of each of its vertices.
-    pub fn finish(self, model: &Header, coding: Coding) -> (Vec<u8>, Vec<u32>) {
+    /// coded as `coding` (the sink's), and its slots' values of the model's `attributes`; and
+    /// the model slot of each of its vertices.
+    pub fn finish(self, model: &Header, model_attributes: &SlotAttributes, coding: Coding) -> (Vec<u8>, Vec<u32>) {
         let slots = self.positions.len() as u32;
         let header = Header {
             input_vertices: slots,
@@ -204,6 +213,7 @@ impl<S: SymbolSink> TileWriter<S> {
             bbox_min: model.bbox_min,
             step: model.step,
             bbox_max: model.bbox_max,
+            attributes: AttributeFlags { order: false, ..model.attributes },
         };
         let mut dups = Vec::new();
         put_varint(&mut dups, 0);
@@ -211,7 +221,19 @@ impl<S: SymbolSink> TileWriter<S> {
         for s in self.loose.iter().flatten() {
             put_varint(&mut loose, *s as u64);
         }
+        let (mut colors, mut normals) = (Vec::new(), Vec::new());
+        if let Some(mut triangles) = self.record {
+            triangles.extend_from_slice(&self.loose);
+            let input = attributes::Input { positions: &self.positions, triangles: &triangles, duplicates: &[] };
+            let a = model_attributes.select(&self.global);
+            if header.attributes.colors {
+                colors = attributes::encode_colors(&input, &a.colors, a.alpha);
+            }
+            if header.attributes.normal_bits > 0 {
+                normals = attributes::encode_normals(&input, &a.normals, a.normal_bits);
+            }
+        }
         let [conn, geom] = self.sink.finish();
-        (format::write(&header, [&conn, &geom, &dups, &loose]), self.global)
+        (format::write(&header, [&conn, &geom, &dups, &loose, &colors, &normals, &[]]), self.global)
     }
 }

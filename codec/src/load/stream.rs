@@ -129,7 +129,7 @@ pub(crate) fn load_memory(path: &Path, bytes: &[u8], format: Format) -> Result<(
         },
         &mut |_| {},
     )?;
-    Ok((Mesh { positions, triangles }, counts.ignored))
+    Ok((Mesh::new(positions, triangles), counts.ignored))
 }
 
 /// Pass 2: calls `f` with every triangle, exactly the triangles of `load_path(path)?` in

@@ -152,6 +152,7 @@ impl Canonical {
         Mesh {
             positions: self.points.iter().map(|&q| self.cube.position(q)).collect(),
             triangles: self.simplices.iter().filter(|s| s.dim == 2).map(|s| s.v).collect(),
+            ..Default::default()
         }
     }
 }

@@ -36,7 +36,7 @@ pub struct Drawn {
 
 impl Drawn {
     pub fn to_mesh(&self) -> crate::Mesh {
-        crate::Mesh { positions: self.positions.clone(), triangles: self.triangles.clone() }
+        crate::Mesh::new(self.positions.clone(), self.triangles.clone())
     }
 }
 

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use super::{oct_decode, oct_encode, write_head, Border, ChunkEntry, ChunkedHeader, DEFAULT_CHUNK_TRIANGLES};
-use crate::bft::encode::encode_quantized;
+use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
 use crate::bft::normals::{face_normal_sums, unit};
 use crate::load::LoadError;
@@ -48,6 +48,8 @@ pub struct ChunkOptions {
     /// Write a model that makes one chunk as a single-stream file (version 2), which it is
     /// (the default); else as a chunked file of one chunk.
     pub one_chunk_as_stream: bool,
+    /// What each chunk's stream codes besides positions (its `quant_bits` is ignored).
+    pub stream: EncodeOptions,
 }
 
 impl Default for ChunkOptions {
@@ -58,6 +60,7 @@ impl Default for ChunkOptions {
             temp_dir: None,
             keep_slot_vertex: false,
             one_chunk_as_stream: true,
+            stream: EncodeOptions::default(),
         }
     }
 }
@@ -97,7 +100,7 @@ pub type TriangleSink<'a> = &'a mut dyn FnMut([u32; 3]) -> Result<(), EncodeChun
 pub fn encode_mesh_chunked(mesh: &Mesh, options: &ChunkOptions) -> Result<(Vec<u8>, ChunkedEncoded), EncodeChunkError> {
     let mut out = Vec::new();
     let enc = encode_chunked(
-        &mesh.positions,
+        mesh,
         &mut |sink: TriangleSink| mesh.triangles.iter().try_for_each(|&t| sink(t)),
         options,
         &mut |_, _, _| {},
@@ -196,8 +199,9 @@ struct Encoded {
 }
 
 fn encode_chunk(
-    positions: &[[f32; 3]],
+    vertices: &Mesh,
     quant: Quantization,
+    options: &EncodeOptions,
     multi: &[bool],
     tris: &[[u32; 3]],
 ) -> Result<Encoded, EncodeChunkError> {
@@ -205,11 +209,18 @@ fn encode_chunk(
     verts.sort_unstable();
     verts.dedup();
     let local = |v: u32| verts.binary_search(&v).expect("the chunk's own vertex") as u32;
+    let pick = |values: &[[f32; 3]]| verts.iter().map(|&v| values[v as usize]).collect();
     let mesh = Mesh {
-        positions: verts.iter().map(|&v| positions[v as usize]).collect(),
+        positions: pick(&vertices.positions),
         triangles: tris.iter().map(|t| t.map(local)).collect(),
+        colors: if vertices.colors.is_empty() {
+            Vec::new()
+        } else {
+            verts.iter().map(|&v| vertices.colors[v as usize]).collect()
+        },
+        normals: if vertices.normals.is_empty() { Vec::new() } else { pick(&vertices.normals) },
     };
-    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, &mut |_, _| {})?;
+    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, &mut |_, _| {})?;
     // Decoded again: the stream checks itself, and the normal sums follow the decoded
     // triangle order, which is what a worker sums.
     let d = crate::bft::decode(&enc.bytes).map_err(|e| io::Error::other(format!("a chunk does not decode: {e}")))?;
@@ -240,15 +251,17 @@ fn encode_chunk(
     })
 }
 
-/// Encodes a model as a chunked `.bft` file written to `out`. `positions` are all input
-/// vertices; `triangles` feeds every triangle to the sink it is given, once, in input order.
+/// Encodes a model as a chunked `.bft` file written to `out`. `vertices` holds all input
+/// vertices (positions, and colours and normals if the model has them; its triangles are not
+/// read); `triangles` feeds every triangle to the sink it is given, once, in input order.
 pub fn encode_chunked(
-    positions: &[[f32; 3]],
+    vertices: &Mesh,
     triangles: &mut dyn FnMut(TriangleSink) -> Result<(), EncodeChunkError>,
     options: &ChunkOptions,
     progress: Progress,
     out: &mut dyn Write,
 ) -> Result<ChunkedEncoded, EncodeChunkError> {
+    let positions = &vertices.positions;
     let n = positions.len();
     if n > 1 << 31 {
         return Err(MeshError::TooManyVertices(n).into());
@@ -382,7 +395,7 @@ pub fn encode_chunked(
         let encoded: Vec<Encoded> = batch
             .par_iter()
             .with_max_len(1)
-            .map(|tris| encode_chunk(positions, quant, &multi, tris))
+            .map(|tris| encode_chunk(vertices, quant, &options.stream, &multi, tris))
             .collect::<Result<_, _>>()?;
         for enc in encoded {
             let base = slots;

@@ -61,7 +61,7 @@ use crate::container::{get_varint, put_varint, Format, FormatError};
 use crate::mesh::Quantization;
 
 use super::decode::Decoded;
-use super::format::{check_quantization, put_box, Coding, Header, MAGIC};
+use super::format::{check_quantization, put_box, AttributeFlags, Coding, Header, MAGIC};
 
 mod encode;
 pub mod sort;
@@ -136,6 +136,7 @@ impl ChunkedHeader {
             bbox_min: self.bbox_min,
             step: self.step,
             bbox_max: self.bbox_max,
+            attributes: Default::default(),
         }
     }
 
@@ -451,10 +452,14 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
         // Every slot beyond the first of its vertex, in a chunk or across chunks.
         let mut header = Header { duplicates: g.slots - g.unique_vertices, ..g.model_header() };
         let (mut connectivity_bytes, mut geometry_bytes, mut border_bytes) = (0, 0, 0);
+        let (mut color_bytes, mut normal_bytes, mut order_bytes) = (0, 0, 0);
         for i in 0..self.entries.len() {
             let p = super::format::parse(self.chunk_bft(i)).map_err(|e| chunk_err(i, e))?;
             connectivity_bytes += p.sections[0].len() + p.sections[2].len() + p.sections[3].len();
             geometry_bytes += p.sections[1].len();
+            color_bytes += p.sections[4].len();
+            normal_bytes += p.sections[5].len();
+            order_bytes += p.sections[6].len();
             border_bytes += self.entries[i].border_len as usize;
             add_chunk_counts(&mut header, &p.header);
         }
@@ -463,6 +468,9 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             bytes: self.bytes.as_ref().len(),
             connectivity_bytes,
             geometry_bytes,
+            color_bytes,
+            normal_bytes,
+            order_bytes,
             chunks: self.entries.len() as u32,
             border_bytes,
         })
@@ -530,9 +538,23 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             positions: Vec::with_capacity(g.slots as usize),
             triangles: Vec::with_capacity(g.triangles as usize),
             duplicates: Vec::new(),
+            attributes: Default::default(),
         };
-        for (e, (d, border)) in self.entries.iter().zip(parts) {
+        for (i, (e, (d, border))) in self.entries.iter().zip(parts).enumerate() {
             let base = e.first_slot;
+            // Every chunk carries the model's attributes (alpha only where some is not 255).
+            let (a, flags) = (&mut out.attributes, d.header.attributes);
+            if i == 0 {
+                a.normal_bits = flags.normal_bits;
+                out.header.attributes = AttributeFlags { alpha: false, order: false, ..flags };
+            }
+            if (flags.colors, flags.normal_bits) != (out.header.attributes.colors, a.normal_bits) {
+                return Err(chunk_err(i, "its attributes differ from the first chunk's"));
+            }
+            a.alpha |= flags.alpha;
+            out.header.attributes.alpha |= flags.alpha;
+            a.colors.extend_from_slice(&d.attributes.colors);
+            a.normals.extend_from_slice(&d.attributes.normals);
             out.positions.extend_from_slice(&d.positions);
             out.triangles.extend(d.triangles.iter().map(|t| t.map(|s| s + base)));
             // A slot's link to an earlier chunk replaces its duplicate entry inside the
