@@ -1,7 +1,9 @@
 // Tile renderer (worker/src/render.rs), two pipelines drawn under the tile's scissor rect:
 // - clear: resets the tile to transparent black and the far depth;
-// - mesh: smooth-shaded, two-sided Lambert + ambient under a headlight, in a fixed light
-//   grey. Opaque: every covered pixel gets alpha 1.
+// - mesh: smooth-shaded, two-sided Lambert + ambient under a headlight, in the vertex
+//   colours where the mesh has them (alpha 1 at every vertex) and a fixed light grey where
+//   it has none (alpha 0 at every vertex, so the grey is exact, not interpolated). Opaque:
+//   every covered pixel gets alpha 1.
 
 // One triangle over the whole viewport, (-1,-1) (3,-1) (-1,3) in NDC, at the far plane:
 // depth 1, the value the mesh's `less` depth test starts from.
@@ -30,19 +32,25 @@ struct VertexOutput {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,
     @location(1) normal: vec3<f32>,
+    @location(2) color: vec4<f32>,
 }
 
-fn transform(position: vec3<f32>, normal: vec3<f32>) -> VertexOutput {
+fn transform(position: vec3<f32>, normal: vec3<f32>, color: vec4<f32>) -> VertexOutput {
     var out: VertexOutput;
     out.clip = frame.view_proj * vec4<f32>(position, 1.0);
     out.world = position;
     out.normal = normal;
+    out.color = color;
     return out;
 }
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> VertexOutput {
-    return transform(position, normal);
+fn vs_main(
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec4<f32>,
+) -> VertexOutput {
+    return transform(position, normal, color);
 }
 
 // The progressive mesh adapted on the GPU (worker/src/pm_adapt/), drawn from its own buffers:
@@ -59,7 +67,7 @@ struct PmPoint {
 @vertex
 fn vs_pulled(@builtin(vertex_index) i: u32) -> VertexOutput {
     let p = pm_points[pm_fvid[i]];
-    return transform(p.pos.xyz, p.nrm.xyz);
+    return transform(p.pos.xyz, p.nrm.xyz, vec4<f32>(0.0));
 }
 
 const BASE: vec3<f32> = vec3<f32>(0.8, 0.8, 0.8);
@@ -76,5 +84,9 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     if (nn > 0.0 && ll > 0.0) {
         diffuse = min(abs(dot(in.normal, to_light)) * inverseSqrt(nn * ll), 1.0);
     }
-    return vec4<f32>(BASE * (AMBIENT + (1.0 - AMBIENT) * diffuse), 1.0);
+    var base = BASE;
+    if (in.color.a > 0.5) {
+        base = in.color.rgb;
+    }
+    return vec4<f32>(base * (AMBIENT + (1.0 - AMBIENT) * diffuse), 1.0);
 }

@@ -104,6 +104,48 @@ fn identical(a: &Path, b: &Path) -> bool {
     pixels(a) == pixels(b)
 }
 
+/// A model's own colours and normals reach the pixels: frames under `mpirun -np 2` and `-np 3`
+/// (chunked and single-stream files, sorted and forwarded chunks) equal the single-process
+/// frame pixel for pixel, and a coloured model's frame is not grey.
+#[test]
+fn colours_and_normals_render_the_same_frames_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let spot = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/spot_colored.ply.gz");
+    let horse = mesh("classic/horse.ply.gz");
+    ok(&alone(&["encode", spot, "-o", &p("spot.bft"), "--chunk-triangles", "3000"]));
+    ok(&alone(&["encode", &horse, "-o", &p("horse.bft"), "--chunk-triangles", "0", "--normal-bits", "12"]));
+    let stats = String::from_utf8(alone(&["stats", &p("spot.bft"), "--json"]).stdout).unwrap();
+    assert!(stats.contains("\"color_bytes\"") && !stats.contains("\"color_bytes\": 0,"), "{stats}");
+    for model in [p("spot.bft"), p("horse.bft")] {
+        let view = ["--size", "320x240", "--view", "three-quarter", "--frames", "2", "--orbit"];
+        let (reference, tiled) = (p("ref.png"), p("tiled.png"));
+        let mut args = vec!["render", &model, "--out", &reference, "--tiles", "1x1"];
+        args.extend(view);
+        ok(&alone(&args));
+        for (np, tiles, extra) in [(2, "4x3", vec![]), (3, "5x4", vec!["--tile-coding", "range"])] {
+            let mut args = vec!["render", &model, "--out", &tiled, "--tiles", tiles];
+            args.extend(view);
+            args.extend(extra);
+            ok(&mpirun(np, &[], &args));
+            for k in 1..=2 {
+                let (a, b) = (dir.path().join(format!("ref-{k:04}.png")), dir.path().join(format!("tiled-{k:04}.png")));
+                assert!(covered(&a) > 1000, "{model}: in view");
+                assert!(
+                    identical(&a, &b),
+                    "{model} frame {k}, -np {np} --tiles {tiles}: {} pixels differ",
+                    differing(&a, &b)
+                );
+            }
+        }
+        if model.ends_with("spot.bft") {
+            let (_, _, px) = pixels(&dir.path().join("ref-0001.png"));
+            let tinted = px.chunks(4).filter(|c| c[3] == 255 && c[0] > c[2] + 20).count();
+            assert!(tinted > 1000, "the cow is drawn in its colours ({tinted} warm pixels)");
+        }
+    }
+}
+
 /// A chunked model renders the same frame whatever the tiles, ranks, balancing and worker
 /// caches: verbatim chunks (sent or kept by the worker), sorted pieces and their border
 /// normals together equal the single-process frame pixel for pixel, and the single-stream

@@ -302,6 +302,15 @@ pub struct EncodeArgs {
     /// default).
     #[arg(long)]
     pub temp_dir: Option<PathBuf>,
+    /// Bits per octahedral coordinate of the file's vertex normals (4 to 16).
+    #[arg(long, default_value_t = codec::bft::attributes::DEFAULT_NORMAL_BITS, value_parser = clap::value_parser!(u8).range(4..=16))]
+    pub normal_bits: u8,
+    /// Drop the file's vertex colours (they are kept by default).
+    #[arg(long)]
+    pub no_colors: bool,
+    /// Drop the file's vertex normals (kept by default; a renderer then computes them).
+    #[arg(long)]
+    pub no_normals: bool,
 }
 
 /// Flags of `tessera render`.

@@ -106,16 +106,22 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         quant_bits: options.quant_bits,
         chunk_triangles: if options.chunk_triangles == 0 { u32::MAX } else { options.chunk_triangles },
         temp_dir: options.temp_dir.clone(),
+        stream: bft::EncodeOptions {
+            quant_bits: options.quant_bits,
+            normal_bits: options.normal_bits,
+            colors: !options.no_colors,
+            normals: !options.no_normals,
+        },
         ..Default::default()
     };
     let streamed = stream::can_stream(input);
     // PLY and OBJ are streamed: the positions in one pass, the triangles in another (inside
     // the encoder's partition pass); STL is loaded whole.
     let mesh = if streamed {
-        let pb = progress::bytes(std::fs::metadata(input).map_or(0, |m| m.len()), "reading positions");
-        let positions = stream::read_positions(input, &mut |done| pb.set_position(done))?;
+        let pb = progress::bytes(std::fs::metadata(input).map_or(0, |m| m.len()), "reading vertices");
+        let vertices = stream::read_vertices(input, &mut |done| pb.set_position(done))?;
         pb.finish_and_clear();
-        Mesh::new(positions, Vec::new())
+        vertices
     } else {
         load_mesh(input)?
     };
@@ -243,6 +249,13 @@ pub struct StatsReport {
     /// Chunks (1 for a single-stream file) and the bytes of their border tables.
     pub chunks: u32,
     pub border_bytes: usize,
+    /// Per-vertex attributes: bytes and bits per vertex (0 where absent), normal bits.
+    pub color_bytes: usize,
+    pub color_bits_per_vertex: f64,
+    pub color_alpha: bool,
+    pub normal_bytes: usize,
+    pub normal_bits_per_vertex: f64,
+    pub normal_bits: u8,
 }
 
 impl StatsReport {
@@ -269,6 +282,12 @@ impl StatsReport {
             bbox_max: h.bbox_max,
             chunks: s.chunks,
             border_bytes: s.border_bytes,
+            color_bytes: s.color_bytes,
+            color_bits_per_vertex: s.per_vertex(s.color_bytes),
+            color_alpha: h.attributes.alpha,
+            normal_bytes: s.normal_bytes,
+            normal_bits_per_vertex: s.per_vertex(s.normal_bytes),
+            normal_bits: h.attributes.normal_bits,
         })
     }
 }
@@ -303,6 +322,19 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
             "  geometry       {:>12.2} bits/vertex at {} bits ({} bytes)",
             r.geometry_bits_per_vertex, r.quant_bits, r.geometry_bytes
         );
+        if r.color_bytes > 0 {
+            let kind = if r.color_alpha { "RGBA" } else { "RGB" };
+            println!(
+                "  colours        {:>12.2} bits/vertex, 8-bit {kind} ({} bytes)",
+                r.color_bits_per_vertex, r.color_bytes
+            );
+        }
+        if r.normal_bytes > 0 {
+            println!(
+                "  normals        {:>12.2} bits/vertex, octahedral at {} bits ({} bytes)",
+                r.normal_bits_per_vertex, r.normal_bits, r.normal_bytes
+            );
+        }
         println!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64);
     }
     Ok(())

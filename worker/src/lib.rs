@@ -28,11 +28,15 @@ mod wgsl_contract;
 use codec::bft::normals::vertex_normals;
 use codec::bft::Decoded;
 
-/// GPU-ready geometry: float positions, smooth unit normals, and a triangle index list.
+/// GPU-ready geometry: float positions, smooth unit normals, optional vertex colours, and a
+/// triangle index list.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RenderMesh {
     pub positions: Vec<[f32; 3]>,
     pub normals: Vec<[f32; 3]>,
+    /// RGBA8 per vertex with alpha 255, or empty (drawn in the renderer's grey). Alpha 0
+    /// marks vertices without a colour (a tile whose parts differ).
+    pub colors: Vec<[u8; 4]>,
     pub indices: Vec<u32>,
 }
 
@@ -43,6 +47,7 @@ impl RenderMesh {
         let mut out = RenderMesh {
             positions: Vec::with_capacity(triangles.len() * 3),
             normals: Vec::with_capacity(triangles.len() * 3),
+            colors: Vec::new(),
             indices: (0..triangles.len() as u32 * 3).collect(),
         };
         for t in triangles {
@@ -61,18 +66,38 @@ impl RenderMesh {
     pub fn from_decoded(decoded: &Decoded) -> RenderMesh {
         let q = decoded.quantization();
         let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
-        let normals = vertex_normals(&positions, &decoded.triangles, &decoded.duplicates);
+        let a = &decoded.attributes;
+        let normals = if a.normals.is_empty() {
+            vertex_normals(&positions, &decoded.triangles, &decoded.duplicates)
+        } else {
+            (0..positions.len()).map(|s| a.normal(s)).collect()
+        };
+        // Shading is opaque: a colour's alpha is not drawn.
+        let colors = a.colors.iter().map(|c| [c[0], c[1], c[2], 255]).collect();
         let indices = decoded.triangles.iter().flatten().copied().collect();
-        RenderMesh { positions, normals, indices }
+        RenderMesh { positions, normals, colors, indices }
+    }
+
+    /// Whether the normals are the file's (a stream with normals), which border normals
+    /// must not replace.
+    pub fn has_file_normals(decoded: &Decoded) -> bool {
+        !decoded.attributes.normals.is_empty()
     }
 
     /// The meshes one after the other, as one (a tile's streams).
     pub fn concat(parts: &[RenderMesh]) -> RenderMesh {
         let mut out = RenderMesh::default();
+        let colored = parts.iter().any(|p| !p.colors.is_empty());
         for p in parts {
             let base = out.positions.len() as u32;
             out.positions.extend_from_slice(&p.positions);
             out.normals.extend_from_slice(&p.normals);
+            if colored {
+                match p.colors.is_empty() {
+                    true => out.colors.resize(out.positions.len(), [0; 4]),
+                    false => out.colors.extend_from_slice(&p.colors),
+                }
+            }
             out.indices.extend(p.indices.iter().map(|&i| i + base));
         }
         out

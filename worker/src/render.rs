@@ -80,6 +80,9 @@ const BYTES_PER_PIXEL: u32 = 4;
 const VEC3_BYTES: u64 = std::mem::size_of::<[f32; 3]>() as u64;
 const POSITION_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
 const NORMAL_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 => Float32x3];
+/// Vertex colours, RGBA8 read as 0..1; alpha 0 marks a mesh without colours (see
+/// `shaders/render.wgsl`).
+const COLOR_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![2 => Unorm8x4];
 
 /// Why the renderer could not start or render.
 #[derive(Debug, Error)]
@@ -90,6 +93,8 @@ pub enum RenderError {
     FrameTooLarge { width: u32, height: u32, max: u32 },
     #[error("mesh has {positions} positions but {normals} normals")]
     NormalCount { positions: usize, normals: usize },
+    #[error("mesh has {positions} positions but {colors} colours")]
+    ColorCount { positions: usize, colors: usize },
     #[error("the mesh's {what} buffer needs {bytes} bytes; the adapter allows {max}")]
     MeshTooLarge { what: &'static str, bytes: u64, max: u64 },
     #[error(transparent)]
@@ -210,6 +215,9 @@ pub struct Renderer {
     bind_group: wgpu::BindGroup,
     positions: GrowBuffer,
     normals: GrowBuffer,
+    colors: GrowBuffer,
+    /// Alpha-0 colours (the mark of a mesh without colours), kept for such meshes.
+    no_colors: Vec<[u8; 4]>,
     indices: GrowBuffer,
     frame_target: Option<FrameTarget>,
     /// The mappable buffer tiles are copied into, rows padded to `COPY_BYTES_PER_ROW_ALIGNMENT`.
@@ -303,7 +311,15 @@ impl Renderer {
             "render: mesh pipeline",
             &layout,
             "vs_main",
-            &[Some(vec3_layout(&POSITION_ATTRIBUTE)), Some(vec3_layout(&NORMAL_ATTRIBUTE))],
+            &[
+                Some(vec3_layout(&POSITION_ATTRIBUTE)),
+                Some(vec3_layout(&NORMAL_ATTRIBUTE)),
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: 4,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &COLOR_ATTRIBUTE,
+                }),
+            ],
         );
         let pulled_layout =
             gpu.bind_group_layout("render: pulled vertices layout", wgpu::ShaderStages::VERTEX, PULLED_BINDINGS);
@@ -332,6 +348,8 @@ impl Renderer {
             bind_group,
             positions: GrowBuffer::new("upload: positions", wgpu::BufferUsages::VERTEX),
             normals: GrowBuffer::new("upload: normals", wgpu::BufferUsages::VERTEX),
+            colors: GrowBuffer::new("upload: colours", wgpu::BufferUsages::VERTEX),
+            no_colors: Vec::new(),
             indices: GrowBuffer::new("upload: indices", wgpu::BufferUsages::INDEX),
             frame_target: None,
             readback: None,
@@ -360,6 +378,9 @@ impl Renderer {
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
         if mesh.normals.len() != mesh.positions.len() {
             return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
+        }
+        if !mesh.colors.is_empty() && mesh.colors.len() != mesh.positions.len() {
+            return Err(RenderError::ColorCount { positions: mesh.positions.len(), colors: mesh.colors.len() });
         }
         self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
     }
@@ -419,6 +440,13 @@ impl Renderer {
             Source::Mesh(mesh) => {
                 self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
                 self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
+                let colors = if mesh.colors.is_empty() {
+                    self.no_colors.resize(mesh.positions.len(), [0; 4]);
+                    &self.no_colors[..mesh.positions.len()]
+                } else {
+                    &mesh.colors[..]
+                };
+                self.colors.write(device, queue, bytemuck::cast_slice(colors), max)?;
                 self.indices.write(device, queue, bytemuck::cast_slice(&mesh.indices), max)?;
                 None
             }
@@ -479,6 +507,7 @@ impl Renderer {
                         pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
                         pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
                         pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
+                        pass.set_vertex_buffer(2, self.colors.slice(mesh.positions.len() as u64 * 4));
                         pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
                         pass.draw_indexed(0..index_count, 0, 0..1);
                     }

@@ -170,6 +170,7 @@ fn pm_speed() {
     let mesh = worker::RenderMesh {
         positions: full.active().iter().map(|&f| pm.positions[f as usize]).collect(),
         normals: full.active().iter().map(|&f| pm.normals[f as usize]).collect(),
+        colors: Vec::new(),
         indices: full.faces().iter().flatten().copied().collect(),
     };
     let (lo, hi) = bbox(&pm);

@@ -128,7 +128,7 @@ fn bad_rects_and_meshes_are_errors() {
         let e = r.render(&mesh, Mat4::IDENTITY, (10, 10), rect).unwrap_err();
         assert!(matches!(e, RenderError::BadRect { .. }), "{rect:?}: {e}");
     }
-    let bad = RenderMesh { positions: vec![[0.0; 3]; 3], normals: vec![], indices: vec![0, 1, 2] };
+    let bad = RenderMesh { positions: vec![[0.0; 3]; 3], normals: vec![], colors: vec![], indices: vec![0, 1, 2] };
     let e = r.render(&bad, Mat4::IDENTITY, (10, 10), [0, 0, 10, 10]).unwrap_err();
     assert!(matches!(e, RenderError::NormalCount { .. }), "{e}");
 }

@@ -97,7 +97,11 @@ impl BorderNormals {
 
     /// The normals `tile` needs from the whole mesh, as `(tile slot, normal)`: those of the
     /// slots that are duplicated or have a triangle outside the tile.
+    /// A model with the file's normals needs none: its tiles carry them.
     pub fn for_tile(&self, model: &TileModel, boxes: &Boxes, tile: &Tile, grid: &TileGrid) -> Vec<(u32, [f32; 3])> {
+        if !model.decoded.attributes.normals.is_empty() {
+            return Vec::new();
+        }
         let (c, r) = ((tile.index % grid.cols as usize) as u16, (tile.index / grid.cols as usize) as u16);
         tile.slots
             .iter()

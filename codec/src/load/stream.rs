@@ -82,20 +82,31 @@ pub fn can_stream(path: &Path) -> bool {
 /// before decompression) read so far by this call; for OBJ the count goes up to twice the
 /// file's size.
 pub fn read_positions(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
-    positions_of(Input::file(path), streamed_format(path)?, progress)
+    Ok(vertices_of(Input::file(path), streamed_format(path)?, progress)?.positions)
 }
 
-fn positions_of(input: Input, format: Format, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+/// Pass 1 with the vertices' colours and normals where the file has them: a mesh without
+/// triangles, positions as [`read_positions`] gives them.
+pub fn read_vertices(path: &Path, progress: &mut dyn FnMut(u64)) -> Result<Mesh, LoadError> {
+    vertices_of(Input::file(path), streamed_format(path)?, progress)
+}
+
+fn vertices_of(input: Input, format: Format, progress: &mut dyn FnMut(u64)) -> Result<Mesh, LoadError> {
     match format {
         Format::Ply => {
-            let positions = ply::positions(input, progress)?;
-            if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-                let what = format!("element 'vertex' {i}: a non-finite coordinate {:?}", positions[i]);
+            let mesh = ply::vertices(input, progress)?;
+            let finite = |p: &[f32; 3]| p.iter().all(|c| c.is_finite());
+            if let Some(i) = mesh.positions.iter().position(|p| !finite(p)) {
+                let what = format!("element 'vertex' {i}: a non-finite coordinate {:?}", mesh.positions[i]);
                 return Err(err(input.path, what));
             }
-            Ok(positions)
+            if let Some(i) = mesh.normals.iter().position(|n| !finite(n)) {
+                let what = format!("element 'vertex' {i}: a non-finite normal {:?}", mesh.normals[i]);
+                return Err(err(input.path, what));
+            }
+            Ok(mesh)
         }
-        _ => obj::positions(input, progress),
+        _ => Ok(Mesh::new(obj::positions(input, progress)?, Vec::new())),
     }
 }
 
@@ -117,19 +128,20 @@ impl<'a> Input<'a> {
 /// positions, the triangles, and the count of skipped points and lines.
 pub(crate) fn load_memory(path: &Path, bytes: &[u8], format: Format) -> Result<(Mesh, u64), LoadError> {
     let input = Input { path, bytes: Some(bytes) };
-    let positions = positions_of(input, format, &mut |_| {})?;
+    let mut mesh = vertices_of(input, format, &mut |_| {})?;
     let mut triangles = Vec::new();
     let counts = triangles_of(
         input,
         format,
-        &positions.as_slice(),
+        &mesh.positions.as_slice(),
         &mut |t| {
             triangles.push(t);
             Ok(())
         },
         &mut |_| {},
     )?;
-    Ok((Mesh::new(positions, triangles), counts.ignored))
+    mesh.triangles = triangles;
+    Ok((mesh, counts.ignored))
 }
 
 /// Pass 2: calls `f` with every triangle, exactly the triangles of `load_path(path)?` in

@@ -61,7 +61,7 @@ use crate::container::{get_varint, put_varint, Format, FormatError};
 use crate::mesh::Quantization;
 
 use super::decode::Decoded;
-use super::format::{check_quantization, put_box, AttributeFlags, Coding, Header, MAGIC};
+use super::format::{check_quantization, put_box, Coding, Header, MAGIC};
 
 mod encode;
 pub mod sort;
@@ -546,13 +546,12 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             let (a, flags) = (&mut out.attributes, d.header.attributes);
             if i == 0 {
                 a.normal_bits = flags.normal_bits;
-                out.header.attributes = AttributeFlags { alpha: false, order: false, ..flags };
+                out.header.attributes.colors = flags.colors;
             }
             if (flags.colors, flags.normal_bits) != (out.header.attributes.colors, a.normal_bits) {
                 return Err(chunk_err(i, "its attributes differ from the first chunk's"));
             }
             a.alpha |= flags.alpha;
-            out.header.attributes.alpha |= flags.alpha;
             a.colors.extend_from_slice(&d.attributes.colors);
             a.normals.extend_from_slice(&d.attributes.normals);
             out.positions.extend_from_slice(&d.positions);
@@ -590,6 +589,11 @@ fn add_chunk_counts(model: &mut Header, chunk: &Header) {
     model.seeds += chunk.seeds;
     model.tail_slots += chunk.tail_slots;
     model.components += chunk.components;
+    // The model has alpha where some chunk has it.
+    let (m, c) = (&mut model.attributes, chunk.attributes);
+    m.colors |= c.colors;
+    m.alpha |= c.alpha;
+    m.normal_bits = m.normal_bits.max(c.normal_bits);
 }
 
 /// Writes a chunked file's header and directory (what precedes the chunks).

@@ -23,6 +23,7 @@ use std::path::Path;
 
 use super::{Emitter, Input, Source};
 use crate::load::{err, LoadError};
+use crate::Mesh;
 
 /// The longest header line read. ply-rs has no limit, but a header line is a keyword and a
 /// few words (or a comment); the limit keeps a binary file that is no PLY from being read
@@ -463,11 +464,71 @@ struct Nothing;
 
 impl Sink for Nothing {}
 
-struct Vertex([f32; 3]);
+/// The values of a vertex record: `x y z`, `red green blue alpha`, `nx ny nz` (see
+/// [`vertex_role`]); colours as the file has them, scaled by [`VertexRoles::scale`].
+type VertexValues = [f32; VALUES];
+const VALUES: usize = 10;
+
+struct Vertex(VertexValues);
 
 impl Sink for Vertex {
     fn axis(&mut self, axis: usize, value: f64) {
         self.0[axis] = value as f32;
+    }
+}
+
+/// A vertex property's place among [`VertexValues`], by its name: the names PLY writers use
+/// (`red` by most, `r` by some, `diffuse_red` by older scanners; `nx` by most, `normal_x` by
+/// a few).
+fn vertex_role(name: &str) -> Option<usize> {
+    Some(match name {
+        "x" => 0,
+        "y" => 1,
+        "z" => 2,
+        "red" | "r" | "diffuse_red" => 3,
+        "green" | "g" | "diffuse_green" => 4,
+        "blue" | "b" | "diffuse_blue" => 5,
+        "alpha" | "a" | "diffuse_alpha" => 6,
+        "nx" | "normal_x" => 7,
+        "ny" | "normal_y" => 8,
+        "nz" | "normal_z" => 9,
+        _ => return None,
+    })
+}
+
+/// Which attributes a `vertex` element has, and how its colour values map to 0..=255: 8-bit
+/// integers as they are, 16-bit ones divided by 257, floats (0 to 1) times 255.
+struct VertexRoles {
+    colors: bool,
+    alpha: bool,
+    normals: bool,
+    scale: [f32; 4],
+}
+
+impl VertexRoles {
+    fn of(e: &Element) -> VertexRoles {
+        let mut found = [None; VALUES];
+        for p in &e.properties {
+            if let (Some(i), Kind::Scalar(ty)) = (vertex_role(&p.name), p.kind) {
+                found[i].get_or_insert(ty);
+            }
+        }
+        let scale = [3, 4, 5, 6].map(|i| match found[i] {
+            Some(ty) if !ty.is_integer() => 255.0,
+            Some(ty) if ty.size() == 2 => 1.0 / 257.0,
+            _ => 1.0,
+        });
+        VertexRoles {
+            colors: found[3..6].iter().all(Option::is_some),
+            alpha: found[6].is_some(),
+            normals: found[7..10].iter().all(Option::is_some),
+            scale,
+        }
+    }
+
+    fn color(&self, v: &VertexValues) -> [u8; 4] {
+        let c = |i: usize| (v[3 + i] * self.scale[i]).round().clamp(0.0, 255.0) as u8;
+        [c(0), c(1), c(2), if self.alpha { c(3) } else { 255 }]
     }
 }
 
@@ -738,17 +799,33 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn vertices(&mut self, e: &Element) -> Result<Vec<[f32; 3]>, LoadError> {
+    /// The `vertex` element's positions, and its colours and normals where it has them.
+    fn vertices(&mut self, e: &Element) -> Result<Mesh, LoadError> {
         // Reserve no more than the file can hold, whatever the header claims.
         let min = e.min_record_bytes(self.ascii());
-        let mut positions =
-            Vec::with_capacity(e.count.min(self.src.size_bound() / min.max(1)).min(MAX_VERTICES) as usize);
-        self.each_vertex(e, &mut |p| positions.push(p))?;
-        Ok(positions)
+        let cap = e.count.min(self.src.size_bound() / min.max(1)).min(MAX_VERTICES) as usize;
+        let roles = VertexRoles::of(e);
+        let mut mesh = Mesh::new(Vec::with_capacity(cap), Vec::new());
+        if roles.colors {
+            mesh.colors.reserve(cap);
+        }
+        if roles.normals {
+            mesh.normals.reserve(cap);
+        }
+        self.each_vertex(e, &mut |v| {
+            mesh.positions.push([v[0], v[1], v[2]]);
+            if roles.colors {
+                mesh.colors.push(roles.color(v));
+            }
+            if roles.normals {
+                mesh.normals.push([v[7], v[8], v[9]]);
+            }
+        })?;
+        Ok(mesh)
     }
 
-    /// The `vertex` element's positions, one by one, in file order.
-    fn each_vertex(&mut self, e: &Element, sink: &mut dyn FnMut([f32; 3])) -> Result<(), LoadError> {
+    /// The `vertex` element's values, one vertex after the other, in file order.
+    fn each_vertex(&mut self, e: &Element, sink: &mut dyn FnMut(&VertexValues)) -> Result<(), LoadError> {
         let path = self.src.path;
         if e.count > MAX_VERTICES {
             let what = format!("element 'vertex' claims {} vertices, more than 32-bit indices address", e.count);
@@ -761,10 +838,8 @@ impl<'a> Reader<'a> {
         let roles: Vec<Role> = e
             .properties
             .iter()
-            .map(|p| match (p.name.as_str(), p.kind) {
-                ("x", Kind::Scalar(_)) => Role::Axis(0),
-                ("y", Kind::Scalar(_)) => Role::Axis(1),
-                ("z", Kind::Scalar(_)) => Role::Axis(2),
+            .map(|p| match (vertex_role(&p.name), p.kind) {
+                (Some(i), Kind::Scalar(_)) => Role::Axis(i),
                 _ => Role::Skip,
             })
             .collect();
@@ -774,14 +849,15 @@ impl<'a> Reader<'a> {
                 done += 1;
                 sink(p)
             })?,
-            _ => self.records(e, &roles, &mut Vertex([0.0; 3]), |v| {
+            _ => self.records(e, &roles, &mut Vertex([0.0; VALUES]), |v| {
                 done += 1;
-                sink(std::mem::take(&mut v.0))
+                sink(&v.0);
+                v.0 = [0.0; VALUES];
             })?,
         }
         // Records without properties, which hold no bytes: ply-rs reads each as (0, 0, 0).
         for _ in done..e.count {
-            sink([0.0; 3]);
+            sink(&[0.0; VALUES]);
         }
         Ok(())
     }
@@ -792,21 +868,22 @@ impl<'a> Reader<'a> {
         e: &Element,
         size: usize,
         roles: &[Role],
-        sink: &mut dyn FnMut([f32; 3]),
+        sink: &mut dyn FnMut(&VertexValues),
     ) -> Result<(), LoadError> {
         let big = self.encoding == Encoding::BigEndian;
-        // Where each coordinate is in a record, and its type.
-        let mut axes: [Option<(usize, Scalar)>; 3] = [None; 3];
+        // Where each value is in a record, and its type.
+        let mut values: Vec<(usize, usize, Scalar)> = Vec::new();
         let mut offset = 0;
         for (p, role) in e.properties.iter().zip(roles) {
             // (Only called for elements without lists.)
             if let Kind::Scalar(ty) = p.kind {
-                if let Role::Axis(axis) = role {
-                    axes[*axis] = Some((offset, ty));
+                if let Role::Axis(i) = role {
+                    values.push((*i, offset, ty));
                 }
                 offset += ty.size();
             }
         }
+        let mut v = [0.0f32; VALUES];
         let mut i = 0;
         while i < e.count {
             if !self.src.ensure(size)? {
@@ -816,11 +893,10 @@ impl<'a> Reader<'a> {
             let unread = self.src.unread();
             let k = ((unread.len() / size) as u64).min(e.count - i) as usize;
             for record in unread[..k * size].chunks_exact(size) {
-                let get = |axis: Option<(usize, Scalar)>| match axis {
-                    Some((at, ty)) => ty.f64_at(&record[at..], big) as f32,
-                    None => 0.0,
-                };
-                sink([get(axes[0]), get(axes[1]), get(axes[2])]);
+                for &(slot, at, ty) in &values {
+                    v[slot] = ty.f64_at(&record[at..], big) as f32;
+                }
+                sink(&v);
             }
             self.src.consume(k * size);
             i += k as u64;
@@ -922,7 +998,7 @@ fn vertex_element(path: &Path, header: &Header) -> Result<usize, LoadError> {
 }
 
 /// Pass 1 for PLY: the `vertex` element, read after the elements before it.
-pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+pub(super) fn vertices(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Mesh, LoadError> {
     let path = input.path;
     let (mut reader, header) = Reader::open(input, progress)?;
     let vertex = vertex_element(path, &header)?;
@@ -946,7 +1022,7 @@ pub(super) fn each_position(
         reader.skip_element(e, true)?;
     }
     let e = &header.elements[vertex];
-    reader.each_vertex(e, sink)?;
+    reader.each_vertex(e, &mut |v| sink([v[0], v[1], v[2]]))?;
     Ok(e.count)
 }
 
