@@ -48,7 +48,53 @@ fn the_hand_made_file_gives_its_triangles() {
             assert!((0..3).all(|k| close(g[k], e[k], 1e-5)), "{name}: {g:?} for {e:?}");
         }
         assert_eq!(l.ignored, 1, "{name}: the LINES primitive");
+        // COLOR_0 of mesh 0 (red, green, blue, white at half alpha) on its three primitives'
+        // corners; white where a primitive has none. Normals: mesh 1 has none, so none.
+        let c = &l.mesh.colors;
+        assert_eq!(c.len(), l.mesh.positions.len(), "{name}");
+        assert_eq!(c[..4], [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [255, 255, 255, 128]], "{name}");
+        assert_eq!(c[4..12], c[..8], "{name}: the strip's and fan's corners");
+        assert!(c[12..].iter().all(|&v| v == [255; 4]), "{name}");
+        assert!(l.mesh.normals.is_empty(), "{name}");
     }
+}
+
+/// NORMAL of every primitive reaches the mesh in world space (the inverse transpose of a
+/// non-uniform scale), and a COLOR_0 of floats in VEC3 is 8-bit RGB with alpha 255.
+#[test]
+fn normals_and_float_colours_are_read_in_world_space() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = Vec::new();
+    for v in [[0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        bin.extend(v.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    let n = [0.6f32, 0.0, 0.8];
+    for _ in 0..3 {
+        bin.extend(n.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    for v in [[1.0f32, 0.5, 0.0], [0.0, 1.0, 0.25], [0.2, 0.2, 0.2]] {
+        bin.extend(v.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    std::fs::write(dir.path().join("t.bin"), &bin).unwrap();
+    let json = r#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"scale": [2, 1, 1], "mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "COLOR_0": 2}}]}],
+        "accessors": [
+          {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+          {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3"},
+          {"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC3"}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36},
+          {"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 72, "byteLength": 36}],
+        "buffers": [{"uri": "t.bin", "byteLength": 108}]}"#;
+    let path = dir.path().join("t.gltf");
+    std::fs::write(&path, json).unwrap();
+    let m = codec::load_path(&path).unwrap();
+    // (0.6, 0, 0.8) under scale (2, 1, 1): (0.3, 0, 0.8), normalized.
+    let l = (0.3f32 * 0.3 + 0.8 * 0.8).sqrt();
+    for got in &m.normals {
+        assert!(close(*got, [0.3 / l, 0.0, 0.8 / l], 1e-6), "{got:?}");
+    }
+    assert_eq!(m.colors, vec![[255, 128, 0, 255], [0, 255, 64, 255], [51, 51, 51, 255]]);
 }
 
 /// Whether `gltf` holds the triangles of `obj`, with the same orientation, corners within

@@ -88,6 +88,7 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
 
     let scene = doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| fail("no scene".into()))?;
     let mut out = Loaded::default();
+    let mut attributes = Attributes::default();
     let mut seen = HashSet::new();
     let mut stack: Vec<(gltf::Node, DMat4)> = scene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
     stack.reverse();
@@ -99,7 +100,7 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
         if let Some(mesh) = node.mesh() {
             for prim in mesh.primitives() {
                 let at = |what: String| fail(format!("mesh {} primitive {}: {what}", mesh.index(), prim.index()));
-                read_primitive(&doc, &prim, &buffers, &world, &mut out).map_err(at)?;
+                read_primitive(&doc, &prim, &buffers, &world, &mut out, &mut attributes).map_err(at)?;
             }
         }
         stack.extend(node.children().collect::<Vec<_>>().into_iter().rev().map(|c| (c, world)));
@@ -107,7 +108,53 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
     if out.mesh.triangles.is_empty() {
         return Err(err(path, super::no_triangles(out.ignored)));
     }
+    // Normals only when every primitive has them (a renderer computes them otherwise);
+    // colours when some primitive has them, white elsewhere (what COLOR_0's absence means).
+    if attributes.every_normal {
+        out.mesh.normals = attributes.normals;
+    }
+    if attributes.some_color {
+        out.mesh.colors = attributes.colors;
+    }
     Ok(out)
+}
+
+/// The normals and colours of the primitives read so far, a value per vertex.
+struct Attributes {
+    normals: Vec<[f32; 3]>,
+    colors: Vec<[u8; 4]>,
+    every_normal: bool,
+    some_color: bool,
+}
+
+impl Default for Attributes {
+    fn default() -> Self {
+        Attributes { normals: Vec::new(), colors: Vec::new(), every_normal: true, some_color: false }
+    }
+}
+
+/// A primitive's `NORMAL` (VEC3) or `COLOR_0` (VEC3 or VEC4) values, if it has them
+/// (Draco-compressed primitives give their positions only).
+fn read_optional(
+    prim: &gltf::Primitive,
+    semantic: Semantic,
+    buffers: &[Vec<u8>],
+    n: usize,
+) -> Result<Option<Vec<[f64; 4]>>, String> {
+    if prim.extension_value("KHR_draco_mesh_compression").is_some() {
+        return Ok(None);
+    }
+    let Some(acc) = prim.get(&semantic) else { return Ok(None) };
+    let comps = match (acc.dimensions(), &semantic) {
+        (Dimensions::Vec3, _) => 3,
+        (Dimensions::Vec4, Semantic::Colors(_)) => 4,
+        _ => return Err(format!("{semantic:?} accessor {} has the wrong type", acc.index())),
+    };
+    if acc.count() != n {
+        return Err(format!("{semantic:?} accessor {} has {} values for {n} vertices", acc.index(), acc.count()));
+    }
+    let flat = read_accessor(&acc, buffers)?;
+    Ok(Some(flat.chunks_exact(comps).map(|c| [c[0], c[1], c[2], if comps == 4 { c[3] } else { 1.0 }]).collect()))
 }
 
 /// Every buffer's bytes: a data URI decoded, a file beside the glTF read, the GLB's binary
@@ -281,6 +328,7 @@ fn read_primitive(
     buffers: &[Vec<u8>],
     world: &DMat4,
     out: &mut Loaded,
+    attributes: &mut Attributes,
 ) -> Result<(), String> {
     let mode = prim.mode();
     if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
@@ -320,8 +368,34 @@ fn read_primitive(
         }
         out.mesh.positions.push(q);
     }
+    // Normals transform by the inverse transpose of the linear part.
+    let linear = DMat3::from_mat4(*world);
+    match read_optional(prim, Semantic::Normals, buffers, n)? {
+        Some(normals) => {
+            let to_world = linear.inverse().transpose();
+            for (k, v) in normals.iter().enumerate() {
+                let m = (to_world * DVec3::new(v[0], v[1], v[2])).normalize_or_zero().to_array().map(|c| c as f32);
+                if !m.iter().all(|c| c.is_finite()) {
+                    return Err(format!("vertex {k}: a non-finite normal {v:?}"));
+                }
+                attributes.normals.push(m);
+            }
+        }
+        None => {
+            attributes.every_normal = false;
+            attributes.normals.resize(out.mesh.positions.len(), [0.0; 3]);
+        }
+    }
+    match read_optional(prim, Semantic::Colors(0), buffers, n)? {
+        Some(colors) => {
+            attributes.some_color = true;
+            let byte = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+            attributes.colors.extend(colors.iter().map(|c| [byte(c[0]), byte(c[1]), byte(c[2]), byte(c[3])]));
+        }
+        None => attributes.colors.resize(out.mesh.positions.len(), [255; 4]),
+    }
     // A negative determinant of the linear part: a mirroring transform.
-    let mirror = DMat3::from_mat4(*world).determinant() < 0.0;
+    let mirror = linear.determinant() < 0.0;
     let mut push = |t: [u32; 3]| {
         let t = t.map(|i| base + i);
         out.mesh.triangles.push(if mirror { [t[0], t[2], t[1]] } else { t });
