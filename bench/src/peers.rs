@@ -69,7 +69,7 @@ pub fn draco_encode_attributes(
                 [0.0, 0.0, 1.0]
             }
         };
-        let bytes: Vec<u8> = normals.iter().flat_map(|n| unit(n)).flat_map(|v| v.to_le_bytes()).collect();
+        let bytes: Vec<u8> = normals.iter().flat_map(unit).flat_map(|v| v.to_le_bytes()).collect();
         normal.buffer_mut().write(0, &bytes);
         normal_id = Some(mesh.add_attribute(normal));
     }

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use codec::load::stream::{for_each_triangle, read_positions};
+use codec::load::stream::{for_each_triangle, read_vertices};
 use codec::load::{load_path_counted, Loaded};
 use codec::Mesh;
 
@@ -30,18 +30,19 @@ fn load(name: &str) -> Result<Loaded, String> {
     }
     // PLY and OBJ stream too, to the same mesh or an error.
     if codec::load::stream::can_stream(&path) {
-        let streamed = read_positions(&path, &mut |_| {}).and_then(|positions| {
+        let streamed = read_vertices(&path, &mut |_| {}).and_then(|mut mesh| {
             let mut triangles = Vec::new();
             let counts = for_each_triangle(
                 &path,
-                &positions,
+                &mesh.positions,
                 &mut |t| {
                     triangles.push(t);
                     Ok(())
                 },
                 &mut |_| {},
             )?;
-            Ok((Mesh::new(positions, triangles), counts.ignored))
+            mesh.triangles = triangles;
+            Ok((mesh, counts.ignored))
         });
         match (&loaded, streamed) {
             (Ok(l), Ok((m, ignored))) => assert_eq!((&l.mesh, l.ignored), (&m, ignored), "{name}: the readers differ"),
@@ -73,8 +74,21 @@ fn every_readable_case_gives_the_square() {
         "stl_binary_header_solid.stl",
     ] {
         let l = load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_eq!(l.mesh, square(), "{name}");
+        let shape = Mesh::new(l.mesh.positions.clone(), l.mesh.triangles.clone());
+        assert_eq!(shape, square(), "{name}");
         assert_eq!(l.ignored, 0, "{name}");
+        match name {
+            "ply_unknown_colours_normals.ply" => {
+                assert_eq!(l.mesh.colors, vec![[255, 128, 0, 255]; 4], "{name}");
+                assert_eq!(l.mesh.normals, vec![[0.0, 0.0, 1.0]; 4], "{name}");
+            }
+            "obj_colours.obj" => {
+                let want = [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [255, 255, 255, 255]];
+                assert_eq!(l.mesh.colors, want, "{name}");
+                assert!(l.mesh.normals.is_empty());
+            }
+            _ => assert!(l.mesh.colors.is_empty() && l.mesh.normals.is_empty(), "{name}"),
+        }
     }
 }
 

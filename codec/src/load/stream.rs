@@ -106,7 +106,7 @@ fn vertices_of(input: Input, format: Format, progress: &mut dyn FnMut(u64)) -> R
             }
             Ok(mesh)
         }
-        _ => Ok(Mesh::new(obj::positions(input, progress)?, Vec::new())),
+        _ => obj::vertices(input, progress),
     }
 }
 
@@ -200,7 +200,7 @@ pub fn for_each_position(
     match streamed_format(path)? {
         Format::Ply => ply::each_position(input, sink, progress),
         _ => {
-            let positions = obj::positions(input, progress)?;
+            let positions = obj::vertices(input, progress)?.positions;
             positions.iter().for_each(|&p| sink(p));
             Ok(positions.len() as u64)
         }

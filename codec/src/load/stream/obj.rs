@@ -24,6 +24,7 @@ use std::str::SplitWhitespace;
 
 use super::{Emitter, Input, Source};
 use crate::load::{err, LoadError};
+use crate::Mesh;
 
 /// "No slot": a file vertex no object has used yet.
 const NONE: u32 = u32::MAX;
@@ -84,7 +85,12 @@ fn floats(words: &mut SplitWhitespace, n: usize) -> bool {
 
 /// The words after `v`: the position (divided by `w` if given) and how many colour values
 /// tobj keeps (those before the first that is not a number).
-fn vertex(mut words: SplitWhitespace) -> Result<([f32; 3], usize), &'static str> {
+fn vertex(words: SplitWhitespace) -> Result<([f32; 3], usize), &'static str> {
+    vertex_colour(words).map(|(p, n, _)| (p, n))
+}
+
+/// [`vertex`] with the colour values themselves (meaningful when all three are numbers).
+fn vertex_colour(mut words: SplitWhitespace) -> Result<([f32; 3], usize, [f32; 3]), &'static str> {
     let mut p = [0.0f32; 3];
     for c in &mut p {
         *c = words.next().and_then(|w| w.parse().ok()).ok_or("a 'v' line needs three numbers")?;
@@ -93,7 +99,7 @@ fn vertex(mut words: SplitWhitespace) -> Result<([f32; 3], usize), &'static str>
         return Err("a 'v' line with a non-finite coordinate");
     }
     let Some(first) = words.next() else {
-        return Ok((p, 0));
+        return Ok((p, 0, [1.0; 3]));
     };
     match (words.next(), words.next()) {
         (None, _) => {
@@ -104,10 +110,12 @@ fn vertex(mut words: SplitWhitespace) -> Result<([f32; 3], usize), &'static str>
             for c in &mut p {
                 *c /= w;
             }
-            Ok((p, 0))
+            Ok((p, 0, [1.0; 3]))
         }
         (Some(second), Some(third)) if words.next().is_none() => {
-            Ok((p, [first, second, third].iter().take_while(|c| c.parse::<f32>().is_ok()).count()))
+            let values = [first, second, third].map(|c| c.parse::<f32>().ok());
+            let n = values.iter().take_while(|c| c.is_some()).count();
+            Ok((p, n, values.map(|c| c.unwrap_or(1.0))))
         }
         _ => Err("a 'v' line needs 3, 4 or 6 values"),
     }
@@ -336,13 +344,16 @@ fn emit(out: &mut Emitter, slots: &mut Slots, corners: &[Corner], line: u64) -> 
 
 /// Pass 1 for OBJ: numbers the slots in one read, then fills them from the `v` lines in a
 /// second.
-pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Vec<[f32; 3]>, LoadError> {
+/// Pass 1 for OBJ: the positions in tobj's order, and their colours where the file has the
+/// `v x y z r g b` extension (values 0 to 1; vertices without them white).
+pub(super) fn vertices(input: Input, progress: &mut dyn FnMut(u64)) -> Result<Mesh, LoadError> {
     let path = input.path;
     let mut slots = Slots::new(true);
     let (counts, read) = scan(input, &mut *progress, &mut slots, None)?;
     let mut older = slots.older.take().unwrap_or_default();
     older.sort_unstable();
     let mut positions = vec![[0.0f32; 3]; slots.next as usize];
+    let mut colors = vec![[255u8; 4]; if counts.colors > 0 { slots.next as usize } else { 0 }];
     let mut base_progress = |n: u64| progress(read + n);
     let mut src = Source::open(input, &mut base_progress)?;
     let (mut line, mut v, mut k, mut line_no) = (Vec::new(), 0usize, 0usize, 0u64);
@@ -356,8 +367,15 @@ pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<V
         if words.next() != Some("v") {
             continue;
         }
-        let (p, _) = vertex(words).map_err(|e| err(path, format!("line {line_no}: {e}")))?;
-        let mut put = |s: u32| positions.get_mut(s as usize).map(|slot| *slot = p).ok_or_else(changed);
+        let (p, n, c) = vertex_colour(words).map_err(|e| err(path, format!("line {line_no}: {e}")))?;
+        let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let c = if n == 3 { [byte(c[0]), byte(c[1]), byte(c[2]), 255] } else { [255; 4] };
+        let mut put = |s: u32| {
+            if let Some(slot) = colors.get_mut(s as usize) {
+                *slot = c;
+            }
+            positions.get_mut(s as usize).map(|slot| *slot = p).ok_or_else(changed)
+        };
         if let Some(&s) = slots.remap.get(v).filter(|&&s| s != NONE) {
             put(s)?;
         }
@@ -367,7 +385,7 @@ pub(super) fn positions(input: Input, progress: &mut dyn FnMut(u64)) -> Result<V
         }
         v += 1;
     }
-    Ok(positions)
+    Ok(Mesh { positions, triangles: Vec::new(), colors, normals: Vec::new() })
 }
 
 /// Pass 2 for OBJ.
