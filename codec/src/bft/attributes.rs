@@ -2,7 +2,7 @@
 //!
 //! Attributes are coded after a stream's connectivity and positions, one value per slot in
 //! slot order, so that every prediction may use the whole decoded connectivity and every
-//! position. The encoder, the decoder and the tile writer share [`encode`] and [`decode`]:
+//! position. The encoder, the decoder and the tile writer share `encode_colors`, `encode_normals` and their decoders:
 //! a tile's attributes are re-coded from the model's decoded values over the tile's own
 //! triangles, exactly as its positions are. A duplicate slot (the encoder's cut at a
 //! non-manifold vertex) codes nothing and takes its source slot's values.
