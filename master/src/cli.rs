@@ -311,6 +311,11 @@ pub struct EncodeArgs {
     /// Drop the file's vertex normals (kept by default; a renderer then computes them).
     #[arg(long)]
     pub no_normals: bool,
+    /// Store the input vertex order, so that `decode` gives every vertex at its input index
+    /// (for per-vertex data kept beside the file); without it `decode` gives the traversal's
+    /// order. `stats` reports its cost in bits per vertex.
+    #[arg(long)]
+    pub keep_order: bool,
 }
 
 /// Flags of `tessera render`.

@@ -111,6 +111,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
             normal_bits: options.normal_bits,
             colors: !options.no_colors,
             normals: !options.no_normals,
+            keep_order: options.keep_order,
         },
         ..Default::default()
     };
@@ -256,6 +257,9 @@ pub struct StatsReport {
     pub normal_bytes: usize,
     pub normal_bits_per_vertex: f64,
     pub normal_bits: u8,
+    /// The stored input vertex order (`encode --keep-order`): bytes and bits per vertex.
+    pub order_bytes: usize,
+    pub order_bits_per_vertex: f64,
 }
 
 impl StatsReport {
@@ -288,6 +292,8 @@ impl StatsReport {
             normal_bytes: s.normal_bytes,
             normal_bits_per_vertex: s.per_vertex(s.normal_bytes),
             normal_bits: h.attributes.normal_bits,
+            order_bytes: s.order_bytes,
+            order_bits_per_vertex: s.per_vertex(s.order_bytes),
         })
     }
 }
@@ -334,6 +340,9 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
                 "  normals        {:>12.2} bits/vertex, octahedral at {} bits ({} bytes)",
                 r.normal_bits_per_vertex, r.normal_bits, r.normal_bytes
             );
+        }
+        if r.order_bytes > 0 {
+            println!("  vertex order   {:>12.2} bits/vertex ({} bytes)", r.order_bits_per_vertex, r.order_bytes);
         }
         println!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64);
     }

@@ -50,9 +50,12 @@ pub struct SlotAttributes {
     /// Octahedral normals per slot, on the grid of `normal_bits`.
     pub normals: Vec<[u16; 2]>,
     pub normal_bits: u8,
+    /// The input vertex index of each slot (`encode --keep-order`), or empty.
+    pub order: Vec<u32>,
 }
 
 impl SlotAttributes {
+    /// Whether there are no colours and no normals (what tiles carry; not the order).
     pub fn is_empty(&self) -> bool {
         self.colors.is_empty() && self.normals.is_empty()
     }
@@ -75,6 +78,7 @@ impl SlotAttributes {
                 slots.iter().map(|&s| self.normals[s as usize]).collect()
             },
             normal_bits: self.normal_bits,
+            order: Vec::new(),
         }
     }
 }
@@ -411,6 +415,60 @@ pub(crate) fn decode_normals(input: &Input, bytes: &[u8], bits: u8) -> Result<Ve
     }
     if dec.overrun() > 0 {
         return Err(BftError::Truncated("normal stream"));
+    }
+    Ok(out)
+}
+
+/// Codes the input vertex index of every slot that is not a duplicate (section `ORDR`,
+/// `encode --keep-order`): each as its difference from the previous one plus one, zigzagged,
+/// through an adaptive Elias-gamma coder, so runs of consecutive indices cost about a bit.
+pub(crate) fn encode_order(values: &[u32], duplicates: &[(u32, u32)]) -> Vec<u8> {
+    let src = sources(values.len(), duplicates);
+    let mut coder = crate::rangecoder::UIntCoder::default();
+    let mut enc = Encoder::new();
+    let mut next = 0i64;
+    for (s, &v) in values.iter().enumerate() {
+        if src[s] as usize == s {
+            let d = v as i64 - next;
+            coder.encode(&mut enc, ((d << 1) ^ (d >> 63)) as u32);
+            next = v as i64 + 1;
+        }
+    }
+    enc.finish()
+}
+
+/// Decodes what [`encode_order`] wrote for `slots` slots; every index must be below `limit`.
+pub(crate) fn decode_order(
+    slots: usize,
+    duplicates: &[(u32, u32)],
+    bytes: &[u8],
+    limit: u32,
+) -> Result<Vec<u32>, BftError> {
+    let src = sources(slots, duplicates);
+    let mut coder = crate::rangecoder::UIntCoder::default();
+    let mut dec = Decoder::new(bytes);
+    let mut out = vec![0u32; slots];
+    let mut next = 0i64;
+    for s in 0..slots {
+        if src[s] as usize != s {
+            out[s] = out[src[s] as usize];
+            continue;
+        }
+        let z = coder.decode(&mut dec).ok_or_else(|| corrupt("bad vertex order code"))? as i64;
+        let v = next + ((z >> 1) ^ -(z & 1));
+        // (A repeated index, which only a forged file has, makes one vertex overwrite another
+        // in `Decoded::to_mesh`; checking for it would cost a table of every input vertex.)
+        if !(0..limit as i64).contains(&v) {
+            return Err(corrupt(format!("vertex order: slot {s} names input vertex {v} of {limit}")));
+        }
+        out[s] = v as u32;
+        next = v + 1;
+        if dec.overrun() > 8 {
+            return Err(BftError::Truncated("vertex order"));
+        }
+    }
+    if dec.overrun() > 0 {
+        return Err(BftError::Truncated("vertex order"));
     }
     Ok(out)
 }

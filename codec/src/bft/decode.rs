@@ -35,8 +35,45 @@ impl Decoded {
     }
 
     /// The decoded mesh with duplicate slots welded back: one vertex per input vertex
-    /// that a triangle used, float positions.
+    /// that a triangle used, float positions, in traversal order; or, for a stream that kept
+    /// the input order (`encode --keep-order`), every input vertex at its input index (those
+    /// no triangle used, which are not stored, at the origin with white and +Z).
     pub fn to_mesh(&self) -> Mesh {
+        let mut mesh = self.to_mesh_traversal();
+        let order = &self.attributes.order;
+        if order.is_empty() {
+            return mesh;
+        }
+        // The welded vertices come in slot order of their first slots: their input indices.
+        let mut duplicate = vec![false; self.positions.len()];
+        for &(d, _) in &self.duplicates {
+            duplicate[d as usize] = true;
+        }
+        let welded: Vec<u32> = (0..self.positions.len()).filter(|&s| !duplicate[s]).map(|s| order[s]).collect();
+        let n = self.header.input_vertices as usize;
+        let mut out = Mesh::new(vec![[0.0; 3]; n], Vec::new());
+        if !mesh.colors.is_empty() {
+            out.colors = vec![[255; 4]; n];
+        }
+        if !mesh.normals.is_empty() {
+            out.normals = vec![[0.0, 0.0, 1.0]; n];
+        }
+        for (k, &i) in welded.iter().enumerate() {
+            let i = i as usize;
+            out.positions[i] = mesh.positions[k];
+            if !out.colors.is_empty() {
+                out.colors[i] = mesh.colors[k];
+            }
+            if !out.normals.is_empty() {
+                out.normals[i] = mesh.normals[k];
+            }
+        }
+        out.triangles =
+            std::mem::take(&mut mesh.triangles).into_iter().map(|t| t.map(|v| welded[v as usize])).collect();
+        out
+    }
+
+    fn to_mesh_traversal(&self) -> Mesh {
         let q = self.quantization();
         let n = self.positions.len();
         let mut target: Vec<u32> = (0..n as u32).collect();
@@ -97,7 +134,7 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
     }
     let parts = format::parse(bytes)?;
     let h = parts.header;
-    let [conn, geom, dup_bytes, loose_bytes, color_bytes, normal_bytes, _order] = parts.sections;
+    let [conn, geom, dup_bytes, loose_bytes, color_bytes, normal_bytes, order_bytes] = parts.sections;
 
     let mut duplicates = Vec::new();
     let mut pos = 0usize;
@@ -136,6 +173,10 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
     }
     if flags.normal_bits > 0 {
         a.normals = attributes::decode_normals(&input, normal_bytes, flags.normal_bits)?;
+    }
+    if flags.order {
+        a.order =
+            attributes::decode_order(decoded.positions.len(), &decoded.duplicates, order_bytes, h.input_vertices)?;
     }
     decoded.attributes = a;
     Ok((decoded, ops))

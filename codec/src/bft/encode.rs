@@ -28,6 +28,9 @@ pub struct EncodeOptions {
     pub colors: bool,
     /// Code the mesh's normals, if it has any.
     pub normals: bool,
+    /// Store each vertex's input index, so that decoding gives the input's vertex order
+    /// (`encode --keep-order`) instead of the traversal's.
+    pub keep_order: bool,
 }
 
 impl Default for EncodeOptions {
@@ -37,6 +40,7 @@ impl Default for EncodeOptions {
             normal_bits: DEFAULT_NORMAL_BITS,
             colors: true,
             normals: true,
+            keep_order: false,
         }
     }
 }
@@ -92,7 +96,7 @@ pub fn encode_with_progress(
     mesh.validate()?;
     let used = mesh.used_vertices();
     let quant = Quantization::fit(&mesh.positions, Some(&used), options.quant_bits)?;
-    encode_quantized(mesh, &used, quant, &options, progress)
+    encode_quantized(mesh, &used, quant, &options, None, progress)
 }
 
 /// As [`encode_with_progress`], on a quantization given by the caller (a chunked file's
@@ -103,6 +107,7 @@ pub(crate) fn encode_quantized(
     used: &[bool],
     quant: Quantization,
     options: &EncodeOptions,
+    input_index: Option<(&[u32], u32)>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Encoded, MeshError> {
     let (colors, normals) = options.coded(mesh);
@@ -137,8 +142,13 @@ pub(crate) fn encode_quantized(
             tr.slot_triangles.push(tri.map(|v| tr.slot_of[v as usize]));
         }
     }
-    let mut flags = AttributeFlags::default();
-    let (mut color_bytes, mut normal_bytes) = (Vec::new(), Vec::new());
+    let mut flags = AttributeFlags { order: options.keep_order, ..Default::default() };
+    let (mut color_bytes, mut normal_bytes, mut order_bytes) = (Vec::new(), Vec::new(), Vec::new());
+    if options.keep_order {
+        let index = |v: u32| input_index.map_or(v, |(g, _)| g[v as usize]);
+        let values: Vec<u32> = tr.vertex_of.iter().map(|&v| index(v)).collect();
+        order_bytes = attributes::encode_order(&values, &tr.dups);
+    }
     if tr.record {
         let slot_q: Vec<[u32; 3]> = tr.vertex_of.iter().map(|&v| tr.q[v as usize]).collect();
         let input = attributes::Input { positions: &slot_q, triangles: &tr.slot_triangles, duplicates: &tr.dups };
@@ -171,7 +181,11 @@ pub(crate) fn encode_quantized(
         *m = quant.min[a] + quant.step * tr.max_q[a] as f32;
     }
     let header = Header {
-        input_vertices: mesh.positions.len() as u32,
+        // A chunk's stream that keeps the order names the whole model's vertices.
+        input_vertices: match input_index {
+            Some((_, n)) if options.keep_order => n,
+            _ => mesh.positions.len() as u32,
+        },
         slots: tr.vertex_of.len() as u32,
         triangles: mesh.triangles.len() as u32,
         loose_triangles: loose_count as u32,
@@ -200,7 +214,8 @@ pub(crate) fn encode_quantized(
     };
     let Traversal { conn, geom, vertex_of, .. } = tr;
     let (conn, geom) = (conn.finish(), geom.finish());
-    let bytes = format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes, &color_bytes, &normal_bytes, &[]]);
+    let bytes =
+        format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes, &color_bytes, &normal_bytes, &order_bytes]);
     Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of })
 }
 

@@ -220,7 +220,8 @@ fn encode_chunk(
         },
         normals: if vertices.normals.is_empty() { Vec::new() } else { pick(&vertices.normals) },
     };
-    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, &mut |_, _| {})?;
+    let input = (&verts[..], vertices.positions.len() as u32);
+    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, Some(input), &mut |_, _| {})?;
     // Decoded again: the stream checks itself, and the normal sums follow the decoded
     // triangle order, which is what a worker sums.
     let d = crate::bft::decode(&enc.bytes).map_err(|e| io::Error::other(format!("a chunk does not decode: {e}")))?;

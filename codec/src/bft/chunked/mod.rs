@@ -547,11 +547,16 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             if i == 0 {
                 a.normal_bits = flags.normal_bits;
                 out.header.attributes.colors = flags.colors;
+                out.header.attributes.order = flags.order;
             }
             if (flags.colors, flags.normal_bits) != (out.header.attributes.colors, a.normal_bits) {
                 return Err(chunk_err(i, "its attributes differ from the first chunk's"));
             }
             a.alpha |= flags.alpha;
+            if flags.order != out.header.attributes.order && i > 0 {
+                return Err(chunk_err(i, "it keeps the input order and the first chunk does not, or the reverse"));
+            }
+            a.order.extend_from_slice(&d.attributes.order);
             a.colors.extend_from_slice(&d.attributes.colors);
             a.normals.extend_from_slice(&d.attributes.normals);
             out.positions.extend_from_slice(&d.positions);
@@ -594,6 +599,7 @@ fn add_chunk_counts(model: &mut Header, chunk: &Header) {
     m.colors |= c.colors;
     m.alpha |= c.alpha;
     m.normal_bits = m.normal_bits.max(c.normal_bits);
+    m.order |= c.order;
 }
 
 /// Writes a chunked file's header and directory (what precedes the chunks).
