@@ -3,11 +3,11 @@
 # bundled model sort-first with `mpirun -np 2` (rank 0 sorts the compressed model into
 # tiles, rank 1 decodes and renders them with wgpu) from a three-quarter view that fills the
 # frame (the bundled cow faces -Z, hence the azimuth), then prints the PNG's path.
-#   scripts/demo.sh [MODEL] [extra tessera render flags...]   (default: assets/spot.obj.gz)
+#   scripts/demo.sh [MODEL] [extra tessera render flags...]   (default: assets/spot_colored.ply.gz, Spot with vertex colours)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh >/dev/null
-model="${1:-assets/spot.obj.gz}"
+model="${1:-assets/spot_colored.ply.gz}"
 shift || true
 out="${TESSERA_OUT:-out}"
 mkdir -p "$out"

@@ -35,9 +35,9 @@ def read_obj(path):
 def colour(p, lo, hi):
     t = [(p[a] - lo[a]) / max(hi[a] - lo[a], 1e-9) for a in range(3)]
     # A sum of a few incommensurate waves: patches where it is high.
-    v = (math.sin(9.1 * t[0] + 2.0 * math.sin(5.3 * t[2]))
-         + math.sin(7.7 * t[1] + 3.1 * t[0]) + math.sin(8.3 * t[2] - 4.2 * t[1]))
-    s = 1.0 / (1.0 + math.exp(-6.0 * (v - 0.6)))  # soft patch edges
+    v = (math.sin(21.1 * t[0] + 2.0 * math.sin(9.3 * t[2]))
+         + math.sin(17.7 * t[1] + 5.1 * t[0]) + math.sin(19.3 * t[2] - 7.2 * t[1]))
+    s = 1.0 / (1.0 + math.exp(-8.0 * (v - 0.9)))  # soft patch edges
     base = (236, 214, 188)
     spot = (46, 38, 34)
     return tuple(int(round(base[c] * (1 - s) + spot[c] * s)) for c in range(3))
