@@ -50,9 +50,12 @@ struct Prepared {
 
 impl Prepared {
     fn new(name: &'static str, mesh: codec::Mesh) -> Prepared {
-        let bft = codec::bft::encode(&mesh, codec::bft::EncodeOptions { quant_bits: QUANT_BITS, ..Default::default() })
-            .unwrap_or_else(|e| panic!("{name}: BFT encode failed: {e}"))
-            .bytes;
+        let bft = codec::bft::encode(
+            &mesh,
+            codec::bft::EncodeOptions { quant_bits: QUANT_BITS, colors: false, normals: false, ..Default::default() },
+        )
+        .unwrap_or_else(|e| panic!("{name}: BFT encode failed: {e}"))
+        .bytes;
         let meshopt = encode_meshopt(&mesh);
         let draco = encode_draco(name, &mesh);
         let draco_triangles = mesh.triangles.iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).count();
@@ -118,7 +121,8 @@ fn bench_mesh(c: &mut Criterion, p: &Prepared) {
     let mut group = c.benchmark_group(format!("encode/{}", p.name));
     group.throughput(Throughput::Elements(triangles));
     group.sampling_mode(SamplingMode::Flat);
-    let options = codec::bft::EncodeOptions { quant_bits: QUANT_BITS, ..Default::default() };
+    let options =
+        codec::bft::EncodeOptions { quant_bits: QUANT_BITS, colors: false, normals: false, ..Default::default() };
     group.bench_function("bft", |b| b.iter(|| codec::bft::encode(black_box(&p.mesh), options).expect("BFT encode")));
     group.finish();
 }
@@ -162,7 +166,8 @@ fn print_summary(p: &Prepared) {
     let bft_t = median_time(|| decode_bft(&p.bft));
     let meshopt_t = median_time(|| decode_meshopt(&p.meshopt));
     let draco_t = median_time(|| decode_draco(&p.draco));
-    let options = codec::bft::EncodeOptions { quant_bits: QUANT_BITS, ..Default::default() };
+    let options =
+        codec::bft::EncodeOptions { quant_bits: QUANT_BITS, colors: false, normals: false, ..Default::default() };
     let encode_t = median_time(|| codec::bft::encode(&p.mesh, options).expect("BFT encode"));
 
     let meshopt_bytes = p.meshopt.bytes();

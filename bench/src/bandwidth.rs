@@ -159,7 +159,9 @@ struct Subject {
 
 impl Subject {
     fn load(path: &Path, quant_bits: u8) -> Result<Subject> {
-        let model = load_model(path, EncodeOptions { quant_bits, ..Default::default() })?;
+        // Positions only, as the peers and the paper's Figure 8 have them.
+        let positions_only = EncodeOptions { quant_bits, colors: false, normals: false, ..Default::default() };
+        let model = load_model(path, positions_only)?;
         let decoded = &model.tiles.decoded;
         let mut source: Vec<u32> = (0..decoded.positions.len() as u32).collect();
         for &(slot, from) in &decoded.duplicates {
@@ -170,7 +172,7 @@ impl Subject {
         let draco = draco_encode(&mesh.positions, &mesh.triangles, decoded.header.quant_bits)
             .with_context(|| format!("Draco cannot encode {}", path.display()))?;
         let input = codec::load_path(path)?;
-        let opts = ChunkOptions { quant_bits, ..Default::default() };
+        let opts = ChunkOptions { quant_bits, stream: positions_only, ..Default::default() };
         let (bytes, _) =
             encode_mesh_chunked(&input, &opts).with_context(|| format!("cannot chunk {}", path.display()))?;
         let chunked = if codec::bft::chunked::is_chunked(&bytes) {
