@@ -179,3 +179,81 @@ fn glb_is_recognised_by_content_and_corrupt_files_get_one_line() {
         }
     }
 }
+
+/// A GLB whose one primitive is Draco-compressed with `NORMAL` and `COLOR_0` (written here
+/// with draco-core's encoder): its normals and colours load as an uncompressed file's do.
+#[test]
+fn draco_compressed_normals_and_colours_load() {
+    use draco_core::{DataType, EncoderBuffer, EncoderOptions, GeometryAttributeType, MeshEncoder, PointAttribute};
+    let positions = [[0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let normals = [[0f32, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.6, 0.8], [0.0, 0.0, 1.0]];
+    let colors = [[255u8, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [10, 20, 30, 40]];
+    let mut mesh = draco_core::Mesh::new();
+    let mut add = |ty, comps: u8, data_type, normalized, bytes: Vec<u8>| {
+        let mut a = PointAttribute::new();
+        a.init(ty, comps, data_type, normalized, 4);
+        a.buffer_mut().write(0, &bytes);
+        mesh.add_attribute(a)
+    };
+    let floats = |v: &[[f32; 3]]| v.iter().flatten().flat_map(|c| c.to_le_bytes()).collect::<Vec<u8>>();
+    let p = add(GeometryAttributeType::Position, 3, DataType::Float32, false, floats(&positions));
+    let n = add(GeometryAttributeType::Normal, 3, DataType::Float32, false, floats(&normals));
+    let c = add(GeometryAttributeType::Color, 4, DataType::Uint8, true, colors.concat());
+    mesh.set_num_faces(2);
+    mesh.set_faces_from_flat_indices(&[0, 1, 2, 0, 2, 3]);
+    let mut options = EncoderOptions::new();
+    options.set_attribute_quantization(p, 14);
+    options.set_attribute_quantization(n, 12);
+    let mut encoder = MeshEncoder::new();
+    encoder.set_mesh(mesh);
+    let mut out = EncoderBuffer::new();
+    encoder.encode(&options, &mut out).unwrap();
+    let mut bin = out.data().to_vec();
+    let draco_len = bin.len();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let ids = (p, n, c);
+    let json = format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+        "extensionsUsed": ["KHR_draco_mesh_compression"], "extensionsRequired": ["KHR_draco_mesh_compression"],
+        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "NORMAL": 1, "COLOR_0": 2}}, "indices": 3,
+          "extensions": {{"KHR_draco_mesh_compression": {{"bufferView": 0,
+            "attributes": {{"POSITION": {}, "NORMAL": {}, "COLOR_0": {}}}}}}}}}]}}],
+        "accessors": [
+          {{"componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+          {{"componentType": 5126, "count": 4, "type": "VEC3"}},
+          {{"componentType": 5121, "normalized": true, "count": 4, "type": "VEC4"}},
+          {{"componentType": 5125, "count": 6, "type": "SCALAR"}}],
+        "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": {draco_len}}}],
+        "buffers": [{{"byteLength": {}}}]}}"#,
+        ids.0,
+        ids.1,
+        ids.2,
+        bin.len()
+    );
+    let mut json = json.into_bytes();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let mut glb = b"glTF".to_vec();
+    glb.extend(2u32.to_le_bytes());
+    glb.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend((json.len() as u32).to_le_bytes());
+    glb.extend(b"JSON");
+    glb.extend(&json);
+    glb.extend((bin.len() as u32).to_le_bytes());
+    glb.extend(b"BIN\0");
+    glb.extend(&bin);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("draco.glb");
+    std::fs::write(&path, &glb).unwrap();
+    let m = codec::load_path(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(m.triangles.len(), 2);
+    // Draco may reorder the points: match each loaded vertex to its input by position.
+    for (k, q) in m.positions.iter().enumerate() {
+        let i = positions.iter().position(|p| close(*p, *q, 1e-3)).expect("a position of the input");
+        assert!(close(m.normals[k], normals[i], 2e-3), "{:?} for {:?}", m.normals[k], normals[i]);
+        assert_eq!(m.colors[k], colors[i]);
+    }
+}

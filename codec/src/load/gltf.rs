@@ -133,17 +133,13 @@ impl Default for Attributes {
     }
 }
 
-/// A primitive's `NORMAL` (VEC3) or `COLOR_0` (VEC3 or VEC4) values, if it has them
-/// (Draco-compressed primitives give their positions only).
+/// A primitive's `NORMAL` (VEC3) or `COLOR_0` (VEC3 or VEC4) values, if it has them.
 fn read_optional(
     prim: &gltf::Primitive,
     semantic: Semantic,
     buffers: &[Vec<u8>],
     n: usize,
 ) -> Result<Option<Vec<[f64; 4]>>, String> {
-    if prim.extension_value("KHR_draco_mesh_compression").is_some() {
-        return Ok(None);
-    }
     let Some(acc) = prim.get(&semantic) else { return Ok(None) };
     let comps = match (acc.dimensions(), &semantic) {
         (Dimensions::Vec3, _) => 3,
@@ -335,8 +331,11 @@ fn read_primitive(
         out.ignored += 1;
         return Ok(());
     }
+    let mut draco_attributes = None;
     let (positions, indices) = if let Some(draco) = prim.extension_value("KHR_draco_mesh_compression") {
-        read_draco(draco, doc, buffers)?
+        let (positions, indices, normals, colors) = read_draco(draco, doc, buffers)?;
+        draco_attributes = Some((normals, colors));
+        (positions, indices)
     } else {
         let acc = prim.get(&Semantic::Positions).ok_or("no POSITION attribute")?;
         if acc.dimensions() != Dimensions::Vec3 {
@@ -370,7 +369,13 @@ fn read_primitive(
     }
     // Normals transform by the inverse transpose of the linear part.
     let linear = DMat3::from_mat4(*world);
-    match read_optional(prim, Semantic::Normals, buffers, n)? {
+    let (normals, colors) = match draco_attributes {
+        Some(found) => found,
+        None => {
+            (read_optional(prim, Semantic::Normals, buffers, n)?, read_optional(prim, Semantic::Colors(0), buffers, n)?)
+        }
+    };
+    match normals {
         Some(normals) => {
             let to_world = linear.inverse().transpose();
             for (k, v) in normals.iter().enumerate() {
@@ -386,7 +391,7 @@ fn read_primitive(
             attributes.normals.resize(out.mesh.positions.len(), [0.0; 3]);
         }
     }
-    match read_optional(prim, Semantic::Colors(0), buffers, n)? {
+    match colors {
         Some(colors) => {
             attributes.some_color = true;
             let byte = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
@@ -417,12 +422,17 @@ fn read_primitive(
     Ok(())
 }
 
-/// A Draco-compressed primitive's positions and corner indices.
+/// A Draco-compressed primitive's values: `NORMAL` or `COLOR_0` as [`read_optional`] gives
+/// them (integers scaled to 0..1 where Draco marks them normalized).
+type Values = Option<Vec<[f64; 4]>>;
+
+/// A Draco-compressed primitive's positions and corner indices, and its normals and colours
+/// where the stream has them.
 fn read_draco(
     ext: &gltf::json::Value,
     doc: &gltf::Document,
     buffers: &[Vec<u8>],
-) -> Result<(Vec<[f64; 3]>, Vec<u32>), String> {
+) -> Result<(Vec<[f64; 3]>, Vec<u32>, Values, Values), String> {
     let fail = |what: &str| format!("KHR_draco_mesh_compression: {what}");
     let view_index = ext.get("bufferView").and_then(|v| v.as_u64()).ok_or_else(|| fail("no bufferView"))? as usize;
     let unique = ext
@@ -443,7 +453,28 @@ fn read_draco(
     let flat = attr.read_f32s(mesh.num_points(), 3);
     let positions = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]].map(f64::from)).collect();
     let indices = mesh.faces().iter().flat_map(|f| f.map(|p| p.0)).collect();
-    Ok((positions, indices))
+    let optional = |name: &str, colour: bool| -> Result<Values, String> {
+        let Some(id) = ext.get("attributes").and_then(|a| a.get(name)).and_then(|v| v.as_u64()) else {
+            return Ok(None);
+        };
+        let attr = mesh.attribute_by_unique_id(id as u32).ok_or_else(|| fail(&format!("the stream has no {name}")))?;
+        let comps = attr.num_components() as usize;
+        if !(comps == 3 || (colour && comps == 4)) {
+            return Err(fail(&format!("{name} has {comps} components")));
+        }
+        let scale = match (attr.normalized(), attr.data_type()) {
+            (true, draco_core::DataType::Uint8) => 1.0 / 255.0,
+            (true, draco_core::DataType::Uint16) => 1.0 / 65535.0,
+            _ => 1.0,
+        };
+        let flat = attr.read_f32s(mesh.num_points(), comps);
+        let value = |c: &[f32]| {
+            let v = |i: usize| f64::from(c[i]) * scale;
+            [v(0), v(1), v(2), if comps == 4 { v(3) } else { 1.0 }]
+        };
+        Ok(Some(flat.chunks_exact(comps).map(value).collect()))
+    };
+    Ok((positions, indices, optional("NORMAL", false)?, optional("COLOR_0", true)?))
 }
 
 /// The bytes of a buffer view, checked against its buffer.
