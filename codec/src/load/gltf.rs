@@ -333,9 +333,9 @@ fn read_primitive(
     }
     let mut draco_attributes = None;
     let (positions, indices) = if let Some(draco) = prim.extension_value("KHR_draco_mesh_compression") {
-        let (positions, indices, normals, colors) = read_draco(draco, doc, buffers)?;
-        draco_attributes = Some((normals, colors));
-        (positions, indices)
+        let d = read_draco(draco, doc, buffers)?;
+        draco_attributes = Some((d.normals, d.colors));
+        (d.positions, d.indices)
     } else {
         let acc = prim.get(&Semantic::Positions).ok_or("no POSITION attribute")?;
         if acc.dimensions() != Dimensions::Vec3 {
@@ -426,13 +426,17 @@ fn read_primitive(
 /// them (integers scaled to 0..1 where Draco marks them normalized).
 type Values = Option<Vec<[f64; 4]>>;
 
+/// What [`read_draco`] reads.
+struct DracoPrimitive {
+    positions: Vec<[f64; 3]>,
+    indices: Vec<u32>,
+    normals: Values,
+    colors: Values,
+}
+
 /// A Draco-compressed primitive's positions and corner indices, and its normals and colours
 /// where the stream has them.
-fn read_draco(
-    ext: &gltf::json::Value,
-    doc: &gltf::Document,
-    buffers: &[Vec<u8>],
-) -> Result<(Vec<[f64; 3]>, Vec<u32>, Values, Values), String> {
+fn read_draco(ext: &gltf::json::Value, doc: &gltf::Document, buffers: &[Vec<u8>]) -> Result<DracoPrimitive, String> {
     let fail = |what: &str| format!("KHR_draco_mesh_compression: {what}");
     let view_index = ext.get("bufferView").and_then(|v| v.as_u64()).ok_or_else(|| fail("no bufferView"))? as usize;
     let unique = ext
@@ -474,7 +478,7 @@ fn read_draco(
         };
         Ok(Some(flat.chunks_exact(comps).map(value).collect()))
     };
-    Ok((positions, indices, optional("NORMAL", false)?, optional("COLOR_0", true)?))
+    Ok(DracoPrimitive { positions, indices, normals: optional("NORMAL", false)?, colors: optional("COLOR_0", true)? })
 }
 
 /// The bytes of a buffer view, checked against its buffer.
