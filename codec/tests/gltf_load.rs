@@ -210,7 +210,7 @@ fn draco_compressed_normals_and_colours_load() {
     encoder.encode(&options, &mut out).unwrap();
     let mut bin = out.data().to_vec();
     let draco_len = bin.len();
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let ids = (p, n, c);
@@ -233,7 +233,7 @@ fn draco_compressed_normals_and_colours_load() {
         bin.len()
     );
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut glb = b"glTF".to_vec();
