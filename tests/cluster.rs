@@ -688,3 +688,263 @@ fn pipelined_frames_equal_unpipelined_frames() {
         assert!(!identical(&frames[1][0], &frames[1][2]), "{model}");
     }
 }
+
+/// The stats' timelines: on one machine (one clock) each frame's stages follow one another
+/// on rank 0, every worker works on a frame between rank 0's sending it and receiving its
+/// pixels, and with frames in flight rank 0 sorts a frame before the one before is back.
+/// `tessera plot` draws them: one row per rank and one for rank 0's writer.
+#[test]
+fn timelines_order_the_stages_and_plot_draws_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = mesh("stanford/bunny_oded_6k.obj");
+    let (out, stats) = (dir.path().join("t.png"), dir.path().join("t.jsonl"));
+    let args = [
+        "render",
+        bunny.as_str(),
+        "--size",
+        "160x120",
+        "--tiles",
+        "4x3",
+        "--frames",
+        "4",
+        "--orbit",
+        "--frames-in-flight",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ];
+    ok(&mpirun(3, &[], &args));
+    let lines: Vec<serde_json::Value> =
+        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let span = |line: &serde_json::Value, stage: &str| -> (f64, f64) {
+        let s = line["timeline"].as_array().unwrap().iter().find(|s| s["stage"] == stage);
+        let s = s.unwrap_or_else(|| panic!("no {stage} in {line}"));
+        (s["start_ms"].as_f64().unwrap(), s["end_ms"].as_f64().unwrap())
+    };
+    // Clocks read by different calls: allow a millisecond.
+    let eps = 1.0;
+    let master: Vec<&serde_json::Value> = lines.iter().filter(|l| l["rank"] == 0).collect();
+    assert_eq!(master.len(), 4);
+    for m in &master {
+        let (sort, send, receive, write) = (span(m, "sort"), span(m, "send"), span(m, "receive"), span(m, "write"));
+        assert!(sort.0 >= 0.0 && sort.0 <= sort.1 && sort.1 <= send.0 + eps, "{m}");
+        assert!(send.1 <= receive.1 + eps && receive.1 <= write.0 + eps && write.0 <= write.1, "{m}");
+        let workers: Vec<&serde_json::Value> =
+            lines.iter().filter(|l| l["rank"] != 0 && l["frame"] == m["frame"]).collect();
+        assert_eq!(workers.len(), 2, "two workers answer frame {}", m["frame"]);
+        for w in workers {
+            let (decode, render) = (span(w, "decode"), span(w, "render"));
+            assert!(decode.0 + eps >= send.0 && decode.1 <= render.0 + eps, "{w} after {m}");
+            assert!(render.1 <= receive.1 + eps, "{w} before {m}'s pixels are in");
+        }
+    }
+    // Pipelined: frame 1 is sorted before frame 0's pixels are all in.
+    assert!(span(master[1], "sort").0 < span(master[0], "receive").1, "{} {}", master[0], master[1]);
+
+    let png = dir.path().join("timeline.png");
+    ok(&alone(&["plot", stats.to_str().unwrap(), "-o", png.to_str().unwrap(), "--width", "900"]));
+    // Rows: rank 0, its writer, ranks 1 and 2.
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (900, master::plot::Timeline::height(4)));
+    let bad = alone(&["plot", &bunny, "-o", png.to_str().unwrap()]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("line 1") && err.lines().count() == 1, "{err}");
+}
+
+fn vec3(v: glam::Vec3) -> String {
+    format!("{},{},{}", v.x, v.y, v.z)
+}
+
+/// `--stereo`: each eye equals a mono render from that eye with the same off-axis frustum
+/// (the camera flags built by [`codec::view::Camera::stereo_eye`]); the two eyes differ;
+/// side by side is the left eye beside the right, under mpirun too.
+#[test]
+fn stereo_eyes_equal_mono_renders_of_their_frusta() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let (eye, target) = (glam::Vec3::new(1.2, 0.8, 2.6), glam::Vec3::new(0.0, 0.4, 0.0));
+    let (near, far) = ("0.5", "10");
+    let base = [
+        "--size",
+        "96x64",
+        "--tiles",
+        "3x2",
+        "--eye",
+        &vec3(eye),
+        "--target",
+        &vec3(target),
+        "--near",
+        near,
+        "--far",
+        far,
+    ];
+    let out = dir.path().join("s.png");
+    let run = |extra: &[&str], out: &Path| {
+        let mut args = vec!["render", model.as_str()];
+        args.extend(base);
+        args.extend(extra);
+        args.extend(["--out", out.to_str().unwrap()]);
+        ok(&alone(&args));
+    };
+    run(&["--stereo", "0.3"], &out);
+    let cam = codec::view::Camera {
+        eye,
+        target,
+        up: glam::Vec3::Y,
+        fovy: codec::view::Camera::DEFAULT_FOVY,
+        near: 0.5,
+        far: 10.0,
+        shift: [0.0; 2],
+    };
+    for (name, offset) in [("left", -0.15f32), ("right", 0.15)] {
+        let e = cam.stereo_eye(offset, eye.distance(target), 96.0 / 64.0);
+        let mono = dir.path().join(format!("mono-{name}.png"));
+        let mut args =
+            vec!["render", model.as_str(), "--size", "96x64", "--tiles", "1x1", "--near", near, "--far", far];
+        let (ev, tv, sv) = (vec3(e.eye), vec3(e.target), format!("{},{}", e.shift[0], e.shift[1]));
+        args.extend(["--eye", &ev, "--target", &tv, "--shift", &sv, "--out", mono.to_str().unwrap()]);
+        ok(&alone(&args));
+        let stereo = dir.path().join(format!("s-{name}.png"));
+        assert!(covered(&stereo) > 300, "{name} shows the model");
+        assert!(identical(&stereo, &mono), "the {name} eye equals its mono render");
+    }
+    assert!(!identical(&dir.path().join("s-left.png"), &dir.path().join("s-right.png")));
+    let sbs = dir.path().join("sbs.png");
+    let args = [
+        &["render", model.as_str()][..],
+        &base,
+        &["--stereo", "0.3", "--stereo-output", "side-by-side", "--out", sbs.to_str().unwrap()],
+    ]
+    .concat();
+    ok(&mpirun(3, &[], &args));
+    let ((w, h, both), (_, _, l), (_, _, r)) =
+        (pixels(&sbs), pixels(&dir.path().join("s-left.png")), pixels(&dir.path().join("s-right.png")));
+    assert_eq!((w, h), (192, 64));
+    for y in 0..64usize {
+        assert_eq!(&both[y * 768..y * 768 + 384], &l[y * 384..(y + 1) * 384], "left half, row {y}");
+        assert_eq!(&both[y * 768 + 384..(y + 1) * 768], &r[y * 384..(y + 1) * 384], "right half, row {y}");
+    }
+}
+
+/// A wall of listed displays placed in the world, head tracked along `--eye-path`: every
+/// display of every frame equals the crop of one mono render with the wall's off-axis
+/// frustum from that frame's eye (the flags from [`master::composite::Wall::camera_args`]),
+/// under `mpirun -np 3`; the picture moves as the eye does.
+#[test]
+fn a_head_tracked_wall_shows_each_eyes_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let text =
+        "[plane]\nbottom_left = [-0.9, -0.6, 0.6]\nbottom_right = [0.9, -0.6, 0.6]\ntop_left = [-0.9, 0.6, 0.6]\n\
+                [[display]]\nname = \"left\"\nx = 6\ny = 10\nwidth = 48\nheight = 64\nbezel = 4\n\
+                [[display]]\nname = \"right\"\nx = 66\ny = 4\nwidth = 48\nheight = 40\nbezel = [4, 4, 6, 36]\n";
+    let wall_path = dir.path().join("wall.toml");
+    std::fs::write(&wall_path, text).unwrap();
+    let wall = master::composite::Wall::parse(text).unwrap();
+    assert_eq!(wall.frame_size(), (120, 80));
+    let eyes = [glam::Vec3::new(0.0, 0.0, 2.5), glam::Vec3::new(0.7, 0.5, 2.0)];
+    let eye_path = dir.path().join("eyes.txt");
+    std::fs::write(
+        &eye_path,
+        format!("# x y z\n{} {} {}\n{},{},{}\n", eyes[0].x, eyes[0].y, eyes[0].z, eyes[1].x, eyes[1].y, eyes[1].z),
+    )
+    .unwrap();
+    let out = dir.path().join("w.png");
+    let args = [
+        "render",
+        model.as_str(),
+        "--wall",
+        wall_path.to_str().unwrap(),
+        "--eye-path",
+        eye_path.to_str().unwrap(),
+        "--frames",
+        "2",
+        "--tiles",
+        "4x2",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    ok(&mpirun(3, &[], &args));
+    for (k, &eye) in eyes.iter().enumerate() {
+        let a = wall.camera_args(&Default::default(), eye).unwrap();
+        let whole = dir.path().join(format!("whole{k}.png"));
+        let (ev, tv, uv) = (vec3(eye), vec3(a.target.unwrap()), vec3(a.up.unwrap()));
+        let (fv, sv) = (a.fovy.unwrap().to_string(), format!("{},{}", a.shift.unwrap()[0], a.shift.unwrap()[1]));
+        ok(&alone(&[
+            "render",
+            &model,
+            "--size",
+            "120x80",
+            "--tiles",
+            "1x1",
+            "--eye",
+            &ev,
+            "--target",
+            &tv,
+            "--up",
+            &uv,
+            "--fovy",
+            &fv,
+            "--shift",
+            &sv,
+            "--out",
+            whole.to_str().unwrap(),
+        ]));
+        let (_, _, full) = pixels(&whole);
+        for d in &wall.displays {
+            let shown = dir.path().join(format!("w-{:04}-display-{}.png", k + 1, d.name));
+            let (dw, dh, px) = pixels(&shown);
+            let [x0, y0, x1, y1] = d.rect;
+            assert_eq!((dw, dh), (x1 - x0, y1 - y0));
+            for y in 0..dh {
+                let at = (((y0 + y) * 120 + x0) * 4) as usize;
+                let row = &px[(y * dw * 4) as usize..((y + 1) * dw * 4) as usize];
+                assert_eq!(row, &full[at..at + (dw * 4) as usize], "frame {k}, display {}, row {y}", d.name);
+            }
+        }
+        assert!(covered(&dir.path().join(format!("w-{:04}-display-left.png", k + 1))) > 100, "frame {k}");
+    }
+    let displays = |k: u32| pixels(&dir.path().join(format!("w-{k:04}-display-left.png"))).2;
+    assert_ne!(displays(1), displays(2), "the picture moves with the eye");
+    // An eye behind the wall is named with its line.
+    std::fs::write(&eye_path, "0 0 3\n0 0 -2\n").unwrap();
+    let bad = alone(&args);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("eyes.txt: line 2") && err.contains("not in front of the wall"), "{err}");
+}
+
+/// Sixteen workers (`mpirun --oversubscribe -np 17`): a 64-tile frame equals the
+/// single-process frame, and a wall of 16 displays shows its crops of it.
+#[test]
+fn sixteen_workers_on_64_tiles_and_16_displays() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let reference = reference(&model, "128x96", dir.path());
+    assert!(covered(&reference) > 1000);
+    let out = dir.path().join("np17.png");
+    ok(&mpirun(17, &[], &["render", &model, "--size", "128x96", "--tiles", "8x8", "--out", out.to_str().unwrap()]));
+    assert!(identical(&out, &reference), "-np 17, 8x8 tiles");
+    let wall = dir.path().join("wall16.toml");
+    std::fs::write(&wall, "columns = 4\nrows = 4\ndisplay_width = 32\ndisplay_height = 24\n").unwrap();
+    let walled = dir.path().join("wall.png");
+    let args =
+        ["render", &model, "--wall", wall.to_str().unwrap(), "--tiles", "8x4", "--out", walled.to_str().unwrap()];
+    ok(&mpirun(17, &[], &args));
+    assert!(identical(&walled, &reference), "the overview of a bezel-less wall is the frame");
+    let (_, _, full) = pixels(&reference);
+    for r in 0..4u32 {
+        for c in 0..4u32 {
+            let (dw, dh, d) = pixels(&dir.path().join(format!("wall-display-{c}-{r}.png")));
+            assert_eq!((dw, dh), (32, 24));
+            for y in 0..24 {
+                let at = (((r * 24 + y) * 128 + c * 32) * 4) as usize;
+                assert_eq!(&d[(y * 128) as usize..((y + 1) * 128) as usize], &full[at..at + 128], "display {c},{r}");
+            }
+        }
+    }
+}

@@ -43,6 +43,13 @@ pub struct Camera {
     pub fovy: f32,
     pub near: f32,
     pub far: f32,
+    /// Lens shift in normalised device coordinates: the image window moves by `shift[0]`
+    /// half-widths right and `shift[1]` half-heights up, the eye and view direction staying,
+    /// which makes the frustum off-axis (asymmetric). Any off-axis frustum (a wall display
+    /// seen from a tracked eye, a stereo eye converging on a focal plane) is a symmetric one
+    /// of the same vertical extent and aspect looking perpendicular to the image plane, so
+    /// shifted. Zero for an ordinary camera.
+    pub shift: [f32; 2],
 }
 
 impl Camera {
@@ -64,6 +71,7 @@ impl Camera {
             fovy: Self::DEFAULT_FOVY,
             near: (dist - radius) * 0.5,
             far: dist + radius * 2.0,
+            shift: [0.0; 2],
         }
     }
 
@@ -137,12 +145,13 @@ impl Camera {
             fovy: Self::DEFAULT_FOVY,
             near: (nearest * 0.5).max(radius * 1e-3),
             far: farthest * 1.5 + radius * 1e-3,
+            shift: [0.0; 2],
         }
     }
 
     pub fn validate(&self) -> Result<(), ViewError> {
         let vals = [self.eye.to_array(), self.target.to_array(), self.up.to_array()];
-        if !vals.iter().flatten().chain(&[self.fovy, self.near, self.far]).all(|v| v.is_finite()) {
+        if !vals.iter().flatten().chain(&[self.fovy, self.near, self.far]).chain(&self.shift).all(|v| v.is_finite()) {
             return Err(ViewError::NonFinite);
         }
         let dir = self.target - self.eye;
@@ -162,8 +171,31 @@ impl Camera {
     }
 
     pub fn view_proj(&self, aspect: f32) -> Mat4 {
-        Mat4::perspective_rh(self.fovy.to_radians(), aspect, self.near, self.far)
+        // The shift moves clip x by -shift_x * w (so NDC x by -shift_x): the window's centre
+        // comes to the screen's.
+        let shift = Mat4::from_translation(Vec3::new(-self.shift[0], -self.shift[1], 0.0));
+        shift
+            * Mat4::perspective_rh(self.fovy.to_radians(), aspect, self.near, self.far)
             * Mat4::look_at_rh(self.eye, self.target, self.up)
+    }
+
+    /// The eye `offset` world units along the camera's right axis, looking parallel to this
+    /// one, with its window shifted so that its frustum meets this camera's at the plane
+    /// `focus` units ahead (the target's distance for a stereo pair converging on it): the
+    /// left eye of a pair `separation` apart is `stereo_eye(-separation / 2, ...)`.
+    pub fn stereo_eye(&self, offset: f32, focus: f32, aspect: f32) -> Camera {
+        let dir = (self.target - self.eye).normalize();
+        let right = dir.cross(self.up).normalize();
+        let half_width = focus * (self.fovy.to_radians() * 0.5).tan() * aspect;
+        // A point on the focal plane straight ahead of this camera lies `-offset` to the
+        // eye's right, at NDC x = -offset / half_width; the shift brings it back to where
+        // this camera sees it.
+        Camera {
+            eye: self.eye + right * offset,
+            target: self.target + right * offset,
+            shift: [self.shift[0] - offset / half_width, self.shift[1]],
+            ..*self
+        }
     }
 }
 
@@ -619,12 +651,78 @@ mod tests {
         }
     }
 
+    fn ndc(cam: &Camera, aspect: f32, p: Vec3) -> Vec3 {
+        let c = cam.view_proj(aspect) * p.extend(1.0);
+        c.truncate() / c.w
+    }
+
+    /// A shift moves the picture, not the eye: NDC positions move by exactly the shift.
+    #[test]
+    fn a_shift_moves_the_window() {
+        let cam = Camera {
+            eye: Vec3::ZERO,
+            target: -Vec3::Z,
+            up: Vec3::Y,
+            fovy: 60.0,
+            near: 0.5,
+            far: 50.0,
+            shift: [0.0; 2],
+        };
+        let shifted = Camera { shift: [0.25, -0.5], ..cam };
+        for p in [Vec3::new(0.3, -0.2, -4.0), Vec3::new(-1.0, 2.0, -9.0)] {
+            let (a, b) = (ndc(&cam, 1.5, p), ndc(&shifted, 1.5, p));
+            assert!((b - a - Vec3::new(-0.25, 0.5, 0.0)).abs().max_element() < 1e-5, "{a} {b}");
+        }
+        assert_eq!(Camera { shift: [f32::NAN, 0.0], ..cam }.validate(), Err(ViewError::NonFinite));
+    }
+
+    /// Stereo eyes converge on the focal plane: a point on it projects where the centre
+    /// camera sees it for both eyes; a point beyond it has positive parallax (further right
+    /// in the right eye), one before it negative.
+    #[test]
+    fn stereo_eyes_meet_on_the_focal_plane() {
+        let cam = Camera {
+            eye: Vec3::new(1.0, 2.0, 8.0),
+            target: Vec3::new(0.5, 0.0, 0.0),
+            up: Vec3::Y,
+            fovy: 50.0,
+            near: 0.5,
+            far: 50.0,
+            shift: [0.1, 0.0],
+        };
+        let aspect = 16.0 / 9.0;
+        let dir = (cam.target - cam.eye).normalize();
+        let focus = cam.eye.distance(cam.target);
+        let (left, right) = (cam.stereo_eye(-0.2, focus, aspect), cam.stereo_eye(0.2, focus, aspect));
+        assert!((left.eye.distance(right.eye) - 0.4).abs() < 1e-5);
+        let side = dir.cross(Vec3::Y).normalize();
+        let up = side.cross(dir);
+        for (x, y) in [(0.0, 0.0), (1.0, -0.5), (-2.0, 1.0)] {
+            let on = cam.eye + dir * focus + side * x + up * y;
+            let (c, l, r) = (ndc(&cam, aspect, on), ndc(&left, aspect, on), ndc(&right, aspect, on));
+            assert!((l.truncate() - c.truncate()).abs().max_element() < 1e-4, "{c} {l}");
+            assert!((r.truncate() - c.truncate()).abs().max_element() < 1e-4, "{c} {r}");
+            let far = cam.eye + (on - cam.eye) * 2.0;
+            assert!(ndc(&right, aspect, far).x > ndc(&left, aspect, far).x + 0.01);
+            let near = cam.eye + (on - cam.eye) * 0.5;
+            assert!(ndc(&right, aspect, near).x < ndc(&left, aspect, near).x - 0.01);
+        }
+    }
+
     /// The per-vertex shortcuts of [`triangle_tile_box`] give what clipping every triangle
     /// gives: triangles wholly inside, wholly outside, across the near plane and through the
     /// eye, on uneven grids.
     #[test]
     fn triangle_tile_box_equals_clipping() {
-        let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fovy: 60.0, near: 0.5, far: 50.0 };
+        let cam = Camera {
+            eye: Vec3::ZERO,
+            target: -Vec3::Z,
+            up: Vec3::Y,
+            fovy: 60.0,
+            near: 0.5,
+            far: 50.0,
+            shift: [0.0; 2],
+        };
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = move || {
             seed ^= seed << 13;
@@ -660,7 +758,15 @@ mod tests {
 
     #[test]
     fn clipping_a_triangle_through_the_near_plane() {
-        let cam = Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fovy: 90.0, near: 1.0, far: 100.0 };
+        let cam = Camera {
+            eye: Vec3::ZERO,
+            target: -Vec3::Z,
+            up: Vec3::Y,
+            fovy: 90.0,
+            near: 1.0,
+            far: 100.0,
+            shift: [0.0; 2],
+        };
         let vp = cam.view_proj(1.0);
         let tri = [Vec3::new(0.0, 0.0, 0.5), Vec3::new(0.5, 0.0, -2.0), Vec3::new(0.0, 0.5, -2.0)];
         let c = tri.map(|p| vp * p.extend(1.0));

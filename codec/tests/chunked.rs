@@ -187,7 +187,7 @@ proptest! {
         let file = assert_chunked_round_trip(&mesh, chunk);
         let whole = bft::decode(file.bytes()).unwrap();
         let model = ChunkedModel::new(file, 1 << 16);
-        let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0 };
+        let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0, shift: [0.0; 2] };
         prop_assume!(cam.validate().is_ok());
         let grid = TileGrid::new(size.0, size.1, tiles.0.min(size.0), tiles.1.min(size.1)).unwrap();
         check_frame(&model, &whole, &cam, &grid);

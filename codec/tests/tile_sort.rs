@@ -128,7 +128,7 @@ proptest! {
         size in (1u32..700, 1u32..500), tiles in (1u32..65, 1u32..65),
     ) {
         let model = model_of(&testkit::holed_grids(w, h, copies, &holes, seed));
-        let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0 };
+        let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0, shift: [0.0; 2] };
         prop_assume!(cam.validate().is_ok());
         let (tw, th) = (tiles.0.min(size.0), tiles.1.min(size.1));
         let grid = TileGrid::new(size.0, size.1, tw, th).unwrap();

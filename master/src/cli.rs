@@ -123,6 +123,19 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// Parses `x,y`.
+pub fn parse_vec2(s: &str) -> Result<[f32; 2], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>().map_err(|_| format!("'{c}' is not a number in '{s}'")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y] if v.iter().all(|c| c.is_finite()) => Ok([x, y]),
+        [_, _] => Err(format!("'{s}' has a non-finite coordinate")),
+        _ => Err(format!("expected x,y, got '{s}'")),
+    }
+}
+
 #[derive(Parser)]
 #[command(name = "tessera", version, about = "Sort-first parallel rendering of compressed meshes")]
 pub struct Cli {
@@ -189,6 +202,32 @@ pub enum Command {
         #[command(subcommand)]
         nsp: Nsp,
     },
+    /// Draw a per-rank timeline of the stages in a `render --stats` file as a PNG.
+    Plot {
+        /// The stats file (JSON lines).
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Only frames A to B (counted from 0, both included): `A..B`, or `A` alone.
+        #[arg(long, value_parser = parse_frame_range)]
+        frames: Option<(u32, u32)>,
+        /// Image width in pixels.
+        #[arg(long, default_value_t = 1600, value_parser = clap::value_parser!(u32).range(400..=16384))]
+        width: u32,
+    },
+}
+
+/// `A..B` or `A`: a range of frame numbers, both ends included.
+pub fn parse_frame_range(s: &str) -> Result<(u32, u32), String> {
+    let num = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("'{s}' is not a frame range (A..B or A)"));
+    let (a, b) = match s.split_once("..") {
+        Some((a, b)) => (num(a)?, num(b)?),
+        None => (num(s)?, num(s)?),
+    };
+    if a > b {
+        return Err(format!("frame range {s} is empty (its first frame is after its last)"));
+    }
+    Ok((a, b))
 }
 
 #[derive(Subcommand)]
@@ -374,6 +413,21 @@ pub struct RenderArgs {
     /// A tile wall description (TOML): one PNG per display plus an overview.
     #[arg(long)]
     pub wall: Option<PathBuf>,
+    /// Head tracking on a wall with a `plane`: a text file of eye positions in world units,
+    /// one `x y z` (or `x,y,z`) line per frame; each frame's off-axis frustum goes from that
+    /// eye through the wall.
+    #[arg(long)]
+    pub eye_path: Option<PathBuf>,
+    /// Render a left and a right eye this far apart (world units) per frame, with off-axis
+    /// frusta converging on the focal plane: the wall's plane for a wall with a `plane`, else
+    /// the plane through the target.
+    #[arg(long, value_parser = parse_positive)]
+    pub stereo: Option<f32>,
+    /// How a stereo pair is written: `separate` (`frame-left.png` and `frame-right.png`) or
+    /// `side-by-side` (one image twice as wide, the left eye on the left; movies take only
+    /// this).
+    #[arg(long, value_enum, default_value_t = StereoOutput::Separate)]
+    pub stereo_output: StereoOutput,
     /// Seconds of silence after which a worker counts as dead. Workers send a heartbeat
     /// while they work, so a slow frame is not silence. At least 1.
     #[arg(long, default_value = "60", value_parser = parse_timeout)]
@@ -473,6 +527,18 @@ pub struct CameraArgs {
     pub near: Option<f32>,
     #[arg(long, value_parser = parse_positive)]
     pub far: Option<f32>,
+    /// Lens shift `x,y` in normalised device coordinates (half-widths right, half-heights
+    /// up): an off-axis frustum, as a wall display seen from off its centre, or a stereo eye.
+    #[arg(long, value_parser = parse_vec2, allow_hyphen_values = true)]
+    pub shift: Option<[f32; 2]>,
+}
+
+/// `render --stereo-output`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StereoOutput {
+    #[default]
+    Separate,
+    SideBySide,
 }
 
 /// The starting camera of [`CameraArgs`].
@@ -519,6 +585,9 @@ impl CameraArgs {
         }
         if let Some(v) = self.fovy {
             cam.fovy = v;
+        }
+        if let Some(v) = self.shift {
+            cam.shift = v;
         }
         if self.eye.is_some() || self.target.is_some() {
             let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));

@@ -2,8 +2,8 @@
 //! file commands `encode`, `decode` and `stats` ([`commands`]), the one-frame tile sort
 //! ([`sort`]), the progressive-mesh commands ([`pm`]), rank 0 of `render` ([`render`]: the
 //! frame loop, tile scheduling, the workers' handshake and silence, stats), the compositor and
-//! tile walls ([`composite`]), and output files that are never left half-written
-//! ([`output`]). `main.rs` decides each process's role.
+//! tile walls ([`composite`]), output files that are never left half-written
+//! ([`output`]), and the timeline of a run's stats ([`plot`]). `main.rs` decides each process's role.
 
 pub mod cli;
 pub mod commands;
@@ -11,6 +11,7 @@ pub mod composite;
 pub mod movie;
 pub mod nsp;
 pub mod output;
+pub mod plot;
 pub mod pm;
 pub mod progress;
 pub mod render;

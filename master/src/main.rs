@@ -51,6 +51,7 @@ fn main() -> ExitCode {
             master::nsp::build(input, output, params, temp_dir.as_deref())
         }
         Command::Nsp { nsp: Nsp::Stats { input, json } } => master::nsp::stats(input, *json),
+        Command::Plot { input, output, frames, width } => master::plot::plot(input, output, *frames, *width),
         Command::Nsp { nsp: Nsp::Adapt { input, view, error_px, output, full } } => {
             master::nsp::adapt(input, &view.camera, view.size, *error_px, *full, output)
         }

@@ -217,7 +217,8 @@ pub fn holed_grids(w: usize, h: usize, copies: usize, holes: &[bool], seed: u64)
 }
 
 /// Cameras around a bounding box: the default framing, an oblique view with the model partly
-/// off-screen, a close-up from inside the box (triangles cross the near plane).
+/// off-screen, a close-up from inside the box (triangles cross the near plane), and the
+/// framing through an off-axis (shifted) window.
 pub fn cameras_around(bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32) -> Vec<Camera> {
     let (lo, hi) = (Vec3::from(bbox_min), Vec3::from(bbox_max));
     let (center, size) = ((lo + hi) * 0.5, (hi - lo).length());
@@ -230,8 +231,11 @@ pub fn cameras_around(bbox_min: [f32; 3], bbox_max: [f32; 3], aspect: f32) -> Ve
         fovy: 70.0,
         near: size * 0.01,
         far: size * 4.0,
+        shift: [0.0; 2],
     };
-    vec![framed, offside, inside]
+    // Off-axis: a shifted window (a wall display seen from off its centre).
+    let off_axis = Camera { shift: [0.4, -0.25], ..framed };
+    vec![framed, offside, inside, off_axis]
 }
 
 /// Per tile of `grid`, the triangles (in [`canonical`] form) whose box `[t]` holds it: what

@@ -25,7 +25,8 @@ use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
 use crate::protocol::{
-    FrameJob, NspFrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes, ToMaster, ToWorker,
+    unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes,
+    ToMaster, ToWorker,
 };
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
@@ -222,6 +223,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             Err(RecvError::Disconnected) => return Err(RankError { rank, reason: WorkerError::MasterGone }),
         };
         heartbeat.busy(true);
+        let start_ms = unix_ms();
         let msg = ToWorker::decode(&bytes);
         // Sorter ranks (`render --sorters K`) send frame shares; everything else comes from
         // rank 0.
@@ -268,7 +270,10 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                     return fail(WorkerError::NspFrame("arrived before its model"));
                 };
                 match view.render(&mut renderer, job) {
-                    Ok((frame, tiles)) => t.send(0, &ToMaster::Pixels { frame, tiles }.encode()),
+                    Ok((frame, tiles)) => {
+                        let span = phased_span(start_ms, &tiles);
+                        t.send(0, &ToMaster::Pixels { frame, tiles, span }.encode())
+                    }
                     Err(e) => return fail(e),
                 }
                 continue;
@@ -278,7 +283,10 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                     return fail(WorkerError::FrameBeforeModel);
                 };
                 match pm.render(&mut renderer, &job) {
-                    Ok(tiles) => t.send(0, &ToMaster::Pixels { frame: job.frame, tiles }.encode()),
+                    Ok(tiles) => {
+                        let span = phased_span(start_ms, &tiles);
+                        t.send(0, &ToMaster::Pixels { frame: job.frame, tiles, span }.encode())
+                    }
                     Err(e) => return fail(e),
                 }
                 continue;
@@ -311,6 +319,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             Ok(m) => m,
             Err((index, e)) => return fail(e.at(index)),
         };
+        let prepared_ms = unix_ms();
         let mut tiles = Vec::with_capacity(meshes.len());
         for mesh in meshes {
             match render_tile(&mut renderer, &jobs[0], &mesh) {
@@ -318,8 +327,17 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                 Err(e) => return fail(e.at(mesh.index)),
             }
         }
-        t.send(0, &ToMaster::Pixels { frame: jobs[0].frame, tiles }.encode());
+        let span = FrameSpan { start_ms, prepared_ms, end_ms: unix_ms() };
+        t.send(0, &ToMaster::Pixels { frame: jobs[0].frame, tiles, span }.encode());
     }
+}
+
+/// The span of a frame whose first phase (an adaptation or an `.nsp` refinement, done once
+/// for all tiles) is timed in the tiles' shares of it.
+fn phased_span(start_ms: f64, tiles: &[TilePixels]) -> FrameSpan {
+    let first: f64 = tiles.iter().map(|t| t.times.decode_ms + t.times.adapt_ms).sum();
+    let end_ms = unix_ms();
+    FrameSpan { start_ms, prepared_ms: (start_ms + first).min(end_ms), end_ms }
 }
 
 /// A verbatim chunk a worker keeps: its stream and its border normals, compressed as it

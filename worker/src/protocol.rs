@@ -40,7 +40,9 @@
 //!                    `node::HEARTBEAT` while it starts or renders a frame)
 //!   kind 4 Pixels    frame u32, tile count u32, then per tile:
 //!                      index u32, rect 4 x u32, decode/adapt/upload/render/readback ms 5 x f64,
-//!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4)
+//!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4);
+//!                    then the frame's span on the worker's clock (ms since the Unix epoch):
+//!                    start, prepared, end 3 x f64 ([`FrameSpan`])
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
 //! ```
 //! A tile is one or more `.bft` streams (a chunked model's verbatim chunks and sorted
@@ -55,9 +57,9 @@ use thiserror::Error;
 
 const MAGIC: &[u8; 4] = b"TSRM";
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
-/// a tile and the chunk cache, 4 the `.nsp` messages; version 1 messages had no version byte, so they read as
+/// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels`; version 1 messages had no version byte, so they read as
 /// version = their kind byte and are refused.
-pub const VERSION: u8 = 4;
+pub const VERSION: u8 = 5;
 
 /// A message that does not parse.
 #[derive(Debug, Error, PartialEq)]
@@ -212,6 +214,24 @@ impl TileTimes {
     }
 }
 
+/// When a worker worked on a frame, on its own clock in milliseconds since the Unix epoch
+/// ([`unix_ms`]): from the start of its work (the frame's last share in) through the end of
+/// its first phase (decoding the tiles, refining `.nsp` cells or adapting a progressive mesh)
+/// to the end of its rendering, just before the pixels are sent. The `--stats` timeline and
+/// `tessera plot` draw it; ranks on different nodes line up as well as their clocks agree.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameSpan {
+    pub start_ms: f64,
+    pub prepared_ms: f64,
+    pub end_ms: f64,
+}
+
+/// Now, in milliseconds since the Unix epoch (the clock of [`FrameSpan`] and of rank 0's
+/// timeline).
+pub fn unix_ms() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64() * 1e3)
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct TilePixels {
     pub index: u32,
@@ -234,6 +254,7 @@ pub enum ToMaster {
     Pixels {
         frame: u32,
         tiles: Vec<TilePixels>,
+        span: FrameSpan,
     },
     Failed {
         reason: String,
@@ -583,7 +604,7 @@ impl ToMaster {
                 w.0
             }
             ToMaster::Heartbeat => Writer::new(8).0,
-            ToMaster::Pixels { frame, tiles } => {
+            ToMaster::Pixels { frame, tiles, span } => {
                 let mut w = Writer::new(4);
                 w.u32(*frame);
                 w.u32(tiles.len() as u32);
@@ -597,6 +618,7 @@ impl ToMaster {
                     w.u32(t.triangles);
                     w.bytes(&t.rgba);
                 }
+                [span.start_ms, span.prepared_ms, span.end_ms].into_iter().for_each(|v| w.f64(v));
                 w.0
             }
             ToMaster::Failed { reason } => {
@@ -640,7 +662,8 @@ impl ToMaster {
                     }
                     tiles.push(TilePixels { index, rect, times, triangles, rgba });
                 }
-                ToMaster::Pixels { frame, tiles }
+                let span = FrameSpan { start_ms: r.f64("span")?, prepared_ms: r.f64("span")?, end_ms: r.f64("span")? };
+                ToMaster::Pixels { frame, tiles, span }
             }
             5 => ToMaster::Failed { reason: r.string("failure reason")? },
             k => return Err(ProtocolError::UnknownKind(k)),
@@ -736,6 +759,7 @@ mod tests {
                 triangles: 12,
                 rgba: vec![9; 8],
             }],
+            span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
         };
         assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
         for m in [
@@ -769,7 +793,7 @@ mod tests {
         extra.push(0);
         assert_eq!(ToWorker::decode(&extra), Err(ProtocolError::Trailing(1)));
         assert_eq!(ToWorker::decode(b"XXXX\x02\x01"), Err(ProtocolError::BadMagic));
-        assert_eq!(ToMaster::decode(b"TSRM\x04\x09"), Err(ProtocolError::UnknownKind(9)));
+        assert_eq!(ToMaster::decode(&[b"TSRM".as_slice(), &[VERSION, 9]].concat()), Err(ProtocolError::UnknownKind(9)));
         // Another build's message is refused by its version, before its kind is read.
         for v in [0u8, 1, 2, 255] {
             let mut b = frame().encode();
@@ -787,6 +811,7 @@ mod tests {
                 triangles: 0,
                 rgba: vec![0; 3],
             }],
+            span: FrameSpan::default(),
         };
         assert!(matches!(ToMaster::decode(&wrong_size.encode()), Err(ProtocolError::Invalid(_))));
     }

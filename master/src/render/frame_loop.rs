@@ -7,33 +7,47 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use codec::view::Camera;
 use glam::Quat;
-use worker::protocol::ToWorker;
+use worker::protocol::{unix_ms, ToWorker};
 use worker::transport::Transport;
 
 use super::jobs::{FrameContext, FrameJobs};
-use super::link::{handshake, receive_pixels, Early, Silence};
-use super::plan::{frame_outputs, frame_path, save_wall, Plan};
+use super::link::{handshake, receive_pixels, Answer, Early, Silence};
+use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{NspScene, PmScene, Scene};
-use super::stats::{worker_stats, ChunkStats, MasterStats, NspStats, TileStats, WorkerStats};
-use crate::cli::RenderArgs;
+use super::stats::{worker_stats, ChunkStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
+use crate::cli::{RenderArgs, StereoOutput};
 use crate::composite::Image;
 use crate::output::{Identity, LineLog};
 
-/// A frame sent to the workers and not yet composited.
+/// A frame (or one eye of a stereo frame) sent to the workers and not yet composited.
 struct InFlight {
     k: u32,
+    /// The view's number in the messages: the frame's, or `2k` and `2k + 1` for stereo eyes.
+    view: u32,
+    eye: Option<Eye>,
     answering: Vec<usize>,
     tiles: Vec<TileStats>,
     chunks: Option<ChunkStats>,
     nsp: Option<NspStats>,
     sort_ms: f64,
     send_ms: f64,
+    /// Rank 0's `sort` and `send` spans.
+    timeline: Vec<Span>,
+}
+
+/// A stereo eye.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum Eye {
+    Left,
+    Right,
 }
 
 /// What the writer thread does with a composited frame: write its image (or movie frame)
-/// and its stats lines, in frame order.
+/// and its stats lines, in frame order (a stereo frame's left eye waits for its right).
 struct Written {
     frame: Image,
+    eye: Option<Eye>,
     /// Rank 0's stats line, whose `frame` is this frame's number.
     stats: MasterStats,
     workers: Vec<WorkerStats>,
@@ -48,12 +62,16 @@ struct Written {
 /// `--balance` sorts each frame from the costs of the frame before, so it keeps one frame
 /// in flight.
 pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
+    // The origin of the stats' timelines.
+    let epoch = unix_ms();
     // Opened first, so that an unwritable path fails before any work.
     let stats = args.stats.as_deref().map(LineLog::create).transpose()?;
     let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
-    crate::cli::check_camera(&cam, grid.height)?;
+    for c in frame_cameras(&scene, args, plan, &cam, 0)? {
+        crate::cli::check_camera(&c, grid.height)?;
+    }
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
     let workers = t.size() - args.sorters as usize;
     let adapters = handshake(t, args.timeout, grid)?;
@@ -68,14 +86,15 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
     }
     let movie = if crate::movie::is_movie(&args.out) {
-        Some(crate::movie::Movie::start(&args.out, grid.width, grid.height, args.fps)?)
+        let width = if plan.stereo.is_some() { grid.width * 2 } else { grid.width };
+        Some(crate::movie::Movie::start(&args.out, width, grid.height, args.fps)?)
     } else {
         None
     };
     // Sorter ranks send the workers their shares of one frame at a time (the protocol has no
     // frame in flight beside another), so with --sorters a frame waits for the one before.
     let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
-    let writer = Writer::start(args, plan, movie, stats, depth);
+    let writer = Writer::start(args, plan, movie, stats, depth, epoch);
 
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
@@ -83,27 +102,37 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let result = (|| -> Result<()> {
         for k in 0..args.frames {
-            let cam_k = if args.orbit { orbit_by(&cam, k, args.frames, args.orbit_degrees) } else { cam };
-            let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
-            let start = Instant::now();
-            let ctx = FrameContext { frame: k, camera: cam_k, grid, workers, args, costs: &costs };
-            t.send_many(&scene.announce(&ctx));
-            let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
-            let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
-            let sort_ms = ms(start);
-            let start = Instant::now();
-            t.send_many(&msgs);
-            let send_ms = ms(start);
-            silence.expect(&answering);
-            flight.push_back(InFlight { k, answering, tiles, chunks, nsp, sort_ms, send_ms });
-            if flight.len() >= depth {
-                let f = flight.pop_front().expect("a frame in flight");
-                let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early)?;
-                writer.send(done)?;
+            let views = frame_cameras(&scene, args, plan, &cam, k)?;
+            let stereo = views.len() == 2;
+            for (e, cam_k) in views.into_iter().enumerate() {
+                let eye = stereo.then_some(if e == 0 { Eye::Left } else { Eye::Right });
+                let view = if stereo { 2 * k + e as u32 } else { k };
+                let start = Instant::now();
+                let sort_start = unix_ms();
+                let ctx = FrameContext { frame: view, camera: cam_k, grid, workers, args, costs: &costs };
+                t.send_many(&scene.announce(&ctx));
+                let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
+                let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
+                let sort_ms = ms(start);
+                let (start, send_start) = (Instant::now(), unix_ms());
+                t.send_many(&msgs);
+                let send_ms = ms(start);
+                let timeline = vec![
+                    Span::between("sort", sort_start, send_start, epoch),
+                    Span::between("send", send_start, unix_ms(), epoch),
+                ];
+                silence.expect(&answering);
+                let f = InFlight { k, view, eye, answering, tiles, chunks, nsp, sort_ms, send_ms, timeline };
+                flight.push_back(f);
+                if flight.len() >= depth {
+                    let f = flight.pop_front().expect("a frame in flight");
+                    let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early, epoch)?;
+                    writer.send(done)?;
+                }
             }
         }
         while let Some(f) = flight.pop_front() {
-            let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early)?;
+            let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early, epoch)?;
             writer.send(done)?;
         }
         Ok(())
@@ -120,6 +149,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
 }
 
 /// Receives and composites frame `f`'s pixels.
+#[allow(clippy::too_many_arguments)]
 fn complete(
     t: &dyn Transport,
     f: InFlight,
@@ -128,14 +158,15 @@ fn complete(
     costs: &mut [f64],
     silence: &mut Silence,
     early: &mut Early,
+    epoch: f64,
 ) -> Result<Written> {
-    let InFlight { k, answering, mut tiles, chunks, nsp, sort_ms, send_ms } = f;
-    let start = Instant::now();
+    let InFlight { k, view, eye, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
+    let (start, receive_start) = (Instant::now(), unix_ms());
     let mut frame = Image::new(plan.grid.width, plan.grid.height);
     let mut composite_ms = 0.0;
     let mut worker_lines = Vec::new();
     for _ in 0..answering.len() {
-        let (rank, pixels) = receive_pixels(t, k, silence, early)?;
+        let Answer { rank, tiles: pixels, span } = receive_pixels(t, view, silence, early)?;
         let c = Instant::now();
         for p in &pixels {
             frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
@@ -145,10 +176,11 @@ fn complete(
             }
         }
         composite_ms += ms(c);
-        worker_lines.push(worker_stats(k, rank, &pixels));
+        worker_lines.push(worker_stats(k, eye, rank, &pixels, span, epoch));
     }
     let wait_ms = ms(start) - composite_ms;
-    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref()) {
+    timeline.push(Span::between("receive", receive_start, unix_ms(), epoch));
+    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref(), plan.stereo) {
         if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
             bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
         }
@@ -156,6 +188,7 @@ fn complete(
     worker_lines.sort_by_key(|l| l.rank);
     let stats = MasterStats {
         frame: k,
+        eye,
         rank: 0,
         sort_ms,
         send_ms,
@@ -167,8 +200,9 @@ fn complete(
         chunks,
         nsp,
         tiles,
+        timeline,
     };
-    Ok(Written { frame, stats, workers: worker_lines })
+    Ok(Written { frame, eye, stats, workers: worker_lines })
 }
 
 /// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
@@ -185,37 +219,53 @@ impl Writer {
         mut movie: Option<crate::movie::Movie>,
         mut stats: Option<LineLog>,
         depth: usize,
+        epoch: f64,
     ) -> Writer {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
-        let (out, frames, wall) = (args.out.clone(), args.frames, plan.wall.clone());
+        let (out, frames, wall, stereo) = (args.out.clone(), args.frames, plan.wall.clone(), plan.stereo);
         let thread = std::thread::spawn(move || -> Result<()> {
             let begin = Instant::now();
             let mut last = begin;
-            for Written { frame, stats: mut line, workers } in rx {
-                let k = line.frame;
-                let start = Instant::now();
-                let path = frame_path(&out, k, frames);
-                match (&wall, movie.as_mut()) {
-                    (_, Some(m)) => m.frame(&frame.rgba)?,
-                    (None, None) => frame.save_png(&path)?,
-                    (Some(wall), None) => save_wall(wall, &frame, &path)?,
+            // A stereo frame's left eye, waiting for its right.
+            let mut left: Option<Written> = None;
+            for w in rx {
+                if w.eye == Some(Eye::Left) {
+                    left = Some(w);
+                    continue;
                 }
-                line.write_ms = ms(start);
+                let k = w.stats.frame;
+                let (start, write_start) = (Instant::now(), unix_ms());
+                let path = frame_path(&out, k, frames);
+                let pair = left.take();
+                match (pair.as_ref().map(|l| &l.frame), stereo) {
+                    (Some(l), Some(StereoOutput::Separate)) => {
+                        write_image(l, &eye_path(&path, "left"), wall.as_ref(), None, None)?;
+                        write_image(&w.frame, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
+                    }
+                    (Some(l), _) => write_image(l, &path, wall.as_ref(), Some(&w.frame), movie.as_mut())?,
+                    (None, _) => write_image(&w.frame, &path, wall.as_ref(), None, movie.as_mut())?,
+                }
+                let write_ms = ms(start);
                 let now = Instant::now();
-                line.frame_ms = (now - last).as_secs_f64() * 1e3;
+                let frame_ms = (now - last).as_secs_f64() * 1e3;
                 last = now;
                 let fps = (k + 1) as f64 / (now - begin).as_secs_f64().max(1e-9);
                 eprintln!(
                     "frame {}: {} tiles, sort {:.1} ms, {} ({fps:.1} frames/s)",
                     k + 1,
-                    line.tiles.len(),
-                    line.sort_ms,
+                    w.stats.tiles.len(),
+                    w.stats.sort_ms,
                     path.display()
                 );
-                if let Some(log) = stats.as_mut() {
-                    log.line(&serde_json::to_string(&line)?)?;
-                    for l in workers {
-                        log.line(&serde_json::to_string(&l)?)?;
+                let write = Span::between("write", write_start, unix_ms(), epoch);
+                for Written { stats: mut line, workers, .. } in pair.into_iter().chain([w]) {
+                    (line.write_ms, line.frame_ms) = (write_ms, frame_ms);
+                    line.timeline.push(write.clone());
+                    if let Some(log) = stats.as_mut() {
+                        log.line(&serde_json::to_string(&line)?)?;
+                        for l in workers {
+                            log.line(&serde_json::to_string(&l)?)?;
+                        }
                     }
                 }
             }
@@ -245,6 +295,58 @@ impl Writer {
             None => Ok(()),
         }
     }
+}
+
+/// Writes a frame: a movie frame, a PNG, or a wall's displays and overview; with `right`,
+/// a stereo pair side by side.
+fn write_image(
+    frame: &Image,
+    path: &std::path::Path,
+    wall: Option<&crate::composite::Wall>,
+    right: Option<&Image>,
+    movie: Option<&mut crate::movie::Movie>,
+) -> Result<()> {
+    match (wall, movie) {
+        (_, Some(m)) => m.frame(&right.map_or_else(|| frame.clone(), |r| frame.beside(r)).rgba),
+        (None, None) => right.map_or_else(|| frame.clone(), |r| frame.beside(r)).save_png(path),
+        (Some(wall), None) => save_wall(wall, frame, right, path),
+    }
+}
+
+/// The cameras of frame `k`: one, or a left and a right eye with `--stereo`. A wall with a
+/// plane gives each eye (from the wall file or `--eye-path`) the off-axis frustum through
+/// it; otherwise the frame's camera orbits and zooms from `cam`, and stereo eyes converge
+/// on the plane through its target.
+fn frame_cameras(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<Camera>> {
+    let half = args.stereo.map(|s| s * 0.5);
+    if let Some(wall) = plan.wall.as_ref().filter(|w| w.plane.is_some()) {
+        let eye = match &plan.eyes {
+            Some(eyes) => eyes[k as usize],
+            None => wall.eye.context("a wall with a plane needs an eye")?,
+        };
+        let right = wall.right().context("a wall with a plane")?;
+        let eyes = match half {
+            Some(h) => vec![eye - right * h, eye + right * h],
+            None => vec![eye],
+        };
+        return eyes
+            .into_iter()
+            .map(|e| {
+                let c = scene.camera(&wall.camera_args(&args.camera, e)?, &plan.grid)?;
+                crate::cli::check_precision(&c, plan.grid.height)?;
+                Ok(c)
+            })
+            .collect();
+    }
+    let cam_k = if args.orbit { orbit_by(cam, k, args.frames, args.orbit_degrees) } else { *cam };
+    let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
+    Ok(match half {
+        Some(h) => {
+            let (focus, aspect) = (cam_k.eye.distance(cam_k.target), plan.grid.aspect());
+            vec![cam_k.stereo_eye(-h, focus, aspect), cam_k.stereo_eye(h, focus, aspect)]
+        }
+        None => vec![cam_k],
+    })
 }
 
 /// This process's resident memory in MB (Linux: `/proc/self/statm`), for the stats.

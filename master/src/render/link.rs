@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use worker::protocol::{TilePixels, ToMaster};
+use worker::protocol::{FrameSpan, TilePixels, ToMaster};
 use worker::transport::{RecvError, Transport};
 
 /// When each worker was last heard from, for telling a dead worker from a busy one: a worker
@@ -102,19 +102,26 @@ fn missing(flags: &[bool]) -> String {
     format!("rank {}", ranks.join(", rank "))
 }
 
-/// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
-/// a worker silent for the whole timeout ends the run.
 /// Pixels that came in for a frame later than the one being composited (with frames in
 /// flight, a fast worker answers frame k+1 before a slow one answers frame k).
 #[derive(Default)]
-pub(super) struct Early(std::collections::BTreeMap<u32, Vec<(usize, Vec<TilePixels>)>>);
+pub(super) struct Early(std::collections::BTreeMap<u32, Vec<Answer>>);
 
+/// A worker's answer to a frame: its rank, its tiles' pixels and when it worked on them.
+pub(super) struct Answer {
+    pub rank: usize,
+    pub tiles: Vec<TilePixels>,
+    pub span: FrameSpan,
+}
+
+/// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
+/// a worker silent for the whole timeout ends the run.
 pub(super) fn receive_pixels(
     t: &dyn Transport,
     frame: u32,
     silence: &mut Silence,
     early: &mut Early,
-) -> Result<(usize, Vec<TilePixels>)> {
+) -> Result<Answer> {
     if let Some(answer) = early.0.get_mut(&frame).and_then(Vec::pop) {
         return Ok(answer);
     }
@@ -132,13 +139,13 @@ pub(super) fn receive_pixels(
         silence.heard(rank);
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
             ToMaster::Heartbeat => continue,
-            ToMaster::Pixels { frame: f, tiles } if f == frame => {
+            ToMaster::Pixels { frame: f, tiles, span } if f == frame => {
                 silence.answered(rank);
-                return Ok((rank, tiles));
+                return Ok(Answer { rank, tiles, span });
             }
-            ToMaster::Pixels { frame: f, tiles } if f > frame && silence.owes(rank) > 0 => {
+            ToMaster::Pixels { frame: f, tiles, span } if f > frame && silence.owes(rank) > 0 => {
                 silence.answered(rank);
-                early.0.entry(f).or_default().insert(0, (rank, tiles));
+                early.0.entry(f).or_default().insert(0, Answer { rank, tiles, span });
             }
             ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
             ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),

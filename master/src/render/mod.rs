@@ -30,7 +30,7 @@ mod plan;
 mod scene;
 mod schedule;
 mod sorter;
-mod stats;
+pub mod stats;
 
 use anyhow::Result;
 use worker::transport::{self, Transport};

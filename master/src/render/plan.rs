@@ -3,10 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
+use glam::Vec3;
 
-use crate::cli::RenderArgs;
+use crate::cli::{RenderArgs, StereoOutput};
 use crate::composite::{Image, Wall};
 use crate::output::{check_distinct, check_extension, Identity};
 
@@ -14,6 +15,10 @@ use crate::output::{check_distinct, check_extension, Identity};
 pub struct Plan {
     pub grid: TileGrid,
     pub wall: Option<Wall>,
+    /// `--eye-path`: the eye of every frame.
+    pub eyes: Option<Vec<Vec3>>,
+    /// `--stereo`: how the pairs are written.
+    pub stereo: Option<StereoOutput>,
     /// The inputs' identities, which no output may be.
     pub inputs: Vec<Identity>,
 }
@@ -29,6 +34,34 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     crate::cli::check_frame_size(w as u64, h as u64)?;
     let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
     let movie = crate::movie::is_movie(&args.out);
+    let stereo = args.stereo.map(|_| args.stereo_output);
+    let planar = wall.as_ref().is_some_and(|w| w.plane.is_some());
+    if args.eye_path.is_some() && !planar {
+        bail!("--eye-path needs a --wall with a plane (the eye looks through the wall)");
+    }
+    if planar {
+        let c = &args.camera;
+        if c.eye.is_some() || c.target.is_some() || c.up.is_some() || c.fovy.is_some() || c.shift.is_some() {
+            bail!("a wall with a plane sets the eye, target, up, field of view and shift; leave out those flags");
+        }
+        if args.orbit || args.zoom != 1.0 {
+            bail!("a wall with a plane is still: the eye moves with --eye-path, not --orbit or --zoom");
+        }
+        if wall.as_ref().is_some_and(|w| w.eye.is_none()) && args.eye_path.is_none() {
+            bail!("a wall with a plane needs an eye: `eye = [x, y, z]` in the wall file, or --eye-path");
+        }
+    }
+    let eyes = args.eye_path.as_deref().map(|p| read_eyes(p, args.frames)).transpose()?;
+    if let (Some(wall), Some(eyes)) = (&wall, &eyes) {
+        for (k, &eye) in eyes.iter().enumerate() {
+            wall.camera_args(&args.camera, eye).with_context(|| {
+                format!("{}: line {}", args.eye_path.as_deref().unwrap_or(Path::new("")).display(), k + 1)
+            })?;
+        }
+    }
+    if movie && stereo == Some(StereoOutput::Separate) {
+        bail!("a movie holds a stereo pair side by side: add --stereo-output side-by-side, or write PNGs");
+    }
     if movie {
         if wall.is_some() {
             anyhow::bail!("a wall writes one image per display: --out must be a .png with --wall");
@@ -48,8 +81,8 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     // No output may be an input or another output.
     let mut inputs: Vec<&Path> = vec![&args.model];
     inputs.extend(args.wall.as_deref());
-    let displays = wall.as_ref().map_or(0, |w| w.columns as u64 * w.rows as u64);
-    let per_frame = 1 + displays;
+    let displays = wall.as_ref().map_or(0, |w| w.displays.len() as u64);
+    let per_frame = (1 + displays) * if stereo == Some(StereoOutput::Separate) { 2 } else { 1 };
     let frames: Vec<u32> = if movie {
         vec![0]
     } else if per_frame * args.frames as u64 <= CHECKED_OUTPUTS {
@@ -58,30 +91,70 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
         vec![0, args.frames - 1]
     };
     let mut outputs: Vec<PathBuf> =
-        frames.iter().flat_map(|&k| frame_outputs(&args.out, k, args.frames, wall.as_ref())).collect();
+        frames.iter().flat_map(|&k| frame_outputs(&args.out, k, args.frames, wall.as_ref(), stereo)).collect();
     outputs.extend(args.stats.clone());
     let outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     check_distinct(&inputs, &outputs)?;
     let inputs = inputs.iter().filter_map(|p| Identity::of(p).ok()).collect();
-    Ok(Plan { grid, wall, inputs })
+    Ok(Plan { grid, wall, eyes, stereo, inputs })
 }
 
-/// Every file frame `k` writes: the frame, and with a wall each display's image.
-pub(super) fn frame_outputs(out: &Path, k: u32, frames: u32, wall: Option<&Wall>) -> Vec<PathBuf> {
+/// The eyes of `--eye-path`: one `x y z` (or `x,y,z`) line per frame, at least `frames`
+/// of them (blank lines and `#` comments skipped).
+fn read_eyes(path: &Path, frames: u32) -> Result<Vec<Vec3>> {
+    let bytes = crate::commands::read_input(path)?;
+    let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
+    let mut eyes = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let joined = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|c| !c.is_empty()).collect::<Vec<_>>();
+        let eye = crate::cli::parse_vec3(&joined.join(","))
+            .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), i + 1))?;
+        eyes.push(eye);
+    }
+    if eyes.len() < frames as usize {
+        bail!("{}: {} eye positions for {frames} frames", path.display(), eyes.len());
+    }
+    Ok(eyes)
+}
+
+/// Every file frame `k` writes: the frame, and with a wall each display's image; for
+/// separate stereo images, each of those for the left and the right eye.
+pub(super) fn frame_outputs(
+    out: &Path,
+    k: u32,
+    frames: u32,
+    wall: Option<&Wall>,
+    stereo: Option<StereoOutput>,
+) -> Vec<PathBuf> {
     let path = frame_path(out, k, frames);
-    let mut v = vec![path.clone()];
-    if let Some(wall) = wall {
-        v.extend(
-            (0..wall.rows).flat_map(|r| (0..wall.columns).map(move |c| (c, r))).map(|(c, r)| display_path(&path, c, r)),
-        );
+    let paths = match stereo {
+        Some(StereoOutput::Separate) => vec![eye_path(&path, "left"), eye_path(&path, "right")],
+        _ => vec![path],
+    };
+    let mut v = Vec::new();
+    for path in paths {
+        if let Some(wall) = wall {
+            v.extend(wall.displays.iter().map(|d| display_path(&path, &d.name)));
+        }
+        v.push(path);
     }
     v
 }
 
-/// The image of display `(c, r)` beside the frame's overview `path`.
-fn display_path(path: &Path, c: u32, r: u32) -> PathBuf {
+/// The image of one eye (`left` or `right`) beside `path`.
+pub(super) fn eye_path(path: &Path, eye: &str) -> PathBuf {
     let stem = path.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
-    path.with_file_name(format!("{stem}-display-{c}-{r}.png"))
+    path.with_file_name(format!("{stem}-{eye}.png"))
+}
+
+/// The image of display `name` beside the frame's overview `path`.
+fn display_path(path: &Path, name: &str) -> PathBuf {
+    let stem = path.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}-display-{name}.png"))
 }
 
 /// `frame.png` for one frame; `frame-0001.png`, ... for several; a movie is one file.
@@ -93,12 +166,17 @@ pub fn frame_path(out: &Path, k: u32, frames: u32) -> PathBuf {
     out.with_file_name(format!("{stem}-{:04}.png", k + 1))
 }
 
-/// Writes one PNG per display of `wall`, and the overview at `out`.
-pub(super) fn save_wall(wall: &Wall, frame: &Image, out: &Path) -> Result<()> {
-    let (displays, overview) = wall.split(frame);
-    for (i, d) in displays.iter().enumerate() {
-        let (c, r) = (i as u32 % wall.columns, i as u32 / wall.columns);
-        d.save_png(&display_path(out, c, r))?;
+/// Writes one PNG per display of `wall`, and the overview at `out`; with `right`, a stereo
+/// pair side by side (`frame` the left eye).
+pub(super) fn save_wall(wall: &Wall, frame: &Image, right: Option<&Image>, out: &Path) -> Result<()> {
+    let (mut displays, mut overview) = wall.split(frame);
+    if let Some(right) = right {
+        let (r_displays, r_overview) = wall.split(right);
+        displays = displays.iter().zip(&r_displays).map(|(l, r)| l.beside(r)).collect();
+        overview = overview.beside(&r_overview);
+    }
+    for (d, image) in wall.displays.iter().zip(&displays) {
+        image.save_png(&display_path(out, &d.name))?;
     }
     overview.save_png(out)
 }

@@ -1,13 +1,35 @@
 //! The `--stats` schema: one JSON line per frame for rank 0 and one per worker, each stage's
-//! time in milliseconds (the README lists the fields).
+//! time in milliseconds and a timeline of when each stage ran (the README lists the fields).
 
-use serde::Serialize;
-use worker::protocol::{TilePixels, TileTimes};
+use serde::{Deserialize, Serialize};
+use worker::protocol::{FrameSpan, TilePixels, TileTimes};
+
+use super::frame_loop::Eye;
+
+/// When a stage of a frame ran on a rank: milliseconds from the start of the run (rank 0's
+/// clock when it began; workers' spans are moved onto it through the Unix epoch, see
+/// [`FrameSpan`]). `tessera plot` draws these.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Span {
+    pub stage: String,
+    pub start_ms: f64,
+    pub end_ms: f64,
+}
+
+impl Span {
+    /// The span from `start` to `end` (Unix milliseconds) of a run that began at `epoch`.
+    pub(super) fn between(stage: &str, start: f64, end: f64, epoch: f64) -> Span {
+        Span { stage: stage.to_string(), start_ms: start - epoch, end_ms: end - epoch }
+    }
+}
 
 /// One stats line of rank 0.
 #[derive(Serialize)]
 pub(super) struct MasterStats {
     pub frame: u32,
+    /// `--stereo`: which eye's view this line is of.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub eye: Option<Eye>,
     pub rank: usize,
     pub sort_ms: f64,
     pub send_ms: f64,
@@ -27,6 +49,9 @@ pub(super) struct MasterStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nsp: Option<NspStats>,
     pub tiles: Vec<TileStats>,
+    /// Rank 0's stages: `sort` (with the frame's announcements), `send`, `receive` (waiting
+    /// for and compositing the workers' pixels) and `write` (on the writer thread).
+    pub timeline: Vec<Span>,
 }
 
 /// An `.nsp` model's frame: cells selected (drawn) for the view, cells the workers draw in
@@ -73,6 +98,8 @@ pub(super) struct TileStats {
 #[derive(Serialize)]
 pub(super) struct WorkerStats {
     frame: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    eye: Option<Eye>,
     pub rank: usize,
     decode_ms: f64,
     adapt_ms: f64,
@@ -80,6 +107,9 @@ pub(super) struct WorkerStats {
     render_ms: f64,
     readback_ms: f64,
     tiles: Vec<WorkerTileStats>,
+    /// The worker's stages: `decode` (or `adapt` for a progressive mesh), then `render`
+    /// (upload, draw and readback of every tile).
+    timeline: Vec<Span>,
 }
 
 #[derive(Serialize)]
@@ -93,11 +123,21 @@ struct WorkerTileStats {
     readback_ms: f64,
 }
 
-/// A worker's line for `frame`, from the tiles it sent back.
-pub(super) fn worker_stats(frame: u32, rank: usize, pixels: &[TilePixels]) -> WorkerStats {
+/// A worker's line for `frame`, from the tiles it sent back and its span of work, on a run
+/// that began at `epoch` (Unix milliseconds).
+pub(super) fn worker_stats(
+    frame: u32,
+    eye: Option<Eye>,
+    rank: usize,
+    pixels: &[TilePixels],
+    span: FrameSpan,
+    epoch: f64,
+) -> WorkerStats {
     let sum = |f: fn(&TileTimes) -> f64| pixels.iter().map(|p| f(&p.times)).sum();
+    let first = if pixels.iter().any(|p| p.times.adapt_ms > 0.0) { "adapt" } else { "decode" };
     WorkerStats {
         frame,
+        eye,
         rank,
         decode_ms: sum(|t| t.decode_ms),
         adapt_ms: sum(|t| t.adapt_ms),
@@ -116,5 +156,9 @@ pub(super) fn worker_stats(frame: u32, rank: usize, pixels: &[TilePixels]) -> Wo
                 readback_ms: p.times.readback_ms,
             })
             .collect(),
+        timeline: vec![
+            Span::between(first, span.start_ms, span.prepared_ms, epoch),
+            Span::between("render", span.prepared_ms, span.end_ms, epoch),
+        ],
     }
 }
