@@ -948,3 +948,71 @@ fn sixteen_workers_on_64_tiles_and_16_displays() {
         }
     }
 }
+
+/// Direct send (`--display-ranks`): the display ranks write every display of every frame
+/// (and of each stereo eye) exactly as rank 0 composites them; rank 0 receives no pixel and
+/// writes no overview; the stats give each view's displays' completion spread and a swap
+/// after the last display is complete, in frame order.
+#[test]
+fn display_ranks_write_the_same_displays_behind_a_swap_barrier() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(
+        &wall,
+        "[[display]]\nname = \"tall\"\nx = 4\ny = 4\nwidth = 40\nheight = 72\nbezel = 4\n\
+         [[display]]\nname = \"a\"\nx = 52\ny = 4\nwidth = 60\nheight = 34\nbezel = [4, 4, 4, 2]\n\
+         [[display]]\nname = \"b\"\nx = 52\ny = 42\nwidth = 60\nheight = 34\nbezel = [4, 2, 4, 4]\n",
+    )
+    .unwrap();
+    let names = ["tall", "a", "b"];
+    let run = |np: usize, out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let stats = out.with_extension("jsonl");
+        let mut args = vec!["render", model.as_str(), "--wall", wall.to_str().unwrap(), "--tiles", "4x3"];
+        args.extend(extra);
+        args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
+        ok(&mpirun(np, &[], &args));
+        let lines: Vec<serde_json::Value> =
+            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        lines.into_iter().filter(|l| l["rank"] == 0).collect::<Vec<_>>()
+    };
+    let frames = ["--frames", "3", "--orbit"];
+    let composited = run(3, "a.png", &frames);
+    let direct = run(5, "b.png", &[&frames[..], &["--display-ranks", "2"]].concat());
+    for k in 1..=3 {
+        for name in names {
+            let (a, b) = (format!("a-{k:04}-display-{name}.png"), format!("b-{k:04}-display-{name}.png"));
+            assert!(identical(&dir.path().join(&a), &dir.path().join(&b)), "{b} equals {a}");
+        }
+        assert!(dir.path().join(format!("a-{k:04}.png")).exists());
+        assert!(!dir.path().join(format!("b-{k:04}.png")).exists(), "rank 0 writes no overview");
+    }
+    assert!(covered(&dir.path().join("b-0001-display-a.png")) > 200);
+    assert!(composited.iter().all(|l| l["pixel_bytes"].as_u64().unwrap() > 0 && l.get("displays").is_none()));
+    let mut last_swap = 0.0;
+    for l in &direct {
+        assert_eq!(l["pixel_bytes"], 0, "rank 0 carries no display pixels: {l}");
+        let d = &l["displays"];
+        assert_eq!(d["displays"], 3);
+        let (first, last, swap) = (
+            d["first_ready_ms"].as_f64().unwrap(),
+            d["last_ready_ms"].as_f64().unwrap(),
+            d["swap_ms"].as_f64().unwrap(),
+        );
+        assert!((d["spread_ms"].as_f64().unwrap() - (last - first)).abs() < 1e-6 && first <= last, "{l}");
+        assert!(swap + 1.0 >= last && swap > last_swap, "the swap follows every display, in frame order: {l}");
+        last_swap = swap;
+    }
+    // Stereo: each eye's displays.
+    run(3, "c.png", &["--stereo", "0.2"]);
+    run(4, "d.png", &["--stereo", "0.2", "--display-ranks", "1"]);
+    for eye in ["left", "right"] {
+        for name in names {
+            let (c, d) = (format!("c-{eye}-display-{name}.png"), format!("d-{eye}-display-{name}.png"));
+            assert!(identical(&dir.path().join(&c), &dir.path().join(&d)), "{d} equals {c}");
+        }
+    }
+    let bad = alone(&["render", &model, "--display-ranks", "2", "--out", dir.path().join("x.png").to_str().unwrap()]);
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--display-ranks needs a --wall"));
+}

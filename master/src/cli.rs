@@ -413,6 +413,12 @@ pub struct RenderArgs {
     /// A tile wall description (TOML): one PNG per display plus an overview.
     #[arg(long)]
     pub wall: Option<PathBuf>,
+    /// Direct send: the last D ranks of the job own the wall's displays (display i on the
+    /// (i mod D)-th of them); workers send them their tiles' pixels, each assembles and
+    /// writes its displays at a swap barrier, and no display pixel passes through rank 0
+    /// (which writes no overview). Needs --wall and mpirun; 0 (default): rank 0 composites.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=4096))]
+    pub display_ranks: u32,
     /// Head tracking on a wall with a `plane`: a text file of eye positions in world units,
     /// one `x y z` (or `x,y,z`) line per frame; each frame's off-axis frustum goes from that
     /// eye through the wall.

@@ -76,17 +76,31 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     let mpi = Mpi::init()
         .context("MPI is already initialized, or cannot serialize calls from two threads (MPI_THREAD_SERIALIZED)")?;
-    let sorters = args.sorters as usize;
-    if mpi.size() < sorters + 1 {
-        anyhow::bail!("--sorters {sorters} needs at least {} ranks (the sorters and a worker)", sorters + 1);
+    let (sorters, displays) = (args.sorters as usize, args.display_ranks as usize);
+    if mpi.size() < sorters + displays + 1 {
+        anyhow::bail!(
+            "--sorters {sorters} and --display-ranks {displays} need at least {} ranks (with rank 0 and a worker)",
+            sorters + displays + 1
+        );
     }
-    // Ranks 1..=N-K are workers; the last K-1 ranks help rank 0 sort (`--sorters K`).
-    let workers = mpi.size() - sorters;
+    // Ranks 1..=W are workers; then K-1 ranks help rank 0 sort (`--sorters K`), and the last
+    // D ranks own the wall's displays (`--display-ranks D`).
+    let workers = mpi.size() - sorters - displays;
+    if mpi.rank() >= mpi.size() - displays {
+        let index = mpi.rank() - (mpi.size() - displays);
+        return master::render::run_display(&mpi, args, &plan, index);
+    }
     if mpi.rank() > workers {
         return master::render::run_sorter(&mpi, args, &plan, mpi.rank() - workers);
     }
     if mpi.rank() > 0 {
-        return worker::node::run(&mpi).map_err(anyhow::Error::msg);
+        let direct = plan
+            .wall
+            .as_ref()
+            .filter(|_| displays > 0)
+            .map(|w| master::render::DirectSend::new(w, mpi.size(), displays));
+        let route = direct.map(|d| Box::new(move |rect: [u32; 4]| d.route(rect)) as Box<worker::node::Route>);
+        return worker::node::run_routed(&mpi, route.as_deref()).map_err(anyhow::Error::msg);
     }
     master::render::run_master(&mpi, args, &plan)
 }

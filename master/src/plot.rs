@@ -19,10 +19,11 @@ use crate::output::{check_distinct, check_extension, write_bytes};
 use crate::render::stats::Span;
 
 /// The stages, in legend order, with their colours.
-pub const STAGES: [(&str, RGBColor); 7] = [
+pub const STAGES: [(&str, RGBColor); 8] = [
     ("sort", RGBColor(31, 119, 180)),
     ("send", RGBColor(23, 190, 207)),
     ("receive", RGBColor(170, 170, 170)),
+    ("swap", RGBColor(214, 39, 40)),
     ("write", RGBColor(148, 103, 189)),
     ("decode", RGBColor(255, 127, 14)),
     ("adapt", RGBColor(188, 189, 34)),

@@ -190,6 +190,16 @@ impl Drop for Heartbeat {
 /// Runs the worker until the master says to stop. `Err` carries the reason, which has
 /// already been sent to rank 0 when the transport allowed it.
 pub fn run(t: &dyn Transport) -> Result<(), RankError> {
+    run_routed(t, None)
+}
+
+/// Direct send (`render --display-ranks D`): the display ranks that take the pixels of a
+/// tile, by its rectangle in the frame.
+pub type Route = dyn Fn([u32; 4]) -> Vec<usize> + Send + Sync;
+
+/// [`run`], sending each tile's pixels to the display ranks `route` names and to rank 0
+/// only the tiles' times (their pixels stripped), when `route` is given.
+pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankError> {
     let rank = t.rank();
     let heartbeat = Heartbeat::start(t.sender(0));
     let fail = |reason: WorkerError| {
@@ -265,6 +275,10 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
         let job = match msg {
             ToWorker::Frame(job) => job,
             ToWorker::Sort(_) => return fail(WorkerError::BadMessage(ProtocolError::Unexpected("Sort".into()))),
+            ToWorker::DisplayFrame(_) | ToWorker::Swap { .. } => {
+                let why = "a display rank's message".into();
+                return fail(WorkerError::BadMessage(ProtocolError::Unexpected(why)));
+            }
             ToWorker::NspFrame(job) => {
                 let Some(view) = nsp.as_mut() else {
                     return fail(WorkerError::NspFrame("arrived before its model"));
@@ -272,7 +286,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                 match view.render(&mut renderer, job) {
                     Ok((frame, tiles)) => {
                         let span = phased_span(start_ms, &tiles);
-                        t.send(0, &ToMaster::Pixels { frame, tiles, span }.encode())
+                        answer(t, route, frame, tiles, span)
                     }
                     Err(e) => return fail(e),
                 }
@@ -285,7 +299,7 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
                 match pm.render(&mut renderer, &job) {
                     Ok(tiles) => {
                         let span = phased_span(start_ms, &tiles);
-                        t.send(0, &ToMaster::Pixels { frame: job.frame, tiles, span }.encode())
+                        answer(t, route, job.frame, tiles, span)
                     }
                     Err(e) => return fail(e),
                 }
@@ -328,8 +342,32 @@ pub fn run(t: &dyn Transport) -> Result<(), RankError> {
             }
         }
         let span = FrameSpan { start_ms, prepared_ms, end_ms: unix_ms() };
-        t.send(0, &ToMaster::Pixels { frame: jobs[0].frame, tiles, span }.encode());
+        answer(t, route, jobs[0].frame, tiles, span);
     }
+}
+
+/// Sends a frame's pixels to rank 0, or with a `route` to the display ranks (each the tiles
+/// that reach its displays) and rank 0 the tiles with their pixels stripped (an empty
+/// rectangle at the tile's corner), all at once.
+fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TilePixels>, span: FrameSpan) {
+    let Some(route) = route else {
+        t.send(0, &ToMaster::Pixels { frame, tiles, span }.encode());
+        return;
+    };
+    let mut to: std::collections::BTreeMap<usize, Vec<TilePixels>> = Default::default();
+    for tile in &tiles {
+        for r in route(tile.rect) {
+            to.entry(r).or_default().push(tile.clone());
+        }
+    }
+    let mut msgs: Vec<(usize, Vec<u8>)> =
+        to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels { frame, tiles, span }.encode())).collect();
+    let stripped = tiles
+        .into_iter()
+        .map(|p| TilePixels { rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]], rgba: Vec::new(), ..p })
+        .collect();
+    msgs.push((0, ToMaster::Pixels { frame, tiles: stripped, span }.encode()));
+    t.send_many(&msgs);
 }
 
 /// The span of a frame whose first phase (an adaptation or an `.nsp` refinement, done once

@@ -34,7 +34,11 @@
 //!                    a cell stream new to this worker: cell u32, offset u32 (the bytes it
 //!                    holds already), length u32 + bytes; tile count
 //!                    u32, then per tile: index u32, rect 4 x u32
-//! worker -> master
+//!   kind 12 DisplayFrame (to a display rank, `render --display-ranks D`) view u32, frame
+//!                    u32, eye u8 (0 mono, 1 left, 2 right), tile count u32, then the tiles
+//!                    whose pixels workers send it, u32 each
+//!   kind 13 Swap     (to a display rank) view u32: write the view's displays
+//! worker -> master (a worker sends `Pixels` to display ranks too)
 //!   kind 3 Ready     adapter name length u32 + UTF-8 bytes, largest texture side u32
 //!   kind 8 Heartbeat (nothing): the worker is alive and working (sent every
 //!                    `node::HEARTBEAT` while it starts or renders a frame)
@@ -44,6 +48,8 @@
 //!                    then the frame's span on the worker's clock (ms since the Unix epoch):
 //!                    start, prepared, end 3 x f64 ([`FrameSpan`])
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
+//!   kind 14 DisplayReady (from a display rank) view u32, display count u32, then per
+//!                    display: index u32, ready time f64 (Unix ms)
 //! ```
 //! A tile is one or more `.bft` streams (a chunked model's verbatim chunks and sorted
 //! pieces; one stream for a single-stream model), drawn one after the other. The normals of
@@ -57,7 +63,7 @@ use thiserror::Error;
 
 const MAGIC: &[u8; 4] = b"TSRM";
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
-/// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels`; version 1 messages had no version byte, so they read as
+/// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the display ranks' messages; version 1 messages had no version byte, so they read as
 /// version = their kind byte and are refused.
 pub const VERSION: u8 = 5;
 
@@ -186,6 +192,24 @@ pub enum ToWorker {
     /// The skeleton of the `.nsp` model that the following `NspFrame`s show.
     NspModel(Vec<u8>),
     NspFrame(NspFrameJob),
+    /// To a display rank (`render --display-ranks D`): the tiles whose pixels the workers
+    /// send it for a view.
+    DisplayFrame(DisplayFrameJob),
+    /// To a display rank: every display has the view; show (write) it.
+    Swap {
+        view: u32,
+    },
+}
+
+/// A view for a display rank: its number in the workers' messages, its frame and eye
+/// (0 mono, 1 left, 2 right), and the tiles of its displays that workers render for it
+/// (tiles no worker renders stay transparent).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisplayFrameJob {
+    pub view: u32,
+    pub frame: u32,
+    pub eye: u8,
+    pub tiles: Vec<u32>,
 }
 
 /// A frame for a sorter rank (`render --sorters K`): the view, and the worker rank of every
@@ -258,6 +282,12 @@ pub enum ToMaster {
     },
     Failed {
         reason: String,
+    },
+    /// From a display rank: its displays of `view` are assembled, each at the time given
+    /// (Unix ms), and wait for the swap.
+    DisplayReady {
+        view: u32,
+        ready: Vec<(u32, f64)>,
     },
 }
 
@@ -435,6 +465,20 @@ impl ToWorker {
                 w.bytes(skeleton);
                 w.0
             }
+            ToWorker::DisplayFrame(f) => {
+                let mut w = Writer::new(12);
+                w.u32(f.view);
+                w.u32(f.frame);
+                w.0.push(f.eye);
+                w.u32(f.tiles.len() as u32);
+                f.tiles.iter().for_each(|&t| w.u32(t));
+                w.0
+            }
+            ToWorker::Swap { view } => {
+                let mut w = Writer::new(13);
+                w.u32(*view);
+                w.0
+            }
             ToWorker::NspFrame(f) => {
                 let mut w = Writer::new(11);
                 for v in [f.frame, f.width, f.height] {
@@ -562,6 +606,17 @@ impl ToWorker {
                 })
             }
             10 => ToWorker::NspModel(r.bytes("nsp skeleton")?.to_vec()),
+            12 => {
+                let (view, frame) = (r.u32("view")?, r.u32("frame")?);
+                let eye = r.take(1, "eye")?[0];
+                if eye > 2 {
+                    return Err(ProtocolError::Invalid(format!("eye {eye}")));
+                }
+                let n = r.count(4, "tiles")?;
+                let tiles = (0..n).map(|_| r.u32("tile index")).collect::<Result<_, _>>()?;
+                ToWorker::DisplayFrame(DisplayFrameJob { view, frame, eye, tiles })
+            }
+            13 => ToWorker::Swap { view: r.u32("view")? },
             11 => {
                 let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
                 let mut view_proj = [0.0f32; 16];
@@ -626,6 +681,16 @@ impl ToMaster {
                 w.bytes(reason.as_bytes());
                 w.0
             }
+            ToMaster::DisplayReady { view, ready } => {
+                let mut w = Writer::new(14);
+                w.u32(*view);
+                w.u32(ready.len() as u32);
+                for &(d, t) in ready {
+                    w.u32(d);
+                    w.f64(t);
+                }
+                w.0
+            }
         }
     }
 
@@ -666,6 +731,14 @@ impl ToMaster {
                 ToMaster::Pixels { frame, tiles, span }
             }
             5 => ToMaster::Failed { reason: r.string("failure reason")? },
+            14 => {
+                let view = r.u32("view")?;
+                let n = r.count(12, "displays")?;
+                let ready = (0..n)
+                    .map(|_| Ok::<_, ProtocolError>((r.u32("display")?, r.f64("ready")?)))
+                    .collect::<Result<_, _>>()?;
+                ToMaster::DisplayReady { view, ready }
+            }
             k => return Err(ProtocolError::UnknownKind(k)),
         };
         r.end()?;
@@ -763,9 +836,16 @@ mod tests {
         };
         assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
         for m in [
+            ToWorker::DisplayFrame(DisplayFrameJob { view: 5, frame: 2, eye: 2, tiles: vec![0, 7, 9] }),
+            ToWorker::Swap { view: 5 },
+        ] {
+            assert_eq!(ToWorker::decode(&m.encode()), Ok(m));
+        }
+        for m in [
             ToMaster::Ready { adapter: "llvmpipe".into(), max_texture_side: 16384 },
             ToMaster::Failed { reason: "no adapter".into() },
             ToMaster::Heartbeat,
+            ToMaster::DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)] },
         ] {
             assert_eq!(ToMaster::decode(&m.encode()), Ok(m));
         }

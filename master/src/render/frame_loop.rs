@@ -10,11 +10,12 @@ use glam::Quat;
 use worker::protocol::{unix_ms, ToWorker};
 use worker::transport::Transport;
 
+use super::display::DirectSend;
 use super::jobs::{FrameContext, FrameJobs};
-use super::link::{handshake, receive_pixels, Answer, Early, Silence};
+use super::link::{handshake, receive_pixels, receive_ready, Answer, Early, Silence};
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{NspScene, PmScene, Scene};
-use super::stats::{worker_stats, ChunkStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
+use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
 use crate::cli::{RenderArgs, StereoOutput};
 use crate::composite::Image;
 use crate::output::{Identity, LineLog};
@@ -73,7 +74,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         crate::cli::check_camera(&c, grid.height)?;
     }
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
-    let workers = t.size() - args.sorters as usize;
+    let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     let adapters = handshake(t, args.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
     if let Scene::Pm(PmScene { bytes, .. }) = &scene {
@@ -96,6 +97,9 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
     let writer = Writer::start(args, plan, movie, stats, depth, epoch);
 
+    let direct =
+        plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), args.display_ranks as usize));
+    let direct = direct.as_ref();
     let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
     let mut silence = Silence::new(workers, args.timeout);
     let mut early = Early::default();
@@ -112,6 +116,15 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 let ctx = FrameContext { frame: view, camera: cam_k, grid, workers, args, costs: &costs };
                 t.send_many(&scene.announce(&ctx));
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
+                if let Some(d) = direct {
+                    let indices: Vec<u32> = tiles.iter().map(|s| s.index).collect();
+                    let code = match eye {
+                        None => 0,
+                        Some(Eye::Left) => 1,
+                        Some(Eye::Right) => 2,
+                    };
+                    t.send_many(&d.frame_messages(view, k, code, &indices, grid));
+                }
                 let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
                 let sort_ms = ms(start);
                 let (start, send_start) = (Instant::now(), unix_ms());
@@ -126,13 +139,13 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 flight.push_back(f);
                 if flight.len() >= depth {
                     let f = flight.pop_front().expect("a frame in flight");
-                    let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early, epoch)?;
+                    let done = complete(t, f, args, plan, direct, &mut costs, &mut silence, &mut early, epoch)?;
                     writer.send(done)?;
                 }
             }
         }
         while let Some(f) = flight.pop_front() {
-            let done = complete(t, f, args, plan, &mut costs, &mut silence, &mut early, epoch)?;
+            let done = complete(t, f, args, plan, direct, &mut costs, &mut silence, &mut early, epoch)?;
             writer.send(done)?;
         }
         Ok(())
@@ -155,6 +168,7 @@ fn complete(
     f: InFlight,
     args: &RenderArgs,
     plan: &Plan,
+    direct: Option<&DirectSend>,
     costs: &mut [f64],
     silence: &mut Silence,
     early: &mut Early,
@@ -164,10 +178,12 @@ fn complete(
     let (start, receive_start) = (Instant::now(), unix_ms());
     let mut frame = Image::new(plan.grid.width, plan.grid.height);
     let mut composite_ms = 0.0;
+    let mut pixel_bytes = 0u64;
     let mut worker_lines = Vec::new();
     for _ in 0..answering.len() {
         let Answer { rank, tiles: pixels, span } = receive_pixels(t, view, silence, early)?;
         let c = Instant::now();
+        pixel_bytes += pixels.iter().map(|p| p.rgba.len() as u64).sum::<u64>();
         for p in &pixels {
             frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
             costs[p.index as usize] = p.times.total_ms();
@@ -179,8 +195,38 @@ fn complete(
         worker_lines.push(worker_stats(k, eye, rank, &pixels, span, epoch));
     }
     let wait_ms = ms(start) - composite_ms;
-    timeline.push(Span::between("receive", receive_start, unix_ms(), epoch));
-    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref(), plan.stereo) {
+    let receive_end = unix_ms();
+    timeline.push(Span::between("receive", receive_start, receive_end, epoch));
+    // Direct send: every display of the view assembled, then the swap.
+    let displays = match direct {
+        Some(d) => {
+            let mut ready = Vec::new();
+            let mut heard = Vec::new();
+            for _ in d.display_ranks() {
+                let r = receive_ready(t, view, silence, early)?;
+                if heard.contains(&r.rank) {
+                    bail!("rank {} reported view {view}'s displays twice", r.rank);
+                }
+                heard.push(r.rank);
+                ready.extend(r.displays);
+            }
+            let swap = ToWorker::Swap { view }.encode();
+            t.send_many(&d.display_ranks().map(|r| (r, swap.clone())).collect::<Vec<_>>());
+            let swap_ms = unix_ms();
+            timeline.push(Span::between("swap", receive_end, swap_ms, epoch));
+            let (first, last) =
+                ready.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, t)| (a.min(t), b.max(t)));
+            Some(DisplayStats {
+                displays: ready.len() as u32,
+                first_ready_ms: first - epoch,
+                last_ready_ms: last - epoch,
+                spread_ms: last - first,
+                swap_ms: swap_ms - epoch,
+            })
+        }
+        None => None,
+    };
+    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
         if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
             bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
         }
@@ -200,6 +246,8 @@ fn complete(
         chunks,
         nsp,
         tiles,
+        pixel_bytes,
+        displays,
         timeline,
     };
     Ok(Written { frame, eye, stats, workers: worker_lines })
@@ -223,6 +271,8 @@ impl Writer {
     ) -> Writer {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
         let (out, frames, wall, stereo) = (args.out.clone(), args.frames, plan.wall.clone(), plan.stereo);
+        // With display ranks, they write the displays and rank 0 writes no image.
+        let images = !plan.direct;
         let thread = std::thread::spawn(move || -> Result<()> {
             let begin = Instant::now();
             let mut last = begin;
@@ -238,6 +288,7 @@ impl Writer {
                 let path = frame_path(&out, k, frames);
                 let pair = left.take();
                 match (pair.as_ref().map(|l| &l.frame), stereo) {
+                    _ if !images => {}
                     (Some(l), Some(StereoOutput::Separate)) => {
                         write_image(l, &eye_path(&path, "left"), wall.as_ref(), None, None)?;
                         write_image(&w.frame, &eye_path(&path, "right"), wall.as_ref(), None, None)?;

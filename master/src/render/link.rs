@@ -103,9 +103,19 @@ fn missing(flags: &[bool]) -> String {
 }
 
 /// Pixels that came in for a frame later than the one being composited (with frames in
-/// flight, a fast worker answers frame k+1 before a slow one answers frame k).
+/// flight, a fast worker answers frame k+1 before a slow one answers frame k), and display
+/// ranks' readiness that came in while rank 0 waited for pixels, by view.
 #[derive(Default)]
-pub(super) struct Early(std::collections::BTreeMap<u32, Vec<Answer>>);
+pub(super) struct Early {
+    pixels: std::collections::BTreeMap<u32, Vec<Answer>>,
+    ready: std::collections::BTreeMap<u32, Vec<Ready>>,
+}
+
+/// A display rank's readiness for a view: its displays and when each was assembled (Unix ms).
+pub(super) struct Ready {
+    pub rank: usize,
+    pub displays: Vec<(u32, f64)>,
+}
 
 /// A worker's answer to a frame: its rank, its tiles' pixels and when it worked on them.
 pub(super) struct Answer {
@@ -122,7 +132,7 @@ pub(super) fn receive_pixels(
     silence: &mut Silence,
     early: &mut Early,
 ) -> Result<Answer> {
-    if let Some(answer) = early.0.get_mut(&frame).and_then(Vec::pop) {
+    if let Some(answer) = early.pixels.get_mut(&frame).and_then(Vec::pop) {
         return Ok(answer);
     }
     loop {
@@ -145,9 +155,48 @@ pub(super) fn receive_pixels(
             }
             ToMaster::Pixels { frame: f, tiles, span } if f > frame && silence.owes(rank) > 0 => {
                 silence.answered(rank);
-                early.0.entry(f).or_default().insert(0, Answer { rank, tiles, span });
+                early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span });
+            }
+            ToMaster::DisplayReady { view, ready } => {
+                early.ready.entry(view).or_default().push(Ready { rank, displays: ready });
             }
             ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
+            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
+        }
+    }
+}
+
+/// The next display rank's readiness for `view` (`render --display-ranks`); workers'
+/// heartbeats and early pixels in between are kept as [`receive_pixels`] keeps them, and a
+/// display rank silent for the whole timeout ends the run.
+pub(super) fn receive_ready(t: &dyn Transport, view: u32, silence: &mut Silence, early: &mut Early) -> Result<Ready> {
+    if let Some(ready) = early.ready.get_mut(&view).and_then(Vec::pop) {
+        return Ok(ready);
+    }
+    let start = Instant::now();
+    loop {
+        let (rank, bytes) = match t.recv(silence.timeout.saturating_sub(start.elapsed())) {
+            Ok(m) => m,
+            Err(RecvError::Timeout) => bail!(
+                "no display rank finished view {} for {:.0} s (--timeout); counting it as dead",
+                view,
+                silence.timeout.as_secs_f64()
+            ),
+            Err(RecvError::Disconnected) => bail!("a display rank exited during view {view}"),
+        };
+        silence.heard(rank);
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            ToMaster::Heartbeat => continue,
+            ToMaster::DisplayReady { view: v, ready } if v == view => return Ok(Ready { rank, displays: ready }),
+            ToMaster::DisplayReady { view: v, ready } => {
+                early.ready.entry(v).or_default().push(Ready { rank, displays: ready })
+            }
+            ToMaster::Pixels { frame: f, tiles, span } if f > view && silence.owes(rank) > 0 => {
+                silence.answered(rank);
+                early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span });
+            }
+            ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during view {view}'s swap"),
             ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
             ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
         }

@@ -21,8 +21,10 @@
 //! | `schedule.rs` | which worker renders which tile (round robin, or balanced by cost) |
 //! | `sorter.rs` | a rank that helps rank 0 sort a chunked model (`--sorters K`) |
 //! | `link.rs` | the handshake, heartbeats and silence, receiving the tiles' pixels |
+//! | `display.rs` | direct send: display ranks that assemble and write a wall's displays at a swap barrier |
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
 
+mod display;
 mod frame_loop;
 mod jobs;
 mod link;
@@ -35,6 +37,7 @@ pub mod stats;
 use anyhow::Result;
 use worker::transport::{self, Transport};
 
+pub use display::{run_display, DirectSend};
 pub use frame_loop::{orbit, orbit_by};
 pub use plan::{frame_path, plan, Plan};
 pub use schedule::assign;
@@ -57,6 +60,9 @@ pub fn run_master(mpi: &transport::Mpi, args: &RenderArgs, plan: &Plan) -> Resul
 
 /// Without mpirun: the frame loop, and one worker on a thread of this process, over channels.
 pub fn run_alone(args: &RenderArgs, plan: &Plan) -> Result<()> {
+    if args.display_ranks > 0 {
+        anyhow::bail!("--display-ranks {} needs mpirun: the display ranks are ranks of their own", args.display_ranks);
+    }
     if args.sorters > 1 {
         anyhow::bail!("--sorters {} needs mpirun: the sorters are ranks of their own", args.sorters);
     }

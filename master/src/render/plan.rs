@@ -19,6 +19,8 @@ pub struct Plan {
     pub eyes: Option<Vec<Vec3>>,
     /// `--stereo`: how the pairs are written.
     pub stereo: Option<StereoOutput>,
+    /// `--display-ranks`: display ranks write the displays, rank 0 no overview.
+    pub direct: bool,
     /// The inputs' identities, which no output may be.
     pub inputs: Vec<Identity>,
 }
@@ -59,6 +61,21 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
             })?;
         }
     }
+    let direct = args.display_ranks > 0;
+    if direct {
+        let Some(w) = &wall else {
+            bail!("--display-ranks needs a --wall whose displays they own");
+        };
+        if args.display_ranks as usize > w.displays.len() {
+            bail!("--display-ranks {} is more than the wall's {} displays", args.display_ranks, w.displays.len());
+        }
+        if args.sorters > 1 {
+            bail!("--display-ranks and --sorters do not go together yet");
+        }
+        if stereo == Some(StereoOutput::SideBySide) {
+            bail!("display ranks write each eye's displays separately: leave out --stereo-output side-by-side");
+        }
+    }
     if movie && stereo == Some(StereoOutput::Separate) {
         bail!("a movie holds a stereo pair side by side: add --stereo-output side-by-side, or write PNGs");
     }
@@ -91,12 +108,12 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
         vec![0, args.frames - 1]
     };
     let mut outputs: Vec<PathBuf> =
-        frames.iter().flat_map(|&k| frame_outputs(&args.out, k, args.frames, wall.as_ref(), stereo)).collect();
+        frames.iter().flat_map(|&k| frame_outputs(&args.out, k, args.frames, wall.as_ref(), stereo, direct)).collect();
     outputs.extend(args.stats.clone());
     let outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     check_distinct(&inputs, &outputs)?;
     let inputs = inputs.iter().filter_map(|p| Identity::of(p).ok()).collect();
-    Ok(Plan { grid, wall, eyes, stereo, inputs })
+    Ok(Plan { grid, wall, eyes, stereo, direct, inputs })
 }
 
 /// The eyes of `--eye-path`: one `x y z` (or `x,y,z`) line per frame, at least `frames`
@@ -121,14 +138,16 @@ fn read_eyes(path: &Path, frames: u32) -> Result<Vec<Vec3>> {
     Ok(eyes)
 }
 
-/// Every file frame `k` writes: the frame, and with a wall each display's image; for
-/// separate stereo images, each of those for the left and the right eye.
+/// Every file frame `k` writes: the frame, and with a wall each display's image (and no
+/// overview with display ranks, `direct`); for separate stereo images, each of those for the
+/// left and the right eye.
 pub(super) fn frame_outputs(
     out: &Path,
     k: u32,
     frames: u32,
     wall: Option<&Wall>,
     stereo: Option<StereoOutput>,
+    direct: bool,
 ) -> Vec<PathBuf> {
     let path = frame_path(out, k, frames);
     let paths = match stereo {
@@ -140,7 +159,9 @@ pub(super) fn frame_outputs(
         if let Some(wall) = wall {
             v.extend(wall.displays.iter().map(|d| display_path(&path, &d.name)));
         }
-        v.push(path);
+        if !direct {
+            v.push(path);
+        }
     }
     v
 }
@@ -152,7 +173,7 @@ pub(super) fn eye_path(path: &Path, eye: &str) -> PathBuf {
 }
 
 /// The image of display `name` beside the frame's overview `path`.
-fn display_path(path: &Path, name: &str) -> PathBuf {
+pub(super) fn display_path(path: &Path, name: &str) -> PathBuf {
     let stem = path.file_stem().map_or("frame".into(), |s| s.to_string_lossy().into_owned());
     path.with_file_name(format!("{stem}-display-{name}.png"))
 }

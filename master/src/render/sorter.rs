@@ -35,7 +35,7 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
         bail!("{}: --sorters shares the sort of a chunked .bft model", args.model.display());
     };
     t.send(0, &ToMaster::Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }.encode());
-    let workers = t.size() - args.sorters as usize;
+    let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     loop {
         let (from, bytes) = match t.recv(MASTER_SILENCE) {
             Ok(m) => m,

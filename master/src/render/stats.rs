@@ -49,9 +49,27 @@ pub(super) struct MasterStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nsp: Option<NspStats>,
     pub tiles: Vec<TileStats>,
+    /// Bytes of tile pixels rank 0 received (0 with display ranks: the pixels go to them).
+    pub pixel_bytes: u64,
+    /// With display ranks: when the view's displays were complete, and the swap.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub displays: Option<DisplayStats>,
     /// Rank 0's stages: `sort` (with the frame's announcements), `send`, `receive` (waiting
-    /// for and compositing the workers' pixels) and `write` (on the writer thread).
+    /// for and compositing the workers' pixels), `swap` (with display ranks: waiting for
+    /// every display to be complete) and `write` (on the writer thread).
     pub timeline: Vec<Span>,
+}
+
+/// The swap barrier of a view on a wall with display ranks: how many displays, when the
+/// first and the last was complete (ms from the run's start), the spread between them, and
+/// when rank 0 sent the swap (after the last).
+#[derive(Serialize, Clone, Copy, Debug, Default)]
+pub(super) struct DisplayStats {
+    pub displays: u32,
+    pub first_ready_ms: f64,
+    pub last_ready_ms: f64,
+    pub spread_ms: f64,
+    pub swap_ms: f64,
 }
 
 /// An `.nsp` model's frame: cells selected (drawn) for the view, cells the workers draw in
