@@ -78,10 +78,13 @@ fn render(args: &RenderArgs) -> Result<()> {
         .context("MPI is already initialized, or cannot serialize calls from two threads (MPI_THREAD_SERIALIZED)")?;
     let (sorters, displays) = (args.sorters as usize, args.display_ranks as usize);
     if mpi.size() < sorters + displays + 1 {
-        anyhow::bail!(
-            "--sorters {sorters} and --display-ranks {displays} need at least {} ranks (with rank 0 and a worker)",
-            sorters + displays + 1
-        );
+        match displays {
+            0 => anyhow::bail!("--sorters {sorters} needs at least {} ranks (the sorters and a worker)", sorters + 1),
+            _ => anyhow::bail!(
+                "--display-ranks {displays} needs at least {} ranks (rank 0, a worker and the display ranks)",
+                displays + 2
+            ),
+        }
     }
     // Ranks 1..=W are workers; then K-1 ranks help rank 0 sort (`--sorters K`), and the last
     // D ranks own the wall's displays (`--display-ranks D`).
