@@ -915,7 +915,7 @@ fn a_head_tracked_wall_shows_each_eyes_window() {
     let bad = alone(&args);
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
-    assert!(err.contains("eyes.txt: line 2") && err.contains("not in front of the wall"), "{err}");
+    assert!(err.contains("eyes.txt: line 2") && err.contains("not in front of it"), "{err}");
 }
 
 /// Sixteen workers (`mpirun --oversubscribe -np 17`): a 64-tile frame equals the
@@ -1015,4 +1015,96 @@ fn display_ranks_write_the_same_displays_behind_a_swap_barrier() {
     }
     let bad = alone(&["render", &model, "--display-ranks", "2", "--out", dir.path().join("x.png").to_str().unwrap()]);
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--display-ranks needs a --wall"));
+}
+
+/// A wall whose displays stand at an angle (two walls of a CAVE, meeting in a corner), each
+/// with its corners in the world: every display gets a frame and an off-axis frustum of its
+/// own, and equals a mono render with that frustum (the flags from
+/// `Wall::display_camera_args`) pixel for pixel, alone and in stereo under mpirun; the model
+/// seen through the corner shows on both.
+#[test]
+fn displays_at_an_angle_each_get_their_own_frustum() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let text = "eye = [-1.5, 0.0, 1.5]\n\
+                [[display]]\nname = \"front\"\nx = 0\ny = 0\nwidth = 64\nheight = 48\nbezel = [0, 0, 4, 0]\n\
+                corners = { bottom_left = [-3.0, -2.25, -3.0], bottom_right = [3.0, -2.25, -3.0], top_left = [-3.0, 2.25, -3.0] }\n\
+                [[display]]\nname = \"side\"\nx = 68\ny = 0\nwidth = 64\nheight = 48\n\
+                corners = { bottom_left = [3.0, -2.25, -3.0], bottom_right = [3.0, -2.25, 3.0], top_left = [3.0, 2.25, -3.0] }\n";
+    let wall_path = dir.path().join("cave.toml");
+    std::fs::write(&wall_path, text).unwrap();
+    let wall = master::composite::Wall::parse(text).unwrap();
+    assert!(wall.per_display());
+    let mono = |i: usize, eye: glam::Vec3, out: &Path| {
+        let a = wall.display_camera_args(i, &Default::default(), eye).unwrap();
+        let (ev, tv, uv) = (vec3(eye), vec3(a.target.unwrap()), vec3(a.up.unwrap()));
+        let (fv, sv) = (a.fovy.unwrap().to_string(), format!("{},{}", a.shift.unwrap()[0], a.shift.unwrap()[1]));
+        ok(&alone(&[
+            "render",
+            &model,
+            "--size",
+            "64x48",
+            "--tiles",
+            "1x1",
+            "--eye",
+            &ev,
+            "--target",
+            &tv,
+            "--up",
+            &uv,
+            "--fovy",
+            &fv,
+            "--shift",
+            &sv,
+            "--out",
+            out.to_str().unwrap(),
+        ]));
+    };
+    let out = dir.path().join("cave.png");
+    ok(&alone(&[
+        "render",
+        &model,
+        "--wall",
+        wall_path.to_str().unwrap(),
+        "--tiles",
+        "2x2",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let eye = glam::Vec3::new(-1.5, 0.0, 1.5);
+    for (i, name) in ["front", "side"].into_iter().enumerate() {
+        let expected = dir.path().join(format!("mono-{name}.png"));
+        mono(i, eye, &expected);
+        let shown = dir.path().join(format!("cave-display-{name}.png"));
+        assert!(covered(&shown) > 100, "{name} shows part of the model");
+        assert!(identical(&shown, &expected), "display {name} equals its own frustum's render");
+    }
+    let (w, h, overview) = pixels(&out);
+    assert_eq!((w, h), (132, 48));
+    let (_, _, side) = pixels(&dir.path().join("cave-display-side.png"));
+    assert_eq!(&overview[(10 * 132 + 68) * 4..(10 * 132 + 132) * 4], &side[10 * 64 * 4..11 * 64 * 4]);
+    // Stereo under mpirun: each eye's displays.
+    let sep = 0.4f32;
+    let args = [
+        "render",
+        model.as_str(),
+        "--wall",
+        wall_path.to_str().unwrap(),
+        "--tiles",
+        "2x2",
+        "--stereo",
+        "0.4",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    ok(&mpirun(3, &[], &args));
+    let right = wall.right().unwrap();
+    for (eye_name, at) in [("left", eye - right * sep * 0.5), ("right", eye + right * sep * 0.5)] {
+        for (i, name) in ["front", "side"].into_iter().enumerate() {
+            let expected = dir.path().join(format!("mono-{eye_name}-{name}.png"));
+            mono(i, at, &expected);
+            let shown = dir.path().join(format!("cave-{eye_name}-display-{name}.png"));
+            assert!(identical(&shown, &expected), "{eye_name} eye, display {name}");
+        }
+    }
 }

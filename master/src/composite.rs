@@ -141,7 +141,19 @@ pub fn encode_png(width: u32, height: u32, color: png::ColorType, pixels: &[u8])
 /// top_left = [-1.6, 1.3, 0.0]
 /// ```
 /// All displays lie in that one plane, so one frustum serves them all: it is each display's
-/// own off-axis frustum, cut to the display.
+/// own off-axis frustum, cut to the display. Displays that stand at angles to each other (a
+/// CAVE) give their own corners instead, and each gets a frame and a frustum of its own:
+///
+/// ```toml
+/// eye = [-1.5, 0.0, 1.5]
+/// [[display]]
+/// name = "front"
+/// x = 0
+/// y = 0
+/// width = 1920
+/// height = 1080
+/// corners = { bottom_left = [-3.2, -1.8, -3.0], bottom_right = [3.2, -1.8, -3.0], top_left = [-3.2, 1.8, -3.0] }
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct Wall {
     pub width: u32,
@@ -169,6 +181,10 @@ pub struct Display {
     pub rect: [u32; 4],
     /// Its bezels in pixels: left, top, right, bottom.
     pub bezel: [u32; 4],
+    /// Where its picture lies in the world (a listed display's `corners`): with every
+    /// display placed so, each gets its own frame and off-axis frustum from the eye, so
+    /// displays may stand at angles to each other (a CAVE, a curved wall).
+    pub corners: Option<WallPlane>,
 }
 
 /// The wall file as written (either form; [`Wall::load`] checks which).
@@ -197,6 +213,7 @@ struct DisplayFile {
     height: u32,
     #[serde(default)]
     bezel: Bezel,
+    corners: Option<WallPlane>,
 }
 
 #[derive(Deserialize)]
@@ -237,73 +254,74 @@ impl Wall {
         };
         (wall.plane, wall.eye) = (plane, eye);
         wall.validate()?;
+        let placed = wall.displays.iter().filter(|d| d.corners.is_some()).count();
+        if placed > 0 && placed < wall.displays.len() {
+            bail!("either every display has its corners or none has");
+        }
+        if placed > 0 && wall.plane.is_some() {
+            bail!("a wall is placed by its plane or by its displays' corners, not both");
+        }
         if let Some(eye) = wall.eye {
-            if wall.plane.is_none() {
-                bail!("an eye needs the wall's plane");
+            if !wall.placed() {
+                bail!("an eye needs the wall's plane or its displays' corners");
             }
-            wall.frustum(eye)?;
+            wall.check_eye(eye)?;
         }
         Ok(wall)
     }
 
+    /// Whether the wall is placed in the world (a plane, or every display's corners).
+    pub fn placed(&self) -> bool {
+        self.plane.is_some() || self.per_display()
+    }
+
+    /// Whether each display has its own frame and frustum (its corners are given).
+    pub fn per_display(&self) -> bool {
+        self.displays.first().is_some_and(|d| d.corners.is_some())
+    }
+
+    /// An error when `eye` cannot look through the wall (or one of its displays).
+    pub fn check_eye(&self, eye: glam::Vec3) -> Result<()> {
+        if self.plane.is_some() {
+            self.camera_args(&Default::default(), eye)?;
+        }
+        if self.per_display() {
+            for i in 0..self.displays.len() {
+                self.display_camera_args(i, &Default::default(), eye)?;
+            }
+        }
+        Ok(())
+    }
+
     /// The camera flags of the off-axis frustum from `eye` through the wall's plane, on top
     /// of `base` (whose clip planes, if given, stay; else they follow the model as for any
-    /// eye given on the command line); `None` for a wall with no plane. An error when the
-    /// eye is not in front of the wall.
+    /// eye given on the command line). An error when the wall has no plane or the eye is not
+    /// in front of it.
     pub fn camera_args(&self, base: &crate::cli::CameraArgs, eye: glam::Vec3) -> Result<crate::cli::CameraArgs> {
-        let (target, up, fovy, shift) = self.frustum(eye)?;
-        Ok(crate::cli::CameraArgs {
-            view: crate::cli::ViewPreset::Front,
-            eye: Some(eye),
-            target: Some(target),
-            up: Some(up),
-            fovy: Some(fovy),
-            shift: Some(shift),
-            ..base.clone()
-        })
+        let plane = self.plane.context("the wall has no plane to look through")?;
+        let frustum = kooima(plane, (self.width, self.height), eye).context("the wall's plane")?;
+        Ok(frustum.args(base, eye))
     }
 
-    /// The wall's rightward direction in the world (a stereo pair's eyes lie along it).
+    /// [`Wall::camera_args`] through display `i`'s own corners, for a frame of its own.
+    pub fn display_camera_args(
+        &self,
+        i: usize,
+        base: &crate::cli::CameraArgs,
+        eye: glam::Vec3,
+    ) -> Result<crate::cli::CameraArgs> {
+        let d = &self.displays[i];
+        let corners = d.corners.with_context(|| format!("display {} has no corners", d.name))?;
+        let [x0, y0, x1, y1] = d.rect;
+        let frustum = kooima(corners, (x1 - x0, y1 - y0), eye).with_context(|| format!("display {}", d.name))?;
+        Ok(frustum.args(base, eye))
+    }
+
+    /// The wall's rightward direction in the world (a stereo pair's eyes lie along it): its
+    /// plane's, or its first display's.
     pub fn right(&self) -> Option<glam::Vec3> {
-        self.plane.map(|p| (glam::Vec3::from(p.bottom_right) - glam::Vec3::from(p.bottom_left)).normalize())
-    }
-
-    /// Kooima's generalised perspective projection as a camera: the eye looks along the
-    /// plane's normal, up its vertical, with the vertical field of view of the wall's
-    /// height and the shift that moves the window onto the wall. Returns the target, up,
-    /// field of view and shift.
-    fn frustum(&self, eye: glam::Vec3) -> Result<(glam::Vec3, glam::Vec3, f32, [f32; 2])> {
-        let Some(p) = self.plane else {
-            bail!("the wall has no plane to look through");
-        };
-        let (bl, br, tl) =
-            (glam::Vec3::from(p.bottom_left), glam::Vec3::from(p.bottom_right), glam::Vec3::from(p.top_left));
-        let (across, up) = (br - bl, tl - bl);
-        let (w, h) = (across.length(), up.length());
-        if !(w > 0.0 && h > 0.0 && eye.is_finite() && bl.is_finite() && br.is_finite() && tl.is_finite()) {
-            bail!("the wall's plane needs three distinct finite corners");
-        }
-        let (vr, vu) = (across / w, up / h);
-        if vr.dot(vu).abs() > 1e-3 {
-            bail!("the wall's plane is not a rectangle (its bottom and left edges are not square)");
-        }
-        // The wall's pixels are square: its plane must have the frame's shape.
-        let (fw, fh) = (self.width as f32, self.height as f32);
-        if ((w / h) / (fw / fh) - 1.0).abs() > 0.01 {
-            bail!("the wall's plane is {w} x {h}, the shape of its {}x{} pixels is not", self.width, self.height);
-        }
-        let vn = vr.cross(vu);
-        let d = vn.dot(eye - bl);
-        if d.is_nan() || d <= 0.0 {
-            bail!(
-                "the eye {eye} is not in front of the wall (on the side its plane's corners face, counter-clockwise)"
-            );
-        }
-        let (l, r) = (vr.dot(bl - eye), vr.dot(br - eye));
-        let (b, t) = (vu.dot(bl - eye), vu.dot(tl - eye));
-        let fovy = 2.0 * ((t - b) * 0.5 / d).atan().to_degrees();
-        let shift = [(r + l) / (r - l), (t + b) / (t - b)];
-        Ok((eye - vn, vu, fovy, shift))
+        let p = self.plane.or(self.displays.first().and_then(|d| d.corners))?;
+        Some((glam::Vec3::from(p.bottom_right) - glam::Vec3::from(p.bottom_left)).normalize())
     }
 
     /// A regular grid of `columns x rows` displays of `w x h` pixels, `bx` and `by` pixels
@@ -327,7 +345,7 @@ impl Wall {
                     if c + 1 < columns { bx / 2 } else { 0 },
                     if r + 1 < rows { by / 2 } else { 0 },
                 ];
-                Display { name: format!("{c}-{r}"), rect: [x0, y0, x0 + w, y0 + h], bezel }
+                Display { name: format!("{c}-{r}"), rect: [x0, y0, x0 + w, y0 + h], bezel, corners: None }
             })
             .collect();
         Ok(Wall { width: fw as u32, height: fh as u32, displays, plane: None, eye: None })
@@ -360,7 +378,7 @@ impl Wall {
             height = height.max(y1 + bezel[3] as u64);
             crate::cli::check_frame_size(width, height).with_context(|| format!("{what}: the wall is too large"))?;
             let rect = [d.x, d.y, x1 as u32, y1 as u32];
-            displays.push(Display { name, rect, bezel });
+            displays.push(Display { name, rect, bezel, corners: d.corners });
         }
         Ok(Wall { width: width as u32, height: height as u32, displays, plane: None, eye: None })
     }
@@ -396,6 +414,60 @@ impl Wall {
         }
         (displays, overview)
     }
+}
+
+/// An off-axis frustum as camera flags: the target, up, vertical field of view and shift.
+struct Frustum {
+    target: glam::Vec3,
+    up: glam::Vec3,
+    fovy: f32,
+    shift: [f32; 2],
+}
+
+impl Frustum {
+    fn args(&self, base: &crate::cli::CameraArgs, eye: glam::Vec3) -> crate::cli::CameraArgs {
+        crate::cli::CameraArgs {
+            view: crate::cli::ViewPreset::Front,
+            eye: Some(eye),
+            target: Some(self.target),
+            up: Some(self.up),
+            fovy: Some(self.fovy),
+            shift: Some(self.shift),
+            ..base.clone()
+        }
+    }
+}
+
+/// Kooima's generalised perspective projection as a camera: the eye looks along the normal
+/// of the rectangle `p` (a picture of `size` pixels), up its vertical, with the vertical
+/// field of view of its height and the shift that moves the window onto it.
+fn kooima(p: WallPlane, size: (u32, u32), eye: glam::Vec3) -> Result<Frustum> {
+    let (bl, br, tl) =
+        (glam::Vec3::from(p.bottom_left), glam::Vec3::from(p.bottom_right), glam::Vec3::from(p.top_left));
+    let (across, up) = (br - bl, tl - bl);
+    let (w, h) = (across.length(), up.length());
+    if !(w > 0.0 && h > 0.0 && eye.is_finite() && bl.is_finite() && br.is_finite() && tl.is_finite()) {
+        bail!("three distinct finite corners are needed");
+    }
+    let (vr, vu) = (across / w, up / h);
+    if vr.dot(vu).abs() > 1e-3 {
+        bail!("not a rectangle (its bottom and left edges are not square)");
+    }
+    // Pixels are square: the rectangle must have the picture's shape.
+    let (fw, fh) = (size.0 as f32, size.1 as f32);
+    if ((w / h) / (fw / fh) - 1.0).abs() > 0.01 {
+        bail!("{w} x {h} in the world is not the shape of its {}x{} pixels", size.0, size.1);
+    }
+    let vn = vr.cross(vu);
+    let d = vn.dot(eye - bl);
+    if d.is_nan() || d <= 0.0 {
+        bail!("the eye {eye} is not in front of it (on the side its corners face, counter-clockwise)");
+    }
+    let (l, r) = (vr.dot(bl - eye), vr.dot(br - eye));
+    let (b, t) = (vu.dot(bl - eye), vu.dot(tl - eye));
+    let fovy = 2.0 * ((t - b) * 0.5 / d).atan().to_degrees();
+    let shift = [(r + l) / (r - l), (t + b) / (t - b)];
+    Ok(Frustum { target: eye - vn, up: vu, fovy, shift })
 }
 
 impl Display {
@@ -479,8 +551,10 @@ mod tests {
         // The frame reaches the right edge of the second display's bezel (12 + 3) and the
         // bottom of the first's (8 + 2).
         assert_eq!(wall.frame_size(), (15, 10));
-        assert_eq!(wall.displays[0], Display { name: "portrait".into(), rect: [2, 3, 5, 8], bezel: [2; 4] });
-        assert_eq!(wall.displays[1], Display { name: "1".into(), rect: [8, 1, 12, 3], bezel: [1, 1, 3, 0] });
+        let portrait = Display { name: "portrait".into(), rect: [2, 3, 5, 8], bezel: [2; 4], corners: None };
+        assert_eq!(wall.displays[0], portrait);
+        let second = Display { name: "1".into(), rect: [8, 1, 12, 3], bezel: [1, 1, 3, 0], corners: None };
+        assert_eq!(wall.displays[1], second);
         let mut frame = Image::new(15, 10);
         for (i, px) in frame.rgba.chunks_mut(4).enumerate() {
             px.copy_from_slice(&[(i % 15) as u8, (i / 15) as u8, 7, 255]);
@@ -546,7 +620,7 @@ mod tests {
         let centred = wall.camera_args(&Default::default(), glam::Vec3::new(0.75, 0.5, 3.0)).unwrap();
         assert!(centred.shift.unwrap().iter().all(|s| s.abs() < 1e-6));
         let behind = wall.camera_args(&Default::default(), glam::Vec3::new(0.0, 0.0, -1.0)).unwrap_err();
-        assert!(behind.to_string().contains("not in front of the wall"), "{behind}");
+        assert!(format!("{behind:#}").contains("not in front of it"), "{behind:#}");
         let squashed = text.replace("top_left = [-1.5, 2.0, 0.0]", "top_left = [-1.5, 5.0, 0.0]");
         assert!(format!("{:#}", Wall::parse(&squashed).unwrap_err()).contains("shape"));
         let no_plane = format!("eye = [0.0, 0.0, 2.0]\n{LISTED}");
@@ -569,5 +643,49 @@ mod tests {
             text.lines().map(|l| l.strip_prefix("# ").filter(setting).unwrap_or(l)).map(|l| format!("{l}\n")).collect();
         let placed = Wall::parse(&placed).unwrap();
         assert!(placed.plane.is_some() && placed.eye.is_some());
+    }
+
+    /// Each display placed by its own corners is a window of its own: a point on it at its
+    /// pixel (x, y) projects to (x, y) of its frame, whatever the angle between displays.
+    #[test]
+    fn displays_placed_at_an_angle_are_windows_of_their_own() {
+        let text = "eye = [-1.5, 0.5, 1.5]\n\
+                    [[display]]\nx = 0\ny = 0\nwidth = 8\nheight = 6\n\
+                    corners = { bottom_left = [-3.0, -2.25, -3.0], bottom_right = [3.0, -2.25, -3.0], top_left = [-3.0, 2.25, -3.0] }\n\
+                    [[display]]\nx = 8\ny = 0\nwidth = 8\nheight = 6\n\
+                    corners = { bottom_left = [3.0, -2.25, -3.0], bottom_right = [3.0, -2.25, 3.0], top_left = [3.0, 2.25, -3.0] }\n";
+        let wall = Wall::parse(text).unwrap();
+        assert!(wall.per_display() && wall.placed());
+        for i in 0..2 {
+            let c = wall.displays[i].corners.unwrap();
+            let (bl, br, tl) =
+                (glam::Vec3::from(c.bottom_left), glam::Vec3::from(c.bottom_right), glam::Vec3::from(c.top_left));
+            for eye in [glam::Vec3::new(-1.5, 0.5, 1.5), glam::Vec3::new(0.0, -1.0, 0.0)] {
+                let a = wall.display_camera_args(i, &Default::default(), eye).unwrap();
+                let cam = codec::view::Camera {
+                    eye,
+                    target: a.target.unwrap(),
+                    up: a.up.unwrap(),
+                    fovy: a.fovy.unwrap(),
+                    near: 0.1,
+                    far: 100.0,
+                    shift: a.shift.unwrap(),
+                };
+                let vp = cam.view_proj(8.0 / 6.0);
+                for (x, y) in [(0.0, 0.0), (8.0, 6.0), (3.0, 4.5)] {
+                    let p = tl + (br - bl) * (x / 8.0) - (tl - bl) * (y / 6.0);
+                    let q = vp * p.extend(1.0);
+                    let (px, py) = ((q.x / q.w + 1.0) * 4.0, (1.0 - q.y / q.w) * 3.0);
+                    assert!(
+                        (px - x).abs() < 1e-3 && (py - y).abs() < 1e-3,
+                        "display {i}, eye {eye}: ({x}, {y}) -> ({px}, {py})"
+                    );
+                }
+            }
+        }
+        let mixed = text.replacen("corners = { bottom_left = [3.0", "# corners = { bottom_left = [3.0", 1);
+        assert!(format!("{:#}", Wall::parse(&mixed).unwrap_err()).contains("every display has its corners"));
+        let behind = text.replace("eye = [-1.5, 0.5, 1.5]", "eye = [4.0, 0.0, 0.0]");
+        assert!(format!("{:#}", Wall::parse(&behind).unwrap_err()).contains("not in front of it"));
     }
 }

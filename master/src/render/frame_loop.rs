@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use codec::view::Camera;
+use codec::view::{Camera, TileGrid};
 use glam::Quat;
 use worker::protocol::{unix_ms, ToWorker};
 use worker::transport::Transport;
@@ -26,6 +26,10 @@ struct InFlight {
     /// The view's number in the messages: the frame's, or `2k` and `2k + 1` for stereo eyes.
     view: u32,
     eye: Option<Eye>,
+    /// The display whose own frame this is (a wall whose displays have their corners).
+    display: Option<usize>,
+    /// The view's frame size.
+    size: (u32, u32),
     answering: Vec<usize>,
     tiles: Vec<TileStats>,
     chunks: Option<ChunkStats>,
@@ -48,7 +52,7 @@ pub(super) enum Eye {
 /// and its stats lines, in frame order (a stereo frame's left eye waits for its right).
 struct Written {
     frame: Image,
-    eye: Option<Eye>,
+    display: Option<usize>,
     /// Rank 0's stats line, whose `frame` is this frame's number.
     stats: MasterStats,
     workers: Vec<WorkerStats>,
@@ -70,8 +74,8 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
-    for c in frame_cameras(&scene, args, plan, &cam, 0)? {
-        crate::cli::check_camera(&c, grid.height)?;
+    for v in frame_views(&scene, args, plan, &cam, 0)? {
+        crate::cli::check_camera(&v.camera, v.grid.height)?;
     }
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
     let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
@@ -106,14 +110,15 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let result = (|| -> Result<()> {
         for k in 0..args.frames {
-            let views = frame_cameras(&scene, args, plan, &cam, k)?;
-            let stereo = views.len() == 2;
-            for (e, cam_k) in views.into_iter().enumerate() {
-                let eye = stereo.then_some(if e == 0 { Eye::Left } else { Eye::Right });
-                let view = if stereo { 2 * k + e as u32 } else { k };
+            let views = frame_views(&scene, args, plan, &cam, k)?;
+            let n = views.len() as u32;
+            for (j, spec) in views.into_iter().enumerate() {
+                let ViewSpec { camera, eye, display, grid } = spec;
+                let grid = &grid;
+                let view = k * n + j as u32;
                 let start = Instant::now();
                 let sort_start = unix_ms();
-                let ctx = FrameContext { frame: view, camera: cam_k, grid, workers, args, costs: &costs };
+                let ctx = FrameContext { frame: view, camera, grid, workers, args, costs: &costs };
                 t.send_many(&scene.announce(&ctx));
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
                 if let Some(d) = direct {
@@ -135,7 +140,9 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                     Span::between("send", send_start, unix_ms(), epoch),
                 ];
                 silence.expect(&answering);
-                let f = InFlight { k, view, eye, answering, tiles, chunks, nsp, sort_ms, send_ms, timeline };
+                let size = (grid.width, grid.height);
+                let f =
+                    InFlight { k, view, eye, display, size, answering, tiles, chunks, nsp, sort_ms, send_ms, timeline };
                 flight.push_back(f);
                 if flight.len() >= depth {
                     let f = flight.pop_front().expect("a frame in flight");
@@ -174,9 +181,9 @@ fn complete(
     early: &mut Early,
     epoch: f64,
 ) -> Result<Written> {
-    let InFlight { k, view, eye, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
+    let InFlight { k, view, eye, display, size, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
     let (start, receive_start) = (Instant::now(), unix_ms());
-    let mut frame = Image::new(plan.grid.width, plan.grid.height);
+    let mut frame = Image::new(size.0, size.1);
     let mut composite_ms = 0.0;
     let mut pixel_bytes = 0u64;
     let mut worker_lines = Vec::new();
@@ -235,6 +242,7 @@ fn complete(
     let stats = MasterStats {
         frame: k,
         eye,
+        display: display.map(|i| plan.wall.as_ref().expect("a wall").displays[i].name.clone()),
         rank: 0,
         sort_ms,
         send_ms,
@@ -250,7 +258,7 @@ fn complete(
         displays,
         timeline,
     };
-    Ok(Written { frame, eye, stats, workers: worker_lines })
+    Ok(Written { frame, display, stats, workers: worker_lines })
 }
 
 /// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
@@ -273,28 +281,46 @@ impl Writer {
         let (out, frames, wall, stereo) = (args.out.clone(), args.frames, plan.wall.clone(), plan.stereo);
         // With display ranks, they write the displays and rank 0 writes no image.
         let images = !plan.direct;
+        let eyes = if plan.stereo.is_some() { 2 } else { 1 };
+        let per_frame = eyes * plan.wall.as_ref().filter(|w| w.per_display()).map_or(1, |w| w.displays.len());
         let thread = std::thread::spawn(move || -> Result<()> {
             let begin = Instant::now();
             let mut last = begin;
-            // A stereo frame's left eye, waiting for its right.
-            let mut left: Option<Written> = None;
+            // A frame's views (eyes, displays with frames of their own) wait for the last.
+            let mut views: Vec<Written> = Vec::with_capacity(per_frame);
             for w in rx {
-                if w.eye == Some(Eye::Left) {
-                    left = Some(w);
+                views.push(w);
+                if views.len() < per_frame {
                     continue;
                 }
-                let k = w.stats.frame;
+                let views = std::mem::take(&mut views);
+                let k = views[0].stats.frame;
                 let (start, write_start) = (Instant::now(), unix_ms());
                 let path = frame_path(&out, k, frames);
-                let pair = left.take();
-                match (pair.as_ref().map(|l| &l.frame), stereo) {
+                // One image per eye: a display's own frame goes to its place on the wall.
+                let per_eye = if views[0].display.is_some() { per_frame / eyes } else { 1 };
+                let images_by_eye: Vec<Image> = views
+                    .chunks(per_eye)
+                    .map(|group| match (&wall, group[0].display) {
+                        (Some(wall), Some(_)) => {
+                            let mut frame = Image::new(wall.width, wall.height);
+                            for v in group {
+                                let rect = wall.displays[v.display.expect("a display's view")].rect;
+                                frame.blit(rect, &v.frame.rgba)?;
+                            }
+                            Ok(frame)
+                        }
+                        _ => Ok(group[0].frame.clone()),
+                    })
+                    .collect::<Result<_>>()?;
+                match (&images_by_eye[..], stereo) {
                     _ if !images => {}
-                    (Some(l), Some(StereoOutput::Separate)) => {
+                    ([l, r], Some(StereoOutput::Separate)) => {
                         write_image(l, &eye_path(&path, "left"), wall.as_ref(), None, None)?;
-                        write_image(&w.frame, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
+                        write_image(r, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
                     }
-                    (Some(l), _) => write_image(l, &path, wall.as_ref(), Some(&w.frame), movie.as_mut())?,
-                    (None, _) => write_image(&w.frame, &path, wall.as_ref(), None, movie.as_mut())?,
+                    ([l, r], _) => write_image(l, &path, wall.as_ref(), Some(r), movie.as_mut())?,
+                    (frames_, _) => write_image(&frames_[0], &path, wall.as_ref(), None, movie.as_mut())?,
                 }
                 let write_ms = ms(start);
                 let now = Instant::now();
@@ -304,12 +330,12 @@ impl Writer {
                 eprintln!(
                     "frame {}: {} tiles, sort {:.1} ms, {} ({fps:.1} frames/s)",
                     k + 1,
-                    w.stats.tiles.len(),
-                    w.stats.sort_ms,
+                    views.iter().map(|v| v.stats.tiles.len()).sum::<usize>(),
+                    views.iter().map(|v| v.stats.sort_ms).sum::<f64>(),
                     path.display()
                 );
                 let write = Span::between("write", write_start, unix_ms(), epoch);
-                for Written { stats: mut line, workers, .. } in pair.into_iter().chain([w]) {
+                for Written { stats: mut line, workers, .. } in views {
                     (line.write_ms, line.frame_ms) = (write_ms, frame_ms);
                     line.timeline.push(write.clone());
                     if let Some(log) = stats.as_mut() {
@@ -364,40 +390,65 @@ fn write_image(
     }
 }
 
-/// The cameras of frame `k`: one, or a left and a right eye with `--stereo`. A wall with a
-/// plane gives each eye (from the wall file or `--eye-path`) the off-axis frustum through
-/// it; otherwise the frame's camera orbits and zooms from `cam`, and stereo eyes converge
-/// on the plane through its target.
-fn frame_cameras(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<Camera>> {
+/// One view of a frame: its camera, its eye (stereo) and, on a wall whose displays each
+/// have a frame, the display, with the grid of the view's frame.
+struct ViewSpec {
+    camera: Camera,
+    eye: Option<Eye>,
+    display: Option<usize>,
+    grid: TileGrid,
+}
+
+/// The views of frame `k`: one, or a left and a right eye with `--stereo`, and on a wall
+/// whose displays have their corners one per display (per eye). A wall placed in the world
+/// gives each eye (from the wall file or `--eye-path`) the off-axis frustum through it, or
+/// through each display; otherwise the frame's camera orbits and zooms from `cam`, and
+/// stereo eyes converge on the plane through its target.
+fn frame_views(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
     let half = args.stereo.map(|s| s * 0.5);
-    if let Some(wall) = plan.wall.as_ref().filter(|w| w.plane.is_some()) {
+    let eye_of = |e: usize| half.map(|_| if e == 0 { Eye::Left } else { Eye::Right });
+    if let Some(wall) = plan.wall.as_ref().filter(|w| w.placed()) {
         let eye = match &plan.eyes {
             Some(eyes) => eyes[k as usize],
-            None => wall.eye.context("a wall with a plane needs an eye")?,
+            None => wall.eye.context("a wall placed in the world needs an eye")?,
         };
-        let right = wall.right().context("a wall with a plane")?;
+        let right = wall.right().context("a wall placed in the world")?;
         let eyes = match half {
             Some(h) => vec![eye - right * h, eye + right * h],
             None => vec![eye],
         };
-        return eyes
-            .into_iter()
-            .map(|e| {
-                let c = scene.camera(&wall.camera_args(&args.camera, e)?, &plan.grid)?;
-                crate::cli::check_precision(&c, plan.grid.height)?;
-                Ok(c)
-            })
-            .collect();
+        let mut views = Vec::new();
+        for (e, &at) in eyes.iter().enumerate() {
+            if !wall.per_display() {
+                let camera = scene.camera(&wall.camera_args(&args.camera, at)?, &plan.grid)?;
+                crate::cli::check_precision(&camera, plan.grid.height)?;
+                views.push(ViewSpec { camera, eye: eye_of(e), display: None, grid: plan.grid });
+                continue;
+            }
+            for (i, d) in wall.displays.iter().enumerate() {
+                let [x0, y0, x1, y1] = d.rect;
+                let grid = TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)?;
+                let camera = scene.camera(&wall.display_camera_args(i, &args.camera, at)?, &grid)?;
+                crate::cli::check_precision(&camera, grid.height)?;
+                views.push(ViewSpec { camera, eye: eye_of(e), display: Some(i), grid });
+            }
+        }
+        return Ok(views);
     }
     let cam_k = if args.orbit { orbit_by(cam, k, args.frames, args.orbit_degrees) } else { *cam };
     let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
-    Ok(match half {
+    let cameras = match half {
         Some(h) => {
             let (focus, aspect) = (cam_k.eye.distance(cam_k.target), plan.grid.aspect());
             vec![cam_k.stereo_eye(-h, focus, aspect), cam_k.stereo_eye(h, focus, aspect)]
         }
         None => vec![cam_k],
-    })
+    };
+    Ok(cameras
+        .into_iter()
+        .enumerate()
+        .map(|(e, camera)| ViewSpec { camera, eye: eye_of(e), display: None, grid: plan.grid })
+        .collect())
 }
 
 /// This process's resident memory in MB (Linux: `/proc/self/statm`), for the stats.

@@ -37,30 +37,50 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     let grid = TileGrid::new(w, h, args.tiles.0, args.tiles.1)?;
     let movie = crate::movie::is_movie(&args.out);
     let stereo = args.stereo.map(|_| args.stereo_output);
-    let planar = wall.as_ref().is_some_and(|w| w.plane.is_some());
-    if args.eye_path.is_some() && !planar {
-        bail!("--eye-path needs a --wall with a plane (the eye looks through the wall)");
+    let placed = wall.as_ref().is_some_and(Wall::placed);
+    if args.eye_path.is_some() && !placed {
+        bail!("--eye-path needs a --wall placed in the world (a plane, or its displays' corners)");
     }
-    if planar {
+    if placed {
         let c = &args.camera;
         if c.eye.is_some() || c.target.is_some() || c.up.is_some() || c.fovy.is_some() || c.shift.is_some() {
-            bail!("a wall with a plane sets the eye, target, up, field of view and shift; leave out those flags");
+            bail!(
+                "a wall placed in the world sets the eye, target, up, field of view and shift; leave out those flags"
+            );
         }
         if args.orbit || args.zoom != 1.0 {
-            bail!("a wall with a plane is still: the eye moves with --eye-path, not --orbit or --zoom");
+            bail!("a wall placed in the world is still: the eye moves with --eye-path, not --orbit or --zoom");
         }
         if wall.as_ref().is_some_and(|w| w.eye.is_none()) && args.eye_path.is_none() {
-            bail!("a wall with a plane needs an eye: `eye = [x, y, z]` in the wall file, or --eye-path");
+            bail!("a wall placed in the world needs an eye: `eye = [x, y, z]` in the wall file, or --eye-path");
         }
     }
-    let eyes = args.eye_path.as_deref().map(|p| read_eyes(p, args.frames)).transpose()?;
-    if let (Some(wall), Some(eyes)) = (&wall, &eyes) {
-        for (k, &eye) in eyes.iter().enumerate() {
-            wall.camera_args(&args.camera, eye).with_context(|| {
-                format!("{}: line {}", args.eye_path.as_deref().unwrap_or(Path::new("")).display(), k + 1)
-            })?;
+    let per_display = wall.as_ref().is_some_and(Wall::per_display);
+    if per_display {
+        for d in &wall.as_ref().expect("per display").displays {
+            let [x0, y0, x1, y1] = d.rect;
+            TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)
+                .with_context(|| format!("display {} has its own frame, cut into --tiles", d.name))?;
+        }
+        if args.balance {
+            bail!("--balance and a wall whose displays each have a frame do not go together yet");
+        }
+        if args.display_ranks > 0 {
+            bail!("--display-ranks and a wall whose displays each have a frame do not go together yet");
         }
     }
+    let eyes = match args.eye_path.as_deref() {
+        Some(path) => {
+            let eyes = read_eyes(path, args.frames)?;
+            if let Some(wall) = &wall {
+                for &(line, eye) in &eyes {
+                    wall.check_eye(eye).with_context(|| format!("{}: line {line}", path.display()))?;
+                }
+            }
+            Some(eyes.into_iter().map(|(_, e)| e).collect())
+        }
+        None => None,
+    };
     let direct = args.display_ranks > 0;
     if direct {
         let Some(w) = &wall else {
@@ -116,9 +136,9 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     Ok(Plan { grid, wall, eyes, stereo, direct, inputs })
 }
 
-/// The eyes of `--eye-path`: one `x y z` (or `x,y,z`) line per frame, at least `frames`
-/// of them (blank lines and `#` comments skipped).
-fn read_eyes(path: &Path, frames: u32) -> Result<Vec<Vec3>> {
+/// The eyes of `--eye-path` with their line numbers: one `x y z` (or `x,y,z`) line per
+/// frame, at least `frames` of them (blank lines and `#` comments skipped).
+fn read_eyes(path: &Path, frames: u32) -> Result<Vec<(usize, Vec3)>> {
     let bytes = crate::commands::read_input(path)?;
     let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
     let mut eyes = Vec::new();
@@ -130,7 +150,7 @@ fn read_eyes(path: &Path, frames: u32) -> Result<Vec<Vec3>> {
         let joined = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|c| !c.is_empty()).collect::<Vec<_>>();
         let eye = crate::cli::parse_vec3(&joined.join(","))
             .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), i + 1))?;
-        eyes.push(eye);
+        eyes.push((i + 1, eye));
     }
     if eyes.len() < frames as usize {
         bail!("{}: {} eye positions for {frames} frames", path.display(), eyes.len());

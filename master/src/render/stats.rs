@@ -30,6 +30,9 @@ pub(super) struct MasterStats {
     /// `--stereo`: which eye's view this line is of.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub eye: Option<Eye>,
+    /// On a wall whose displays have frames of their own: which display's frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub display: Option<String>,
     pub rank: usize,
     pub sort_ms: f64,
     pub send_ms: f64,
