@@ -238,7 +238,16 @@ impl Wall {
 
     /// A wall from the text of a wall file, checked.
     pub fn parse(text: &str) -> Result<Wall> {
-        let file: WallFile = toml::from_str(text).context("not a valid wall description")?;
+        let file: WallFile = toml::from_str(text).map_err(|e: toml::de::Error| {
+            // toml's own message spans several lines (a snippet and a caret): one line here.
+            let at = e.span().map_or(String::new(), |span| {
+                let before = &text[..span.start.min(text.len())];
+                let line = before.matches('\n').count() + 1;
+                let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+                format!(" at line {line}, column {column}")
+            });
+            anyhow::anyhow!("not a valid wall description{at}: {}", e.message().trim())
+        })?;
         let grid = [file.columns, file.rows, file.display_width, file.display_height];
         let (plane, eye) = (file.plane, file.eye.map(glam::Vec3::from));
         let mut wall = if file.display.is_empty() {
@@ -584,7 +593,12 @@ mod tests {
         assert!(err(&format!("columns = 2\n{LISTED}")).contains("not both"));
         assert!(err("rows = 2\n").contains("needs columns"));
         assert!(err(&LISTED.replace("x = 8", "x = 20000")).contains("too large"));
-        assert!(err(&LISTED.replace("bezel = 2", "bezels = 2")).contains("not a valid wall"));
+        let unknown = err(&LISTED.replace("bezel = 2", "bezels = 2"));
+        assert!(
+            unknown.starts_with("not a valid wall description at line 7, column 1: unknown field `bezels`"),
+            "{unknown}"
+        );
+        assert_eq!(unknown.lines().count(), 1);
     }
 
     /// A wall in the world is a window: a point on its plane at wall pixel (x, y) projects
