@@ -183,7 +183,8 @@ fn complete(
 ) -> Result<Written> {
     let InFlight { k, view, eye, display, size, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
     let (start, receive_start) = (Instant::now(), unix_ms());
-    let mut frame = Image::new(size.0, size.1);
+    // With display ranks the pixels go to them: rank 0 holds no frame.
+    let mut frame = if direct.is_some() { Image::new(0, 0) } else { Image::new(size.0, size.1) };
     let mut composite_ms = 0.0;
     let mut pixel_bytes = 0u64;
     let mut worker_lines = Vec::new();
@@ -192,7 +193,12 @@ fn complete(
         let c = Instant::now();
         pixel_bytes += pixels.iter().map(|p| p.rgba.len() as u64).sum::<u64>();
         for p in &pixels {
-            frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+            if direct.is_some() && !p.rgba.is_empty() {
+                bail!("rank {rank} sent tile {}'s pixels to rank 0, which display ranks should have", p.index);
+            }
+            if direct.is_none() {
+                frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+            }
             costs[p.index as usize] = p.times.total_ms();
             if let Some(s) = tiles.iter_mut().find(|s| s.index == p.index) {
                 s.triangles = p.triangles;
@@ -301,6 +307,7 @@ impl Writer {
                 let per_eye = if views[0].display.is_some() { per_frame / eyes } else { 1 };
                 let images_by_eye: Vec<Image> = views
                     .chunks(per_eye)
+                    .filter(|_| images)
                     .map(|group| match (&wall, group[0].display) {
                         (Some(wall), Some(_)) => {
                             let mut frame = Image::new(wall.width, wall.height);
@@ -320,7 +327,8 @@ impl Writer {
                         write_image(r, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
                     }
                     ([l, r], _) => write_image(l, &path, wall.as_ref(), Some(r), movie.as_mut())?,
-                    (frames_, _) => write_image(&frames_[0], &path, wall.as_ref(), None, movie.as_mut())?,
+                    ([frame], _) => write_image(frame, &path, wall.as_ref(), None, movie.as_mut())?,
+                    (other, _) => bail!("frame {} came with {} images", k + 1, other.len()),
                 }
                 let write_ms = ms(start);
                 let now = Instant::now();
