@@ -759,6 +759,32 @@ fn vec3(v: glam::Vec3) -> String {
     format!("{},{},{}", v.x, v.y, v.z)
 }
 
+/// The camera flags of an off-axis frustum built by the wall (eye, target, up, field of
+/// view, shift), for a mono render of it.
+fn frustum_flags(a: &master::cli::CameraArgs) -> Vec<String> {
+    let [sx, sy] = a.shift.unwrap();
+    vec![
+        "--eye".into(),
+        vec3(a.eye.unwrap()),
+        "--target".into(),
+        vec3(a.target.unwrap()),
+        "--up".into(),
+        vec3(a.up.unwrap()),
+        "--fovy".into(),
+        a.fovy.unwrap().to_string(),
+        "--shift".into(),
+        format!("{sx},{sy}"),
+    ]
+}
+
+/// `tessera render MODEL --size SIZE --tiles 1x1 FLAGS --out OUT`, alone.
+fn render_alone(model: &str, size: &str, flags: &[String], out: &Path) {
+    let mut args = vec!["render", model, "--size", size, "--tiles", "1x1"];
+    args.extend(flags.iter().map(String::as_str));
+    args.extend(["--out", out.to_str().unwrap()]);
+    ok(&alone(&args));
+}
+
 /// `--stereo`: each eye equals a mono render from that eye with the same off-axis frustum
 /// (the camera flags built by [`codec::view::Camera::stereo_eye`]); the two eyes differ;
 /// side by side is the left eye beside the right, under mpirun too.
@@ -872,28 +898,7 @@ fn a_head_tracked_wall_shows_each_eyes_window() {
     for (k, &eye) in eyes.iter().enumerate() {
         let a = wall.camera_args(&Default::default(), eye).unwrap();
         let whole = dir.path().join(format!("whole{k}.png"));
-        let (ev, tv, uv) = (vec3(eye), vec3(a.target.unwrap()), vec3(a.up.unwrap()));
-        let (fv, sv) = (a.fovy.unwrap().to_string(), format!("{},{}", a.shift.unwrap()[0], a.shift.unwrap()[1]));
-        ok(&alone(&[
-            "render",
-            &model,
-            "--size",
-            "120x80",
-            "--tiles",
-            "1x1",
-            "--eye",
-            &ev,
-            "--target",
-            &tv,
-            "--up",
-            &uv,
-            "--fovy",
-            &fv,
-            "--shift",
-            &sv,
-            "--out",
-            whole.to_str().unwrap(),
-        ]));
+        render_alone(&model, "120x80", &frustum_flags(&a), &whole);
         let (_, _, full) = pixels(&whole);
         for d in &wall.displays {
             let shown = dir.path().join(format!("w-{:04}-display-{}.png", k + 1, d.name));
@@ -1037,28 +1042,7 @@ fn displays_at_an_angle_each_get_their_own_frustum() {
     assert!(wall.per_display());
     let mono = |i: usize, eye: glam::Vec3, out: &Path| {
         let a = wall.display_camera_args(i, &Default::default(), eye).unwrap();
-        let (ev, tv, uv) = (vec3(eye), vec3(a.target.unwrap()), vec3(a.up.unwrap()));
-        let (fv, sv) = (a.fovy.unwrap().to_string(), format!("{},{}", a.shift.unwrap()[0], a.shift.unwrap()[1]));
-        ok(&alone(&[
-            "render",
-            &model,
-            "--size",
-            "64x48",
-            "--tiles",
-            "1x1",
-            "--eye",
-            &ev,
-            "--target",
-            &tv,
-            "--up",
-            &uv,
-            "--fovy",
-            &fv,
-            "--shift",
-            &sv,
-            "--out",
-            out.to_str().unwrap(),
-        ]));
+        render_alone(&model, "64x48", &frustum_flags(&a), out);
     };
     let out = dir.path().join("cave.png");
     ok(&alone(&[

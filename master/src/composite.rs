@@ -601,6 +601,19 @@ mod tests {
         assert_eq!(unknown.lines().count(), 1);
     }
 
+    /// The camera of a wall's camera flags, with clip planes 0.1 and 100.
+    fn camera_of(a: &crate::cli::CameraArgs) -> codec::view::Camera {
+        codec::view::Camera {
+            eye: a.eye.unwrap(),
+            target: a.target.unwrap(),
+            up: a.up.unwrap(),
+            fovy: a.fovy.unwrap(),
+            near: 0.1,
+            far: 100.0,
+            shift: a.shift.unwrap(),
+        }
+    }
+
     /// A wall in the world is a window: a point on its plane at wall pixel (x, y) projects
     /// to pixel (x, y) from any eye in front of it; an eye behind it is refused.
     #[test]
@@ -613,17 +626,7 @@ mod tests {
         assert_eq!(wall.frame_size(), (15, 10));
         let world = |x: f32, y: f32| glam::Vec3::new(-1.5 + 4.5 * x / 15.0, 2.0 - 3.0 * y / 10.0, 0.0);
         for eye in [glam::Vec3::new(0.0, 0.0, 2.0), glam::Vec3::new(-4.0, 3.0, 0.5), glam::Vec3::new(0.75, 0.5, 9.0)] {
-            let a = wall.camera_args(&crate::cli::CameraArgs::default(), eye).unwrap();
-            let cam = codec::view::Camera {
-                eye,
-                target: a.target.unwrap(),
-                up: a.up.unwrap(),
-                fovy: a.fovy.unwrap(),
-                near: 0.1,
-                far: 100.0,
-                shift: a.shift.unwrap(),
-            };
-            let vp = cam.view_proj(15.0 / 10.0);
+            let vp = camera_of(&wall.camera_args(&Default::default(), eye).unwrap()).view_proj(15.0 / 10.0);
             for (x, y) in [(0.0, 0.0), (15.0, 10.0), (4.0, 7.5), (12.0, 1.0)] {
                 let c = vp * world(x, y).extend(1.0);
                 let (px, py) = ((c.x / c.w + 1.0) * 0.5 * 15.0, (1.0 - c.y / c.w) * 0.5 * 10.0);
@@ -675,17 +678,8 @@ mod tests {
             let (bl, br, tl) =
                 (glam::Vec3::from(c.bottom_left), glam::Vec3::from(c.bottom_right), glam::Vec3::from(c.top_left));
             for eye in [glam::Vec3::new(-1.5, 0.5, 1.5), glam::Vec3::new(0.0, -1.0, 0.0)] {
-                let a = wall.display_camera_args(i, &Default::default(), eye).unwrap();
-                let cam = codec::view::Camera {
-                    eye,
-                    target: a.target.unwrap(),
-                    up: a.up.unwrap(),
-                    fovy: a.fovy.unwrap(),
-                    near: 0.1,
-                    far: 100.0,
-                    shift: a.shift.unwrap(),
-                };
-                let vp = cam.view_proj(8.0 / 6.0);
+                let vp =
+                    camera_of(&wall.display_camera_args(i, &Default::default(), eye).unwrap()).view_proj(8.0 / 6.0);
                 for (x, y) in [(0.0, 0.0), (8.0, 6.0), (3.0, 4.5)] {
                     let p = tl + (br - bl) * (x / 8.0) - (tl - bl) * (y / 6.0);
                     let q = vp * p.extend(1.0);
