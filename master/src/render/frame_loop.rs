@@ -193,11 +193,10 @@ fn complete(
         let c = Instant::now();
         pixel_bytes += pixels.iter().map(|p| p.rgba.len() as u64).sum::<u64>();
         for p in &pixels {
-            if direct.is_some() && !p.rgba.is_empty() {
-                bail!("rank {rank} sent tile {}'s pixels to rank 0, which display ranks should have", p.index);
-            }
             if direct.is_none() {
                 frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+            } else if !p.rgba.is_empty() {
+                bail!("rank {rank} sent tile {}'s pixels to rank 0, which display ranks should have", p.index);
             }
             costs[p.index as usize] = p.times.total_ms();
             if let Some(s) = tiles.iter_mut().find(|s| s.index == p.index) {
@@ -299,25 +298,26 @@ impl Writer {
                 if views.len() < per_frame {
                     continue;
                 }
-                let views = std::mem::take(&mut views);
+                let mut views = std::mem::take(&mut views);
                 let k = views[0].stats.frame;
                 let (start, write_start) = (Instant::now(), unix_ms());
                 let path = frame_path(&out, k, frames);
                 // One image per eye: a display's own frame goes to its place on the wall.
                 let per_eye = if views[0].display.is_some() { per_frame / eyes } else { 1 };
+                // The frames move out of the views (whose stats lines are written below).
                 let images_by_eye: Vec<Image> = views
-                    .chunks(per_eye)
+                    .chunks_mut(per_eye)
                     .filter(|_| images)
                     .map(|group| match (&wall, group[0].display) {
                         (Some(wall), Some(_)) => {
                             let mut frame = Image::new(wall.width, wall.height);
-                            for v in group {
+                            for v in group.iter() {
                                 let rect = wall.displays[v.display.expect("a display's view")].rect;
                                 frame.blit(rect, &v.frame.rgba)?;
                             }
                             Ok(frame)
                         }
-                        _ => Ok(group[0].frame.clone()),
+                        _ => Ok(std::mem::replace(&mut group[0].frame, Image::new(0, 0))),
                     })
                     .collect::<Result<_>>()?;
                 match (&images_by_eye[..], stereo) {
@@ -391,10 +391,12 @@ fn write_image(
     right: Option<&Image>,
     movie: Option<&mut crate::movie::Movie>,
 ) -> Result<()> {
-    match (wall, movie) {
-        (_, Some(m)) => m.frame(&right.map_or_else(|| frame.clone(), |r| frame.beside(r)).rgba),
-        (None, None) => right.map_or_else(|| frame.clone(), |r| frame.beside(r)).save_png(path),
-        (Some(wall), None) => save_wall(wall, frame, right, path),
+    match (wall, movie, right) {
+        (_, Some(m), None) => m.frame(&frame.rgba),
+        (_, Some(m), Some(r)) => m.frame(&frame.beside(r).rgba),
+        (Some(wall), None, _) => save_wall(wall, frame, right, path),
+        (None, None, None) => frame.save_png(path),
+        (None, None, Some(r)) => frame.beside(r).save_png(path),
     }
 }
 
