@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, ensure, Context, Result};
+use anyhow::{ensure, Context, Result};
 use codec::bft::tile_sort::{self, Boxes, Sorter};
 use codec::bft::Coding;
 use codec::bft::EncodeOptions;
@@ -446,8 +446,7 @@ const PANEL_SIZE: (u32, u32) = (900, 650);
 
 /// Renders the figure as PNG bytes: one panel per model, from that model's rows.
 fn render_plot(panels: &[&[Row]], size: (u32, u32), quant_bits: u8) -> Result<Vec<u8>> {
-    plotters::style::register_font("sans-serif", FontStyle::Normal, ttf_noto_sans::REGULAR)
-        .map_err(|_| anyhow!("the embedded font does not load"))?;
+    master::plot::register_font()?;
     let cols = (panels.len() as f64).sqrt().ceil().max(1.0) as u32;
     let grid_rows = (panels.len() as u32).div_ceil(cols).max(1);
     let (w, h) = (PANEL_SIZE.0 * cols, PANEL_SIZE.1 * grid_rows + 50);

@@ -651,6 +651,11 @@ mod tests {
         }
     }
 
+    /// A camera at the origin looking down -Z, 60 degrees high.
+    fn down_z() -> Camera {
+        Camera { eye: Vec3::ZERO, target: -Vec3::Z, up: Vec3::Y, fovy: 60.0, near: 0.5, far: 50.0, shift: [0.0; 2] }
+    }
+
     fn ndc(cam: &Camera, aspect: f32, p: Vec3) -> Vec3 {
         let c = cam.view_proj(aspect) * p.extend(1.0);
         c.truncate() / c.w
@@ -659,15 +664,7 @@ mod tests {
     /// A shift moves the picture, not the eye: NDC positions move by exactly the shift.
     #[test]
     fn a_shift_moves_the_window() {
-        let cam = Camera {
-            eye: Vec3::ZERO,
-            target: -Vec3::Z,
-            up: Vec3::Y,
-            fovy: 60.0,
-            near: 0.5,
-            far: 50.0,
-            shift: [0.0; 2],
-        };
+        let cam = down_z();
         let shifted = Camera { shift: [0.25, -0.5], ..cam };
         for p in [Vec3::new(0.3, -0.2, -4.0), Vec3::new(-1.0, 2.0, -9.0)] {
             let (a, b) = (ndc(&cam, 1.5, p), ndc(&shifted, 1.5, p));
@@ -714,15 +711,7 @@ mod tests {
     /// eye, on uneven grids.
     #[test]
     fn triangle_tile_box_equals_clipping() {
-        let cam = Camera {
-            eye: Vec3::ZERO,
-            target: -Vec3::Z,
-            up: Vec3::Y,
-            fovy: 60.0,
-            near: 0.5,
-            far: 50.0,
-            shift: [0.0; 2],
-        };
+        let cam = down_z();
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = move || {
             seed ^= seed << 13;

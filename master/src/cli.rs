@@ -110,30 +110,27 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     n.checked_mul(1u64 << shift).filter(|&v| v > 0).ok_or_else(|| format!("'{s}' is out of range"))
 }
 
-/// Parses `x,y,z`.
-pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+/// Parses `N` finite comma-separated numbers (`shape` names them in the error: `x,y,z`).
+fn parse_floats<const N: usize>(s: &str, shape: &str) -> Result<[f32; N], String> {
     let v: Vec<f32> = s
         .split(',')
         .map(|c| c.trim().parse::<f32>().map_err(|_| format!("'{c}' is not a number in '{s}'")))
         .collect::<Result<_, _>>()?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
-        [_, _, _] => Err(format!("'{s}' has a non-finite coordinate")),
-        _ => Err(format!("expected x,y,z, got '{s}'")),
+    let v: [f32; N] = v.try_into().map_err(|_| format!("expected {shape}, got '{s}'"))?;
+    if !v.iter().all(|c| c.is_finite()) {
+        return Err(format!("'{s}' has a non-finite coordinate"));
     }
+    Ok(v)
+}
+
+/// Parses `x,y,z`.
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    parse_floats::<3>(s, "x,y,z").map(Vec3::from)
 }
 
 /// Parses `x,y`.
 pub fn parse_vec2(s: &str) -> Result<[f32; 2], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|c| c.trim().parse::<f32>().map_err(|_| format!("'{c}' is not a number in '{s}'")))
-        .collect::<Result<_, _>>()?;
-    match v[..] {
-        [x, y] if v.iter().all(|c| c.is_finite()) => Ok([x, y]),
-        [_, _] => Err(format!("'{s}' has a non-finite coordinate")),
-        _ => Err(format!("expected x,y, got '{s}'")),
-    }
+    parse_floats(s, "x,y")
 }
 
 #[derive(Parser)]

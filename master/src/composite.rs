@@ -392,14 +392,12 @@ impl Wall {
         Ok(Wall { width: width as u32, height: height as u32, displays, plane: None, eye: None })
     }
 
-    /// Displays whose bezels overlap another display, or a wall too large.
+    /// Displays whose bezels overlap another display (the size was checked as the wall was
+    /// laid out, by [`Wall::grid`] or [`Wall::listed`]).
     fn validate(&self) -> Result<()> {
-        crate::cli::check_frame_size(self.width as u64, self.height as u64)
-            .context("the wall (displays and bezels) is too large")?;
         for (i, a) in self.displays.iter().enumerate() {
             for b in &self.displays[..i] {
-                let (oa, ob) = (a.outer(), b.outer());
-                if oa[0] < ob[2] && ob[0] < oa[2] && oa[1] < ob[3] && ob[1] < oa[3] {
+                if intersection(a.outer(), b.outer()).is_some() {
                     bail!("displays {} and {} overlap (bezels included)", b.name, a.name);
                 }
             }
@@ -423,6 +421,12 @@ impl Wall {
         }
         (displays, overview)
     }
+}
+
+/// The intersection of two pixel rectangles `[x0, y0, x1, y1)`, if not empty.
+pub fn intersection(a: [u32; 4], b: [u32; 4]) -> Option<[u32; 4]> {
+    let r = [a[0].max(b[0]), a[1].max(b[1]), a[2].min(b[2]), a[3].min(b[3])];
+    (r[0] < r[2] && r[1] < r[3]).then_some(r)
 }
 
 /// An off-axis frustum as camera flags: the target, up, vertical field of view and shift.

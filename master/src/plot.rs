@@ -115,8 +115,7 @@ impl Timeline {
     /// Draws the timeline into an RGB image of `width x height(rows)`, with `title` on top;
     /// also gives the pixel at the middle of each bar (in the order of `bars`).
     pub fn draw(&self, width: u32, title: &str) -> Result<Drawn> {
-        plotters::style::register_font("sans-serif", FontStyle::Normal, ttf_noto_sans::REGULAR)
-            .map_err(|_| anyhow!("the embedded font does not load"))?;
+        register_font()?;
         let height = Self::height(self.rows.len());
         let mut pixels = vec![0u8; width as usize * height as usize * 3];
         let mut centers = Vec::with_capacity(self.bars.len());
@@ -212,6 +211,13 @@ impl Timeline {
         let top = (rows - row) as f64;
         [top - 0.85, top - 0.15]
     }
+}
+
+/// Registers the embedded font as plotters' `sans-serif` (it has no system fonts here): for
+/// every figure drawn with plotters.
+pub fn register_font() -> Result<()> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, ttf_noto_sans::REGULAR)
+        .map_err(|_| anyhow!("the embedded font does not load"))
 }
 
 /// A drawn timeline: RGB pixels, rows top first, and the pixel at the middle of each bar.

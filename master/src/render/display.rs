@@ -16,7 +16,7 @@ use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};
 use crate::cli::{RenderArgs, StereoOutput};
-use crate::composite::{Image, Wall};
+use crate::composite::{intersection, Image, Wall};
 
 /// Which display rank owns which display, and so which ranks a tile's pixels go to.
 #[derive(Clone, Debug)]
@@ -41,8 +41,10 @@ impl DirectSend {
 
     /// The display ranks whose displays the pixel rectangle `rect` reaches, in order.
     pub fn route(&self, rect: [u32; 4]) -> Vec<usize> {
-        let mut to: Vec<usize> =
-            (0..self.rects.len()).filter(|&i| overlap(self.rects[i], rect).is_some()).map(|i| self.owner(i)).collect();
+        let mut to: Vec<usize> = (0..self.rects.len())
+            .filter(|&i| intersection(self.rects[i], rect).is_some())
+            .map(|i| self.owner(i))
+            .collect();
         to.sort_unstable();
         to.dedup();
         to
@@ -71,12 +73,6 @@ impl DirectSend {
     pub fn display_ranks(&self) -> std::ops::Range<usize> {
         self.first..self.first + self.ranks
     }
-}
-
-/// The intersection of two pixel rectangles, if not empty.
-fn overlap(a: [u32; 4], b: [u32; 4]) -> Option<[u32; 4]> {
-    let r = [a[0].max(b[0]), a[1].max(b[1]), a[2].min(b[2]), a[3].min(b[3])];
-    (r[0] < r[2] && r[1] < r[3]).then_some(r)
 }
 
 /// One view on a display rank: what rank 0 said to expect, what came, the images.
@@ -153,19 +149,13 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
                 ToMaster::Pixels { frame, tiles, .. } => {
                     let v = views.entry(frame).or_insert_with(new_view);
                     for tile in tiles {
+                        let [x0, y0, x1, y1] = tile.rect;
+                        let pixels = Image { width: x1 - x0, height: y1 - y0, rgba: tile.rgba };
                         for (&i, image) in mine.iter().zip(v.images.iter_mut()) {
                             let d = wall.displays[i].rect;
-                            if let Some(r) = overlap(d, tile.rect) {
-                                let outer = tile.rect;
-                                let w = (outer[2] - outer[0]) as usize * 4;
-                                let (x, row) = ((r[0] - outer[0]) as usize * 4, (r[2] - r[0]) as usize * 4);
-                                let part: Vec<u8> = (r[1]..r[3])
-                                    .flat_map(|y| {
-                                        let at = (y - outer[1]) as usize * w + x;
-                                        tile.rgba[at..at + row].iter().copied()
-                                    })
-                                    .collect();
-                                image.blit([r[0] - d[0], r[1] - d[1], r[2] - d[0], r[3] - d[1]], &part)?;
+                            if let Some(r) = intersection(d, tile.rect) {
+                                let part = pixels.crop([r[0] - x0, r[1] - y0, r[2] - x0, r[3] - y0]);
+                                image.blit([r[0] - d[0], r[1] - d[1], r[2] - d[0], r[3] - d[1]], &part.rgba)?;
                             }
                         }
                         v.received.push(tile.index);
@@ -188,7 +178,7 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
             let done = job
                 .tiles
                 .iter()
-                .filter(|&&tile| overlap(rect, plan.grid.tile_rect(tile as usize)).is_some())
+                .filter(|&&tile| intersection(rect, plan.grid.tile_rect(tile as usize)).is_some())
                 .all(|tile| v.received.contains(tile));
             if done && v.ready[k].is_none() {
                 v.ready[k] = Some(now);

@@ -132,71 +132,72 @@ pub(super) fn receive_pixels(
     silence: &mut Silence,
     early: &mut Early,
 ) -> Result<Answer> {
-    if let Some(answer) = early.pixels.get_mut(&frame).and_then(Vec::pop) {
-        return Ok(answer);
-    }
-    loop {
-        let (wait, quiet) = silence.next_wait();
-        let (rank, bytes) = match t.recv(wait) {
-            Ok(m) => m,
-            Err(RecvError::Timeout) => bail!(
-                "rank {quiet} sent nothing for {:.0} s during frame {} (--timeout); counting it as dead",
-                silence.timeout.as_secs_f64(),
-                frame + 1
-            ),
-            Err(RecvError::Disconnected) => bail!("the worker exited during frame {}", frame + 1),
-        };
-        silence.heard(rank);
-        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
-            ToMaster::Heartbeat => continue,
-            ToMaster::Pixels { frame: f, tiles, span } if f == frame => {
-                silence.answered(rank);
-                return Ok(Answer { rank, tiles, span });
-            }
-            ToMaster::Pixels { frame: f, tiles, span } if f > frame && silence.owes(rank) > 0 => {
-                silence.answered(rank);
-                early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span });
-            }
-            ToMaster::DisplayReady { view, ready } => {
-                early.ready.entry(view).or_default().push(Ready { rank, displays: ready });
-            }
-            ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during frame {frame}"),
-            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
-            ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
-        }
-    }
+    receive_until(t, frame, Want::Pixels, silence, early)?;
+    Ok(early.pixels.get_mut(&frame).and_then(Vec::pop).expect("received"))
 }
 
 /// The next display rank's readiness for `view` (`render --display-ranks`); workers'
 /// heartbeats and early pixels in between are kept as [`receive_pixels`] keeps them, and a
 /// display rank silent for the whole timeout ends the run.
 pub(super) fn receive_ready(t: &dyn Transport, view: u32, silence: &mut Silence, early: &mut Early) -> Result<Ready> {
-    if let Some(ready) = early.ready.get_mut(&view).and_then(Vec::pop) {
-        return Ok(ready);
-    }
+    receive_until(t, view, Want::Ready, silence, early)?;
+    Ok(early.ready.get_mut(&view).and_then(Vec::pop).expect("received"))
+}
+
+/// What rank 0 waits for.
+#[derive(Clone, Copy, PartialEq)]
+enum Want {
+    Pixels,
+    Ready,
+}
+
+/// Receives until `early` holds what `want` asks of `view`, keeping in `early` what comes
+/// first: a worker's pixels for this or a later view, a display rank's readiness for any.
+fn receive_until(t: &dyn Transport, view: u32, want: Want, silence: &mut Silence, early: &mut Early) -> Result<()> {
     let start = Instant::now();
     loop {
-        let (rank, bytes) = match t.recv(silence.timeout.saturating_sub(start.elapsed())) {
-            Ok(m) => m,
-            Err(RecvError::Timeout) => bail!(
+        let held = match want {
+            Want::Pixels => early.pixels.get(&view).is_some_and(|v| !v.is_empty()),
+            Want::Ready => early.ready.get(&view).is_some_and(|v| !v.is_empty()),
+        };
+        if held {
+            return Ok(());
+        }
+        let (wait, quiet) = match want {
+            Want::Pixels => silence.next_wait(),
+            Want::Ready => (silence.timeout.saturating_sub(start.elapsed()), 0),
+        };
+        let (rank, bytes) = match (t.recv(wait), want) {
+            (Ok(m), _) => m,
+            (Err(RecvError::Timeout), Want::Pixels) => bail!(
+                "rank {quiet} sent nothing for {:.0} s during frame {} (--timeout); counting it as dead",
+                silence.timeout.as_secs_f64(),
+                view + 1
+            ),
+            (Err(RecvError::Timeout), Want::Ready) => bail!(
                 "no display rank finished view {} for {:.0} s (--timeout); counting it as dead",
                 view,
                 silence.timeout.as_secs_f64()
             ),
-            Err(RecvError::Disconnected) => bail!("a display rank exited during view {view}"),
+            (Err(RecvError::Disconnected), Want::Pixels) => bail!("the worker exited during frame {}", view + 1),
+            (Err(RecvError::Disconnected), Want::Ready) => bail!("a display rank exited during view {view}"),
         };
         silence.heard(rank);
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
             ToMaster::Heartbeat => continue,
-            ToMaster::DisplayReady { view: v, ready } if v == view => return Ok(Ready { rank, displays: ready }),
-            ToMaster::DisplayReady { view: v, ready } => {
-                early.ready.entry(v).or_default().push(Ready { rank, displays: ready })
-            }
-            ToMaster::Pixels { frame: f, tiles, span } if f > view && silence.owes(rank) > 0 => {
+            ToMaster::Pixels { frame: f, tiles, span }
+                if (f == view && want == Want::Pixels) || (f > view && silence.owes(rank) > 0) =>
+            {
                 silence.answered(rank);
                 early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span });
             }
-            ToMaster::Pixels { frame: f, .. } => bail!("rank {rank} answered frame {f} during view {view}'s swap"),
+            ToMaster::DisplayReady { view: v, ready } => {
+                early.ready.entry(v).or_default().push(Ready { rank, displays: ready })
+            }
+            ToMaster::Pixels { frame: f, .. } => match want {
+                Want::Pixels => bail!("rank {rank} answered frame {f} during frame {view}"),
+                Want::Ready => bail!("rank {rank} answered frame {f} during view {view}'s swap"),
+            },
             ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
             ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
         }

@@ -55,9 +55,8 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
             bail!("a wall placed in the world needs an eye: `eye = [x, y, z]` in the wall file, or --eye-path");
         }
     }
-    let per_display = wall.as_ref().is_some_and(Wall::per_display);
-    if per_display {
-        for d in &wall.as_ref().expect("per display").displays {
+    if let Some(w) = wall.as_ref().filter(|w| w.per_display()) {
+        for d in &w.displays {
             let [x0, y0, x1, y1] = d.rect;
             TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)
                 .with_context(|| format!("display {} has its own frame, cut into --tiles", d.name))?;
