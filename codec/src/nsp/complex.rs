@@ -99,12 +99,14 @@ pub struct Ahead {
     pub desc: Vec<SmallVec<[u16; 4]>>,
 }
 
+/// A kd-cell: its place (the kd-index's prefix is derived from it, [`KdCell::prefix`]: one
+/// less field to shift at each of the ~23 kd levels a split's kd-cell descends, measured
+/// faster) and its incident top-simplices.
 #[derive(Clone, Debug)]
 pub struct KdCell {
-    pub level: u8,
-    pub prefix: u128,
     /// The cell's integer coordinates: axis `a` holds the bits consumed so far on it.
     pub xyz: [u32; 3],
+    pub level: u8,
     /// Incident top-simplices (inline up to a typical valence: no allocation per vertex).
     pub tops: SmallVec<[u32; 8]>,
 }
@@ -145,7 +147,20 @@ impl KdCell {
     /// The kd-index: a total order on kd-cells of any levels (`1 << level | prefix`).
     #[inline]
     pub fn index(&self) -> u128 {
-        (1u128 << self.level) | self.prefix
+        (1u128 << self.level) | self.prefix()
+    }
+
+    /// The `level` bits of the cell's path from the root, first split first: the axes'
+    /// coordinates interleaved x, y, z from their most significant bits ([`xyz_of`]'s
+    /// inverse).
+    pub fn prefix(&self) -> u128 {
+        let mut p = 0u128;
+        for i in 0..self.level as u32 {
+            let axis = (i % 3) as usize;
+            let bit = used(self.level, axis) - 1 - i / 3;
+            p = (p << 1) | ((self.xyz[axis] >> bit) & 1) as u128;
+        }
+        p
     }
 }
 
@@ -183,24 +198,39 @@ pub struct Complex {
     scratch_opposite: Vec<Opposite>,
     scratch_syms: Vec<u8>,
     scratch_edges: Vec<[u32; 2]>,
-    scratch_tris: Vec<([u32; 3], usize, bool)>,
+    scratch_tris: Vec<NewTri>,
     scratch_old: SmallVec<[u32; 8]>,
     pub ahead: Ahead,
 }
 
-/// A triangle `v·w·x` of the star: the ids of `w` and `x` (ascending) and the oriented
-/// triangle.
+/// A triangle `v·w·x` of the star: the ids of `w` and `x` (ascending), the oriented
+/// triangle and its top-simplex id.
 #[derive(Clone, Copy, Debug, Default)]
 struct Opposite {
     w: [u32; 2],
     tri: [u32; 3],
+    id: u32,
 }
+
+/// A triangle of a split's new star: its vertices (oriented once the orientation is
+/// decoded), the orientation context (1 for a triangle both `v0` and `v1` inherit), whether
+/// it is a cone `v0·v1·w`, and the star triangle whose top-simplex it takes over (`NONE`
+/// for a new one).
+#[derive(Clone, Copy, Debug)]
+struct NewTri {
+    v: [u32; 3],
+    kind: usize,
+    cone: bool,
+    reuse: u32,
+}
+
+const NONE: u32 = u32::MAX;
 
 impl Complex {
     /// The root's starting state: one kd-cell (the cube) and one point.
     pub fn root() -> Complex {
         let mut c = Complex::default();
-        c.cells.push(KdCell { level: 0, prefix: 0, xyz: [0; 3], tops: SmallVec::new() });
+        c.cells.push(KdCell { level: 0, xyz: [0; 3], tops: SmallVec::new() });
         c.add_top(Top { v: [0, 0, 0], dim: 0 });
         c.order = vec![0];
         c
@@ -217,7 +247,7 @@ impl Complex {
         let mut c = Complex { level, ..Complex::default() };
         c.cells = distinct
             .iter()
-            .map(|&prefix| KdCell { level, prefix, xyz: xyz_of(prefix, level), tops: SmallVec::new() })
+            .map(|&prefix| KdCell { level, xyz: xyz_of(prefix, level), tops: SmallVec::new() })
             .collect();
         let images = simplices.iter().map(|s| {
             let mut t = *s;
@@ -248,7 +278,7 @@ impl Complex {
         ranks.dedup();
         for &r in &ranks {
             let k = &self.cells[self.order[r as usize] as usize];
-            c.cells.push(KdCell { level: k.level, prefix: k.prefix, xyz: k.xyz, tops: SmallVec::new() });
+            c.cells.push(KdCell { level: k.level, xyz: k.xyz, tops: SmallVec::new() });
         }
         if self.ahead.levels > 0 {
             c.ahead.levels = self.ahead.levels;
@@ -348,21 +378,19 @@ impl Complex {
         let cell = &mut self.cells[v as usize];
         let axis = (cell.level % 3) as usize;
         cell.level += 1;
-        cell.prefix <<= 1;
         cell.xyz[axis] <<= 1;
         if !both {
-            cell.prefix |= second as u128;
             cell.xyz[axis] |= second as u32;
             return Ok(None);
         }
-        let (level, prefix) = (cell.level, cell.prefix | 1);
+        let level = cell.level;
         let mut xyz = cell.xyz;
         xyz[axis] |= 1;
         if self.cells.len() >= max_cells {
             return Err(ApplyError::TooLarge);
         }
         let v1 = self.cells.len() as u32;
-        self.cells.push(KdCell { level, prefix, xyz, tops: SmallVec::new() });
+        self.cells.push(KdCell { level, xyz, tops: SmallVec::new() });
         oracle.before_split(v, v1);
         self.split(v, v1, io, oracle)?;
         if self.live_tops > max_tops {
@@ -412,7 +440,7 @@ impl Complex {
         let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(kd.tops.len()));
         let mut out = SmallVec::with_capacity(list.len() * 2);
         for &s in list {
-            let (both, second) = oracle.occupancy((kd.prefix << rel) | s as u128, level);
+            let (both, second) = oracle.occupancy((kd.prefix() << rel) | s as u128, level);
             if io.bit(ctx, both) {
                 out.push(s << 1);
                 out.push(s << 1 | 1);
@@ -525,7 +553,7 @@ impl Complex {
             verts.extend_from_slice(&others[..n]);
             if n == 2 {
                 let w = [others[0].min(others[1]), others[0].max(others[1])];
-                opposite.push(Opposite { w, tri: top.v });
+                opposite.push(Opposite { w, tri: top.v, id: t });
             }
         }
         verts.sort_unstable();
@@ -550,7 +578,7 @@ impl Complex {
             // Bits 2 and 3: whether a triangle covers the edge v0·w, v1·w (filled below).
             syms.push(sym);
             if sym == 3 {
-                tris.push(([v0, v1, w], 0, true));
+                tris.push(NewTri { v: [v0, v1, w], kind: 0, cone: true, reuse: NONE });
                 has_simplex = [true, true];
                 *syms.last_mut().expect("just pushed") |= 0b1100;
             }
@@ -574,14 +602,17 @@ impl Complex {
             let sym = code_symbol(io, 2, allowed, 0, truth);
             let t = o.tri;
             let sub = |x: u32| t.map(|u| if u == v0 { x } else { u });
+            // A star triangle goes on as the v0 triangle, or as the v1 one if it has no v0 one:
+            // the same top-simplex, so w's and x's lists need no change.
             if sym != 1 {
-                tris.push((sub(v0), (sym == 2) as usize, false));
+                tris.push(NewTri { v: sub(v0), kind: (sym == 2) as usize, cone: false, reuse: o.id });
                 syms[ja] |= 0b0100;
                 syms[jb] |= 0b0100;
                 has_simplex[0] = true;
             }
             if sym != 0 {
-                tris.push((sub(v1), (sym == 2) as usize, false));
+                let reuse = if sym == 1 { o.id } else { NONE };
+                tris.push(NewTri { v: sub(v1), kind: (sym == 2) as usize, cone: false, reuse });
                 syms[ja] |= 0b1000;
                 syms[jb] |= 0b1000;
                 has_simplex[1] = true;
@@ -603,33 +634,34 @@ impl Complex {
         // A cone triangle covers v0·v1; there is one only if the edge is there.
         if cone_edge {
             has_simplex = [true, true];
-            if !tris.iter().any(|t| t.2) {
+            if !tris.iter().any(|t| t.cone) {
                 edges.push([v0, v1]);
             }
         }
 
         // Orientation: inherited triangles first (against their parent), then cones
         // (against a neighbour across v0·w or v1·w among the inherited ones).
-        for (t, kind, cone) in tris.iter_mut() {
-            if *cone {
+        for t in tris.iter_mut() {
+            if t.cone {
                 continue;
             }
-            let right = oracle.oriented(*t);
-            if io.bit(ORIENT_BASE + *kind, !right) {
-                t.swap(1, 2);
+            let right = oracle.oriented(t.v);
+            if io.bit(ORIENT_BASE + t.kind, !right) {
+                t.v.swap(1, 2);
             }
         }
         for i in 0..tris.len() {
-            if !tris[i].2 {
+            if !tris[i].cone {
                 continue;
             }
-            let w = tris[i].0[2];
+            let w = tris[i].v[2];
             let mut predicted = [v0, v1, w];
             let mut found = false;
-            for (t, _, cone) in tris.iter() {
-                if *cone {
+            for t in tris.iter() {
+                if t.cone {
                     continue;
                 }
+                let t = &t.v;
                 if let Some(dir) = directed(t, v0, w) {
                     predicted = if dir { [v0, v1, w] } else { [v1, v0, w] };
                     found = true;
@@ -643,12 +675,16 @@ impl Complex {
             }
             let right = oracle.oriented(predicted);
             let flip = io.bit(ORIENT_BASE + 2 + found as usize, !right);
-            tris[i].0 = if flip { [predicted[1], predicted[0], predicted[2]] } else { predicted };
+            tris[i].v = if flip { [predicted[1], predicted[0], predicted[2]] } else { predicted };
         }
 
-        // Replace the old star by the new top-simplices.
+        // Replace the old star by the new top-simplices. Star triangles stay where they are
+        // (rewritten in place, listed again under v0 or v1); its edges and points go.
         for &t in &old {
             let top = self.tops[t as usize];
+            if top.dim == 2 {
+                continue;
+            }
             for &u in &top.v[..top.dim as usize + 1] {
                 if u != v0 {
                     let list = &mut self.cells[u as usize].tops;
@@ -661,8 +697,14 @@ impl Complex {
             self.free.push(t);
             self.live_tops -= 1;
         }
-        for (t, _, _) in tris.iter() {
-            self.add_top(Top { v: *t, dim: 2 });
+        for t in tris.iter() {
+            if t.reuse == NONE {
+                self.add_top(Top { v: t.v, dim: 2 });
+            } else {
+                self.tops[t.reuse as usize].v = t.v;
+                let owner = if t.v.contains(&v0) { v0 } else { v1 };
+                self.cells[owner as usize].tops.push(t.reuse);
+            }
         }
         for e in edges.iter() {
             self.add_top(Top { v: [e[0], e[1], 0], dim: 1 });
@@ -706,7 +748,7 @@ impl Complex {
         opposite: Vec<Opposite>,
         syms: Vec<u8>,
         edges: Vec<[u32; 2]>,
-        tris: Vec<([u32; 3], usize, bool)>,
+        tris: Vec<NewTri>,
     ) {
         self.scratch_verts = verts;
         self.scratch_opposite = opposite;

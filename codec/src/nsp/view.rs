@@ -139,7 +139,7 @@ fn walk(
             return None;
         }
         let cells = &st.cx.cells;
-        let k = st.cx.order.binary_search_by_key(&prefix, |&id| cells[id as usize].prefix).ok()?;
+        let k = st.cx.order.binary_search_by_key(&prefix, |&id| cells[id as usize].prefix()).ok()?;
         Some(st.cx.position(st.cx.order[k], bits))
     };
     let mut locs: Vec<Option<Loc>> = Vec::new();
@@ -188,7 +188,7 @@ fn walk(
                                 moved = true;
                             }
                             if ahead {
-                                if let Some(there) = owner_position(c, corner.0, kd.prefix >> (kd.level - corner.0)) {
+                                if let Some(there) = owner_position(c, corner.0, kd.prefix() >> (kd.level - corner.0)) {
                                     *pos = there;
                                 }
                             }
