@@ -265,28 +265,48 @@ impl Complex {
 
     /// The part of `self` (at a uniform level) that touches the kd-cells `inside`: the
     /// top-simplices with a vertex there, and all their vertices, in kd-index order. `rank`
-    /// gives each kd-cell's position in `self.order` (kd-index order at a uniform level), so
-    /// kd-cells sort as 4-byte ranks rather than 16-byte kd-indices.
+    /// gives each kd-cell's position in `self.order` (kd-index order at a uniform level).
+    ///
+    /// The kept top-simplices and kd-cells are marked in bit sets over the parent's ids and
+    /// ranks, which list them in order without sorting, and a kept kd-cell's new id is the
+    /// count of marked ranks below its own (sorting the marks instead took 60% of this
+    /// function on the dragon's cells).
     pub fn restrict(&self, inside: &[u32], rank: &[u32]) -> Complex {
         let mut c = Complex { level: self.level, ..Complex::default() };
-        let mut keep: Vec<u32> = inside.iter().flat_map(|&v| self.cells[v as usize].tops.iter().copied()).collect();
-        keep.sort_unstable();
-        keep.dedup();
-        let mut ranks: Vec<u32> =
-            keep.iter().flat_map(|&t| self.top_verts(t).iter().map(|&v| rank[v as usize])).collect();
-        ranks.sort_unstable();
-        ranks.dedup();
-        for &r in &ranks {
+        let mut keep = vec![0u64; self.tops.len().div_ceil(64)];
+        for &v in inside {
+            for &t in &self.cells[v as usize].tops {
+                keep[t as usize / 64] |= 1 << (t % 64);
+            }
+        }
+        let mut ranks = vec![0u64; self.cells.len().div_ceil(64)];
+        for t in ones(&keep) {
+            for &v in self.top_verts(t) {
+                let r = rank[v as usize];
+                ranks[r as usize / 64] |= 1 << (r % 64);
+            }
+        }
+        let mut before = Vec::with_capacity(ranks.len());
+        let mut count = 0;
+        for w in &ranks {
+            before.push(count);
+            count += w.count_ones();
+        }
+        c.cells.reserve(count as usize);
+        for r in ones(&ranks) {
             let k = &self.cells[self.order[r as usize] as usize];
             c.cells.push(KdCell { level: k.level, xyz: k.xyz, tops: SmallVec::new() });
         }
         if self.ahead.levels > 0 {
             c.ahead.levels = self.ahead.levels;
             c.ahead.top = self.ahead.top;
-            c.ahead.desc = ranks.iter().map(|&r| self.ahead.desc[self.order[r as usize] as usize].clone()).collect();
+            c.ahead.desc = ones(&ranks).map(|r| self.ahead.desc[self.order[r as usize] as usize].clone()).collect();
         }
-        let map = |v: u32| ranks.binary_search(&rank[v as usize]).expect("a vertex of a kept simplex") as u32;
-        for &t in &keep {
+        let map = |v: u32| {
+            let r = rank[v as usize] as usize;
+            before[r / 64] + (ranks[r / 64] & ((1u64 << (r % 64)) - 1)).count_ones()
+        };
+        for t in ones(&keep) {
             let mut top = self.tops[t as usize];
             for k in 0..=top.dim as usize {
                 top.v[k] = map(top.v[k]);
@@ -756,6 +776,20 @@ impl Complex {
         self.scratch_edges = edges;
         self.scratch_tris = tris;
     }
+}
+
+/// The positions of the set bits of a bit set, ascending.
+fn ones(bits: &[u64]) -> impl Iterator<Item = u32> + '_ {
+    bits.iter().enumerate().flat_map(|(i, &w)| {
+        let mut w = w;
+        std::iter::from_fn(move || {
+            (w != 0).then(|| {
+                let b = w.trailing_zeros();
+                w &= w - 1;
+                i as u32 * 64 + b
+            })
+        })
+    })
 }
 
 /// An undirected edge as one sortable integer (array keys compare element by element, measured
