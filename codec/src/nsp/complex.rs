@@ -133,14 +133,12 @@ fn used(level: u8, axis: usize) -> u32 {
     (level as u32 + 2 - axis as u32) / 3
 }
 
+/// 0 for up to 3 simplices, 1 for 4 to 6, 2 for 7 to 9, 3 for more (a table rather than a
+/// `match`, which compiled to a chain of unpredictable branches).
 #[inline]
 fn valence_bucket(tops: usize) -> usize {
-    match tops {
-        0..=3 => 0,
-        4..=6 => 1,
-        7..=9 => 2,
-        _ => 3,
-    }
+    const BUCKET: [u8; 11] = [0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3];
+    BUCKET[tops.min(10)] as usize
 }
 
 impl KdCell {
