@@ -99,16 +99,18 @@ pub struct Ahead {
     pub desc: Vec<SmallVec<[u16; 4]>>,
 }
 
-/// A kd-cell: its place (the kd-index's prefix is derived from it, [`KdCell::prefix`]: one
-/// less field to shift at each of the ~23 kd levels a split's kd-cell descends, measured
-/// faster) and its incident top-simplices.
-#[derive(Clone, Debug)]
+/// A kd-cell: its place and how many top-simplices it has. 16 bytes: the per-level loop and
+/// the split's side test read only these, in a dense array apart from the lists of
+/// incident simplices ([`Complex::incident`]; with the lists inline, kd-cells took 56 bytes
+/// and decoding was measured slower). The kd-index's prefix is derived from the place
+/// ([`KdCell::prefix`]).
+#[derive(Clone, Copy, Debug)]
 pub struct KdCell {
     /// The cell's integer coordinates: axis `a` holds the bits consumed so far on it.
     pub xyz: [u32; 3],
     pub level: u8,
-    /// Incident top-simplices (inline up to a typical valence: no allocation per vertex).
-    pub tops: SmallVec<[u32; 8]>,
+    /// Incident top-simplices, up to 255 (the geometry contexts look at up to 10).
+    pub degree: u8,
 }
 
 /// The per-axis coordinates of the kd-cell `prefix` at `level` (bits consumed per axis).
@@ -185,6 +187,9 @@ pub enum ApplyError {
 #[derive(Clone, Debug, Default)]
 pub struct Complex {
     pub cells: Vec<KdCell>,
+    /// Per kd-cell, its incident top-simplices (inline up to a typical valence: no
+    /// allocation per vertex).
+    pub incident: Vec<SmallVec<[u32; 8]>>,
     pub tops: Vec<Top>,
     free: Vec<u32>,
     live_tops: usize,
@@ -240,7 +245,8 @@ impl Complex {
     /// The root's starting state: one kd-cell (the cube) and one point.
     pub fn root() -> Complex {
         let mut c = Complex::default();
-        c.cells.push(KdCell { level: 0, xyz: [0; 3], tops: SmallVec::new() });
+        c.cells.push(KdCell { level: 0, xyz: [0; 3], degree: 0 });
+        c.incident.push(SmallVec::new());
         c.add_top(Top { v: [0, 0, 0], dim: 0 });
         c.order = vec![0];
         c
@@ -257,8 +263,9 @@ impl Complex {
         let mut c = Complex { level, ..Complex::default() };
         c.cells = distinct
             .iter()
-            .map(|&prefix| KdCell { level, xyz: xyz_of(prefix, level), tops: SmallVec::new() })
+            .map(|&prefix| KdCell { level, xyz: xyz_of(prefix, level), degree: 0 })
             .collect();
+        c.incident = vec![SmallVec::new(); c.cells.len()];
         let images = simplices.iter().map(|s| {
             let mut t = *s;
             for k in 0..=s.dim as usize {
@@ -285,7 +292,7 @@ impl Complex {
         let mut c = Complex { level: self.level, ..Complex::default() };
         let mut keep = vec![0u64; self.tops.len().div_ceil(64)];
         for &v in inside {
-            for &t in &self.cells[v as usize].tops {
+            for &t in &self.incident[v as usize] {
                 keep[t as usize / 64] |= 1 << (t % 64);
             }
         }
@@ -303,9 +310,10 @@ impl Complex {
             count += w.count_ones();
         }
         c.cells.reserve(count as usize);
+        c.incident.resize(count as usize, SmallVec::new());
         for r in ones(&ranks) {
             let k = &self.cells[self.order[r as usize] as usize];
-            c.cells.push(KdCell { level: k.level, xyz: k.xyz, tops: SmallVec::new() });
+            c.cells.push(KdCell { level: k.level, xyz: k.xyz, degree: 0 });
         }
         if self.ahead.levels > 0 {
             c.ahead.levels = self.ahead.levels;
@@ -342,6 +350,14 @@ impl Complex {
         self.tops.iter().filter(|t| t.dim != DEAD)
     }
 
+    /// Lists top-simplex `t` as incident to kd-cell `u`.
+    #[inline]
+    fn link(&mut self, u: u32, t: u32) {
+        let list = &mut self.incident[u as usize];
+        list.push(t);
+        self.cells[u as usize].degree = list.len().min(255) as u8;
+    }
+
     fn add_top(&mut self, top: Top) -> u32 {
         let id = match self.free.pop() {
             Some(id) => {
@@ -354,7 +370,7 @@ impl Complex {
             }
         };
         for k in 0..=top.dim as usize {
-            self.cells[top.v[k] as usize].tops.push(id);
+            self.link(top.v[k], id);
         }
         self.live_tops += 1;
         self.peak_tops = self.peak_tops.max(self.live_tops);
@@ -377,7 +393,7 @@ impl Complex {
         let mut next = Vec::with_capacity(order.len() * 2);
         for &v in &order {
             let (both, second) = oracle.geometry(v, level);
-            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(self.cells[v as usize].tops.len()));
+            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(self.cells[v as usize].degree as usize));
             let both = io.bit(ctx, both);
             let second = !both && io.bit(ctx + 1, second);
             next.push(v);
@@ -420,7 +436,8 @@ impl Complex {
             return Err(ApplyError::TooLarge);
         }
         let v1 = self.cells.len() as u32;
-        self.cells.push(KdCell { level, xyz, tops: SmallVec::new() });
+        self.cells.push(KdCell { level, xyz, degree: 0 });
+        self.incident.push(SmallVec::new());
         oracle.before_split(v, v1);
         self.split(v, v1, io, oracle)?;
         if self.live_tops > max_tops {
@@ -467,7 +484,7 @@ impl Complex {
     ) -> SmallVec<[u16; 4]> {
         let kd = &self.cells[v as usize];
         let level = kd.level + rel;
-        let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(kd.tops.len()));
+        let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(kd.degree as usize));
         let mut out = SmallVec::with_capacity(list.len() * 2);
         for &s in list {
             let (both, second) = oracle.occupancy((kd.prefix() << rel) | s as u128, level);
@@ -562,7 +579,8 @@ impl Complex {
     fn split(&mut self, v0: u32, v1: u32, io: &mut impl BitIo, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
         // v0's list starts afresh (reusing the spare list's room); the old one is read.
         let spare = std::mem::take(&mut self.scratch_old);
-        let old = std::mem::replace(&mut self.cells[v0 as usize].tops, spare);
+        let old = std::mem::replace(&mut self.incident[v0 as usize], spare);
+        self.cells[v0 as usize].degree = 0;
         // The star of v: every τ with v·τ in the closure of v's top-simplices: the vertex
         // itself, its neighbours (edges v·w) and its opposite edges (triangles v·w·x), each in
         // kd-cell id order.
@@ -759,10 +777,11 @@ impl Complex {
             }
             for &u in &top.v[..top.dim as usize + 1] {
                 if u != v0 {
-                    let list = &mut self.cells[u as usize].tops;
+                    let list = &mut self.incident[u as usize];
                     if let Some(pos) = list.iter().position(|&x| x == t) {
                         list.swap_remove(pos);
                     }
+                    self.cells[u as usize].degree = list.len().min(255) as u8;
                 }
             }
             self.tops[t as usize].dim = DEAD;
@@ -775,7 +794,7 @@ impl Complex {
             } else {
                 self.tops[t.reuse as usize].v = t.v;
                 let owner = if t.v.contains(&v0) { v0 } else { v1 };
-                self.cells[owner as usize].tops.push(t.reuse);
+                self.link(owner, t.reuse);
             }
         }
         for e in edges.iter() {
