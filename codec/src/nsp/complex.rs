@@ -37,6 +37,63 @@ pub const CONTEXTS: usize = ORIENT_BASE + 4;
 /// decoder ignores it and returns what the stream says.
 pub trait BitIo {
     fn bit(&mut self, ctx: usize, value: bool) -> bool;
+
+    /// The geometry of the kd-cells `order[from..]` at kd `level`, each moved one level down
+    /// and pushed on `next`, up to the first one whose two halves are occupied: that one is
+    /// pushed but not moved, and its index returned (`order.len()` if none). A coder may run
+    /// [`geometry_run`] on a copy of its registers.
+    #[inline]
+    fn geometry_run(
+        &mut self,
+        oracle: &mut impl Oracle,
+        cells: &mut [KdCell],
+        order: &[u32],
+        from: usize,
+        level: u8,
+        next: &mut Vec<u32>,
+    ) -> usize
+    where
+        Self: Sized,
+    {
+        geometry_run(self, oracle, cells, order, from, level, next)
+    }
+
+    /// [`Complex::split`] of `v0` into `v0` and `v1` (a coder may run it on a copy of its
+    /// registers).
+    #[inline]
+    fn split(&mut self, cx: &mut Complex, v0: u32, v1: u32, oracle: &mut impl Oracle) -> Result<(), ApplyError>
+    where
+        Self: Sized,
+    {
+        cx.split(v0, v1, self, oracle)
+    }
+}
+
+/// [`BitIo::geometry_run`]'s steps, shared by every coder.
+#[inline(always)]
+pub(super) fn geometry_run(
+    io: &mut impl BitIo,
+    oracle: &mut impl Oracle,
+    cells: &mut [KdCell],
+    order: &[u32],
+    from: usize,
+    level: u8,
+    next: &mut Vec<u32>,
+) -> usize {
+    let axis = (level % 3) as usize;
+    for (i, &v) in order[from..].iter().enumerate() {
+        let (both, second) = oracle.geometry(v, level);
+        let cell = &mut cells[v as usize];
+        let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(cell.degree as usize));
+        next.push(v);
+        if io.bit(ctx, both) {
+            return from + i;
+        }
+        let second = io.bit(ctx + 1, second);
+        cell.level += 1;
+        cell.xyz[axis] = cell.xyz[axis] << 1 | second as u32;
+    }
+    order.len()
 }
 
 /// What the encoder knows and the decoder learns from the stream. The decoder's oracle
@@ -391,14 +448,15 @@ impl Complex {
         let level = self.level;
         let order = std::mem::take(&mut self.order);
         let mut next = Vec::with_capacity(order.len() * 2);
-        for &v in &order {
-            let (both, second) = oracle.geometry(v, level);
-            let ctx = 2 * (level as usize * VALENCE_BUCKETS + valence_bucket(self.cells[v as usize].degree as usize));
-            let both = io.bit(ctx, both);
-            let second = !both && io.bit(ctx + 1, second);
-            next.push(v);
-            if let Some(v1) = self.descend(v, both, second, io, oracle, max_cells, max_tops)? {
-                next.push(v1);
+        let mut i = 0;
+        while i < order.len() {
+            i = io.geometry_run(oracle, &mut self.cells, &order, i, level, &mut next);
+            if let Some(&v) = order.get(i) {
+                // Both halves of `v` are occupied.
+                if let Some(v1) = self.descend(v, true, false, io, oracle, max_cells, max_tops)? {
+                    next.push(v1);
+                }
+                i += 1;
             }
         }
         self.order = next;
@@ -439,7 +497,7 @@ impl Complex {
         self.cells.push(KdCell { level, xyz, degree: 0 });
         self.incident.push(SmallVec::new());
         oracle.before_split(v, v1);
-        self.split(v, v1, io, oracle)?;
+        io.split(self, v, v1, oracle)?;
         if self.live_tops > max_tops {
             return Err(ApplyError::TooLarge);
         }
@@ -576,7 +634,14 @@ impl Complex {
     /// Hand-written small-vector code rather than hash maps: stars hold a dozen simplices at
     /// fine levels, and this runs once per vertex split (measured 5x faster than with
     /// `HashMap`/`HashSet` scratch).
-    fn split(&mut self, v0: u32, v1: u32, io: &mut impl BitIo, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
+    #[inline(always)]
+    pub(super) fn split(
+        &mut self,
+        v0: u32,
+        v1: u32,
+        io: &mut impl BitIo,
+        oracle: &mut impl Oracle,
+    ) -> Result<(), ApplyError> {
         // v0's list starts afresh (reusing the spare list's room); the old one is read.
         let spare = std::mem::take(&mut self.scratch_old);
         let old = std::mem::replace(&mut self.incident[v0 as usize], spare);
@@ -893,6 +958,7 @@ fn directed(t: &[u32; 3], a: u32, b: u32) -> Option<bool> {
 
 /// Codes one symbol from the `allowed` set (bit `s` for symbol `s`) in at most two binary
 /// decisions: the group ({0,1} or {2,3}), then the member; forced decisions cost nothing.
+#[inline(always)]
 fn code_symbol(io: &mut impl BitIo, dim: usize, allowed: u8, side: usize, truth: u8) -> u8 {
     let node = |n: usize| CONN_BASE + ((dim * 16 + allowed as usize) * 3 + n) * SIDES + side;
     let lo = allowed & 0b0011 != 0;

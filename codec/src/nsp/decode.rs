@@ -6,7 +6,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
-use super::complex::{ApplyError, BitIo, Blind, Complex};
+use super::complex::{self, ApplyError, BitIo, Blind, Complex, KdCell, Oracle};
 use super::format::{self, CellEntry, Header, FOOTER_LEN, MIN_TABLE_LEN, PREFIX_LEN};
 use super::tree::Tree;
 use super::view::{draw, Drawn};
@@ -315,6 +315,31 @@ impl BitIo for Static<'_, '_> {
     #[inline]
     fn bit(&mut self, ctx: usize, _: bool) -> bool {
         self.dec.bit_static(self.table[ctx])
+    }
+
+    /// On a copy of the decoder, which the compiler keeps in registers through the loop
+    /// (through `self.dec` every decision stored and reloaded them: measured slower).
+    fn geometry_run(
+        &mut self,
+        oracle: &mut impl Oracle,
+        cells: &mut [KdCell],
+        order: &[u32],
+        from: usize,
+        level: u8,
+        next: &mut Vec<u32>,
+    ) -> usize {
+        let mut dec = self.dec.clone();
+        let at = complex::geometry_run(&mut Static { dec: &mut dec, table: self.table }, oracle, cells, order, from, level, next);
+        *self.dec = dec;
+        at
+    }
+
+    /// On a copy of the decoder, as [`BitIo::geometry_run`].
+    fn split(&mut self, cx: &mut Complex, v0: u32, v1: u32, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
+        let mut dec = self.dec.clone();
+        let done = cx.split(v0, v1, &mut Static { dec: &mut dec, table: self.table }, oracle);
+        *self.dec = dec;
+        done
     }
 }
 
