@@ -893,6 +893,7 @@ impl Complex {
     /// Where `w` lies against the plane between `v0` and `v1` (the lower face of `v1`):
     /// 0 across it, 1 or 2 on `v0`'s side (adjacent to the plane within one cell of `v1`'s
     /// size along the axis, or farther), 3 or 4 on `v1`'s.
+    #[inline(always)]
     fn side(&self, v1: u32, w: u32) -> usize {
         let (a, b) = (&self.cells[v1 as usize], &self.cells[w as usize]);
         let axis = ((a.level - 1) % 3) as usize;
