@@ -287,8 +287,6 @@ fn check_count(cells: u32, entries: &[CellEntry]) -> Result<(), NspError> {
 pub struct CellState {
     pub cell: u32,
     pub cx: Complex,
-    /// The state the cell started from (for coarsening by re-decoding).
-    start: Complex,
     /// The stream's bytes fetched so far (a prefix, whole segments).
     bytes: Vec<u8>,
     table: Arc<[u16]>,
@@ -372,7 +370,6 @@ impl CellState {
         }
         Ok(CellState {
             cell: c,
-            start: cx.clone(),
             cx,
             bytes: Vec::new(),
             table: file.table.clone(),
@@ -400,8 +397,25 @@ impl CellState {
         self.max_level / 3
     }
 
-    /// Brings the cell to `bits` of precision (clamped to its range): refining continues the
-    /// stream; coarsening re-decodes it from the start.
+    /// Whether bringing the cell to `bits` of precision means coarsening it: a state refines
+    /// only, so the cell then restarts from a fresh starting state ([`CellState::inherit`]).
+    /// (A state does not keep a copy of its start for this: the copy cost 3% of a full
+    /// decode and as much memory as the cell's start, and a navigator holds the parent
+    /// a fresh start is restricted from anyway.)
+    pub fn coarsens(&self, bits: u8) -> bool {
+        !self.cx.cells.is_empty() && (3 * bits).clamp(self.min_level, self.max_level) < self.cx.level
+    }
+
+    /// Takes over the stream bytes `old` (a state of the same cell) fetched and its count of
+    /// splits, so that a fresh start re-decodes without reading the file again.
+    pub fn inherit(&mut self, old: CellState) {
+        debug_assert_eq!(self.cell, old.cell);
+        self.bytes = old.bytes;
+        self.splits = old.splits;
+    }
+
+    /// Brings the cell to `bits` of precision (clamped to its range) by continuing its
+    /// stream; a state coarser than its current one is refused ([`CellState::coarsens`]).
     pub fn set_precision(&mut self, file: &NspFile, bits: u8) -> Result<(), NspError> {
         let target = (3 * bits).clamp(self.min_level, self.max_level);
         if self.cx.cells.is_empty() {
@@ -414,11 +428,13 @@ impl CellState {
             let more = file.cell_range(self.cell, self.bytes.len() as u32, need)?;
             self.bytes.extend_from_slice(&more);
         }
-        self.by_child = std::sync::OnceLock::new();
         if target < self.cx.level {
-            self.cx = self.start.clone();
-            self.at = None;
+            return Err(NspError::Cell {
+                cell: self.cell,
+                what: "coarsened in place (restart it from its parent's state)".into(),
+            });
         }
+        self.by_child = std::sync::OnceLock::new();
         // Nothing to decode: no decoder is started, as one started over the bytes held so
         // far (none at the minimal precision) would read zeros ahead, and resuming it once
         // more bytes came would decode from those zeros. (With the geometry advance the

@@ -408,16 +408,24 @@ impl Navigator {
             let done: Vec<Result<(u32, CellState, u64), NspError>> = mine
                 .par_iter_mut()
                 .map(|(c, existing)| {
-                    let mut s = match existing.take() {
-                        Some(s) => s,
-                        None => {
-                            let parent = tree.nodes[*c as usize].parent;
-                            if parent == u32::MAX {
-                                file.root_state()?
-                            } else {
-                                file.child_state(&states[&parent], *c)?
-                            }
+                    // A cell starts from its parent's state (held at its maximal precision)
+                    // when it is new, and again when it coarsens.
+                    let fresh = || {
+                        let parent = tree.nodes[*c as usize].parent;
+                        if parent == u32::MAX {
+                            file.root_state()
+                        } else {
+                            file.child_state(&states[&parent], *c)
                         }
+                    };
+                    let mut s = match existing.take() {
+                        Some(old) if old.coarsens(want[c]) => {
+                            let mut s = fresh()?;
+                            s.inherit(old);
+                            s
+                        }
+                        Some(s) => s,
+                        None => fresh()?,
                     };
                     let before = s.splits;
                     s.set_precision(file, want[c])?;
