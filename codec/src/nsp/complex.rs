@@ -260,6 +260,7 @@ pub struct Complex {
     scratch_syms: Vec<u8>,
     scratch_edges: Vec<[u32; 2]>,
     scratch_tris: Vec<NewTri>,
+    scratch_first: Vec<u32>,
     scratch_old: SmallVec<[u32; 8]>,
     /// Per kd-cell: the split that last listed it in its star's vertices, and its position
     /// there (a mark instead of sorting duplicates away, and no search for a triangle's
@@ -291,6 +292,8 @@ struct NewTri {
     kind: usize,
     cone: bool,
     reuse: u32,
+    /// A cone's `w`: its position in the star's vertices.
+    at: u32,
 }
 
 const NONE: u32 = u32::MAX;
@@ -725,10 +728,14 @@ impl Complex {
         edges.clear();
         let mut tris = std::mem::take(&mut self.scratch_tris);
         tris.clear();
+        // Per star vertex: the first inherited triangle with it as a corner.
+        let mut first = std::mem::take(&mut self.scratch_first);
+        first.clear();
+        first.resize(verts.len(), NONE);
         // Whether v0 and v1 end up in any simplex (else each is an isolated point).
         let mut has_simplex = [false; 2];
         let cone_edge = code_symbol(io, 0, 0b1100, 0, oracle.symbol(v0, v1, &[])) == 3;
-        for &w in verts.iter() {
+        for (j, &w) in verts.iter().enumerate() {
             let allowed = 0b0111 | if cone_edge { 0b1000 } else { 0 };
             let truth = oracle.symbol(v0, v1, &[w]);
             let side = self.side(v1, w);
@@ -736,7 +743,7 @@ impl Complex {
             // Bits 2 and 3: whether a triangle covers the edge v0·w, v1·w (filled below).
             syms.push(sym);
             if sym == 3 {
-                tris.push(NewTri { v: [v0, v1, w], kind: 0, cone: true, reuse: NONE });
+                tris.push(NewTri { v: [v0, v1, w], kind: 0, cone: true, reuse: NONE, at: j as u32 });
                 has_simplex = [true, true];
                 *syms.last_mut().expect("just pushed") |= 0b1100;
             }
@@ -750,6 +757,7 @@ impl Complex {
             let m1 = has1(a) && has1(b);
             let allowed = (m0 as u8) | (m1 as u8) << 1 | ((m0 && m1) as u8) << 2;
             if allowed == 0 {
+                self.scratch_first = first;
                 self.restore(verts, opposite, syms, edges, tris);
                 return Err(ApplyError::NoSymbol);
             }
@@ -760,14 +768,18 @@ impl Complex {
             // A star triangle goes on as the v0 triangle, or as the v1 one if it has no v0 one:
             // the same top-simplex, so w's and x's lists need no change.
             if sym != 1 {
-                tris.push(NewTri { v: sub(v0), kind: (sym == 2) as usize, cone: false, reuse: o.id });
+                first[ja] = first[ja].min(tris.len() as u32);
+                first[jb] = first[jb].min(tris.len() as u32);
+                tris.push(NewTri { v: sub(v0), kind: (sym == 2) as usize, cone: false, reuse: o.id, at: NONE });
                 syms[ja] |= 0b0100;
                 syms[jb] |= 0b0100;
                 has_simplex[0] = true;
             }
             if sym != 0 {
                 let reuse = if sym == 1 { o.id } else { NONE };
-                tris.push(NewTri { v: sub(v1), kind: (sym == 2) as usize, cone: false, reuse });
+                first[ja] = first[ja].min(tris.len() as u32);
+                first[jb] = first[jb].min(tris.len() as u32);
+                tris.push(NewTri { v: sub(v1), kind: (sym == 2) as usize, cone: false, reuse, at: NONE });
                 syms[ja] |= 0b1000;
                 syms[jb] |= 0b1000;
                 has_simplex[1] = true;
@@ -812,20 +824,17 @@ impl Complex {
             let w = tris[i].v[2];
             let mut predicted = [v0, v1, w];
             let mut found = false;
-            for t in tris.iter() {
-                if t.cone {
-                    continue;
-                }
+            // The first inherited triangle with an edge v0·w or v1·w: the first with w as a
+            // corner (each has one of v0 and v1, and its other corners are older than v1),
+            // noted as they were made rather than searched for.
+            if let Some(t) = tris.get(first[tris[i].at as usize] as usize) {
                 let t = &t.v;
                 if let Some(dir) = directed(t, v0, w) {
                     predicted = if dir { [v0, v1, w] } else { [v1, v0, w] };
                     found = true;
-                    break;
-                }
-                if let Some(dir) = directed(t, v1, w) {
+                } else if let Some(dir) = directed(t, v1, w) {
                     predicted = if dir { [v1, v0, w] } else { [v0, v1, w] };
                     found = true;
-                    break;
                 }
             }
             let right = oracle.oriented(predicted);
@@ -873,6 +882,7 @@ impl Complex {
         let mut old = old;
         old.clear();
         self.scratch_old = old;
+        self.scratch_first = first;
         self.restore(verts, opposite, syms, edges, tris);
         Ok(())
     }
