@@ -661,6 +661,8 @@ impl Complex {
         // neighbour was met before): measured faster on the dragon.
         verts.resize(2 * old.len(), 0);
         let mut nv = 0;
+        // Edges and points of the star (triangles stay in place, these go).
+        let mut lower = 0;
         for &t in &old {
             let top = self.tops[t as usize];
             let [a, b, c] = top.v;
@@ -682,6 +684,7 @@ impl Complex {
                 }
                 _ => (0, 0, 0),
             };
+            lower += (top.dim != 2) as usize;
             for &u in &[x, y][..n] {
                 let m = &mut self.marks[u as usize][0];
                 verts[nv] = u;
@@ -844,7 +847,7 @@ impl Complex {
 
         // Replace the old star by the new top-simplices. Star triangles stay where they are
         // (rewritten in place, listed again under v0 or v1); its edges and points go.
-        for &t in &old {
+        for &t in old.iter().take(if lower > 0 { old.len() } else { 0 }) {
             let top = self.tops[t as usize];
             if top.dim == 2 {
                 continue;
@@ -867,7 +870,8 @@ impl Complex {
                 self.add_top(Top { v: t.v, dim: 2 });
             } else {
                 self.tops[t.reuse as usize].v = t.v;
-                let owner = if t.v.contains(&v0) { v0 } else { v1 };
+                let has_v0 = (t.v[0] == v0) | (t.v[1] == v0) | (t.v[2] == v0);
+                let owner = if has_v0 { v0 } else { v1 };
                 self.link(owner, t.reuse);
             }
         }
