@@ -993,3 +993,36 @@ fn code_symbol(io: &mut impl BitIo, dim: usize, allowed: u8, side: usize, truth:
         b
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_kd_cells_prefix_is_the_path_its_coordinates_were_read_from() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        for level in 0..=3 * crate::nsp::MAX_BITS {
+            for _ in 0..50 {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let prefix = (seed as u128 | (seed as u128) << 64) & ((1u128 << level) - 1);
+                let cell = KdCell { xyz: xyz_of(prefix, level), level, degree: 0 };
+                assert_eq!(cell.prefix(), prefix, "level {level}");
+                assert_eq!(cell.index(), 1u128 << level | prefix);
+            }
+        }
+    }
+
+    #[test]
+    fn ones_lists_the_set_bits_in_order() {
+        let bits = [0b1001u64, 0, 1 << 63 | 1];
+        assert_eq!(ones(&bits).collect::<Vec<_>>(), vec![0, 3, 128, 191]);
+        assert_eq!(ones(&[]).count(), 0);
+    }
+
+    #[test]
+    fn valence_buckets_follow_their_bounds() {
+        let got: Vec<usize> = (0..14).map(valence_bucket).collect();
+        assert_eq!(got, [0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 3]);
+        assert_eq!(valence_bucket(usize::MAX), 3);
+    }
+}
