@@ -384,13 +384,21 @@ impl Complex {
             let r = rank[v as usize] as usize;
             before[r / 64] + (ranks[r / 64] & ((1u64 << (r % 64)) - 1)).count_ones()
         };
+        // As `add_top` would, with the degrees set once at the end.
         for t in ones(&keep) {
             let mut top = self.tops[t as usize];
+            let id = c.tops.len() as u32;
             for k in 0..=top.dim as usize {
                 top.v[k] = map(top.v[k]);
+                c.incident[top.v[k] as usize].push(id);
             }
-            c.add_top(top);
+            c.tops.push(top);
         }
+        for (cell, list) in c.cells.iter_mut().zip(&c.incident) {
+            cell.degree = list.len().min(255) as u8;
+        }
+        c.live_tops = c.tops.len();
+        c.peak_tops = c.live_tops;
         c.order = (0..c.cells.len() as u32).collect();
         c
     }
