@@ -13,10 +13,11 @@ HIGH="${3:-4}"
 DIR="${4:-${TMPDIR:-/tmp}/tessera-nsp-scale}"
 mkdir -p "$DIR"
 cargo build --release -q -p tessera -p tessera-bench --bin tessera --bin subdivide
-T=target/release/tessera
+BIN="${CARGO_TARGET_DIR:-target}/release"
+T="$BIN/tessera"
 MESH=../shared/meshes/stanford/armadillo_100k.obj.gz
 for L in "$LOW" "$HIGH"; do
-  [ -s "$DIR/arm-$L.ply" ] || target/release/subdivide "$MESH" --levels "$L" -o "$DIR/arm-$L.ply" > /dev/null
+  [ -s "$DIR/arm-$L.ply" ] || "$BIN/subdivide" "$MESH" --levels "$L" -o "$DIR/arm-$L.ply" > /dev/null
 done
 for M in $ADVANCES; do
   peaks=()

@@ -62,8 +62,10 @@
 //!   table per level to be the best of the static choices).
 //! - Coarsening re-decodes a cell from the start of its stream to the lower precision
 //!   (NSP.md 5.4.5 proposes this first): the state at a precision is a pure function of the
-//!   stream, so refine-then-coarsen gives back the same state (tested). Refining keeps the
-//!   coder's position and continues.
+//!   stream, so refine-then-coarsen gives back the same state (tested). The start is
+//!   restricted again from the parent's state, which a navigator holds at its maximal
+//!   precision anyway, rather than kept as a copy in every cell; the stream bytes already
+//!   fetched are kept. Refining keeps the coder's position and continues.
 //! - The **geometry advance** of section 7 (`--advance m`, 0 by default): geometry runs
 //!   `3m` kd levels ahead of connectivity ([`complex::Ahead`]). Each kd-cell keeps its
 //!   non-empty descendants `3m` levels below (fewer near the cell's finest points,
