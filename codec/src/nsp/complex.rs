@@ -230,7 +230,6 @@ pub struct Top {
 
 const DEAD: u8 = u8::MAX;
 
-
 /// Why a stream cannot be applied (only a corrupt stream gets here).
 #[derive(Debug, PartialEq)]
 pub enum ApplyError {
@@ -321,10 +320,7 @@ impl Complex {
         let id: HashMap<u128, u32> = distinct.iter().enumerate().map(|(i, &p)| (p, i as u32)).collect();
         let pcell: Vec<u32> = prefix.iter().map(|p| id[p]).collect();
         let mut c = Complex { level, ..Complex::default() };
-        c.cells = distinct
-            .iter()
-            .map(|&prefix| KdCell { level, xyz: xyz_of(prefix, level), degree: 0 })
-            .collect();
+        c.cells = distinct.iter().map(|&prefix| KdCell { level, xyz: xyz_of(prefix, level), degree: 0 }).collect();
         c.incident = vec![SmallVec::new(); c.cells.len()];
         let images = simplices.iter().map(|s| {
             let mut t = *s;

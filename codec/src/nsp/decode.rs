@@ -327,7 +327,15 @@ impl BitIo for Static<'_, '_> {
         next: &mut Vec<u32>,
     ) -> usize {
         let mut dec = self.dec.clone();
-        let at = complex::geometry_run(&mut Static { dec: &mut dec, table: self.table }, oracle, cells, order, from, level, next);
+        let at = complex::geometry_run(
+            &mut Static { dec: &mut dec, table: self.table },
+            oracle,
+            cells,
+            order,
+            from,
+            level,
+            next,
+        );
         *self.dec = dec;
         at
     }
