@@ -41,7 +41,7 @@ pub trait BitIo {
     /// The geometry of the kd-cells `order[from..]` at kd `level`, each moved one level down
     /// and pushed on `next`, up to the first one whose two halves are occupied: that one is
     /// pushed but not moved, and its index returned (`order.len()` if none). A coder may run
-    /// [`geometry_run`] on a copy of its registers.
+    /// these shared steps on a copy of its registers.
     #[inline]
     fn geometry_run(
         &mut self,
@@ -58,7 +58,7 @@ pub trait BitIo {
         geometry_run(self, oracle, cells, order, from, level, next)
     }
 
-    /// [`Complex::split`] of `v0` into `v0` and `v1` (a coder may run it on a copy of its
+    /// The vertex split of `v0` into `v0` and `v1` (a coder may run it on a copy of its
     /// registers).
     #[inline]
     fn split(&mut self, cx: &mut Complex, v0: u32, v1: u32, oracle: &mut impl Oracle) -> Result<(), ApplyError>
