@@ -52,6 +52,10 @@ pub enum FormatError {
     TrailingBytes(usize),
     #[error("corrupt {0} data: {1}")]
     Corrupt(Format, String),
+    /// Well formed, but decoding it would take more memory than the cap on decompressed
+    /// input allows ([`crate::input::max_decompressed_bytes`]).
+    #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
+    TooLarge(String),
 }
 
 /// "version 2", "versions 1 and 2", "versions 1, 2 and 3".

@@ -139,6 +139,23 @@ fn shorten(bytes: &[u8], tag: [u8; 4]) -> Vec<u8> {
     out
 }
 
+/// A header that claims more input vertices than the cap on decompressed input allows is
+/// refused with a one-line error before anything that size is allocated (`to_mesh` would
+/// make room for every input vertex).
+#[test]
+fn a_forged_count_of_input_vertices_is_refused_not_allocated() {
+    let mesh = shared("classic/beetle.obj");
+    let opts = EncodeOptions { keep_order: true, ..Default::default() };
+    let mut bytes = bft::encode(&mesh, opts).unwrap().bytes;
+    let header_len = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
+    bytes[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+    let crc = crc32fast::hash(&bytes[12..12 + header_len]);
+    bytes[12 + header_len..16 + header_len].copy_from_slice(&crc.to_le_bytes());
+    let e = bft::decode(&bytes).unwrap_err().to_string();
+    assert!(e.contains("4294967295 input vertices") && e.contains("--max-decompressed"), "{e}");
+    assert!(!e.contains('\n'), "{e}");
+}
+
 /// `keep_order`: the decoded mesh has every input vertex at its input index (unused ones at
 /// the origin) and the input's triangles index for index, single-stream and chunked.
 #[test]
