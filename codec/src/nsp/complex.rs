@@ -158,9 +158,10 @@ pub struct Ahead {
 
 /// A kd-cell: its place and how many top-simplices it has. 16 bytes: the per-level loop and
 /// the split's side test read only these, in a dense array apart from the lists of
-/// incident simplices ([`Complex::incident`]; with the lists inline, kd-cells took 56 bytes
-/// and decoding was measured slower). The kd-index's prefix is derived from the place
-/// ([`KdCell::prefix`]).
+/// incident simplices ([`Complex::incident`]; with the lists inline a kd-cell took 56 bytes;
+/// the split measured no faster or slower on the dragon). The kd-index's prefix is derived
+/// from the place ([`KdCell::prefix`]: one field less to shift at every level, measured
+/// faster).
 #[derive(Clone, Copy, Debug)]
 pub struct KdCell {
     /// The cell's integer coordinates: axis `a` holds the bits consumed so far on it.
