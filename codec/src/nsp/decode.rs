@@ -309,14 +309,25 @@ struct Static<'a, 'b> {
     table: &'a [u16],
 }
 
+impl Static<'_, '_> {
+    /// Runs `f` on a copy of the decoder, which the compiler keeps in registers through `f`'s
+    /// loops (through `self.dec` every decision stored and reloaded them: measured slower),
+    /// and takes its state back.
+    #[inline(always)]
+    fn on_copy<R>(&mut self, f: impl FnOnce(&mut Static<'_, '_>) -> R) -> R {
+        let mut dec = self.dec.clone();
+        let out = f(&mut Static { dec: &mut dec, table: self.table });
+        *self.dec = dec;
+        out
+    }
+}
+
 impl BitIo for Static<'_, '_> {
     #[inline]
     fn bit(&mut self, ctx: usize, _: bool) -> bool {
         self.dec.bit_static(self.table[ctx])
     }
 
-    /// On a copy of the decoder, which the compiler keeps in registers through the loop
-    /// (through `self.dec` every decision stored and reloaded them: measured slower).
     fn geometry_run(
         &mut self,
         oracle: &mut impl Oracle,
@@ -326,26 +337,11 @@ impl BitIo for Static<'_, '_> {
         level: u8,
         next: &mut Vec<u32>,
     ) -> usize {
-        let mut dec = self.dec.clone();
-        let at = complex::geometry_run(
-            &mut Static { dec: &mut dec, table: self.table },
-            oracle,
-            cells,
-            order,
-            from,
-            level,
-            next,
-        );
-        *self.dec = dec;
-        at
+        self.on_copy(|io| complex::geometry_run(io, oracle, cells, order, from, level, next))
     }
 
-    /// On a copy of the decoder, as [`BitIo::geometry_run`].
     fn split(&mut self, cx: &mut Complex, v0: u32, v1: u32, oracle: &mut impl Oracle) -> Result<(), ApplyError> {
-        let mut dec = self.dec.clone();
-        let done = cx.split(v0, v1, &mut Static { dec: &mut dec, table: self.table }, oracle);
-        *self.dec = dec;
-        done
+        self.on_copy(|io| cx.split(v0, v1, io, oracle))
     }
 }
 
