@@ -91,11 +91,7 @@ struct View {
 /// A display rank (`render --display-ranks D`, the `index`-th of them): assembles, reports
 /// and, at each swap, writes its displays.
 pub fn run_display(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Result<()> {
-    let result = serve(t, args, plan, index);
-    if let Err(e) = &result {
-        t.send(0, &ToMaster::Failed { reason: format!("display rank {index}: {e:#}") }.encode());
-    }
-    result
+    super::link::report_failure(t, &format!("display rank {index}: "), serve(t, args, plan, index))
 }
 
 fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Result<()> {

@@ -8,6 +8,15 @@ use codec::view::TileGrid;
 use worker::protocol::{FrameSpan, TilePixels, ToMaster};
 use worker::transport::{RecvError, Transport};
 
+/// How a rank that helps rank 0 (a sorter, a display rank) ends: a failure is reported to
+/// rank 0, which ends the job with it (`prefix` says who failed), and returned.
+pub(super) fn report_failure(t: &dyn Transport, prefix: &str, result: Result<()>) -> Result<()> {
+    if let Err(e) = &result {
+        t.send(0, &ToMaster::Failed { reason: format!("{prefix}{e:#}") }.encode());
+    }
+    result
+}
+
 /// When each worker was last heard from, for telling a dead worker from a busy one: a worker
 /// sends heartbeats while it works, so only silence longer than the timeout counts.
 pub(super) struct Silence {

@@ -23,11 +23,7 @@ const MASTER_SILENCE: Duration = Duration::from_secs(3600);
 /// Sorter `s` (of `--sorters K`, rank 0 being sorter 0) until rank 0 shuts the job down. A
 /// failure is reported to rank 0, which ends the job with it.
 pub fn run_sorter(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
-    let result = sort_frames(t, args, plan, s);
-    if let Err(e) = &result {
-        t.send(0, &ToMaster::Failed { reason: format!("{e:#}") }.encode());
-    }
-    result
+    super::link::report_failure(t, "", sort_frames(t, args, plan, s))
 }
 
 fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
