@@ -44,6 +44,9 @@ pub enum FormatError {
     BadMagic(Format),
     #[error("unsupported {format} version {found} (this build reads {})", versions(.known))]
     UnsupportedVersion { format: Format, found: u16, known: &'static [u16] },
+    /// A version this build used to read and no longer does, with what to do about it.
+    #[error("{format} version {found} is no longer read (this build reads {}): {remedy}", versions(.known))]
+    Outdated { format: Format, found: u16, known: &'static [u16], remedy: &'static str },
     #[error("file is truncated: {0}")]
     Truncated(&'static str),
     #[error("checksum mismatch in {0}: the file is corrupt")]

@@ -200,15 +200,24 @@ fn bunny_and_dragon_sizes() {
 }
 
 /// A version this build does not know is refused, naming the one it reads; the version
-/// field is outside the header's checksum, so nothing else stops the file.
+/// field is outside the header's checksum, so nothing else stops the file. Version 2, whose
+/// operations decode with floating-point steps, is refused with what to do instead.
 #[test]
 fn unknown_versions_are_refused() {
     let mut bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), format::VERSION);
-    for v in [0u16, 1, 3, u16::MAX] {
+    for v in [0u16, 1, 4, u16::MAX] {
         bytes[8..10].copy_from_slice(&v.to_le_bytes());
         let e = decode(&bytes).unwrap_err();
-        assert_eq!(e.to_string(), format!("unsupported .dpm version {v} (this build reads version 2)"));
+        assert_eq!(e.to_string(), format!("unsupported .dpm version {v} (this build reads version 3)"));
         assert!(DpmStats::of(&bytes).is_err());
     }
+    bytes[8..10].copy_from_slice(&2u16.to_le_bytes());
+    let e = decode(&bytes).unwrap_err().to_string();
+    assert!(
+        e.starts_with(".dpm version 2 is no longer read (this build reads version 3): ")
+            && e.ends_with("rebuild it from its source mesh with `tessera pm build`")
+            && !e.contains('\n'),
+        "{e}"
+    );
 }

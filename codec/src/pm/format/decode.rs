@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use super::fields::KINDS;
-use super::header::{corrupt, get_varint, Header, LAYOUT};
+use super::header::{corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT};
 use super::op::{read_op, DecodedOp, OpContext};
 use super::quantize::{dequantize_position, max_q, oct_decode, valid_oct};
 use super::tables::read_tables;
@@ -41,7 +41,16 @@ pub struct Dpm<'a> {
 impl<'a> Dpm<'a> {
     /// Checks the container and reads the tables and the base mesh (not the operations).
     pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
-        let c = LAYOUT.parse(bytes)?;
+        let c = LAYOUT.parse(bytes).map_err(|e| match e {
+            DpmError::UnsupportedVersion { format, found: FLOAT_VERSION, known } => DpmError::Outdated {
+                format,
+                found: FLOAT_VERSION,
+                known,
+                remedy: "its operations decode with floating-point steps a GPU may round differently; \
+                         rebuild it from its source mesh with `tessera pm build`",
+            },
+            e => e,
+        })?;
         let (hb, sections) = (c.header, c.sections);
         let header = Header::from_bytes(hb)?;
         let tables = read_tables(sections[0])?;

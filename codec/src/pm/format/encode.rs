@@ -83,9 +83,13 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
     let (first_tables, _) = probability_tables(&ops, &first_guess);
     let offsets = compress_in_reverse_order(&ops, &first_tables);
     let last = recompute_and_recompress(&ops, &offsets);
-    h.avg_op_bytes = offsets.avg;
+    h.avg_op_size = offsets.avg;
 
     let (oper, addresses) = lay_out(&ops, &last.bytes, &last.choices.swaps);
+    // Offsets into the section and their residuals stay within 32 bits as zigzag values.
+    if oper.len() >= 1 << 31 {
+        return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
+    }
     let tb = write_tables(&last.tables);
     let bb = base_section(pm, &tree, &qpos, &qnrm, &addresses);
     let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &oper]);
@@ -138,11 +142,12 @@ struct Operations {
 /// How the operations are stored besides their data, what an operation's bytes depend on: per
 /// operation whether `v_u`'s operation is stored first (the swap, where both children split),
 /// the address offset of the child stored second (the size of the subtree stored first), and
-/// the average operation size `s_avg` the offsets are estimated from (section 4.2.1).
+/// the average operation size `s_avg` the offsets are estimated from (section 4.2.1; 16.16
+/// fixed point).
 struct Choices {
     swaps: Vec<bool>,
     offsets: Vec<u64>,
-    avg: f32,
+    avg: u32,
 }
 
 /// Step 1 of section 4.2: "Compute uncompressed operations with zero address offsets."
@@ -247,7 +252,7 @@ fn uncompressed_operations(
     }
 
     let smaller_first: Vec<bool> = data.iter().map(|d| d.ctx.v_end - d.v_u < d.v_u - d.ctx.v).collect();
-    let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; data.len()], avg: 0.0 };
+    let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; data.len()], avg: 0 };
     let ops = Operations { data, order, child_ops, root_ops, contexts, levels, normal_bits };
     Ok((ops, zero_offsets))
 }
@@ -270,8 +275,11 @@ fn probability_tables(ops: &Operations, choices: &Choices) -> (Vec<Table>, Vec<[
 /// the average operation size `s_avg` (section 4.2.1), the second, with the estimate, gives
 /// the offsets and the swaps that step 4 counts.
 fn compress_in_reverse_order(ops: &Operations, tables: &[Table]) -> Choices {
-    let (bytes, _) = compress_bottom_up(ops, tables, 0.0);
-    let avg = bytes.iter().map(|b| b.len()).sum::<usize>() as f32 / ops.data.len().max(1) as f32;
+    let (bytes, _) = compress_bottom_up(ops, tables, 0);
+    // 16.16 fixed point, rounded.
+    let total = bytes.iter().map(|b| b.len() as u64).sum::<u64>() << 16;
+    let n = ops.data.len().max(1) as u64;
+    let avg = ((total + n / 2) / n).min(u32::MAX as u64) as u32;
     compress_bottom_up(ops, tables, avg).1
 }
 
@@ -345,7 +353,7 @@ fn symbol_bits(counts: &[[u64; 256]], tables: &[Table]) -> (f64, f64) {
 /// parents, so the sizes of both subtrees are known when an operation is coded. Per operation
 /// its bytes, swap and offset. Every operation whose children both split is coded both ways,
 /// and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
-fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: f32) -> (Vec<Vec<u8>>, Choices) {
+fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (Vec<Vec<u8>>, Choices) {
     let (data, child_ops) = (&ops.data, &ops.child_ops);
     let m = data.len();
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; m];
@@ -464,7 +472,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         step: 1.0,
         length_step: 0.25,
         attribute_step: 1.0 / 4096.0,
-        avg_op_bytes: 4.0,
+        avg_op_size: 4 << 16,
         triangles: data.first().copied().unwrap_or(0) as u32,
     };
     let tb = vec![0u8; TABLES.div_ceil(8)];

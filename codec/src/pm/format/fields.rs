@@ -5,8 +5,6 @@
 //! before). Encoder and decoder both call these, so a context is computed one way only; the
 //! order in which the fields are coded is in the format's documentation ([`super`]) and `op.rs`.
 
-use super::quantize::oct_decode;
-
 /// The fields of an operation, for the size breakdown in [`DpmStats`](super::DpmStats).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(usize)]
@@ -41,8 +39,7 @@ pub(super) enum Scheme {
     /// One symbol per value: the value itself below 16, else its bit length and the three bits
     /// below the leading one, followed by the remaining low bits uncoded (as DEFLATE codes
     /// lengths and distances). One table per class; suits wide values whose low bits are
-    /// noise. Values must be below `2^34` (the encoder's are: FVID offsets, positions and
-    /// normals are at most 33 bits as zigzag values).
+    /// noise.
     Buckets,
 }
 
@@ -185,17 +182,49 @@ pub(super) fn corner_class(prev: Option<u64>, range: u32) -> usize {
 
 /// The estimate of the address offset of the child stored second, from the average operation
 /// size: `s_avg * (m - 1)` for `m` the FVID count of the child stored first (section 4.2.1,
-/// where that child is always `v_l`: `s_avg * (v_u - v - 1)`).
-pub(super) fn pointer_estimate(avg: f32, first_size: u32) -> i64 {
-    (avg as f64 * (first_size as f64 - 1.0)).round() as i64
+/// where that child is always `v_l`: `s_avg * (v_u - v - 1)`). `s_avg` is in 16.16 fixed
+/// point (the header's `avg_op_size`); the product is rounded to the
+/// nearest byte (halves up) and capped at `u32::MAX`, integer arithmetic every decoder repeats
+/// exactly (the WGSL one with 32-bit halves).
+pub(super) fn pointer_estimate(avg: u32, first_size: u32) -> i64 {
+    let p = avg as u64 * first_size.saturating_sub(1) as u64 + (1 << 15);
+    (p >> 16).min(u32::MAX as u64) as i64
 }
 
+/// The octahedral code of a normal as an integer vector along the normal (not unit length):
+/// with `m = 2^bits - 1`, `x = 2 q_0 - m`, `y = 2 q_1 - m` and `z = m - |x| - |y|`, folded
+/// where `z < 0` as the octahedral decoder folds; zero for the zero code. Its
+/// components are within `m` in magnitude; integers, so the prediction below is the same in
+/// every decoder.
+pub(super) fn oct_vector(q: [u32; 2], bits: u8) -> [i32; 3] {
+    let zero = 1u32 << bits;
+    if q == [zero, zero] {
+        return [0; 3];
+    }
+    let m = ((1u32 << bits) - 1) as i32;
+    let (x, y) = (2 * q[0] as i32 - m, 2 * q[1] as i32 - m);
+    let z = m - x.abs() - y.abs();
+    if z >= 0 {
+        return [x, y, z];
+    }
+    let sign = |c: i32| if c >= 0 { 1 } else { -1 };
+    [(m - y.abs()) * sign(x), (m - x.abs()) * sign(y), z]
+}
+
+/// Bits a normal component keeps for the tangent-plane prediction (sign included, 12): with
+/// tangential deltas below [`TANGENT_LIMIT`] the prediction's products and sum stay below
+/// 2^30, in 32-bit integers.
+const TANGENT_NORMAL_BITS: u8 = 11;
+/// Tangential deltas at or beyond this (in grid steps) are not predicted (prediction 0).
+pub(super) const TANGENT_LIMIT: i64 = 1 << 18;
+
 /// The coding frame of a position delta: the axes in coding order, the two least aligned with
-/// `v`'s normal first, and the normal's components along them. The last axis is predicted
-/// from the first two by the tangent plane (section 4.2.4 predicts `v_u` from `v`; the normal
-/// of `v` is known to the decoder, so the delta is predicted to lie in `v`'s tangent plane).
-pub(super) fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [f64; 3]) {
-    let n = oct_decode(normal, bits);
+/// `v`'s normal first, and the normal's components along them ([`oct_vector`], shifted right
+/// to at most 11 bits of magnitude). The last axis is predicted from the first two by the
+/// tangent plane (section 4.2.4 predicts `v_u` from `v`; the normal of `v` is known to the
+/// decoder, so the delta is predicted to lie in `v`'s tangent plane).
+pub(super) fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [i32; 3]) {
+    let n = oct_vector(normal, bits);
     let mut a = 0;
     for i in 1..3 {
         if n[i].abs() > n[a].abs() {
@@ -207,20 +236,86 @@ pub(super) fn position_frame(normal: [u32; 2], bits: u8) -> ([usize; 3], [f64; 3
         1 => [0, 2, 1],
         _ => [0, 1, 2],
     };
-    (axes, axes.map(|i| n[i] as f64))
+    let shift = bits.saturating_sub(TANGENT_NORMAL_BITS);
+    (axes, axes.map(|i| n[i] >> shift))
 }
 
-/// The tangent-plane prediction of the last axis from the first two.
-pub(super) fn tangent_prediction(n: [f64; 3], d0: i64, d1: i64) -> i64 {
-    if n[2] == 0.0 {
+/// The tangent-plane prediction of the last axis from the first two,
+/// `-(n_a d_a + n_b d_b) / n_c` rounded to the nearest integer (halves away from zero), in
+/// integers: 0 where `n_c` is 0 or a tangential delta is [`TANGENT_LIMIT`] or more.
+pub(super) fn tangent_prediction(n: [i32; 3], d0: i64, d1: i64) -> i64 {
+    if n[2] == 0 || d0.abs() >= TANGENT_LIMIT || d1.abs() >= TANGENT_LIMIT {
         return 0;
     }
-    let p = -(n[0] * d0 as f64 + n[1] * d1 as f64) / n[2];
-    p.round().clamp(-2_147_483_648.0, 2_147_483_648.0) as i64
+    // |n| < 2^11 and |d| < 2^18: the sum is below 2^30 in magnitude.
+    let num = -(n[0] as i64 * d0 + n[1] as i64 * d1);
+    let den = n[2] as i64;
+    let q = (num.abs() + den.abs() / 2) / den.abs();
+    if (num < 0) != (den < 0) {
+        -q
+    } else {
+        q
+    }
 }
 
 /// The class of the last axis's residual: the bit length of the tangential delta.
 pub(super) fn tangent_class(d0: i64, d1: i64) -> usize {
     let m = d0.unsigned_abs() + d1.unsigned_abs();
     ((64 - m.leading_zeros()) as usize).min(MAGNITUDES - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::quantize::oct_decode;
+    use super::*;
+
+    #[test]
+    fn the_integer_octahedral_vector_points_along_the_decoded_normal() {
+        for bits in [4u8, 7, 10] {
+            let zero = 1u32 << bits;
+            assert_eq!(oct_vector([zero, zero], bits), [0; 3]);
+            for a in 0..zero {
+                for b in 0..zero {
+                    let v = oct_vector([a, b], bits);
+                    let m = ((1u32 << bits) - 1) as i32;
+                    assert!(v.iter().all(|c| c.abs() <= m) && v[0].abs() + v[1].abs() + v[2].abs() == m);
+                    let l = v.iter().map(|&c| (c as f64).powi(2)).sum::<f64>().sqrt();
+                    let n = oct_decode([a, b], bits);
+                    for i in 0..3 {
+                        assert!((v[i] as f64 / l - n[i] as f64).abs() < 1e-6, "{bits} bits, code {a},{b}: {v:?} {n:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_tangent_prediction_is_the_rounded_quotient() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = |m: i64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % (2 * m as u64 + 1)) as i64 - m
+        };
+        for _ in 0..100_000 {
+            let n = [next(2047) as i32, next(2047) as i32, next(2047) as i32];
+            let (d0, d1) = (next(TANGENT_LIMIT - 1), next(TANGENT_LIMIT - 1));
+            let p = tangent_prediction(n, d0, d1);
+            if n[2] == 0 {
+                assert_eq!(p, 0);
+                continue;
+            }
+            // Exact: |p - num/den| <= 1/2, halves away from zero.
+            let (num, den) = (-(n[0] as i64 * d0 + n[1] as i64 * d1), n[2] as i64);
+            let twice = 2 * (p * den - num).abs();
+            assert!(twice < den.abs() || (twice == den.abs() && p.signum() * den.signum() * num.signum() >= 0));
+        }
+        assert_eq!(tangent_prediction([1, 1, 1], TANGENT_LIMIT, 0), 0);
+        assert_eq!(tangent_prediction([1, 1, 2], 1, 0), -1);
+        assert_eq!(tangent_prediction([1, 1, 2], -1, 0), 1);
+        assert_eq!(pointer_estimate(3 << 15, 5), 6);
+        assert_eq!(pointer_estimate(u32::MAX, u32::MAX), u32::MAX as i64);
+        assert_eq!(pointer_estimate(1 << 16, 0), 0);
+    }
 }

@@ -7,7 +7,10 @@ use crate::container::Layout;
 pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
+/// The last version whose operations decode with floating-point steps (`exp`, an `f64`
+/// prediction): refused with a message that says how to get a current file.
+pub const FLOAT_VERSION: u16 = 2;
 const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
 /// The `.dpm` container: sections TABL, BASE, OPER.
 pub(super) const LAYOUT: Layout<3> = Layout {
@@ -46,13 +49,14 @@ pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
 /// 30      4     step (f32)
 /// 34      4     length_step (f32)
 /// 38      4     attribute_step (f32)
-/// 42      4     avg_op_bytes (f32)
+/// 42      4     avg_op_size (u32, 16.16 fixed point)
 /// 46      4     triangles (u32)
 /// ```
 ///
-/// Reading it rejects bit counts out of range, non-finite floats, steps that are
-/// not positive, a negative average and vertex counts that do not add up
-/// (`base_vertices + splits = vertices`).
+/// Reading it rejects bit counts out of range, non-finite floats, steps that are not positive,
+/// lower bounds of the log codes that are not normal `f32`s below 2^64 (their codes decode by
+/// exponent arithmetic), and vertex counts that do not add up (`base_vertices + splits =
+/// vertices`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Header {
     /// Finest-level vertices (FVIDs).
@@ -69,8 +73,9 @@ pub struct Header {
     pub length_step: f32,
     /// Lower bound `q` of the log-coded attribute error.
     pub attribute_step: f32,
-    /// Average operation size in bytes, for the address offset estimate.
-    pub avg_op_bytes: f32,
+    /// Average operation size in 1/65536 bytes (16.16 fixed point), for the address offset
+    /// estimate: an integer, so every decoder computes the same estimate.
+    pub avg_op_size: u32,
     /// Total triangles after full refinement.
     pub triangles: u32,
 }
@@ -83,17 +88,12 @@ impl Header {
         }
         b.push(self.position_bits);
         b.push(self.normal_bits);
-        for v in [
-            self.bbox_min[0],
-            self.bbox_min[1],
-            self.bbox_min[2],
-            self.step,
-            self.length_step,
-            self.attribute_step,
-            self.avg_op_bytes,
-        ] {
+        for v in
+            [self.bbox_min[0], self.bbox_min[1], self.bbox_min[2], self.step, self.length_step, self.attribute_step]
+        {
             b.extend_from_slice(&v.to_le_bytes());
         }
+        b.extend_from_slice(&self.avg_op_size.to_le_bytes());
         b.extend_from_slice(&self.triangles.to_le_bytes());
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
@@ -116,19 +116,18 @@ impl Header {
             step: f(30),
             length_step: f(34),
             attribute_step: f(38),
-            avg_op_bytes: f(42),
+            avg_op_size: u(42),
             triangles: u(46),
         };
         if !(8..=24).contains(&h.position_bits) || !(4..=16).contains(&h.normal_bits) {
             return Err(corrupt("quantization bits out of range"));
         }
         let pos = |x: f32| x.is_finite() && x > 0.0;
+        let log_bound = |x: f32| x.is_normal() && x > 0.0 && x < 1.8e19;
         if !(h.bbox_min.iter().all(|x| x.is_finite())
             && pos(h.step)
-            && pos(h.length_step)
-            && pos(h.attribute_step)
-            && h.avg_op_bytes.is_finite()
-            && h.avg_op_bytes >= 0.0)
+            && log_bound(h.length_step)
+            && log_bound(h.attribute_step))
         {
             return Err(corrupt("bad quantization parameters"));
         }

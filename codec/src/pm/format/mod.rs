@@ -5,7 +5,8 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSDPM\x1a"
-//! 8       2     version (u16 LE), currently 2
+//! 8       2     version (u16 LE), currently 3 (2, whose operations decoded with floating-point
+//!               steps, is refused with a note to rebuild)
 //! 10      2     header length H (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
@@ -36,7 +37,7 @@
 //! `n = v_end - v`, the number of FVIDs `v` stands for, an operation holds, in this order:
 //!
 //! 1. criteria (section 4.2.3): `sin(alpha)` in 8 bits (rounded up), the geometric error and
-//!    the attribute error log-coded at 2% (rounded up, `q * 1.02^(k-1)`, 0 for 0), each as the
+//!    the attribute error log-coded at 2% (rounded up, `q * 2^((k-1)/35)`, 0 for 0), each as the
 //!    zigzag difference to the parent operation's; `sin(alpha)` in 4 classes by the parent's
 //!    value (groups);
 //! 2. the head symbol, in 4 classes by `n` (2, 3, 4, more; groups):
@@ -63,14 +64,30 @@
 //! 6. the position delta of `v_u` to `v` (quantized over the bounding box; buckets): the two
 //!    axes least aligned with `v`'s normal first, in classes by the magnitude of the radius,
 //!    then the third as the difference to its tangent-plane prediction
-//!    `round(-(n_a d_a + n_b d_b) / n_c)`, in classes by the bit length of `|d_a| + |d_b|`;
+//!    `round(-(n_a d_a + n_b d_b) / n_c)` (in integers, below), in classes by the bit length of
+//!    `|d_a| + |d_b|`;
 //!    `v_l` keeps `v`'s position and normal (half-edge collapses), so its delta is always zero
 //!    and not stored;
 //! 7. the normal delta (2, octahedral), in classes by the magnitude of the attribute error
 //!    (buckets): the error bounds the normal's change;
 //! 8. when both children split: the address offset of the child stored second from the end of
 //!    this operation, as the zigzag difference to `s_avg * (m - 1)`, `m` the FVID count of the
-//!    child stored first (4.2.1), in 6 classes by the bit length of `m` (groups).
+//!    child stored first (4.2.1; `s_avg` in 16.16 fixed point, the product rounded to a byte),
+//!    in 6 classes by the bit length of `m` (groups).
+//!
+//! **Integer-exact decoding (version 3).** Decoding an operation takes integer steps only, so a
+//! GPU decodes it bit for bit as the CPU does (`shaders/pm/decode.wgsl`, tested against
+//! [`Dpm::decode_op`]): every coded value fits in 32 bits (decoders refuse wider ones; the
+//! encoder refuses 2^31 vertices or a 2 GiB operations section, which keep them there); the
+//! log codes step by `2^(1/35)`, so a code `k` decodes as the entry `(k-1) % 35` of a per-file
+//! table of 35 `f32` values ([`log_table`], correctly rounded products of the lower bound and
+//! the format's constants) with `(k-1) / 35` added to its exponent bits ([`log_value`]); the
+//! tangent-plane prediction takes the octahedral code as an integer vector along the normal
+//! (no normalisation, which a GPU may round differently), shifted to 11 bits of magnitude, and
+//! predicts nothing where a tangential delta is 2^18 steps or more, so its products fit in 32
+//! bits; the pointer estimate multiplies integers (32-bit halves on a GPU). Version 2 used
+//! `exp`, a normalised `f64` normal and an `f32` average; the sizes did not change (bunny
+//! 393,776 to 393,768 bytes, dragon 4,288,305 to 4,288,300).
 //!
 //! Compression follows the four steps of section 4.2 (`encode.rs`, one function per step):
 //! operations with zero offsets give the first tables; the operations are compressed bottom-up
@@ -110,9 +127,7 @@
 //!   when it is the opposite of the first's (the head's pattern);
 //! * contexts beyond byte significance, from what the decoder knows when it reads a value (the
 //!   classes above), and the tangent-plane prediction of the position (section 4.2.4 only
-//!   predicts from `v`; the normal of `v` is in the context). The prediction uses basic `f64`
-//!   arithmetic on the decoded normal (IEEE 754 rounds those exactly), so encoder and decoder
-//!   agree on every platform;
+//!   predicts from `v`; the normal of `v` is in the context), in integers (above);
 //! * the third corner's positive offset is taken to the end of `v`'s FVID range (`v_end`, part
 //!   of the context: the left child's range ends at `v_u`, the right child's where `v`'s did)
 //!   rather than to the next active vertex, which depends on the runtime state;
@@ -151,5 +166,5 @@ pub use decode::{decode, Decoded, Dpm};
 pub use encode::{encode, wrap_for_fuzzing, EncodeError, EncodeOptions, Encoded};
 pub use header::{DpmError, Header, MAGIC, VERSION};
 pub use op::{DecodedOp, OpContext};
-pub use quantize::quantized;
+pub use quantize::{log_table, log_value, quantized, LOG_STEPS};
 pub use stats::DpmStats;

@@ -104,7 +104,7 @@ fn face_pattern(faces: &[FaceCode]) -> u32 {
 
 /// Writes an operation; `swapped` stores `v_u`'s subtree first, `offset` is the size in bytes
 /// of the subtree stored first (both only where both children split further).
-pub(super) fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64, avg: f32, normal_bits: u8) {
+pub(super) fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64, avg: u32, normal_bits: u8) {
     let (v, v_u, v_end) = (d.ctx.v, d.v_u, d.ctx.v_end);
     let mut residual = [0i64; 4];
     for (i, r) in residual.iter_mut().enumerate() {
@@ -314,7 +314,7 @@ pub(super) fn read_op(
     }
     let offset = if has_left && has_right {
         let residual = r.get_signed(POINTER, split_class(first_size + 2))?;
-        let o = pointer_estimate(h.avg_op_bytes, first_size).saturating_add(residual);
+        let o = pointer_estimate(h.avg_op_size, first_size).saturating_add(residual);
         if o < 1 {
             return Err(corrupt("bad operation pointer"));
         }

@@ -12,17 +12,24 @@ use crate::pm::{Criteria, ProgressiveMesh};
 
 /// The largest log code (also the code of NaN); codes above are corrupt.
 pub(super) const MAX_K: u32 = 1 << 20;
-const LN_STEP: f64 = 0.019_802_627_296_179_712; // ln 1.02
+/// Log-code steps per doubling: a step is `2^(1/35)` = 1.0200016 (the paper's 2%, made a whole
+/// fraction of an octave so that decoding needs no `exp`).
+pub const LOG_STEPS: u32 = 35;
+const LN_STEP: f64 = std::f64::consts::LN_2 / LOG_STEPS as f64;
+/// `2^(j/35)` for `j` in `0..35`, as `f32` bit patterns: the one table that log codes decode
+/// through. It is part of the format (not computed at run time), so every decoder, the WGSL
+/// one included, reads the same values.
+const OCTAVE: [u32; LOG_STEPS as usize] = [
+    0x3f800000, 0x3f828f6a, 0x3f852bef, 0x3f87d5d4, 0x3f8a8d5c, 0x3f8d52ce, 0x3f902671, 0x3f93088c, 0x3f95f96b,
+    0x3f98f959, 0x3f9c08a4, 0x3f9f2799, 0x3fa25689, 0x3fa595c6, 0x3fa8e5a3, 0x3fac4675, 0x3fafb894, 0x3fb33c57,
+    0x3fb6d21a, 0x3fba7a38, 0x3fbe3510, 0x3fc20300, 0x3fc5e46c, 0x3fc9d9b6, 0x3fcde345, 0x3fd2017f, 0x3fd634d0,
+    0x3fda7da4, 0x3fdedc67, 0x3fe3518b, 0x3fe7dd82, 0x3fec80c0, 0x3ff13bbf, 0x3ff60ef5, 0x3ffafae1,
+];
 
 /// The log code of a length or error `e >= 0` with lower bound `q` (section 4.2.3, relative
-/// accuracy 2%): 0 for 0, 1 up to `q`, else one plus the paper's `ceil((ln e - ln q) / ln 1.02)`,
-/// raised while `log_dec(k, q) < e`, so the decoded value is never below `e` and at most 2%
-/// above it.
-///
-/// A decoded value codes again as its own code or the next one (about half of them: the
-/// `f32` rounding of `log_dec(k)` lands above the exact `q * 1.02^(k-1)`, and the `f64`
-/// ceiling then takes the step above), so quantizing twice may raise a criterion by one more
-/// 2% step. The encoder quantizes the builder's values once.
+/// accuracy 2%): 0 for 0, 1 up to `q`, else one plus `ceil(log2(e / q) * 35)`, moved to the
+/// smallest code whose decoded value ([`log_dec`]) is at least `e`, so the decoded value is
+/// never below `e` and at most one step above it.
 pub(super) fn log_enc(e: f32, q: f32) -> u32 {
     if e.is_nan() {
         return MAX_K;
@@ -34,22 +41,51 @@ pub(super) fn log_enc(e: f32, q: f32) -> u32 {
         return 1;
     }
     let k = ((e as f64).ln() - (q as f64).ln()) / LN_STEP;
-    let mut k = (k.ceil().min(MAX_K as f64) as u32 + 1).min(MAX_K);
-    // Never below the true value.
+    let mut k = (k.ceil().clamp(0.0, MAX_K as f64) as u32 + 1).min(MAX_K);
+    // Exactly the smallest code whose value is not below `e`.
     while k < MAX_K && log_dec(k, q) < e {
         k += 1;
+    }
+    while k > 2 && log_dec(k - 1, q) >= e {
+        k -= 1;
     }
     k
 }
 
-/// The value of log code `k`: `q * 1.02^(k-1)`, 0 for 0 (infinite for codes too large for
-/// an `f32`).
+/// The per-file table of log code values within an octave: `q * 2^(j/35)` for `j` in
+/// `0..35`, each one correctly rounded `f32` product (what the WGSL decoder uploads).
+pub fn log_table(q: f32) -> [f32; LOG_STEPS as usize] {
+    OCTAVE.map(|b| q * f32::from_bits(b))
+}
+
+/// The value of log code `k` from a [`log_table`]: 0 for 0, else `t[(k-1) % 35]` times
+/// `2^((k-1) / 35)`, the power of two added to the exponent bits, an integer step (so every
+/// decoder agrees bit for bit); [`f32::MAX`] where the exponent would leave the range (never
+/// below the coded value, and finite for a GPU, which may assume no infinities).
+pub fn log_value(k: u32, t: &[f32; LOG_STEPS as usize]) -> f32 {
+    if k == 0 {
+        return 0.0;
+    }
+    times_power_of_two(t[((k - 1) % LOG_STEPS) as usize], (k - 1) / LOG_STEPS)
+}
+
+/// `x * 2^e` by adding `e` to the exponent bits of `x`, a normal `f32` ([`f32::MAX`] past the
+/// range). The header keeps the lower bounds normal and below 2^64 and the octave factors are
+/// in [1, 2), so a table entry is normal: its exponent field is 1 to 254.
+fn times_power_of_two(x: f32, e: u32) -> f32 {
+    let bits = x.to_bits();
+    if ((bits >> 23) & 0xff) + e >= 0xff {
+        return f32::MAX;
+    }
+    f32::from_bits(bits + (e << 23))
+}
+
+/// The value of log code `k` for the lower bound `q` (one entry of [`log_table`]).
 pub(super) fn log_dec(k: u32, q: f32) -> f32 {
     if k == 0 {
-        0.0
-    } else {
-        (q as f64 * (LN_STEP * (k - 1) as f64).exp()) as f32
+        return 0.0;
     }
+    times_power_of_two(q * f32::from_bits(OCTAVE[((k - 1) % LOG_STEPS) as usize]), (k - 1) / LOG_STEPS)
 }
 
 /// `sin(alpha)` in 8 bits (section 4.2.3), rounded up: `k / 255` is at least `s` and less
@@ -173,7 +209,11 @@ pub(super) fn fit_header(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<He
     }
     let n = pm.positions.len();
     Ok(Header {
-        vertices: u32::try_from(n).map_err(|_| EncodeError::InvalidMesh("too many vertices".into()))?,
+        // Below 2^31, so that a face corner's zigzag offset fits in 32 bits.
+        vertices: u32::try_from(n)
+            .ok()
+            .filter(|&n| n < 1 << 31)
+            .ok_or_else(|| EncodeError::InvalidMesh("2^31 vertices or more".into()))?,
         base_vertices: pm.base_vertices.len() as u32,
         base_faces: pm.base_faces.len() as u32,
         splits: pm.splits.len() as u32,
@@ -183,7 +223,7 @@ pub(super) fn fit_header(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<He
         step,
         length_step: step * 0.25,
         attribute_step: 1.0 / 4096.0,
-        avg_op_bytes: 0.0,
+        avg_op_size: 0,
         triangles: (pm.base_faces.len() + pm.splits.iter().map(|s| s.faces.len()).sum::<usize>()) as u32,
     })
 }
@@ -325,22 +365,29 @@ mod tests {
                 // From a tenth of q to 10^5 q.
                 let e = q * 10f32.powf(rng.unit() * 6.0 - 1.0);
                 let d = log_dec(log_enc(e, q), q);
-                assert!(d >= e && d <= (e * 1.02 * (1.0 + 1e-6)).max(q), "{e} came back as {d}");
+                assert!(d >= e && d <= (e * 2f32.powf(1.0 / 35.0) * (1.0 + 1e-6)).max(q), "{e} came back as {d}");
             }
         }
     }
 
     #[test]
-    fn log_codes_come_back_as_themselves_or_the_next_step() {
+    fn log_codes_come_back_as_themselves() {
         let h = bunny_header(16);
-        for q in [h.length_step, h.attribute_step] {
-            for k in 0..4_000 {
+        for q in [h.length_step, h.attribute_step, f32::MIN_POSITIVE, 1.5e19] {
+            let t = log_table(q);
+            let mut prev = 0.0;
+            for k in (0..40_000).chain(MAX_K - 10..=MAX_K) {
                 let e = log_dec(k, q);
-                assert!(e.is_finite());
-                let again = log_enc(e, q);
-                assert!(again == k || (k > 1 && again == k + 1), "code {k} came back as {again}");
+                assert_eq!(e.to_bits(), log_value(k, &t).to_bits());
+                assert!(e.is_finite() && (k == 0 || e > prev || e == f32::MAX), "code {k}: {e} after {prev}");
+                if e < f32::MAX {
+                    assert_eq!(log_enc(e, q), k, "code {k} ({e}) came back as another");
+                }
+                prev = e;
             }
         }
+        // Whole octaves are exact powers of two.
+        assert_eq!(log_dec(1 + 35 * 3, 0.25), 2.0);
     }
 
     #[test]
@@ -372,7 +419,7 @@ mod tests {
             let d = dequantize_criteria(k, &h);
             assert!(d.sin_alpha >= c.sin_alpha && d.geometric_error >= c.geometric_error);
             assert!(d.attribute_error >= c.attribute_error && d.radius >= c.radius, "{c:?} came back as {d:?}");
-            assert!(quantize_criteria(&d, &h).iter().zip(&k).all(|(a, b)| a - b <= 1));
+            assert_eq!(quantize_criteria(&d, &h), k);
         }
     }
 }

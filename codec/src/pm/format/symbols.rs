@@ -94,8 +94,10 @@ impl<'a> OpWriter<'a> {
         }
     }
 
-    /// Codes `v` in class `class` of field `f`.
+    /// Codes `v` in class `class` of field `f`; `v` fits in 32 bits (the encoder's bounds on
+    /// vertices and section size keep every value there, and decoders refuse wider ones).
     pub(super) fn put(&mut self, f: usize, class: usize, mut v: u64) {
+        debug_assert!(v <= u32::MAX as u64, "a coded value wider than 32 bits");
         let spec = FIELDS[f];
         let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
         match spec.scheme {
@@ -164,7 +166,7 @@ impl<'a, 'b> OpReader<'a, 'b> {
                 let mut v = 0u64;
                 let mut i = 0;
                 loop {
-                    if i == 10 {
+                    if i == 5 {
                         return Err(corrupt("overlong value in an operation"));
                     }
                     let sym = self.sym(base + i.min(2))?;
@@ -193,7 +195,7 @@ impl<'a, 'b> OpReader<'a, 'b> {
         if let Some(b) = self.bits.as_deref_mut() {
             b[spec.kind as usize] += self.r.read - before;
         }
-        if v > u32::MAX as u64 * 2 + 1 {
+        if v > u32::MAX as u64 {
             return Err(corrupt("value out of range in an operation"));
         }
         Ok(v)
