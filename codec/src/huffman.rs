@@ -101,6 +101,21 @@ impl Table {
         Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest })
     }
 
+    /// The canonical decoding tables, for a decoder elsewhere (the WGSL one of `.dpm`
+    /// operations): per length `l` in `0..=MAX_LEN` the first code of that length, the number
+    /// of codes with it and where its symbols start in the symbols by code; those symbols; and
+    /// the longest length in use. A code of length `l` decodes as
+    /// `sorted[offset[l] + code - first[l]]` when `first[l] <= code < first[l] + count[l]`.
+    pub fn canonical(&self) -> Canonical<'_> {
+        Canonical {
+            first: &self.first,
+            count: &self.count,
+            offset: &self.offset,
+            sorted: &self.sorted,
+            longest: self.longest,
+        }
+    }
+
     /// `sym`'s code and its length.
     #[inline]
     pub fn code(&self, sym: u8) -> (u32, u8) {
@@ -130,6 +145,16 @@ impl Table {
         }
         None
     }
+}
+
+/// A [`Table`]'s canonical decoding tables ([`Table::canonical`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Canonical<'a> {
+    pub first: &'a [u32; MAX_LEN as usize + 1],
+    pub count: &'a [u32; MAX_LEN as usize + 1],
+    pub offset: &'a [u32; MAX_LEN as usize + 1],
+    pub sorted: &'a [u8],
+    pub longest: u8,
 }
 
 /// Huffman code lengths for positive frequencies (two-queue construction).

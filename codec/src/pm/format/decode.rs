@@ -58,6 +58,9 @@ impl<'a> Dpm<'a> {
         let bb = sections[1];
         let ops = sections[2];
         let nb = header.base_vertices as usize;
+        if ops.len() >= 1 << 31 {
+            return Err(corrupt("operations section of 2 GiB or more"));
+        }
         if nb > bb.len() / 7 || header.base_faces as usize > bb.len() / 3 || header.splits as usize > ops.len() {
             return Err(corrupt("counts larger than the data"));
         }
@@ -123,6 +126,12 @@ impl<'a> Dpm<'a> {
             ops,
             section_lens: sections.map(|s| s.len()),
         })
+    }
+
+    /// The probability tables, one per context ([`super::TABLES`] of them, in the order the format's
+    /// fields list them).
+    pub fn tables(&self) -> &[Arc<Table>] {
+        &self.tables
     }
 
     /// Decodes the single operation at `addr` of the operations section.

@@ -474,6 +474,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         attribute_step: 1.0 / 4096.0,
         avg_op_size: 4 << 16,
         triangles: data.first().copied().unwrap_or(0) as u32,
+        max_faces: 64,
     };
     let tb = vec![0u8; TABLES.div_ceil(8)];
     let mut bb = vec![];

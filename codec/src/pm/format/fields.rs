@@ -123,8 +123,12 @@ pub(super) const fn tables_per_class(s: Scheme) -> usize {
     }
 }
 
-/// Per field, the index of its first table; the last entry is the number of tables.
-pub(super) const TABLE_BASE: [usize; FIELDS.len() + 1] = {
+/// Per field, the index of its first table; the last entry is the number of tables. The fields
+/// in order: `sin(alpha)`, geometric error, attribute error, radius, head, split point, face
+/// count, face form, face corner in `v_l`'s range, in `v_u`'s, third corner, its difference,
+/// general corner, tangential position, normal position, normal, pointer. A field's class `c`
+/// starts at its base plus `c` (buckets) or `3 c` (groups: significance 0, 1, 2 and more).
+pub const TABLE_BASE: [usize; FIELDS.len() + 1] = {
     let mut b = [0; FIELDS.len() + 1];
     let mut i = 0;
     while i < FIELDS.len() {
@@ -133,7 +137,8 @@ pub(super) const TABLE_BASE: [usize; FIELDS.len() + 1] = {
     }
     b
 };
-pub(super) const TABLES: usize = TABLE_BASE[FIELDS.len()];
+/// The number of probability tables of a file.
+pub const TABLES: usize = TABLE_BASE[FIELDS.len()];
 
 /// The magnitude class of a log-coded length or attribute error `k` (section 4.2.3): 0 for
 /// zero, then one class per doubling (35 steps of 2%), capped.

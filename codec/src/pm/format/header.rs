@@ -11,7 +11,7 @@ pub const VERSION: u16 = 3;
 /// The last version whose operations decode with floating-point steps (`exp`, an `f64`
 /// prediction): refused with a message that says how to get a current file.
 pub const FLOAT_VERSION: u16 = 2;
-const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 8;
+const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 9;
 /// The `.dpm` container: sections TABL, BASE, OPER.
 pub(super) const LAYOUT: Layout<3> = Layout {
     format: Format::Dpm,
@@ -35,7 +35,7 @@ pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
     crate::container::get_varint(Format::Dpm, b, pos, what)
 }
 
-/// The fixed header, little-endian, `HEADER_LEN` (50) bytes:
+/// The fixed header, little-endian, `HEADER_LEN` (54) bytes:
 ///
 /// ```text
 /// offset  size  field
@@ -51,12 +51,13 @@ pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
 /// 38      4     attribute_step (f32)
 /// 42      4     avg_op_size (u32, 16.16 fixed point)
 /// 46      4     triangles (u32)
+/// 50      4     max_faces (u32, at most 65535)
 /// ```
 ///
 /// Reading it rejects bit counts out of range, non-finite floats, steps that are not positive,
 /// lower bounds of the log codes that are not normal `f32`s below 2^64 (their codes decode by
 /// exponent arithmetic), and vertex counts that do not add up (`base_vertices + splits =
-/// vertices`).
+/// vertices`, below 2^31), and more than [`MAX_OP_FACES`] faces per operation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Header {
     /// Finest-level vertices (FVIDs).
@@ -78,7 +79,13 @@ pub struct Header {
     pub avg_op_size: u32,
     /// Total triangles after full refinement.
     pub triangles: u32,
+    /// The most faces one operation adds: decoders refuse operations with more, which bounds
+    /// the work of a corrupt one (a GPU thread's loop, the faces allocated).
+    pub max_faces: u32,
 }
+
+/// The most faces an operation may add (the header's `max_faces` at most).
+pub const MAX_OP_FACES: u32 = 65535;
 
 impl Header {
     pub(super) fn to_bytes(self) -> Vec<u8> {
@@ -95,6 +102,7 @@ impl Header {
         }
         b.extend_from_slice(&self.avg_op_size.to_le_bytes());
         b.extend_from_slice(&self.triangles.to_le_bytes());
+        b.extend_from_slice(&self.max_faces.to_le_bytes());
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
     }
@@ -118,6 +126,7 @@ impl Header {
             attribute_step: f(38),
             avg_op_size: u(42),
             triangles: u(46),
+            max_faces: u(50),
         };
         if !(8..=24).contains(&h.position_bits) || !(4..=16).contains(&h.normal_bits) {
             return Err(corrupt("quantization bits out of range"));
@@ -131,8 +140,11 @@ impl Header {
         {
             return Err(corrupt("bad quantization parameters"));
         }
-        if h.base_vertices as u64 + h.splits as u64 != h.vertices as u64 {
+        if h.base_vertices as u64 + h.splits as u64 != h.vertices as u64 || h.vertices >= 1 << 31 {
             return Err(corrupt("vertex counts do not add up"));
+        }
+        if h.max_faces > MAX_OP_FACES {
+            return Err(corrupt("more faces per operation than the format allows"));
         }
         Ok(h)
     }

@@ -164,7 +164,8 @@ mod tables;
 
 pub use decode::{decode, Decoded, Dpm};
 pub use encode::{encode, wrap_for_fuzzing, EncodeError, EncodeOptions, Encoded};
-pub use header::{DpmError, Header, MAGIC, VERSION};
+pub use fields::{TABLES, TABLE_BASE};
+pub use header::{DpmError, Header, MAGIC, MAX_OP_FACES, VERSION};
 pub use op::{DecodedOp, OpContext};
 pub use quantize::{log_table, log_value, quantized, LOG_STEPS};
 pub use stats::DpmStats;

@@ -189,7 +189,11 @@ pub(super) fn read_op(
     }
     let n = h.vertices as i64;
     let (v, v_end) = (ctx.v, ctx.v_end);
-    if v >= v_end || v_end as i64 > n {
+    if v >= v_end
+        || v_end as i64 > n
+        || !valid_oct(ctx.normal, h.normal_bits)
+        || ctx.position.iter().any(|&p| p > max_q(h.position_bits))
+    {
         return Err(corrupt("bad operation context"));
     }
     let mut r = OpReader::new(tables, ops, addr, bits);
@@ -241,8 +245,8 @@ pub(super) fn read_op(
         return Err(corrupt("split tree inconsistent with the FVID ranges"));
     }
     let nf = if nfc == 3 { 3 + r.get(FACE_COUNT, 0)? } else { nfc };
-    if nf > (ops.len() as u64 - addr as u64) * 8 {
-        return Err(corrupt("face count larger than the data"));
+    if nf > (ops.len() as u64 - addr as u64) * 8 || nf > h.max_faces as u64 {
+        return Err(corrupt("face count larger than the data or the header's maximum"));
     }
     if (nf == 0 && pattern != 0) || pattern > 2 {
         return Err(corrupt("bad operation head"));

@@ -6,7 +6,7 @@
 //! Every quantizer rounds so that what the runtime reads is safe: criteria are rounded up
 //! (a cone, an error or a radius never shrinks), positions and normals to the nearest code.
 
-use super::header::Header;
+use super::header::{Header, MAX_OP_FACES};
 use super::{EncodeError, EncodeOptions};
 use crate::pm::{Criteria, ProgressiveMesh};
 
@@ -225,6 +225,15 @@ pub(super) fn fit_header(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<He
         attribute_step: 1.0 / 4096.0,
         avg_op_size: 0,
         triangles: (pm.base_faces.len() + pm.splits.iter().map(|s| s.faces.len()).sum::<usize>()) as u32,
+        max_faces: {
+            let most = pm.splits.iter().map(|s| s.faces.len()).max().unwrap_or(0);
+            if most > MAX_OP_FACES as usize {
+                return Err(EncodeError::InvalidMesh(format!(
+                    "a split adds {most} faces, more than the format's {MAX_OP_FACES}"
+                )));
+            }
+            most as u32
+        },
     })
 }
 
