@@ -168,6 +168,18 @@ fn pm_stage_bindings_match_the_wgsl() {
 }
 
 #[test]
+fn pm_decoder_bindings_match_the_wgsl() {
+    use crate::pm_adapt::decoder::{batch_wgsl, BATCH_BINDINGS, DECODE_WG};
+    let shader = parse("pm: decode batch", &batch_wgsl());
+    let mut problems = mismatches(&shader, "main", &[(0, BATCH_BINDINGS)]);
+    let size = shader.workgroup_size("main");
+    if size != [DECODE_WG, 1, 1] {
+        problems.push(format!("pm: decode batch: workgroup size {size:?}, Rust dispatches [{DECODE_WG}, 1, 1]"));
+    }
+    assert_none(problems);
+}
+
+#[test]
 fn pm_constants_match_the_rust() {
     let rust = [
         ("WG", WG),

@@ -41,6 +41,7 @@
 //!   what equals the CPU reference.
 
 pub(crate) mod buffers;
+pub mod decoder;
 mod pass;
 pub(crate) mod pipelines;
 

@@ -167,5 +167,5 @@ pub use encode::{encode, wrap_for_fuzzing, EncodeError, EncodeOptions, Encoded};
 pub use fields::{TABLES, TABLE_BASE};
 pub use header::{DpmError, Header, MAGIC, MAX_OP_FACES, VERSION};
 pub use op::{DecodedOp, OpContext};
-pub use quantize::{log_table, log_value, quantized, LOG_STEPS};
+pub use quantize::{log_table, log_value, quantized, LOG_STEPS, MAX_K};
 pub use stats::DpmStats;

@@ -11,7 +11,7 @@ use super::{EncodeError, EncodeOptions};
 use crate::pm::{Criteria, ProgressiveMesh};
 
 /// The largest log code (also the code of NaN); codes above are corrupt.
-pub(super) const MAX_K: u32 = 1 << 20;
+pub const MAX_K: u32 = 1 << 20;
 /// Log-code steps per doubling: a step is `2^(1/35)` = 1.0200016 (the paper's 2%, made a whole
 /// fraction of an octave so that decoding needs no `exp`).
 pub const LOG_STEPS: u32 = 35;

@@ -1,0 +1,617 @@
+// Decoding one operation of a .dpm file (version 3) from its address and context on the GPU:
+// the WGSL twin of codec/src/pm/format/op.rs `read_op`, field for field and check for check,
+// so that it decodes what the CPU decodes bit for bit and refuses what the CPU refuses
+// (worker/tests/pm_decode.rs compares the two over every operation of real meshes and over
+// damaged ones). Every step is an integer step: the format was made so (the format's
+// documentation, "Integer-exact decoding").
+//
+// A shader that decodes prepends the generated constants (the table layout of the format's
+// fields, `decoder_prelude` in worker/src/pm_adapt/decoder.rs) and this file, and declares:
+//   D:         the DecodeParams uniform,
+//   ops:       array<u32>, the operations section, four bytes per word, little-endian,
+//   tables:    array<u32>, the probability tables (see `read_sym`),
+//   values:    array<u32>, the f32 bits of sin(alpha) codes (256), then the log tables of the
+//              lengths and of the attribute error (LOG_STEPS each),
+//   dec_faces: array<u32>, read_write, where decoded faces go (FVID triples).
+//
+// Bounded work and reads: every read of `ops` is below D.ops_len, every loop has a constant or
+// header-checked bound (a symbol at most MAX_LEN bits, a value at most 5 groups or 28 raw bits,
+// the faces at most D.max_faces, at most 65535), and a failed check stops the decoding with a
+// status, never a fault.
+
+struct DecodeParams {
+    ops_len: u32,       // bytes of the operations section
+    vertices: u32,      // FVIDs, below 2^31
+    position_bits: u32,
+    normal_bits: u32,
+    avg_op_size: u32,   // 16.16 fixed point
+    max_faces: u32,     // the header's: no operation adds more
+    count: u32,         // operations to decode (batch entry points)
+    pad: u32,
+}
+
+// One decoded operation (`Decoded` in Rust's decoder.rs).
+struct DecodedOp {
+    status: u32,        // DEC_OK or the check that failed
+    v_u: u32,
+    flags: u32,         // 1: v_l splits further, 2: v_u does, 4: v_u's operation is stored first
+    left: u32,          // address of v_l's operation, NONE_ADDR if none
+    right: u32,         // address of v_u's operation, NONE_ADDR if none
+    end: u32,           // one past the operation's last byte
+    faces: u32,         // faces added (written to dec_faces)
+    pad: u32,
+    crit: vec4<u32>,    // quantized criteria: sin(alpha), geometric error, attribute error, radius
+    crit_f: vec4<u32>,  // their f32 values, as bits
+    position: vec4<u32>, // v_u's quantized position (w unused)
+    normal: vec4<u32>,  // v_u's octahedral normal (zw unused)
+}
+
+const NONE_ADDR: u32 = 0xffffffffu;
+const DEC_OK: u32 = 0u;
+const DEC_TRUNCATED: u32 = 1u;   // the operations section ends inside the operation
+const DEC_CONTEXT: u32 = 2u;     // address or context out of range
+const DEC_SYMBOL: u32 = 3u;      // a bit pattern that is no code of its table
+const DEC_VALUE: u32 = 4u;       // a value wider than 32 bits, or a bad head
+const DEC_CRITERION: u32 = 5u;   // a refinement criterion out of range
+const DEC_TREE: u32 = 6u;        // split tree inconsistent with the FVID ranges
+const DEC_FACES: u32 = 7u;       // face count, form or corner out of range
+const DEC_POSITION: u32 = 8u;
+const DEC_NORMAL: u32 = 9u;
+const DEC_POINTER: u32 = 10u;
+
+// The bit reader: the next byte to load, the loaded byte, its bits not yet read, and the
+// first failure (reads after one return zeros without touching memory).
+var<private> r_byte: u32;
+var<private> r_buf: u32;
+var<private> r_bits: u32;
+var<private> r_err: u32;
+
+fn fail(code: u32) {
+    if (r_err == DEC_OK) {
+        r_err = code;
+    }
+}
+
+fn op_byte(i: u32) -> u32 {
+    return (ops[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu;
+}
+
+// The next bit, most significant first; past the section's end a failure.
+fn read_bit() -> u32 {
+    if (r_err != DEC_OK) {
+        return 0u;
+    }
+    if (r_bits == 0u) {
+        if (r_byte >= D.ops_len) {
+            fail(DEC_TRUNCATED);
+            return 0u;
+        }
+        r_buf = op_byte(r_byte);
+        r_byte += 1u;
+        r_bits = 8u;
+    }
+    r_bits -= 1u;
+    return (r_buf >> r_bits) & 1u;
+}
+
+// One symbol of canonical Huffman table `t`, bit by bit. `tables[t]` is where the table's
+// TABLE_WORDS words start (identical tables share them): the first code per length (MAX_LEN + 1
+// words), the count per length, the offset of the length's symbols, the longest length, then
+// the symbols by code, four bytes per word.
+fn read_sym(t: u32) -> u32 {
+    let base = tables[t];
+    let longest = min(tables[base + 3u * (MAX_LEN + 1u)], MAX_LEN);
+    var code = 0u;
+    for (var l = 1u; l <= longest; l++) {
+        code = (code << 1u) | read_bit();
+        if (r_err != DEC_OK) {
+            return 0u;
+        }
+        let first = tables[base + l];
+        let d = code - first;
+        if (code >= first && d < tables[base + MAX_LEN + 1u + l]) {
+            let k = tables[base + 2u * (MAX_LEN + 1u) + l] + d;
+            return (tables[base + 3u * (MAX_LEN + 1u) + 1u + (k >> 2u)] >> ((k & 3u) * 8u)) & 0xffu;
+        }
+    }
+    fail(DEC_SYMBOL);
+    return 0u;
+}
+
+// A value in 7-bit groups, least significant first, from the three tables at `t0` (group
+// significance 0, 1, 2 and more); at most 32 bits.
+fn get_groups(t0: u32) -> u32 {
+    var v = 0u;
+    for (var i = 0u; i < 5u; i++) {
+        let s = read_sym(t0 + min(i, 2u));
+        if (r_err != DEC_OK) {
+            return 0u;
+        }
+        let g = s & 0x7fu;
+        if (i == 4u && g > 15u) {
+            fail(DEC_VALUE);
+            return 0u;
+        }
+        v |= g << (7u * i);
+        if ((s & 0x80u) == 0u) {
+            return v;
+        }
+    }
+    fail(DEC_VALUE);
+    return 0u;
+}
+
+// A bucket value of table `t`: the symbol itself below 16, else a bit length and the three
+// bits below the leading one, then the raw low bits; at most 32 bits.
+fn get_bucket(t: u32) -> u32 {
+    let s = read_sym(t);
+    if (r_err != DEC_OK || s < 16u) {
+        return s;
+    }
+    let b = ((s - 16u) >> 3u) + 5u;
+    if (b > 32u) {
+        fail(DEC_VALUE);
+        return 0u;
+    }
+    let raw = b - 4u;
+    var v = (8u | ((s - 16u) & 7u)) << raw;
+    for (var i = 1u; i <= raw; i++) {
+        v |= read_bit() << (raw - i);
+    }
+    return v;
+}
+
+// The inverse of the zigzag map (0, -1, 1, -2, ...), over all of u32.
+fn unzigzag(u: u32) -> i32 {
+    if ((u & 1u) == 0u) {
+        return i32(u >> 1u);
+    }
+    return -i32(u >> 1u) - 1;
+}
+
+// |x| as u32, exact for the most negative i32.
+fn magnitude(x: i32) -> u32 {
+    if (x >= 0) {
+        return u32(x);
+    }
+    return u32(-(x + 1)) + 1u;
+}
+
+fn bit_length(x: u32) -> u32 {
+    return 32u - countLeadingZeros(x);
+}
+
+// Whether `base + d` lies in [0, hi] (no overflow: base and hi are below 2^31).
+fn lands_in(base: i32, d: i32, hi: i32) -> bool {
+    return d >= -base && d <= hi - base;
+}
+
+// The contexts of codec/src/pm/format/fields.rs.
+fn region_class(size: u32) -> u32 {
+    return min(bit_length(max(size, 2u)) - 2u, 2u);
+}
+
+fn split_class(n: u32) -> u32 {
+    return min(bit_length(n) - 3u, 5u);
+}
+
+fn head_class(size: u32) -> u32 {
+    return clamp(size, 2u, 5u) - 2u;
+}
+
+fn magnitude_class(k: u32) -> u32 {
+    if (k == 0u) {
+        return 0u;
+    }
+    return min(1u + (k - 1u) / LOG_STEPS, 27u);
+}
+
+fn corner_class(has_prev: bool, prev: u32, range: u32) -> u32 {
+    if (!has_prev) {
+        return min(bit_length(range) - 2u, 3u);
+    }
+    return 4u + min(prev, 2u);
+}
+
+fn valid_oct(q: vec2<u32>) -> bool {
+    let zero = 1u << D.normal_bits;
+    return (q.x == zero && q.y == zero) || (q.x < zero && q.y < zero);
+}
+
+// Criterion `pred - residual`, or a failure unless it lies in [0, hi].
+fn criterion(pred: u32, residual: i32, hi: u32) -> u32 {
+    if (residual >= 0) {
+        let r = u32(residual);
+        if (r <= pred && pred - r <= hi) {
+            return pred - r;
+        }
+    } else {
+        let r = magnitude(residual);
+        if (pred <= hi && r <= hi - pred) {
+            return pred + r;
+        }
+    }
+    fail(DEC_CRITERION);
+    return 0u;
+}
+
+// The f32 bits of log code `k` from the 35-entry table at `values[at]` (codec's `log_value`):
+// the octave's power of two added to the exponent bits, f32::MAX past the range.
+fn log_value_bits(k: u32, at: u32) -> u32 {
+    if (k == 0u) {
+        return 0u;
+    }
+    let bits = values[at + (k - 1u) % LOG_STEPS];
+    let e = (k - 1u) / LOG_STEPS;
+    if (((bits >> 23u) & 0xffu) + e >= 0xffu) {
+        return 0x7f7fffffu;
+    }
+    return bits + (e << 23u);
+}
+
+// The address offset estimate: avg * (first - 1) in 16.16 fixed point, rounded, capped at
+// u32::MAX (codec's `pointer_estimate`), with the 64-bit product in 32-bit halves.
+fn pointer_estimate(avg: u32, first: u32) -> u32 {
+    let b = first - 1u;
+    let a_lo = avg & 0xffffu;
+    let a_hi = avg >> 16u;
+    let b_lo = b & 0xffffu;
+    let b_hi = b >> 16u;
+    let ll = a_lo * b_lo;
+    let lh = a_lo * b_hi;
+    let hl = a_hi * b_lo;
+    let hh = a_hi * b_hi;
+    // lo = ll + (lh << 16) + (hl << 16), hi = hh + (lh >> 16) + (hl >> 16) + carries.
+    var lo = ll;
+    var hi = hh + (lh >> 16u) + (hl >> 16u);
+    let s1 = lo + (lh << 16u);
+    hi += select(0u, 1u, s1 < lo);
+    lo = s1;
+    let s2 = lo + (hl << 16u);
+    hi += select(0u, 1u, s2 < lo);
+    lo = s2;
+    let s3 = lo + 0x8000u;
+    hi += select(0u, 1u, s3 < lo);
+    lo = s3;
+    if (hi >= 0x10000u) {
+        return 0xffffffffu;
+    }
+    return (hi << 16u) | (lo >> 16u);
+}
+
+// Decodes the operation at byte `addr` for vertex `v` (FVIDs v..v_end), its parent's quantized
+// criteria `pc`, its quantized position `pos` and octahedral normal `nrm`; the faces go to
+// dec_faces from face slot `face_out` on.
+fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: vec2<u32>, face_out: u32) -> DecodedOp {
+    var o: DecodedOp;
+    o.left = NONE_ADDR;
+    o.right = NONE_ADDR;
+    r_byte = addr;
+    r_bits = 0u;
+    r_err = DEC_OK;
+    let n = D.vertices;
+    let max_q = (1u << D.position_bits) - 1u;
+    if (addr >= D.ops_len || v >= v_end || v_end > n || !valid_oct(nrm) || any(pos > vec3<u32>(max_q))) {
+        o.status = DEC_CONTEXT;
+        return o;
+    }
+    let size = v_end - v;
+
+    // 1. criteria residuals, 2. the head, 3. the radius.
+    let r_sin = unzigzag(get_groups(T_SIN + 3u * min(pc.x >> 6u, 3u)));
+    let r_geom = unzigzag(get_groups(T_GEOM));
+    let r_attr = unzigzag(get_groups(T_ATTR));
+    let head = get_groups(T_HEAD + 3u * head_class(size));
+    if (r_err != DEC_OK) {
+        o.status = r_err;
+        return o;
+    }
+    let code = head % 5u;
+    let nfc = head / 5u % 4u;
+    let pattern = head / 20u % 3u;
+    let rz = head / 60u;
+    if (rz > 1u) {
+        o.status = DEC_VALUE;
+        return o;
+    }
+    var r_radius = 0;
+    if (rz == 1u) {
+        let g = get_groups(T_RADIUS);
+        if (g == 0xffffffffu) {
+            // A residual of 2^31: the radius would be negative.
+            fail(DEC_CRITERION);
+        } else {
+            r_radius = unzigzag(g + 1u);
+        }
+    }
+    var crit: vec4<u32>;
+    crit.x = criterion(pc.x, r_sin, 255u);
+    crit.y = criterion(pc.y, r_geom, MAX_K);
+    crit.z = criterion(pc.z, r_attr, MAX_K);
+    crit.w = criterion(min(pc.w, crit.y), r_radius, MAX_K);
+    if (r_err != DEC_OK) {
+        o.status = r_err;
+        return o;
+    }
+
+    // 4. the split point.
+    let has_left = code == 1u || code == 2u || code == 4u;
+    let has_right = code == 1u || code == 3u || code == 4u;
+    let swapped = code == 4u;
+    var v_u: u32;
+    var first = 0u;
+    if (has_left && has_right) {
+        var s = 2u;
+        if (size > 4u) {
+            let g = get_groups(T_SPLIT + 3u * split_class(size));
+            if (r_err == DEC_OK && g > size - 4u) {
+                fail(DEC_TREE);
+            }
+            s = g + 2u;
+        } else if (size < 4u) {
+            fail(DEC_TREE);
+        }
+        if (r_err != DEC_OK) {
+            o.status = r_err;
+            return o;
+        }
+        v_u = select(v + s, v_end - s, swapped);
+        first = s;
+    } else if (has_left) {
+        v_u = v_end - 1u;
+    } else {
+        v_u = v + 1u;
+    }
+    if (v_u <= v || v_u >= v_end || (has_left && v_u - v < 2u) || (!has_left && v_u - v != 1u)
+        || (has_right && v_end - v_u < 2u) || (!has_right && v_end - v_u != 1u)) {
+        o.status = DEC_TREE;
+        return o;
+    }
+
+    // 5. the faces.
+    var nf = nfc;
+    if (nfc == 3u) {
+        let g = get_groups(T_FACE_COUNT);
+        // max_faces is at most 65535, so a count that wraps is above it too.
+        nf = select(g + 3u, 0xffffffffu, g > 0xfffffffcu);
+    }
+    let rest = D.ops_len - addr;
+    if (r_err == DEC_OK && (nf > D.max_faces || (rest < 8192u && nf > rest * 8u) || (nf == 0u && pattern != 0u))) {
+        fail(DEC_FACES);
+    }
+    var has_prev = false;
+    var pt = 0u;
+    var pu = 0u;
+    var po = 0u;
+    for (var i = 0u; i < nf && r_err == DEC_OK; i++) {
+        var form: u32;
+        if (pattern < 2u && i == 0u) {
+            form = pattern;
+        } else if (pattern < 2u && i == 1u) {
+            form = 1u - pattern;
+        } else {
+            form = get_groups(T_FACE_FORM);
+        }
+        var f: vec3<u32>;
+        if (form <= 1u) {
+            var t = 0u;
+            if (v_u - v > 1u) {
+                t = get_groups(T_FACE_T + 3u * corner_class(has_prev, pt, v_u - v));
+            }
+            var u = 0u;
+            if (v_end - v_u > 1u) {
+                u = get_groups(T_FACE_U + 3u * corner_class(has_prev, pu, v_end - v_u));
+            }
+            var ov: u32;
+            if (!has_prev) {
+                ov = get_bucket(T_FACE_OTHER + region_class(size));
+            } else {
+                let g = get_bucket(T_FACE_OTHER_DELTA + region_class(size));
+                ov = po + g;
+                if (ov < po) {
+                    // Past 2^32: the corner would be outside the FVIDs (fewer than 2^31).
+                    fail(DEC_FACES);
+                }
+            }
+            has_prev = true;
+            pt = t;
+            pu = u;
+            po = ov;
+            if (r_err != DEC_OK) {
+                break;
+            }
+            var other: u32;
+            var other_ok: bool;
+            if ((ov & 1u) == 0u) {
+                // At or after v_end.
+                other_ok = (ov >> 1u) < n - v_end;
+                other = v_end + (ov >> 1u);
+            } else {
+                // Before v.
+                let back = (ov >> 1u) + 1u;
+                other_ok = back <= v;
+                other = v - back;
+            }
+            if (t >= v_u - v || u >= v_end - v_u || !other_ok) {
+                fail(DEC_FACES);
+                break;
+            }
+            if (form == 0u) {
+                f = vec3<u32>(v + t, v_u + u, other);
+            } else {
+                f = vec3<u32>(v_u + u, v + t, other);
+            }
+        } else if (form == 2u) {
+            for (var c = 0u; c < 3u; c++) {
+                let s = unzigzag(get_groups(T_FACE_GENERAL));
+                var x: u32;
+                var ok: bool;
+                if (s < 0) {
+                    let back = magnitude(s);
+                    ok = back <= v;
+                    x = v - back;
+                } else {
+                    x = v + u32(s);
+                    ok = x < n;
+                }
+                if (r_err == DEC_OK && !ok) {
+                    fail(DEC_FACES);
+                }
+                f[c] = x;
+            }
+            if (r_err != DEC_OK) {
+                break;
+            }
+        } else {
+            fail(DEC_FACES);
+            break;
+        }
+        let at = 3u * (face_out + i);
+        dec_faces[at] = f.x;
+        dec_faces[at + 1u] = f.y;
+        dec_faces[at + 2u] = f.z;
+    }
+    if (r_err != DEC_OK) {
+        o.status = r_err;
+        return o;
+    }
+
+    // 6. the position of v_u: two tangential axes, then the third from the tangent plane.
+    var nv = vec3<i32>(0);
+    let zero = 1u << D.normal_bits;
+    if (!(nrm.x == zero && nrm.y == zero)) {
+        let m = i32(zero - 1u);
+        let x = 2 * i32(nrm.x) - m;
+        let y = 2 * i32(nrm.y) - m;
+        let z = m - abs(x) - abs(y);
+        if (z >= 0) {
+            nv = vec3<i32>(x, y, z);
+        } else {
+            nv = vec3<i32>((m - abs(y)) * select(-1, 1, x >= 0), (m - abs(x)) * select(-1, 1, y >= 0), z);
+        }
+    }
+    var a = 0u;
+    if (abs(nv.y) > abs(nv.x)) {
+        a = 1u;
+    }
+    if (abs(nv.z) > abs(nv[a])) {
+        a = 2u;
+    }
+    var axes = vec3<u32>(0u, 1u, 2u);
+    if (a == 0u) {
+        axes = vec3<u32>(1u, 2u, 0u);
+    } else if (a == 1u) {
+        axes = vec3<u32>(0u, 2u, 1u);
+    }
+    let shift = u32(max(i32(D.normal_bits) - 11, 0));
+    let n0 = nv[axes.x] >> shift;
+    let n1 = nv[axes.y] >> shift;
+    let n2 = nv[axes.z] >> shift;
+    let pclass = magnitude_class(crit.w);
+    let d0 = unzigzag(get_bucket(T_POS_TANGENT + pclass));
+    let d1 = unzigzag(get_bucket(T_POS_TANGENT + pclass));
+    let tclass = min(bit_length(min(magnitude(d0), 1u << 27u) + min(magnitude(d1), 1u << 27u)), 27u);
+    let r2 = unzigzag(get_bucket(T_POS_NORMAL + tclass));
+    if (r_err != DEC_OK) {
+        o.status = r_err;
+        return o;
+    }
+    var pred = 0;
+    let limit: i32 = 1 << 18u;
+    if (n2 != 0 && d0 > -limit && d0 < limit && d1 > -limit && d1 < limit) {
+        let num = -(n0 * d0 + n1 * d1);
+        let q = i32((magnitude(num) + magnitude(n2) / 2u) / magnitude(n2));
+        pred = select(q, -q, (num < 0) != (n2 < 0));
+    }
+    let hi = i32(max_q);
+    let b0 = i32(pos[axes.x]);
+    let b1 = i32(pos[axes.y]);
+    let b2 = i32(pos[axes.z]) + pred;
+    if (!lands_in(b0, d0, hi) || !lands_in(b1, d1, hi) || !lands_in(b2, r2, hi)) {
+        o.status = DEC_POSITION;
+        return o;
+    }
+    var p: vec3<u32>;
+    p[axes.x] = u32(b0 + d0);
+    p[axes.y] = u32(b1 + d1);
+    p[axes.z] = u32(b2 + r2);
+
+    // 7. the normal of v_u.
+    let nclass = magnitude_class(crit.z);
+    var q: vec2<u32>;
+    for (var c = 0u; c < 2u; c++) {
+        let r = unzigzag(get_bucket(T_NORMAL + nclass));
+        if (r_err != DEC_OK) {
+            o.status = r_err;
+            return o;
+        }
+        if (!lands_in(i32(nrm[c]), r, i32(zero))) {
+            o.status = DEC_NORMAL;
+            return o;
+        }
+        q[c] = u32(i32(nrm[c]) + r);
+    }
+    if (!valid_oct(q)) {
+        o.status = DEC_NORMAL;
+        return o;
+    }
+
+    // 8. the address of the child stored second.
+    var offset = 0u;
+    if (has_left && has_right) {
+        let r = unzigzag(get_groups(T_POINTER + 3u * split_class(first + 2u)));
+        if (r_err != DEC_OK) {
+            o.status = r_err;
+            return o;
+        }
+        let est = pointer_estimate(D.avg_op_size, first);
+        if (r >= 0) {
+            offset = est + u32(r);
+            if (offset < est) {
+                // Past 2^32, so past the section.
+                o.status = DEC_POINTER;
+                return o;
+            }
+        } else {
+            let back = magnitude(r);
+            if (back >= est) {
+                o.status = DEC_POINTER;
+                return o;
+            }
+            offset = est - back;
+        }
+        if (offset < 1u) {
+            o.status = DEC_POINTER;
+            return o;
+        }
+    }
+    let end = r_byte;
+    if ((has_left || has_right) && end >= D.ops_len) {
+        o.status = DEC_TRUNCATED;
+        return o;
+    }
+    if (has_left && has_right && offset >= D.ops_len - end) {
+        o.status = DEC_POINTER;
+        return o;
+    }
+    let second = end + offset;
+    if (has_left && has_right) {
+        o.left = select(end, second, swapped);
+        o.right = select(second, end, swapped);
+    } else if (has_left) {
+        o.left = end;
+    } else if (has_right) {
+        o.right = end;
+    }
+    o.status = DEC_OK;
+    o.v_u = v_u;
+    o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);
+    o.end = end;
+    o.faces = nf;
+    o.crit = crit;
+    o.crit_f = vec4<u32>(values[crit.x], log_value_bits(crit.y, 256u), log_value_bits(crit.z, 256u + LOG_STEPS),
+                         log_value_bits(crit.w, 256u));
+    o.position = vec4<u32>(p, 0u);
+    o.normal = vec4<u32>(q, 0u, 0u);
+    return o;
+}
