@@ -221,3 +221,23 @@ fn unknown_versions_are_refused() {
         "{e}"
     );
 }
+
+/// A damaged operation's error names it by its address, in one line.
+#[test]
+fn an_operation_error_names_the_operation() {
+    let bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
+    let d = decode(&bytes).unwrap();
+    let dpm = format::Dpm::parse(&bytes).unwrap();
+    let (addr, ctx) = (d.addresses[5], d.contexts[5]);
+    assert!(dpm.decode_op(addr, &ctx).is_ok());
+    let e = dpm.decode_op(dpm.ops.len(), &ctx).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("corrupt .dpm data: operation at byte {}: ", dpm.ops.len())), "{e}");
+    let bad = format::OpContext { v_end: ctx.v, ..ctx };
+    let e = dpm.decode_op(addr, &bad).unwrap_err().to_string();
+    assert_eq!(e, format!("corrupt .dpm data: operation at byte {addr}: bad operation context"));
+    // The section cut inside the operation.
+    let mut cut = dpm.clone();
+    cut.ops = &dpm.ops[..addr + 1];
+    let e = cut.decode_op(addr, &ctx).unwrap_err().to_string();
+    assert_eq!(e, format!("corrupt .dpm data: operation at byte {addr}: the operations section ends inside it"));
+}

@@ -134,9 +134,10 @@ impl<'a> Dpm<'a> {
         &self.tables
     }
 
-    /// Decodes the single operation at `addr` of the operations section.
+    /// Decodes the single operation at `addr` of the operations section; an error names the
+    /// operation by its address.
     pub fn decode_op(&self, addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
-        read_op(&self.header, &self.tables, self.ops, addr, ctx, None)
+        read_op(&self.header, &self.tables, self.ops, addr, ctx, None).map_err(|e| naming(addr, e))
     }
 
     /// Decodes every operation (pre-order over the forest), optionally counting bits per field.
@@ -175,7 +176,8 @@ impl<'a> Dpm<'a> {
                 if splits.len() >= h.splits as usize {
                     return Err(corrupt("more operations than the header says"));
                 }
-                let op = read_op(h, &self.tables, self.ops, addr, &ctx, bits.as_deref_mut())?;
+                let op =
+                    read_op(h, &self.tables, self.ops, addr, &ctx, bits.as_deref_mut()).map_err(|e| naming(addr, e))?;
                 let v_u = op.split.v_u;
                 positions[v_u as usize] = dequantize_position(op.position_u, h);
                 normals[v_u as usize] = oct_decode(op.normal_u, h.normal_bits);
@@ -221,6 +223,16 @@ impl<'a> Dpm<'a> {
             addresses,
             contexts,
         })
+    }
+}
+
+/// An operation's error, naming the operation by its address (where the section ends inside
+/// an operation, the data is corrupt: the container has checked the section's length).
+fn naming(addr: usize, e: DpmError) -> DpmError {
+    match e {
+        DpmError::Corrupt(f, m) => DpmError::Corrupt(f, format!("operation at byte {addr}: {m}")),
+        DpmError::Truncated(_) => corrupt(format!("operation at byte {addr}: the operations section ends inside it")),
+        e => e,
     }
 }
 
