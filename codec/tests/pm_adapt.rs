@@ -5,7 +5,8 @@
 
 use std::time::Instant;
 
-use codec::pm::{build, Adapter, ProgressiveMesh, SplitTree, Viewpoint, NONE};
+use codec::pm::format::{decode, encode, Dpm, EncodeOptions};
+use codec::pm::{build, Adapter, DpmAdapter, ProgressiveMesh, SplitTree, Viewpoint, NONE};
 use codec::view::Camera;
 use codec::Mesh;
 use glam::Vec3;
@@ -398,4 +399,62 @@ fn tile_views_are_the_tiles_sub_frusta() {
         }
     }
     assert!(hits > 300, "{hits} points in tiles");
+}
+
+/// The adaption from the compressed operations ([`DpmAdapter`]) against the reference over
+/// the decoded mesh: after every pass of a camera path (each frame to convergence), then of a
+/// full refinement, the same statistics, active vertices and triangle set.
+fn check_from_compressed(mesh: &Mesh, frames: usize, error_px: f32, what: &str) -> (usize, usize) {
+    let pm = build(mesh).unwrap();
+    let bytes = encode(&pm, EncodeOptions::default()).unwrap().bytes;
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let decoded = decode(&bytes).unwrap().pm;
+    let mut reference = Adapter::new(&decoded);
+    let mut compressed = DpmAdapter::new(&dpm).unwrap();
+    let (mut passes, mut collapses) = (0, 0);
+    let mut compare = |r: codec::pm::PassStats, c: codec::pm::PassStats, at: &str, a: &Adapter, d: &DpmAdapter| {
+        assert_eq!(r, c, "{what}, {at}: pass statistics");
+        assert_eq!(a.active(), &d.active()[..], "{what}, {at}: active vertices");
+        assert_eq!(sorted_canonical(a.face_fvids()), sorted_canonical(d.face_fvids()), "{what}, {at}: triangles");
+        passes += 1;
+        collapses += r.collapses;
+    };
+    for k in 0..frames {
+        let view = path_view(&decoded, k, frames, error_px);
+        for p in 0..64 {
+            let (r, c) = (reference.adapt(&view), compressed.adapt(&view).unwrap());
+            compare(r, c, &format!("frame {k}, pass {p}"), &reference, &compressed);
+            if r.converged() {
+                break;
+            }
+        }
+    }
+    loop {
+        let (r, c) = (reference.refine_step(), compressed.refine_step().unwrap());
+        compare(r, c, "full refinement", &reference, &compressed);
+        if r.splits == 0 {
+            break;
+        }
+    }
+    assert_eq!(reference.active().len(), decoded.positions.len(), "{what}: fully refined");
+    (passes, collapses)
+}
+
+#[test]
+fn adapting_from_the_compressed_operations_equals_the_reference() {
+    for rel in MESHES.iter().copied().chain(["stanford/bunny_zipper_c3d.obj.gz"]) {
+        let rel = testkit::find_mesh(rel);
+        let (passes, collapses) = check_from_compressed(&load(&rel), 16, 1.0, &rel);
+        eprintln!("{rel}: {passes} passes alike, {collapses} collapses among them");
+        assert!(collapses > 0, "{rel}: the path never coarsens");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 60, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_adapt_alike_from_the_compressed_operations(mesh in soup(), error_px in 0.5f32..40.0) {
+        check_from_compressed(&mesh, 8, error_px, "a random soup");
+    }
 }

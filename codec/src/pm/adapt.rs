@@ -144,20 +144,20 @@ impl Viewpoint {
 }
 
 /// A view prepared for evaluation.
-struct Eval {
+pub(super) struct Eval {
     view: Viewpoint,
     planes: [Vec4; 6],
 }
 
 impl Eval {
-    fn new(view: &Viewpoint) -> Self {
+    pub(super) fn new(view: &Viewpoint) -> Self {
         Eval { view: *view, planes: view.planes() }
     }
 
     /// The test, written as plain scalar arithmetic in a fixed order (no transcendental
     /// functions, no fused multiply-adds, no SIMD dot products) so that `shaders/pm/common.wgsl`,
     /// which repeats it operation for operation, reaches the same decision.
-    fn needs(&self, c: &Cached) -> bool {
+    pub(super) fn needs(&self, c: &Cached) -> bool {
         needs_split(&self.view, &self.planes, c.center.to_array(), c.normal.to_array(), &c.crit)
     }
 }
@@ -209,10 +209,10 @@ pub fn needs_split(view: &Viewpoint, planes: &[Vec4; 6], center: [f32; 3], norma
 /// One entry of the split/collapse cache: what a vertex needs to evaluate an operation without
 /// touching the split records.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Cached {
-    center: Vec3,
-    normal: Vec3,
-    crit: Criteria,
+pub(super) struct Cached {
+    pub(super) center: Vec3,
+    pub(super) normal: Vec3,
+    pub(super) crit: Criteria,
 }
 
 impl Cached {
@@ -266,7 +266,7 @@ pub struct Adapter<'a> {
 }
 
 /// Exclusive prefix sum in parallel chunks; `out.len() == v.len() + 1`, the last entry the total.
-fn exclusive_scan(v: &[u32]) -> Vec<u32> {
+pub(super) fn exclusive_scan(v: &[u32]) -> Vec<u32> {
     const CHUNK: usize = 1 << 14;
     let sums: Vec<u32> = v.par_chunks(CHUNK).map(|c| c.iter().sum()).collect();
     let mut offsets = Vec::with_capacity(sums.len());

@@ -134,6 +134,16 @@ impl<'a> Dpm<'a> {
         &self.tables
     }
 
+    /// The position of quantized position `q` (as [`decode`] gives it).
+    pub fn position(&self, q: [u32; 3]) -> [f32; 3] {
+        dequantize_position(q, &self.header)
+    }
+
+    /// The unit normal (or zero) of octahedral code `q` (as [`decode`] gives it).
+    pub fn normal(&self, q: [u32; 2]) -> [f32; 3] {
+        oct_decode(q, self.header.normal_bits)
+    }
+
     /// Decodes the single operation at `addr` of the operations section; an error names the
     /// operation by its address.
     pub fn decode_op(&self, addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {

@@ -1,0 +1,313 @@
+//! The parallel view-dependent adaption of [`super::adapt`] run straight from a `.dpm` file's
+//! compressed operations, as the paper runs it on the GPU: nothing is decoded at load, every
+//! operation is decoded from its address and context when a vertex needs it, and the state is
+//! per *active* vertex, so memory follows the adapted mesh, not the model. It reaches the same
+//! states as [`Adapter`](super::Adapter) over the decoded mesh, pass for pass (tested in
+//! `tests/pm_adapt.rs`); it is the reference the GPU version of this state follows.
+//!
+//! **Where a collapse finds its operation.** [`Adapter`](super::Adapter) keeps a static split
+//! tree: a collapsing vertex learns its parent's parent from it. Decoding an operation needs
+//! its context, its parent's criteria among them (criteria are coded as differences to the
+//! parent's), so an operation cannot be decoded from below, and a static table of parents or
+//! criteria would cost bytes per operation in graphics memory. The paper is silent on this.
+//! What makes it free here is a bijection: every performed split `P` has a right child whose
+//! FVID is `P.v_u`, and the vertex with the smallest FVID of that right child's subtree keeps
+//! it, so every active vertex whose FVID `f` is not a base vertex's is the leftmost leaf of the
+//! right subtree of exactly one performed split, `f`'s *creator*. Each active vertex carries its
+//! creator's descriptor (address, context, criteria): a split hands its own operation to its
+//! right child as that child's creator and its creator to its left child unchanged; a collapse
+//! of a right child into its target makes the target's vertex the creator's vertex again
+//! (its operation, context and criteria, from the right child's descriptor) while the target
+//! keeps its own descriptor, which the FVID it keeps still names. A vertex is the right child
+//! of its creator exactly when its FVID range ends where the creator's did; only right children
+//! collapse (Algorithm 1 as in [`super::adapt`]).
+//!
+//! Per active vertex: FVID, its operation's address and context (range end, parent criteria,
+//! quantized position and normal), the split cache (its operation's criteria, position and
+//! normal), and its creator's address, context and criteria (the collapse cache). A face's
+//! owner is its split's address.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::adapt::{exclusive_scan, Cached, Eval};
+use super::format::{Dpm, DpmError, OpContext};
+use super::{PassStats, Viewpoint, NONE};
+
+/// An operation as a vertex carries it: its address ([`NONE`]: none) and its context.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Op {
+    addr: u32,
+    ctx: OpContext,
+    /// Its centre, normal and criteria (decoded once, when the vertex gets the operation).
+    cache: Cached,
+}
+
+/// One active vertex.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Vertex {
+    /// Its operation; `own.ctx` holds its FVID, range end, quantized position and normal.
+    own: Op,
+    /// Its creator (the split whose `v_u` is this FVID), `addr` [`NONE`] for a base FVID.
+    creator: Op,
+}
+
+impl Vertex {
+    fn fvid(&self) -> u32 {
+        self.own.ctx.v
+    }
+
+    /// The FVID of the vertex this one collapses into, if it is the right child of its
+    /// creator (its range ends where the creator's did).
+    fn target(&self) -> u32 {
+        if self.creator.addr != NONE && self.own.ctx.v_end == self.creator.ctx.v_end {
+            self.creator.ctx.v
+        } else {
+            NONE
+        }
+    }
+}
+
+/// View-dependent adaption from the compressed operations (see the module docs).
+#[derive(Clone, Debug)]
+pub struct DpmAdapter<'a> {
+    dpm: &'a Dpm<'a>,
+    /// Active vertices, sorted by FVID.
+    vertices: Vec<Vertex>,
+    /// Faces: current vertex indices, finest FVIDs, and the address of the split that created
+    /// them ([`NONE`] for base faces).
+    face_idx: Vec<[u32; 3]>,
+    face_fvid: Vec<[u32; 3]>,
+    face_owner: Vec<u32>,
+}
+
+impl<'a> DpmAdapter<'a> {
+    /// Starts at the base mesh of `dpm`.
+    pub fn new(dpm: &'a Dpm<'a>) -> Result<Self, DpmError> {
+        let h = &dpm.header;
+        let n = dpm.base_vertices.len();
+        let mut vertices = Vec::with_capacity(n);
+        for b in 0..n {
+            let ctx = OpContext {
+                v: dpm.base_vertices[b],
+                v_end: dpm.base_vertices.get(b + 1).copied().unwrap_or(h.vertices),
+                parent_criteria: [0; 4],
+                position: dpm.base_positions[b],
+                normal: dpm.base_normals[b],
+            };
+            let addr = dpm.roots[b].map_or(NONE, |a| a as u32);
+            vertices.push(Vertex { own: op(dpm, addr, ctx)?, creator: Op { addr: NONE, ..Op::default() } });
+        }
+        let fvid: Vec<u32> = vertices.iter().map(Vertex::fvid).collect();
+        let face_idx = dpm
+            .base_faces
+            .iter()
+            .map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32))
+            .collect();
+        Ok(DpmAdapter {
+            dpm,
+            vertices,
+            face_idx,
+            face_fvid: dpm.base_faces.clone(),
+            face_owner: vec![NONE; dpm.base_faces.len()],
+        })
+    }
+
+    /// One adaption pass for `view` (Algorithms 1 to 5).
+    pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, DpmError> {
+        let eval = Eval::new(view);
+        self.pass(&|c| eval.needs(c))
+    }
+
+    /// One pass that splits every active vertex that has a split (and collapses nothing).
+    pub fn refine_step(&mut self) -> Result<PassStats, DpmError> {
+        self.pass(&|_| true)
+    }
+
+    /// Active vertex FVIDs, ascending.
+    pub fn active(&self) -> Vec<u32> {
+        self.vertices.iter().map(Vertex::fvid).collect()
+    }
+
+    /// The current faces as FVID triples of active vertices.
+    pub fn face_fvids(&self) -> Vec<[u32; 3]> {
+        self.face_idx.par_iter().map(|t| t.map(|i| self.vertices[i as usize].fvid())).collect()
+    }
+
+    /// Bytes of adaptation state: per active vertex and per face (what memory follows; the
+    /// file's bytes are the only other data).
+    pub fn state_bytes(&self) -> usize {
+        self.vertices.len() * std::mem::size_of::<Vertex>() + self.face_idx.len() * (12 + 12 + 4)
+    }
+
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> Result<PassStats, DpmError> {
+        let dpm = self.dpm;
+        let vs = &self.vertices;
+        let n = vs.len();
+
+        // Algorithm 1: vertex state update.
+        let state: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let v = &vs[i];
+                if v.own.addr != NONE && need(&v.own.cache) {
+                    return 2;
+                }
+                let target = v.target();
+                if target != NONE
+                    && !need(&v.creator.cache)
+                    && i > 0
+                    && vs[i - 1].fvid() == target
+                    && (i + 1 == n || vs[i + 1].target() != v.fvid())
+                {
+                    return 0;
+                }
+                1
+            })
+            .collect();
+        // Algorithm 2: collapses whose target splits are cancelled.
+        let cnt: Vec<u32> =
+            (0..n).into_par_iter().map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] }).collect();
+        let splits = cnt.par_iter().filter(|&&c| c == 2).count();
+        let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
+        let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+        if splits == 0 && collapses == 0 {
+            return Ok(PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() });
+        }
+
+        // The operations of the splitting vertices, decoded once for the pass.
+        let decoded: Vec<Option<super::format::DecodedOp>> = (0..n)
+            .into_par_iter()
+            .map(|i| match cnt[i] {
+                2 => dpm.decode_op(vs[i].own.addr as usize, &vs[i].own.ctx).map(Some),
+                _ => Ok(None),
+            })
+            .collect::<Result<_, _>>()?;
+
+        // Algorithm 3: memory management.
+        let face_cnt: Vec<u32> =
+            (0..n).into_par_iter().map(|i| decoded[i].as_ref().map_or(0, |d| d.split.faces.len() as u32)).collect();
+        let face_sum = exclusive_scan(&face_cnt);
+        let vertex_sum = exclusive_scan(&cnt);
+        let new: Vec<Vertex> = (0..n)
+            .into_par_iter()
+            .map(|i| -> Result<[Option<Vertex>; 2], DpmError> {
+                let v = vs[i];
+                Ok(match cnt[i] {
+                    0 => [None, None],
+                    1 if i + 1 < n && cnt[i + 1] == 0 => {
+                        // Algorithm 2's collapse: the target becomes its creator's vertex
+                        // again and keeps its own creator.
+                        let c = vs[i + 1].creator;
+                        [Some(Vertex { own: c, creator: v.creator }), None]
+                    }
+                    1 => [Some(v), None],
+                    _ => {
+                        // Algorithm 4: the split writes v and v_u.
+                        let d = decoded[i].as_ref().expect("decoded above");
+                        let ctx = v.own.ctx;
+                        let left = OpContext { v_end: d.split.v_u, parent_criteria: d.criteria_q, ..ctx };
+                        let right = OpContext {
+                            v: d.split.v_u,
+                            v_end: ctx.v_end,
+                            parent_criteria: d.criteria_q,
+                            position: d.position_u,
+                            normal: d.normal_u,
+                        };
+                        let addr = |a: Option<usize>| a.map_or(NONE, |a| a as u32);
+                        [
+                            Some(Vertex { own: op(dpm, addr(d.left), left)?, creator: v.creator }),
+                            Some(Vertex { own: op(dpm, addr(d.right), right)?, creator: v.own }),
+                        ]
+                    }
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter()
+            .flatten()
+            .flatten()
+            .collect();
+        debug_assert_eq!(new.len(), vertex_sum[n] as usize);
+        let new_fvid: Vec<u32> = new.iter().map(Vertex::fvid).collect();
+        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
+
+        // Algorithm 4: the new faces of the splits.
+        let find = |f: u32| new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32;
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = (0..n)
+            .into_par_iter()
+            .filter(|&i| cnt[i] == 2)
+            .flat_map_iter(|i| {
+                let d = decoded[i].as_ref().expect("decoded above");
+                let (v, v_u, owner) = (d.split.v, d.split.v_u, vs[i].own.addr);
+                let j = vertex_sum[i];
+                let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
+                let find = &find;
+                d.split.faces.iter().map(move |t| {
+                    let idx = t.map(|f| match f {
+                        f if f >= v && f < v_u => j,
+                        f if f >= v_u && f < end => j + 1,
+                        f => find(f),
+                    });
+                    (idx, *t, owner)
+                })
+            })
+            .collect();
+        debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
+
+        // Algorithm 5: index update and compaction of the old faces.
+        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
+            .into_par_iter()
+            .filter_map(|k| {
+                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
+                let mut idx = [0u32; 3];
+                for c in 0..3 {
+                    let i = old[c] as usize;
+                    idx[c] = match cnt[i] {
+                        0 if owner != NONE && vs[i].creator.addr == owner => return None,
+                        0 => vertex_sum[i] - 1,
+                        1 => vertex_sum[i],
+                        _ => {
+                            let j = vertex_sum[i];
+                            if new_fvid[j as usize + 1] <= fv[c] {
+                                j + 1
+                            } else {
+                                j
+                            }
+                        }
+                    };
+                }
+                Some((idx, fv, owner))
+            })
+            .collect();
+
+        let faces = kept.len() + new_faces.len();
+        let (mut fi, mut ff, mut fo) =
+            (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
+        for (a, b, c) in kept.into_iter().chain(new_faces) {
+            fi.push(a);
+            ff.push(b);
+            fo.push(c);
+        }
+        self.face_idx = fi;
+        self.face_fvid = ff;
+        self.face_owner = fo;
+        self.vertices = new;
+        Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces })
+    }
+}
+
+/// The operation at `addr` ([`NONE`]: none) in context `ctx`, its split cache decoded: the
+/// centre and normal of the vertex and the operation's criteria.
+fn op(dpm: &Dpm, addr: u32, ctx: OpContext) -> Result<Op, DpmError> {
+    let cache = if addr == NONE {
+        Cached::default()
+    } else {
+        let d = dpm.decode_op(addr as usize, &ctx)?;
+        Cached {
+            center: Vec3::from(dpm.position(ctx.position)),
+            normal: Vec3::from(dpm.normal(ctx.normal)),
+            crit: d.criteria,
+        }
+    };
+    Ok(Op { addr, ctx, cache })
+}
