@@ -9,9 +9,9 @@
 // fields, `decoder_prelude` in worker/src/pm_adapt/decoder.rs) and this file, and declares:
 //   D:         the DecodeParams uniform,
 //   ops:       array<u32>, the operations section, four bytes per word, little-endian,
-//   tables:    array<u32>, the probability tables (see `read_sym`),
-//   values:    array<u32>, the f32 bits of sin(alpha) codes (256), then the log tables of the
-//              lengths and of the attribute error (LOG_STEPS each),
+//   tables:    array<u32>, the probability tables (see `read_sym`), then from D.values_at the
+//              f32 bits of the sin(alpha) codes (256) and the log tables of the lengths and of
+//              the attribute error (LOG_STEPS each),
 //   dec_faces: array<u32>, read_write, where decoded faces go (FVID triples).
 //
 // Bounded work and reads: every read of `ops` is below D.ops_len, every loop has a constant or
@@ -27,7 +27,7 @@ struct DecodeParams {
     avg_op_size: u32,   // 16.16 fixed point
     max_faces: u32,     // the header's: no operation adds more
     count: u32,         // operations to decode (batch entry points)
-    pad: u32,
+    values_at: u32,     // where the value tables start in `tables`
 }
 
 // One decoded operation (`Decoded` in Rust's decoder.rs).
@@ -58,6 +58,11 @@ const DEC_FACES: u32 = 7u;       // face count, form or corner out of range
 const DEC_POSITION: u32 = 8u;
 const DEC_NORMAL: u32 = 9u;
 const DEC_POINTER: u32 = 10u;
+
+// How far decode_op goes: everything, or up to the face count (criteria, children, v_u and
+// the number of faces: what a vertex needs to ask for its split and size it).
+const DECODE_ALL: u32 = 0u;
+const DECODE_TO_FACES: u32 = 1u;
 
 // The bit reader: the next byte to load, the loaded byte, its bits not yet read, and the
 // first failure (reads after one return zeros without touching memory).
@@ -241,12 +246,19 @@ fn log_value_bits(k: u32, at: u32) -> u32 {
     if (k == 0u) {
         return 0u;
     }
-    let bits = values[at + (k - 1u) % LOG_STEPS];
+    let bits = tables[D.values_at + at + (k - 1u) % LOG_STEPS];
     let e = (k - 1u) / LOG_STEPS;
     if (((bits >> 23u) & 0xffu) + e >= 0xffu) {
         return 0x7f7fffffu;
     }
     return bits + (e << 23u);
+}
+
+// The f32 bits of quantized criteria: sin(alpha) from its table, the lengths and the
+// attribute error from theirs.
+fn crit_values(c: vec4<u32>) -> vec4<u32> {
+    return vec4<u32>(tables[D.values_at + min(c.x, 255u)], log_value_bits(c.y, 256u),
+                     log_value_bits(c.z, 256u + LOG_STEPS), log_value_bits(c.w, 256u));
 }
 
 // The address offset estimate: avg * (first - 1) in 16.16 fixed point, rounded, capped at
@@ -281,8 +293,10 @@ fn pointer_estimate(avg: u32, first: u32) -> u32 {
 
 // Decodes the operation at byte `addr` for vertex `v` (FVIDs v..v_end), its parent's quantized
 // criteria `pc`, its quantized position `pos` and octahedral normal `nrm`; the faces go to
-// dec_faces from face slot `face_out` on.
-fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: vec2<u32>, face_out: u32) -> DecodedOp {
+// dec_faces from face slot `face_out` on (nowhere for NONE_ADDR). With `upto` DECODE_TO_FACES it
+// stops after the face count: then only status, v_u, flags, faces and the criteria are set.
+fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: vec2<u32>, face_out: u32,
+             upto: u32) -> DecodedOp {
     var o: DecodedOp;
     o.left = NONE_ADDR;
     o.right = NONE_ADDR;
@@ -379,6 +393,15 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     if (r_err == DEC_OK && (nf > D.max_faces || (rest < 8192u && nf > rest * 8u) || (nf == 0u && pattern != 0u))) {
         fail(DEC_FACES);
     }
+    if (upto == DECODE_TO_FACES) {
+        o.status = r_err;
+        o.v_u = v_u;
+        o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);
+        o.faces = nf;
+        o.crit = crit;
+        o.crit_f = crit_values(crit);
+        return o;
+    }
     var has_prev = false;
     var pt = 0u;
     var pu = 0u;
@@ -466,10 +489,12 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
             fail(DEC_FACES);
             break;
         }
-        let at = 3u * (face_out + i);
-        dec_faces[at] = f.x;
-        dec_faces[at + 1u] = f.y;
-        dec_faces[at + 2u] = f.z;
+        if (face_out != NONE_ADDR) {
+            let at = 3u * (face_out + i);
+            dec_faces[at] = f.x;
+            dec_faces[at + 1u] = f.y;
+            dec_faces[at + 2u] = f.z;
+        }
     }
     if (r_err != DEC_OK) {
         o.status = r_err;
@@ -609,8 +634,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     o.end = end;
     o.faces = nf;
     o.crit = crit;
-    o.crit_f = vec4<u32>(values[crit.x], log_value_bits(crit.y, 256u), log_value_bits(crit.z, 256u + LOG_STEPS),
-                         log_value_bits(crit.w, 256u));
+    o.crit_f = crit_values(crit);
     o.position = vec4<u32>(p, 0u);
     o.normal = vec4<u32>(q, 0u, 0u);
     return o;

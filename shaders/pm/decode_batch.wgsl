@@ -17,10 +17,9 @@ struct Job {
 @group(0) @binding(0) var<uniform> D: DecodeParams;
 @group(0) @binding(1) var<storage, read> ops: array<u32>;
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
-@group(0) @binding(3) var<storage, read> values: array<u32>;
-@group(0) @binding(4) var<storage, read> jobs: array<Job>;
-@group(0) @binding(5) var<storage, read_write> decoded: array<DecodedOp>;
-@group(0) @binding(6) var<storage, read_write> dec_faces: array<u32>;
+@group(0) @binding(3) var<storage, read> jobs: array<Job>;
+@group(0) @binding(4) var<storage, read_write> decoded: array<DecodedOp>;
+@group(0) @binding(5) var<storage, read_write> dec_faces: array<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -29,5 +28,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let j = jobs[i];
-    decoded[i] = decode_op(j.addr, j.v, j.v_end, j.parent_criteria, j.position.xyz, j.normal.xy, i * D.max_faces);
+    decoded[i] = decode_op(j.addr, j.v, j.v_end, j.parent_criteria, j.position.xyz, j.normal.xy, i * D.max_faces,
+                           DECODE_ALL);
 }

@@ -70,6 +70,50 @@ pub(crate) fn batch_wgsl() -> String {
     format!("{}\n{}", decoder_wgsl(), include_str!("../../../shaders/pm/decode_batch.wgsl"))
 }
 
+/// What the decoder keeps of `dpm` besides its operations: the `tables` buffer's words (a word
+/// per table of the format with where its words start, the distinct tables, then the value
+/// tables: the `f32` bits of the 256 `sin(alpha)` codes and the log tables of the lengths and
+/// the attribute error), and the decoder's parameters.
+pub(crate) fn decoder_data(dpm: &Dpm) -> (Vec<u32>, DecodeParams) {
+    let h = &dpm.header;
+    // The distinct tables once each (the contexts a small model leaves unused all have the
+    // flat code), after a map from every table of the format to its copy.
+    let mut words: Vec<u32> = vec![0; TABLES];
+    let mut distinct: Vec<Vec<u32>> = Vec::new();
+    for (i, t) in dpm.tables().iter().enumerate() {
+        let c = t.canonical();
+        let mut w = Vec::with_capacity(TABLE_WORDS as usize);
+        w.extend_from_slice(c.first);
+        w.extend_from_slice(c.count);
+        w.extend_from_slice(c.offset);
+        w.push(c.longest as u32);
+        let mut sorted = [0u8; 256];
+        sorted[..c.sorted.len()].copy_from_slice(c.sorted);
+        w.extend(sorted.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+        let slot = distinct.iter().position(|d| *d == w).unwrap_or_else(|| {
+            distinct.push(w);
+            distinct.len() - 1
+        });
+        words[i] = (TABLES + slot * TABLE_WORDS as usize) as u32;
+    }
+    words.extend(distinct.into_iter().flatten());
+    let values_at = words.len() as u32;
+    words.extend((0..256u32).map(|k| (k as f32 / 255.0).to_bits()));
+    words.extend(log_table(h.length_step).map(f32::to_bits));
+    words.extend(log_table(h.attribute_step).map(f32::to_bits));
+    let params = DecodeParams {
+        ops_len: dpm.ops.len() as u32,
+        vertices: h.vertices,
+        position_bits: h.position_bits as u32,
+        normal_bits: h.normal_bits as u32,
+        avg_op_size: h.avg_op_size,
+        max_faces: h.max_faces,
+        count: 0,
+        values_at,
+    };
+    (words, params)
+}
+
 /// `DecodeParams` of `decode.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
@@ -79,9 +123,9 @@ pub(crate) struct DecodeParams {
     position_bits: u32,
     normal_bits: u32,
     avg_op_size: u32,
-    max_faces: u32,
-    count: u32,
-    pad: u32,
+    pub(crate) max_faces: u32,
+    pub(crate) count: u32,
+    values_at: u32,
 }
 
 /// `Job` of `decode_batch.wgsl`.
@@ -120,10 +164,9 @@ pub(crate) const BATCH_BINDINGS: &[Binding] = &[
     Binding::uniform::<DecodeParams>(0, "D"),
     Binding::read::<u32>(1, "ops"),
     Binding::read::<u32>(2, "tables"),
-    Binding::read::<u32>(3, "values"),
-    Binding::read::<Job>(4, "jobs"),
-    Binding::read_write::<RawDecoded>(5, "decoded"),
-    Binding::read_write::<u32>(6, "dec_faces"),
+    Binding::read::<Job>(3, "jobs"),
+    Binding::read_write::<RawDecoded>(4, "decoded"),
+    Binding::read_write::<u32>(5, "dec_faces"),
 ];
 
 /// Why the GPU refused an operation: the check of `read_op` that failed (`DEC_*` of
@@ -207,7 +250,6 @@ pub struct GpuOpDecoder {
     params: DecodeParams,
     ops: wgpu::Buffer,
     tables: wgpu::Buffer,
-    values: wgpu::Buffer,
     static_bytes: u64,
     max_groups: u32,
 }
@@ -215,48 +257,13 @@ pub struct GpuOpDecoder {
 impl GpuOpDecoder {
     /// Uploads `dpm`'s operations, tables and value tables to `gpu`.
     pub fn new(gpu: &Gpu, dpm: &Dpm) -> Result<GpuOpDecoder, AdaptError> {
-        let h = &dpm.header;
-        // The distinct tables once each (the contexts a small model leaves unused all have the
-        // flat code), after a map from every table of the format to its copy.
-        let mut words: Vec<u32> = vec![0; TABLES];
-        let mut distinct: Vec<Vec<u32>> = Vec::new();
-        for (i, t) in dpm.tables().iter().enumerate() {
-            let c = t.canonical();
-            let mut w = Vec::with_capacity(TABLE_WORDS as usize);
-            w.extend_from_slice(c.first);
-            w.extend_from_slice(c.count);
-            w.extend_from_slice(c.offset);
-            w.push(c.longest as u32);
-            let mut sorted = [0u8; 256];
-            sorted[..c.sorted.len()].copy_from_slice(c.sorted);
-            w.extend(sorted.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
-            let slot = distinct.iter().position(|d| *d == w).unwrap_or_else(|| {
-                distinct.push(w);
-                distinct.len() - 1
-            });
-            words[i] = (TABLES + slot * TABLE_WORDS as usize) as u32;
-        }
-        words.extend(distinct.into_iter().flatten());
-        let mut values: Vec<u32> = (0..256u32).map(|k| (k as f32 / 255.0).to_bits()).collect();
-        values.extend(log_table(h.length_step).map(f32::to_bits));
-        values.extend(log_table(h.attribute_step).map(f32::to_bits));
-        let params = DecodeParams {
-            ops_len: dpm.ops.len() as u32,
-            vertices: h.vertices,
-            position_bits: h.position_bits as u32,
-            normal_bits: h.normal_bits as u32,
-            avg_op_size: h.avg_op_size,
-            max_faces: h.max_faces,
-            count: 0,
-            pad: 0,
-        };
+        let (words, params) = decoder_data(dpm);
         gpu.scoped(|| {
             let device = gpu.device();
             let usage = wgpu::BufferUsages::STORAGE;
             let ops = init(device, "pm decode: operations", dpm.ops, usage);
             let tables = init(device, "pm decode: tables", bytemuck::cast_slice(&words), usage);
-            let values = init(device, "pm decode: values", bytemuck::cast_slice(&values), usage);
-            let static_bytes = ops.size() + tables.size() + values.size();
+            let static_bytes = ops.size() + tables.size();
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("pm: decode batch"),
                 source: wgpu::ShaderSource::Wgsl(batch_wgsl().into()),
@@ -282,7 +289,6 @@ impl GpuOpDecoder {
                 params,
                 ops,
                 tables,
-                values,
                 static_bytes,
                 max_groups: device.limits().max_compute_workgroups_per_dimension,
             })
@@ -357,7 +363,6 @@ impl GpuOpDecoder {
                     ("D", &uniform),
                     ("ops", &self.ops),
                     ("tables", &self.tables),
-                    ("values", &self.values),
                     ("jobs", &job_buf),
                     ("decoded", &decoded),
                     ("dec_faces", &dec_faces),
