@@ -54,19 +54,17 @@ fn vs_main(
 }
 
 // The progressive mesh adapted on the GPU (worker/src/pm_adapt/), drawn from its own buffers:
-// the index buffer holds active-vertex indices, and each vertex pulls its position and normal
-// through its FVID.
+// the index buffer holds active-vertex indices, and each vertex pulls its position and normal.
 struct PmPoint {
     pos: vec4<f32>,
     nrm: vec4<f32>,
 }
 
-@group(1) @binding(0) var<storage, read> pm_fvid: array<u32>;
-@group(1) @binding(1) var<storage, read> pm_points: array<PmPoint>;
+@group(1) @binding(0) var<storage, read> pm_points: array<PmPoint>;
 
 @vertex
 fn vs_pulled(@builtin(vertex_index) i: u32) -> VertexOutput {
-    let p = pm_points[pm_fvid[i]];
+    let p = pm_points[i];
     return transform(p.pos.xyz, p.nrm.xyz, vec4<f32>(0.0));
 }
 

@@ -186,12 +186,14 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     let mut start = Instant::now();
     let (active, mut faces, passes) = if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
-        let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &pm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
+        let dpm = format::Dpm::parse(&bytes)?;
+        let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
         start = Instant::now();
         let passes = match &view {
             None => adapter.refine_fully()?,
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
         };
+        adapter.check()?;
         (adapter.active()?, adapter.faces()?, passes)
     } else {
         let mut adapter = Adapter::new(&pm);

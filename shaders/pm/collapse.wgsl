@@ -1,15 +1,14 @@
 // Algorithm 2, parallel edge collapses, in place: a collapse whose target is marked for
-// splitting is cancelled (count 1); otherwise the target takes the collapse's place in the
-// split tree: its next split becomes the collapsed split and its node that split's parent.
-// The collapsed vertex and its faces are dropped by the later stages. In place is safe: a
-// target is never itself collapsing (its successor is the vertex collapsing into it), and a
-// count that changes goes from 0 to 1, which no neighbour reads as 2.
+// splitting is cancelled (count 1); otherwise the target becomes its creator's vertex again:
+// it takes the creator's operation, context and criteria from the collapsing vertex and keeps
+// its own creator (which the FVID it keeps still names). The collapsed vertex and its faces
+// are dropped by the later stages. In place is safe: a target is never itself collapsing (its
+// successor is the vertex collapsing into it), and a count that changes goes from 0 to 1,
+// which no neighbour reads as 2.
 
-@group(0) @binding(1) var<storage, read> splits: array<Split>;
-@group(0) @binding(2) var<storage, read_write> vnext: array<u32>;
-@group(0) @binding(3) var<storage, read_write> vnode: array<u32>;
-@group(0) @binding(4) var<storage, read_write> vcnt: array<u32>;
-@group(0) @binding(5) var<storage, read_write> stats: array<atomic<u32>, 8>;
+@group(0) @binding(1) var<storage, read_write> vstate: array<VState>;
+@group(0) @binding(2) var<storage, read_write> vcnt: array<u32>;
+@group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 8>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -22,9 +21,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         atomicAdd(&stats[STAT_CANCELLED], 1u);
         return;
     }
-    let s = vnode[i] >> 1u;
-    vnext[i - 1u] = s;
-    vnode[i - 1u] = splits[s].parent;
+    let c = vstate[i];
+    var t = vstate[i - 1u];
+    t.v_end = c.c_v_end;
+    t.addr = c.c_addr;
+    t.faces = c.c_faces;
+    t.pc = c.c_pc;
+    t.crit = c.c_crit;
+    vstate[i - 1u] = t;
     atomicAdd(&stats[STAT_COLLAPSES], 1u);
-    atomicAdd(&stats[STAT_REMOVED_FACES], splits[s].face_cnt);
+    atomicAdd(&stats[STAT_REMOVED_FACES], c.c_faces);
 }

@@ -9,21 +9,38 @@ const NONE: u32 = 0xffffffffu;
 const DEAD: u32 = 0xfffffffeu;
 const WG: u32 = 256u;
 
-// Per split: the static split record, decoded from the .dpm.
-struct Split {
-    v: u32,
-    v_u: u32,
-    face_off: u32,   // first face in `split_faces`
-    face_cnt: u32,
-    child0: u32,     // split of the left child (keeps v's FVID), NONE at a leaf
-    child1: u32,     // split of the right child (v_u)
-    parent: u32,     // node this split refines: 2 s + side, NONE at a root
+// Per active vertex: its operation (the split that refines it) with that operation's context
+// and criteria, and its creator's (the split whose v_u is this vertex's FVID; the collapse a
+// right child performs). The state of codec/src/pm/dpm_adapt.rs: operations are decoded from
+// the .dpm's compressed bytes when a vertex gets them, nothing per operation is kept.
+struct VState {
+    v_end: u32,        // one past the last FVID the vertex stands for
+    addr: u32,         // its operation's address, NONE at a leaf
+    faces: u32,        // faces its operation makes
+    c_addr: u32,       // its creator's address, NONE for a base vertex's FVID
+    c_v: u32,          // the creator's vertex: the collapse target's FVID
+    c_v_end: u32,      // the creator's range end
+    c_faces: u32,      // faces the creator's split made
     pad: u32,
+    pc: vec4<u32>,     // its operation's context: the parent's quantized criteria
+    pos: vec4<u32>,    // quantized position (xyz)
+    nrm: vec4<u32>,    // octahedral normal (xy)
     // sin(alpha), geometric error, attribute error, radius
-    crit: vec4<f32>,
+    crit: vec4<f32>,   // its operation's criteria
+    c_pc: vec4<u32>,   // the creator's context's parent criteria
+    c_crit: vec4<f32>, // the creator's criteria
 }
 
-// Per FVID: finest-level position and unit normal (w unused).
+// A vertex's collapse target FVID: its creator's vertex, if it is the creator's right child
+// (its range ends where the creator's did); NONE otherwise.
+fn target_of(s: VState) -> u32 {
+    if (s.c_addr != NONE && s.v_end == s.c_v_end) {
+        return s.c_v;
+    }
+    return NONE;
+}
+
+// Per active vertex: its position and unit normal (w unused), what the renderer pulls.
 struct Point {
     pos: vec4<f32>,
     nrm: vec4<f32>,

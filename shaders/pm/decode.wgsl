@@ -28,6 +28,7 @@ struct DecodeParams {
     max_faces: u32,     // the header's: no operation adds more
     count: u32,         // operations to decode (batch entry points)
     values_at: u32,     // where the value tables start in `tables`
+    grid: vec4<f32>,    // the position grid: its origin (xyz) and step (w)
 }
 
 // One decoded operation (`Decoded` in Rust's decoder.rs).

@@ -1,11 +1,11 @@
 // Algorithm 5, parallel index update of the faces that existed before the pass: each corner
 // moves to its vertex's new slot; a collapsed vertex's corner to the previous slot (its
 // target), a split vertex's corner to the next slot (v_u) when the corner's FVID reaches
-// v_u. A face created by a performed collapse's split (its owner, kept per face) is marked
-// DEAD for the compaction: the owner rule rather than degeneracy, because input faces may be
-// degenerate at every level (see codec/src/pm/adapt.rs).
+// v_u. A face created by a performed collapse's split (its owner, kept per face, is the
+// collapsing vertex's creator) is marked DEAD for the compaction: the owner rule rather than
+// degeneracy, because input faces may be degenerate at every level (see codec/src/pm/adapt.rs).
 
-@group(0) @binding(1) var<storage, read> vnode: array<u32>;
+@group(0) @binding(1) var<storage, read> vstate: array<VState>;
 @group(0) @binding(2) var<storage, read> vsum: array<u32>;
 @group(0) @binding(3) var<storage, read> dfvid: array<u32>;
 @group(0) @binding(4) var<storage, read_write> face_idx: array<u32>;
@@ -25,7 +25,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         let j = vsum[i];
         let cnt = vsum[i + 1u] - j;
         if (cnt == 0u) {
-            if (owner != NONE && (vnode[i] >> 1u) == owner) {
+            if (owner != NONE && vstate[i].c_addr == owner) {
                 face_owner[k] = DEAD;
                 return;
             }

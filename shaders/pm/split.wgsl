@@ -1,19 +1,19 @@
-// Algorithm 4, parallel vertex splits: one thread per split appends the split's faces after
-// the old ones (at m + fsum[i]) with their current vertex indices. A corner in [v, v_u) is v
-// (new slot j), one in v_u's range [v_u, FVID of slot j + 2) is v_u (slot j + 1); any other
-// corner is found by binary search in the new sorted FVID buffer: the active vertex with
-// the greatest FVID <= the corner's.
+// Algorithm 4, parallel vertex splits: one thread per split gives the split's faces, whose
+// FVIDs the reorganisation decoded into their slots after the old ones (at m + fsum[i]),
+// their current vertex indices and their owner (the split's address). A corner in [v, v_u)
+// is v (new slot j), one in v_u's range [v_u, FVID of slot j + 2) is v_u (slot j + 1); any
+// other corner is found by binary search in the new sorted FVID buffer: the active vertex
+// with the greatest FVID <= the corner's.
 
-@group(0) @binding(1) var<storage, read> splits: array<Split>;
-@group(0) @binding(2) var<storage, read> split_faces: array<u32>;
-@group(0) @binding(3) var<storage, read> vnext: array<u32>;
-@group(0) @binding(4) var<storage, read> vsum: array<u32>;
-@group(0) @binding(5) var<storage, read> fsum: array<u32>;
-@group(0) @binding(6) var<storage, read> list: array<u32>;
-@group(0) @binding(7) var<storage, read> dfvid: array<u32>;
-@group(0) @binding(8) var<storage, read_write> face_idx: array<u32>;
-@group(0) @binding(9) var<storage, read_write> face_fvid: array<u32>;
-@group(0) @binding(10) var<storage, read_write> face_owner: array<u32>;
+@group(0) @binding(1) var<storage, read> vfvid: array<u32>;
+@group(0) @binding(2) var<storage, read> vstate: array<VState>;
+@group(0) @binding(3) var<storage, read> vsum: array<u32>;
+@group(0) @binding(4) var<storage, read> fsum: array<u32>;
+@group(0) @binding(5) var<storage, read> list: array<u32>;
+@group(0) @binding(6) var<storage, read> dfvid: array<u32>;
+@group(0) @binding(7) var<storage, read_write> face_idx: array<u32>;
+@group(0) @binding(8) var<storage, read> face_fvid: array<u32>;
+@group(0) @binding(9) var<storage, read_write> face_owner: array<u32>;
 
 // The index of the active vertex with the greatest FVID <= f (0 if there is none).
 fn find(f: u32) -> u32 {
@@ -37,30 +37,30 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let i = list[k];
-    let s = vnext[i];
-    let split = splits[s];
+    let v = vfvid[i];
+    let owner = vstate[i].addr;
     let j = vsum[i];
+    let v_u = dfvid[j + 1u];
     var end = NONE;
     if (j + 2u < P.n_new) {
         end = dfvid[j + 2u];
     }
     let out = P.m + fsum[i];
-    for (var e = 0u; e < split.face_cnt; e++) {
-        let src = 3u * (split.face_off + e);
+    let count = fsum[i + 1u] - fsum[i];
+    for (var e = 0u; e < count; e++) {
         let dst = out + e;
         for (var c = 0u; c < 3u; c++) {
-            let f = split_faces[src + c];
+            let f = face_fvid[3u * dst + c];
             var idx: u32;
-            if (f >= split.v && f < split.v_u) {
+            if (f >= v && f < v_u) {
                 idx = j;
-            } else if (f >= split.v_u && f < end) {
+            } else if (f >= v_u && f < end) {
                 idx = j + 1u;
             } else {
                 idx = find(f);
             }
             face_idx[3u * dst + c] = idx;
-            face_fvid[3u * dst + c] = f;
         }
-        face_owner[dst] = s;
+        face_owner[dst] = owner;
     }
 }

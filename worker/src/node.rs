@@ -646,8 +646,8 @@ struct PmTiles {
 
 impl PmTiles {
     fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, WorkerError> {
-        let decoded = codec::pm::format::decode(dpm).map_err(WorkerError::Model)?;
-        let adapter = GpuAdapter::new(gpu, &decoded.pm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        let dpm = codec::pm::format::Dpm::parse(dpm).map_err(WorkerError::Model)?;
+        let adapter = GpuAdapter::new(gpu, &dpm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
         Ok(PmTiles { adapter })
     }
 
@@ -682,6 +682,8 @@ impl PmTiles {
                 break;
             }
         }
+        // A pass checks the operations the one before decoded; the last one is checked here.
+        self.adapter.check().map_err(|e| TileError::from(e).at(first))?;
         // The one adaptation, shared out among the tiles for the load balancer.
         let adapt_ms = start.elapsed().as_secs_f64() * 1e3 / job.tiles.len() as f64;
         let triangles = self.adapter.counts().1;

@@ -32,12 +32,10 @@ use crate::RenderMesh;
 /// A mesh that is already on the device, in the layout of the GPU progressive-mesh
 /// adaptation (`crate::pm_adapt`), drawn by vertex pulling (`vs_pulled` in
 /// `shaders/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
-/// its FVID, then that FVID's position and normal.
+/// its position and normal.
 #[derive(Clone, Copy)]
 pub struct AdaptedMesh<'a> {
-    /// The FVID of each active vertex (`u32`, `STORAGE`).
-    pub fvid: &'a wgpu::Buffer,
-    /// Position and normal per FVID ([`PmPoint`], `STORAGE`).
+    /// Position and normal per active vertex ([`PmPoint`], `STORAGE`).
     pub points: &'a wgpu::Buffer,
     /// Active-vertex indices, 3 per triangle (`u32`, `INDEX`).
     pub indices: &'a wgpu::Buffer,
@@ -45,8 +43,8 @@ pub struct AdaptedMesh<'a> {
     pub index_count: u32,
 }
 
-/// One FVID's finest-level position and unit normal, `w` unused: `PmPoint` of
-/// `render.wgsl`, `Point` of `pm/common.wgsl`.
+/// One active vertex's position and unit normal, `w` unused: `PmPoint` of `render.wgsl`,
+/// `Point` of `pm/common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PmPoint {
@@ -70,8 +68,7 @@ pub(crate) const FRAME_GROUP: u32 = 0;
 pub(crate) const FRAME_BINDINGS: &[Binding] = &[Binding::uniform::<FrameUniform>(0, "frame")];
 /// Bind group 1 of the pulled pipeline: the adapted mesh's buffers, read by `vs_pulled`.
 pub(crate) const PULLED_GROUP: u32 = 1;
-pub(crate) const PULLED_BINDINGS: &[Binding] =
-    &[Binding::read::<u32>(0, "pm_fvid"), Binding::read::<PmPoint>(1, "pm_points")];
+pub(crate) const PULLED_BINDINGS: &[Binding] = &[Binding::read::<PmPoint>(0, "pm_points")];
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -454,7 +451,7 @@ impl Renderer {
                 "render: pulled vertices",
                 &self.pulled_layout,
                 PULLED_BINDINGS,
-                &[("pm_fvid", pm.fvid), ("pm_points", pm.points)],
+                &[("pm_points", pm.points)],
             )),
         };
         // The eye is the point the projection sends to infinity: clip (0, 0, 1, 0) back in

@@ -6,6 +6,7 @@
 
 use std::time::Instant;
 
+use codec::pm::format::{decode, encode, Dpm, EncodeOptions};
 use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
@@ -14,8 +15,13 @@ use worker::gpu::Gpu;
 use worker::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
-fn pm_of(rel: &str) -> ProgressiveMesh {
-    build(&testkit::load_mesh(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+/// The `.dpm` of a mesh and the progressive mesh it decodes to (the CPU reference's input:
+/// the GPU adapts from the compressed operations).
+fn dpm_of(rel: &str) -> (Vec<u8>, ProgressiveMesh) {
+    let pm = build(&testkit::load_mesh(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
+    let bytes = encode(&pm, EncodeOptions::default()).unwrap().bytes;
+    let pm = decode(&bytes).unwrap().pm;
+    (bytes, pm)
 }
 
 fn bbox(pm: &ProgressiveMesh) -> (Vec3, Vec3) {
@@ -67,9 +73,10 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
 
 /// Adapts along a path of `frames` frames, one pass per frame, on both.
 fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu) {
-    let pm = pm_of(rel);
+    let (bytes, pm) = dpm_of(rel);
+    let dpm = Dpm::parse(&bytes).unwrap();
     let mut cpu = Adapter::new(&pm);
-    let mut gpu = GpuAdapter::new(device, &pm, 4096).unwrap();
+    let mut gpu = GpuAdapter::new(device, &dpm, 4096).unwrap();
     let start = Instant::now();
     let (mut lo, mut hi) = (usize::MAX, 0);
     for k in 0..frames {
@@ -108,9 +115,10 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
         } else {
             format!("stanford/{}", rel.rsplit('/').next().unwrap())
         };
-        let pm = pm_of(&rel);
+        let (bytes, pm) = dpm_of(&rel);
+        let dpm = Dpm::parse(&bytes).unwrap();
         let mut cpu = Adapter::new(&pm);
-        let mut gpu = GpuAdapter::new(&device, &pm, 16).unwrap();
+        let mut gpu = GpuAdapter::new(&device, &dpm, 16).unwrap();
         let mut passes = 0;
         loop {
             pass_both(&pm, &mut cpu, &mut gpu, None, &format!("{rel} refine pass {passes}"));
@@ -157,7 +165,8 @@ fn median(v: &mut [f64]) -> f64 {
 #[ignore = "times the dragon on the GPU; run in release"]
 fn pm_speed() {
     let rel = std::env::var("TESSERA_PM_MESH").unwrap_or_else(|_| "stanford/dragon_vrip.ply.gz".into());
-    let pm = pm_of(&rel);
+    let (bytes, pm) = dpm_of(&rel);
+    let dpm = Dpm::parse(&bytes).unwrap();
     let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
     eprintln!("adapter: {}", device.adapter_name());
     let mut renderer = Renderer::new(&device);
@@ -193,7 +202,7 @@ fn pm_speed() {
 
         // From the base mesh to the converged view: generated triangles per second.
         let view0 = Viewpoint::new(&cam_at(0), w, h, 0.5);
-        let mut gpu = GpuAdapter::new(&device, &pm, DEFAULT_N_ALLOC).unwrap();
+        let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
         let start = Instant::now();
         let passes = gpu.adapt_until_converged(&view0, 1000).unwrap().expect("converges");
         let gen_s = start.elapsed().as_secs_f64();
@@ -251,9 +260,10 @@ fn pm_speed() {
 #[test]
 #[ignore = "timing; run in release"]
 fn pass_overhead() {
-    let pm = pm_of("stanford/bunny_oded_6k.obj");
+    let (bytes, pm) = dpm_of("stanford/bunny_oded_6k.obj");
+    let dpm = Dpm::parse(&bytes).unwrap();
     let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
-    let mut gpu = GpuAdapter::new(&device, &pm, DEFAULT_N_ALLOC).unwrap();
+    let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
     let view = path_view(&pm, 0, 1, 0.5);
     gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
     let mut idle: Vec<f64> = (0..50)

@@ -4,18 +4,24 @@
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-/// `Split` of `shaders/pm/common.wgsl`: a split record, uploaded once per progressive mesh.
+/// `VState` of `shaders/pm/common.wgsl`: an active vertex's operation and its creator's.
 #[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-pub(super) struct GpuSplit {
-    pub(super) v: u32,
-    pub(super) v_u: u32,
-    pub(super) face_off: u32,
-    pub(super) face_cnt: u32,
-    pub(super) child: [u32; 2],
-    pub(super) parent: u32,
+#[derive(Clone, Copy, Pod, Zeroable, Default, Debug)]
+pub(super) struct GpuVState {
+    pub(super) v_end: u32,
+    pub(super) addr: u32,
+    pub(super) faces: u32,
+    pub(super) c_addr: u32,
+    pub(super) c_v: u32,
+    pub(super) c_v_end: u32,
+    pub(super) c_faces: u32,
     pub(super) pad: u32,
+    pub(super) pc: [u32; 4],
+    pub(super) pos: [u32; 4],
+    pub(super) nrm: [u32; 4],
     pub(super) crit: [f32; 4],
+    pub(super) c_pc: [u32; 4],
+    pub(super) c_crit: [f32; 4],
 }
 
 /// `Params` of `shaders/pm/common.wgsl`.
@@ -53,8 +59,12 @@ pub(crate) const STAT_COLLAPSES: usize = 0;
 pub(crate) const STAT_CANCELLED: usize = 1;
 pub(crate) const STAT_REMOVED_FACES: usize = 2;
 pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
-/// Readback: vertex total, face total, then the 8 counters.
-pub(super) const READBACK_BYTES: u64 = 8 + STATS_BYTES;
+/// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
+/// never cleared by a pass (`report` of `reorganise.wgsl`).
+pub(super) type Errors = [u32; 2];
+pub(super) const ERRORS_BYTES: u64 = std::mem::size_of::<Errors>() as u64;
+/// Readback: vertex total, face total, the 8 counters, then the errors.
+pub(super) const READBACK_BYTES: u64 = 8 + STATS_BYTES + ERRORS_BYTES;
 
 /// A buffer with a capacity in elements, resized by the paper's `n_alloc` policy.
 pub(super) struct Sized {
@@ -71,22 +81,30 @@ pub(super) struct ScanLevel {
     pub(super) blocks: u32,
 }
 
-/// The per-vertex buffers (one of two sets: reorganisation copies from one into the other).
+/// The per-vertex buffers (one of two sets: reorganisation copies from one into the other):
+/// FVIDs, states, and the points the renderer pulls.
 pub(super) struct VertexSet {
     pub(super) fvid: Sized,
-    pub(super) next: Sized,
-    pub(super) node: Sized,
+    pub(super) state: Sized,
+    pub(super) point: Sized,
 }
 
 impl VertexSet {
     pub(super) fn new(device: &wgpu::Device, name: &str, cap: u64) -> VertexSet {
         VertexSet {
             fvid: storage(device, &format!("pm: vertex fvid {name}"), cap, 4, VERTEX_USAGE),
-            next: storage(device, &format!("pm: vertex next {name}"), cap, 4, VERTEX_USAGE),
-            node: storage(device, &format!("pm: vertex node {name}"), cap, 4, VERTEX_USAGE),
+            state: storage(device, &format!("pm: vertex state {name}"), cap, STATE_BYTES, VERTEX_USAGE),
+            point: storage(device, &format!("pm: vertex point {name}"), cap, POINT_BYTES, VERTEX_USAGE),
         }
     }
+
+    pub(super) fn bytes(&self) -> u64 {
+        self.fvid.buffer.size() + self.state.buffer.size() + self.point.buffer.size()
+    }
 }
+
+const STATE_BYTES: u64 = std::mem::size_of::<GpuVState>() as u64;
+const POINT_BYTES: u64 = std::mem::size_of::<crate::render::PmPoint>() as u64;
 
 pub(super) struct FaceSet {
     /// Current vertex indices, 3 per face: the draw's index buffer.

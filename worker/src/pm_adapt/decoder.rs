@@ -110,6 +110,7 @@ pub(crate) fn decoder_data(dpm: &Dpm) -> (Vec<u32>, DecodeParams) {
         max_faces: h.max_faces,
         count: 0,
         values_at,
+        grid: [h.bbox_min[0], h.bbox_min[1], h.bbox_min[2], h.step],
     };
     (words, params)
 }
@@ -126,6 +127,8 @@ pub(crate) struct DecodeParams {
     pub(crate) max_faces: u32,
     pub(crate) count: u32,
     values_at: u32,
+    /// The position grid: its origin and step.
+    grid: [f32; 4],
 }
 
 /// `Job` of `decode_batch.wgsl`.
@@ -188,7 +191,7 @@ pub enum DecodeFailure {
 }
 
 impl DecodeFailure {
-    fn of(status: u32) -> DecodeFailure {
+    pub(crate) fn of(status: u32) -> DecodeFailure {
         use DecodeFailure::*;
         match status {
             1 => Truncated,

@@ -47,15 +47,17 @@ pub(crate) mod pipelines;
 
 use std::sync::Arc;
 
-use codec::pm::{PassStats, ProgressiveMesh, SplitTree, Viewpoint, NONE};
+use codec::pm::format::{Dpm, OpContext};
+use codec::pm::{PassStats, Viewpoint, NONE};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
-    init, needs_resize, storage, FaceSet, GpuSplit, Params, ScanLevel, Sized, VertexSet, READBACK_BYTES, STATS_BYTES,
-    VERTEX_USAGE,
+    init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, READBACK_BYTES,
+    STATS_BYTES, VERTEX_USAGE,
 };
+use decoder::{decoder_data, DecodeFailure};
 use pipelines::Pipelines;
 
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
@@ -74,6 +76,19 @@ pub enum AdaptError {
     /// A face read back refers to a vertex that is not active (a GPU fault).
     #[error("GPU error: face index {index} out of {vertices} vertices")]
     FaceIndex { index: u32, vertices: usize },
+    /// An operation of the `.dpm` did not decode on the GPU.
+    #[error("corrupt .dpm data: operation at byte {addr}: {failure}")]
+    Corrupt { addr: u32, failure: String },
+    /// A base vertex's operation did not decode on the CPU.
+    #[error(transparent)]
+    Format(#[from] codec::pm::DpmError),
+}
+
+impl AdaptError {
+    /// The error of a `DEC_*` status of `decode.wgsl` for the operation at `addr`.
+    pub(crate) fn corrupt(status: u32, addr: u32) -> AdaptError {
+        AdaptError::Corrupt { addr, failure: DecodeFailure::of(status).to_string() }
+    }
 }
 
 /// The adaptation state of one progressive mesh on the GPU (see the module docs).
@@ -84,6 +99,8 @@ pub struct GpuAdapter {
     n_alloc: u32,
     params: wgpu::Buffer,
     stats: wgpu::Buffer,
+    /// The first operation that failed to decode ([`buffers::Errors`]).
+    errors: wgpu::Buffer,
     readback: wgpu::Buffer,
     sets: [VertexSet; 2],
     cur: usize,
@@ -104,21 +121,22 @@ pub struct GpuAdapter {
     times: [f64; 3],
 }
 
-/// What adapters of the same progressive mesh share: the pipelines, the static buffers, and
-/// the base mesh.
+/// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
+/// compressed operations, the decoder's tables and parameters), and the base mesh.
 struct Shared {
     pipelines: Pipelines,
     max_groups: u32,
-    splits: wgpu::Buffer,
-    split_faces: wgpu::Buffer,
-    points: wgpu::Buffer,
+    ops: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    decode: wgpu::Buffer,
     base: BaseState,
 }
 
 impl GpuAdapter {
-    /// Uploads `pm` to `gpu`'s device and starts at the base mesh. `n_alloc` is the paper's
-    /// reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
-    pub fn new(gpu: &Gpu, pm: &ProgressiveMesh, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
+    /// Uploads `dpm`'s compressed operations and decoding tables to `gpu`'s device and starts
+    /// at the base mesh (whose operations' criteria the CPU decodes: a few per component).
+    /// `n_alloc` is the paper's reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
+    pub fn new(gpu: &Gpu, dpm: &Dpm, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
         let limits = gpu.device().limits();
         let need = pipelines::storage_buffers_per_stage();
         if limits.max_storage_buffers_per_shader_stage < need {
@@ -127,65 +145,33 @@ impl GpuAdapter {
                 allowed: limits.max_storage_buffers_per_shader_stage,
             });
         }
-        let tree = SplitTree::new(pm);
-        let mut face_off = 0u32;
-        let splits: Vec<GpuSplit> = pm
-            .splits
-            .iter()
-            .enumerate()
-            .map(|(s, split)| {
-                let c = pm.criteria.get(s).copied().unwrap_or_default();
-                let g = GpuSplit {
-                    v: split.v,
-                    v_u: split.v_u,
-                    face_off,
-                    face_cnt: split.faces.len() as u32,
-                    child: tree.children[s],
-                    parent: tree.parent[s],
-                    pad: 0,
-                    crit: [c.sin_alpha, c.geometric_error, c.attribute_error, c.radius],
-                };
-                face_off += split.faces.len() as u32;
-                g
-            })
-            .collect();
-        let split_faces: Vec<u32> = pm.splits.iter().flat_map(|s| s.faces.iter().flatten().copied()).collect();
-        let points: Vec<PmPoint> = pm
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(f, p)| {
-                let n = pm.normals.get(f).copied().unwrap_or_default();
-                PmPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] }
-            })
-            .collect();
+        let base = base_state(dpm)?;
+        let (words, params) = decoder_data(dpm);
         gpu.scoped(|| {
             let device = gpu.device();
             let read_only = wgpu::BufferUsages::STORAGE;
-            let splits = init(device, "pm: splits", bytemuck::cast_slice(&splits), read_only);
-            let split_faces = init(device, "pm: split faces", bytemuck::cast_slice(&split_faces), read_only);
-            let points = init(device, "pm: points", bytemuck::cast_slice(&points), read_only);
+            let ops = init(device, "pm: operations", dpm.ops, read_only);
+            let tables = init(device, "pm: decoding tables", bytemuck::cast_slice(&words), read_only);
+            let decode = init(device, "pm: decode params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
             let shared = Arc::new(Shared {
                 pipelines: Pipelines::new(gpu),
                 max_groups: limits.max_compute_workgroups_per_dimension,
-                splits,
-                split_faces,
-                points,
-                base: base_state(pm, &tree),
+                ops,
+                tables,
+                decode,
+                base,
             });
             Ok(GpuAdapter::with_shared(gpu.clone(), shared, n_alloc.max(1)))
         })
     }
 
     /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
-    /// pipelines and static buffers (a worker keeps one per tile it renders).
+    /// pipelines and static buffers.
     pub fn sibling(&self) -> GpuAdapter {
         self.sibling_with_slack(self.n_alloc)
     }
 
-    /// [`GpuAdapter::sibling`] with its own `n_alloc`: a worker that keeps one adapter per
-    /// tile gives each a share of the slack, so that the slack summed over its tiles stays
-    /// one adapter's whatever the tile count.
+    /// [`GpuAdapter::sibling`] with its own `n_alloc`.
     pub fn sibling_with_slack(&self, n_alloc: u32) -> GpuAdapter {
         GpuAdapter::with_shared(self.gpu.clone(), self.shared.clone(), n_alloc.max(1))
     }
@@ -203,6 +189,7 @@ impl GpuAdapter {
                 mapped_at_creation: false,
             }),
             stats: storage(d, "pm: stats", STATS_BYTES / 4, 4, VERTEX_USAGE).buffer,
+            errors: storage(d, "pm: errors", ERRORS_BYTES / 4, 4, VERTEX_USAGE).buffer,
             readback: d.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pm: readback"),
                 size: READBACK_BYTES,
@@ -231,30 +218,31 @@ impl GpuAdapter {
     /// Goes back to the base mesh.
     pub fn reset(&mut self) {
         let shared = self.shared.clone();
-        let (fvid, next, faces_idx, faces_fvid) = &shared.base;
-        let (n, m) = (fvid.len() as u64, faces_idx.len() as u64);
-        let node = vec![NONE; fvid.len()];
-        let owner = vec![NONE; faces_idx.len()];
+        let base = &shared.base;
+        let (n, m) = (base.fvid.len() as u64, base.face_idx.len() as u64);
+        let owner = vec![NONE; base.face_idx.len()];
         self.cur = 0;
         let na = self.n_alloc as u64;
         if needs_resize(self.sets[0].fvid.cap, n, self.n_alloc) {
             self.sets[0] = VertexSet::new(self.gpu.device(), "A", n + na);
         }
         let set = &self.sets[0];
-        for (s, data) in [(&set.fvid, fvid), (&set.next, next), (&set.node, &node)] {
-            if !data.is_empty() {
-                self.gpu.queue().write_buffer(&s.buffer, 0, bytemuck::cast_slice(data));
-            }
+        let q = self.gpu.queue();
+        if n > 0 {
+            q.write_buffer(&set.fvid.buffer, 0, bytemuck::cast_slice(&base.fvid));
+            q.write_buffer(&set.state.buffer, 0, bytemuck::cast_slice(&base.state));
+            q.write_buffer(&set.point.buffer, 0, bytemuck::cast_slice(&base.point));
         }
         if needs_resize(self.faces.idx.cap, m, self.n_alloc) {
             self.faces = FaceSet::new(self.gpu.device(), m + na);
         }
         let faces = &self.faces;
         if m > 0 {
-            self.gpu.queue().write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(faces_idx));
-            self.gpu.queue().write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(faces_fvid));
-            self.gpu.queue().write_buffer(&faces.owner.buffer, 0, bytemuck::cast_slice(&owner));
+            q.write_buffer(&faces.idx.buffer, 0, bytemuck::cast_slice(&base.face_idx));
+            q.write_buffer(&faces.fvid.buffer, 0, bytemuck::cast_slice(&base.face_fvid));
+            q.write_buffer(&faces.owner.buffer, 0, bytemuck::cast_slice(&owner));
         }
+        q.write_buffer(&self.errors, 0, bytemuck::bytes_of(&[0u32; 2]));
         self.n = n as u32;
         self.m = m as u32;
     }
@@ -284,18 +272,28 @@ impl GpuAdapter {
 
     /// Bytes of GPU memory the dynamic (per adapted mesh) buffers take now, at their capacities.
     pub fn dynamic_bytes(&self) -> u64 {
-        let sets: u64 =
-            self.sets.iter().map(|s| s.fvid.buffer.size() + s.next.buffer.size() + s.node.buffer.size()).sum();
+        let sets: u64 = self.sets.iter().map(VertexSet::bytes).sum();
         let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
         let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
         let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size()).sum();
         sets + faces + tmp + levels
     }
 
-    /// Bytes of the static (per progressive mesh) buffers: decoded split records, their faces,
-    /// and positions and normals per FVID.
+    /// Bytes of the static (per progressive mesh) buffers: the compressed operations, the
+    /// decoding tables and parameters.
     pub fn static_bytes(&self) -> u64 {
-        self.shared.splits.size() + self.shared.split_faces.size() + self.shared.points.size()
+        self.shared.ops.size() + self.shared.tables.size() + self.shared.decode.size()
+    }
+
+    /// Fails if an operation did not decode in the last pass (a pass checks the one before
+    /// it; this checks the last, for a caller about to draw).
+    pub fn check(&self) -> Result<(), AdaptError> {
+        let bytes = self.read_buffer(&self.errors, ERRORS_BYTES)?;
+        let e: [u32; 2] = bytemuck::pod_read_unaligned(&bytes);
+        if e[0] != 0 {
+            return Err(AdaptError::corrupt(e[0], e[1]));
+        }
+        Ok(())
     }
 
     /// One adaptation pass for `view` (Algorithms 1 to 5).
@@ -363,25 +361,59 @@ impl GpuAdapter {
             .collect()
     }
 
-    /// The current mesh, for [`crate::render::Renderer::render_pm`]: the FVID buffer of the
-    /// active vertices, the per-FVID points, and the face index buffer, all on the device.
+    /// The current mesh, for [`crate::render::Renderer::render_pm`]: the points of the
+    /// active vertices and the face index buffer, on the device.
     pub fn mesh(&self) -> AdaptedMesh<'_> {
         AdaptedMesh {
-            fvid: &self.sets[self.cur].fvid.buffer,
-            points: &self.shared.points,
+            points: &self.sets[self.cur].point.buffer,
             indices: &self.faces.idx.buffer,
             index_count: self.m * 3,
         }
     }
 }
 
-/// The base mesh as the adapter's initial buffers: FVIDs, next splits, face indices, face FVIDs.
-type BaseState = (Vec<u32>, Vec<u32>, Vec<[u32; 3]>, Vec<[u32; 3]>);
+/// The base mesh as the adapter's initial buffers.
+struct BaseState {
+    fvid: Vec<u32>,
+    state: Vec<GpuVState>,
+    point: Vec<PmPoint>,
+    face_idx: Vec<[u32; 3]>,
+    face_fvid: Vec<[u32; 3]>,
+}
 
-/// Builds the [`BaseState`] of `pm`.
-fn base_state(pm: &ProgressiveMesh, tree: &SplitTree) -> BaseState {
-    let fvid = pm.base_vertices.clone();
-    let idx =
-        pm.base_faces.iter().map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32)).collect();
-    (fvid, tree.roots.clone(), idx, pm.base_faces.clone())
+/// The base vertices with their first operations' criteria and face counts (decoded on the
+/// CPU, as the GPU decodes the rest), and the base faces.
+fn base_state(dpm: &Dpm) -> Result<BaseState, AdaptError> {
+    let h = &dpm.header;
+    let fvid = dpm.base_vertices.clone();
+    let mut state = Vec::with_capacity(fvid.len());
+    let mut point = Vec::with_capacity(fvid.len());
+    for b in 0..fvid.len() {
+        let v_end = fvid.get(b + 1).copied().unwrap_or(h.vertices);
+        let (pos, nrm) = (dpm.base_positions[b], dpm.base_normals[b]);
+        let mut s = GpuVState {
+            v_end,
+            addr: NONE,
+            c_addr: NONE,
+            c_v: NONE,
+            c_v_end: NONE,
+            pos: [pos[0], pos[1], pos[2], 0],
+            nrm: [nrm[0], nrm[1], 0, 0],
+            ..GpuVState::default()
+        };
+        if let Some(addr) = dpm.roots[b] {
+            let ctx = OpContext { v: fvid[b], v_end, parent_criteria: [0; 4], position: pos, normal: nrm };
+            let d = dpm.decode_op(addr, &ctx)?;
+            let c = d.criteria;
+            s.addr = addr as u32;
+            s.faces = d.split.faces.len() as u32;
+            s.crit = [c.sin_alpha, c.geometric_error, c.attribute_error, c.radius];
+        }
+        state.push(s);
+        let (p, n) = (dpm.position(pos), dpm.normal(nrm));
+        point.push(PmPoint { pos: [p[0], p[1], p[2], 1.0], nrm: [n[0], n[1], n[2], 0.0] });
+    }
+    let face_idx =
+        dpm.base_faces.iter().map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32)).collect();
+    Ok(BaseState { fvid, state, point, face_idx, face_fvid: dpm.base_faces.clone() })
 }

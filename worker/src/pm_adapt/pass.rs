@@ -4,8 +4,8 @@
 use codec::pm::{PassStats, Viewpoint};
 
 use super::buffers::{
-    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, READBACK_BYTES, STATS_BYTES,
-    STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
+    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, READBACK_BYTES,
+    STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter};
@@ -58,11 +58,9 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("splits", &self.shared.splits),
-                    ("points", &self.shared.points),
                     ("vfvid", &set.fvid.buffer),
-                    ("vnext", &set.next.buffer),
-                    ("vnode", &set.node.buffer),
+                    ("vstate", &set.state.buffer),
+                    ("vpoint", &set.point.buffer),
                     ("vcnt", &self.vcnt.buffer),
                     ("fcnt", &self.fcnt.buffer),
                 ],
@@ -71,9 +69,7 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("splits", &self.shared.splits),
-                    ("vnext", &set.next.buffer),
-                    ("vnode", &set.node.buffer),
+                    ("vstate", &set.state.buffer),
                     ("vcnt", &self.vcnt.buffer),
                     ("stats", &self.stats),
                 ],
@@ -101,11 +97,16 @@ impl GpuAdapter {
         enc.copy_buffer_to_buffer(&self.vcnt.buffer, n as u64 * 4, &self.readback, 0, 4);
         enc.copy_buffer_to_buffer(&self.fcnt.buffer, n as u64 * 4, &self.readback, 4, 4);
         enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
+        enc.copy_buffer_to_buffer(&self.errors, 0, &self.readback, 8 + STATS_BYTES, ERRORS_BYTES);
         self.gpu.queue().submit([enc.finish()]);
         let totals = self.read_totals()?;
+        // An operation the last pass could not decode fails this one.
+        if totals[10] != 0 {
+            return Err(AdaptError::corrupt(totals[10], totals[11]));
+        }
         self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
         let (n_new, f_add) = (totals[0], totals[1]);
-        let counters = &totals[2..];
+        let counters = &totals[2..10];
         let (collapses, cancelled, removed) =
             (counters[STAT_COLLAPSES], counters[STAT_CANCELLED], counters[STAT_REMOVED_FACES]);
         let splits = (n_new + collapses).checked_sub(n).ok_or(AdaptError::InconsistentTotals {
@@ -152,14 +153,19 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("splits", &self.shared.splits),
                     ("vfvid", &src.fvid.buffer),
-                    ("vnext", &src.next.buffer),
-                    ("vnode", &src.node.buffer),
+                    ("vstate", &src.state.buffer),
+                    ("vpoint", &src.point.buffer),
                     ("vsum", &self.vcnt.buffer),
+                    ("fsum", &self.fcnt.buffer),
                     ("dfvid", &dstset.fvid.buffer),
-                    ("dnext", &dstset.next.buffer),
-                    ("dnode", &dstset.node.buffer),
+                    ("dstate", &dstset.state.buffer),
+                    ("dpoint", &dstset.point.buffer),
+                    ("D", &self.shared.decode),
+                    ("ops", &self.shared.ops),
+                    ("tables", &self.shared.tables),
+                    ("dec_faces", &f.fvid.buffer),
+                    ("errors", &self.errors),
                 ],
             );
             let compact = p.compact_splits.bind(
@@ -175,9 +181,8 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("splits", &self.shared.splits),
-                    ("split_faces", &self.shared.split_faces),
-                    ("vnext", &src.next.buffer),
+                    ("vfvid", &src.fvid.buffer),
+                    ("vstate", &src.state.buffer),
                     ("vsum", &self.vcnt.buffer),
                     ("fsum", &self.fcnt.buffer),
                     ("list", &self.list.buffer),
@@ -191,7 +196,7 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("vnode", &src.node.buffer),
+                    ("vstate", &src.state.buffer),
                     ("vsum", &self.vcnt.buffer),
                     ("dfvid", &dstset.fvid.buffer),
                     ("face_idx", &f.idx.buffer),
@@ -330,9 +335,9 @@ impl GpuAdapter {
         pass.dispatch_workgroups(x, y, 1);
     }
 
-    fn read_totals(&self) -> Result<[u32; 10], GpuError> {
+    pub(super) fn read_totals(&self) -> Result<[u32; 12], GpuError> {
         self.gpu.map_read(&self.readback, READBACK_BYTES, |mapped| {
-            let mut out = [0u32; 10];
+            let mut out = [0u32; 12];
             out.copy_from_slice(bytemuck::cast_slice(mapped));
             out
         })

@@ -6,7 +6,8 @@
 
 use std::borrow::Cow;
 
-use super::buffers::{GpuSplit, LevelUniform, Params, Stats};
+use super::buffers::{Errors, GpuVState, LevelUniform, Params, Stats};
+use super::decoder::{decoder_wgsl, DecodeParams};
 use crate::gpu::{Access, Binding, Gpu};
 use crate::render::PmPoint;
 
@@ -24,15 +25,17 @@ pub(crate) struct ShaderDef {
     source: &'static str,
     /// Whether `common.wgsl` is prepended.
     common: bool,
+    /// Whether the operation decoder (`decode.wgsl` and its constants) is prepended too.
+    decoder: bool,
 }
 
 impl ShaderDef {
     /// The WGSL the device compiles (and the contract test parses).
     pub(crate) fn wgsl(&self) -> Cow<'static, str> {
-        if self.common {
-            format!("{COMMON}\n{}", self.source).into()
-        } else {
-            self.source.into()
+        match (self.common, self.decoder) {
+            (true, true) => format!("{COMMON}\n{}\n{}", decoder_wgsl(), self.source).into(),
+            (true, false) => format!("{COMMON}\n{}", self.source).into(),
+            _ => self.source.into(),
         }
     }
 }
@@ -47,14 +50,23 @@ pub(crate) struct StageDef {
 }
 
 const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
-    ShaderDef { label, source, common: true }
+    ShaderDef { label, source, common: true, decoder: false }
 }
 
 const STATE_WGSL: ShaderDef = with_common("pm: state update", include_str!("../../../shaders/pm/state.wgsl"));
 const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("../../../shaders/pm/collapse.wgsl"));
-const SCAN_WGSL: ShaderDef =
-    ShaderDef { label: "pm: scan", source: include_str!("../../../shaders/pm/scan.wgsl"), common: false };
-const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("../../../shaders/pm/reorganise.wgsl"));
+const SCAN_WGSL: ShaderDef = ShaderDef {
+    label: "pm: scan",
+    source: include_str!("../../../shaders/pm/scan.wgsl"),
+    common: false,
+    decoder: false,
+};
+const REORGANISE_WGSL: ShaderDef = ShaderDef {
+    label: "pm: reorganise",
+    source: include_str!("../../../shaders/pm/reorganise.wgsl"),
+    common: true,
+    decoder: true,
+};
 const COMPACT_SPLITS_WGSL: ShaderDef =
     with_common("pm: compact splits", include_str!("../../../shaders/pm/compact_splits.wgsl"));
 const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("../../../shaders/pm/split.wgsl"));
@@ -73,13 +85,11 @@ pub(crate) const STATE: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<GpuSplit>(1, "splits"),
-        Binding::read::<PmPoint>(2, "points"),
-        Binding::read::<u32>(3, "vfvid"),
-        Binding::read::<u32>(4, "vnext"),
-        Binding::read::<u32>(5, "vnode"),
-        Binding::read_write::<u32>(6, "vcnt"),
-        Binding::read_write::<u32>(7, "fcnt"),
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read_write::<u32>(4, "vcnt"),
+        Binding::read_write::<u32>(5, "fcnt"),
     ],
 };
 
@@ -90,11 +100,9 @@ pub(crate) const COLLAPSE: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<GpuSplit>(1, "splits"),
-        Binding::read_write::<u32>(2, "vnext"),
-        Binding::read_write::<u32>(3, "vnode"),
-        Binding::read_write::<u32>(4, "vcnt"),
-        Binding::read_write::<Stats>(5, "stats"),
+        Binding::read_write::<GpuVState>(1, "vstate"),
+        Binding::read_write::<u32>(2, "vcnt"),
+        Binding::read_write::<Stats>(3, "stats"),
     ],
 };
 
@@ -120,14 +128,19 @@ pub(crate) const REORGANISE: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<GpuSplit>(1, "splits"),
-        Binding::read::<u32>(2, "vfvid"),
-        Binding::read::<u32>(3, "vnext"),
-        Binding::read::<u32>(4, "vnode"),
-        Binding::read::<u32>(5, "vsum"),
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read::<u32>(4, "vsum"),
+        Binding::read::<u32>(5, "fsum"),
         Binding::read_write::<u32>(6, "dfvid"),
-        Binding::read_write::<u32>(7, "dnext"),
-        Binding::read_write::<u32>(8, "dnode"),
+        Binding::read_write::<GpuVState>(7, "dstate"),
+        Binding::read_write::<PmPoint>(8, "dpoint"),
+        Binding::uniform::<DecodeParams>(9, "D"),
+        Binding::read::<u32>(10, "ops"),
+        Binding::read::<u32>(11, "tables"),
+        Binding::read_write::<u32>(12, "dec_faces"),
+        Binding::read_write::<Errors>(13, "errors"),
     ],
 };
 
@@ -151,16 +164,15 @@ pub(crate) const SPLIT: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<GpuSplit>(1, "splits"),
-        Binding::read::<u32>(2, "split_faces"),
-        Binding::read::<u32>(3, "vnext"),
-        Binding::read::<u32>(4, "vsum"),
-        Binding::read::<u32>(5, "fsum"),
-        Binding::read::<u32>(6, "list"),
-        Binding::read::<u32>(7, "dfvid"),
-        Binding::read_write::<u32>(8, "face_idx"),
-        Binding::read_write::<u32>(9, "face_fvid"),
-        Binding::read_write::<u32>(10, "face_owner"),
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<u32>(3, "vsum"),
+        Binding::read::<u32>(4, "fsum"),
+        Binding::read::<u32>(5, "list"),
+        Binding::read::<u32>(6, "dfvid"),
+        Binding::read_write::<u32>(7, "face_idx"),
+        Binding::read::<u32>(8, "face_fvid"),
+        Binding::read_write::<u32>(9, "face_owner"),
     ],
 };
 
@@ -171,7 +183,7 @@ pub(crate) const INDEX_UPDATE: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<u32>(1, "vnode"),
+        Binding::read::<GpuVState>(1, "vstate"),
         Binding::read::<u32>(2, "vsum"),
         Binding::read::<u32>(3, "dfvid"),
         Binding::read_write::<u32>(4, "face_idx"),
