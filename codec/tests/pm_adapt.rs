@@ -458,3 +458,45 @@ proptest! {
         check_from_compressed(&mesh, 8, error_px, "a random soup");
     }
 }
+
+/// A soup (found by `random_soups_adapt_consistently`) in which a split's right child has an
+/// error raised by its neighbours beyond its region, so that its sphere did not nest in its
+/// parent's: the child asked for a split its parent did not, and frame-to-frame and from-base
+/// adaptions differed. The builder now raises the parent's radius to nest it.
+#[test]
+fn a_child_sphere_raised_by_its_neighbours_nests_in_its_parent() {
+    let p: Vec<[f32; 3]> = vec![
+        [0.0, 3.0, 3.0],
+        [3.0, 3.0, 0.0],
+        [0.0, 2.0, 2.0],
+        [3.0, 3.0, 3.0],
+        [1.0, 2.0, 3.0],
+        [0.0, 1.0, 2.0],
+        [3.0, 0.0, 2.0],
+        [3.0, 0.0, 1.0],
+        [3.0, 2.0, 0.0],
+        [0.0, 1.0, 1.0],
+        [3.0, 3.0, 2.0],
+        [3.0, 2.0, 0.0],
+        [3.0, 3.0, 0.0],
+        [3.0, 0.0, 1.0],
+        [2.0, 0.0, 2.0],
+        [3.0, 2.0, 0.0],
+        [1.0, 2.0, 2.0],
+        [2.0, 1.0, 0.0],
+        [2.0, 2.0, 2.0],
+    ];
+    let t = vec![[12, 12, 8], [8, 11, 7], [0, 1, 8], [7, 14, 9], [8, 1, 0], [0, 0, 0], [0, 1, 7]];
+    let pm = build(&Mesh::new(p, t)).unwrap();
+    check_monotone(&pm);
+    let tree = SplitTree::new(&pm);
+    for k in 0..20 {
+        let view = path_view(&pm, k, 20, 26.401794);
+        for s in 0..pm.splits.len() {
+            for ch in tree.children[s].into_iter().filter(|&c| c != NONE) {
+                assert!(!view.needs_split(&pm, ch as usize) || view.needs_split(&pm, s), "frame {k}: split {s}");
+            }
+        }
+    }
+    check_path(&pm, 20, 26.401794);
+}

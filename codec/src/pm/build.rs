@@ -46,8 +46,13 @@
 //!   fold-overs; so it can exceed the region's radius, and is still at least both
 //!   children's (`v_t` and `v_u` are among those vertices). Being at least the region's
 //!   farthest vertex from `v`, it is also the region's bounding radius.
-//! * the cone angle gets a relative slack of `1e-5` (plus `1e-5` rad) per level, so the
-//!   runtime tests, which recompute the nesting in `f32`, stay monotone.
+//!   It is raised, where needed, to `d + r_u` (and the left child's radius), so that the
+//!   children's bounding spheres nest in the parent's: a child's error may exceed its region
+//!   (raised to its neighbours'), and the runtime tests spheres (found on a random soup whose
+//!   frame-to-frame and from-base adaptions differed).
+//! * the cone angle and the nesting radius get a relative slack of `1e-5` (plus `1e-5` rad
+//!   for the angle) per level, so the runtime tests, which recompute the nesting in `f32`,
+//!   stay monotone.
 //!
 //! **Hubs: linear time whatever the valence.** A collapse costs time in the number of faces
 //! around `u` and `t`: it moves `u`'s faces, reads the errors around both, and offers every
@@ -674,12 +679,16 @@ fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]], geometric: &[f64]) -> (Ve
         let (l, r) = (child(cl, v), child(cu, u));
         // The geometric error is at least the farthest finest vertex of the region from `v`,
         // so it serves as the region's bounding radius (conservatively: a larger sphere only
-        // refines more near the frustum's sides), and the radius costs nothing to store.
-        let radius = geometric[s];
+        // refines more near the frustum's sides), and the radius costs nothing to store. It
+        // is raised where needed so that the children's spheres nest in it: a child's error
+        // may exceed its region (raised to its neighbours'), and the runtime tests spheres,
+        // which must nest for a child never to ask for a split its parent does not.
+        let nest = |c: [f64; 4], d: f64| (d + c[0]) * (1.0 + SLACK);
+        let radius = geometric[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos[u], pos[v]))));
         let attribute = l[2].max(norm(sub(normal[u], normal[v])) + r[2]);
         let alpha = (l[3].max(angle(normal[v], normal[u]) + r[3]) * (1.0 + SLACK) + SLACK).min(max_angle);
         let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
-        node[s] = [radius, geometric[s], attribute, alpha];
+        node[s] = [radius, radius, attribute, alpha];
     }
     let criteria = node
         .iter()

@@ -1,40 +1,57 @@
-//! View-dependent adaptation of a dependency-free progressive mesh on the GPU: the stages of
-//! Algorithms 1 to 5 of Derzapf and Guthe as WGSL compute pipelines (`shaders/pm/*.wgsl`, one
-//! file per stage, `common.wgsl` prepended to each but the generic scan), driven pass by pass
-//! from here. It is the GPU twin of the CPU reference [`codec::pm::Adapter`]: same state, same
-//! decisions, same triangle set after every pass (tested in `worker/tests/pm_gpu.rs`).
+//! View-dependent adaptation of a dependency-free progressive mesh on the GPU, straight from
+//! the `.dpm`'s compressed operations: the stages of Algorithms 1 to 5 of Derzapf and Guthe as
+//! WGSL compute pipelines (`shaders/pm/*.wgsl`, one file per stage, `common.wgsl` prepended to
+//! each but the generic scan, the operation decoder `decode.wgsl` to the reorganisation),
+//! driven pass by pass from here. It keeps the state of [`codec::pm::DpmAdapter`] and reaches
+//! the states of the CPU reference [`codec::pm::Adapter`]: same decisions, same triangle set
+//! after every pass (tested in `worker/tests/pm_gpu.rs`).
 //!
 //! It runs on a [`Gpu`] and hands the renderer the adapted mesh as an [`AdaptedMesh`]
 //! ([`GpuAdapter::mesh`]); it knows nothing else of the renderer. `buffers` holds the records
-//! it uploads (the WGSL structs' twins) and its `n_alloc`-sized buffers, `pipelines` the
-//! stages with their binding tables, and `pass` one adaptation pass.
+//! it shares with the WGSL (the structs' twins) and its `n_alloc`-sized buffers, `pipelines`
+//! the stages with their binding tables, `decoder` the operation decoder's tables, and `pass`
+//! one adaptation pass.
+//!
+//! What stays in graphics memory for a model is its compressed operations (the OPER section
+//! as it is in the file), the distinct Huffman tables, 326 values and a few parameters: 1.01x
+//! the dragon's `.dpm` (4.34 MB for 4.29 MB; it was 45.4 MB of decoded records, faces and
+//! points, 10.6x). Everything else follows the adapted mesh.
 //!
 //! One [`GpuAdapter::adapt`] pass is two submissions:
 //!
 //! 1. state update (Algorithm 1), collapses (Algorithm 2, in place), and the work-efficient
-//!    scans of the vertex and face counts; the totals and the collapse counters are then read
-//!    back (40 bytes): the host needs them to size the buffers (the paper's `n_alloc` policy)
-//!    and to size the remaining dispatches;
-//! 2. vertex reorganisation (Algorithm 3) into the other of two vertex buffer sets, split
+//!    scans of the vertex and face counts; the totals, the collapse counters and the first
+//!    decoding error of the pass before are then read back (48 bytes): the host needs them to
+//!    size the buffers (the paper's `n_alloc` policy) and to size the remaining dispatches;
+//! 2. vertex reorganisation (Algorithm 3) into the other of two vertex buffer sets, in which a
+//!    splitting vertex decodes its operation (children, `v_u`'s position and normal, faces)
+//!    and its children's operations up to their face counts (their split caches), split
 //!    compaction, splits with binary search (Algorithm 4), index update (Algorithm 5) and the
 //!    in-place face compaction (section 5.6).
 //!
 //! The adapted mesh stays on the GPU between passes (temporal coherence). It is drawn straight
 //! from these buffers: the face index buffer is the draw's index buffer, and the vertex shader
-//! pulls each vertex's position and normal through its FVID (see `vs_pulled` in
-//! `shaders/render.wgsl`), so rendering reads nothing back.
+//! pulls each active vertex's position and normal (see `vs_pulled` in `shaders/render.wgsl`),
+//! so rendering reads nothing back.
 //!
 //! Where this differs from the paper:
 //!
-//! * The split records (criteria, children, faces) are uploaded decoded, once, from the
-//!   `.dpm` decoded on the CPU; the paper decodes each operation on the GPU from its address.
-//!   The split/collapse cache is then the split record itself, one indexed load away.
-//! * The vertex VBO is not copied during reorganisation: positions and normals are static per
-//!   FVID and pulled through the FVID buffer, so a pass moves 12 bytes per vertex, not 36.
+//! * A vertex carries its creator's operation (the split whose `v_u` is its FVID) with that
+//!   operation's context, so that a collapse knows the operation it becomes without a static
+//!   tree or a decode from the root; see [`codec::pm::DpmAdapter`] for why this covers every
+//!   collapse. The split cache holds the vertex's operation's criteria and face count, decoded
+//!   when the vertex is made; the collapse cache is the creator's criteria.
+//! * Operations are decoded on demand per split, in the reorganisation: a pass splits a vertex
+//!   once, and its children's criteria are all the next pass needs, so a split costs one full
+//!   decode and two up to the face count, and a pass decodes nothing where nothing splits. A
+//!   wavefront over tree depths (decoding from the roots down each pass, contexts flowing
+//!   down) would redo every active vertex's ancestors each pass, 15.6 levels on average for
+//!   the dragon (29 at most); it was not built.
 //! * Splits write `v` and `v_u` during reorganisation, so that the new FVID buffer is complete
-//!   before the split stage binary-searches it; the split stage appends the faces.
-//! * Faces carry the split that created them (4 bytes per face): the collapse removes exactly
-//!   those, as in the CPU reference (inputs may hold faces that are degenerate at every level).
+//!   before the split stage binary-searches it; the split stage gives the faces their indices.
+//! * Faces carry the address of the split that created them (4 bytes per face): the collapse
+//!   removes exactly those, as in the CPU reference (inputs may hold faces that are degenerate
+//!   at every level).
 //! * The split compaction and the face compaction use atomic cursors instead of scans: the
 //!   order they produce does not matter (face slots come from the face prefix sum, and the
 //!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is

@@ -21,8 +21,10 @@ pub(super) fn every_symbol(counts: &[u64; 256]) -> Table {
 
 /// One bit stream, padded to a byte: per table a bit, 0 for a flat code (every symbol 8 bits),
 /// 1 for a code whose 256 lengths follow, each as the Elias gamma code of one plus the zigzag
-/// difference to the previous symbol's length (the first to 8): neighbouring symbols mostly
-/// have equal or adjacent lengths, so a table costs about 40 to 80 bytes.
+/// difference to the previous symbol's length (the first to 8), and after a length equal to
+/// the previous one the gamma code of one plus how many more repeat it (a run): neighbouring
+/// symbols mostly have equal or adjacent lengths, and the unused ones, which every table
+/// codes, long runs of one length.
 pub(super) fn write_tables(tables: &[Table]) -> Vec<u8> {
     let mut w = BitWriter::default();
     for t in tables {
@@ -31,16 +33,43 @@ pub(super) fn write_tables(tables: &[Table]) -> Vec<u8> {
             continue;
         }
         w.put(1, 1);
-        let mut prev = 8i64;
-        for &l in &t.lens {
-            let g = zigzag(l as i64 - prev) as u32 + 1;
+        let gamma = |w: &mut BitWriter, g: u32| {
             let b = 32 - g.leading_zeros();
             w.put(0, (b - 1) as u8);
             w.put(g, b as u8);
-            prev = l as i64;
+        };
+        let mut prev = 8i64;
+        let mut i = 0;
+        while i < t.lens.len() {
+            let l = t.lens[i] as i64;
+            gamma(&mut w, zigzag(l - prev) as u32 + 1);
+            i += 1;
+            if l == prev {
+                // A run: how many of the following lengths repeat this one too.
+                let run = t.lens[i..].iter().take_while(|&&x| x as i64 == l).count();
+                gamma(&mut w, run as u32 + 1);
+                i += run;
+            }
+            prev = l;
         }
     }
     w.finish()
+}
+
+/// An Elias gamma code (at most 9 bits of value) read bit by bit.
+fn gamma(bit: &mut impl FnMut() -> Result<bool, DpmError>) -> Result<u32, DpmError> {
+    let mut zeros = 0;
+    while !bit()? {
+        zeros += 1;
+        if zeros > 8 {
+            return Err(corrupt("bad code length"));
+        }
+    }
+    let mut g = 1u32;
+    for _ in 0..zeros {
+        g = (g << 1) | bit()? as u32;
+    }
+    Ok(g)
 }
 
 /// The flat code (every symbol 8 bits), built once and shared by every table coded as flat.
@@ -62,23 +91,22 @@ pub(super) fn read_tables(tb: &[u8]) -> Result<Vec<Arc<Table>>, DpmError> {
         } else {
             let mut lens = [8u8; 256];
             let mut prev = 8i64;
-            for l in &mut lens {
-                let mut zeros = 0;
-                while !bit()? {
-                    zeros += 1;
-                    if zeros > 8 {
-                        return Err(corrupt("bad code length"));
-                    }
-                }
-                let mut g = 1u32;
-                for _ in 0..zeros {
-                    g = (g << 1) | bit()? as u32;
-                }
-                let x = prev + unzigzag(g as u64 - 1);
+            let mut i = 0;
+            while i < lens.len() {
+                let x = prev + unzigzag(gamma(&mut bit)? as u64 - 1);
                 if !(1..=MAX_LEN as i64).contains(&x) {
                     return Err(corrupt("bad code length"));
                 }
-                *l = x as u8;
+                lens[i] = x as u8;
+                i += 1;
+                if x == prev {
+                    let run = gamma(&mut bit)? as usize - 1;
+                    if run > lens.len() - i {
+                        return Err(corrupt("bad code length"));
+                    }
+                    lens[i..i + run].fill(x as u8);
+                    i += run;
+                }
                 prev = x;
             }
             tables.push(Arc::new(Table::from_lens(&lens).ok_or_else(|| corrupt("invalid code lengths"))?));
