@@ -157,7 +157,21 @@ impl GpuAdapter {
                     ("vstate", &src.state.buffer),
                     ("vpoint", &src.point.buffer),
                     ("vsum", &self.vcnt.buffer),
+                    ("dfvid", &dstset.fvid.buffer),
+                    ("dstate", &dstset.state.buffer),
+                    ("dpoint", &dstset.point.buffer),
+                ],
+            );
+            let split_decode = p.split_decode.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vfvid", &src.fvid.buffer),
+                    ("vstate", &src.state.buffer),
+                    ("vpoint", &src.point.buffer),
+                    ("vsum", &self.vcnt.buffer),
                     ("fsum", &self.fcnt.buffer),
+                    ("list", &self.list.buffer),
                     ("dfvid", &dstset.fvid.buffer),
                     ("dstate", &dstset.state.buffer),
                     ("dpoint", &dstset.point.buffer),
@@ -226,8 +240,9 @@ impl GpuAdapter {
             );
             let mut pass = enc
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None });
-            self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
+            self.dispatch(&mut pass, &p.split_decode, &split_decode, splits);
+            self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
             self.dispatch(&mut pass, &p.split, &split, splits);
             self.dispatch(&mut pass, &p.index_update, &index, m);
             self.dispatch(&mut pass, &p.holes, &holes, m_new);

@@ -61,9 +61,10 @@ const SCAN_WGSL: ShaderDef = ShaderDef {
     common: false,
     decoder: false,
 };
-const REORGANISE_WGSL: ShaderDef = ShaderDef {
-    label: "pm: reorganise",
-    source: include_str!("../../../shaders/pm/reorganise.wgsl"),
+const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("../../../shaders/pm/reorganise.wgsl"));
+const SPLIT_DECODE_WGSL: ShaderDef = ShaderDef {
+    label: "pm: split decode",
+    source: include_str!("../../../shaders/pm/split_decode.wgsl"),
     common: true,
     decoder: true,
 };
@@ -132,15 +133,33 @@ pub(crate) const REORGANISE: StageDef = StageDef {
         Binding::read::<GpuVState>(2, "vstate"),
         Binding::read::<PmPoint>(3, "vpoint"),
         Binding::read::<u32>(4, "vsum"),
+        Binding::read_write::<u32>(5, "dfvid"),
+        Binding::read_write::<GpuVState>(6, "dstate"),
+        Binding::read_write::<PmPoint>(7, "dpoint"),
+    ],
+};
+
+/// Algorithm 3's splits: the operations decoded, the children written.
+pub(crate) const SPLIT_DECODE: StageDef = StageDef {
+    label: "pm: split decode",
+    shader: &SPLIT_DECODE_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read::<u32>(4, "vsum"),
         Binding::read::<u32>(5, "fsum"),
-        Binding::read_write::<u32>(6, "dfvid"),
-        Binding::read_write::<GpuVState>(7, "dstate"),
-        Binding::read_write::<PmPoint>(8, "dpoint"),
-        Binding::uniform::<DecodeParams>(9, "D"),
-        Binding::read::<u32>(10, "ops"),
-        Binding::read::<u32>(11, "tables"),
-        Binding::read_write::<u32>(12, "dec_faces"),
-        Binding::read_write::<Errors>(13, "errors"),
+        Binding::read::<u32>(6, "list"),
+        Binding::read_write::<u32>(7, "dfvid"),
+        Binding::read_write::<GpuVState>(8, "dstate"),
+        Binding::read_write::<PmPoint>(9, "dpoint"),
+        Binding::uniform::<DecodeParams>(10, "D"),
+        Binding::read::<u32>(11, "ops"),
+        Binding::read::<u32>(12, "tables"),
+        Binding::read_write::<u32>(13, "dec_faces"),
+        Binding::read_write::<Errors>(14, "errors"),
     ],
 };
 
@@ -222,8 +241,19 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 10] =
-    [&STATE, &COLLAPSE, &SCAN_BLOCKS, &ADD_BLOCKS, &REORGANISE, &COMPACT_SPLITS, &SPLIT, &INDEX_UPDATE, &HOLES, &FILL];
+pub(crate) const STAGES: [&StageDef; 11] = [
+    &STATE,
+    &COLLAPSE,
+    &SCAN_BLOCKS,
+    &ADD_BLOCKS,
+    &COMPACT_SPLITS,
+    &SPLIT_DECODE,
+    &REORGANISE,
+    &SPLIT,
+    &INDEX_UPDATE,
+    &HOLES,
+    &FILL,
+];
 
 /// The most storage buffers one stage binds: what the device must allow per shader stage.
 pub(super) fn storage_buffers_per_stage() -> u32 {
@@ -273,6 +303,7 @@ pub(super) struct Pipelines {
     pub(super) add_blocks: Stage,
     pub(super) reorganise: Stage,
     pub(super) compact_splits: Stage,
+    pub(super) split_decode: Stage,
     pub(super) split: Stage,
     pub(super) index_update: Stage,
     pub(super) holes: Stage,
@@ -298,6 +329,7 @@ impl Pipelines {
             add_blocks: Stage::new(gpu, &scan, &ADD_BLOCKS),
             reorganise: single(&REORGANISE),
             compact_splits: single(&COMPACT_SPLITS),
+            split_decode: single(&SPLIT_DECODE),
             split: single(&SPLIT),
             index_update: single(&INDEX_UPDATE),
             holes: Stage::new(gpu, &compact, &HOLES),
