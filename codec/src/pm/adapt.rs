@@ -248,6 +248,59 @@ impl PassStats {
     }
 }
 
+/// Algorithm 5 and the rebuild of the face buffers, for both adapters: every old corner moves to
+/// its vertex's new position, a collapsed vertex's to its target (the previous one), a split
+/// vertex's to `v_u` (the next one) when the corner's FVID reaches `v_u`; the faces whose owner
+/// is the split a collapsing vertex undoes (`collapsed(i)`) are dropped, order kept, and
+/// `new_faces` appended. `faces` are the index and FVID buffers, `owner` the owners; returns
+/// the face count.
+pub(super) fn update_faces(
+    faces: [&mut Vec<[u32; 3]>; 2],
+    owner: &mut Vec<u32>,
+    cnt: &[u32],
+    vertex_sum: &[u32],
+    new_fvid: &[u32],
+    collapsed: &(dyn Fn(usize) -> u32 + Sync),
+    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
+) -> usize {
+    let [face_idx, face_fvid] = faces;
+    let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..face_idx.len())
+        .into_par_iter()
+        .filter_map(|k| {
+            let (old, fv, owner) = (face_idx[k], face_fvid[k], owner[k]);
+            let mut idx = [0u32; 3];
+            for c in 0..3 {
+                let i = old[c] as usize;
+                idx[c] = match cnt[i] {
+                    0 if owner != NONE && collapsed(i) == owner => return None,
+                    0 => vertex_sum[i] - 1,
+                    1 => vertex_sum[i],
+                    _ => {
+                        let j = vertex_sum[i];
+                        if new_fvid[j as usize + 1] <= fv[c] {
+                            j + 1
+                        } else {
+                            j
+                        }
+                    }
+                };
+            }
+            Some((idx, fv, owner))
+        })
+        .collect();
+    let total = kept.len() + new_faces.len();
+    let (mut fi, mut ff, mut fo) = (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
+    for (a, b, c) in kept.into_iter().chain(new_faces) {
+        fi.push(a);
+        ff.push(b);
+        fo.push(c);
+    }
+    *face_idx = fi;
+    *face_fvid = ff;
+    *owner = fo;
+    total
+}
+
 /// View-dependent adaption of a progressive mesh (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Adapter<'a> {
@@ -480,42 +533,16 @@ impl<'a> Adapter<'a> {
         debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
 
         // Algorithm 5: index update and compaction of the old faces.
-        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
-            .into_par_iter()
-            .filter_map(|k| {
-                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
-                let mut idx = [0u32; 3];
-                for c in 0..3 {
-                    let i = old[c] as usize;
-                    idx[c] = match cnt[i] {
-                        0 if owner != NONE && self.node[i] >> 1 == owner => return None,
-                        0 => vertex_sum[i] - 1,
-                        1 => vertex_sum[i],
-                        _ => {
-                            let j = vertex_sum[i];
-                            if new_fvid[j as usize + 1] <= fv[c] {
-                                j + 1
-                            } else {
-                                j
-                            }
-                        }
-                    };
-                }
-                Some((idx, fv, owner))
-            })
-            .collect();
-
-        let faces = kept.len() + new_faces.len();
-        let (mut fi, mut ff, mut fo) =
-            (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
-        for (a, b, c) in kept.into_iter().chain(new_faces) {
-            fi.push(a);
-            ff.push(b);
-            fo.push(c);
-        }
-        self.face_idx = fi;
-        self.face_fvid = ff;
-        self.face_owner = fo;
+        let node = &self.node;
+        let faces = update_faces(
+            [&mut self.face_idx, &mut self.face_fvid],
+            &mut self.face_owner,
+            &cnt,
+            &vertex_sum,
+            &new_fvid,
+            &|i| node[i] >> 1,
+            new_faces,
+        );
         self.fvid = new_fvid;
         self.next = vertices.par_iter().map(|v| v.1).collect();
         self.node = vertices.par_iter().map(|v| v.2).collect();

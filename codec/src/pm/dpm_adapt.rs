@@ -30,7 +30,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{exclusive_scan, Cached, Eval};
+use super::adapt::{exclusive_scan, update_faces, Cached, Eval};
 use super::format::{Dpm, DpmError, OpContext};
 use super::{PassStats, Viewpoint, NONE};
 
@@ -255,42 +255,15 @@ impl<'a> DpmAdapter<'a> {
         debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
 
         // Algorithm 5: index update and compaction of the old faces.
-        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
-            .into_par_iter()
-            .filter_map(|k| {
-                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
-                let mut idx = [0u32; 3];
-                for c in 0..3 {
-                    let i = old[c] as usize;
-                    idx[c] = match cnt[i] {
-                        0 if owner != NONE && vs[i].creator.addr == owner => return None,
-                        0 => vertex_sum[i] - 1,
-                        1 => vertex_sum[i],
-                        _ => {
-                            let j = vertex_sum[i];
-                            if new_fvid[j as usize + 1] <= fv[c] {
-                                j + 1
-                            } else {
-                                j
-                            }
-                        }
-                    };
-                }
-                Some((idx, fv, owner))
-            })
-            .collect();
-
-        let faces = kept.len() + new_faces.len();
-        let (mut fi, mut ff, mut fo) =
-            (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
-        for (a, b, c) in kept.into_iter().chain(new_faces) {
-            fi.push(a);
-            ff.push(b);
-            fo.push(c);
-        }
-        self.face_idx = fi;
-        self.face_fvid = ff;
-        self.face_owner = fo;
+        let faces = update_faces(
+            [&mut self.face_idx, &mut self.face_fvid],
+            &mut self.face_owner,
+            &cnt,
+            &vertex_sum,
+            &new_fvid,
+            &|i| vs[i].creator.addr,
+            new_faces,
+        );
         self.vertices = new;
         Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces })
     }
