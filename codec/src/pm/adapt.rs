@@ -248,6 +248,33 @@ impl PassStats {
     }
 }
 
+/// Algorithm 2's cancellations, for both adapters: a collapse (state 0) whose target (the
+/// vertex before it) splits (state 2) keeps its vertex (1). Returns the vertex counts and the
+/// splits, collapses and cancelled collapses they make.
+pub(super) fn cancel_collapses(state: &[u32]) -> (Vec<u32>, usize, usize, usize) {
+    let cnt: Vec<u32> = (0..state.len())
+        .into_par_iter()
+        .map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] })
+        .collect();
+    let splits = cnt.par_iter().filter(|&&c| c == 2).count();
+    let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
+    let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+    (cnt, splits, collapses, cancelled)
+}
+
+/// Algorithm 4's indices of a new face `t` of the split of `v` into `v` (new slot `j`) and
+/// `v_u` (slot `j + 1`), for both adapters: a corner in `[v, v_u)` is `v`, one in `v_u`'s range
+/// (up to the FVID of slot `j + 2`) is `v_u`, any other the active vertex with the greatest
+/// FVID `<=` the corner's, by binary search in the new sorted FVIDs.
+pub(super) fn split_face_indices(t: [u32; 3], v: u32, v_u: u32, j: u32, new_fvid: &[u32]) -> [u32; 3] {
+    let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
+    t.map(|f| match f {
+        f if f >= v && f < v_u => j,
+        f if f >= v_u && f < end => j + 1,
+        f => new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32,
+    })
+}
+
 /// Algorithm 5 and the rebuild of the face buffers, for both adapters: every old corner moves to
 /// its vertex's new position, a collapsed vertex's to its target (the previous one), a split
 /// vertex's to `v_u` (the next one) when the corner's FVID reaches `v_u`; the faces whose owner
@@ -461,11 +488,7 @@ impl<'a> Adapter<'a> {
             })
             .collect();
         // Algorithm 2: collapses whose target splits are cancelled.
-        let cnt: Vec<u32> =
-            (0..n).into_par_iter().map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] }).collect();
-        let splits = cnt.par_iter().filter(|&&c| c == 2).count();
-        let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
-        let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+        let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
         if splits == 0 && collapses == 0 {
             return PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() };
         }
@@ -511,23 +534,14 @@ impl<'a> Adapter<'a> {
 
         // Algorithm 4: the new faces of the compacted splits.
         let split_list: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| cnt[i as usize] == 2).collect();
-        let find = |f: u32| new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32;
+        let new_fvid_ref = &new_fvid;
         let new_faces: Vec<([u32; 3], [u32; 3], u32)> = split_list
             .par_iter()
             .flat_map_iter(|&i| {
                 let s = self.next[i as usize];
                 let split = &pm.splits[s as usize];
                 let j = vertex_sum[i as usize];
-                let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
-                let find = &find;
-                split.faces.iter().map(move |t| {
-                    let idx = t.map(|f| match f {
-                        f if f >= split.v && f < split.v_u => j,
-                        f if f >= split.v_u && f < end => j + 1,
-                        f => find(f),
-                    });
-                    (idx, *t, s)
-                })
+                split.faces.iter().map(move |&t| (split_face_indices(t, split.v, split.v_u, j, new_fvid_ref), t, s))
             })
             .collect();
         debug_assert_eq!(new_faces.len(), face_sum[n] as usize);

@@ -30,7 +30,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{exclusive_scan, update_faces, Cached, Eval};
+use super::adapt::{cancel_collapses, exclusive_scan, split_face_indices, update_faces, Cached, Eval};
 use super::format::{Dpm, DpmError, OpContext};
 use super::{PassStats, Viewpoint, NONE};
 
@@ -166,11 +166,7 @@ impl<'a> DpmAdapter<'a> {
             })
             .collect();
         // Algorithm 2: collapses whose target splits are cancelled.
-        let cnt: Vec<u32> =
-            (0..n).into_par_iter().map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] }).collect();
-        let splits = cnt.par_iter().filter(|&&c| c == 2).count();
-        let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
-        let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+        let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
         if splits == 0 && collapses == 0 {
             return Ok(PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() });
         }
@@ -232,7 +228,7 @@ impl<'a> DpmAdapter<'a> {
         debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
 
         // Algorithm 4: the new faces of the splits.
-        let find = |f: u32| new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32;
+        let new_fvid_ref = &new_fvid;
         let new_faces: Vec<([u32; 3], [u32; 3], u32)> = (0..n)
             .into_par_iter()
             .filter(|&i| cnt[i] == 2)
@@ -240,16 +236,7 @@ impl<'a> DpmAdapter<'a> {
                 let d = decoded[i].as_ref().expect("decoded above");
                 let (v, v_u, owner) = (d.split.v, d.split.v_u, vs[i].own.addr);
                 let j = vertex_sum[i];
-                let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
-                let find = &find;
-                d.split.faces.iter().map(move |t| {
-                    let idx = t.map(|f| match f {
-                        f if f >= v && f < v_u => j,
-                        f if f >= v_u && f < end => j + 1,
-                        f => find(f),
-                    });
-                    (idx, *t, owner)
-                })
+                d.split.faces.iter().map(move |&t| (split_face_indices(t, v, v_u, j, new_fvid_ref), t, owner))
             })
             .collect();
         debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
