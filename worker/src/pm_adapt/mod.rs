@@ -182,17 +182,6 @@ impl GpuAdapter {
         })
     }
 
-    /// A second adapter of the same mesh on the same device, at the base mesh, sharing the
-    /// pipelines and static buffers.
-    pub fn sibling(&self) -> GpuAdapter {
-        self.sibling_with_slack(self.n_alloc)
-    }
-
-    /// [`GpuAdapter::sibling`] with its own `n_alloc`.
-    pub fn sibling_with_slack(&self, n_alloc: u32) -> GpuAdapter {
-        GpuAdapter::with_shared(self.gpu.clone(), self.shared.clone(), n_alloc.max(1))
-    }
-
     /// A new adapter at the base mesh.
     fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
         let d = gpu.device();
