@@ -55,6 +55,9 @@ pub enum FormatError {
     TrailingBytes(usize),
     #[error("corrupt {0} data: {1}")]
     Corrupt(Format, String),
+    /// The file could not be read (an out-of-core reader reads it while it runs).
+    #[error("{0}")]
+    Io(String),
     /// Well formed, but decoding it would take more memory than the cap on decompressed
     /// input allows ([`crate::input::max_decompressed_bytes`]).
     #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
@@ -158,10 +161,43 @@ impl<const N: usize> Layout<N> {
     /// sections. A prefix of the magic number reads as truncated, anything else there as bad
     /// magic.
     pub fn parse<'a>(&self, bytes: &'a [u8]) -> Result<Contents<'a, N>, FormatError> {
-        self.parse_container(bytes).map_err(|e| e.within(self))
+        self.parse_container(bytes, false).map_err(|e| e.within(self))
     }
 
-    fn parse_container<'a>(&self, bytes: &'a [u8]) -> Result<Contents<'a, N>, ContainerError> {
+    /// Checks a file's bytes up to its last section's payload ([`Layout::read_prefix`]): magic,
+    /// version, the header and every section but the last, which comes back empty, with its
+    /// length in `last_len`. For out-of-core readers, which check the last section in pieces.
+    pub fn parse_prefix<'a>(&self, bytes: &'a [u8]) -> Result<Contents<'a, N>, FormatError> {
+        self.parse_container(bytes, true).map_err(|e| e.within(self))
+    }
+
+    /// Reads from `r` the bytes [`Layout::parse_prefix`] checks: everything before the last
+    /// section's payload. Fails with the error of the bytes read so far where they cannot be
+    /// the start of such a file.
+    pub fn read_prefix(&self, r: &mut impl std::io::Read) -> Result<Vec<u8>, FormatError> {
+        let mut out = vec![];
+        let mut take = |out: &mut Vec<u8>, n: usize| -> Result<(), FormatError> {
+            let at = out.len();
+            out.resize(at + n, 0);
+            r.read_exact(&mut out[at..]).map_err(|e| match e.kind() {
+                std::io::ErrorKind::UnexpectedEof => self.parse_container(out, true).map_err(|e| e.within(self)).err()
+                    .unwrap_or(FormatError::Truncated("file")),
+                _ => FormatError::Io(format!("cannot read: {e}")),
+            })
+        };
+        take(&mut out, 12)?;
+        let hlen = u16::from_le_bytes([out[10], out[11]]) as usize;
+        take(&mut out, hlen + 4)?;
+        for _ in 0..N - 1 {
+            take(&mut out, 8)?;
+            let n = u32::from_le_bytes(out[out.len() - 4..].try_into().unwrap()) as usize;
+            take(&mut out, n + 4)?;
+        }
+        take(&mut out, 8)?;
+        Ok(out)
+    }
+
+    fn parse_container<'a>(&self, bytes: &'a [u8], prefix: bool) -> Result<Contents<'a, N>, ContainerError> {
         let mut r = Reader { b: bytes, pos: 0 };
         let magic = r.take(8, "magic number").map_err(|e| {
             if self.magic.starts_with(bytes) {
@@ -183,12 +219,17 @@ impl<const N: usize> Layout<N> {
             return Err(ContainerError::Checksum("header"));
         }
         let mut sections: [&[u8]; N] = [&[]; N];
+        let mut last_len = 0;
         for (i, s) in sections.iter_mut().enumerate() {
             let name = self.names[i];
             if r.take(4, name)? != self.tags[i] {
                 return Err(ContainerError::WrongSection(name));
             }
             let n = r.u32(name)? as usize;
+            if prefix && i == N - 1 {
+                last_len = n as u64;
+                break;
+            }
             *s = r.take(n, name)?;
             if r.u32(name)? != crc32fast::hash(s) {
                 return Err(ContainerError::Checksum(name));
@@ -197,7 +238,7 @@ impl<const N: usize> Layout<N> {
         if r.pos != bytes.len() {
             return Err(ContainerError::TrailingBytes(bytes.len() - r.pos));
         }
-        Ok(Contents { version, header, sections })
+        Ok(Contents { version, header, sections, last_len })
     }
 }
 
@@ -207,6 +248,8 @@ pub(crate) struct Contents<'a, const N: usize> {
     pub version: u16,
     pub header: &'a [u8],
     pub sections: [&'a [u8]; N],
+    /// The last section's length (where parsed with [`Layout::parse_prefix`]; else 0).
+    pub last_len: u64,
 }
 
 pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
@@ -247,7 +290,7 @@ mod tests {
     #[test]
     fn round_trip_and_errors() {
         let bytes = LAYOUT.write(b"head", [b"one", b""]);
-        assert_eq!(LAYOUT.parse(&bytes), Ok(Contents { version: 3, header: b"head", sections: [b"one", b""] }));
+        assert_eq!(LAYOUT.parse(&bytes), Ok(Contents { version: 3, header: b"head", sections: [b"one", b""], last_len: 0 }));
         assert_eq!(LAYOUT.parse(&bytes[..3]), Err(FormatError::Truncated("magic number")));
         assert_eq!(LAYOUT.parse(b"nope"), Err(FormatError::BadMagic(Format::Bft)));
         let mut longer = bytes.clone();

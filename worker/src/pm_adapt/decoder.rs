@@ -25,7 +25,7 @@ pub(crate) const DECODE_WG: u32 = 64;
 const BATCH: usize = 1 << 16;
 
 /// The WGSL names of the format's fields, in [`TABLE_BASE`]'s order.
-const FIELD_NAMES: [&str; 17] = [
+const FIELD_NAMES: [&str; 19] = [
     "T_SIN",
     "T_GEOM",
     "T_ATTR",
@@ -43,6 +43,8 @@ const FIELD_NAMES: [&str; 17] = [
     "T_POS_NORMAL",
     "T_NORMAL",
     "T_POINTER",
+    "T_NODE_DELTA",
+    "T_LOCAL",
 ];
 
 /// The constants `decode.wgsl` takes from the format: the first table of every field and the

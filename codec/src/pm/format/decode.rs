@@ -8,7 +8,8 @@
 use std::sync::Arc;
 
 use super::fields::KINDS;
-use super::header::{corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT};
+use super::header::{corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT, NODELESS_VERSION, NODE_BYTES};
+use super::nodes::{read_node_table, NodeInfo};
 use super::op::{read_op, DecodedOp, OpContext};
 use super::quantize::{dequantize_position, max_q, oct_decode, valid_oct};
 use super::tables::read_tables;
@@ -21,7 +22,8 @@ fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmErro
     u32::try_from(get_varint(b, pos, what)?).map_err(|_| corrupt(format!("number out of range in {what}")))
 }
 
-/// The parsed container: header, tables, the base mesh and the operation bytes.
+/// The parsed container: header, tables, the base mesh, the node table and the operation
+/// bytes (out of core: none, see [`Dpm::parse_prefix`]).
 #[derive(Clone, Debug)]
 pub struct Dpm<'a> {
     pub header: Header,
@@ -33,35 +35,47 @@ pub struct Dpm<'a> {
     /// Per base vertex: the address of its first operation.
     pub roots: Vec<Option<usize>>,
     pub base_faces: Vec<[u32; 3]>,
+    /// The out-of-core hierarchy's nodes (none in core), parents before children.
+    pub nodes: Vec<NodeInfo>,
+    /// The operations section (empty where parsed with [`Dpm::parse_prefix`]).
     pub ops: &'a [u8],
-    /// The sizes of the sections TABL, BASE, OPER.
-    pub(super) section_lens: [usize; 3],
+    /// The sizes of the sections TABL, BASE, NODE, OPER.
+    pub(super) section_lens: [usize; 4],
 }
 
 impl<'a> Dpm<'a> {
-    /// Checks the container and reads the tables and the base mesh (not the operations).
+    /// Checks the container and reads the tables, the base mesh and the node table (not the
+    /// operations).
     pub fn parse(bytes: &'a [u8]) -> Result<Self, DpmError> {
-        let c = LAYOUT.parse(bytes).map_err(|e| match e {
-            DpmError::UnsupportedVersion { format, found: FLOAT_VERSION, known } => DpmError::Outdated {
-                format,
-                found: FLOAT_VERSION,
-                known,
-                remedy: "its operations decode with floating-point steps a GPU may round differently; \
-                         rebuild it from its source mesh with `tessera pm build`",
-            },
-            e => e,
-        })?;
-        let (hb, sections) = (c.header, c.sections);
-        let header = Header::from_bytes(hb)?;
-        let tables = read_tables(sections[0])?;
-        // Base mesh.
-        let bb = sections[1];
-        let ops = sections[2];
-        let nb = header.base_vertices as usize;
-        if ops.len() >= 1 << 31 {
+        let c = LAYOUT.parse(bytes).map_err(outdated)?;
+        let ops = c.sections[3];
+        if ops.len() >= 1 << 31 && c.sections[2].is_empty() {
             return Err(corrupt("operations section of 2 GiB or more"));
         }
-        if nb > bb.len() / 7 || header.base_faces as usize > bb.len() / 3 || header.splits as usize > ops.len() {
+        Self::from_parts(c.header, [c.sections[0], c.sections[1], c.sections[2]], ops, ops.len() as u64)
+    }
+
+    /// Parses an out-of-core file's bytes up to its operations (as [`NodeFile`] reads them):
+    /// the tables, the base mesh and the node table, checked; its nodes are read one by one and
+    /// checked by their own checksums ([`NodeInfo::check`]).
+    ///
+    /// [`NodeFile`]: super::NodeFile
+    pub fn parse_prefix(prefix: &'a [u8]) -> Result<Self, DpmError> {
+        let c = LAYOUT.parse_prefix(prefix).map_err(outdated)?;
+        if c.sections[2].is_empty() {
+            return Err(corrupt("an in-core file (no node table) read out of core"));
+        }
+        Self::from_parts(c.header, [c.sections[0], c.sections[1], c.sections[2]], &[], c.last_len)
+    }
+
+    fn from_parts(hb: &[u8], sections: [&[u8]; 3], ops: &'a [u8], ops_len: u64) -> Result<Self, DpmError> {
+        let header = Header::from_bytes(hb)?;
+        let tables = read_tables(sections[0])?;
+        let nodes = read_node_table(sections[2], &header, ops_len)?;
+        // Base mesh.
+        let bb = sections[1];
+        let nb = header.base_vertices as usize;
+        if nb > bb.len() / 7 || header.base_faces as usize > bb.len() / 3 || header.splits as u64 > ops_len {
             return Err(corrupt("counts larger than the data"));
         }
         let mut pos = 0;
@@ -92,9 +106,14 @@ impl<'a> Dpm<'a> {
             base_positions.push(p);
             base_normals.push(q);
             let root = get_varint(bb, &mut pos, "base vertices")?;
+            let in_range = |a: u64| match nodes.get((a / NODE_BYTES as u64) as usize) {
+                _ if nodes.is_empty() => a < ops_len,
+                Some(n) => (a % NODE_BYTES as u64) < n.len as u64,
+                None => false,
+            };
             roots.push(match root {
                 0 => None,
-                a if a - 1 < ops.len() as u64 => Some(a as usize - 1),
+                a if in_range(a - 1) => Some(a as usize - 1),
                 _ => return Err(corrupt("root operation address out of range")),
             });
         }
@@ -123,9 +142,26 @@ impl<'a> Dpm<'a> {
             base_normals,
             roots,
             base_faces,
+            nodes,
             ops,
-            section_lens: sections.map(|s| s.len()),
+            section_lens: [sections[0].len(), sections[1].len(), sections[2].len(), ops_len as usize],
         })
+    }
+
+    /// Whether the file has an out-of-core hierarchy (its addresses name nodes).
+    pub fn out_of_core(&self) -> bool {
+        !self.nodes.is_empty()
+    }
+
+    /// The node of address `addr` of an out-of-core file.
+    pub fn node_of(addr: usize) -> u32 {
+        (addr / NODE_BYTES) as u32
+    }
+
+    /// The bytes of node `i` within the operations section this was parsed with.
+    pub fn node_bytes(&self, i: u32) -> &'a [u8] {
+        let n = &self.nodes[i as usize];
+        self.ops.get(n.offset as usize..n.offset as usize + n.len as usize).unwrap_or(&[])
     }
 
     /// The probability tables, one per context ([`super::TABLES`] of them, in the order the format's
@@ -144,10 +180,32 @@ impl<'a> Dpm<'a> {
         oct_decode(q, self.header.normal_bits)
     }
 
-    /// Decodes the single operation at `addr` of the operations section; an error names the
-    /// operation by its address.
+    /// Decodes the single operation at `addr` (a byte of the operations section in core, a node
+    /// and a local address out of core); an error names the operation by its address (and
+    /// node).
     pub fn decode_op(&self, addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
-        read_op(&self.header, &self.tables, self.ops, addr, ctx, None).map_err(|e| naming(addr, e))
+        self.read(addr, ctx, None)
+    }
+
+    /// Decodes the operation at `addr` of an out-of-core file from `node`, the bytes of its
+    /// node (read and checked by the caller, [`NodeInfo::check`]).
+    pub fn decode_in(&self, node: &[u8], addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
+        let n = Self::node_of(addr);
+        read_op(&self.header, &self.tables, node, addr % NODE_BYTES, Some(n), ctx, None)
+            .map_err(|e| naming(addr, true, e))
+    }
+
+    fn read(&self, addr: usize, ctx: &OpContext, bits: Option<&mut [u64; KINDS]>) -> Result<DecodedOp, DpmError> {
+        if self.nodes.is_empty() {
+            return read_op(&self.header, &self.tables, self.ops, addr, None, ctx, bits)
+                .map_err(|e| naming(addr, false, e));
+        }
+        let n = Self::node_of(addr);
+        if n as usize >= self.nodes.len() {
+            return Err(naming(addr, true, corrupt("operation address past the last node")));
+        }
+        read_op(&self.header, &self.tables, self.node_bytes(n), addr % NODE_BYTES, Some(n), ctx, bits)
+            .map_err(|e| naming(addr, true, e))
     }
 
     /// Decodes every operation (pre-order over the forest), optionally counting bits per field.
@@ -186,8 +244,7 @@ impl<'a> Dpm<'a> {
                 if splits.len() >= h.splits as usize {
                     return Err(corrupt("more operations than the header says"));
                 }
-                let op =
-                    read_op(h, &self.tables, self.ops, addr, &ctx, bits.as_deref_mut()).map_err(|e| naming(addr, e))?;
+                let op = self.read(addr, &ctx, bits.as_deref_mut())?;
                 let v_u = op.split.v_u;
                 positions[v_u as usize] = dequantize_position(op.position_u, h);
                 normals[v_u as usize] = oct_decode(op.normal_u, h.normal_bits);
@@ -236,12 +293,39 @@ impl<'a> Dpm<'a> {
     }
 }
 
-/// An operation's error, naming the operation by its address (where the section ends inside
-/// an operation, the data is corrupt: the container has checked the section's length).
-fn naming(addr: usize, e: DpmError) -> DpmError {
+/// A container error, with versions 2 and 3 named as outdated and how to get a current file.
+fn outdated(e: DpmError) -> DpmError {
     match e {
-        DpmError::Corrupt(f, m) => DpmError::Corrupt(f, format!("operation at byte {addr}: {m}")),
-        DpmError::Truncated(_) => corrupt(format!("operation at byte {addr}: the operations section ends inside it")),
+        DpmError::UnsupportedVersion { format, found: FLOAT_VERSION, known } => DpmError::Outdated {
+            format,
+            found: FLOAT_VERSION,
+            known,
+            remedy: "its operations decode with floating-point steps a GPU may round differently; \
+                     rebuild it from its source mesh with `tessera pm build`",
+        },
+        DpmError::UnsupportedVersion { format, found: NODELESS_VERSION, known } => DpmError::Outdated {
+            format,
+            found: NODELESS_VERSION,
+            known,
+            remedy: "it has no node table; rebuild it from its source mesh with `tessera pm build`",
+        },
+        e => e,
+    }
+}
+
+/// An operation's error, naming the operation by its address (where the section or node ends
+/// inside an operation, the data is corrupt: the container or the node table has checked the
+/// length); out of core by its node and local address.
+fn naming(addr: usize, out_of_core: bool, e: DpmError) -> DpmError {
+    let at = if out_of_core {
+        format!("node {}: operation at byte {}", addr / NODE_BYTES, addr % NODE_BYTES)
+    } else {
+        format!("operation at byte {addr}")
+    };
+    let ends = if out_of_core { "the node" } else { "the operations section" };
+    match e {
+        DpmError::Corrupt(f, m) => DpmError::Corrupt(f, format!("{at}: {m}")),
+        DpmError::Truncated(_) => corrupt(format!("{at}: {ends} ends inside it")),
         e => e,
     }
 }

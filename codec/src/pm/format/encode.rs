@@ -16,9 +16,13 @@
 use rayon::prelude::*;
 
 use super::fields::TABLES;
-use super::header::{Header, LAYOUT};
-use super::op::{classify, write_op, FaceCode, OpContext, OpData};
-use super::quantize::{fit_header, oct_encode, quantize_criteria, quantize_position};
+use super::header::{Header, LAYOUT, MAX_NODES, NODE_BYTES};
+use super::hierarchy::{self, Hierarchy, OpGeometry};
+use super::nodes::{write_node_table, NodeInfo};
+use super::op::{classify, write_op, FaceCode, Loc, OpContext, OpData};
+use super::quantize::{
+    dequantize_criteria, dequantize_position, fit_header, oct_encode, quantize_criteria, quantize_position,
+};
 use super::symbols::OpWriter;
 use super::tables::{every_symbol, write_tables};
 use crate::container::put_varint;
@@ -33,16 +37,19 @@ pub struct EncodeOptions {
     pub position_bits: u8,
     /// Bits per octahedral normal coordinate (4 to 16).
     pub normal_bits: u8,
+    /// 0: an in-core file; else the most bytes of a node of the out-of-core hierarchy (at
+    /// most [`NODE_BYTES`], the paper's 64 kB; less makes small models take many nodes).
+    pub node_bytes: u32,
 }
 
 impl Default for EncodeOptions {
     fn default() -> Self {
-        EncodeOptions { position_bits: 16, normal_bits: 10 }
+        EncodeOptions { position_bits: 16, normal_bits: 10, node_bytes: 0 }
     }
 }
 
-/// An encoded file and, per split of the input (in its order), the operation's address in the
-/// operations section and its context.
+/// An encoded file and, per split of the input (in its order), the operation's address (in the
+/// operations section in core, `node * NODE_BYTES + local` out of core) and its context.
 #[derive(Clone, Debug)]
 pub struct Encoded {
     pub bytes: Vec<u8>,
@@ -85,14 +92,28 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
     let last = recompute_and_recompress(&ops, &offsets);
     h.avg_op_size = offsets.avg;
 
-    let (oper, addresses) = lay_out(&ops, &last.bytes, &last.choices.swaps);
-    // Offsets into the section and their residuals stay within 32 bits as zigzag values.
-    if oper.len() >= 1 << 31 {
-        return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
-    }
-    let tb = write_tables(&last.tables);
+    let (oper, addresses, tables, node_table) = if opts.node_bytes == 0 {
+        let (oper, addresses) = lay_out(&ops, &last.bytes, &last.choices.swaps);
+        // Offsets into the section and their residuals stay within 32 bits as zigzag values.
+        if oper.len() >= 1 << 31 {
+            return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
+        }
+        (oper, addresses, last.tables, vec![])
+    } else if ops.data.is_empty() {
+        // Nothing to page: a mesh without operations is an in-core file.
+        (vec![], vec![], last.tables, vec![])
+    } else {
+        let ooc = out_of_core(&ops, &last, &h, opts.node_bytes)?;
+        h.nodes = ooc.infos.len() as u32;
+        let mut addresses = vec![0usize; ops.order.len()];
+        for (i, &s) in ops.order.iter().enumerate() {
+            addresses[s] = ooc.addr[i];
+        }
+        (ooc.nodes.concat(), addresses, ooc.tables, write_node_table(&ooc.infos))
+    };
+    let tb = write_tables(&tables);
     let bb = base_section(pm, &tree, &qpos, &qnrm, &addresses);
-    let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &oper]);
+    let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &node_table, &oper]);
     Ok(Encoded { bytes, header: h, addresses, contexts: ops.contexts, symbol_bits: last.symbol_bits })
 }
 
@@ -307,8 +328,18 @@ fn recompute_and_recompress(ops: &Operations, step3: &Choices) -> Recompressed {
 /// The symbol counts per table of every operation coded with `choices`, in parallel chunks,
 /// each with its own counts, summed at the end.
 fn count_symbols(ops: &Operations, choices: &Choices) -> Vec<[u64; 256]> {
-    const CHUNK: usize = 1 << 14;
     let Choices { swaps, offsets, avg } = choices;
+    count_coded(ops, *avg, &|i| (swaps[i], offsets[i], None))
+}
+
+/// The symbol counts per table of every operation coded with the choices `coding` gives per
+/// operation (swap, offset, out-of-core locations).
+fn count_coded(
+    ops: &Operations,
+    avg: u32,
+    coding: &(dyn Fn(usize) -> (bool, u64, Option<[Loc; 2]>) + Sync),
+) -> Vec<[u64; 256]> {
+    const CHUNK: usize = 1 << 14;
     ops.data
         .par_chunks(CHUNK)
         .enumerate()
@@ -317,7 +348,8 @@ fn count_symbols(ops: &Operations, choices: &Choices) -> Vec<[u64; 256]> {
             for (k, d) in chunk.iter().enumerate() {
                 let i = c * CHUNK + k;
                 let mut w = OpWriter::counting(&mut counts);
-                write_op(&mut w, d, swaps[i], offsets[i], *avg, ops.normal_bits);
+                let (swap, offset, ooc) = coding(i);
+                write_op(&mut w, d, swap, offset, avg, ops.normal_bits, ooc);
             }
             counts
         })
@@ -368,7 +400,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (Vec<Vec<
                 let [l, r] = child_ops[i];
                 let code = |swap: bool, offset: u64| {
                     let mut w = OpWriter::coding(tables);
-                    write_op(&mut w, d, swap, offset, avg, ops.normal_bits);
+                    write_op(&mut w, d, swap, offset, avg, ops.normal_bits, None);
                     w.finish()
                 };
                 if d.has_left && d.has_right {
@@ -394,6 +426,266 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (Vec<Vec<
         }
     }
     (bytes, Choices { swaps, offsets, avg })
+}
+
+/// An out-of-core layout: the tables, per node its bytes and what the node table keeps of it,
+/// per operation its address (`node * NODE_BYTES + local`).
+struct OutOfCore {
+    tables: Vec<Table>,
+    nodes: Vec<Vec<u8>>,
+    infos: Vec<NodeInfo>,
+    addr: Vec<usize>,
+}
+
+/// How an operation of an out-of-core file is coded: its swap, the in-node offset of the child
+/// stored second, where its children are.
+#[derive(Clone, Copy, Debug, Default)]
+struct OocCoding {
+    swap: bool,
+    offset: u64,
+    locs: [Loc; 2],
+}
+
+/// The out-of-core layout (sections 4.1 and 4.2): the hierarchy built over the in-core coded
+/// sizes (plus a byte for the node pointers), the operations coded node by node, children's
+/// nodes first, with the in-core tables, the tables counted again from that coding and the
+/// operations coded again. As in the paper, where a node comes out larger than
+/// `node_bytes`, the hierarchy is built again with a smaller size limit ("we iteratively reduce
+/// the maximum node size when building the hierarchy and store the model as soon as all
+/// nodes are small enough after compression").
+fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: u32) -> Result<OutOfCore, EncodeError> {
+    if node_bytes as usize > NODE_BYTES || node_bytes < 256 {
+        return Err(EncodeError::InvalidOptions(format!("node size {node_bytes} bytes outside 256 to {NODE_BYTES}")));
+    }
+    let m = ops.data.len();
+    let geometry: Vec<OpGeometry> = (0..m)
+        .into_par_iter()
+        .map(|i| {
+            let d = &ops.data[i];
+            let c = dequantize_criteria(d.crit, h);
+            OpGeometry {
+                children: ops.child_ops[i],
+                size: incore.bytes[i].len() as u64 + 1,
+                error: c.geometric_error,
+                center: dequantize_position(d.ctx.position, h),
+                radius: c.radius,
+            }
+        })
+        .collect();
+    let roots: Vec<usize> = ops.root_ops.iter().copied().filter(|&r| r != usize::MAX).collect();
+    let mut s_max = node_bytes as u64 * 15 / 16;
+    loop {
+        let hier = hierarchy::build(&geometry, &roots, s_max)
+            .ok_or_else(|| invalid(&format!("an operation is larger than a node of {node_bytes} bytes")))?;
+        if hier.parents.len() > MAX_NODES as usize {
+            return Err(invalid(&format!(
+                "more than {MAX_NODES} nodes of {node_bytes} bytes; use larger nodes or split the model into chunks"
+            )));
+        }
+        let mut tables = incore.tables.clone();
+        let mut largest = 0;
+        for round in 0..2 {
+            let (nodes, addr, coding) = code_nodes(ops, &hier, &tables, h.avg_op_size);
+            largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
+            if largest > node_bytes as usize {
+                break;
+            }
+            if round == 0 {
+                let counts = count_coded(ops, h.avg_op_size, &|i| {
+                    let c = coding[i];
+                    (c.swap, c.offset, Some(c.locs))
+                });
+                tables = counts.iter().map(every_symbol).collect();
+            } else {
+                let infos = node_infos(&geometry, &hier, &nodes, ops, h);
+                return Ok(OutOfCore { tables, nodes, infos, addr });
+            }
+        }
+        let shrunk = (s_max as f64 * node_bytes as f64 / largest as f64 * 0.98) as u64;
+        s_max = shrunk.min(s_max - 1);
+        if s_max < 64 {
+            return Err(invalid("the out-of-core hierarchy does not fit its nodes"));
+        }
+    }
+}
+
+/// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
+/// each in parallel with the others of its depth, so that a child's address is known when its
+/// parent operation is coded. Returns per node its bytes, per operation its address and coding.
+fn code_nodes(
+    ops: &Operations,
+    hier: &Hierarchy,
+    tables: &[Table],
+    avg: u32,
+) -> (Vec<Vec<u8>>, Vec<usize>, Vec<OocCoding>) {
+    let m = ops.data.len();
+    let count = hier.parents.len();
+    let mut depth = vec![0usize; count];
+    for n in 0..count {
+        depth[n] = hier.parents[n].map_or(0, |p| depth[p as usize] + 1);
+    }
+    let mut members: Vec<Vec<usize>> = vec![vec![]; count];
+    for (i, &n) in hier.node_of.iter().enumerate() {
+        members[n as usize].push(i);
+    }
+    let mut parent_op = vec![usize::MAX; m];
+    for (i, c) in ops.child_ops.iter().enumerate() {
+        for &c in c.iter().filter(|&&c| c != usize::MAX) {
+            parent_op[c] = i;
+        }
+    }
+    let mut by_depth: Vec<Vec<usize>> = vec![vec![]; depth.iter().max().map_or(0, |d| d + 1)];
+    for (n, &d) in depth.iter().enumerate() {
+        by_depth[d].push(n);
+    }
+    let mut addr = vec![usize::MAX; m];
+    let mut coding = vec![OocCoding::default(); m];
+    let mut nodes: Vec<Vec<u8>> = vec![vec![]; count];
+    for level in by_depth.iter().rev() {
+        let coded: Vec<(Vec<u8>, Vec<(usize, usize, OocCoding)>)> = level
+            .par_iter()
+            .map(|&n| code_node(ops, hier, &members[n], n as u32, &parent_op, &addr, tables, avg))
+            .collect();
+        for (&n, (bytes, placed)) in level.iter().zip(coded) {
+            for (i, a, c) in placed {
+                addr[i] = a;
+                coding[i] = c;
+            }
+            nodes[n] = bytes;
+        }
+    }
+    (nodes, addr, coding)
+}
+
+/// Codes the operations `list` (ascending, pre-order) of node `n`, children before parents,
+/// each with the shorter of its swaps (as [`compress_bottom_up`]), and lays them out: per
+/// operation subtree entering the node, in pre-order, each operation followed by the child it
+/// stores first where that is in the node. Returns the node's bytes and per operation its
+/// address and coding.
+#[allow(clippy::too_many_arguments)]
+fn code_node(
+    ops: &Operations,
+    hier: &Hierarchy,
+    list: &[usize],
+    n: u32,
+    parent_op: &[usize],
+    addr: &[usize],
+    tables: &[Table],
+    avg: u32,
+) -> (Vec<u8>, Vec<(usize, usize, OocCoding)>) {
+    let idx = |i: usize| list.binary_search(&i).ok();
+    let mut inner = vec![0u64; list.len()];
+    let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
+    let mut coding = vec![OocCoding::default(); list.len()];
+    for (k, &i) in list.iter().enumerate().rev() {
+        let d = &ops.data[i];
+        let [l, r] = ops.child_ops[i];
+        // A child's location and the bytes of its subtree's part in this node.
+        let loc = |c: usize| -> (Loc, u64) {
+            if hier.node_of[c] == n {
+                (Loc::default(), inner[idx(c).expect("in the node")])
+            } else {
+                let a = addr[c];
+                debug_assert!(hier.node_of[c] > n && a != usize::MAX);
+                (Loc { delta: hier.node_of[c] - n, local: (a % NODE_BYTES) as u32 }, 0)
+            }
+        };
+        let code = |swap: bool| {
+            let (first, second) = if swap { (r, l) } else { (l, r) };
+            let mut locs = [Loc::default(); 2];
+            let mut sizes = [0u64; 2];
+            for (k, c) in [first, second].into_iter().filter(|&c| c != usize::MAX).enumerate() {
+                (locs[k], sizes[k]) = loc(c);
+            }
+            let offset = if first != usize::MAX && second != usize::MAX && locs[0].delta == 0 { sizes[0] } else { 0 };
+            let mut w = OpWriter::coding(tables);
+            write_op(&mut w, d, swap, offset, avg, ops.normal_bits, Some(locs));
+            let (b, bits) = w.finish();
+            (b, bits, OocCoding { swap, offset, locs })
+        };
+        let (b, _, c) = if d.has_left && d.has_right {
+            let plain = code(false);
+            let other = code(true);
+            if (other.0.len(), other.1) < (plain.0.len(), plain.1) {
+                other
+            } else {
+                plain
+            }
+        } else {
+            code(false)
+        };
+        let sub = |c: usize| if c != usize::MAX && hier.node_of[c] == n { inner[idx(c).unwrap()] } else { 0 };
+        inner[k] = b.len() as u64 + sub(l) + sub(r);
+        bytes[k] = b;
+        coding[k] = c;
+    }
+    let mut out = Vec::with_capacity(inner.iter().sum::<u64>() as usize);
+    let mut placed = Vec::with_capacity(list.len());
+    let mut stack = vec![];
+    for (k, &i) in list.iter().enumerate() {
+        let p = parent_op[i];
+        if p != usize::MAX && hier.node_of[p] == n {
+            continue;
+        }
+        stack.push(k);
+        while let Some(k) = stack.pop() {
+            let i = list[k];
+            placed.push((i, n as usize * NODE_BYTES + out.len(), coding[k]));
+            out.extend_from_slice(&bytes[k]);
+            let [l, r] = ops.child_ops[i];
+            let (first, second) = if coding[k].swap { (r, l) } else { (l, r) };
+            for c in [second, first] {
+                if c != usize::MAX && hier.node_of[c] == n {
+                    stack.push(idx(c).unwrap());
+                }
+            }
+        }
+    }
+    (out, placed)
+}
+
+/// What the node table keeps of every node: its length and checksum, its parent, the box of
+/// its operations' bounding spheres (widened by a few ulps so that `f32` rounding cannot put
+/// a sphere outside it) and its greatest errors, as the operations decode.
+fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>], ops: &Operations, h: &Header) -> Vec<NodeInfo> {
+    let mut infos: Vec<NodeInfo> = nodes
+        .iter()
+        .zip(&hier.parents)
+        .map(|(b, &parent)| NodeInfo {
+            offset: 0,
+            len: b.len() as u32,
+            parent,
+            bbox_min: [f32::INFINITY; 3],
+            bbox_max: [f32::NEG_INFINITY; 3],
+            geometric_error: 0.0,
+            attribute_error: 0.0,
+            crc: crc32fast::hash(b),
+        })
+        .collect();
+    let mut offset = 0;
+    for n in &mut infos {
+        n.offset = offset;
+        offset += n.len as u64;
+    }
+    let widen = |x: f32, up: bool| {
+        let e = x.abs() * 4.0 * f32::EPSILON + f32::MIN_POSITIVE;
+        if up {
+            x + e
+        } else {
+            x - e
+        }
+    };
+    for (i, g) in geometry.iter().enumerate() {
+        let n = &mut infos[hier.node_of[i] as usize];
+        for k in 0..3 {
+            n.bbox_min[k] = n.bbox_min[k].min(widen(g.center[k] - g.radius, false));
+            n.bbox_max[k] = n.bbox_max[k].max(widen(g.center[k] + g.radius, true));
+        }
+        let c = dequantize_criteria(ops.data[i].crit, h);
+        n.geometric_error = n.geometric_error.max(c.geometric_error);
+        n.attribute_error = n.attribute_error.max(c.attribute_error);
+    }
+    infos
 }
 
 /// The operations section: pre-order, each operation followed by the subtree it stores first.
@@ -475,6 +767,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         avg_op_size: 4 << 16,
         triangles: data.first().copied().unwrap_or(0) as u32,
         max_faces: 64,
+        nodes: 0,
     };
     let tb = vec![0u8; TABLES.div_ceil(8)];
     let mut bb = vec![];
@@ -483,5 +776,5 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         put_varint(&mut bb, 0);
     }
     put_varint(&mut bb, if data.is_empty() { 0 } else { 1 });
-    LAYOUT.write(&h.to_bytes(), [&tb, &bb, data])
+    LAYOUT.write(&h.to_bytes(), [&tb, &bb, &[], data])
 }

@@ -96,7 +96,9 @@ pub(super) const POS_TANGENT: usize = 13;
 pub(super) const POS_NORMAL: usize = 14;
 pub(super) const NORMAL: usize = 15;
 pub(super) const POINTER: usize = 16;
-pub(super) const FIELDS: [Field; 17] = [
+pub(super) const NODE_DELTA: usize = 17;
+pub(super) const LOCAL: usize = 18;
+pub(super) const FIELDS: [Field; 19] = [
     field(Kind::Sin, 4, Scheme::Groups),
     field(Kind::GeomError, 1, Scheme::Groups),
     field(Kind::AttrError, 1, Scheme::Groups),
@@ -114,6 +116,10 @@ pub(super) const FIELDS: [Field; 17] = [
     field(Kind::Position, MAGNITUDES, Scheme::Buckets),
     field(Kind::Normal, MAGNITUDES, Scheme::Buckets),
     field(Kind::Pointer, SPLIT_CLASSES, Scheme::Groups),
+    // Out-of-core files only: per child that splits, its node's distance (class: the child
+    // stored first or second) and, in another node, its local address.
+    field(Kind::Pointer, 2, Scheme::Groups),
+    field(Kind::Pointer, 1, Scheme::Buckets),
 ];
 
 pub(super) const fn tables_per_class(s: Scheme) -> usize {
@@ -126,7 +132,8 @@ pub(super) const fn tables_per_class(s: Scheme) -> usize {
 /// Per field, the index of its first table; the last entry is the number of tables. The fields
 /// in order: `sin(alpha)`, geometric error, attribute error, radius, head, split point, face
 /// count, face form, face corner in `v_l`'s range, in `v_u`'s, third corner, its difference,
-/// general corner, tangential position, normal position, normal, pointer. A field's class `c`
+/// general corner, tangential position, normal position, normal, pointer, and (out of core)
+/// node distance and local address. A field's class `c`
 /// starts at its base plus `c` (buckets) or `3 c` (groups: significance 0, 1, 2 and more).
 pub const TABLE_BASE: [usize; FIELDS.len() + 1] = {
     let mut b = [0; FIELDS.len() + 1];

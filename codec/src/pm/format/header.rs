@@ -7,20 +7,31 @@ use crate::container::Layout;
 pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = 4;
 /// The last version whose operations decode with floating-point steps (`exp`, an `f64`
 /// prediction): refused with a message that says how to get a current file.
 pub const FLOAT_VERSION: u16 = 2;
-const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 9;
-/// The `.dpm` container: sections TABL, BASE, OPER.
-pub(super) const LAYOUT: Layout<3> = Layout {
+/// The last version without a node table (`NODE`) or a node count in the header: its
+/// operations decode as version 4's in-core ones, but its container differs; refused with a
+/// message that says how to get a current file.
+pub const NODELESS_VERSION: u16 = 3;
+const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 10;
+/// The `.dpm` container: sections TABL, BASE, NODE, OPER (the operations last, so that an
+/// out-of-core reader reads everything before them and then the nodes it needs).
+pub(super) const LAYOUT: Layout<4> = Layout {
     format: Format::Dpm,
     magic: MAGIC,
     version: VERSION,
     reads: &[VERSION],
-    tags: [*b"TABL", *b"BASE", *b"OPER"],
-    names: ["tables section", "base mesh section", "operations section"],
+    tags: [*b"TABL", *b"BASE", *b"NODE", *b"OPER"],
+    names: ["tables section", "base mesh section", "node table", "operations section"],
 };
+
+/// The most bytes of operations in one node of an out-of-core file: an operation's address is
+/// `node * NODE_BYTES + local` (section 4.2.1's `2^16`), 32 bits in all.
+pub const NODE_BYTES: usize = 1 << 16;
+/// The most nodes of an out-of-core file (address `u32::MAX` means "none").
+pub const MAX_NODES: u32 = (1 << 16) - 1;
 
 /// Everything that can be wrong with `.dpm` bytes: the container error type both formats
 /// share. (What keeps a mesh from being encoded is an [`EncodeError`](super::EncodeError).)
@@ -35,7 +46,7 @@ pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
     crate::container::get_varint(Format::Dpm, b, pos, what)
 }
 
-/// The fixed header, little-endian, `HEADER_LEN` (54) bytes:
+/// The fixed header, little-endian, `HEADER_LEN` (58) bytes:
 ///
 /// ```text
 /// offset  size  field
@@ -52,6 +63,7 @@ pub(super) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
 /// 42      4     avg_op_size (u32, 16.16 fixed point)
 /// 46      4     triangles (u32)
 /// 50      4     max_faces (u32, at most 65535)
+/// 54      4     nodes (u32; 0: in core, else the nodes of the out-of-core hierarchy)
 /// ```
 ///
 /// Reading it rejects bit counts out of range, non-finite floats, steps that are not positive,
@@ -82,6 +94,9 @@ pub struct Header {
     /// The most faces one operation adds: decoders refuse operations with more, which bounds
     /// the work of a corrupt one (a GPU thread's loop, the faces allocated).
     pub max_faces: u32,
+    /// The nodes of the out-of-core hierarchy (section 4.1), at most [`MAX_NODES`]; 0 for an
+    /// in-core file, whose operation addresses are byte offsets into the operations section.
+    pub nodes: u32,
 }
 
 /// The most faces an operation may add (the header's `max_faces` at most).
@@ -103,6 +118,7 @@ impl Header {
         b.extend_from_slice(&self.avg_op_size.to_le_bytes());
         b.extend_from_slice(&self.triangles.to_le_bytes());
         b.extend_from_slice(&self.max_faces.to_le_bytes());
+        b.extend_from_slice(&self.nodes.to_le_bytes());
         debug_assert_eq!(b.len(), HEADER_LEN);
         b
     }
@@ -127,6 +143,7 @@ impl Header {
             avg_op_size: u(42),
             triangles: u(46),
             max_faces: u(50),
+            nodes: u(54),
         };
         if !(8..=24).contains(&h.position_bits) || !(4..=16).contains(&h.normal_bits) {
             return Err(corrupt("quantization bits out of range"));
@@ -145,6 +162,9 @@ impl Header {
         }
         if h.max_faces > MAX_OP_FACES {
             return Err(corrupt("more faces per operation than the format allows"));
+        }
+        if h.nodes > MAX_NODES {
+            return Err(corrupt("more nodes than the format allows"));
         }
         Ok(h)
     }

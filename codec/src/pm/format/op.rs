@@ -9,9 +9,10 @@ use std::sync::Arc;
 use super::fields::{
     corner_class, criteria_prediction, head_class, magnitude_class, pointer_estimate, position_frame, region_class,
     sin_class, split_class, tangent_class, tangent_prediction, ATTR, FACE_COUNT, FACE_FORM, FACE_GENERAL, FACE_OTHER,
-    FACE_OTHER_DELTA, FACE_T, FACE_U, GEOM, HEAD, KINDS, NORMAL, POINTER, POS_NORMAL, POS_TANGENT, RADIUS, SIN, SPLIT,
+    FACE_OTHER_DELTA, FACE_T, FACE_U, GEOM, HEAD, KINDS, LOCAL, NODE_DELTA, NORMAL, POINTER, POS_NORMAL, POS_TANGENT,
+    RADIUS, SIN, SPLIT,
 };
-use super::header::{corrupt, Header};
+use super::header::{corrupt, Header, NODE_BYTES};
 use super::quantize::{dequantize_criteria, max_q, valid_oct, MAX_K};
 use super::symbols::{unzigzag, zigzag, OpReader, OpWriter};
 use super::DpmError;
@@ -79,6 +80,15 @@ pub(super) struct OpData {
     pub(super) dnrm: [i64; 2],
 }
 
+/// Where a child's operation is stored in an out-of-core file: its node's distance from this
+/// operation's node (0: the same node; a node's descendants in the hierarchy come after it)
+/// and, in another node, its local address there.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(super) struct Loc {
+    pub(super) delta: u32,
+    pub(super) local: u32,
+}
+
 /// The children code of the head symbol: 0 none splits further, 1 both (`v_l`'s operation
 /// first), 2 `v_l` only, 3 `v_u` only, 4 both, swapped (`v_u`'s operation first).
 fn children_code(left: bool, right: bool, swapped: bool) -> u32 {
@@ -103,8 +113,18 @@ fn face_pattern(faces: &[FaceCode]) -> u32 {
 }
 
 /// Writes an operation; `swapped` stores `v_u`'s subtree first, `offset` is the size in bytes
-/// of the subtree stored first (both only where both children split further).
-pub(super) fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64, avg: u32, normal_bits: u8) {
+/// of the subtree stored first (both only where both children split further; out of core, of
+/// its part in this node). Out of core, `ooc` says where the children stored first and second
+/// are (the first of the children that split, then the second).
+pub(super) fn write_op(
+    w: &mut OpWriter,
+    d: &OpData,
+    swapped: bool,
+    offset: u64,
+    avg: u32,
+    normal_bits: u8,
+    ooc: Option<[Loc; 2]>,
+) {
     let (v, v_u, v_end) = (d.ctx.v, d.v_u, d.ctx.v_end);
     let mut residual = [0i64; 4];
     for (i, r) in residual.iter_mut().enumerate() {
@@ -169,18 +189,37 @@ pub(super) fn write_op(w: &mut OpWriter, d: &OpData, swapped: bool, offset: u64,
     for x in d.dnrm {
         w.put_signed(NORMAL, class, x);
     }
-    if d.has_left && d.has_right {
-        w.put_signed(POINTER, split_class(first_size + 2), offset as i64 - pointer_estimate(avg, first_size));
+    let both = d.has_left && d.has_right;
+    match ooc {
+        None if both => {
+            w.put_signed(POINTER, split_class(first_size + 2), offset as i64 - pointer_estimate(avg, first_size))
+        }
+        None => {}
+        Some(locs) => {
+            let splitting = d.has_left as usize + d.has_right as usize;
+            for (k, loc) in locs.iter().enumerate().take(splitting) {
+                w.put(NODE_DELTA, k, loc.delta as u64);
+                if loc.delta != 0 {
+                    w.put(LOCAL, 0, loc.local as u64);
+                } else if k == 1 {
+                    let estimate = if locs[0].delta == 0 { pointer_estimate(avg, first_size) } else { 0 };
+                    w.put_signed(POINTER, split_class(first_size + 2), offset as i64 - estimate);
+                }
+            }
+        }
     }
 }
 
-/// Reads the operation at byte `addr` of the operations section `ops`, in context `ctx`,
-/// optionally adding the bits of every field to its kind. The inverse of [`write_op`].
+/// Reads the operation at byte `addr` of `ops`, in context `ctx`, optionally adding the bits
+/// of every field to its kind. The inverse of [`write_op`]. In core `ops` is the operations
+/// section and `node` `None`; out of core `ops` is the bytes of node `node` and `addr` the
+/// local address there, and the children's addresses come back as `node * NODE_BYTES + local`.
 pub(super) fn read_op(
     h: &Header,
     tables: &[Arc<Table>],
     ops: &[u8],
     addr: usize,
+    node: Option<u32>,
     ctx: &OpContext,
     bits: Option<&mut [u64; KINDS]>,
 ) -> Result<DecodedOp, DpmError> {
@@ -316,29 +355,84 @@ pub(super) fn read_op(
     if !valid_oct(normal_u, h.normal_bits) {
         return Err(corrupt("normal out of range"));
     }
-    let offset = if has_left && has_right {
-        let residual = r.get_signed(POINTER, split_class(first_size + 2))?;
-        let o = pointer_estimate(h.avg_op_size, first_size).saturating_add(residual);
-        if o < 1 {
-            return Err(corrupt("bad operation pointer"));
+    let both = has_left && has_right;
+    // The addresses of the children stored first and second (of those that split).
+    let (first, second) = match node {
+        None => {
+            let offset = if both {
+                let residual = r.get_signed(POINTER, split_class(first_size + 2))?;
+                let o = pointer_estimate(h.avg_op_size, first_size).saturating_add(residual);
+                if o < 1 {
+                    return Err(corrupt("bad operation pointer"));
+                }
+                o as u64
+            } else {
+                0
+            };
+            let end = r.end();
+            if (has_left || has_right) && end >= ops.len() {
+                return Err(DpmError::Truncated("the operations"));
+            }
+            let second = end as u64 + offset;
+            if both && second >= ops.len() as u64 {
+                return Err(corrupt("operation pointer past the end of the operations"));
+            }
+            (end, second as usize)
         }
-        o as u64
-    } else {
-        0
+        Some(n) => {
+            let mut at = [0usize; 2];
+            let mut direct_first = false;
+            for k in 0..has_left as usize + has_right as usize {
+                let delta = r.get(NODE_DELTA, k)?;
+                if delta == 0 {
+                    // In this node: the first directly after this operation, the second past
+                    // the first's subtree (its part in this node).
+                    let offset = if k == 1 {
+                        let estimate = if direct_first { pointer_estimate(h.avg_op_size, first_size) } else { 0 };
+                        let o = estimate.saturating_add(r.get_signed(POINTER, split_class(first_size + 2))?);
+                        if o < 0 || (direct_first && o < 1) {
+                            return Err(corrupt("bad operation pointer"));
+                        }
+                        o as u64
+                    } else {
+                        direct_first = true;
+                        0
+                    };
+                    at[k] = (n as u64 * NODE_BYTES as u64 + offset) as usize;
+                } else {
+                    let local = r.get(LOCAL, 0)?;
+                    let target = n as u64 + delta;
+                    if target >= h.nodes as u64 || local >= NODE_BYTES as u64 {
+                        return Err(corrupt("operation pointer past the last node"));
+                    }
+                    at[k] = (target * NODE_BYTES as u64 + local) as usize;
+                }
+            }
+            // The in-node offsets are from this operation's end, known only now.
+            let end = r.end();
+            let base = n as usize * NODE_BYTES;
+            for (k, a) in at.iter_mut().enumerate().take(has_left as usize + has_right as usize) {
+                if *a / NODE_BYTES == n as usize {
+                    let local = end as u64 + (*a - base) as u64;
+                    if local >= ops.len() as u64 {
+                        return Err(if k == 0 {
+                            DpmError::Truncated("the operations")
+                        } else {
+                            corrupt("operation pointer past the end of its node")
+                        });
+                    }
+                    *a = base + local as usize;
+                }
+            }
+            (at[0], at[1])
+        }
     };
     let end = r.end();
-    if (has_left || has_right) && end >= ops.len() {
-        return Err(DpmError::Truncated("the operations"));
-    }
-    let second = end as u64 + offset;
-    if has_left && has_right && second >= ops.len() as u64 {
-        return Err(corrupt("operation pointer past the end of the operations"));
-    }
     let (left, right) = match (has_left, has_right, swapped) {
-        (true, true, false) => (Some(end), Some(second as usize)),
-        (true, true, true) => (Some(second as usize), Some(end)),
-        (true, false, _) => (Some(end), None),
-        (false, true, _) => (None, Some(end)),
+        (true, true, false) => (Some(first), Some(second)),
+        (true, true, true) => (Some(second), Some(first)),
+        (true, false, _) => (Some(first), None),
+        (false, true, _) => (None, Some(first)),
         (false, false, _) => (None, None),
     };
     Ok(DecodedOp {

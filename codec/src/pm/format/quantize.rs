@@ -234,6 +234,7 @@ pub(super) fn fit_header(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<He
             }
             most as u32
         },
+        nodes: 0,
     })
 }
 
@@ -281,7 +282,7 @@ mod tests {
 
     fn bunny_header(position_bits: u8) -> Header {
         let pm = ProgressiveMesh { positions: vec![BUNNY_MIN, BUNNY_MAX], ..Default::default() };
-        fit_header(&pm, EncodeOptions { position_bits, normal_bits: 10 }).expect("valid options")
+        fit_header(&pm, EncodeOptions { position_bits, normal_bits: 10, node_bytes: 0 }).expect("valid options")
     }
 
     fn in_bunny_box(rng: &mut Rng) -> [f32; 3] {

@@ -28,6 +28,8 @@ pub struct DpmStats {
     pub base_bytes: usize,
     /// The probability tables section.
     pub table_bytes: usize,
+    /// The node table (out of core; empty in core).
+    pub node_table_bytes: usize,
     /// Magic, header, section framing and checksums.
     pub framing_bytes: usize,
 }
@@ -52,7 +54,7 @@ impl DpmStats {
             Kind::FaceGeneral,
         ]);
         let geometry_bytes = sum(&[Kind::Position, Kind::Normal]);
-        let [tables, base, ops] = dpm.section_lens;
+        let [tables, base, node_table, ops] = dpm.section_lens;
         Ok(DpmStats {
             header: dpm.header,
             bytes: bytes.len(),
@@ -63,7 +65,8 @@ impl DpmStats {
             padding_bytes: ops as f64 - criteria_bytes - tree_pointer_bytes - connectivity_bytes - geometry_bytes,
             base_bytes: base,
             table_bytes: tables,
-            framing_bytes: bytes.len() - tables - base - ops,
+            node_table_bytes: node_table,
+            framing_bytes: bytes.len() - tables - base - node_table - ops,
         })
     }
 
