@@ -180,7 +180,10 @@ impl<const N: usize> Layout<N> {
             let at = out.len();
             out.resize(at + n, 0);
             r.read_exact(&mut out[at..]).map_err(|e| match e.kind() {
-                std::io::ErrorKind::UnexpectedEof => self.parse_container(out, true).map_err(|e| e.within(self)).err()
+                std::io::ErrorKind::UnexpectedEof => self
+                    .parse_container(out, true)
+                    .map_err(|e| e.within(self))
+                    .err()
                     .unwrap_or(FormatError::Truncated("file")),
                 _ => FormatError::Io(format!("cannot read: {e}")),
             })
@@ -290,7 +293,10 @@ mod tests {
     #[test]
     fn round_trip_and_errors() {
         let bytes = LAYOUT.write(b"head", [b"one", b""]);
-        assert_eq!(LAYOUT.parse(&bytes), Ok(Contents { version: 3, header: b"head", sections: [b"one", b""], last_len: 0 }));
+        assert_eq!(
+            LAYOUT.parse(&bytes),
+            Ok(Contents { version: 3, header: b"head", sections: [b"one", b""], last_len: 0 })
+        );
         assert_eq!(LAYOUT.parse(&bytes[..3]), Err(FormatError::Truncated("magic number")));
         assert_eq!(LAYOUT.parse(b"nope"), Err(FormatError::BadMagic(Format::Bft)));
         let mut longer = bytes.clone();

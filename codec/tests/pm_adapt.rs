@@ -500,3 +500,75 @@ fn a_child_sphere_raised_by_its_neighbours_nests_in_its_parent() {
     }
     check_path(&pm, 20, 26.401794);
 }
+
+/// Out of core (section 5.7): the adaption from the resident nodes of an out-of-core file,
+/// loaded by priority within a budget that holds the nodes every frame requires but not the
+/// model, equals the in-core adaption pass for pass over a camera path (an operation in a node
+/// of priority below 1 is never asked for), with operations waiting for their nodes on the
+/// way, and the resident bytes stay within the budget; the loader thread, waited for, gives
+/// the same.
+#[test]
+fn out_of_core_adaption_equals_in_core_within_a_budget() {
+    use codec::pm::format::{NodeFile, NODE_BYTES};
+    use codec::pm::NodeCache;
+    use std::sync::Arc;
+    let pm = build(&load("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
+    let incore = encode(&pm, EncodeOptions::default()).unwrap().bytes;
+    let ooc = encode(&pm, EncodeOptions { node_bytes: 4096, ..EncodeOptions::default() }).unwrap().bytes;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("spot.dpm");
+    std::fs::write(&path, &ooc).unwrap();
+    let file = Arc::new(NodeFile::open(&path).unwrap());
+    let (dpm, prefix) = (Dpm::parse(&incore).unwrap(), Dpm::parse_prefix(file.prefix()).unwrap());
+    let decoded = decode(&incore).unwrap().pm;
+    let (frames, error_px) = (12, 1.0);
+    let total: u64 = prefix.nodes.iter().map(|n| n.len as u64).sum();
+    // A close look around one part of the model: most of it is outside the frustum.
+    let (lo, hi) = bbox(&decoded);
+    let size = (Vec3::from(hi) - Vec3::from(lo)).length();
+    let close = |k: usize| {
+        let target = Vec3::from(decoded.positions[decoded.positions.len() / 3]);
+        let a = k as f32 * 0.15;
+        let eye = target + Vec3::new(a.cos(), 0.3, a.sin()) * 0.25 * size;
+        let base = Camera::framing(lo, hi, 4.0 / 3.0);
+        let cam = Camera { eye, target, near: size * 0.001, far: size * 4.0, ..base };
+        Viewpoint::new(&cam, 640, 480, error_px)
+    };
+    let required = (0..frames)
+        .map(|k| {
+            let view = close(k);
+            let planes = view.planes();
+            prefix.nodes.iter().filter(|n| n.priority(&view, &planes) >= 1.0).map(|n| n.len as u64).sum::<u64>()
+        })
+        .max()
+        .unwrap();
+    let budget = required + 2 * 4096;
+    eprintln!("budget {budget} bytes of the model's {total}");
+    for background in [false, true] {
+        let mut cache = NodeCache::new(&prefix, file.clone(), budget, background);
+        let (mut a, mut b) = (DpmAdapter::new(&dpm).unwrap(), DpmAdapter::new(&prefix).unwrap());
+        let mut waited = 0;
+        for k in 0..frames {
+            let view = close(k);
+            let st = cache.schedule(&view).unwrap();
+            cache.wait().unwrap();
+            for p in 0..64 {
+                let (r, c) = (a.adapt(&view).unwrap(), b.adapt_resident(&view, &cache).unwrap());
+                let at = format!("background {background}, frame {k}, pass {p}");
+                assert_eq!(r, c, "{at}");
+                assert_eq!(a.active(), b.active(), "{at}");
+                assert_eq!(sorted_canonical(a.face_fvids()), sorted_canonical(b.face_fvids()), "{at}");
+                waited = waited.max(b.pending());
+                if r.converged() {
+                    break;
+                }
+            }
+            assert!(st.resident_bytes <= budget && st.required_resident <= st.required);
+            let resident: u64 =
+                (0..prefix.nodes.len() as u32).filter_map(|i| cache.get(i)).map(|b| b.len() as u64).sum();
+            assert!(resident <= budget, "frame {k}: {resident} bytes resident, budget {budget}");
+        }
+        assert!(waited > 0, "no operation ever waited for its node");
+        let _ = NODE_BYTES;
+    }
+}

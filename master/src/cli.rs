@@ -291,6 +291,10 @@ pub enum Pm {
         /// Bits per octahedral normal coordinate (4 to 16).
         #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u8).range(4..=16))]
         normal_bits: u8,
+        /// Write an out-of-core file: operations grouped into a hierarchy of nodes of at most
+        /// this many kB (1 to 64; the paper's 64), read node by node within a memory budget.
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+        node_kb: Option<u32>,
     },
     /// Print the size of a .dpm file per vertex, with the breakdown.
     Stats {

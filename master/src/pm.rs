@@ -87,6 +87,9 @@ pub struct PmStatsReport {
     pub padding_per_vertex: f64,
     pub base_mesh_bytes: usize,
     pub table_bytes: usize,
+    /// Out of core: the nodes and the node table's bytes (0 in core).
+    pub nodes: u32,
+    pub node_table_bytes: usize,
     pub framing_bytes: usize,
 }
 
@@ -111,6 +114,8 @@ impl PmStatsReport {
             padding_per_vertex: s.per_vertex(s.padding_bytes),
             base_mesh_bytes: s.base_bytes,
             table_bytes: s.table_bytes,
+            nodes: h.nodes,
+            node_table_bytes: s.node_table_bytes,
             framing_bytes: s.framing_bytes,
         })
     }
@@ -138,6 +143,9 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         );
         println!("  padding        {:>12.2} bytes/vertex", r.padding_per_vertex);
         println!("  base, tables   {:>12} + {} bytes", r.base_mesh_bytes, r.table_bytes);
+        if r.nodes > 0 {
+            println!("  nodes          {:>12}   (out of core; node table {} bytes)", r.nodes, r.node_table_bytes);
+        }
     }
     Ok(())
 }

@@ -31,8 +31,26 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::adapt::{cancel_collapses, exclusive_scan, split_face_indices, update_faces, Cached, Eval};
-use super::format::{Dpm, DpmError, OpContext};
+use super::format::{DecodedOp, Dpm, DpmError, OpContext};
+use super::ooc::NodeCache;
 use super::{PassStats, Viewpoint, NONE};
+
+/// Where the operations are: the file in memory, or the resident nodes of an out-of-core one.
+#[derive(Clone, Copy)]
+enum Source<'s> {
+    InCore,
+    Nodes(&'s NodeCache),
+}
+
+impl Source<'_> {
+    /// The operation at `addr`, `None` where its node is not resident.
+    fn decode(self, dpm: &Dpm, addr: u32, ctx: &OpContext) -> Result<Option<DecodedOp>, DpmError> {
+        match self {
+            Source::InCore => dpm.decode_op(addr as usize, ctx).map(Some),
+            Source::Nodes(cache) => cache.decode(dpm, addr as usize, ctx),
+        }
+    }
+}
 
 /// An operation as a vertex carries it: its address ([`NONE`]: none) and its context.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -41,6 +59,9 @@ struct Op {
     ctx: OpContext,
     /// Its centre, normal and criteria (decoded once, when the vertex gets the operation).
     cache: Cached,
+    /// Out of core: its node was not resident when the vertex got it, so `cache` is not
+    /// decoded yet (the vertex does not split until it is).
+    pending: bool,
 }
 
 /// One active vertex.
@@ -96,7 +117,12 @@ impl<'a> DpmAdapter<'a> {
                 normal: dpm.base_normals[b],
             };
             let addr = dpm.roots[b].map_or(NONE, |a| a as u32);
-            vertices.push(Vertex { own: op(dpm, addr, ctx)?, creator: Op { addr: NONE, ..Op::default() } });
+            let own = if dpm.out_of_core() {
+                Op { addr, ctx, cache: Cached::default(), pending: addr != NONE }
+            } else {
+                op(dpm, Source::InCore, addr, ctx)?
+            };
+            vertices.push(Vertex { own, creator: Op { addr: NONE, ..Op::default() } });
         }
         let fvid: Vec<u32> = vertices.iter().map(Vertex::fvid).collect();
         let face_idx = dpm
@@ -113,15 +139,27 @@ impl<'a> DpmAdapter<'a> {
         })
     }
 
-    /// One adaption pass for `view` (Algorithms 1 to 5).
+    /// One adaption pass for `view` (Algorithms 1 to 5) of an in-core file.
     pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, DpmError> {
         let eval = Eval::new(view);
-        self.pass(&|c| eval.needs(c))
+        self.pass(&|c| eval.needs(c), Source::InCore)
+    }
+
+    /// One adaption pass for `view` of an out-of-core file, from the nodes resident in
+    /// `nodes`: a vertex whose operation's node is not resident does not split this pass.
+    pub fn adapt_resident(&mut self, view: &Viewpoint, nodes: &NodeCache) -> Result<PassStats, DpmError> {
+        let eval = Eval::new(view);
+        self.pass(&|c| eval.needs(c), Source::Nodes(nodes))
     }
 
     /// One pass that splits every active vertex that has a split (and collapses nothing).
     pub fn refine_step(&mut self) -> Result<PassStats, DpmError> {
-        self.pass(&|_| true)
+        self.pass(&|_| true, Source::InCore)
+    }
+
+    /// Active vertices whose operation waits for its node.
+    pub fn pending(&self) -> usize {
+        self.vertices.iter().filter(|v| v.own.pending).count()
     }
 
     /// Active vertex FVIDs, ascending.
@@ -140,17 +178,31 @@ impl<'a> DpmAdapter<'a> {
         self.vertices.len() * std::mem::size_of::<Vertex>() + self.face_idx.len() * (12 + 12 + 4)
     }
 
-    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> Result<PassStats, DpmError> {
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
         let dpm = self.dpm;
+        // Out of core: the operations whose nodes have come in since their vertices got them.
+        {
+            self.vertices.par_iter_mut().filter(|v| v.own.pending).try_for_each(|v| -> Result<(), DpmError> {
+                let o = op(dpm, src, v.own.addr, v.own.ctx)?;
+                if !o.pending {
+                    v.own = o;
+                }
+                Ok(())
+            })?;
+        }
         let vs = &self.vertices;
         let n = vs.len();
+        let resident = |a: u32| match src {
+            Source::InCore => true,
+            Source::Nodes(c) => c.get(Dpm::node_of(a as usize)).is_some(),
+        };
 
         // Algorithm 1: vertex state update.
         let state: Vec<u32> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let v = &vs[i];
-                if v.own.addr != NONE && need(&v.own.cache) {
+                if v.own.addr != NONE && !v.own.pending && need(&v.own.cache) && resident(v.own.addr) {
                     return 2;
                 }
                 let target = v.target();
@@ -172,10 +224,10 @@ impl<'a> DpmAdapter<'a> {
         }
 
         // The operations of the splitting vertices, decoded once for the pass.
-        let decoded: Vec<Option<super::format::DecodedOp>> = (0..n)
+        let decoded: Vec<Option<DecodedOp>> = (0..n)
             .into_par_iter()
             .map(|i| match cnt[i] {
-                2 => dpm.decode_op(vs[i].own.addr as usize, &vs[i].own.ctx).map(Some),
+                2 => src.decode(dpm, vs[i].own.addr, &vs[i].own.ctx),
                 _ => Ok(None),
             })
             .collect::<Result<_, _>>()?;
@@ -212,8 +264,8 @@ impl<'a> DpmAdapter<'a> {
                         };
                         let addr = |a: Option<usize>| a.map_or(NONE, |a| a as u32);
                         [
-                            Some(Vertex { own: op(dpm, addr(d.left), left)?, creator: v.creator }),
-                            Some(Vertex { own: op(dpm, addr(d.right), right)?, creator: v.own }),
+                            Some(Vertex { own: op(dpm, src, addr(d.left), left)?, creator: v.creator }),
+                            Some(Vertex { own: op(dpm, src, addr(d.right), right)?, creator: v.own }),
                         ]
                     }
                 })
@@ -257,17 +309,23 @@ impl<'a> DpmAdapter<'a> {
 }
 
 /// The operation at `addr` ([`NONE`]: none) in context `ctx`, its split cache decoded: the
-/// centre and normal of the vertex and the operation's criteria.
-fn op(dpm: &Dpm, addr: u32, ctx: OpContext) -> Result<Op, DpmError> {
-    let cache = if addr == NONE {
-        Cached::default()
-    } else {
-        let d = dpm.decode_op(addr as usize, &ctx)?;
-        Cached {
-            center: Vec3::from(dpm.position(ctx.position)),
-            normal: Vec3::from(dpm.normal(ctx.normal)),
-            crit: d.criteria,
-        }
-    };
-    Ok(Op { addr, ctx, cache })
+/// centre and normal of the vertex and the operation's criteria; pending where its node is not
+/// resident.
+fn op(dpm: &Dpm, src: Source, addr: u32, ctx: OpContext) -> Result<Op, DpmError> {
+    if addr == NONE {
+        return Ok(Op { addr, ctx, cache: Cached::default(), pending: false });
+    }
+    Ok(match src.decode(dpm, addr, &ctx)? {
+        Some(d) => Op {
+            addr,
+            ctx,
+            cache: Cached {
+                center: Vec3::from(dpm.position(ctx.position)),
+                normal: Vec3::from(dpm.normal(ctx.normal)),
+                crit: d.criteria,
+            },
+            pending: false,
+        },
+        None => Op { addr, ctx, cache: Cached::default(), pending: true },
+    })
 }

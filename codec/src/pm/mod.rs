@@ -40,12 +40,14 @@ pub mod adapt;
 pub mod build;
 pub mod dpm_adapt;
 pub mod format;
+pub mod ooc;
 pub mod refine;
 
 pub use adapt::{Adapter, PassStats, Viewpoint};
 pub use build::{build, build_with_progress, build_with_stats, BuildStats, PmError, HUB_FACES};
 pub use dpm_adapt::DpmAdapter;
 pub use format::{DpmError, EncodeOptions as DpmOptions};
+pub use ooc::{CacheStats, NodeCache};
 pub use refine::{refine_all, Refiner};
 
 /// "None" in the index buffers of this module (no split, no parent node).

@@ -99,6 +99,12 @@ pub enum AdaptError {
     /// A base vertex's operation did not decode on the CPU.
     #[error(transparent)]
     Format(#[from] codec::pm::DpmError),
+    /// An out-of-core file: its node addresses are not decoded on the GPU yet.
+    #[error(
+        "out-of-core .dpm files (built with --node-kb) are adapted on the CPU only so far \
+         (`codec::pm::NodeCache`); rebuild it without --node-kb for the GPU"
+    )]
+    OutOfCore,
 }
 
 impl AdaptError {
@@ -154,6 +160,9 @@ impl GpuAdapter {
     /// at the base mesh (whose operations' criteria the CPU decodes: a few per component).
     /// `n_alloc` is the paper's reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
     pub fn new(gpu: &Gpu, dpm: &Dpm, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
+        if dpm.out_of_core() {
+            return Err(AdaptError::OutOfCore);
+        }
         let limits = gpu.device().limits();
         let need = pipelines::storage_buffers_per_stage();
         if limits.max_storage_buffers_per_shader_stage < need {

@@ -509,6 +509,9 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
     }
 }
 
+/// A node's bytes, and per operation in it its index, address and coding.
+type CodedNode = (Vec<u8>, Vec<(usize, usize, OocCoding)>);
+
 /// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
 /// each in parallel with the others of its depth, so that a child's address is known when its
 /// parent operation is coded. Returns per node its bytes, per operation its address and coding.
@@ -542,7 +545,7 @@ fn code_nodes(
     let mut coding = vec![OocCoding::default(); m];
     let mut nodes: Vec<Vec<u8>> = vec![vec![]; count];
     for level in by_depth.iter().rev() {
-        let coded: Vec<(Vec<u8>, Vec<(usize, usize, OocCoding)>)> = level
+        let coded: Vec<CodedNode> = level
             .par_iter()
             .map(|&n| code_node(ops, hier, &members[n], n as u32, &parent_op, &addr, tables, avg))
             .collect();
@@ -572,7 +575,7 @@ fn code_node(
     addr: &[usize],
     tables: &[Table],
     avg: u32,
-) -> (Vec<u8>, Vec<(usize, usize, OocCoding)>) {
+) -> CodedNode {
     let idx = |i: usize| list.binary_search(&i).ok();
     let mut inner = vec![0u64; list.len()];
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
@@ -647,7 +650,13 @@ fn code_node(
 /// What the node table keeps of every node: its length and checksum, its parent, the box of
 /// its operations' bounding spheres (widened by a few ulps so that `f32` rounding cannot put
 /// a sphere outside it) and its greatest errors, as the operations decode.
-fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>], ops: &Operations, h: &Header) -> Vec<NodeInfo> {
+fn node_infos(
+    geometry: &[OpGeometry],
+    hier: &Hierarchy,
+    nodes: &[Vec<u8>],
+    ops: &Operations,
+    h: &Header,
+) -> Vec<NodeInfo> {
     let mut infos: Vec<NodeInfo> = nodes
         .iter()
         .zip(&hier.parents)

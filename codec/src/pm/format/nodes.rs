@@ -124,7 +124,8 @@ pub(super) fn read_node_table(b: &[u8], h: &Header, ops_len: u64) -> Result<Vec<
             attribute_error: f(7),
             crc: u32::from_le_bytes(fixed[32..36].try_into().unwrap()),
         };
-        let box_ok = (0..3).all(|k| n.bbox_min[k].is_finite() && n.bbox_max[k].is_finite() && n.bbox_min[k] <= n.bbox_max[k]);
+        let box_ok =
+            (0..3).all(|k| n.bbox_min[k].is_finite() && n.bbox_max[k].is_finite() && n.bbox_min[k] <= n.bbox_max[k]);
         let err_ok = [n.geometric_error, n.attribute_error].iter().all(|e| e.is_finite() && *e >= 0.0);
         if !box_ok || !err_ok {
             return Err(corrupt(format!("node {i}: bad box or errors in the node table")));

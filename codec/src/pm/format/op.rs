@@ -382,7 +382,7 @@ pub(super) fn read_op(
         Some(n) => {
             let mut at = [0usize; 2];
             let mut direct_first = false;
-            for k in 0..has_left as usize + has_right as usize {
+            for (k, slot) in at.iter_mut().enumerate().take(has_left as usize + has_right as usize) {
                 let delta = r.get(NODE_DELTA, k)?;
                 if delta == 0 {
                     // In this node: the first directly after this operation, the second past
@@ -398,14 +398,14 @@ pub(super) fn read_op(
                         direct_first = true;
                         0
                     };
-                    at[k] = (n as u64 * NODE_BYTES as u64 + offset) as usize;
+                    *slot = (n as u64 * NODE_BYTES as u64 + offset) as usize;
                 } else {
                     let local = r.get(LOCAL, 0)?;
                     let target = n as u64 + delta;
                     if target >= h.nodes as u64 || local >= NODE_BYTES as u64 {
                         return Err(corrupt("operation pointer past the last node"));
                     }
-                    at[k] = (target * NODE_BYTES as u64 + local) as usize;
+                    *slot = (target * NODE_BYTES as u64 + local) as usize;
                 }
             }
             // The in-node offsets are from this operation's end, known only now.

@@ -1,0 +1,224 @@
+//! Out-of-core memory management of section 5.7: the nodes of an out-of-core `.dpm` file kept
+//! in memory within a budget, chosen by the paper's priority `p = d_n / d_v`
+//! ([`NodeInfo::priority`]) and read by a second thread.
+//!
+//! Every frame [`NodeCache::schedule`] ranks the nodes by priority for the view: the nodes of
+//! priority at least 1 are required (only they can hold an operation the view asks for), and,
+//! as the paper does against the delay of loading, nodes of lower priority are kept or loaded
+//! too while the budget has room. Resident nodes outside the budget's best are evicted when
+//! space is needed. Loads are asked of the loader thread in priority order; what it has read
+//! is installed by [`NodeCache::install`] (the adaptation never waits for the disk: a vertex
+//! whose operation is in a node not yet loaded just does not split yet). Evicting a node is
+//! always safe: collapses need no decoding (their operations' criteria are in the vertices'
+//! state), and an operation is decoded only from a resident node.
+
+use std::collections::HashMap;
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use super::format::{DecodedOp, Dpm, DpmError, NodeFile, NodeInfo, OpContext, NODE_BYTES};
+use super::Viewpoint;
+
+/// What a cache did in one [`NodeCache::schedule`] and [`NodeCache::install`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CacheStats {
+    /// Nodes of priority at least 1 for the view, and how many of them are resident.
+    pub required: usize,
+    pub required_resident: usize,
+    /// Nodes and bytes resident.
+    pub resident: usize,
+    pub resident_bytes: u64,
+    /// Nodes and bytes installed since the last report, and evicted.
+    pub loaded: usize,
+    pub loaded_bytes: u64,
+    pub evicted: usize,
+}
+
+/// The nodes of an out-of-core file in memory (see the module docs).
+pub struct NodeCache {
+    nodes: Vec<NodeInfo>,
+    resident: HashMap<u32, Arc<[u8]>>,
+    budget: u64,
+    /// Nodes asked of the loader and not yet installed.
+    in_flight: HashMap<u32, ()>,
+    loader: Loader,
+    stats: CacheStats,
+}
+
+/// A node the loader thread read, or why it could not.
+type Loaded = (u32, Result<Vec<u8>, DpmError>);
+
+enum Loader {
+    /// Reads in [`NodeCache::schedule`] (tests, tools that want every frame converged).
+    Inline(Arc<NodeFile>),
+    /// A second thread reads; requests go out in priority order.
+    Thread {
+        requests: Option<Sender<u32>>,
+        /// In a mutex only so that the cache can be shared with the adaptation's threads.
+        done: Mutex<Receiver<Loaded>>,
+        handle: Option<JoinHandle<()>>,
+    },
+}
+
+impl NodeCache {
+    /// A cache of at most `budget` bytes of nodes of `file` (whose node table `dpm` holds),
+    /// read by a thread of its own when `background`, else while scheduling.
+    pub fn new(dpm: &Dpm, file: Arc<NodeFile>, budget: u64, background: bool) -> NodeCache {
+        let loader = if background {
+            let (requests, rx) = channel::<u32>();
+            let (tx, done) = channel();
+            let handle = std::thread::Builder::new()
+                .name("dpm node loader".into())
+                .spawn(move || {
+                    for i in rx {
+                        if tx.send((i, file.read_node(i))).is_err() {
+                            break;
+                        }
+                    }
+                })
+                .expect("spawning the node loader thread");
+            Loader::Thread { requests: Some(requests), done: Mutex::new(done), handle: Some(handle) }
+        } else {
+            Loader::Inline(file)
+        };
+        NodeCache {
+            nodes: dpm.nodes.clone(),
+            resident: HashMap::new(),
+            budget,
+            in_flight: HashMap::new(),
+            loader,
+            stats: CacheStats::default(),
+        }
+    }
+
+    /// The bytes of node `i`, if resident.
+    pub fn get(&self, i: u32) -> Option<&[u8]> {
+        self.resident.get(&i).map(|b| &b[..])
+    }
+
+    /// Decodes the operation at `addr` of `dpm` if its node is resident.
+    pub fn decode(&self, dpm: &Dpm, addr: usize, ctx: &OpContext) -> Result<Option<DecodedOp>, DpmError> {
+        self.get((addr / NODE_BYTES) as u32).map(|b| dpm.decode_in(b, addr, ctx)).transpose()
+    }
+
+    /// Ranks the nodes for `view`, evicts what falls outside the budget where space is needed,
+    /// and asks for the missing ones in priority order (inline: reads them now). Returns the
+    /// stats of this frame (loads counted since the last call).
+    pub fn schedule(&mut self, view: &Viewpoint) -> Result<CacheStats, DpmError> {
+        let planes = view.planes();
+        let priority: Vec<f32> = self.nodes.iter().map(|n| n.priority(view, &planes)).collect();
+        let mut order: Vec<u32> = (0..self.nodes.len() as u32).collect();
+        order.sort_by(|&a, &b| priority[b as usize].total_cmp(&priority[a as usize]).then(a.cmp(&b)));
+        // The best nodes that fit the budget, required ones first (the order has them first).
+        let mut wanted = HashMap::new();
+        let mut room = self.budget;
+        for &i in &order {
+            let len = self.nodes[i as usize].len as u64;
+            if len > room {
+                if priority[i as usize] >= 1.0 {
+                    continue;
+                }
+                break;
+            }
+            room -= len;
+            wanted.insert(i, ());
+        }
+        // Evict the resident nodes not wanted, worst first, only as far as the wanted ones
+        // need the space (the others stay while there is room).
+        let need: u64 = order
+            .iter()
+            .filter(|i| wanted.contains_key(i) && !self.resident.contains_key(i))
+            .map(|&i| self.nodes[i as usize].len as u64)
+            .sum();
+        let mut used: u64 = self.resident.keys().map(|&i| self.nodes[i as usize].len as u64).sum();
+        let in_flight: u64 = self.in_flight.keys().map(|&i| self.nodes[i as usize].len as u64).sum();
+        for &i in order.iter().rev() {
+            if used + in_flight + need <= self.budget {
+                break;
+            }
+            if !wanted.contains_key(&i) && self.resident.remove(&i).is_some() {
+                used -= self.nodes[i as usize].len as u64;
+                self.stats.evicted += 1;
+            }
+        }
+        for &i in &order {
+            if !wanted.contains_key(&i) || self.resident.contains_key(&i) || self.in_flight.contains_key(&i) {
+                continue;
+            }
+            match &self.loader {
+                Loader::Inline(file) => {
+                    let bytes = file.read_node(i)?;
+                    self.put(i, bytes);
+                }
+                Loader::Thread { requests, .. } => {
+                    if let Some(r) = requests {
+                        let _ = r.send(i);
+                    }
+                    self.in_flight.insert(i, ());
+                }
+            }
+        }
+        let required: Vec<u32> = order.iter().copied().filter(|&i| priority[i as usize] >= 1.0).collect();
+        self.stats.required = required.len();
+        self.stats.required_resident = required.iter().filter(|i| self.resident.contains_key(i)).count();
+        Ok(self.take_stats())
+    }
+
+    /// Installs what the loader thread has read so far (nothing inline); an error names the
+    /// node that could not be read or failed its checksum.
+    pub fn install(&mut self) -> Result<usize, DpmError> {
+        let mut got = vec![];
+        if let Loader::Thread { done, .. } = &self.loader {
+            let done = done.lock().expect("the loader's channel");
+            while let Ok(r) = done.try_recv() {
+                got.push(r);
+            }
+        }
+        let n = got.len();
+        for (i, bytes) in got {
+            self.in_flight.remove(&i);
+            self.put(i, bytes?);
+        }
+        Ok(n)
+    }
+
+    /// Waits for every load asked for (tools and tests that want a frame converged).
+    pub fn wait(&mut self) -> Result<(), DpmError> {
+        while !self.in_flight.is_empty() {
+            let Loader::Thread { done, .. } = &self.loader else { break };
+            let got = done.lock().expect("the loader's channel").recv();
+            let (i, bytes) = got.map_err(|_| DpmError::Io("the node loader thread stopped".into()))?;
+            self.in_flight.remove(&i);
+            self.put(i, bytes?);
+        }
+        Ok(())
+    }
+
+    fn put(&mut self, i: u32, bytes: Vec<u8>) {
+        self.stats.loaded += 1;
+        self.stats.loaded_bytes += bytes.len() as u64;
+        self.resident.insert(i, bytes.into());
+    }
+
+    fn take_stats(&mut self) -> CacheStats {
+        self.stats.resident = self.resident.len();
+        self.stats.resident_bytes = self.resident.values().map(|b| b.len() as u64).sum();
+        let s = self.stats;
+        self.stats.loaded = 0;
+        self.stats.loaded_bytes = 0;
+        self.stats.evicted = 0;
+        s
+    }
+}
+
+impl Drop for NodeCache {
+    fn drop(&mut self) {
+        if let Loader::Thread { requests, handle, .. } = &mut self.loader {
+            requests.take();
+            if let Some(h) = handle.take() {
+                let _ = h.join();
+            }
+        }
+    }
+}
