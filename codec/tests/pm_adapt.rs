@@ -509,7 +509,7 @@ fn a_child_sphere_raised_by_its_neighbours_nests_in_its_parent() {
 /// the same.
 #[test]
 fn out_of_core_adaption_equals_in_core_within_a_budget() {
-    use codec::pm::format::{NodeFile, NODE_BYTES};
+    use codec::pm::format::NodeFile;
     use codec::pm::NodeCache;
     use std::sync::Arc;
     let pm = build(&load("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
@@ -569,6 +569,5 @@ fn out_of_core_adaption_equals_in_core_within_a_budget() {
             assert!(resident <= budget, "frame {k}: {resident} bytes resident, budget {budget}");
         }
         assert!(waited > 0, "no operation ever waited for its node");
-        let _ = NODE_BYTES;
     }
 }

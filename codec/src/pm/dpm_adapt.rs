@@ -50,6 +50,14 @@ impl Source<'_> {
             Source::Nodes(cache) => cache.decode(dpm, addr as usize, ctx),
         }
     }
+
+    /// Whether the operation at `addr` can be decoded now.
+    fn resident(self, addr: u32) -> bool {
+        match self {
+            Source::InCore => true,
+            Source::Nodes(cache) => cache.get(Dpm::node_of(addr as usize)).is_some(),
+        }
+    }
 }
 
 /// An operation as a vertex carries it: its address ([`NONE`]: none) and its context.
@@ -181,28 +189,22 @@ impl<'a> DpmAdapter<'a> {
     fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
         let dpm = self.dpm;
         // Out of core: the operations whose nodes have come in since their vertices got them.
-        {
-            self.vertices.par_iter_mut().filter(|v| v.own.pending).try_for_each(|v| -> Result<(), DpmError> {
-                let o = op(dpm, src, v.own.addr, v.own.ctx)?;
-                if !o.pending {
-                    v.own = o;
-                }
-                Ok(())
-            })?;
-        }
+        self.vertices.par_iter_mut().filter(|v| v.own.pending).try_for_each(|v| -> Result<(), DpmError> {
+            let o = op(dpm, src, v.own.addr, v.own.ctx)?;
+            if !o.pending {
+                v.own = o;
+            }
+            Ok(())
+        })?;
         let vs = &self.vertices;
         let n = vs.len();
-        let resident = |a: u32| match src {
-            Source::InCore => true,
-            Source::Nodes(c) => c.get(Dpm::node_of(a as usize)).is_some(),
-        };
 
         // Algorithm 1: vertex state update.
         let state: Vec<u32> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let v = &vs[i];
-                if v.own.addr != NONE && !v.own.pending && need(&v.own.cache) && resident(v.own.addr) {
+                if v.own.addr != NONE && !v.own.pending && need(&v.own.cache) && src.resident(v.own.addr) {
                     return 2;
                 }
                 let target = v.target();

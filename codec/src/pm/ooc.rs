@@ -12,7 +12,7 @@
 //! always safe: collapses need no decoding (their operations' criteria are in the vertices'
 //! state), and an operation is decoded only from a resident node.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -41,7 +41,7 @@ pub struct NodeCache {
     resident: HashMap<u32, Arc<[u8]>>,
     budget: u64,
     /// Nodes asked of the loader and not yet installed.
-    in_flight: HashMap<u32, ()>,
+    in_flight: HashSet<u32>,
     loader: Loader,
     stats: CacheStats,
 }
@@ -86,7 +86,7 @@ impl NodeCache {
             nodes: dpm.nodes.clone(),
             resident: HashMap::new(),
             budget,
-            in_flight: HashMap::new(),
+            in_flight: HashSet::new(),
             loader,
             stats: CacheStats::default(),
         }
@@ -111,7 +111,7 @@ impl NodeCache {
         let mut order: Vec<u32> = (0..self.nodes.len() as u32).collect();
         order.sort_by(|&a, &b| priority[b as usize].total_cmp(&priority[a as usize]).then(a.cmp(&b)));
         // The best nodes that fit the budget, required ones first (the order has them first).
-        let mut wanted = HashMap::new();
+        let mut wanted = HashSet::new();
         let mut room = self.budget;
         for &i in &order {
             let len = self.nodes[i as usize].len as u64;
@@ -122,28 +122,28 @@ impl NodeCache {
                 break;
             }
             room -= len;
-            wanted.insert(i, ());
+            wanted.insert(i);
         }
         // Evict the resident nodes not wanted, worst first, only as far as the wanted ones
         // need the space (the others stay while there is room).
         let need: u64 = order
             .iter()
-            .filter(|i| wanted.contains_key(i) && !self.resident.contains_key(i))
+            .filter(|i| wanted.contains(i) && !self.resident.contains_key(i))
             .map(|&i| self.nodes[i as usize].len as u64)
             .sum();
         let mut used: u64 = self.resident.keys().map(|&i| self.nodes[i as usize].len as u64).sum();
-        let in_flight: u64 = self.in_flight.keys().map(|&i| self.nodes[i as usize].len as u64).sum();
+        let in_flight: u64 = self.in_flight.iter().map(|&i| self.nodes[i as usize].len as u64).sum();
         for &i in order.iter().rev() {
             if used + in_flight + need <= self.budget {
                 break;
             }
-            if !wanted.contains_key(&i) && self.resident.remove(&i).is_some() {
+            if !wanted.contains(&i) && self.resident.remove(&i).is_some() {
                 used -= self.nodes[i as usize].len as u64;
                 self.stats.evicted += 1;
             }
         }
         for &i in &order {
-            if !wanted.contains_key(&i) || self.resident.contains_key(&i) || self.in_flight.contains_key(&i) {
+            if !wanted.contains(&i) || self.resident.contains_key(&i) || self.in_flight.contains(&i) {
                 continue;
             }
             match &self.loader {
@@ -155,7 +155,7 @@ impl NodeCache {
                     if let Some(r) = requests {
                         let _ = r.send(i);
                     }
-                    self.in_flight.insert(i, ());
+                    self.in_flight.insert(i);
                 }
             }
         }

@@ -106,10 +106,13 @@ impl<'a> Dpm<'a> {
             base_positions.push(p);
             base_normals.push(q);
             let root = get_varint(bb, &mut pos, "base vertices")?;
-            let in_range = |a: u64| match nodes.get((a / NODE_BYTES as u64) as usize) {
-                _ if nodes.is_empty() => a < ops_len,
-                Some(n) => (a % NODE_BYTES as u64) < n.len as u64,
-                None => false,
+            let in_range = |a: u64| {
+                if nodes.is_empty() {
+                    a < ops_len
+                } else {
+                    let node = nodes.get((a / NODE_BYTES as u64) as usize);
+                    node.is_some_and(|n| (a % NODE_BYTES as u64) < n.len as u64)
+                }
             };
             roots.push(match root {
                 0 => None,
@@ -190,8 +193,17 @@ impl<'a> Dpm<'a> {
     /// Decodes the operation at `addr` of an out-of-core file from `node`, the bytes of its
     /// node (read and checked by the caller, [`NodeInfo::check`]).
     pub fn decode_in(&self, node: &[u8], addr: usize, ctx: &OpContext) -> Result<DecodedOp, DpmError> {
-        let n = Self::node_of(addr);
-        read_op(&self.header, &self.tables, node, addr % NODE_BYTES, Some(n), ctx, None)
+        self.read_in(node, addr, ctx, None)
+    }
+
+    fn read_in(
+        &self,
+        node: &[u8],
+        addr: usize,
+        ctx: &OpContext,
+        bits: Option<&mut [u64; KINDS]>,
+    ) -> Result<DecodedOp, DpmError> {
+        read_op(&self.header, &self.tables, node, addr % NODE_BYTES, Some(Self::node_of(addr)), ctx, bits)
             .map_err(|e| naming(addr, true, e))
     }
 
@@ -204,8 +216,7 @@ impl<'a> Dpm<'a> {
         if n as usize >= self.nodes.len() {
             return Err(naming(addr, true, corrupt("operation address past the last node")));
         }
-        read_op(&self.header, &self.tables, self.node_bytes(n), addr % NODE_BYTES, Some(n), ctx, bits)
-            .map_err(|e| naming(addr, true, e))
+        self.read_in(self.node_bytes(n), addr, ctx, bits)
     }
 
     /// Decodes every operation (pre-order over the forest), optionally counting bits per field.

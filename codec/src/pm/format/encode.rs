@@ -467,6 +467,7 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
                 children: ops.child_ops[i],
                 size: incore.bytes[i].len() as u64 + 1,
                 error: c.geometric_error,
+                attribute_error: c.attribute_error,
                 center: dequantize_position(d.ctx.position, h),
                 radius: c.radius,
             }
@@ -497,7 +498,7 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
                 });
                 tables = counts.iter().map(every_symbol).collect();
             } else {
-                let infos = node_infos(&geometry, &hier, &nodes, ops, h);
+                let infos = node_infos(&geometry, &hier, &nodes);
                 return Ok(OutOfCore { tables, nodes, infos, addr });
             }
         }
@@ -617,7 +618,7 @@ fn code_node(
         } else {
             code(false)
         };
-        let sub = |c: usize| if c != usize::MAX && hier.node_of[c] == n { inner[idx(c).unwrap()] } else { 0 };
+        let sub = |c: usize| if c == usize::MAX { 0 } else { loc(c).1 };
         inner[k] = b.len() as u64 + sub(l) + sub(r);
         bytes[k] = b;
         coding[k] = c;
@@ -650,13 +651,7 @@ fn code_node(
 /// What the node table keeps of every node: its length and checksum, its parent, the box of
 /// its operations' bounding spheres (widened by a few ulps so that `f32` rounding cannot put
 /// a sphere outside it) and its greatest errors, as the operations decode.
-fn node_infos(
-    geometry: &[OpGeometry],
-    hier: &Hierarchy,
-    nodes: &[Vec<u8>],
-    ops: &Operations,
-    h: &Header,
-) -> Vec<NodeInfo> {
+fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>]) -> Vec<NodeInfo> {
     let mut infos: Vec<NodeInfo> = nodes
         .iter()
         .zip(&hier.parents)
@@ -690,9 +685,8 @@ fn node_infos(
             n.bbox_min[k] = n.bbox_min[k].min(widen(g.center[k] - g.radius, false));
             n.bbox_max[k] = n.bbox_max[k].max(widen(g.center[k] + g.radius, true));
         }
-        let c = dequantize_criteria(ops.data[i].crit, h);
-        n.geometric_error = n.geometric_error.max(c.geometric_error);
-        n.attribute_error = n.attribute_error.max(c.attribute_error);
+        n.geometric_error = n.geometric_error.max(g.error);
+        n.attribute_error = n.attribute_error.max(g.attribute_error);
     }
     infos
 }

@@ -30,8 +30,9 @@ pub(super) struct OpGeometry {
     pub(super) children: [usize; 2],
     /// Its coded size (an estimate while the hierarchy is built).
     pub(super) size: u64,
-    /// Its geometric error (as it decodes).
+    /// Its geometric and attribute errors (as they decode).
     pub(super) error: f32,
+    pub(super) attribute_error: f32,
     /// Its bounding sphere.
     pub(super) center: [f32; 3],
     pub(super) radius: f32,

@@ -7,7 +7,7 @@
 //! the other in the operations section, in this order), its distance to its parent (LEB128; 0
 //! for the root, node 0 only), the box around the bounding spheres of its operations (6 `f32`,
 //! minimum then maximum), the greatest geometric and attribute errors of its operations (2
-//! `f32`, as they decode), and the CRC-32 of its bytes (`u32`): 38 to 44 bytes a node; the
+//! `f32`, as they decode), and the CRC-32 of its bytes (`u32`): 38 to 42 bytes a node; the
 //! paper keeps 35 in main memory.
 
 use std::path::Path;

@@ -380,51 +380,50 @@ pub(super) fn read_op(
             (end, second as usize)
         }
         Some(n) => {
-            let mut at = [0usize; 2];
-            let mut direct_first = false;
-            for (k, slot) in at.iter_mut().enumerate().take(has_left as usize + has_right as usize) {
+            /// A child's operation: at an offset from this operation's end in this node, or
+            /// at an address in another node.
+            enum At {
+                Here(u64),
+                There(usize),
+            }
+            let mut read_child = |k: usize, first_here: bool| -> Result<At, DpmError> {
                 let delta = r.get(NODE_DELTA, k)?;
-                if delta == 0 {
-                    // In this node: the first directly after this operation, the second past
-                    // the first's subtree (its part in this node).
-                    let offset = if k == 1 {
-                        let estimate = if direct_first { pointer_estimate(h.avg_op_size, first_size) } else { 0 };
-                        let o = estimate.saturating_add(r.get_signed(POINTER, split_class(first_size + 2))?);
-                        if o < 0 || (direct_first && o < 1) {
-                            return Err(corrupt("bad operation pointer"));
-                        }
-                        o as u64
-                    } else {
-                        direct_first = true;
-                        0
-                    };
-                    *slot = (n as u64 * NODE_BYTES as u64 + offset) as usize;
-                } else {
+                if delta != 0 {
                     let local = r.get(LOCAL, 0)?;
                     let target = n as u64 + delta;
                     if target >= h.nodes as u64 || local >= NODE_BYTES as u64 {
                         return Err(corrupt("operation pointer past the last node"));
                     }
-                    *slot = (target * NODE_BYTES as u64 + local) as usize;
+                    return Ok(At::There((target * NODE_BYTES as u64 + local) as usize));
                 }
-            }
-            // The in-node offsets are from this operation's end, known only now.
-            let end = r.end();
-            let base = n as usize * NODE_BYTES;
-            for (k, a) in at.iter_mut().enumerate().take(has_left as usize + has_right as usize) {
-                if *a / NODE_BYTES == n as usize {
-                    let local = end as u64 + (*a - base) as u64;
-                    if local >= ops.len() as u64 {
-                        return Err(if k == 0 {
-                            DpmError::Truncated("the operations")
-                        } else {
-                            corrupt("operation pointer past the end of its node")
-                        });
-                    }
-                    *a = base + local as usize;
+                // In this node: the first directly after this operation, the second past the
+                // first's subtree (its part in this node).
+                if k == 0 {
+                    return Ok(At::Here(0));
                 }
-            }
-            (at[0], at[1])
+                let estimate = if first_here { pointer_estimate(h.avg_op_size, first_size) } else { 0 };
+                let o = estimate.saturating_add(r.get_signed(POINTER, split_class(first_size + 2))?);
+                if o < 0 || (first_here && o < 1) {
+                    return Err(corrupt("bad operation pointer"));
+                }
+                Ok(At::Here(o as u64))
+            };
+            let splitting = has_left as usize + has_right as usize;
+            let first = if splitting > 0 { Some(read_child(0, false)?) } else { None };
+            let first_here = matches!(first, Some(At::Here(_)));
+            let second = if splitting > 1 { Some(read_child(1, first_here)?) } else { None };
+            // The offsets in this node are from this operation's end, known only now.
+            let end = r.end() as u64;
+            let resolve = |a: Option<At>, k: usize| -> Result<usize, DpmError> {
+                match a {
+                    None => Ok(0),
+                    Some(At::There(x)) => Ok(x),
+                    Some(At::Here(o)) if end + o < ops.len() as u64 => Ok(n as usize * NODE_BYTES + (end + o) as usize),
+                    Some(At::Here(_)) if k == 0 => Err(DpmError::Truncated("the operations")),
+                    Some(At::Here(_)) => Err(corrupt("operation pointer past the end of its node")),
+                }
+            };
+            (resolve(first, 0)?, resolve(second, 1)?)
         }
     };
     let end = r.end();
