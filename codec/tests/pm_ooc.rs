@@ -175,6 +175,48 @@ fn node_files_read_and_check_their_nodes() {
     assert!(NodeFile::open(&path).is_err());
 }
 
+/// A cache of fixed slots (what a GPU pool holds) never holds more nodes than its slots, even
+/// when the view moves on faster than the loader thread reads: nodes that arrive no longer
+/// wanted are dropped, and a wanted one evicts the worst unwanted one.
+#[test]
+fn a_cache_of_slots_never_overflows_while_views_move_on() {
+    use codec::pm::NodeCache;
+    use std::sync::Arc;
+    let pm = build(&load("classic/spot.obj")).unwrap();
+    let enc = encode(&pm, out_of_core(1024)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("spot.dpm");
+    std::fs::write(&path, &enc.bytes).unwrap();
+    let file = Arc::new(NodeFile::open(&path).unwrap());
+    let dpm = Dpm::parse_prefix(file.prefix()).unwrap();
+    let (lo, hi) = pm.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(a, b), &p| {
+        (a.min(Vec3::from(p)), b.max(Vec3::from(p)))
+    });
+    let size = (hi - lo).length();
+    let slots = dpm.nodes.len() as u64 / 3;
+    let mut cache = NodeCache::with_slots(&dpm, file.clone(), slots, 1024, true);
+    let (mut discarded, mut evicted) = (0, 0);
+    for k in 0..40 {
+        // Close looks at parts of the model far apart, one after the other.
+        let target = Vec3::from(pm.positions[(k * 7919) % pm.positions.len()]);
+        let a = k as f32 * 1.3;
+        let eye = target + Vec3::new(a.cos(), 0.3, a.sin()) * 0.3 * size;
+        let base = Camera::framing(lo.to_array(), hi.to_array(), 640.0 / 480.0);
+        let camera = Camera { eye, target, near: size * 0.001, far: size * 20.0, ..base };
+        let st = cache.schedule(&Viewpoint::new(&camera, 640, 480, 0.5)).unwrap();
+        if k % 3 == 2 {
+            cache.wait().unwrap();
+        } else {
+            cache.install().unwrap();
+        }
+        let resident = cache.resident_nodes().count() as u64;
+        assert!(resident <= slots, "view {k}: {resident} nodes resident in {slots} slots");
+        (discarded, evicted) = (discarded + st.discarded, evicted + st.evicted);
+    }
+    eprintln!("{slots} slots of {} nodes: {evicted} evicted, {discarded} dropped on arrival", dpm.nodes.len());
+    assert!(evicted > 0, "no node was ever evicted");
+}
+
 /// The cost of the out-of-core layout per operation (the paper: about 1 byte; here 1.18 on
 /// the bunny and 1.39 on the dragon, the local addresses of pointers into other nodes coded
 /// whole, so held to 1.5):

@@ -21,7 +21,7 @@ struct VState {
     c_v: u32,          // the creator's vertex: the collapse target's FVID
     c_v_end: u32,      // the creator's range end
     c_faces: u32,      // faces the creator's split made
-    pad: u32,
+    flags: u32,        // out of core: PENDING, ABSENT (0 in core)
     pc: vec4<u32>,     // its operation's context: the parent's quantized criteria
     pos: vec4<u32>,    // quantized position (xyz)
     nrm: vec4<u32>,    // octahedral normal (xy)
@@ -30,6 +30,13 @@ struct VState {
     c_pc: vec4<u32>,   // the creator's context's parent criteria
     c_crit: vec4<f32>, // the creator's criteria
 }
+
+// VState.flags, out of core only. PENDING: the operation's node was not resident when the
+// vertex got it, so its criteria and face count are not decoded yet (`crit` and `faces` are
+// zero); ABSENT: its node is not resident this pass. A vertex with either does not split
+// (codec::pm::DpmAdapter's `pending` and `Source::resident`).
+const PENDING: u32 = 1u;
+const ABSENT: u32 = 2u;
 
 // A vertex's collapse target FVID: its creator's vertex, if it is the creator's right child
 // (its range ends where the creator's did); NONE otherwise.

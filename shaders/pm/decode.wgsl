@@ -1,4 +1,4 @@
-// Decoding one operation of a .dpm file (version 3) from its address and context on the GPU:
+// Decoding one operation of a .dpm file (version 4) from its address and context on the GPU:
 // the WGSL twin of codec/src/pm/format/op.rs `read_op`, field for field and check for check,
 // so that it decodes what the CPU decodes bit for bit and refuses what the CPU refuses
 // (worker/tests/pm_decode.rs compares the two over every operation of real meshes and over
@@ -8,13 +8,21 @@
 // A shader that decodes prepends the generated constants (the table layout of the format's
 // fields, `decoder_prelude` in worker/src/pm_adapt/decoder.rs) and this file, and declares:
 //   D:         the DecodeParams uniform,
-//   ops:       array<u32>, the operations section, four bytes per word, little-endian,
+//   ops:       array<u32>, the operations section, four bytes per word, little-endian; out of
+//              core (D.nodes > 0) a pool of slots of D.slot_bytes each, holding resident nodes,
 //   tables:    array<u32>, the probability tables (see `read_sym`), then from D.values_at the
 //              f32 bits of the sin(alpha) codes (256) and the log tables of the lengths and of
-//              the attribute error (LOG_STEPS each),
+//              the attribute error (LOG_STEPS each); out of core, from D.lens_at, every node's
+//              length, then every node's slot in `ops` (the page table, NONE_ADDR: not
+//              resident),
 //   dec_faces: array<u32>, read_write, where decoded faces go (FVID triples).
 //
-// Bounded work and reads: every read of `ops` is below D.ops_len, every loop has a constant or
+// Out of core an address is node * 2^16 + local address (section 4.2.1 of the paper): the
+// decoder looks the node up in the page table and reads within its slot; an operation whose
+// node is not resident is answered DEC_ABSENT (the caller waits for it, it is not an error).
+//
+// Bounded work and reads: every read of `ops` is below D.ops_len (out of core: below the end
+// of the node's bytes in its slot), every loop has a constant or
 // header-checked bound (a symbol at most MAX_LEN bits, a value at most 5 groups or 28 raw bits,
 // the faces at most D.max_faces, at most 65535), and a failed check stops the decoding with a
 // status, never a fault.
@@ -28,6 +36,10 @@ struct DecodeParams {
     max_faces: u32,     // the header's: no operation adds more
     count: u32,         // operations to decode (batch entry points)
     values_at: u32,     // where the value tables start in `tables`
+    nodes: u32,         // out of core: the nodes; 0 in core
+    lens_at: u32,       // out of core: where the node lengths start in `tables` (the page table after)
+    slot_bytes: u32,    // out of core: bytes per slot of `ops`
+    pad: u32,
     grid: vec4<f32>,    // the position grid: its origin (xyz) and step (w)
 }
 
@@ -59,6 +71,7 @@ const DEC_FACES: u32 = 7u;       // face count, form or corner out of range
 const DEC_POSITION: u32 = 8u;
 const DEC_NORMAL: u32 = 9u;
 const DEC_POINTER: u32 = 10u;
+const DEC_ABSENT: u32 = 11u;     // out of core: the operation's node is not resident (no error)
 
 // How far decode_op goes: everything, or up to the face count (criteria, children, v_u and
 // the number of faces: what a vertex needs to ask for its split and size it).
@@ -66,8 +79,10 @@ const DECODE_ALL: u32 = 0u;
 const DECODE_TO_FACES: u32 = 1u;
 
 // The bit reader: the next byte to load, the loaded byte, its bits not yet read, and the
-// first failure (reads after one return zeros without touching memory).
+// first failure (reads after one return zeros without touching memory); r_end is one past the
+// last byte it may read (the section's, or the node's in its slot).
 var<private> r_byte: u32;
+var<private> r_end: u32;
 var<private> r_buf: u32;
 var<private> r_bits: u32;
 var<private> r_err: u32;
@@ -88,7 +103,7 @@ fn read_bit() -> u32 {
         return 0u;
     }
     if (r_bits == 0u) {
-        if (r_byte >= D.ops_len) {
+        if (r_byte >= r_end) {
             fail(DEC_TRUNCATED);
             return 0u;
         }
@@ -301,12 +316,33 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     var o: DecodedOp;
     o.left = NONE_ADDR;
     o.right = NONE_ADDR;
-    r_byte = addr;
+    // Where the operation's bytes are: in core the section, out of core its node's slot.
+    var node = NONE_ADDR;
+    var local = addr;
+    var len = D.ops_len;
+    var base = 0u;
+    if (D.nodes != 0u) {
+        node = addr >> 16u;
+        local = addr & 0xffffu;
+        if (node >= D.nodes) {
+            o.status = DEC_CONTEXT;
+            return o;
+        }
+        let slot = tables[D.lens_at + D.nodes + node];
+        if (slot == NONE_ADDR) {
+            o.status = DEC_ABSENT;
+            return o;
+        }
+        len = min(tables[D.lens_at + node], D.slot_bytes);
+        base = slot * D.slot_bytes;
+    }
+    r_byte = base + local;
+    r_end = base + len;
     r_bits = 0u;
     r_err = DEC_OK;
     let n = D.vertices;
     let max_q = (1u << D.position_bits) - 1u;
-    if (addr >= D.ops_len || v >= v_end || v_end > n || !valid_oct(nrm) || any(pos > vec3<u32>(max_q))) {
+    if (local >= len || v >= v_end || v_end > n || !valid_oct(nrm) || any(pos > vec3<u32>(max_q))) {
         o.status = DEC_CONTEXT;
         return o;
     }
@@ -390,7 +426,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
         // max_faces is at most 65535, so a count that wraps is above it too.
         nf = select(g + 3u, 0xffffffffu, g > 0xfffffffcu);
     }
-    let rest = D.ops_len - addr;
+    let rest = len - local;
     if (r_err == DEC_OK && (nf > D.max_faces || (rest < 8192u && nf > rest * 8u) || (nf == 0u && pattern != 0u))) {
         fail(DEC_FACES);
     }
@@ -582,53 +618,129 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
         return o;
     }
 
-    // 8. the address of the child stored second.
-    var offset = 0u;
-    if (has_left && has_right) {
-        let r = unzigzag(get_groups(T_POINTER + 3u * split_class(first + 2u)));
-        if (r_err != DEC_OK) {
-            o.status = r_err;
+    // 8. the addresses of the children that split.
+    var first_addr = NONE_ADDR;
+    var second_addr = NONE_ADDR;
+    if (D.nodes == 0u) {
+        // In core: the child stored first right after this operation, the second at an offset.
+        var offset = 0u;
+        if (has_left && has_right) {
+            let r = unzigzag(get_groups(T_POINTER + 3u * split_class(first + 2u)));
+            if (r_err != DEC_OK) {
+                o.status = r_err;
+                return o;
+            }
+            let est = pointer_estimate(D.avg_op_size, first);
+            if (r >= 0) {
+                offset = est + u32(r);
+                if (offset < est) {
+                    // Past 2^32, so past the section.
+                    o.status = DEC_POINTER;
+                    return o;
+                }
+            } else {
+                let back = magnitude(r);
+                if (back >= est) {
+                    o.status = DEC_POINTER;
+                    return o;
+                }
+                offset = est - back;
+            }
+            if (offset < 1u) {
+                o.status = DEC_POINTER;
+                return o;
+            }
+        }
+        let end = r_byte;
+        if ((has_left || has_right) && end >= D.ops_len) {
+            o.status = DEC_TRUNCATED;
             return o;
         }
-        let est = pointer_estimate(D.avg_op_size, first);
-        if (r >= 0) {
-            offset = est + u32(r);
-            if (offset < est) {
-                // Past 2^32, so past the section.
-                o.status = DEC_POINTER;
-                return o;
-            }
-        } else {
-            let back = magnitude(r);
-            if (back >= est) {
-                o.status = DEC_POINTER;
-                return o;
-            }
-            offset = est - back;
-        }
-        if (offset < 1u) {
+        if (has_left && has_right && offset >= D.ops_len - end) {
             o.status = DEC_POINTER;
             return o;
         }
+        first_addr = end;
+        second_addr = end + offset;
+    } else {
+        // Out of core (codec's read_op): per child that splits, its node's distance from this
+        // one; in another node its local address there; in this node the first directly after
+        // this operation and the second at an offset past the first's part in this node.
+        let splitting = select(0u, 1u, has_left) + select(0u, 1u, has_right);
+        var here = array<bool, 2>(false, false);
+        var at = array<u32, 2>(0u, 0u);
+        for (var k = 0u; k < splitting; k++) {
+            let delta = get_groups(T_NODE_DELTA + 3u * k);
+            if (r_err != DEC_OK) {
+                o.status = r_err;
+                return o;
+            }
+            if (delta != 0u) {
+                let l = get_bucket(T_LOCAL);
+                if (r_err != DEC_OK) {
+                    o.status = r_err;
+                    return o;
+                }
+                if (delta >= D.nodes - node || l > 0xffffu) {
+                    o.status = DEC_POINTER;
+                    return o;
+                }
+                at[k] = ((node + delta) << 16u) | l;
+            } else if (k == 0u) {
+                here[0] = true;
+            } else {
+                here[1] = true;
+                let est = select(0u, pointer_estimate(D.avg_op_size, first), here[0]);
+                let r = unzigzag(get_groups(T_POINTER + 3u * split_class(first + 2u)));
+                if (r_err != DEC_OK) {
+                    o.status = r_err;
+                    return o;
+                }
+                var off: u32;
+                if (r >= 0) {
+                    off = est + u32(r);
+                    if (off < est) {
+                        o.status = DEC_POINTER;
+                        return o;
+                    }
+                } else {
+                    let back = magnitude(r);
+                    if (back > est) {
+                        o.status = DEC_POINTER;
+                        return o;
+                    }
+                    off = est - back;
+                }
+                if (here[0] && off < 1u) {
+                    o.status = DEC_POINTER;
+                    return o;
+                }
+                at[1] = off;
+            }
+        }
+        // The offsets in this node count from this operation's end.
+        let end = r_byte - base;
+        for (var k = 0u; k < splitting; k++) {
+            if (here[k]) {
+                if (at[k] >= len - min(end, len)) {
+                    o.status = select(DEC_POINTER, DEC_TRUNCATED, k == 0u);
+                    return o;
+                }
+                at[k] = (node << 16u) | (end + at[k]);
+            }
+        }
+        first_addr = at[0];
+        second_addr = at[1];
     }
-    let end = r_byte;
-    if ((has_left || has_right) && end >= D.ops_len) {
-        o.status = DEC_TRUNCATED;
-        return o;
-    }
-    if (has_left && has_right && offset >= D.ops_len - end) {
-        o.status = DEC_POINTER;
-        return o;
-    }
-    let second = end + offset;
     if (has_left && has_right) {
-        o.left = select(end, second, swapped);
-        o.right = select(second, end, swapped);
+        o.left = select(first_addr, second_addr, swapped);
+        o.right = select(second_addr, first_addr, swapped);
     } else if (has_left) {
-        o.left = end;
+        o.left = first_addr;
     } else if (has_right) {
-        o.right = end;
+        o.right = first_addr;
     }
+    let end = r_byte - base;
     o.status = DEC_OK;
     o.v_u = v_u;
     o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);

@@ -23,36 +23,6 @@
 @group(0) @binding(13) var<storage, read_write> dec_faces: array<u32>;
 @group(0) @binding(14) var<storage, read_write> errors: array<atomic<u32>, 2>;
 
-// Records the first operation that failed to decode: its status, then its address.
-fn report(status: u32, addr: u32) {
-    for (var k = 0u; k < 16u; k++) {
-        let r = atomicCompareExchangeWeak(&errors[0], 0u, status);
-        if (r.exchanged) {
-            atomicStore(&errors[1], addr);
-            return;
-        }
-        if (r.old_value != 0u) {
-            return;
-        }
-    }
-}
-
-// Gives a vertex its operation's split cache: criteria and face count, decoded up to there.
-fn with_op(s: ptr<function, VState>, fvid: u32) {
-    (*s).faces = 0u;
-    (*s).crit = vec4<f32>(0.0);
-    if ((*s).addr == NONE) {
-        return;
-    }
-    let o = decode_op((*s).addr, fvid, (*s).v_end, (*s).pc, (*s).pos.xyz, (*s).nrm.xy, NONE_ADDR, DECODE_TO_FACES);
-    if (o.status != DEC_OK) {
-        report(o.status, (*s).addr);
-        return;
-    }
-    (*s).faces = o.faces;
-    (*s).crit = bitcast<vec4<f32>>(o.crit_f);
-}
-
 // The position of a quantized one, as the CPU decoder computes it.
 fn dequantize(q: vec3<u32>) -> vec3<f32> {
     return vec3<f32>(D.grid.x + f32(q.x) * D.grid.w, D.grid.y + f32(q.y) * D.grid.w, D.grid.z + f32(q.z) * D.grid.w);
@@ -101,6 +71,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     var l = s;
+    l.flags = 0u;
     l.v_end = o.v_u;
     l.addr = o.left;
     l.pc = o.crit;

@@ -24,7 +24,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let s = vstate[i];
     var state = 1u;
     var faces = 0u;
-    if (s.addr != NONE && (P.mode == 1u || needs_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
+    if (s.addr != NONE && s.flags == 0u && (P.mode == 1u || needs_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
         state = 2u;
         faces = s.faces;
     } else if (P.mode == 0u) {

@@ -7,7 +7,7 @@
 use codec::pm::build;
 use codec::pm::format::{decode, encode, Dpm, EncodeOptions, OpContext};
 use worker::gpu::Gpu;
-use worker::pm_adapt::decoder::GpuOpDecoder;
+use worker::pm_adapt::decoder::{DecodeFailure, GpuOpDecoder};
 
 fn dpm_bytes(rel: &str) -> Vec<u8> {
     let pm = build(&testkit::load_mesh(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
@@ -17,10 +17,19 @@ fn dpm_bytes(rel: &str) -> Vec<u8> {
 /// Decodes `jobs` on both and compares: the same refusals, the same operations.
 fn compare(gpu: &Gpu, dpm: &Dpm, jobs: &[(usize, OpContext)], what: &str) -> (usize, usize) {
     let decoder = GpuOpDecoder::new(gpu, dpm).expect("decoder");
+    compare_with(&decoder, dpm, jobs, what)
+}
+
+/// As [`compare`] with `decoder`; an operation it answers [`DecodeFailure::Absent`] is not
+/// compared (out of core, its node is not resident) and counts as neither.
+fn compare_with(decoder: &GpuOpDecoder, dpm: &Dpm, jobs: &[(usize, OpContext)], what: &str) -> (usize, usize) {
     let (got, _) = decoder.decode(jobs).expect("GPU decode");
     assert_eq!(got.len(), jobs.len());
     let (mut ok, mut refused) = (0, 0);
     for (i, ((addr, ctx), g)) in jobs.iter().zip(&got).enumerate() {
+        if g == &Err(DecodeFailure::Absent) {
+            continue;
+        }
         match (dpm.decode_op(*addr, ctx), g) {
             (Ok(c), Ok(g)) => {
                 let ctx_s = format!("{what}: operation {i} at {addr} ({ctx:?})");
@@ -132,6 +141,62 @@ fn damaged_operations_are_refused_where_the_cpu_refuses_them() {
     totals = (totals.0 + ok, totals.1 + refused);
     eprintln!("damaged: {} operations decoded alike, {} refused by both", totals.0, totals.1);
     assert!(totals.0 > 1000 && totals.1 > 1000, "both outcomes exercised: {totals:?}");
+}
+
+/// Out-of-core files: every operation decodes on the GPU from its node's slot in the pool as
+/// on the CPU; with half of the nodes resident, exactly the operations of the others are
+/// absent; damaged nodes and random node addresses are refused where the CPU refuses them.
+#[test]
+fn out_of_core_operations_decode_on_the_gpu_as_on_the_cpu() {
+    let gpu = Gpu::new().expect("a wgpu adapter");
+    let mut rng = Rng(0x00c0);
+    for (rel, node_bytes) in [("stanford/bunny_zipper_c3d.obj.gz", 4096), ("classic/teapot.obj", 1024)] {
+        let pm = build(&testkit::load_mesh(rel)).unwrap();
+        let bytes = encode(&pm, EncodeOptions { node_bytes, ..EncodeOptions::default() }).unwrap().bytes;
+        let dpm = Dpm::parse(&bytes).unwrap();
+        let nodes = dpm.nodes.len() as u32;
+        assert!(dpm.out_of_core() && nodes > 2, "{rel}: {nodes} nodes");
+        let jobs = all_jobs(&bytes);
+        assert_eq!(compare(&gpu, &dpm, &jobs, rel), (jobs.len(), 0), "{rel}");
+        // Every other node resident.
+        let even: Vec<u32> = (0..nodes).filter(|i| i % 2 == 0).collect();
+        let decoder = GpuOpDecoder::with_nodes(&gpu, &dpm, &even).unwrap();
+        let (got, _) = decoder.decode(&jobs).unwrap();
+        let absent = got.iter().filter(|g| **g == Err(DecodeFailure::Absent)).count();
+        let odd_ops = jobs.iter().filter(|(a, _)| Dpm::node_of(*a) % 2 == 1).count();
+        assert_eq!(absent, odd_ops, "{rel}: the operations of the absent nodes");
+        assert_eq!(compare_with(&decoder, &dpm, &jobs, rel), (jobs.len() - odd_ops, 0), "{rel}");
+        // Damaged nodes (flipped bits, overwritten bytes), decoded at every operation's address.
+        let mut totals = (0, 0);
+        for round in 0..4 {
+            let mut ops = dpm.ops.to_vec();
+            for _ in 0..ops.len() / if round < 2 { 64 } else { 256 } {
+                let i = rng.below(ops.len() as u64) as usize;
+                if round < 2 {
+                    ops[i] ^= 1 << rng.below(8);
+                } else {
+                    ops[i] = rng.next() as u8;
+                }
+            }
+            let mut damaged = dpm.clone();
+            damaged.ops = &ops;
+            let (ok, refused) = compare(&gpu, &damaged, &jobs, &format!("{rel}: round {round}"));
+            totals = (totals.0 + ok, totals.1 + refused);
+        }
+        // Random addresses in and past the nodes, with other operations' contexts.
+        let odd: Vec<(usize, OpContext)> = (0..5000)
+            .map(|_| {
+                let node = rng.below(nodes as u64 + 2) as usize;
+                let span = if rng.below(4) == 0 { 1 << 16 } else { node_bytes as u64 };
+                let local = rng.below(span) as usize;
+                (node * codec::pm::format::NODE_BYTES + local, jobs[rng.below(jobs.len() as u64) as usize].1)
+            })
+            .collect();
+        let (ok, refused) = compare(&gpu, &dpm, &odd, &format!("{rel}: random addresses"));
+        totals = (totals.0 + ok, totals.1 + refused);
+        eprintln!("{rel}, {nodes} nodes: damaged, {} decoded alike, {} refused by both", totals.0, totals.1);
+        assert!(totals.0 > 100 && totals.1 > 1000, "{rel}: both outcomes exercised: {totals:?}");
+    }
 }
 
 /// The dragon (871k triangles): every operation on both, the static memory, and the GPU's

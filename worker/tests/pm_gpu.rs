@@ -288,3 +288,68 @@ fn pass_overhead() {
         median(&mut busy)
     );
 }
+
+/// Out of core: the bunny in 4 kB nodes adapted on the GPU from a pool of node slots within a
+/// budget (two thirds of the nodes), against the CPU's
+/// `DpmAdapter::adapt_resident` with a cache of the same slots: after every pass the same
+/// statistics, active vertices and triangle set, with operations waiting for their nodes on
+/// the way; the GPU keeps no more node bytes than the budget. Once with the nodes read while
+/// scheduling, once by the loader thread (waited for).
+#[test]
+fn out_of_core_path_matches_the_cpu_reference() {
+    use codec::pm::format::NodeFile;
+    use codec::pm::{DpmAdapter, NodeCache};
+    use std::sync::Arc;
+    use worker::pm_adapt::OutOfCore;
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let rel = "stanford/bunny_zipper_c3d.obj.gz";
+    let pm = build(&testkit::load_mesh(rel)).unwrap();
+    let bytes = encode(&pm, EncodeOptions { node_bytes: 4096, ..EncodeOptions::default() }).unwrap().bytes;
+    let decoded = decode(&bytes).unwrap().pm;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bunny.dpm");
+    std::fs::write(&path, &bytes).unwrap();
+    let file = Arc::new(NodeFile::open(&path).unwrap());
+    let dpm = Dpm::parse_prefix(file.prefix()).unwrap();
+    let slot = dpm.nodes.iter().map(|n| n.len).max().unwrap().next_multiple_of(4) as u64;
+    let (frames, error_px) = (24, 0.5);
+    // Two thirds of the model: the path's whole views require more (then the required nodes
+    // of highest priority go in first), its close views less.
+    let slots = dpm.nodes.len() as u64 * 2 / 3;
+    for background in [false, true] {
+        let ooc = OutOfCore { file: file.clone(), budget_bytes: slots * slot, background };
+        let mut gpu = GpuAdapter::out_of_core(&device, &dpm, ooc, 4096).unwrap();
+        assert_eq!(gpu.node_slots(), Some(slots as u32));
+        let mut cache = NodeCache::with_slots(&dpm, file.clone(), slots, slot, false);
+        let mut cpu = DpmAdapter::new(&dpm).unwrap();
+        let (mut waited, mut passes) = (0, 0);
+        for k in 0..frames {
+            let view = path_view(&decoded, k, frames, error_px);
+            cache.schedule(&view).unwrap();
+            gpu.schedule(&view).unwrap();
+            gpu.wait_for_nodes().unwrap();
+            for p in 0..12 {
+                let what = format!("background {background}, frame {k}, pass {p}");
+                let (c, g) = (cpu.adapt_resident(&view, &cache).unwrap(), gpu.adapt(&view).unwrap());
+                assert_eq!(c, g, "{what}: pass statistics differ");
+                assert_eq!(gpu.active().unwrap(), cpu.active(), "{what}: active vertices differ");
+                assert_eq!(sorted_canonical(gpu.face_fvids().unwrap()), sorted_canonical(cpu.face_fvids()), "{what}");
+                waited = waited.max(cpu.pending());
+                passes += 1;
+                if c.converged() {
+                    break;
+                }
+            }
+            gpu.check().unwrap();
+        }
+        let pool = gpu.node_pool_bytes();
+        eprintln!(
+            "{rel} out of core (background {background}): {passes} passes equal; {slots} slots of {slot} bytes \
+             ({pool} bytes of nodes on the GPU, file {}), {} bytes uploaded, up to {waited} vertices waiting",
+            bytes.len(),
+            gpu.uploaded_bytes()
+        );
+        assert!(pool <= slots * slot, "{pool} bytes of node pool for a budget of {}", slots * slot);
+        assert!(waited > 0, "no operation ever waited for its node");
+    }
+}

@@ -6,7 +6,9 @@
 //! priority at least 1 are required (only they can hold an operation the view asks for), and,
 //! as the paper does against the delay of loading, nodes of lower priority are kept or loaded
 //! too while the budget has room. Resident nodes outside the budget's best are evicted when
-//! space is needed. Loads are asked of the loader thread in priority order; what it has read
+//! space is needed, that is when a wanted node arrives; a node that arrives no longer wanted
+//! is dropped, so the resident nodes never exceed the budget (a pool of GPU slots relies on
+//! it). Loads are asked of the loader thread in priority order; what it has read
 //! is installed by [`NodeCache::install`] (the adaptation never waits for the disk: a vertex
 //! whose operation is in a node not yet loaded just does not split yet). Evicting a node is
 //! always safe: collapses need no decoding (their operations' criteria are in the vertices'
@@ -33,6 +35,8 @@ pub struct CacheStats {
     pub loaded: usize,
     pub loaded_bytes: u64,
     pub evicted: usize,
+    /// Nodes read but no longer wanted when they arrived (the view moved on), not installed.
+    pub discarded: usize,
 }
 
 /// The nodes of an out-of-core file in memory (see the module docs).
@@ -40,6 +44,15 @@ pub struct NodeCache {
     nodes: Vec<NodeInfo>,
     resident: HashMap<u32, Arc<[u8]>>,
     budget: u64,
+    /// What a node costs of the budget: its length, or a fixed slot size (a GPU pool of
+    /// slots, [`NodeCache::with_slots`]).
+    slot_bytes: Option<u64>,
+    /// What the resident nodes cost of the budget.
+    used: u64,
+    /// The nodes the last schedule wants resident (they fit the budget), and every node's
+    /// place in its priority order.
+    wanted: HashSet<u32>,
+    rank: Vec<u32>,
     /// Nodes asked of the loader and not yet installed.
     in_flight: HashSet<u32>,
     loader: Loader,
@@ -65,6 +78,16 @@ impl NodeCache {
     /// A cache of at most `budget` bytes of nodes of `file` (whose node table `dpm` holds),
     /// read by a thread of its own when `background`, else while scheduling.
     pub fn new(dpm: &Dpm, file: Arc<NodeFile>, budget: u64, background: bool) -> NodeCache {
+        Self::make(dpm, file, budget, None, background)
+    }
+
+    /// A cache of at most `slots` nodes, each taking a slot of `slot_bytes` whatever its
+    /// length (what a pool of fixed slots in graphics memory holds).
+    pub fn with_slots(dpm: &Dpm, file: Arc<NodeFile>, slots: u64, slot_bytes: u64, background: bool) -> NodeCache {
+        Self::make(dpm, file, slots * slot_bytes, Some(slot_bytes), background)
+    }
+
+    fn make(dpm: &Dpm, file: Arc<NodeFile>, budget: u64, slot_bytes: Option<u64>, background: bool) -> NodeCache {
         let loader = if background {
             let (requests, rx) = channel::<u32>();
             let (tx, done) = channel();
@@ -86,6 +109,10 @@ impl NodeCache {
             nodes: dpm.nodes.clone(),
             resident: HashMap::new(),
             budget,
+            slot_bytes,
+            used: 0,
+            wanted: HashSet::new(),
+            rank: vec![0; dpm.nodes.len()],
             in_flight: HashSet::new(),
             loader,
             stats: CacheStats::default(),
@@ -95,6 +122,21 @@ impl NodeCache {
     /// The bytes of node `i`, if resident.
     pub fn get(&self, i: u32) -> Option<&[u8]> {
         self.resident.get(&i).map(|b| &b[..])
+    }
+
+    /// The resident nodes, in no particular order.
+    pub fn resident_nodes(&self) -> impl Iterator<Item = u32> + '_ {
+        self.resident.keys().copied()
+    }
+
+    /// Nodes asked of the loader thread and not installed yet.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// What node `i` costs of the budget.
+    fn cost(&self, i: u32) -> u64 {
+        self.slot_bytes.unwrap_or(self.nodes[i as usize].len as u64)
     }
 
     /// Decodes the operation at `addr` of `dpm` if its node is resident.
@@ -114,7 +156,7 @@ impl NodeCache {
         let mut wanted = HashSet::new();
         let mut room = self.budget;
         for &i in &order {
-            let len = self.nodes[i as usize].len as u64;
+            let len = self.cost(i);
             if len > room {
                 if priority[i as usize] >= 1.0 {
                     continue;
@@ -124,26 +166,13 @@ impl NodeCache {
             room -= len;
             wanted.insert(i);
         }
-        // Evict the resident nodes not wanted, worst first, only as far as the wanted ones
-        // need the space (the others stay while there is room).
-        let need: u64 = order
-            .iter()
-            .filter(|i| wanted.contains(i) && !self.resident.contains_key(i))
-            .map(|&i| self.nodes[i as usize].len as u64)
-            .sum();
-        let mut used: u64 = self.resident.keys().map(|&i| self.nodes[i as usize].len as u64).sum();
-        let in_flight: u64 = self.in_flight.iter().map(|&i| self.nodes[i as usize].len as u64).sum();
-        for &i in order.iter().rev() {
-            if used + in_flight + need <= self.budget {
-                break;
-            }
-            if !wanted.contains(&i) && self.resident.remove(&i).is_some() {
-                used -= self.nodes[i as usize].len as u64;
-                self.stats.evicted += 1;
-            }
+        // Evicting waits until a wanted node arrives and needs the space (`put`).
+        for (k, &i) in order.iter().enumerate() {
+            self.rank[i as usize] = k as u32;
         }
+        self.wanted = wanted;
         for &i in &order {
-            if !wanted.contains(&i) || self.resident.contains_key(&i) || self.in_flight.contains(&i) {
+            if !self.wanted.contains(&i) || self.resident.contains_key(&i) || self.in_flight.contains(&i) {
                 continue;
             }
             match &self.loader {
@@ -195,7 +224,28 @@ impl NodeCache {
         Ok(())
     }
 
+    /// Installs node `i` if the last schedule still wants it, evicting the resident nodes it
+    /// does not want, worst first, as far as the space is needed. The wanted nodes fit the
+    /// budget together, so the resident ones always do.
     fn put(&mut self, i: u32, bytes: Vec<u8>) {
+        if !self.wanted.contains(&i) {
+            self.stats.discarded += 1;
+            return;
+        }
+        let cost = self.cost(i);
+        while self.used + cost > self.budget {
+            let worst = self
+                .resident
+                .keys()
+                .copied()
+                .filter(|j| !self.wanted.contains(j))
+                .max_by_key(|&j| self.rank[j as usize]);
+            let Some(j) = worst else { break };
+            self.resident.remove(&j);
+            self.used -= self.cost(j);
+            self.stats.evicted += 1;
+        }
+        self.used += cost;
         self.stats.loaded += 1;
         self.stats.loaded_bytes += bytes.len() as u64;
         self.resident.insert(i, bytes.into());
@@ -208,6 +258,7 @@ impl NodeCache {
         self.stats.loaded = 0;
         self.stats.loaded_bytes = 0;
         self.stats.evicted = 0;
+        self.stats.discarded = 0;
         s
     }
 }

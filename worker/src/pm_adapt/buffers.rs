@@ -15,7 +15,8 @@ pub(super) struct GpuVState {
     pub(super) c_v: u32,
     pub(super) c_v_end: u32,
     pub(super) c_faces: u32,
-    pub(super) pad: u32,
+    /// Out of core: [`PENDING`], `ABSENT` (`common.wgsl`).
+    pub(super) flags: u32,
     pub(super) pc: [u32; 4],
     pub(super) pos: [u32; 4],
     pub(super) nrm: [u32; 4],
@@ -23,6 +24,9 @@ pub(super) struct GpuVState {
     pub(super) c_pc: [u32; 4],
     pub(super) c_crit: [f32; 4],
 }
+
+/// `PENDING` of `shaders/pm/common.wgsl`: the vertex's operation waits for its node.
+pub(super) const PENDING: u32 = 1;
 
 /// `Params` of `shaders/pm/common.wgsl`.
 #[repr(C)]

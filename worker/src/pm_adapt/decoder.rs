@@ -11,6 +11,7 @@ use codec::huffman::MAX_LEN;
 use codec::pm::format::{log_table, Dpm, OpContext, LOG_STEPS, MAX_K, TABLES, TABLE_BASE};
 
 use super::buffers::init;
+use super::nodes::NodePool;
 use super::AdaptError;
 use crate::gpu::{Binding, Gpu, GpuError};
 
@@ -72,10 +73,16 @@ pub(crate) fn batch_wgsl() -> String {
     format!("{}\n{}", decoder_wgsl(), include_str!("../../../shaders/pm/decode_batch.wgsl"))
 }
 
+/// Bytes per slot of the node pool of an out-of-core `dpm`: its longest node, in words.
+pub(crate) fn slot_bytes(dpm: &Dpm) -> u32 {
+    dpm.nodes.iter().map(|n| n.len).max().unwrap_or(0).next_multiple_of(4).max(4)
+}
+
 /// What the decoder keeps of `dpm` besides its operations: the `tables` buffer's words (a word
 /// per table of the format with where its words start, the distinct tables, then the value
 /// tables: the `f32` bits of the 256 `sin(alpha)` codes and the log tables of the lengths and
-/// the attribute error), and the decoder's parameters.
+/// the attribute error; out of core then every node's length and the page table, every node
+/// not resident), and the decoder's parameters.
 pub(crate) fn decoder_data(dpm: &Dpm) -> (Vec<u32>, DecodeParams) {
     let h = &dpm.header;
     // The distinct tables once each (the contexts a small model leaves unused all have the
@@ -103,6 +110,11 @@ pub(crate) fn decoder_data(dpm: &Dpm) -> (Vec<u32>, DecodeParams) {
     words.extend((0..256u32).map(|k| (k as f32 / 255.0).to_bits()));
     words.extend(log_table(h.length_step).map(f32::to_bits));
     words.extend(log_table(h.attribute_step).map(f32::to_bits));
+    let lens_at = words.len() as u32;
+    if dpm.out_of_core() {
+        words.extend(dpm.nodes.iter().map(|n| n.len));
+        words.extend(std::iter::repeat_n(codec::pm::NONE, dpm.nodes.len()));
+    }
     let params = DecodeParams {
         ops_len: dpm.ops.len() as u32,
         vertices: h.vertices,
@@ -112,6 +124,10 @@ pub(crate) fn decoder_data(dpm: &Dpm) -> (Vec<u32>, DecodeParams) {
         max_faces: h.max_faces,
         count: 0,
         values_at,
+        nodes: dpm.nodes.len() as u32,
+        lens_at,
+        slot_bytes: if dpm.out_of_core() { slot_bytes(dpm) } else { 0 },
+        pad: 0,
         grid: [h.bbox_min[0], h.bbox_min[1], h.bbox_min[2], h.step],
     };
     (words, params)
@@ -129,6 +145,12 @@ pub(crate) struct DecodeParams {
     pub(crate) max_faces: u32,
     pub(crate) count: u32,
     values_at: u32,
+    /// Out of core: the nodes (0 in core), where their lengths start in `tables` (the page
+    /// table follows), and the bytes per slot of the node pool.
+    pub(crate) nodes: u32,
+    pub(crate) lens_at: u32,
+    pub(crate) slot_bytes: u32,
+    pad: u32,
     /// The position grid: its origin and step.
     grid: [f32; 4],
 }
@@ -188,6 +210,8 @@ pub enum DecodeFailure {
     Position,
     Normal,
     Pointer,
+    /// Out of core: the operation's node is not resident (not an error of the file).
+    Absent,
     /// A status the shader does not produce (a GPU fault).
     Unknown(u32),
 }
@@ -206,6 +230,7 @@ impl DecodeFailure {
             8 => Position,
             9 => Normal,
             10 => Pointer,
+            11 => Absent,
             s => Unknown(s),
         }
     }
@@ -225,6 +250,7 @@ impl std::fmt::Display for DecodeFailure {
             Position => "position out of range",
             Normal => "normal out of range",
             Pointer => "bad operation pointer",
+            Absent => "its node is not resident",
             Unknown(_) => "an unknown status (a GPU fault)",
         })
     }
@@ -260,14 +286,30 @@ pub struct GpuOpDecoder {
 }
 
 impl GpuOpDecoder {
-    /// Uploads `dpm`'s operations, tables and value tables to `gpu`.
+    /// Uploads `dpm`'s operations, tables and value tables to `gpu`; out of core, every node.
     pub fn new(gpu: &Gpu, dpm: &Dpm) -> Result<GpuOpDecoder, AdaptError> {
+        let all: Vec<u32> = (0..dpm.nodes.len() as u32).collect();
+        Self::with_nodes(gpu, dpm, &all)
+    }
+
+    /// As [`Self::new`], but of an out-of-core `dpm` (parsed whole) only the nodes `resident`
+    /// are in graphics memory, in a pool of as many slots: an operation of another node is
+    /// [`DecodeFailure::Absent`].
+    pub fn with_nodes(gpu: &Gpu, dpm: &Dpm, resident: &[u32]) -> Result<GpuOpDecoder, AdaptError> {
         let (words, params) = decoder_data(dpm);
         gpu.scoped(|| {
             let device = gpu.device();
-            let usage = wgpu::BufferUsages::STORAGE;
-            let ops = init(device, "pm decode: operations", dpm.ops, usage);
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
             let tables = init(device, "pm decode: tables", bytemuck::cast_slice(&words), usage);
+            let ops = if dpm.out_of_core() {
+                let slots = resident.len() as u32;
+                let mut pool =
+                    NodePool::new(device, dpm.nodes.len(), slots, params.slot_bytes, params.lens_at + params.nodes);
+                pool.sync(gpu.queue(), &tables, resident.iter().map(|&i| (i, dpm.node_bytes(i))))?;
+                pool.ops
+            } else {
+                init(device, "pm decode: operations", dpm.ops, usage)
+            };
             let static_bytes = ops.size() + tables.size();
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("pm: decode batch"),

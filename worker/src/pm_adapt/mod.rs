@@ -59,22 +59,24 @@
 
 pub(crate) mod buffers;
 pub mod decoder;
+mod nodes;
 mod pass;
 pub(crate) mod pipelines;
 
 use std::sync::Arc;
 
-use codec::pm::format::{Dpm, OpContext};
-use codec::pm::{PassStats, Viewpoint, NONE};
+use codec::pm::format::{Dpm, NodeFile, OpContext, NODE_BYTES};
+use codec::pm::{CacheStats, NodeCache, PassStats, Viewpoint, NONE};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
-    init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, READBACK_BYTES,
-    STATS_BYTES, VERTEX_USAGE,
+    init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, PENDING,
+    READBACK_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
-use decoder::{decoder_data, DecodeFailure};
+use decoder::{decoder_data, slot_bytes, DecodeFailure};
+use nodes::NodePool;
 use pipelines::Pipelines;
 
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
@@ -93,25 +95,59 @@ pub enum AdaptError {
     /// A face read back refers to a vertex that is not active (a GPU fault).
     #[error("GPU error: face index {index} out of {vertices} vertices")]
     FaceIndex { index: u32, vertices: usize },
-    /// An operation of the `.dpm` did not decode on the GPU.
-    #[error("corrupt .dpm data: operation at byte {addr}: {failure}")]
-    Corrupt { addr: u32, failure: String },
-    /// A base vertex's operation did not decode on the CPU.
+    /// An operation of the `.dpm` did not decode on the GPU: where (the operation's byte, and
+    /// out of core its node) and why.
+    #[error("corrupt .dpm data: {at}: {failure}")]
+    Corrupt { at: String, failure: String },
+    /// A base vertex's operation did not decode on the CPU, or a node could not be read.
     #[error(transparent)]
     Format(#[from] codec::pm::DpmError),
-    /// An out-of-core file: its node addresses are not decoded on the GPU yet.
-    #[error(
-        "out-of-core .dpm files (built with --node-kb) are adapted on the CPU only so far \
-         (`codec::pm::NodeCache`); rebuild it without --node-kb for the GPU"
-    )]
-    OutOfCore,
+    /// An out-of-core file given to [`GpuAdapter::new`], or an in-core one to
+    /// [`GpuAdapter::out_of_core`].
+    #[error("{0}")]
+    WrongLayout(&'static str),
+    /// The budget does not hold the largest node.
+    #[error("a GPU budget of {budget} bytes holds no node: the largest takes {slot_bytes} (raise --gpu-budget-mb)")]
+    Budget { budget: u64, slot_bytes: u32 },
+    /// The node pool was asked to hold more nodes than it has slots (a bug of the cache).
+    #[error("GPU error: the node pool's {slots} slots are all taken")]
+    PoolFull { slots: u32 },
+    /// A node larger than a slot (a node table that lies).
+    #[error("corrupt .dpm data: node {node}: {bytes} bytes, more than the {slot_bytes} of a slot")]
+    NodeSize { node: u32, bytes: usize, slot_bytes: u32 },
 }
 
 impl AdaptError {
-    /// The error of a `DEC_*` status of `decode.wgsl` for the operation at `addr`.
-    pub(crate) fn corrupt(status: u32, addr: u32) -> AdaptError {
-        AdaptError::Corrupt { addr, failure: DecodeFailure::of(status).to_string() }
+    /// The error of a `DEC_*` status of `decode.wgsl` for the operation at `addr` (out of
+    /// core: a node and a local address).
+    pub(crate) fn corrupt(status: u32, addr: u32, out_of_core: bool) -> AdaptError {
+        let at = if out_of_core {
+            format!("node {}: operation at byte {}", addr as usize / NODE_BYTES, addr as usize % NODE_BYTES)
+        } else {
+            format!("operation at byte {addr}")
+        };
+        AdaptError::Corrupt { at, failure: DecodeFailure::of(status).to_string() }
     }
+}
+
+/// Where an out-of-core adapter reads its nodes and how many it keeps.
+pub struct OutOfCore {
+    /// The file, open for reading nodes ([`NodeFile::open`]).
+    pub file: Arc<NodeFile>,
+    /// Bytes of graphics memory for nodes: the pool holds this many bytes' worth of slots
+    /// of the largest node's size.
+    pub budget_bytes: u64,
+    /// Read nodes on a thread of their own (the paper's); else while scheduling.
+    pub background: bool,
+}
+
+/// An out-of-core adapter's nodes: the cache that decides (on the host) and the pool that
+/// follows it (on the GPU).
+struct Resident {
+    cache: NodeCache,
+    pool: NodePool,
+    /// Node bytes uploaded to the pool so far.
+    uploaded: u64,
 }
 
 /// The adaptation state of one progressive mesh on the GPU (see the module docs).
@@ -142,6 +178,8 @@ pub struct GpuAdapter {
     profile: bool,
     /// Milliseconds of the last pass: classification (to the totals read back), application.
     times: [f64; 3],
+    /// Out of core: the resident nodes.
+    resident: Option<Resident>,
 }
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
@@ -161,8 +199,34 @@ impl GpuAdapter {
     /// `n_alloc` is the paper's reallocation slack in elements ([`DEFAULT_N_ALLOC`]).
     pub fn new(gpu: &Gpu, dpm: &Dpm, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
         if dpm.out_of_core() {
-            return Err(AdaptError::OutOfCore);
+            return Err(AdaptError::WrongLayout(
+                "an out-of-core .dpm (built with --node-kb) needs a GPU budget for its nodes",
+            ));
         }
+        Self::make(gpu, dpm, n_alloc, None)
+    }
+
+    /// An adapter of an out-of-core file (`dpm` its head, [`Dpm::parse_prefix`]): its nodes
+    /// come from `ooc.file` as [`Self::schedule`] asks for them and stay within
+    /// `ooc.budget_bytes` of graphics memory, a pool of slots of the largest node's size,
+    /// chosen by the paper's priority ([`NodeCache`]). It starts at the base mesh with every
+    /// operation pending; a vertex splits once its operation's node is resident.
+    pub fn out_of_core(gpu: &Gpu, dpm: &Dpm, ooc: OutOfCore, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
+        if !dpm.out_of_core() {
+            return Err(AdaptError::WrongLayout("an in-core .dpm has no nodes to keep within a GPU budget"));
+        }
+        let slot = slot_bytes(dpm);
+        // At most one slot per node, and within what one binding and a 32-bit address allow.
+        let limit = gpu.device().limits().max_storage_buffer_binding_size.min(u32::MAX as u64);
+        let slots = (ooc.budget_bytes.min(limit) / slot as u64).min(dpm.nodes.len() as u64) as u32;
+        if slots == 0 {
+            return Err(AdaptError::Budget { budget: ooc.budget_bytes, slot_bytes: slot });
+        }
+        let cache = NodeCache::with_slots(dpm, ooc.file, slots as u64, slot as u64, ooc.background);
+        Self::make(gpu, dpm, n_alloc, Some((cache, slots)))
+    }
+
+    fn make(gpu: &Gpu, dpm: &Dpm, n_alloc: u32, nodes: Option<(NodeCache, u32)>) -> Result<GpuAdapter, AdaptError> {
         let limits = gpu.device().limits();
         let need = pipelines::storage_buffers_per_stage();
         if limits.max_storage_buffers_per_shader_stage < need {
@@ -176,8 +240,17 @@ impl GpuAdapter {
         gpu.scoped(|| {
             let device = gpu.device();
             let read_only = wgpu::BufferUsages::STORAGE;
-            let ops = init(device, "pm: operations", dpm.ops, read_only);
-            let tables = init(device, "pm: decoding tables", bytemuck::cast_slice(&words), read_only);
+            // Out of core the page table at the tables' end changes between passes.
+            let tables_usage = read_only | wgpu::BufferUsages::COPY_DST;
+            let tables = init(device, "pm: decoding tables", bytemuck::cast_slice(&words), tables_usage);
+            let (ops, resident) = match nodes {
+                None => (init(device, "pm: operations", dpm.ops, read_only), None),
+                Some((cache, slots)) => {
+                    let pool =
+                        NodePool::new(device, dpm.nodes.len(), slots, params.slot_bytes, params.lens_at + params.nodes);
+                    (pool.ops.clone(), Some(Resident { cache, pool, uploaded: 0 }))
+                }
+            };
             let decode = init(device, "pm: decode params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
             let shared = Arc::new(Shared {
                 pipelines: Pipelines::new(gpu),
@@ -187,12 +260,12 @@ impl GpuAdapter {
                 decode,
                 base,
             });
-            Ok(GpuAdapter::with_shared(gpu.clone(), shared, n_alloc.max(1)))
+            Ok(GpuAdapter::with_shared(gpu.clone(), shared, n_alloc.max(1), resident))
         })
     }
 
     /// A new adapter at the base mesh.
-    fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32) -> GpuAdapter {
+    fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32, resident: Option<Resident>) -> GpuAdapter {
         let d = gpu.device();
         let mut adapter = GpuAdapter {
             shared,
@@ -224,6 +297,7 @@ impl GpuAdapter {
             reallocations: 0,
             profile: false,
             times: [0.0; 3],
+            resident,
             gpu,
         };
         adapter.reset();
@@ -300,14 +374,73 @@ impl GpuAdapter {
         self.shared.ops.size() + self.shared.tables.size() + self.shared.decode.size()
     }
 
+    /// Whether the file is out of core (nodes within a budget).
+    pub fn is_out_of_core(&self) -> bool {
+        self.resident.is_some()
+    }
+
     /// Fails if an operation did not decode in the last pass (a pass checks the one before
     /// it; this checks the last, for a caller about to draw).
     pub fn check(&self) -> Result<(), AdaptError> {
         let bytes = self.read_buffer(&self.errors, ERRORS_BYTES)?;
         let e: [u32; 2] = bytemuck::pod_read_unaligned(&bytes);
         if e[0] != 0 {
-            return Err(AdaptError::corrupt(e[0], e[1]));
+            return Err(AdaptError::corrupt(e[0], e[1], self.resident.is_some()));
         }
+        Ok(())
+    }
+
+    /// Out of core: ranks the nodes for `view` by the paper's priority and asks for the ones
+    /// the budget keeps (read by the loader thread, or now when not in the background); the
+    /// passes that follow upload what has arrived. Call it once per frame. `None` in core.
+    pub fn schedule(&mut self, view: &Viewpoint) -> Result<Option<CacheStats>, AdaptError> {
+        match &mut self.resident {
+            None => Ok(None),
+            Some(r) => Ok(Some(r.cache.schedule(view)?)),
+        }
+    }
+
+    /// Out of core: waits until every node asked for has arrived (for a frame that must
+    /// converge; the paper's renderer never waits). Nothing in core.
+    pub fn wait_for_nodes(&mut self) -> Result<(), AdaptError> {
+        if let Some(r) = &mut self.resident {
+            r.cache.wait()?;
+        }
+        Ok(())
+    }
+
+    /// Out of core: nodes asked for and not arrived yet (0 in core).
+    pub fn nodes_in_flight(&self) -> usize {
+        self.resident.as_ref().map_or(0, |r| r.cache.in_flight())
+    }
+
+    /// Out of core: node bytes uploaded to graphics memory so far (the load traffic).
+    pub fn uploaded_bytes(&self) -> u64 {
+        self.resident.as_ref().map_or(0, |r| r.uploaded)
+    }
+
+    /// Out of core: bytes of graphics memory the node pool takes (0 in core).
+    pub fn node_pool_bytes(&self) -> u64 {
+        self.resident.as_ref().map_or(0, |r| r.pool.ops.size())
+    }
+
+    /// Out of core: the node pool's slots (what the budget holds).
+    pub fn node_slots(&self) -> Option<u32> {
+        self.resident.as_ref().map(|r| r.pool.slots())
+    }
+
+    /// Out of core: installs the nodes that have arrived and brings the pool and its page
+    /// table in line with the cache, before a pass.
+    fn sync_nodes(&mut self) -> Result<(), AdaptError> {
+        let Some(r) = &mut self.resident else { return Ok(()) };
+        r.cache.install()?;
+        let cache = &r.cache;
+        let up = r.pool.sync(
+            self.gpu.queue(),
+            &self.shared.tables,
+            cache.resident_nodes().map(|i| (i, cache.get(i).expect("resident"))),
+        )?;
+        r.uploaded += up;
         Ok(())
     }
 
@@ -416,7 +549,11 @@ fn base_state(dpm: &Dpm) -> Result<BaseState, AdaptError> {
             nrm: [nrm[0], nrm[1], 0, 0],
             ..GpuVState::default()
         };
-        if let Some(addr) = dpm.roots[b] {
+        if let (Some(addr), true) = (dpm.roots[b], dpm.out_of_core()) {
+            // Decoded by the node check once its node is resident.
+            s.addr = addr as u32;
+            s.flags = PENDING;
+        } else if let Some(addr) = dpm.roots[b] {
             let ctx = OpContext { v: fvid[b], v_end, parent_criteria: [0; 4], position: pos, normal: nrm };
             let d = dpm.decode_op(addr, &ctx)?;
             let c = d.criteria;

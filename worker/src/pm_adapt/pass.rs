@@ -20,6 +20,9 @@ impl GpuAdapter {
     fn pass_unscoped(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
         let pass_start = std::time::Instant::now();
         self.times = [0.0; 3];
+        // Out of core: the nodes that arrived go in before the pass, which then sees one page
+        // table throughout.
+        self.sync_nodes()?;
         let (n, m) = (self.n, self.m);
         let unchanged = PassStats { vertices: n as usize, faces: m as usize, ..Default::default() };
         if n == 0 {
@@ -65,6 +68,21 @@ impl GpuAdapter {
                     ("fcnt", &self.fcnt.buffer),
                 ],
             );
+            let node_check = self.resident.as_ref().map(|_| {
+                p.node_check.bind(
+                    &self.gpu,
+                    &[
+                        ("P", &self.params),
+                        ("vfvid", &set.fvid.buffer),
+                        ("vstate", &set.state.buffer),
+                        ("D", &self.shared.decode),
+                        ("ops", &self.shared.ops),
+                        ("tables", &self.shared.tables),
+                        ("dec_faces", &self.faces.fvid.buffer),
+                        ("errors", &self.errors),
+                    ],
+                )
+            });
             let collapse = p.collapse.bind(
                 &self.gpu,
                 &[
@@ -78,6 +96,9 @@ impl GpuAdapter {
                 label: Some("pm: classify"),
                 timestamp_writes: None,
             });
+            if let Some(bg) = &node_check {
+                self.dispatch(&mut pass, &p.node_check, bg, n);
+            }
             self.dispatch(&mut pass, &p.state, &state, n + 1);
             self.dispatch(&mut pass, &p.collapse, &collapse, n);
         }
@@ -102,7 +123,7 @@ impl GpuAdapter {
         let totals = self.read_totals()?;
         // An operation the last pass could not decode fails this one.
         if totals[10] != 0 {
-            return Err(AdaptError::corrupt(totals[10], totals[11]));
+            return Err(AdaptError::corrupt(totals[10], totals[11], self.resident.is_some()));
         }
         self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
         let (n_new, f_add) = (totals[0], totals[1]);

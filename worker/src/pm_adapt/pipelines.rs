@@ -18,6 +18,8 @@ pub(crate) const SCAN_BLOCK: u32 = 2048;
 
 /// Types, `Params`, and the refinement test every stage but the scan shares.
 const COMMON: &str = include_str!("../../../shaders/pm/common.wgsl");
+/// What the stages that decode share after the decoder: error reports, a vertex's split cache.
+const VERTEX_OP: &str = include_str!("../../../shaders/pm/vertex_op.wgsl");
 
 /// One WGSL file of the adaptation, compiled as one shader module.
 pub(crate) struct ShaderDef {
@@ -25,7 +27,8 @@ pub(crate) struct ShaderDef {
     source: &'static str,
     /// Whether `common.wgsl` is prepended.
     common: bool,
-    /// Whether the operation decoder (`decode.wgsl` and its constants) is prepended too.
+    /// Whether the operation decoder (`decode.wgsl` and its constants) and `vertex_op.wgsl`
+    /// are prepended too.
     decoder: bool,
 }
 
@@ -33,7 +36,7 @@ impl ShaderDef {
     /// The WGSL the device compiles (and the contract test parses).
     pub(crate) fn wgsl(&self) -> Cow<'static, str> {
         match (self.common, self.decoder) {
-            (true, true) => format!("{COMMON}\n{}\n{}", decoder_wgsl(), self.source).into(),
+            (true, true) => format!("{COMMON}\n{}\n{VERTEX_OP}\n{}", decoder_wgsl(), self.source).into(),
             (true, false) => format!("{COMMON}\n{}", self.source).into(),
             _ => self.source.into(),
         }
@@ -53,6 +56,12 @@ const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
     ShaderDef { label, source, common: true, decoder: false }
 }
 
+const NODES_WGSL: ShaderDef = ShaderDef {
+    label: "pm: node check",
+    source: include_str!("../../../shaders/pm/nodes.wgsl"),
+    common: true,
+    decoder: true,
+};
 const STATE_WGSL: ShaderDef = with_common("pm: state update", include_str!("../../../shaders/pm/state.wgsl"));
 const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("../../../shaders/pm/collapse.wgsl"));
 const SCAN_WGSL: ShaderDef = ShaderDef {
@@ -78,6 +87,24 @@ const FACE_COMPACT_WGSL: ShaderDef =
 
 /// `P`, the parameters every stage of `common.wgsl` binds first.
 const PARAMS: Binding = Binding::uniform::<Params>(0, "P");
+
+/// Out of core, first in a pass: which vertices' nodes are resident, and the pending
+/// operations whose nodes came in decoded.
+pub(crate) const NODE_CHECK: StageDef = StageDef {
+    label: "pm: node check",
+    shader: &NODES_WGSL,
+    entry: "main",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read_write::<GpuVState>(2, "vstate"),
+        Binding::uniform::<DecodeParams>(3, "D"),
+        Binding::read::<u32>(4, "ops"),
+        Binding::read::<u32>(5, "tables"),
+        Binding::read_write::<u32>(6, "dec_faces"),
+        Binding::read_write::<Errors>(7, "errors"),
+    ],
+};
 
 /// Algorithm 1.
 pub(crate) const STATE: StageDef = StageDef {
@@ -241,7 +268,8 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 11] = [
+pub(crate) const STAGES: [&StageDef; 12] = [
+    &NODE_CHECK,
     &STATE,
     &COLLAPSE,
     &SCAN_BLOCKS,
@@ -297,6 +325,7 @@ impl Stage {
 }
 
 pub(super) struct Pipelines {
+    pub(super) node_check: Stage,
     pub(super) state: Stage,
     pub(super) collapse: Stage,
     pub(super) scan_blocks: Stage,
@@ -323,6 +352,7 @@ impl Pipelines {
         let compact = module(&FACE_COMPACT_WGSL);
         let single = |def: &'static StageDef| Stage::new(gpu, &module(def.shader), def);
         Pipelines {
+            node_check: single(&NODE_CHECK),
             state: single(&STATE),
             collapse: single(&COLLAPSE),
             scan_blocks: Stage::new(gpu, &scan, &SCAN_BLOCKS),
