@@ -164,34 +164,68 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     assert!(!out.exists());
 }
 
+/// `pm adapt --gpu` writes the CPU's file, from an in-core `.dpm` and from an out-of-core one
+/// (4 kB nodes, every node in graphics memory); a budget for fewer nodes gives a coarser mesh,
+/// and one that holds no node is refused in one line.
 #[test]
 fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
     let dir = tempfile::tempdir().unwrap();
     let dpm = dir.path().join("bunny.dpm");
-    let o = tessera(&["pm", "build", s(&mesh("stanford/bunny_zipper_c3d.obj.gz")), "-o", s(&dpm)]);
+    let ooc = dir.path().join("bunny-nodes.dpm");
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let o = tessera(&["pm", "build", s(&bunny), "-o", s(&dpm)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tessera(&["pm", "build", s(&bunny), "-o", s(&ooc), "--node-kb", "4"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let xdg = std::env::temp_dir().join("tessera-xdg");
     std::fs::create_dir_all(&xdg).unwrap();
+    let run = |model: &Path, view: &[&str], gpu: &[&str], out: &Path| {
+        let mut args = vec!["pm", "adapt", s(model), "-o", s(out)];
+        args.extend(view);
+        args.extend(gpu);
+        Command::new(env!("CARGO_BIN_EXE_tessera")).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap()
+    };
+    let read = |o: Output, out: &Path| {
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read(out).unwrap()
+    };
+    let close = ["--size", "960x540", "--eye", "0,0.12,0.08", "--target", "-0.02,0.1,0"];
     for view in [
-        vec!["--full"],
-        vec!["--size", "1920x1080", "--error-px", "0.5"],
-        vec!["--size", "640x480", "--error-px", "2", "--eye", "0.3,0.1,0.2", "--normal-weight", "0.02"],
+        &["--full"][..],
+        &["--size", "1920x1080", "--error-px", "0.5"],
+        &["--size", "640x480", "--error-px", "2", "--eye", "0.3,0.1,0.2", "--normal-weight", "0.02"],
+        &close,
     ] {
-        let run = |gpu: bool, out: &Path| {
-            let mut args = vec!["pm", "adapt", s(&dpm), "-o", s(out)];
-            args.extend(&view);
-            if gpu {
-                args.push("--gpu");
-            }
-            let o =
-                Command::new(env!("CARGO_BIN_EXE_tessera")).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap();
-            assert!(o.status.success(), "{args:?}: {}", stderr(&o));
-            std::fs::read(out).unwrap()
-        };
-        let (cpu, gpu) = (run(false, &dir.path().join("cpu.ply")), run(true, &dir.path().join("gpu.ply")));
+        let out = dir.path().join("out.ply");
+        let cpu = read(run(&dpm, view, &[], &out), &out);
         assert!(cpu.len() > 1000, "{view:?}: a mesh is written");
-        assert!(cpu == gpu, "{view:?}: the GPU's PLY differs from the CPU's");
+        for (model, what) in [(&dpm, "in core"), (&ooc, "out of core")] {
+            let gpu = read(run(model, view, &["--gpu"], &out), &out);
+            assert!(cpu == gpu, "{view:?}: the GPU's PLY ({what}) differs from the CPU's");
+        }
     }
+    let out = dir.path().join("small.ply");
+    let small = codec::load_path(&{
+        read(run(&ooc, &close, &["--gpu", "--gpu-budget-mb", "0.1"], &out), &out);
+        out.clone()
+    })
+    .unwrap();
+    let whole = codec::load_path(&dir.path().join("out.ply")).unwrap();
+    assert!(
+        small.triangles.len() * 2 < whole.triangles.len() && !small.triangles.is_empty(),
+        "0.1 MB of nodes: {} triangles of {}",
+        small.triangles.len(),
+        whole.triangles.len()
+    );
+    let o = run(&ooc, &close, &["--gpu", "--gpu-budget-mb", "0.001"], &dir.path().join("none.ply"));
+    assert!(!o.status.success() && !dir.path().join("none.ply").exists());
+    let e = stderr(&o);
+    assert!(
+        e.trim().lines().count() == 1
+            && e.starts_with("error: a GPU budget of 1048 bytes holds no node: the largest takes ")
+            && e.trim().ends_with("(raise --gpu-budget-mb)"),
+        "{e}"
+    );
 }
 
 /// `tessera sort --dump` writes a PLY per non-empty tile and the summary; both tile codings

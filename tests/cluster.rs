@@ -538,6 +538,78 @@ fn one_worker_adapts_once_whatever_its_tiles() {
     assert!(frames[0] == frames[1], "6x4 tiles differ from 1x1");
 }
 
+/// Out-of-core progressive meshes (`pm build --node-kb`): each worker reads the file's nodes
+/// itself. With a budget that holds every node the frames equal the in-core file's pixel for
+/// pixel; with a budget of a third of the nodes the stats show the slots full, node traffic in
+/// every frame and fewer triangles, and the frame still covers the model. A corrupt node stops
+/// the run in one line that names it, and no image is written.
+#[test]
+fn out_of_core_progressive_meshes_render_within_the_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let (incore, ooc) = (dir.path().join("in.dpm"), dir.path().join("ooc.dpm"));
+    ok(&alone(&["pm", "build", &bunny, "-o", incore.to_str().unwrap()]));
+    ok(&alone(&["pm", "build", &bunny, "-o", ooc.to_str().unwrap(), "--node-kb", "4"]));
+    // A close orbit: the bunny's box is larger than the frame. The near and far planes are
+    // given: by default they follow the model's box, which an out-of-core file bounds by its
+    // nodes' boxes, larger than the in-core vertices' box.
+    let camera = ["--eye", "0,0.12,0.08", "--target", "-0.02,0.1,0", "--near", "0.01", "--far", "1"];
+    let view = [&["--size", "960x540", "--tiles", "4x2"][..], &camera].concat();
+    let render = |model: &Path, name: &str, budget: &str| {
+        let (out, stats) = (dir.path().join(format!("{name}.png")), dir.path().join(format!("{name}.jsonl")));
+        let args = [model.to_str().unwrap(), "--frames", "3", "--orbit", "--gpu-budget-mb", budget];
+        let o = mpirun(
+            2,
+            &[],
+            &[&["render"][..], &args, &view, &["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]]
+                .concat(),
+        );
+        ok(&o);
+        let lines: Vec<serde_json::Value> = std::fs::read_to_string(&stats)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .filter(|l: &serde_json::Value| l["rank"] == 1)
+            .collect();
+        assert_eq!(lines.len(), 3, "{name}: a worker line per frame");
+        lines
+    };
+    let a = render(&incore, "in", "512");
+    let b = render(&ooc, "all", "1");
+    let c = render(&ooc, "third", "0.12");
+    for k in 1..=3 {
+        let f = |name: &str| dir.path().join(format!("{name}-{k:04}.png"));
+        assert!(identical(&f("in"), &f("all")), "frame {k}: the out-of-core frame differs from the in-core one");
+        assert!(covered(&f("third")) * 10 > covered(&f("in")) * 9, "frame {k}: a third of the nodes covers the model");
+    }
+    let tri = |l: &serde_json::Value| l["tiles"][0]["triangles"].as_u64().unwrap();
+    for k in 0..3 {
+        let (pa, pb, pc) = (&a[k]["pm"], &b[k]["pm"], &c[k]["pm"]);
+        assert_eq!(pa["node_slots"], 0, "in core: no nodes");
+        assert_eq!(pb["resident_nodes"], pb["node_slots"], "frame {k}: every node fits 1 MB");
+        let slots = pc["node_slots"].as_u64().unwrap();
+        assert!(slots > 0 && pc["resident_nodes"].as_u64().unwrap() <= slots);
+        assert!(pc["required_nodes"].as_u64().unwrap() > slots, "frame {k}: the view requires more than the budget");
+        assert!(pc["loaded_bytes"].as_u64().unwrap() > 0, "frame {k}: nodes come in as the view turns");
+        assert!(pc["gpu_bytes"].as_u64().unwrap() > 0);
+        assert!(tri(&c[k]) < tri(&b[k]), "frame {k}: fewer triangles within the smaller budget");
+    }
+    // A byte of a node flipped: its checksum fails when a worker reads it.
+    let mut bytes = std::fs::read(&ooc).unwrap();
+    let at = bytes.len() - 100;
+    bytes[at] ^= 0x40;
+    let bad = dir.path().join("bad.dpm");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = dir.path().join("bad.png");
+    let o =
+        mpirun(2, &[], &[&["render", bad.to_str().unwrap()][..], &view, &["--out", out.to_str().unwrap()]].concat());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    let line = err.lines().find(|l| l.contains("checksum mismatch")).unwrap_or_else(|| panic!("{err}"));
+    assert!(line.contains("corrupt .dpm data: node ") && line.contains("rank 1"), "{line}");
+    assert!(!out.exists() && !dir.path().join("bad-0001.png").exists(), "no image is written");
+}
+
 #[test]
 fn bad_progressive_meshes_are_reported() {
     let dir = tempfile::tempdir().unwrap();

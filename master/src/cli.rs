@@ -324,6 +324,10 @@ pub enum Pm {
         /// mesh written is the same as the CPU reference's.
         #[arg(long)]
         gpu: bool,
+        /// With --gpu, an out-of-core file's nodes in graphics memory, in MB (fractions
+        /// allowed): the nodes of highest priority for the view that fit. Default: all of them.
+        #[arg(long, value_parser = parse_positive, requires = "gpu")]
+        gpu_budget_mb: Option<f32>,
     },
 }
 
@@ -479,6 +483,12 @@ pub struct RenderArgs {
     /// as a pass changes nothing.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_passes: u32,
+    /// Out-of-core progressive meshes (`pm build --node-kb`): the graphics memory each worker
+    /// keeps of the model's nodes, in MB. Workers read the file themselves (a path every rank
+    /// can open), the nodes their view needs first (the paper's priority), others while room
+    /// is left. Fractions of a MB are allowed (small models, tests).
+    #[arg(long, default_value_t = 512.0, value_parser = parse_positive)]
+    pub gpu_budget_mb: f32,
 }
 
 /// Screen size and tile grid.

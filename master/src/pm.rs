@@ -162,6 +162,8 @@ pub struct AdaptOptions {
     pub full: bool,
     /// On the GPU ([`worker::pm_adapt::GpuAdapter`]).
     pub gpu: bool,
+    /// On the GPU, an out-of-core file's node budget in bytes (`None`: every node).
+    pub gpu_budget: Option<u64>,
 }
 
 /// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full] [--gpu]`.
@@ -179,15 +181,14 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     pb.finish_and_clear();
     let pm = decoded?.pm;
     let (lo, hi) = bbox(&pm.positions);
-    let view = if opts.full {
-        None
-    } else {
+    let camera_view = || -> Result<Viewpoint> {
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
         crate::cli::check_camera(&cam, size.1)?;
         let mut view = Viewpoint::new(&cam, size.0, size.1, error_px);
         view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
-        Some(view)
+        Ok(view)
     };
+    let view = if opts.full { None } else { Some(camera_view()?) };
     const MAX_PASSES: usize = 10_000;
     // Timed from the base mesh on the device (for the GPU, after the device, pipelines and
     // static buffers are set up).
@@ -195,7 +196,23 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     let (active, mut faces, passes) = if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
         let dpm = format::Dpm::parse(&bytes)?;
-        let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
+        let n_alloc = worker::pm_adapt::DEFAULT_N_ALLOC;
+        let mut adapter = if dpm.out_of_core() {
+            // Nodes read from the file as the view's priorities ask, within the budget.
+            let file =
+                std::sync::Arc::new(format::NodeFile::open(input).with_context(|| format!("{}", input.display()))?);
+            let prefix = format::Dpm::parse_prefix(file.prefix())?;
+            let ooc = worker::pm_adapt::OutOfCore {
+                file: file.clone(),
+                budget_bytes: opts.gpu_budget.unwrap_or(u64::MAX),
+                background: false,
+            };
+            let mut a = worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, n_alloc)?;
+            a.schedule(&camera_view()?)?;
+            a
+        } else {
+            worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?
+        };
         start = Instant::now();
         let passes = match &view {
             None => adapter.refine_fully()?,

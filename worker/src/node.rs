@@ -11,6 +11,7 @@
 //! receives and prints as `rank R failed: <reason>`.
 
 use std::collections::HashMap;
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -23,10 +24,10 @@ use thiserror::Error;
 
 use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
-use crate::pm_adapt::{AdaptError, GpuAdapter, DEFAULT_N_ALLOC};
+use crate::pm_adapt::{AdaptError, GpuAdapter, OutOfCore, DEFAULT_N_ALLOC};
 use crate::protocol::{
-    unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, ProtocolError, StreamSource, TilePixels, TileTimes,
-    ToMaster, ToWorker,
+    unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, PmMemory, ProtocolError, StreamSource, TilePixels,
+    TileTimes, ToMaster, ToWorker,
 };
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
@@ -61,9 +62,12 @@ pub enum WorkerError {
     /// Protocol: a `PmFrame` before any `Model`.
     #[error("a progressive-mesh frame arrived before its model")]
     FrameBeforeModel,
-    /// Decode: the `Model` message's `.dpm` bytes.
+    /// Decode: the `Model` message's `.dpm` bytes, or the head of a `DpmFile`'s file.
     #[error("cannot decode the progressive mesh: {0}")]
     Model(DpmError),
+    /// The `DpmFile` message's file could not be opened or read.
+    #[error("{path}: {error}")]
+    ModelFile { path: String, error: DpmError },
     /// GPU: the progressive mesh could not be uploaded.
     #[error(transparent)]
     Upload(AdaptError),
@@ -249,6 +253,13 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
                 }
                 continue;
             }
+            Ok(ToWorker::DpmFile { path, gpu_budget }) => {
+                match PmTiles::open(&gpu, Path::new(&path), gpu_budget) {
+                    Ok(p) => pm = Some(p),
+                    Err(e) => return fail(e),
+                }
+                continue;
+            }
             Ok(ToWorker::NspModel(skeleton)) => {
                 match codec::nsp::NspFile::from_skeleton(skeleton) {
                     Ok(file) => nsp = Some(NspView { file, nav: Default::default() }),
@@ -286,7 +297,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
                 match view.render(&mut renderer, job) {
                     Ok((frame, tiles)) => {
                         let span = phased_span(start_ms, &tiles);
-                        answer(t, route, frame, tiles, span)
+                        answer(t, route, frame, tiles, span, PmMemory::default())
                     }
                     Err(e) => return fail(e),
                 }
@@ -297,9 +308,9 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
                     return fail(WorkerError::FrameBeforeModel);
                 };
                 match pm.render(&mut renderer, &job) {
-                    Ok(tiles) => {
+                    Ok((tiles, memory)) => {
                         let span = phased_span(start_ms, &tiles);
-                        answer(t, route, job.frame, tiles, span)
+                        answer(t, route, job.frame, tiles, span, memory)
                     }
                     Err(e) => return fail(e),
                 }
@@ -342,16 +353,16 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
             }
         }
         let span = FrameSpan { start_ms, prepared_ms, end_ms: unix_ms() };
-        answer(t, route, jobs[0].frame, tiles, span);
+        answer(t, route, jobs[0].frame, tiles, span, PmMemory::default());
     }
 }
 
 /// Sends a frame's pixels to rank 0, or with a `route` to the display ranks (each the tiles
 /// that reach its displays) and rank 0 the tiles with their pixels stripped (an empty
 /// rectangle at the tile's corner), all at once.
-fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TilePixels>, span: FrameSpan) {
+fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TilePixels>, span: FrameSpan, pm: PmMemory) {
     let Some(route) = route else {
-        t.send(0, &ToMaster::Pixels { frame, tiles, span }.encode());
+        t.send(0, &ToMaster::Pixels { frame, tiles, span, pm }.encode());
         return;
     };
     let mut to: std::collections::BTreeMap<usize, Vec<TilePixels>> = Default::default();
@@ -361,12 +372,12 @@ fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TileP
         }
     }
     let mut msgs: Vec<(usize, Vec<u8>)> =
-        to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels { frame, tiles, span }.encode())).collect();
+        to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels { frame, tiles, span, pm }.encode())).collect();
     let stripped = tiles
         .into_iter()
         .map(|p| TilePixels { rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]], rgba: Vec::new(), ..p })
         .collect();
-    msgs.push((0, ToMaster::Pixels { frame, tiles: stripped, span }.encode()));
+    msgs.push((0, ToMaster::Pixels { frame, tiles: stripped, span, pm }.encode()));
     t.send_many(&msgs);
 }
 
@@ -640,20 +651,43 @@ fn tile_groups(tiles: &[(u32, [u32; 4])], width: u32, height: u32) -> Vec<TileGr
 /// Rank 0 deals a progressive mesh's tiles to workers in contiguous runs, so a worker's
 /// rectangle is its share of the frame. It also keeps the mesh coherent from frame to frame:
 /// one adaptation state, whatever tiles come.
+///
+/// An out-of-core file ([`PmTiles::open`]) is read by each worker from its path, node by node
+/// on a loader thread, the nodes kept within the GPU budget by the paper's priority for the
+/// worker's region of the frame. A frame schedules the nodes its view wants, adapts, and when
+/// the mesh has converged while nodes are still on their way, waits for them and goes on (an
+/// offline frame is drawn from the nodes its view needs; the paper's interactive renderer
+/// would draw at once and refine over the next frames).
 struct PmTiles {
     adapter: GpuAdapter,
+    /// Node bytes uploaded up to the end of the last frame (out of core).
+    uploaded: u64,
 }
 
 impl PmTiles {
     fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, WorkerError> {
         let dpm = codec::pm::format::Dpm::parse(dpm).map_err(WorkerError::Model)?;
         let adapter = GpuAdapter::new(gpu, &dpm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
-        Ok(PmTiles { adapter })
+        Ok(PmTiles { adapter, uploaded: 0 })
+    }
+
+    /// An out-of-core `.dpm` at `path`, its nodes within `gpu_budget` bytes of graphics memory.
+    fn open(gpu: &Gpu, path: &Path, gpu_budget: u64) -> Result<PmTiles, WorkerError> {
+        let named = |error| WorkerError::ModelFile { path: path.display().to_string(), error };
+        let file = Arc::new(codec::pm::format::NodeFile::open(path).map_err(named)?);
+        let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).map_err(named)?;
+        let ooc = OutOfCore { file: file.clone(), budget_bytes: gpu_budget, background: true };
+        let adapter = GpuAdapter::out_of_core(gpu, &dpm, ooc, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        Ok(PmTiles { adapter, uploaded: 0 })
     }
 
     /// Adapts the mesh to the sub-frustum of `job`'s tiles' bounding rectangle (until
     /// converged or `max_passes`) and renders every tile from it.
-    fn render(&mut self, renderer: &mut Renderer, job: &PmFrameJob) -> Result<Vec<TilePixels>, WorkerError> {
+    fn render(
+        &mut self,
+        renderer: &mut Renderer,
+        job: &PmFrameJob,
+    ) -> Result<(Vec<TilePixels>, PmMemory), WorkerError> {
         let view_proj = Mat4::from_cols_array(&job.view_proj);
         let view = Viewpoint {
             view_proj,
@@ -666,7 +700,7 @@ impl PmTiles {
             attribute_scale: job.attribute_scale,
         };
         let Some(&(first, _)) = job.tiles.first() else {
-            return Ok(Vec::new());
+            return Ok((Vec::new(), PmMemory::default()));
         };
         let mut region = [u32::MAX, u32::MAX, 0, 0];
         for &(index, [x0, y0, x1, y1]) in &job.tiles {
@@ -677,9 +711,14 @@ impl PmTiles {
         }
         let region_view = view.for_tile(region);
         let start = Instant::now();
+        let at = |e: AdaptError| TileError::from(e).at(first);
+        let cache = self.adapter.schedule(&region_view).map_err(at)?;
         for _ in 0..job.max_passes.max(1) {
-            if self.adapter.adapt(&region_view).map_err(|e| TileError::from(e).at(first))?.converged() {
-                break;
+            if self.adapter.adapt(&region_view).map_err(at)?.converged() {
+                if self.adapter.nodes_in_flight() == 0 {
+                    break;
+                }
+                self.adapter.wait_for_nodes().map_err(at)?;
             }
         }
         // A pass checks the operations the one before decoded; the last one is checked here.
@@ -697,6 +736,15 @@ impl PmTiles {
         } else {
             tile_groups(&job.tiles, job.width, job.height)
         };
+        let uploaded = self.adapter.uploaded_bytes();
+        let memory = PmMemory {
+            gpu_bytes: self.adapter.static_bytes() + self.adapter.dynamic_bytes(),
+            loaded_bytes: uploaded - self.uploaded,
+            resident_nodes: self.adapter.nodes_resident() as u32,
+            required_nodes: cache.map_or(0, |c| c.required as u32),
+            slots: self.adapter.node_slots().unwrap_or(0),
+        };
+        self.uploaded = uploaded;
         let mut out = Vec::with_capacity(job.tiles.len());
         for group in &groups {
             let first = group.tiles[0].0;
@@ -720,7 +768,7 @@ impl PmTiles {
                 });
             }
         }
-        Ok(out)
+        Ok((out, memory))
     }
 }
 
@@ -754,6 +802,10 @@ mod tests {
             (
                 TileError::Adapt(AdaptError::FaceIndex { index: 9, vertices: 4 }).at(5),
                 "tile 5: GPU error: face index 9 out of 4 vertices",
+            ),
+            (
+                TileError::Adapt(AdaptError::corrupt(10, 3 * 65536 + 17, true)).at(1),
+                "tile 1: corrupt .dpm data: node 3: operation at byte 17: bad operation pointer",
             ),
         ];
         for (error, reason) in cases {

@@ -38,6 +38,9 @@
 //!                    u32, eye u8 (0 mono, 1 left, 2 right), tile count u32, then the tiles
 //!                    whose pixels workers send it, u32 each
 //!   kind 13 Swap     (to a display rank) view u32: write the view's displays
+//!   kind 15 DpmFile  path length u32 + UTF-8 bytes, GPU budget u64 (bytes): an out-of-core
+//!                    .dpm that every worker opens itself (a shared file system) and reads
+//!                    node by node, sent once before its `PmFrame`s
 //! worker -> master (a worker sends `Pixels` to display ranks too)
 //!   kind 3 Ready     adapter name length u32 + UTF-8 bytes, largest texture side u32
 //!   kind 8 Heartbeat (nothing): the worker is alive and working (sent every
@@ -46,7 +49,10 @@
 //!                      index u32, rect 4 x u32, decode/adapt/upload/render/readback ms 5 x f64,
 //!                      triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4);
 //!                    then the frame's span on the worker's clock (ms since the Unix epoch):
-//!                    start, prepared, end 3 x f64 ([`FrameSpan`])
+//!                    start, prepared, end 3 x f64 ([`FrameSpan`]); then what a progressive
+//!                    mesh's adaptation held ([`PmMemory`], zeros otherwise): GPU bytes u64,
+//!                    node bytes loaded this frame u64, resident nodes u32, required nodes u32,
+//!                    node slots u32
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
 //!   kind 14 DisplayReady (from a display rank) view u32, display count u32, then per
 //!                    display: index u32, ready time f64 (Unix ms)
@@ -63,9 +69,11 @@ use thiserror::Error;
 
 const MAGIC: &[u8; 4] = b"TSRM";
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
-/// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the display ranks' messages; version 1 messages had no version byte, so they read as
-/// version = their kind byte and are refused.
-pub const VERSION: u8 = 5;
+/// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the
+/// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`;
+/// version 1 messages had no version byte, so they read as version = their kind byte and are
+/// refused.
+pub const VERSION: u8 = 6;
 
 /// A message that does not parse.
 #[derive(Debug, Error, PartialEq)]
@@ -186,6 +194,12 @@ pub enum ToWorker {
     Shutdown,
     /// The progressive mesh (`.dpm` bytes) that the following `PmFrame`s show.
     Model(Vec<u8>),
+    /// An out-of-core progressive mesh by its path, which every worker reads itself, and the
+    /// bytes of graphics memory each may keep of its nodes.
+    DpmFile {
+        path: String,
+        gpu_budget: u64,
+    },
     PmFrame(PmFrameJob),
     /// To a sorter rank: sort your share of the chunks for this frame.
     Sort(SortJob),
@@ -250,6 +264,21 @@ pub struct FrameSpan {
     pub end_ms: f64,
 }
 
+/// What a worker's progressive mesh held in a frame (all zero for other models and in-core
+/// files' node fields).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PmMemory {
+    /// Graphics memory of the adaptation: the static buffers (compressed operations or the
+    /// node pool, tables) and the dynamic ones at their capacities.
+    pub gpu_bytes: u64,
+    /// Out of core: node bytes uploaded this frame (the load traffic), nodes resident at its
+    /// end, nodes of priority at least 1 for its view, and the pool's slots.
+    pub loaded_bytes: u64,
+    pub resident_nodes: u32,
+    pub required_nodes: u32,
+    pub slots: u32,
+}
+
 /// Now, in milliseconds since the Unix epoch (the clock of [`FrameSpan`] and of rank 0's
 /// timeline).
 pub fn unix_ms() -> f64 {
@@ -279,6 +308,7 @@ pub enum ToMaster {
         frame: u32,
         tiles: Vec<TilePixels>,
         span: FrameSpan,
+        pm: PmMemory,
     },
     Failed {
         reason: String,
@@ -308,6 +338,9 @@ impl Writer {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
     fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
     fn bytes(&mut self, b: &[u8]) {
@@ -350,6 +383,9 @@ impl<'a> Reader<'a> {
     }
     fn f64(&mut self, what: &'static str) -> Result<f64, ProtocolError> {
         Ok(f64::from_le_bytes(self.take(8, what)?.try_into().unwrap()))
+    }
+    fn u64(&mut self, what: &'static str) -> Result<u64, ProtocolError> {
+        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().unwrap()))
     }
     fn bytes(&mut self, what: &'static str) -> Result<&'a [u8], ProtocolError> {
         let n = self.u32(what)? as usize;
@@ -396,7 +432,7 @@ impl ToWorker {
                 }
                 w.0.push(f.decode_only as u8);
                 w.0.extend_from_slice(&[f.sorter, f.sorters]);
-                w.0.extend_from_slice(&f.chunk_cache.to_le_bytes());
+                w.u64(f.chunk_cache);
                 w.u32(f.tiles.len() as u32);
                 for t in &f.tiles {
                     w.u32(t.index);
@@ -439,6 +475,12 @@ impl ToWorker {
             ToWorker::Model(dpm) => {
                 let mut w = Writer::new(6);
                 w.bytes(dpm);
+                w.0
+            }
+            ToWorker::DpmFile { path, gpu_budget } => {
+                let mut w = Writer::new(15);
+                w.bytes(path.as_bytes());
+                w.u64(*gpu_budget);
                 w.0
             }
             ToWorker::PmFrame(f) => {
@@ -527,7 +569,7 @@ impl ToWorker {
                 if sorter >= sorters {
                     return Err(ProtocolError::Invalid(format!("sorter {sorter} of {sorters}")));
                 }
-                let chunk_cache = u64::from_le_bytes(r.take(8, "chunk cache bound")?.try_into().unwrap());
+                let chunk_cache = r.u64("chunk cache bound")?;
                 let n = r.count(24, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
                 for _ in 0..n {
@@ -576,6 +618,7 @@ impl ToWorker {
                 ToWorker::Sort(SortJob { frame, view_proj, owners })
             }
             6 => ToWorker::Model(r.bytes("model")?.to_vec()),
+            15 => ToWorker::DpmFile { path: r.string("model path")?, gpu_budget: r.u64("GPU budget")? },
             7 => {
                 let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
                 let mut view_proj = [0.0f32; 16];
@@ -659,7 +702,7 @@ impl ToMaster {
                 w.0
             }
             ToMaster::Heartbeat => Writer::new(8).0,
-            ToMaster::Pixels { frame, tiles, span } => {
+            ToMaster::Pixels { frame, tiles, span, pm } => {
                 let mut w = Writer::new(4);
                 w.u32(*frame);
                 w.u32(tiles.len() as u32);
@@ -674,6 +717,11 @@ impl ToMaster {
                     w.bytes(&t.rgba);
                 }
                 [span.start_ms, span.prepared_ms, span.end_ms].into_iter().for_each(|v| w.f64(v));
+                w.u64(pm.gpu_bytes);
+                w.u64(pm.loaded_bytes);
+                w.u32(pm.resident_nodes);
+                w.u32(pm.required_nodes);
+                w.u32(pm.slots);
                 w.0
             }
             ToMaster::Failed { reason } => {
@@ -728,7 +776,14 @@ impl ToMaster {
                     tiles.push(TilePixels { index, rect, times, triangles, rgba });
                 }
                 let span = FrameSpan { start_ms: r.f64("span")?, prepared_ms: r.f64("span")?, end_ms: r.f64("span")? };
-                ToMaster::Pixels { frame, tiles, span }
+                let pm = PmMemory {
+                    gpu_bytes: r.u64("memory")?,
+                    loaded_bytes: r.u64("memory")?,
+                    resident_nodes: r.u32("memory")?,
+                    required_nodes: r.u32("memory")?,
+                    slots: r.u32("memory")?,
+                };
+                ToMaster::Pixels { frame, tiles, span, pm }
             }
             5 => ToMaster::Failed { reason: r.string("failure reason")? },
             14 => {
@@ -833,8 +888,11 @@ mod tests {
                 rgba: vec![9; 8],
             }],
             span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
+            pm: PmMemory { gpu_bytes: 1 << 33, loaded_bytes: 65536, resident_nodes: 7, required_nodes: 9, slots: 8 },
         };
         assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
+        let file = ToWorker::DpmFile { path: "/data/é.dpm".into(), gpu_budget: 512 << 20 };
+        assert_eq!(ToWorker::decode(&file.encode()), Ok(file));
         for m in [
             ToWorker::DisplayFrame(DisplayFrameJob { view: 5, frame: 2, eye: 2, tiles: vec![0, 7, 9] }),
             ToWorker::Swap { view: 5 },
@@ -892,6 +950,7 @@ mod tests {
                 rgba: vec![0; 3],
             }],
             span: FrameSpan::default(),
+            pm: PmMemory::default(),
         };
         assert!(matches!(ToMaster::decode(&wrong_size.encode()), Err(ProtocolError::Invalid(_))));
     }

@@ -14,7 +14,7 @@ use super::display::DirectSend;
 use super::jobs::{FrameContext, FrameJobs};
 use super::link::{handshake, receive_pixels, receive_ready, Answer, Early, Silence};
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
-use super::scene::{NspScene, PmScene, Scene};
+use super::scene::{NspScene, PmScene, PmSource, Scene};
 use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
 use crate::cli::{RenderArgs, StereoOutput};
 use crate::composite::Image;
@@ -81,8 +81,13 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     let adapters = handshake(t, args.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
-    if let Scene::Pm(PmScene { bytes, .. }) = &scene {
-        let model = ToWorker::Model(bytes.clone()).encode();
+    if let Scene::Pm(PmScene { source, .. }) = &scene {
+        let model = match source {
+            PmSource::Bytes(bytes) => ToWorker::Model(bytes.clone()).encode(),
+            PmSource::File { path, gpu_budget } => {
+                ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget }.encode()
+            }
+        };
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
     }
     if let Scene::Nsp(nsp) = &scene {
@@ -189,7 +194,7 @@ fn complete(
     let mut pixel_bytes = 0u64;
     let mut worker_lines = Vec::new();
     for _ in 0..answering.len() {
-        let Answer { rank, tiles: pixels, span } = receive_pixels(t, view, silence, early)?;
+        let Answer { rank, tiles: pixels, span, pm } = receive_pixels(t, view, silence, early)?;
         let c = Instant::now();
         pixel_bytes += pixels.iter().map(|p| p.rgba.len() as u64).sum::<u64>();
         for p in &pixels {
@@ -204,7 +209,7 @@ fn complete(
             }
         }
         composite_ms += ms(c);
-        worker_lines.push(worker_stats(k, eye, rank, &pixels, span, epoch));
+        worker_lines.push(worker_stats(k, eye, rank, &pixels, span, pm, epoch));
     }
     let wait_ms = ms(start) - composite_ms;
     let receive_end = unix_ms();

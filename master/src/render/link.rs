@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use worker::protocol::{FrameSpan, TilePixels, ToMaster};
+use worker::protocol::{FrameSpan, PmMemory, TilePixels, ToMaster};
 use worker::transport::{RecvError, Transport};
 
 /// How a rank that helps rank 0 (a sorter, a display rank) ends: a failure is reported to
@@ -131,6 +131,8 @@ pub(super) struct Answer {
     pub rank: usize,
     pub tiles: Vec<TilePixels>,
     pub span: FrameSpan,
+    /// What its progressive mesh held (zeros for other models).
+    pub pm: PmMemory,
 }
 
 /// The next worker's pixels for `frame`; heartbeats in between keep a busy worker alive, and
@@ -194,11 +196,11 @@ fn receive_until(t: &dyn Transport, view: u32, want: Want, silence: &mut Silence
         silence.heard(rank);
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
             ToMaster::Heartbeat => continue,
-            ToMaster::Pixels { frame: f, tiles, span }
+            ToMaster::Pixels { frame: f, tiles, span, pm }
                 if (f == view && want == Want::Pixels) || (f > view && silence.owes(rank) > 0) =>
             {
                 silence.answered(rank);
-                early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span });
+                early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span, pm });
             }
             ToMaster::DisplayReady { view: v, ready } => {
                 early.ready.entry(v).or_default().push(Ready { rank, displays: ready })

@@ -57,11 +57,20 @@ pub(super) struct BftScene {
     pub boxes: Box<Boxes>,
 }
 
-/// A progressive mesh: rank 0 keeps its file for the workers and its bounding box for the
-/// camera and for the tiles it can reach.
+/// A progressive mesh: rank 0 keeps its file for the workers (or, out of core, its path:
+/// each worker reads the nodes it needs itself) and its bounding box for the camera and for
+/// the tiles it can reach.
 pub(super) struct PmScene {
-    pub bytes: Vec<u8>,
+    pub source: PmSource,
     pub bbox: ([f32; 3], [f32; 3]),
+}
+
+pub(super) enum PmSource {
+    /// An in-core file's bytes, sent to every worker.
+    Bytes(Vec<u8>),
+    /// An out-of-core file's absolute path, and the bytes of graphics memory each worker
+    /// keeps of its nodes.
+    File { path: String, gpu_budget: u64 },
 }
 
 impl Scene {
@@ -100,6 +109,10 @@ impl Scene {
                 boxes: Box::default(),
             }));
         }
+        let named = || format!("{}", path.display());
+        if codec::pm::format::NodeFile::is_out_of_core(path).with_context(named)? {
+            return PmScene::out_of_core(path, (args.gpu_budget_mb as f64 * MB as f64) as u64).map(Scene::Pm);
+        }
         let bytes = crate::commands::read_input(path)?;
         // Decoded here once, so that a corrupt file fails before any worker sees it.
         let pm = codec::pm::format::decode(&bytes).with_context(|| format!("{}", path.display()))?.pm;
@@ -107,7 +120,7 @@ impl Scene {
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
-        Ok(Scene::Pm(PmScene { bytes, bbox: (lo, hi) }))
+        Ok(Scene::Pm(PmScene { source: PmSource::Bytes(bytes), bbox: (lo, hi) }))
     }
 
     /// The camera of the first frame: the flags given, the rest framing the model.
@@ -121,5 +134,33 @@ impl Scene {
                 args.camera(lo, hi, grid.aspect())
             }
         }
+    }
+}
+
+impl PmScene {
+    /// An out-of-core `.dpm`: its head is read and checked here (the nodes are checked by
+    /// their checksums as workers read them); its box is the union of the base vertices and
+    /// of the nodes' boxes, which hold every operation's bounding sphere, so every vertex.
+    fn out_of_core(path: &Path, gpu_budget: u64) -> Result<PmScene> {
+        let named = || format!("{}", path.display());
+        let file = codec::pm::format::NodeFile::open(path).with_context(named)?;
+        let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).with_context(named)?;
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        let points = dpm.base_positions.iter().map(|&q| {
+            let p = dpm.position(q);
+            (p, p)
+        });
+        for (a, b) in points.chain(dpm.nodes.iter().map(|n| (n.bbox_min, n.bbox_max))) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(b[k]);
+            }
+        }
+        if !lo.iter().chain(&hi).all(|v| v.is_finite()) || lo.iter().zip(&hi).any(|(a, b)| a > b) {
+            bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
+        }
+        let abs = std::fs::canonicalize(path).with_context(named)?;
+        let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();
+        Ok(PmScene { source: PmSource::File { path, gpu_budget }, bbox: (lo, hi) })
     }
 }

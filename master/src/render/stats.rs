@@ -2,7 +2,7 @@
 //! time in milliseconds and a timeline of when each stage ran (the README lists the fields).
 
 use serde::{Deserialize, Serialize};
-use worker::protocol::{FrameSpan, TilePixels, TileTimes};
+use worker::protocol::{FrameSpan, PmMemory, TilePixels, TileTimes};
 
 use super::frame_loop::Eye;
 
@@ -128,9 +128,23 @@ pub(super) struct WorkerStats {
     render_ms: f64,
     readback_ms: f64,
     tiles: Vec<WorkerTileStats>,
+    /// A progressive mesh's memory: graphics memory of the adaptation (static and dynamic
+    /// buffers), and out of core the node bytes loaded this frame, the nodes resident, the
+    /// nodes the view requires (priority at least 1) and the slots the budget holds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pm: Option<PmMemoryStats>,
     /// The worker's stages: `decode` (or `adapt` for a progressive mesh), then `render`
     /// (upload, draw and readback of every tile).
     timeline: Vec<Span>,
+}
+
+#[derive(Serialize)]
+struct PmMemoryStats {
+    gpu_bytes: u64,
+    loaded_bytes: u64,
+    resident_nodes: u32,
+    required_nodes: u32,
+    node_slots: u32,
 }
 
 #[derive(Serialize)]
@@ -152,6 +166,7 @@ pub(super) fn worker_stats(
     rank: usize,
     pixels: &[TilePixels],
     span: FrameSpan,
+    pm: PmMemory,
     epoch: f64,
 ) -> WorkerStats {
     let sum = |f: fn(&TileTimes) -> f64| pixels.iter().map(|p| f(&p.times)).sum();
@@ -177,6 +192,13 @@ pub(super) fn worker_stats(
                 readback_ms: p.times.readback_ms,
             })
             .collect(),
+        pm: (pm.gpu_bytes > 0).then_some(PmMemoryStats {
+            gpu_bytes: pm.gpu_bytes,
+            loaded_bytes: pm.loaded_bytes,
+            resident_nodes: pm.resident_nodes,
+            required_nodes: pm.required_nodes,
+            node_slots: pm.slots,
+        }),
         timeline: vec![
             Span::between(first, span.start_ms, span.prepared_ms, epoch),
             Span::between("render", span.prepared_ms, span.end_ms, epoch),

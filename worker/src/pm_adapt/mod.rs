@@ -414,6 +414,11 @@ impl GpuAdapter {
         self.resident.as_ref().map_or(0, |r| r.cache.in_flight())
     }
 
+    /// Out of core: nodes resident now (0 in core).
+    pub fn nodes_resident(&self) -> usize {
+        self.resident.as_ref().map_or(0, |r| r.cache.resident_nodes().count())
+    }
+
     /// Out of core: node bytes uploaded to graphics memory so far (the load traffic).
     pub fn uploaded_bytes(&self) -> u64 {
         self.resident.as_ref().map_or(0, |r| r.uploaded)

@@ -305,7 +305,7 @@ impl<'a> Dpm<'a> {
 }
 
 /// A container error, with versions 2 and 3 named as outdated and how to get a current file.
-fn outdated(e: DpmError) -> DpmError {
+pub(super) fn outdated(e: DpmError) -> DpmError {
     match e {
         DpmError::UnsupportedVersion { format, found: FLOAT_VERSION, known } => DpmError::Outdated {
             format,

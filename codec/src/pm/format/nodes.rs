@@ -156,6 +156,15 @@ pub struct NodeFile {
 }
 
 impl NodeFile {
+    /// Whether the `.dpm` file at `path` is out of core (it has a node table), from its head
+    /// alone: a reader that must not read a large file whole asks this first.
+    pub fn is_out_of_core(path: &Path) -> Result<bool, DpmError> {
+        let (mut file, _) = crate::input::open_regular(path).map_err(DpmError::Io)?;
+        let prefix = LAYOUT.read_prefix(&mut file)?;
+        let c = LAYOUT.parse_prefix(&prefix).map_err(super::decode::outdated)?;
+        Ok(Header::from_bytes(c.header)?.nodes > 0)
+    }
+
     /// Opens `path` and reads everything before its operations (checked as
     /// [`Dpm::parse_prefix`] checks it) and the file's length against the node table's.
     pub fn open(path: &Path) -> Result<NodeFile, DpmError> {
