@@ -489,6 +489,12 @@ pub struct RenderArgs {
     /// is left. Fractions of a MB are allowed (small models, tests).
     #[arg(long, default_value_t = 512.0, value_parser = parse_positive)]
     pub gpu_budget_mb: f32,
+    /// Progressive meshes: occlusion culling one frame late. Each worker keeps the depth of
+    /// the frame it drew last and does not refine what it hid (the paper's section 5.7), so
+    /// hidden parts stay at what the frame before showed of them; the first frame is drawn
+    /// without.
+    #[arg(long)]
+    pub occlusion: bool,
 }
 
 /// Screen size and tile grid.

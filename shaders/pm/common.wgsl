@@ -69,6 +69,12 @@ struct Params {
     m_new: u32,    // faces after the pass
     splits: u32,   // splits performed
     pad: u32,
+    // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
+    // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
+    // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.
+    occ_vp: mat4x4<f32>,
+    occ_rect: vec4<f32>,
+    occ_size: vec4<f32>,
 }
 
 // Every stage binds its parameters here.

@@ -24,6 +24,7 @@ use thiserror::Error;
 
 use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
+use crate::pm_adapt::occlusion::Occluder;
 use crate::pm_adapt::{AdaptError, GpuAdapter, OutOfCore, DEFAULT_N_ALLOC};
 use crate::protocol::{
     unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, PmMemory, ProtocolError, StreamSource, TilePixels,
@@ -736,6 +737,9 @@ impl PmTiles {
         } else {
             tile_groups(&job.tiles, job.width, job.height)
         };
+        if !job.occlusion {
+            self.adapter.set_occluder(None);
+        }
         let uploaded = self.adapter.uploaded_bytes();
         let memory = PmMemory {
             gpu_bytes: self.adapter.static_bytes() + self.adapter.dynamic_bytes(),
@@ -767,6 +771,13 @@ impl PmTiles {
                     rgba: crop(&group_rgba, group.rect, rect),
                 });
             }
+        }
+        // Occlusion culling one frame late: the region's depth, drawn whole above, hides
+        // what the next frame need not refine.
+        if job.occlusion && groups.len() == 1 {
+            let depth = renderer.read_depth(region).map_err(|e| TileError::from(e).at(first))?;
+            let occluder = Occluder::new(view_proj, (job.width, job.height), region, &depth);
+            self.adapter.set_occluder(Some(&occluder));
         }
         Ok((out, memory))
     }

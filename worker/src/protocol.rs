@@ -25,7 +25,8 @@
 //!                    tile count u32, then per tile the worker rank that renders it, u32
 //!   kind 7 PmFrame   frame u32, width u32, height u32, view_proj 16 x f32, eye 3 x f32,
 //!                    pixels_per_unit f32, error_px f32, c_lod f32, attribute_scale f32,
-//!                    max_passes u32, tile count u32, then per tile: index u32, rect 4 x u32
+//!                    max_passes u32, occlusion u8 (1: cull with the worker's last frame's
+//!                    depth; 0 off), tile count u32, then per tile: index u32, rect 4 x u32
 //!   kind 10 NspModel skeleton length u32 + bytes (an .nsp file without its cell streams,
 //!                    sent once before its frames)
 //!   kind 11 NspFrame frame u32, width u32, height u32, view_proj 16 x f32, selection count
@@ -168,6 +169,8 @@ pub struct PmFrameJob {
     /// Adaptation passes per tile and frame at most (each pass performs every split and
     /// collapse the view asks of the active vertices; the tile stops early when converged).
     pub max_passes: u32,
+    /// Cull what the worker's last frame hid (occlusion culling one frame late).
+    pub occlusion: bool,
     /// `(tile index, rect)`.
     pub tiles: Vec<(u32, [u32; 4])>,
 }
@@ -495,6 +498,7 @@ impl ToWorker {
                     w.f32(v);
                 }
                 w.u32(f.max_passes);
+                w.0.push(f.occlusion as u8);
                 w.u32(f.tiles.len() as u32);
                 for (index, rect) in &f.tiles {
                     w.u32(*index);
@@ -629,6 +633,11 @@ impl ToWorker {
                 let (pixels_per_unit, error_px) = (r.f32("pixels per unit")?, r.f32("error")?);
                 let (c_lod, attribute_scale) = (r.f32("c_lod")?, r.f32("attribute scale")?);
                 let max_passes = r.u32("max passes")?;
+                let occlusion = match r.take(1, "occlusion")?[0] {
+                    0 => false,
+                    1 => true,
+                    v => return Err(ProtocolError::Invalid(format!("occlusion flag {v}"))),
+                };
                 let n = r.count(20, "tiles")?;
                 let mut tiles = Vec::with_capacity(n);
                 for _ in 0..n {
@@ -645,6 +654,7 @@ impl ToWorker {
                     c_lod,
                     attribute_scale,
                     max_passes,
+                    occlusion,
                     tiles,
                 })
             }
@@ -845,6 +855,7 @@ mod tests {
             c_lod: 100.0,
             attribute_scale: 0.01,
             max_passes: 64,
+            occlusion: true,
             tiles: vec![(0, [0, 0, 320, 240]), (3, [320, 240, 640, 480])],
         })
     }

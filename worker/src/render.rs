@@ -163,6 +163,7 @@ struct FrameTarget {
     size: (u32, u32),
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
+    depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
 }
 
@@ -185,7 +186,12 @@ impl FrameTarget {
             COLOR_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
-        let depth = texture("render: depth buffer", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        // Copied out for occlusion culling ([`Renderer::read_depth`]).
+        let depth = texture(
+            "render: depth buffer",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
         let color_view = color.create_view(&wgpu::TextureViewDescriptor {
             label: Some("render: color target view"),
             ..Default::default()
@@ -194,7 +200,7 @@ impl FrameTarget {
             label: Some("render: depth buffer view"),
             ..Default::default()
         });
-        FrameTarget { size: (width, height), color, color_view, depth_view }
+        FrameTarget { size: (width, height), color, color_view, depth, depth_view }
     }
 }
 
@@ -567,6 +573,66 @@ impl Renderer {
         })?;
         let readback_ms = ms_since(start);
         Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
+    }
+}
+
+impl Renderer {
+    /// The depth buffer over `rect` of the last frame drawn, row by row (1 where nothing was
+    /// drawn): what occlusion culling one frame late builds its pyramid from
+    /// ([`crate::pm_adapt::occlusion::Occluder`]).
+    pub fn read_depth(&mut self, rect: [u32; 4]) -> Result<Vec<f32>, RenderError> {
+        let gpu = self.gpu.clone();
+        gpu.scoped(|| self.read_depth_unscoped(rect))
+    }
+
+    fn read_depth_unscoped(&mut self, [x0, y0, x1, y1]: [u32; 4]) -> Result<Vec<f32>, RenderError> {
+        let Some(target) = self.frame_target.as_ref() else {
+            return Ok(Vec::new());
+        };
+        let (width, height) = target.size;
+        if !(x0 < x1 && x1 <= width && y0 < y1 && y1 <= height) {
+            return Err(RenderError::BadRect { rect: [x0, y0, x1, y1], width, height });
+        }
+        // A depth texture is copied whole (wgpu allows no partial copy of one), the rows of
+        // the rectangle, then cut out.
+        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let bytes = padded_row as u64 * height as u64;
+        let device = self.gpu.device();
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback: depth"),
+            size: bytes,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback: depth") });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &target.depth,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::DepthOnly,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded_row),
+                    rows_per_image: None,
+                },
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        self.gpu.queue().submit([encoder.finish()]);
+        let (cols, rows) = (x0 as usize * 4..x1 as usize * 4, y0 as usize..y1 as usize);
+        Ok(self.gpu.map_read(&buffer, bytes, |mapped| {
+            let mut depth = Vec::with_capacity(cols.len() / 4 * rows.len());
+            for padded in mapped.chunks_exact(padded_row as usize).skip(rows.start).take(rows.len()) {
+                let row = &padded[cols.clone()];
+                depth.extend(row.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+            }
+            depth
+        })?)
     }
 }
 

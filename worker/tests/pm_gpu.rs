@@ -353,3 +353,73 @@ fn out_of_core_path_matches_the_cpu_reference() {
         assert!(waited > 0, "no operation ever waited for its node");
     }
 }
+
+/// Occlusion culling one frame late: after a frame is drawn, its depth pyramid stops the
+/// refinement of vertices whose spheres it hid. On a view down the model's length (its front
+/// hides much of the rest) the adapted triangles drop, and the frame drawn from the culled
+/// mesh matches the unculled one for at least 99% of its covered pixels within 8/255.
+fn occlusion_on(rel: &str, min_saving: f64) {
+    let (bytes, pm) = dpm_of(rel);
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let mut renderer = Renderer::new(&device);
+    let (w, h) = (960u32, 540u32);
+    let rect = [0, 0, w, h];
+    let (lo, hi) = bbox(&pm);
+    let base = Camera::framing(lo.to_array(), hi.to_array(), w as f32 / h as f32);
+    // Along the longest axis of the box, from outside its end.
+    let ext = hi - lo;
+    let axis = if ext.x >= ext.y.max(ext.z) {
+        Vec3::X
+    } else if ext.z >= ext.y {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    let center = (lo + hi) * 0.5;
+    let eye = center + (axis * 1.4 + Vec3::Y * 0.3).normalize() * ext.length() * 1.1;
+    let cam = Camera { eye, target: center, near: base.near * 0.1, far: base.far * 3.0, ..base };
+    let vp = cam.view_proj(w as f32 / h as f32);
+    let view = Viewpoint::new(&cam, w, h, 0.5);
+    let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
+    gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
+    let all = gpu.counts().1;
+    let (plain, _) = renderer.render_pm(gpu.mesh(), vp, (w, h), rect).unwrap();
+    let depth = renderer.read_depth(rect).unwrap();
+    assert_eq!(depth.len(), (w * h) as usize);
+    assert!(depth.iter().any(|&d| d < 1.0) && depth.iter().any(|&d| d == 1.0), "the model and the background");
+    gpu.set_occluder(Some(&worker::pm_adapt::occlusion::Occluder::new(vp, (w, h), rect, &depth)));
+    gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
+    gpu.check().unwrap();
+    let culled = gpu.counts().1;
+    let (image, _) = renderer.render_pm(gpu.mesh(), vp, (w, h), rect).unwrap();
+    let (mut covered, mut close) = (0usize, 0usize);
+    for (a, b) in plain.chunks_exact(4).zip(image.chunks_exact(4)) {
+        if a[3] > 0 || b[3] > 0 {
+            covered += 1;
+            close += a.iter().zip(b).all(|(x, y)| x.abs_diff(*y) <= 8) as usize;
+        }
+    }
+    let saving = 1.0 - culled as f64 / all as f64;
+    let matching = close as f64 / covered as f64;
+    eprintln!("{rel}: {all} triangles, {culled} with occlusion culling ({:.1}% fewer); {:.2}% of {covered} covered pixels within 8/255",
+        saving * 100.0, matching * 100.0);
+    assert!(saving >= min_saving, "{rel}: culling saved {:.1}% of the triangles", saving * 100.0);
+    assert!(matching >= 0.99, "{rel}: {:.2}% of the covered pixels match", matching * 100.0);
+    // Off again: back to the unculled mesh.
+    gpu.set_occluder(None);
+    gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
+    assert_eq!(gpu.counts().1, all);
+}
+
+#[test]
+fn occlusion_culling_lowers_the_triangles_and_keeps_the_frame() {
+    occlusion_on("stanford/bunny_zipper_c3d.obj.gz", 0.05);
+}
+
+/// `cargo test --release -p tessera-worker --test pm_gpu -- --ignored --nocapture occlusion`
+#[test]
+#[ignore = "the dragon; run in release"]
+fn occlusion_culling_on_the_dragon() {
+    occlusion_on("stanford/dragon_vrip.ply.gz", 0.05);
+}

@@ -297,6 +297,7 @@ impl PmScene {
                 c_lod: args.c_lod,
                 attribute_scale: args.normal_weight * diagonal,
                 max_passes: args.max_passes,
+                occlusion: args.occlusion,
                 tiles: vec![],
             })
             .collect();

@@ -46,6 +46,12 @@ pub(super) struct Params {
     pub(super) m_new: u32,
     pub(super) splits: u32,
     pub(super) pad: u32,
+    /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
+    /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
+    /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).
+    pub(super) occ_vp: [[f32; 4]; 4],
+    pub(super) occ_rect: [f32; 4],
+    pub(super) occ_size: [f32; 4],
 }
 
 /// `Level` of `shaders/pm/scan.wgsl`: the element count of one level of the scan.

@@ -60,6 +60,7 @@
 pub(crate) mod buffers;
 pub mod decoder;
 mod nodes;
+pub mod occlusion;
 mod pass;
 pub(crate) mod pipelines;
 
@@ -77,6 +78,7 @@ use buffers::{
 };
 use decoder::{decoder_data, slot_bytes, DecodeFailure};
 use nodes::NodePool;
+use occlusion::Occluder;
 use pipelines::Pipelines;
 
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
@@ -180,7 +182,14 @@ pub struct GpuAdapter {
     times: [f64; 3],
     /// Out of core: the resident nodes.
     resident: Option<Resident>,
+    /// The occlusion pyramid of the state update (`occ`; one word when off) and the
+    /// occluder's parameters, `None` when off.
+    occ: Sized,
+    occluder: Option<OccParams>,
 }
+
+/// The occlusion fields of [`Params`]: the view-projection, the rectangle, the sizes.
+type OccParams = ([[f32; 4]; 4], [f32; 4], [f32; 4]);
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
 /// compressed operations, the decoder's tables and parameters), and the base mesh.
@@ -298,6 +307,8 @@ impl GpuAdapter {
             profile: false,
             times: [0.0; 3],
             resident,
+            occ: storage(d, "pm: occlusion pyramid", 4, 4, VERTEX_USAGE),
+            occluder: None,
             gpu,
         };
         adapter.reset();
@@ -388,6 +399,23 @@ impl GpuAdapter {
             return Err(AdaptError::corrupt(e[0], e[1], self.resident.is_some()));
         }
         Ok(())
+    }
+
+    /// Culls with `occluder` from the next pass on (the depth of a frame drawn from this
+    /// adapter's mesh: occlusion one frame late, see [`occlusion`]); `None` turns it off.
+    pub fn set_occluder(&mut self, occluder: Option<&Occluder>) {
+        let Some(o) = occluder else {
+            self.occluder = None;
+            return;
+        };
+        let n = o.words.len() as u64;
+        if self.occ.cap < n {
+            self.occ = storage(self.gpu.device(), "pm: occlusion pyramid", n * 2, 4, VERTEX_USAGE);
+        }
+        self.gpu.queue().write_buffer(&self.occ.buffer, 0, bytemuck::cast_slice(&o.words));
+        let [x0, y0, x1, y1] = o.rect.map(|v| v as f32);
+        let size = [o.frame.0 as f32, o.frame.1 as f32, occlusion::CELL as f32, 1.0];
+        self.occluder = Some((o.view_proj.to_cols_array_2d(), [x0, y0, x1, y1], size));
     }
 
     /// Out of core: ranks the nodes for `view` by the paper's priority and asks for the ones

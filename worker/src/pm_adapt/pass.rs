@@ -47,6 +47,9 @@ impl GpuAdapter {
             params.error_px = v.error_px;
             params.c_lod = v.c_lod;
             params.attribute_scale = v.attribute_scale;
+            if let Some((vp, rect, size)) = self.occluder {
+                (params.occ_vp, params.occ_rect, params.occ_size) = (vp, rect, size);
+            }
         }
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
@@ -66,6 +69,7 @@ impl GpuAdapter {
                     ("vpoint", &set.point.buffer),
                     ("vcnt", &self.vcnt.buffer),
                     ("fcnt", &self.fcnt.buffer),
+                    ("occ", &self.occ.buffer),
                 ],
             );
             let node_check = self.resident.as_ref().map(|_| {

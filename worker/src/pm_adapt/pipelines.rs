@@ -118,6 +118,7 @@ pub(crate) const STATE: StageDef = StageDef {
         Binding::read::<PmPoint>(3, "vpoint"),
         Binding::read_write::<u32>(4, "vcnt"),
         Binding::read_write::<u32>(5, "fcnt"),
+        Binding::read::<u32>(6, "occ"),
     ],
 };
 
