@@ -22,8 +22,9 @@ pub enum GpuError {
     NoAdapter(wgpu::RequestAdapterError),
     #[error("adapter {adapter} refused a device: {source}")]
     Device { adapter: String, source: wgpu::RequestDeviceError },
-    /// A validation or out-of-memory error caught by an error scope (`Gpu::scoped`).
-    #[error("GPU error: {0}")]
+    /// A validation or out-of-memory error caught by an error scope (`Gpu::scoped`), with
+    /// wgpu's description (its display alone says "Validation Error").
+    #[error("GPU error: {}", scope_error(.0))]
     Scope(wgpu::Error),
     /// Waiting for the device failed.
     #[error("GPU error: {0}")]
@@ -257,5 +258,22 @@ impl Binding {
     /// A `var<storage, read_write>` of `T`s (or a `T`).
     pub(crate) const fn read_write<T>(slot: u32, name: &'static str) -> Binding {
         Binding { slot, name, access: Access::ReadWrite, bytes: std::mem::size_of::<T>() as u64 }
+    }
+}
+
+/// What a caught GPU error says: its kind, and for a validation or internal error wgpu's
+/// description on one line.
+fn scope_error(e: &wgpu::Error) -> String {
+    match e {
+        wgpu::Error::Validation { description, .. } | wgpu::Error::Internal { description, .. } => {
+            let said = e.to_string().lines().next().unwrap_or("").trim().to_string();
+            let lines: Vec<&str> = description
+                .lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && *l != said && *l != "Caused by:")
+                .collect();
+            format!("{said}: {}", lines.join(": "))
+        }
+        e => e.to_string(),
     }
 }

@@ -818,6 +818,11 @@ mod tests {
                 TileError::Adapt(AdaptError::corrupt(10, 3 * 65536 + 17, true)).at(1),
                 "tile 1: corrupt .dpm data: node 3: operation at byte 17: bad operation pointer",
             ),
+            (
+                TileError::Adapt(AdaptError::TooLarge { elements: 9, what: "vertices", bytes: 1152, limit: 1024 }).at(0),
+                "tile 0: the adapted mesh needs 9 vertices, 1152 bytes in one buffer, and this GPU binds at most 1024: \
+                 raise --error-px",
+            ),
         ];
         for (error, reason) in cases {
             assert_eq!(error.to_string(), reason);

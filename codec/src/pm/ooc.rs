@@ -148,8 +148,19 @@ impl NodeCache {
     /// and asks for the missing ones in priority order (inline: reads them now). Returns the
     /// stats of this frame (loads counted since the last call).
     pub fn schedule(&mut self, view: &Viewpoint) -> Result<CacheStats, DpmError> {
+        self.schedule_culled(view, &|_| false)
+    }
+
+    /// [`Self::schedule`], the nodes `hidden` says were occluded (in the frame before: the
+    /// paper culls nodes one frame late) ranked last, as no view needs them.
+    pub fn schedule_culled(
+        &mut self,
+        view: &Viewpoint,
+        hidden: &dyn Fn(&NodeInfo) -> bool,
+    ) -> Result<CacheStats, DpmError> {
         let planes = view.planes();
-        let priority: Vec<f32> = self.nodes.iter().map(|n| n.priority(view, &planes)).collect();
+        let priority: Vec<f32> =
+            self.nodes.iter().map(|n| if hidden(n) { 0.0 } else { n.priority(view, &planes) }).collect();
         let mut order: Vec<u32> = (0..self.nodes.len() as u32).collect();
         order.sort_by(|&a, &b| priority[b as usize].total_cmp(&priority[a as usize]).then(a.cmp(&b)));
         // The best nodes that fit the budget, required ones first (the order has them first).

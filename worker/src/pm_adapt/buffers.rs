@@ -113,7 +113,7 @@ impl VertexSet {
     }
 }
 
-const STATE_BYTES: u64 = std::mem::size_of::<GpuVState>() as u64;
+pub(super) const STATE_BYTES: u64 = std::mem::size_of::<GpuVState>() as u64;
 const POINT_BYTES: u64 = std::mem::size_of::<crate::render::PmPoint>() as u64;
 
 pub(super) struct FaceSet {

@@ -108,6 +108,12 @@ pub enum AdaptError {
     /// [`GpuAdapter::out_of_core`].
     #[error("{0}")]
     WrongLayout(&'static str),
+    /// The adapted mesh outgrew what the device binds in one buffer.
+    #[error(
+        "the adapted mesh needs {elements} {what}, {bytes} bytes in one buffer, and this GPU binds at most \
+         {limit}: raise --error-px"
+    )]
+    TooLarge { elements: u64, what: &'static str, bytes: u64, limit: u64 },
     /// The budget does not hold the largest node.
     #[error("a GPU budget of {budget} bytes holds no node: the largest takes {slot_bytes} (raise --gpu-budget-mb)")]
     Budget { budget: u64, slot_bytes: u32 },
@@ -186,6 +192,8 @@ pub struct GpuAdapter {
     /// occluder's parameters, `None` when off.
     occ: Sized,
     occluder: Option<OccParams>,
+    /// The occluder itself, out of core: hidden nodes are not required.
+    node_occluder: Option<Occluder>,
 }
 
 /// The occlusion fields of [`Params`]: the view-projection, the rectangle, the sizes.
@@ -309,6 +317,7 @@ impl GpuAdapter {
             resident,
             occ: storage(d, "pm: occlusion pyramid", 4, 4, VERTEX_USAGE),
             occluder: None,
+            node_occluder: None,
             gpu,
         };
         adapter.reset();
@@ -406,8 +415,12 @@ impl GpuAdapter {
     pub fn set_occluder(&mut self, occluder: Option<&Occluder>) {
         let Some(o) = occluder else {
             self.occluder = None;
+            self.node_occluder = None;
             return;
         };
+        if self.resident.is_some() {
+            self.node_occluder = Some(o.clone());
+        }
         let n = o.words.len() as u64;
         if self.occ.cap < n {
             self.occ = storage(self.gpu.device(), "pm: occlusion pyramid", n * 2, 4, VERTEX_USAGE);
@@ -418,13 +431,19 @@ impl GpuAdapter {
         self.occluder = Some((o.view_proj.to_cols_array_2d(), [x0, y0, x1, y1], size));
     }
 
-    /// Out of core: ranks the nodes for `view` by the paper's priority and asks for the ones
-    /// the budget keeps (read by the loader thread, or now when not in the background); the
-    /// passes that follow upload what has arrived. Call it once per frame. `None` in core.
+    /// Out of core: ranks the nodes for `view` by the paper's priority (the nodes the occluder
+    /// hides, if one is set, last) and asks for the ones the budget keeps (read by the loader
+    /// thread, or now when not in the background); the passes that follow upload what has
+    /// arrived. Call it once per frame. `None` in core.
     pub fn schedule(&mut self, view: &Viewpoint) -> Result<Option<CacheStats>, AdaptError> {
         match &mut self.resident {
             None => Ok(None),
-            Some(r) => Ok(Some(r.cache.schedule(view)?)),
+            Some(r) => Ok(Some(match &self.node_occluder {
+                None => r.cache.schedule(view)?,
+                Some(o) => r
+                    .cache
+                    .schedule_culled(view, &|n| o.hides(glam::Vec3::from(n.bbox_min), glam::Vec3::from(n.bbox_max)))?,
+            })),
         }
     }
 

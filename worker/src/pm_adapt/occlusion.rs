@@ -7,7 +7,7 @@
 //! Spheres, not nodes: every vertex's sphere bounds all it refines into, so the test is the
 //! node test at the finest grain and works for in-core files too.
 
-use glam::Mat4;
+use glam::{Mat4, Vec3, Vec4};
 
 /// The side in pixels of the pyramid's finest cells.
 pub const CELL: u32 = 4;
@@ -64,5 +64,97 @@ impl Occluder {
             words.extend(cells.iter().map(|d| d.to_bits()));
         }
         Occluder { view_proj, frame, rect, words }
+    }
+}
+
+impl Occluder {
+    /// Whether the box `lo..hi` was hidden in the pyramid's frame: the test `state.wgsl`'s
+    /// `occluded` makes of a sphere's box, here of a node's box (out of core, hidden nodes
+    /// are not required: [`codec::pm::NodeCache::schedule_culled`]).
+    pub fn hides(&self, lo: Vec3, hi: Vec3) -> bool {
+        let (mut min, mut max, mut zmin) = (glam::Vec2::splat(f32::MAX), glam::Vec2::splat(f32::MIN), f32::MAX);
+        for k in 0..8 {
+            let c = Vec3::new(
+                if k & 1 != 0 { hi.x } else { lo.x },
+                if k & 2 != 0 { hi.y } else { lo.y },
+                if k & 4 != 0 { hi.z } else { lo.z },
+            );
+            let q = self.view_proj * Vec4::from((c, 1.0));
+            if q.w <= 0.0 {
+                return false;
+            }
+            min = min.min(q.truncate().truncate() / q.w);
+            max = max.max(q.truncate().truncate() / q.w);
+            zmin = zmin.min(q.z / q.w);
+        }
+        if zmin <= 0.0 {
+            return false;
+        }
+        let (w, h) = (self.frame.0 as f32, self.frame.1 as f32);
+        let (x0, x1) = ((min.x + 1.0) * 0.5 * w, (max.x + 1.0) * 0.5 * w);
+        let (y0, y1) = ((1.0 - max.y) * 0.5 * h, (1.0 - min.y) * 0.5 * h);
+        let [rx0, ry0, rx1, ry1] = self.rect.map(|v| v as f32);
+        if x0 < rx0 || y0 < ry0 || x1 > rx1 || y1 > ry1 {
+            return false;
+        }
+        let levels = self.words[0] as usize;
+        let (mut level, mut side) = (0, CELL as f32);
+        while level + 1 < levels && (x1 - x0).max(y1 - y0) > side {
+            level += 1;
+            side *= 2.0;
+        }
+        let [lw, lh, at] = [1, 2, 3].map(|i| self.words[i + 3 * level] as usize);
+        let cell = |v: f32, lo: f32, n: usize| (((v - lo) / side) as usize).min(n - 1);
+        let mut far = 0f32;
+        for cy in cell(y0, ry0, lh)..=cell(y1, ry0, lh) {
+            for cx in cell(x0, rx0, lw)..=cell(x1, rx0, lw) {
+                far = far.max(f32::from_bits(self.words[at + cy * lw + cx]));
+            }
+        }
+        zmin > far
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A wall at depth 0.5 over the left half of a 64x32 frame: a box behind it is hidden, one
+    /// in front of it, beside it or reaching past the pyramid's rectangle is not; the levels
+    /// halve down to one cell.
+    #[test]
+    fn boxes_behind_the_drawn_depth_are_hidden() {
+        let cam = codec::view::Camera {
+            eye: Vec3::new(0.0, 0.0, 4.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            fovy: 60.0,
+            near: 1.0,
+            far: 10.0,
+            shift: [0.0; 2],
+        };
+        let (w, h) = (64u32, 32u32);
+        let vp = cam.view_proj(w as f32 / h as f32);
+        let depth: Vec<f32> = (0..w * h).map(|i| if i % w < w / 2 { 0.5 } else { 1.0 }).collect();
+        let o = Occluder::new(vp, (w, h), [0, 0, w, h], &depth);
+        // Levels of 16x8, 8x4, 4x2, 2x1 and 1x1 cells; the finest start after the table.
+        assert_eq!(o.words[0], 5);
+        assert_eq!(&o.words[1..4], &[16, 8, 16]);
+        // The depth of a point at distance d along the view axis.
+        let z = |d: f32| {
+            let q = vp * Vec4::new(0.0, 0.0, 4.0 - d, 1.0);
+            q.z / q.w
+        };
+        let (near_d, far_d) = ((1..100).map(|k| k as f32 * 0.09 + 1.0).find(|&d| z(d) > 0.5).unwrap(), 9.0);
+        let small =
+            |x: f32, d: f32| (Vec3::new(x - 0.05, -0.05, 4.0 - d - 0.05), Vec3::new(x + 0.05, 0.05, 4.0 - d + 0.05));
+        let (lo, hi) = small(-0.5, far_d);
+        assert!(o.hides(lo, hi), "behind the wall");
+        let (lo, hi) = small(-0.5, near_d - 0.5);
+        assert!(!o.hides(lo, hi), "in front of the wall");
+        let (lo, hi) = small(0.5, far_d);
+        assert!(!o.hides(lo, hi), "beside the wall");
+        assert!(!o.hides(Vec3::new(-50.0, -0.1, -5.1), Vec3::new(-0.2, 0.1, -4.9)), "past the frame");
+        assert!(!o.hides(Vec3::new(-0.1, -0.1, 3.0), Vec3::new(0.1, 0.1, 5.0)), "around the eye");
     }
 }

@@ -5,7 +5,7 @@ use codec::pm::{PassStats, Viewpoint};
 
 use super::buffers::{
     needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, READBACK_BYTES,
-    STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
+    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter};
@@ -143,6 +143,16 @@ impl GpuAdapter {
             return Ok(PassStats { cancelled: cancelled as usize, ..unchanged });
         }
         let m_new = m - removed + f_add;
+        // Every buffer of the pass is bound whole: past the device's binding limit the pass
+        // would fail validation.
+        let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
+        for (elements, each, what) in
+            [(n_new as u64 + na, STATE_BYTES, "vertices"), (m as u64 + f_add as u64 + na, 12, "faces")]
+        {
+            if elements * each > limit {
+                return Err(AdaptError::TooLarge { elements, what, bytes: elements * each, limit });
+            }
+        }
 
         // Memory management (section 5.3): the other vertex set receives the reorganised
         // vertices, so it is reallocated without copying; the face buffers keep their content.
