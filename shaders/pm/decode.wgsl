@@ -307,6 +307,17 @@ fn pointer_estimate(avg: u32, first: u32) -> u32 {
     return (hi << 16u) | (lo >> 16u);
 }
 
+// A pointer offset from its estimate and coded residual, `est + r`; NONE_ADDR below zero or
+// past 2^32 (so past any section).
+fn offset_from(est: u32, r: i32) -> u32 {
+    if (r >= 0) {
+        let o = est + u32(r);
+        return select(o, NONE_ADDR, o < est);
+    }
+    let back = magnitude(r);
+    return select(est - back, NONE_ADDR, back > est);
+}
+
 // Decodes the operation at byte `addr` for vertex `v` (FVIDs v..v_end), its parent's quantized
 // criteria `pc`, its quantized position `pos` and octahedral normal `nrm`; the faces go to
 // dec_faces from face slot `face_out` on (nowhere for NONE_ADDR). With `upto` DECODE_TO_FACES it
@@ -630,23 +641,8 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
                 o.status = r_err;
                 return o;
             }
-            let est = pointer_estimate(D.avg_op_size, first);
-            if (r >= 0) {
-                offset = est + u32(r);
-                if (offset < est) {
-                    // Past 2^32, so past the section.
-                    o.status = DEC_POINTER;
-                    return o;
-                }
-            } else {
-                let back = magnitude(r);
-                if (back >= est) {
-                    o.status = DEC_POINTER;
-                    return o;
-                }
-                offset = est - back;
-            }
-            if (offset < 1u) {
+            offset = offset_from(pointer_estimate(D.avg_op_size, first), r);
+            if (offset < 1u || offset == NONE_ADDR) {
                 o.status = DEC_POINTER;
                 return o;
             }
@@ -696,22 +692,8 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
                     o.status = r_err;
                     return o;
                 }
-                var off: u32;
-                if (r >= 0) {
-                    off = est + u32(r);
-                    if (off < est) {
-                        o.status = DEC_POINTER;
-                        return o;
-                    }
-                } else {
-                    let back = magnitude(r);
-                    if (back > est) {
-                        o.status = DEC_POINTER;
-                        return o;
-                    }
-                    off = est - back;
-                }
-                if (here[0] && off < 1u) {
+                let off = offset_from(est, r);
+                if (off == NONE_ADDR || (here[0] && off < 1u)) {
                     o.status = DEC_POINTER;
                     return o;
                 }
