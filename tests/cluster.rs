@@ -608,6 +608,14 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
     let line = err.lines().find(|l| l.contains("checksum mismatch")).unwrap_or_else(|| panic!("{err}"));
     assert!(line.contains("corrupt .dpm data: node ") && line.contains("rank 1"), "{line}");
     assert!(!out.exists() && !dir.path().join("bad-0001.png").exists(), "no image is written");
+    // A budget that holds no node is refused by rank 0, before any worker starts.
+    let o = alone(
+        &[&["render", ooc.to_str().unwrap(), "--gpu-budget-mb", "0.001"][..], &view, &["--out", out.to_str().unwrap()]]
+            .concat(),
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("holds no node") && !err.contains("ready"), "{err}");
+    assert!(!out.exists());
 }
 
 /// `render --occlusion`: each worker culls what its last frame hid. Along a slow orbit of the

@@ -159,6 +159,12 @@ impl PmScene {
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) || lo.iter().zip(&hi).any(|(a, b)| a > b) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
+        // Each worker's pool holds slots of the largest node's size: a budget below one slot
+        // is refused here, before any worker starts on it.
+        let slot = dpm.nodes.iter().map(|n| n.len).max().unwrap_or(0).next_multiple_of(4) as u64;
+        if gpu_budget < slot {
+            bail!("a GPU budget of {gpu_budget} bytes holds no node: the largest takes {slot} (raise --gpu-budget-mb)");
+        }
         let abs = std::fs::canonicalize(path).with_context(named)?;
         let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();
         Ok(PmScene { source: PmSource::File { path, gpu_budget }, bbox: (lo, hi) })
