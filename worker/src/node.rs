@@ -713,6 +713,9 @@ impl PmTiles {
         let region_view = view.for_tile(region);
         let start = Instant::now();
         let at = |e: AdaptError| TileError::from(e).at(first);
+        if !job.occlusion {
+            self.adapter.set_occluder(None);
+        }
         let cache = self.adapter.schedule(&region_view).map_err(at)?;
         for _ in 0..job.max_passes.max(1) {
             if self.adapter.adapt(&region_view).map_err(at)?.converged() {
@@ -737,9 +740,6 @@ impl PmTiles {
         } else {
             tile_groups(&job.tiles, job.width, job.height)
         };
-        if !job.occlusion {
-            self.adapter.set_occluder(None);
-        }
         let uploaded = self.adapter.uploaded_bytes();
         let memory = PmMemory {
             gpu_bytes: self.adapter.static_bytes() + self.adapter.dynamic_bytes(),
@@ -776,8 +776,7 @@ impl PmTiles {
         // what the next frame need not refine.
         if job.occlusion && groups.len() == 1 {
             let depth = renderer.read_depth(region).map_err(|e| TileError::from(e).at(first))?;
-            let occluder = Occluder::new(view_proj, (job.width, job.height), region, &depth);
-            self.adapter.set_occluder(Some(&occluder));
+            self.adapter.set_occluder(Some(Occluder::new(view_proj, (job.width, job.height), region, &depth)));
         }
         Ok((out, memory))
     }

@@ -531,46 +531,13 @@ impl Renderer {
         let render_ms = ms_since(start);
 
         let start = Instant::now();
-        let padded_row = (size.0 * BYTES_PER_PIXEL).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let bytes = padded_row as u64 * size.1 as u64;
-        // Kept while large enough: a worker's tiles of an uneven grid differ by a pixel or so.
-        if self.readback.as_ref().is_none_or(|b| b.size() < bytes) {
-            self.readback = Some(device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("readback: pixels"),
-                size: bytes,
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            }));
-        }
-        let readback = self.readback.as_ref().expect("created above");
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback: copy") });
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &target.color,
-                mip_level: 0,
-                origin: wgpu::Origin3d { x: x0, y: y0, z: 0 },
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded_row),
-                    rows_per_image: None,
-                },
-            },
-            wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
-        );
-        queue.submit([encoder.finish()]);
-        let row = (size.0 * BYTES_PER_PIXEL) as usize;
-        let pixels = self.gpu.map_read(readback, bytes, |mapped| {
-            let mut pixels = Vec::with_capacity(row * size.1 as usize);
-            for padded in mapped.chunks_exact(padded_row as usize) {
-                pixels.extend_from_slice(&padded[..row]);
-            }
-            pixels
-        })?;
+        let color = wgpu::TexelCopyTextureInfo {
+            texture: &target.color,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x: x0, y: y0, z: 0 },
+            aspect: wgpu::TextureAspect::All,
+        };
+        let pixels = read_back(&self.gpu, &mut self.readback, color, size, BYTES_PER_PIXEL)?;
         let readback_ms = ms_since(start);
         Ok((pixels, RenderTimes { upload_ms, render_ms, readback_ms }))
     }
@@ -593,47 +560,65 @@ impl Renderer {
         if !(x0 < x1 && x1 <= width && y0 < y1 && y1 <= height) {
             return Err(RenderError::BadRect { rect: [x0, y0, x1, y1], width, height });
         }
-        // A depth texture is copied whole (wgpu allows no partial copy of one), the rows of
-        // the rectangle, then cut out.
-        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let bytes = padded_row as u64 * height as u64;
-        let device = self.gpu.device();
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback: depth"),
+        // A depth texture is copied whole (wgpu allows no partial copy of one), then the
+        // rectangle is cut out.
+        let depth = wgpu::TexelCopyTextureInfo {
+            texture: &target.depth,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::DepthOnly,
+        };
+        let bytes = read_back(&self.gpu, &mut self.readback, depth, (width, height), 4)?;
+        let row = width as usize * 4;
+        Ok(bytes
+            .chunks_exact(row)
+            .skip(y0 as usize)
+            .take((y1 - y0) as usize)
+            .flat_map(|r| r[x0 as usize * 4..x1 as usize * 4].chunks_exact(4))
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect())
+    }
+}
+
+/// Copies `size` texels of `copy` (`texel_bytes` each) into `kept`, the renderer's readback
+/// buffer (grown when too small, then kept: a worker's tiles of an uneven grid differ by a
+/// pixel or so), and returns them row by row, the copy's row padding dropped.
+fn read_back(
+    gpu: &Gpu,
+    kept: &mut Option<wgpu::Buffer>,
+    copy: wgpu::TexelCopyTextureInfo<'_>,
+    size: (u32, u32),
+    texel_bytes: u32,
+) -> Result<Vec<u8>, GpuError> {
+    let padded_row = (size.0 * texel_bytes).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let bytes = padded_row as u64 * size.1 as u64;
+    if kept.as_ref().is_none_or(|b| b.size() < bytes) {
+        *kept = Some(gpu.device().create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
             size: bytes,
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
-        });
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback: depth") });
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &target.depth,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::DepthOnly,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded_row),
-                    rows_per_image: None,
-                },
-            },
-            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-        );
-        self.gpu.queue().submit([encoder.finish()]);
-        let (cols, rows) = (x0 as usize * 4..x1 as usize * 4, y0 as usize..y1 as usize);
-        Ok(self.gpu.map_read(&buffer, bytes, |mapped| {
-            let mut depth = Vec::with_capacity(cols.len() / 4 * rows.len());
-            for padded in mapped.chunks_exact(padded_row as usize).skip(rows.start).take(rows.len()) {
-                let row = &padded[cols.clone()];
-                depth.extend(row.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])));
-            }
-            depth
-        })?)
+        }));
     }
+    let buffer = kept.as_ref().expect("created above");
+    let mut encoder = gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    encoder.copy_texture_to_buffer(
+        copy,
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: None },
+        },
+        wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
+    );
+    gpu.queue().submit([encoder.finish()]);
+    let row = (size.0 * texel_bytes) as usize;
+    gpu.map_read(buffer, bytes, |mapped| {
+        let mut out = Vec::with_capacity(row * size.1 as usize);
+        for padded in mapped.chunks_exact(padded_row as usize) {
+            out.extend_from_slice(&padded[..row]);
+        }
+        out
+    })
 }
 
 fn ms_since(start: Instant) -> f64 {

@@ -188,6 +188,7 @@ fn pm_constants_match_the_rust() {
         ("STAT_CANCELLED", STAT_CANCELLED as u32),
         ("STAT_REMOVED_FACES", STAT_REMOVED_FACES as u32),
         ("BLOCK", SCAN_BLOCK),
+        ("PENDING", crate::pm_adapt::buffers::PENDING),
     ];
     let shaders: Vec<Shader> = STAGES.iter().map(|s| parse(s.label, &s.shader.wgsl())).collect();
     let mut problems = Vec::new();

@@ -311,7 +311,7 @@ fn out_of_core_path_matches_the_cpu_reference() {
     std::fs::write(&path, &bytes).unwrap();
     let file = Arc::new(NodeFile::open(&path).unwrap());
     let dpm = Dpm::parse_prefix(file.prefix()).unwrap();
-    let slot = dpm.nodes.iter().map(|n| n.len).max().unwrap().next_multiple_of(4) as u64;
+    let slot = worker::pm_adapt::decoder::slot_bytes(&dpm) as u64;
     let (frames, error_px) = (24, 0.5);
     // Two thirds of the model: the path's whole views require more (then the required nodes
     // of highest priority go in first), its close views less.
@@ -388,7 +388,7 @@ fn occlusion_on(rel: &str, min_saving: f64) {
     let depth = renderer.read_depth(rect).unwrap();
     assert_eq!(depth.len(), (w * h) as usize);
     assert!(depth.iter().any(|&d| d < 1.0) && depth.contains(&1.0), "the model and the background");
-    gpu.set_occluder(Some(&worker::pm_adapt::occlusion::Occluder::new(vp, (w, h), rect, &depth)));
+    gpu.set_occluder(Some(worker::pm_adapt::occlusion::Occluder::new(vp, (w, h), rect, &depth)));
     gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
     gpu.check().unwrap();
     let culled = gpu.counts().1;

@@ -161,9 +161,9 @@ impl PmScene {
         }
         // Each worker's pool holds slots of the largest node's size: a budget below one slot
         // is refused here, before any worker starts on it.
-        let slot = dpm.nodes.iter().map(|n| n.len).max().unwrap_or(0).next_multiple_of(4) as u64;
-        if gpu_budget < slot {
-            bail!("a GPU budget of {gpu_budget} bytes holds no node: the largest takes {slot} (raise --gpu-budget-mb)");
+        let slot_bytes = worker::pm_adapt::decoder::slot_bytes(&dpm);
+        if gpu_budget < slot_bytes as u64 {
+            return Err(worker::pm_adapt::AdaptError::Budget { budget: gpu_budget, slot_bytes }.into());
         }
         let abs = std::fs::canonicalize(path).with_context(named)?;
         let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();

@@ -26,7 +26,7 @@ pub(super) struct GpuVState {
 }
 
 /// `PENDING` of `shaders/pm/common.wgsl`: the vertex's operation waits for its node.
-pub(super) const PENDING: u32 = 1;
+pub(crate) const PENDING: u32 = 1;
 
 /// `Params` of `shaders/pm/common.wgsl`.
 #[repr(C)]

@@ -74,7 +74,7 @@ pub(crate) fn batch_wgsl() -> String {
 }
 
 /// Bytes per slot of the node pool of an out-of-core `dpm`: its longest node, in words.
-pub(crate) fn slot_bytes(dpm: &Dpm) -> u32 {
+pub fn slot_bytes(dpm: &Dpm) -> u32 {
     dpm.nodes.iter().map(|n| n.len).max().unwrap_or(0).next_multiple_of(4).max(4)
 }
 

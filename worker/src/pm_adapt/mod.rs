@@ -188,16 +188,12 @@ pub struct GpuAdapter {
     times: [f64; 3],
     /// Out of core: the resident nodes.
     resident: Option<Resident>,
-    /// The occlusion pyramid of the state update (`occ`; one word when off) and the
-    /// occluder's parameters, `None` when off.
+    /// The occlusion pyramid of the state update (`occ`; one word when off), and the
+    /// occluder it was uploaded from (`None`: off), whose parameters every pass writes and
+    /// whose test ranks hidden nodes last out of core.
     occ: Sized,
-    occluder: Option<OccParams>,
-    /// The occluder itself, out of core: hidden nodes are not required.
-    node_occluder: Option<Occluder>,
+    occluder: Option<Occluder>,
 }
-
-/// The occlusion fields of [`Params`]: the view-projection, the rectangle, the sizes.
-type OccParams = ([[f32; 4]; 4], [f32; 4], [f32; 4]);
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
 /// compressed operations, the decoder's tables and parameters), and the base mesh.
@@ -317,7 +313,6 @@ impl GpuAdapter {
             resident,
             occ: storage(d, "pm: occlusion pyramid", 4, 4, VERTEX_USAGE),
             occluder: None,
-            node_occluder: None,
             gpu,
         };
         adapter.reset();
@@ -394,11 +389,6 @@ impl GpuAdapter {
         self.shared.ops.size() + self.shared.tables.size() + self.shared.decode.size()
     }
 
-    /// Whether the file is out of core (nodes within a budget).
-    pub fn is_out_of_core(&self) -> bool {
-        self.resident.is_some()
-    }
-
     /// Fails if an operation did not decode in the last pass (a pass checks the one before
     /// it; this checks the last, for a caller about to draw).
     pub fn check(&self) -> Result<(), AdaptError> {
@@ -412,23 +402,15 @@ impl GpuAdapter {
 
     /// Culls with `occluder` from the next pass on (the depth of a frame drawn from this
     /// adapter's mesh: occlusion one frame late, see [`occlusion`]); `None` turns it off.
-    pub fn set_occluder(&mut self, occluder: Option<&Occluder>) {
-        let Some(o) = occluder else {
-            self.occluder = None;
-            self.node_occluder = None;
-            return;
-        };
-        if self.resident.is_some() {
-            self.node_occluder = Some(o.clone());
+    pub fn set_occluder(&mut self, occluder: Option<Occluder>) {
+        if let Some(o) = &occluder {
+            let n = o.words.len() as u64;
+            if self.occ.cap < n {
+                self.occ = storage(self.gpu.device(), "pm: occlusion pyramid", n * 2, 4, VERTEX_USAGE);
+            }
+            self.gpu.queue().write_buffer(&self.occ.buffer, 0, bytemuck::cast_slice(&o.words));
         }
-        let n = o.words.len() as u64;
-        if self.occ.cap < n {
-            self.occ = storage(self.gpu.device(), "pm: occlusion pyramid", n * 2, 4, VERTEX_USAGE);
-        }
-        self.gpu.queue().write_buffer(&self.occ.buffer, 0, bytemuck::cast_slice(&o.words));
-        let [x0, y0, x1, y1] = o.rect.map(|v| v as f32);
-        let size = [o.frame.0 as f32, o.frame.1 as f32, occlusion::CELL as f32, 1.0];
-        self.occluder = Some((o.view_proj.to_cols_array_2d(), [x0, y0, x1, y1], size));
+        self.occluder = occluder;
     }
 
     /// Out of core: ranks the nodes for `view` by the paper's priority (the nodes the occluder
@@ -438,7 +420,7 @@ impl GpuAdapter {
     pub fn schedule(&mut self, view: &Viewpoint) -> Result<Option<CacheStats>, AdaptError> {
         match &mut self.resident {
             None => Ok(None),
-            Some(r) => Ok(Some(match &self.node_occluder {
+            Some(r) => Ok(Some(match &self.occluder {
                 None => r.cache.schedule(view)?,
                 Some(o) => r
                     .cache

@@ -68,6 +68,13 @@ impl Occluder {
 }
 
 impl Occluder {
+    /// The occlusion fields of the stages' `Params`: the view-projection, the rectangle (x0,
+    /// y0, x1, y1), and the frame's width and height, the finest cell's side, 1 (on).
+    pub(super) fn params(&self) -> ([[f32; 4]; 4], [f32; 4], [f32; 4]) {
+        let size = [self.frame.0 as f32, self.frame.1 as f32, CELL as f32, 1.0];
+        (self.view_proj.to_cols_array_2d(), self.rect.map(|v| v as f32), size)
+    }
+
     /// Whether the box `lo..hi` was hidden in the pyramid's frame: the test `state.wgsl`'s
     /// `occluded` makes of a sphere's box, here of a node's box (out of core, hidden nodes
     /// are not required: [`codec::pm::NodeCache::schedule_culled`]).

@@ -47,8 +47,8 @@ impl GpuAdapter {
             params.error_px = v.error_px;
             params.c_lod = v.c_lod;
             params.attribute_scale = v.attribute_scale;
-            if let Some((vp, rect, size)) = self.occluder {
-                (params.occ_vp, params.occ_rect, params.occ_size) = (vp, rect, size);
+            if let Some(o) = &self.occluder {
+                (params.occ_vp, params.occ_rect, params.occ_size) = o.params();
             }
         }
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
