@@ -110,8 +110,8 @@ impl Scene {
             }));
         }
         let named = || format!("{}", path.display());
-        if codec::pm::format::NodeFile::is_out_of_core(path).with_context(named)? {
-            return PmScene::out_of_core(path, (args.gpu_budget_mb as f64 * MB as f64) as u64).map(Scene::Pm);
+        if let Some(file) = codec::pm::format::NodeFile::open_out_of_core(path).with_context(named)? {
+            return PmScene::out_of_core(path, &file, (args.gpu_budget_mb as f64 * MB as f64) as u64).map(Scene::Pm);
         }
         let bytes = crate::commands::read_input(path)?;
         // Decoded here once, so that a corrupt file fails before any worker sees it.
@@ -141,9 +141,8 @@ impl PmScene {
     /// An out-of-core `.dpm`: its head is read and checked here (the nodes are checked by
     /// their checksums as workers read them); its box is the union of the base vertices and
     /// of the nodes' boxes, which hold every operation's bounding sphere, so every vertex.
-    fn out_of_core(path: &Path, gpu_budget: u64) -> Result<PmScene> {
+    fn out_of_core(path: &Path, file: &codec::pm::format::NodeFile, gpu_budget: u64) -> Result<PmScene> {
         let named = || format!("{}", path.display());
-        let file = codec::pm::format::NodeFile::open(path).with_context(named)?;
         let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).with_context(named)?;
         let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
         let points = dpm.base_positions.iter().map(|&q| {

@@ -156,20 +156,22 @@ pub struct NodeFile {
 }
 
 impl NodeFile {
-    /// Whether the `.dpm` file at `path` is out of core (it has a node table), from its head
-    /// alone: a reader that must not read a large file whole asks this first.
-    pub fn is_out_of_core(path: &Path) -> Result<bool, DpmError> {
-        let (mut file, _) = crate::input::open_regular(path).map_err(DpmError::Io)?;
-        let prefix = LAYOUT.read_prefix(&mut file)?;
-        let c = LAYOUT.parse_prefix(&prefix).map_err(super::decode::outdated)?;
-        Ok(Header::from_bytes(c.header)?.nodes > 0)
-    }
-
     /// Opens `path` and reads everything before its operations (checked as
     /// [`Dpm::parse_prefix`] checks it) and the file's length against the node table's.
     pub fn open(path: &Path) -> Result<NodeFile, DpmError> {
+        Self::open_out_of_core(path)?.ok_or_else(|| corrupt("an in-core file (no node table) read out of core"))
+    }
+
+    /// [`Self::open`] if the `.dpm` file at `path` is out of core (its header counts nodes),
+    /// `None` for an in-core file, from its head alone: a reader that must not read a large
+    /// file whole asks this first.
+    pub fn open_out_of_core(path: &Path) -> Result<Option<NodeFile>, DpmError> {
         let (mut file, len) = crate::input::open_regular(path).map_err(DpmError::Io)?;
         let prefix = LAYOUT.read_prefix(&mut file)?;
+        let c = LAYOUT.parse_prefix(&prefix).map_err(super::decode::outdated)?;
+        if Header::from_bytes(c.header)?.nodes == 0 {
+            return Ok(None);
+        }
         let dpm = Dpm::parse_prefix(&prefix)?;
         let ops_len = dpm.nodes.iter().map(|n| n.len as u64).sum::<u64>();
         let ops_start = prefix.len() as u64;
@@ -181,7 +183,7 @@ impl NodeFile {
             });
         }
         let nodes = dpm.nodes.clone();
-        Ok(NodeFile { file, prefix, ops_start, nodes })
+        Ok(Some(NodeFile { file, prefix, ops_start, nodes }))
     }
 
     /// The file's bytes up to its operations: [`Dpm::parse_prefix`] parses them.
