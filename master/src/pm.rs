@@ -29,6 +29,8 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
     })
     .with_context(|| format!("cannot build {}", input.display()))?;
     pb.finish_and_clear();
+    // The progressive mesh holds every position and face: the input is not read again.
+    drop(mesh);
     let build_s = start.elapsed().as_secs_f64();
     let pb = progress::spinner(format!("compressing {} operations", pm.splits.len()));
     let t = Instant::now();

@@ -72,6 +72,8 @@
 //! quadrics tie every cost), so their progressive meshes are the ones of the plain greedy
 //! order.
 
+use std::collections::HashMap;
+
 use thiserror::Error;
 
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
@@ -171,6 +173,10 @@ impl QuadHeap {
 
     fn push(&mut self, x: Candidate) {
         let mut i = self.0.len();
+        if i == self.0.capacity() {
+            // Grow by a quarter, not double: the heap outgrows its edges by about a third.
+            self.0.reserve_exact(i / 4 + 64);
+        }
         self.0.push(x);
         while i > 0 {
             let p = (i - 1) / 4;
@@ -238,7 +244,7 @@ struct Simplifier {
     hub: Vec<bool>,
     /// Per hub: at least the error of every vertex that has been its neighbour since it
     /// became a hub, and of its neighbours then.
-    hub_neighbour_error: Vec<f64>,
+    hub_neighbour_error: HashMap<u32, f64>,
     /// At least the error of every hub.
     hub_error: f64,
     hubs: usize,
@@ -288,24 +294,36 @@ impl Simplifier {
             vertex_faces,
             live_faces,
             hub,
-            hub_neighbour_error: vec![0.0; n],
+            hub_neighbour_error: HashMap::new(),
             hub_error: 0.0,
             hubs,
             heap: QuadHeap(Vec::new()),
             work: 3 * mesh.triangles.len() as u64,
         };
-        let mut initial = Vec::with_capacity(3 * mesh.triangles.len());
-        for tri in &mesh.triangles {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                if a != b {
-                    initial.push(s.candidate(a.min(b), a.max(b)));
+        // One entry per edge, found from its lower vertex (`last` marks the upper ones seen),
+        // counted first so the heap is allocated once at its size: listing the edges of every
+        // face and deduplicating them took twice the memory. The entries differ in their
+        // vertices, so the order they pop in does not depend on the order they were pushed.
+        let edges_from = |a: usize, last: &mut [u32], visit: &mut dyn FnMut(u32)| {
+            for &f in &s.vertex_faces[a] {
+                for b in s.faces[f as usize] {
+                    if b as usize > a && last[b as usize] != a as u32 {
+                        last[b as usize] = a as u32;
+                        visit(b);
+                    }
                 }
             }
+        };
+        let mut last = vec![u32::MAX; n];
+        let mut edges = 0usize;
+        for a in 0..n {
+            edges_from(a, &mut last, &mut |_| edges += 1);
         }
-        // Interior edges come twice; one entry each keeps the heap half the size.
-        initial.sort_unstable_by_key(|&c| unpack(c));
-        initial.dedup();
+        last.fill(u32::MAX);
+        let mut initial = Vec::with_capacity(edges);
+        for a in 0..n {
+            edges_from(a, &mut last, &mut |b| initial.push(s.candidate(a as u32, b)));
+        }
         s.heap = QuadHeap::from_vec(initial);
         s
     }
@@ -364,13 +382,13 @@ impl Simplifier {
 
     /// An upper bound of the errors of a hub's neighbours: those it has had, and every hub.
     fn hub_bound(&self, h: u32) -> f64 {
-        self.hub_neighbour_error[h as usize].max(self.hub_error)
+        self.hub_neighbour_error.get(&h).copied().unwrap_or(0.0).max(self.hub_error)
     }
 
     /// `t` took the error `e` in a collapse: the hubs around it and the hub bound learn it.
     fn record_error(&mut self, t: u32, e: f64, around: &[u32]) {
         for &h in around {
-            let b = &mut self.hub_neighbour_error[h as usize];
+            let b = self.hub_neighbour_error.entry(h).or_insert(0.0);
             *b = b.max(e);
         }
         if self.hub[t as usize] {
@@ -393,7 +411,7 @@ impl Simplifier {
                 }
             }
         }
-        self.hub_neighbour_error[vi] = b;
+        self.hub_neighbour_error.insert(v, b);
         self.hub_error = self.hub_error.max(error[vi]);
     }
 
@@ -535,7 +553,7 @@ pub fn build_with_stats(
     // Collapse history: (u, t) per collapse, and the faces each removed (CSR over `removed`).
     let mut collapses: Vec<(u32, u32)> = Vec::new();
     let mut removed: Vec<u32> = Vec::new();
-    let mut removed_end: Vec<usize> = Vec::new();
+    let mut removed_end: Vec<u32> = Vec::new();
     let mut seen = vec![u32::MAX; n];
     // Geometric error per collapse (section 3.2): the farthest finest vertex a vertex stands
     // for (`reach`, a nesting bound), raised to the tracked error of every vertex around the
@@ -558,12 +576,18 @@ pub fn build_with_stats(
         let stamp = collapses.len() as u32 + 1;
         s.collapse(u, t, &mut removed, &mut seen, stamp, &error);
         collapses.push((u, t));
-        removed_end.push(removed.len());
+        removed_end.push(removed.len() as u32);
         if collapses.len().is_multiple_of(1 << 16) {
             progress(collapses.len(), bound);
         }
     }
     progress(collapses.len(), bound);
+    // Only the survivors and the statistics are read from here on: free the working state
+    // (quadrics, face lists, heap: most of the build's memory) before the forest is numbered.
+    let stats = BuildStats { collapses: collapses.len(), hubs: s.hubs, work: s.work };
+    let (alive, face_alive) = (std::mem::take(&mut s.alive), std::mem::take(&mut s.face_alive));
+    drop(s);
+    drop((seen, reach, error));
 
     // The forest: each vertex's children are the vertices it absorbed, chronologically.
     let children = Csr::build(n, || collapses.iter().map(|&(u, t)| (t, u)));
@@ -573,7 +597,7 @@ pub fn build_with_stats(
     let mut positions = Vec::new();
     let mut base_vertices = Vec::new();
     let mut stack = Vec::new();
-    for root in (0..n).filter(|&v| s.alive[v]) {
+    for root in (0..n).filter(|&v| alive[v]) {
         base_vertices.push(positions.len() as u32);
         stack.push(root as u32);
         while let Some(x) = stack.pop() {
@@ -584,28 +608,29 @@ pub fn build_with_stats(
     }
 
     let to_fvid = |f: u32| mesh.triangles[f as usize].map(|v| fvid_of_input[v as usize]);
-    let base_faces = (0..mesh.triangles.len() as u32).filter(|&f| s.face_alive[f as usize]).map(to_fvid).collect();
+    let base_faces = (0..mesh.triangles.len() as u32).filter(|&f| face_alive[f as usize]).map(to_fvid).collect();
     let splits = collapses
         .iter()
         .enumerate()
         .rev()
         .map(|(i, &(u, t))| {
-            let start = if i == 0 { 0 } else { removed_end[i - 1] };
+            let start = if i == 0 { 0 } else { removed_end[i - 1] as usize };
             Split {
                 v: fvid_of_input[t as usize],
                 v_u: fvid_of_input[u as usize],
-                faces: removed[start..removed_end[i]].iter().map(|&f| to_fvid(f)).collect(),
+                faces: removed[start..removed_end[i] as usize].iter().map(|&f| to_fvid(f)).collect(),
             }
         })
         .collect();
+    drop((children, collapses, removed, removed_end, alive, face_alive));
     let finest: Vec<[u32; 3]> = (0..mesh.triangles.len() as u32).map(to_fvid).collect();
     let mut pm = ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input, ..Default::default() };
     // Splits run coarse to fine, the reverse of the collapses.
-    let geometric: Vec<f64> = collapse_error.iter().rev().copied().collect();
+    let mut geometric = collapse_error;
+    geometric.reverse();
     let (normals, criteria) = criteria(&pm, &finest, &geometric);
     pm.normals = normals;
     pm.criteria = criteria;
-    let stats = BuildStats { collapses: collapses.len(), hubs: s.hubs, work: s.work };
     Ok((pm, stats))
 }
 

@@ -14,6 +14,7 @@
 //! `v_l`/`v_u` swap of section 4.2.4 (see the format's documentation, [`super`]).
 
 use rayon::prelude::*;
+use smallvec::SmallVec;
 
 use super::fields::TABLES;
 use super::header::{Header, LAYOUT, MAX_NODES, NODE_BYTES};
@@ -99,7 +100,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
             return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
         }
         (oper, addresses, last.tables, vec![])
-    } else if ops.data.is_empty() {
+    } else if ops.len() == 0 {
         // Nothing to page: a mesh without operations is an in-core file.
         (vec![], vec![], last.tables, vec![])
     } else {
@@ -107,14 +108,20 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
         h.nodes = ooc.infos.len() as u32;
         let mut addresses = vec![0usize; ops.order.len()];
         for (i, &s) in ops.order.iter().enumerate() {
-            addresses[s] = ooc.addr[i];
+            addresses[s as usize] = ooc.addr[i];
         }
         (ooc.nodes.concat(), addresses, ooc.tables, write_node_table(&ooc.infos))
     };
     let tb = write_tables(&tables);
     let bb = base_section(pm, &tree, &qpos, &qnrm, &addresses);
     let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &node_table, &oper]);
-    Ok(Encoded { bytes, header: h, addresses, contexts: ops.contexts, symbol_bits: last.symbol_bits })
+    let symbol_bits = last.symbol_bits;
+    drop(last.bytes);
+    let mut contexts = vec![OpContext::default(); ops.order.len()];
+    for (i, &s) in ops.order.iter().enumerate() {
+        contexts[s as usize] = ops.context(i);
+    }
+    Ok(Encoded { bytes, header: h, addresses, contexts, symbol_bits })
 }
 
 /// The checks of `pm`'s structure that need no traversal (the traversal of step 1 checks the
@@ -142,22 +149,77 @@ fn check_mesh(pm: &ProgressiveMesh) -> Result<(), EncodeError> {
 
 /// The operations of step 1, in pre-order of the split forest (an operation, then `v_l`'s
 /// subtree, then `v_u`'s), and the split forest over them.
-struct Operations {
-    /// Per operation: everything but its address offset and its swap.
-    data: Vec<OpData>,
+///
+/// An operation's [`OpData`] is made again from the progressive mesh and the quantized
+/// values each time it is coded ([`Operations::op`]): kept, it was three quarters of the
+/// encoder's memory, and the coding costs far more than making it.
+struct Operations<'a> {
+    pm: &'a ProgressiveMesh,
+    tree: &'a SplitTree,
+    qpos: &'a [[u32; 3]],
+    qnrm: &'a [[u32; 2]],
+    qcrit: &'a [[u32; 4]],
     /// Per operation: its split.
-    order: Vec<usize>,
+    order: Vec<u32>,
+    /// Per operation: one past the last FVID its vertex stands for.
+    v_end: Vec<u32>,
+    /// Per operation: its parent's split (`NONE` for a root).
+    parent: Vec<u32>,
     /// Per operation: the operations of `v_l` and `v_u` (`usize::MAX` where that child is a leaf).
     child_ops: Vec<[usize; 2]>,
     /// Per base vertex: its first operation (`usize::MAX`: none).
     root_ops: Vec<usize>,
-    /// Per split (in the input's order): its operation's context.
-    contexts: Vec<OpContext>,
     /// The operations by height in the split forest (0: both children leaves): an operation's
     /// children are all of lower height, so each height is coded in parallel once the lower
     /// ones are done (pre-order puts children after their parent).
     levels: Vec<Vec<usize>>,
     normal_bits: u8,
+}
+
+impl Operations<'_> {
+    fn len(&self) -> usize {
+        self.order.len()
+    }
+
+    /// Operation `i`'s context.
+    fn context(&self, i: usize) -> OpContext {
+        let split = &self.pm.splits[self.order[i] as usize];
+        let p = self.parent[i];
+        OpContext {
+            v: split.v,
+            v_end: self.v_end[i],
+            parent_criteria: if p == NONE { [0; 4] } else { self.qcrit[p as usize] },
+            position: self.qpos[split.v as usize],
+            normal: self.qnrm[split.v as usize],
+        }
+    }
+
+    /// Operation `i`: its context, its quantized criteria, its faces classified and sorted by
+    /// third-corner offset (4.2.2), its position and normal deltas.
+    fn op(&self, i: usize) -> OpData {
+        let s = self.order[i] as usize;
+        let split = &self.pm.splits[s];
+        let ctx = self.context(i);
+        let mut faces: SmallVec<[FaceCode; 2]> =
+            split.faces.iter().map(|&f| classify(split.v, split.v_u, ctx.v_end, f)).collect();
+        faces.sort_by_key(|f| match *f {
+            FaceCode::Standard { o, .. } => (0, o),
+            FaceCode::General(_) => (1, 0),
+        });
+        let (pv, pu) = (self.qpos[split.v as usize], self.qpos[split.v_u as usize]);
+        let (nv, nu) = (self.qnrm[split.v as usize], self.qnrm[split.v_u as usize]);
+        let [l, r] = self.tree.children[s];
+        OpData {
+            ctx,
+            v_u: split.v_u,
+            crit: self.qcrit[s],
+            has_left: l != NONE,
+            has_right: r != NONE,
+            faces,
+            dpos: std::array::from_fn(|k| pu[k] as i32 - pv[k] as i32),
+            dnrm: std::array::from_fn(|k| nu[k] as i32 - nv[k] as i32),
+        }
+    }
 }
 
 /// How the operations are stored besides their data, what an operation's bytes depend on: per
@@ -179,24 +241,26 @@ struct Choices {
 /// normal deltas. The choices go with zero offsets and a first guess at the swaps, the smaller
 /// subtree first: from tables built without swaps, the swapped children code would be too
 /// long for any swap to pay.
-fn uncompressed_operations(
-    pm: &ProgressiveMesh,
-    tree: &SplitTree,
-    qpos: &[[u32; 3]],
-    qnrm: &[[u32; 2]],
-    qcrit: &[[u32; 4]],
+fn uncompressed_operations<'a>(
+    pm: &'a ProgressiveMesh,
+    tree: &'a SplitTree,
+    qpos: &'a [[u32; 3]],
+    qnrm: &'a [[u32; 2]],
+    qcrit: &'a [[u32; 4]],
     normal_bits: u8,
-) -> Result<(Operations, Choices), EncodeError> {
+) -> Result<(Operations<'a>, Choices), EncodeError> {
     let n = pm.positions.len();
-    // Pre-order over the forest (v_l first); per op: split index, children's op indices.
-    let mut order: Vec<usize> = Vec::with_capacity(pm.splits.len());
-    let mut data: Vec<OpData> = Vec::with_capacity(pm.splits.len());
-    let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(pm.splits.len());
-    let mut contexts = vec![OpContext::default(); pm.splits.len()];
-    let mut op_of_split = vec![usize::MAX; pm.splits.len()];
+    let m = pm.splits.len();
+    // Pre-order over the forest (v_l first); per op: split index, range end, parent split,
+    // children's op indices.
+    let mut order: Vec<u32> = Vec::with_capacity(m);
+    let mut v_ends: Vec<u32> = Vec::with_capacity(m);
+    let mut parents: Vec<u32> = Vec::with_capacity(m);
+    let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(m);
+    let mut visited = vec![false; m];
     let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
-    // Stack entries: (split, context, parent op index and side).
-    type Pending = (u32, OpContext, Option<(usize, usize)>);
+    // Stack entries: (split, its vertex, its range end, parent op index and side).
+    type Pending = (u32, u32, u32, Option<(usize, usize)>);
     let mut stack: Vec<Pending> = vec![];
     for (b, &v) in pm.base_vertices.iter().enumerate() {
         let v_end = pm.base_vertices.get(b + 1).copied().unwrap_or(n as u32);
@@ -207,63 +271,43 @@ fn uncompressed_operations(
             }
             continue;
         }
-        root_ops[b] = data.len();
-        let ctx = OpContext { v, v_end, parent_criteria: [0; 4], position: qpos[v as usize], normal: qnrm[v as usize] };
-        stack.push((root, ctx, None));
-        while let Some((s, ctx, parent)) = stack.pop() {
-            let s = s as usize;
-            let split = &pm.splits[s];
-            if split.v != ctx.v || split.v_u <= ctx.v || split.v_u >= ctx.v_end || op_of_split[s] != usize::MAX {
+        root_ops[b] = order.len();
+        stack.push((root, v, v_end, None));
+        while let Some((s, v, v_end, parent)) = stack.pop() {
+            let su = s as usize;
+            let split = &pm.splits[su];
+            if split.v != v || split.v_u <= v || split.v_u >= v_end || visited[su] {
                 return Err(invalid("split outside its vertex's FVID range"));
             }
-            let [l, r] = tree.children[s];
+            let [l, r] = tree.children[su];
             let (has_left, has_right) = (l != NONE, r != NONE);
-            if (!has_left && split.v_u != split.v + 1) || (!has_right && ctx.v_end != split.v_u + 1) {
+            if (!has_left && split.v_u != split.v + 1) || (!has_right && v_end != split.v_u + 1) {
                 return Err(invalid("split tree inconsistent with the FVID ranges"));
             }
-            let i = data.len();
-            op_of_split[s] = i;
+            let i = order.len();
+            visited[su] = true;
             if let Some((p, side)) = parent {
                 child_ops[p][side] = i;
             }
-            contexts[s] = ctx;
-            let mut faces: Vec<FaceCode> =
-                split.faces.iter().map(|&f| classify(split.v, split.v_u, ctx.v_end, f)).collect();
-            faces.sort_by_key(|f| match *f {
-                FaceCode::Standard { o, .. } => (0, o),
-                FaceCode::General(_) => (1, 0),
-            });
-            let (pv, pu) = (qpos[split.v as usize], qpos[split.v_u as usize]);
-            let (nv, nu) = (qnrm[split.v as usize], qnrm[split.v_u as usize]);
-            data.push(OpData {
-                ctx,
-                v_u: split.v_u,
-                crit: qcrit[s],
-                has_left,
-                has_right,
-                faces,
-                dpos: std::array::from_fn(|k| pu[k] as i64 - pv[k] as i64),
-                dnrm: std::array::from_fn(|k| nu[k] as i64 - nv[k] as i64),
-            });
             order.push(s);
+            v_ends.push(v_end);
+            parents.push(parent.map_or(NONE, |(p, _)| order[p]));
             child_ops.push([usize::MAX; 2]);
             if has_right {
-                let c =
-                    OpContext { v: split.v_u, v_end: ctx.v_end, parent_criteria: qcrit[s], position: pu, normal: nu };
-                stack.push((r, c, Some((i, 1))));
+                stack.push((r, split.v_u, v_end, Some((i, 1))));
             }
             if has_left {
-                let c = OpContext { v_end: split.v_u, parent_criteria: qcrit[s], ..ctx };
-                stack.push((l, c, Some((i, 0))));
+                stack.push((l, v, split.v_u, Some((i, 0))));
             }
         }
     }
-    if data.len() != pm.splits.len() {
+    if order.len() != m {
         return Err(invalid("splits not reachable from the base vertices"));
     }
+    drop(visited);
 
-    let mut height = vec![0u32; data.len()];
-    for i in (0..data.len()).rev() {
+    let mut height = vec![0u32; m];
+    for i in (0..m).rev() {
         let h = child_ops[i].iter().filter(|&&c| c != usize::MAX).map(|&c| height[c] + 1).max().unwrap_or(0);
         height[i] = h;
     }
@@ -272,9 +316,27 @@ fn uncompressed_operations(
         levels[h as usize].push(i);
     }
 
-    let smaller_first: Vec<bool> = data.iter().map(|d| d.ctx.v_end - d.v_u < d.v_u - d.ctx.v).collect();
-    let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; data.len()], avg: 0 };
-    let ops = Operations { data, order, child_ops, root_ops, contexts, levels, normal_bits };
+    let smaller_first: Vec<bool> = (0..m)
+        .map(|i| {
+            let split = &pm.splits[order[i] as usize];
+            v_ends[i] - split.v_u < split.v_u - split.v
+        })
+        .collect();
+    let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; m], avg: 0 };
+    let ops = Operations {
+        pm,
+        tree,
+        qpos,
+        qnrm,
+        qcrit,
+        order,
+        v_end: v_ends,
+        parent: parents,
+        child_ops,
+        root_ops,
+        levels,
+        normal_bits,
+    };
     Ok((ops, zero_offsets))
 }
 
@@ -298,16 +360,41 @@ fn probability_tables(ops: &Operations, choices: &Choices) -> (Vec<Table>, Vec<[
 fn compress_in_reverse_order(ops: &Operations, tables: &[Table]) -> Choices {
     let (bytes, _) = compress_bottom_up(ops, tables, 0);
     // 16.16 fixed point, rounded.
-    let total = bytes.iter().map(|b| b.len() as u64).sum::<u64>() << 16;
-    let n = ops.data.len().max(1) as u64;
+    let total = (bytes.data.len() as u64) << 16;
+    let n = ops.len().max(1) as u64;
     let avg = ((total + n / 2) / n).min(u32::MAX as u64) as u32;
     compress_bottom_up(ops, tables, avg).1
+}
+
+/// Every operation's bytes in one buffer, in the order they were coded (a heap block per
+/// operation cost more memory than the bytes: the builder's memory must follow what it keeps).
+struct OpBytes {
+    data: Vec<u8>,
+    start: Vec<u64>,
+    len: Vec<u32>,
+}
+
+impl OpBytes {
+    fn new(m: usize) -> Self {
+        Self { data: vec![], start: vec![0; m], len: vec![0; m] }
+    }
+
+    fn put(&mut self, i: usize, b: &[u8]) {
+        self.start[i] = self.data.len() as u64;
+        self.len[i] = b.len() as u32;
+        self.data.extend_from_slice(b);
+    }
+
+    fn get(&self, i: usize) -> &[u8] {
+        let s = self.start[i] as usize;
+        &self.data[s..s + self.len[i] as usize]
+    }
 }
 
 /// What the encoder writes: the file's tables, each operation's bytes and how it was stored.
 struct Recompressed {
     tables: Vec<Table>,
-    bytes: Vec<Vec<u8>>,
+    bytes: OpBytes,
     choices: Choices,
     /// [`Encoded::symbol_bits`].
     symbol_bits: (f64, f64),
@@ -340,16 +427,14 @@ fn count_coded(
     coding: &(dyn Fn(usize) -> (bool, u64, Option<[Loc; 2]>) + Sync),
 ) -> Vec<[u64; 256]> {
     const CHUNK: usize = 1 << 14;
-    ops.data
-        .par_chunks(CHUNK)
-        .enumerate()
-        .map(|(c, chunk)| {
+    (0..ops.len().div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
             let mut counts = vec![[0u64; 256]; TABLES];
-            for (k, d) in chunk.iter().enumerate() {
-                let i = c * CHUNK + k;
+            for i in c * CHUNK..((c + 1) * CHUNK).min(ops.len()) {
                 let mut w = OpWriter::counting(&mut counts);
                 let (swap, offset, ooc) = coding(i);
-                write_op(&mut w, d, swap, offset, avg, ops.normal_bits, ooc);
+                write_op(&mut w, &ops.op(i), swap, offset, avg, ops.normal_bits, ooc);
             }
             counts
         })
@@ -385,22 +470,23 @@ fn symbol_bits(counts: &[[u64; 256]], tables: &[Table]) -> (f64, f64) {
 /// parents, so the sizes of both subtrees are known when an operation is coded. Per operation
 /// its bytes, swap and offset. Every operation whose children both split is coded both ways,
 /// and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
-fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (Vec<Vec<u8>>, Choices) {
-    let (data, child_ops) = (&ops.data, &ops.child_ops);
-    let m = data.len();
-    let mut bytes: Vec<Vec<u8>> = vec![vec![]; m];
+fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (OpBytes, Choices) {
+    let child_ops = &ops.child_ops;
+    let m = ops.len();
+    let mut bytes = OpBytes::new(m);
     let mut subtree = vec![0u64; m];
     let mut swaps = vec![false; m];
     let mut offsets = vec![0u64; m];
-    for level in &ops.levels {
+    // In pieces of a level, so the coded bytes in flight stay few.
+    for level in ops.levels.iter().flat_map(|l| l.chunks(1 << 16)) {
         let coded: Vec<(Vec<u8>, bool, u64)> = level
             .par_iter()
             .map(|&i| {
-                let d = &data[i];
+                let d = ops.op(i);
                 let [l, r] = child_ops[i];
                 let code = |swap: bool, offset: u64| {
                     let mut w = OpWriter::coding(tables);
-                    write_op(&mut w, d, swap, offset, avg, ops.normal_bits, None);
+                    write_op(&mut w, &d, swap, offset, avg, ops.normal_bits, None);
                     w.finish()
                 };
                 if d.has_left && d.has_right {
@@ -420,7 +506,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (Vec<Vec<
             let [l, r] = child_ops[i];
             let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
             subtree[i] = b.len() as u64 + sub(l) + sub(r);
-            bytes[i] = b;
+            bytes.put(i, &b);
             swaps[i] = swap;
             offsets[i] = offset;
         }
@@ -457,18 +543,18 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
     if node_bytes as usize > NODE_BYTES || node_bytes < 256 {
         return Err(EncodeError::InvalidOptions(format!("node size {node_bytes} bytes outside 256 to {NODE_BYTES}")));
     }
-    let m = ops.data.len();
+    let m = ops.len();
     let geometry: Vec<OpGeometry> = (0..m)
         .into_par_iter()
         .map(|i| {
-            let d = &ops.data[i];
-            let c = dequantize_criteria(d.crit, h);
+            let s = ops.order[i] as usize;
+            let c = dequantize_criteria(ops.qcrit[s], h);
             OpGeometry {
                 children: ops.child_ops[i],
-                size: incore.bytes[i].len() as u64 + 1,
+                size: u64::from(incore.bytes.len[i]) + 1,
                 error: c.geometric_error,
                 attribute_error: c.attribute_error,
-                center: dequantize_position(d.ctx.position, h),
+                center: dequantize_position(ops.qpos[ops.pm.splits[s].v as usize], h),
                 radius: c.radius,
             }
         })
@@ -522,7 +608,7 @@ fn code_nodes(
     tables: &[Table],
     avg: u32,
 ) -> (Vec<Vec<u8>>, Vec<usize>, Vec<OocCoding>) {
-    let m = ops.data.len();
+    let m = ops.len();
     let count = hier.parents.len();
     let mut depth = vec![0usize; count];
     for n in 0..count {
@@ -582,7 +668,7 @@ fn code_node(
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
     let mut coding = vec![OocCoding::default(); list.len()];
     for (k, &i) in list.iter().enumerate().rev() {
-        let d = &ops.data[i];
+        let d = ops.op(i);
         let [l, r] = ops.child_ops[i];
         // A child's location and the bytes of its subtree's part in this node.
         let loc = |c: usize| -> (Loc, u64) {
@@ -603,7 +689,7 @@ fn code_node(
             }
             let offset = if first != usize::MAX && second != usize::MAX && locs[0].delta == 0 { sizes[0] } else { 0 };
             let mut w = OpWriter::coding(tables);
-            write_op(&mut w, d, swap, offset, avg, ops.normal_bits, Some(locs));
+            write_op(&mut w, &d, swap, offset, avg, ops.normal_bits, Some(locs));
             let (b, bits) = w.finish();
             (b, bits, OocCoding { swap, offset, locs })
         };
@@ -693,16 +779,16 @@ fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>]) -> V
 
 /// The operations section: pre-order, each operation followed by the subtree it stores first.
 /// Returns the section and, per split (in the input's order), its operation's address.
-fn lay_out(ops: &Operations, op_bytes: &[Vec<u8>], swaps: &[bool]) -> (Vec<u8>, Vec<usize>) {
-    let m = op_bytes.len();
-    let mut oper = Vec::with_capacity(op_bytes.iter().map(|b| b.len()).sum());
+fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Vec<usize>) {
+    let m = op_bytes.len.len();
+    let mut oper = Vec::with_capacity(op_bytes.data.len());
     let mut op_addr = vec![0usize; m];
     let mut layout: Vec<usize> = vec![];
     for &root in ops.root_ops.iter().filter(|&&r| r != usize::MAX) {
         layout.push(root);
         while let Some(i) = layout.pop() {
             op_addr[i] = oper.len();
-            oper.extend_from_slice(&op_bytes[i]);
+            oper.extend_from_slice(op_bytes.get(i));
             let [l, r] = ops.child_ops[i];
             let (first, second) = if swaps[i] { (r, l) } else { (l, r) };
             for c in [second, first] {
@@ -714,7 +800,7 @@ fn lay_out(ops: &Operations, op_bytes: &[Vec<u8>], swaps: &[bool]) -> (Vec<u8>, 
     }
     let mut addresses = vec![0usize; ops.order.len()];
     for (i, &s) in ops.order.iter().enumerate() {
-        addresses[s] = op_addr[i];
+        addresses[s as usize] = op_addr[i];
     }
     (oper, addresses)
 }

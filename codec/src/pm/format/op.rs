@@ -6,6 +6,8 @@
 
 use std::sync::Arc;
 
+use smallvec::SmallVec;
+
 use super::fields::{
     corner_class, criteria_prediction, head_class, magnitude_class, pointer_estimate, position_frame, region_class,
     sin_class, split_class, tangent_class, tangent_prediction, ATTR, FACE_COUNT, FACE_FORM, FACE_GENERAL, FACE_OTHER,
@@ -74,10 +76,12 @@ pub(super) struct OpData {
     pub(super) crit: [u32; 4],
     pub(super) has_left: bool,
     pub(super) has_right: bool,
-    /// Standard faces first, by third-corner offset.
-    pub(super) faces: Vec<FaceCode>,
-    pub(super) dpos: [i64; 3],
-    pub(super) dnrm: [i64; 2],
+    /// Standard faces first, by third-corner offset. Inline up to the two faces of a manifold
+    /// split: one heap block less per operation, a quarter of the encoder's memory.
+    pub(super) faces: SmallVec<[FaceCode; 2]>,
+    /// Deltas of quantized positions (at most 24 bits) and normals (at most 16 bits).
+    pub(super) dpos: [i32; 3],
+    pub(super) dnrm: [i32; 2],
 }
 
 /// Where a child's operation is stored in an out-of-core file: its node's distance from this
@@ -180,14 +184,14 @@ pub(super) fn write_op(
         }
     }
     let (axes, n) = position_frame(d.ctx.normal, normal_bits);
-    let [d0, d1, d2] = axes.map(|a| d.dpos[a]);
+    let [d0, d1, d2] = axes.map(|a| i64::from(d.dpos[a]));
     let class = magnitude_class(d.crit[3]);
     w.put_signed(POS_TANGENT, class, d0);
     w.put_signed(POS_TANGENT, class, d1);
     w.put_signed(POS_NORMAL, tangent_class(d0, d1), d2 - tangent_prediction(n, d0, d1));
     let class = magnitude_class(d.crit[2]);
     for x in d.dnrm {
-        w.put_signed(NORMAL, class, x);
+        w.put_signed(NORMAL, class, i64::from(x));
     }
     let both = d.has_left && d.has_right;
     match ooc {
