@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # The scale run of out-of-core progressive meshes (issue 16), not run by CI: generates a model
-# of at least MIN_TRIANGLES (default 13M) from the dragon by subdivision into a temporary
+# of at least MIN_TRIANGLES (default 13M; K, M, G are powers of 1024, so write 100000000 for
+# a hundred million) from $MESH (default the dragon) by subdivision into a temporary
 # folder, builds it out of core in 64 kB nodes (time and peak memory, /usr/bin/time -v), and
 # renders an orbit with one worker at 1920x1080 under each GPU budget, printing per frame the
 # adapted triangles, the worker's graphics memory (node pool and adapted mesh), the node bytes
 # loaded, and the resident, required and slot counts of nodes.
-# Usage: scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
+# Usage: [MESH=FILE] scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
 #   e.g. scripts/pm-scale.sh 13M /tmp/tessera-pm 16 128
+#   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=1 scripts/pm-scale.sh 100000000 /tmp/pm100 512
+# ERROR_PX sets render's --error-px (default its own, 0.5): on lavapipe, which binds at most
+# 128 MiB per buffer, the adapted mesh must stay below about 1.05M vertices.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MIN="${1:-13M}"
@@ -20,12 +24,14 @@ mkdir -p "$XDG_RUNTIME_DIR"
 cargo build --release -q -p tessera -p tessera-bench --bin tessera --bin subdivide
 BIN="${CARGO_TARGET_DIR:-target}/release"
 T="$BIN/tessera"
-PLY="$DIR/dragon-$MIN.ply"
-DPM="$DIR/dragon-$MIN.dpm"
+MESH="${MESH:-../shared/meshes/stanford/dragon_vrip.ply.gz}"
+NAME="$(basename "$MESH" | sed 's/[._].*//')-$MIN"
+PLY="$DIR/$NAME.ply"
+DPM="$DIR/$NAME.dpm"
 peak() { grep -E "Maximum resident" "$1" | awk '{printf "%.0f MB", $6/1024}'; }
 
 if [ ! -s "$PLY" ]; then
-  "$BIN/subdivide" ../shared/meshes/stanford/dragon_vrip.ply.gz --min-triangles "$MIN" -o "$PLY"
+  "$BIN/subdivide" "$MESH" --min-triangles "$MIN" -o "$PLY"
 fi
 if [ ! -s "$DPM" ]; then
   echo "== pm build $PLY --node-kb 64"
@@ -37,7 +43,7 @@ $T pm stats "$DPM" | grep -E "bytes|nodes|operations"
 for B in "${BUDGETS[@]}"; do
   echo "== render, 6 frames of an orbit, --gpu-budget-mb $B"
   /usr/bin/time -v mpirun --bind-to none --oversubscribe -np 2 $T render "$DPM" --size 1920x1080 --tiles 4x4 \
-    --frames 6 --orbit --gpu-budget-mb "$B" --out "$DIR/b$B.png" --stats "$DIR/b$B.jsonl" 2> "$DIR/b$B.time" > /dev/null
+    --frames 6 --orbit --gpu-budget-mb "$B" ${ERROR_PX:+--error-px "$ERROR_PX"} --out "$DIR/b$B.png" --stats "$DIR/b$B.jsonl" 2> "$DIR/b$B.time" > /dev/null
   echo "   peak memory of a rank $(peak "$DIR/b$B.time")"
   python3 - "$DIR/b$B.jsonl" <<'EOF'
 import json, sys

@@ -252,6 +252,72 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
 
 /// The bounding box of `p` (the unit cube when empty).
 /// The bounding box of a progressive mesh's positions; a unit box for an empty one.
+/// A box around every vertex of an out-of-core `.dpm`, from its head alone: the union of the
+/// base vertices and of the nodes' boxes (which hold every operation's bounding sphere, so
+/// every vertex), cut to the quantization grid (the header's lower corner and its largest
+/// extent), which holds every position. The spheres of coarse operations reach far past the
+/// model: uncut, the 102M-triangle armadillo's default camera framed it at a fraction of the
+/// frame.
+pub fn out_of_core_bbox(dpm: &codec::pm::format::Dpm) -> ([f32; 3], [f32; 3]) {
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    let points = dpm.base_positions.iter().map(|&q| {
+        let p = dpm.position(q);
+        (p, p)
+    });
+    for (a, b) in points.chain(dpm.nodes.iter().map(|n| (n.bbox_min, n.bbox_max))) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(a[k]);
+            hi[k] = hi[k].max(b[k]);
+        }
+    }
+    let top = (1u32 << dpm.header.position_bits) - 1;
+    let (grid_lo, grid_hi) = (dpm.position([0; 3]), dpm.position([top; 3]));
+    for k in 0..3 {
+        lo[k] = lo[k].max(grid_lo[k]);
+        hi[k] = hi[k].min(grid_hi[k]);
+    }
+    (lo, hi)
+}
+
 pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     codec::mesh::bounding_box(p).unwrap_or(([0.0; 3], [1.0; 3]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The box of an out-of-core file holds every vertex and is cut to the quantization grid,
+    /// where the union of its node boxes (the operations' spheres) reaches far past the model.
+    #[test]
+    fn the_out_of_core_box_holds_the_model_and_no_more_than_its_grid() {
+        let mesh = crate::commands::load_mesh(&testkit::mesh_path("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
+        let pm = codec::pm::build(&mesh).unwrap();
+        let opts = EncodeOptions { node_bytes: 4096, ..EncodeOptions::default() };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bunny.dpm");
+        std::fs::write(&path, format::encode(&pm, opts).unwrap().bytes).unwrap();
+        let file = format::NodeFile::open_out_of_core(&path).unwrap().expect("out of core");
+        let dpm = format::Dpm::parse_prefix(file.prefix()).unwrap();
+        let (lo, hi) = out_of_core_bbox(&dpm);
+        let (elo, ehi) = bbox(&pm.positions);
+        let step = dpm.header.step;
+        let extent = (0..3).map(|k| ehi[k] - elo[k]).fold(0.0f32, f32::max);
+        let (mut ulo, mut uhi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for n in &dpm.nodes {
+            for k in 0..3 {
+                ulo[k] = ulo[k].min(n.bbox_min[k]);
+                uhi[k] = uhi[k].max(n.bbox_max[k]);
+            }
+        }
+        for k in 0..3 {
+            assert!(
+                lo[k] <= elo[k] + step && hi[k] >= ehi[k] - step,
+                "axis {k}: {lo:?}..{hi:?} misses {elo:?}..{ehi:?}"
+            );
+            assert!(hi[k] - lo[k] <= extent + 2.0 * step, "axis {k}: {lo:?}..{hi:?} wider than the grid");
+        }
+        // The nodes' union is larger (that is what the cut is for).
+        assert!((0..3).any(|k| uhi[k] - ulo[k] > extent * 1.2), "union {ulo:?}..{uhi:?}, extent {extent}");
+    }
 }

@@ -139,22 +139,11 @@ impl Scene {
 
 impl PmScene {
     /// An out-of-core `.dpm`: its head is read and checked here (the nodes are checked by
-    /// their checksums as workers read them); its box is the union of the base vertices and
-    /// of the nodes' boxes, which hold every operation's bounding sphere, so every vertex.
+    /// their checksums as workers read them); its box is [`crate::pm::out_of_core_bbox`].
     fn out_of_core(path: &Path, file: &codec::pm::format::NodeFile, gpu_budget: u64) -> Result<PmScene> {
         let named = || format!("{}", path.display());
         let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).with_context(named)?;
-        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-        let points = dpm.base_positions.iter().map(|&q| {
-            let p = dpm.position(q);
-            (p, p)
-        });
-        for (a, b) in points.chain(dpm.nodes.iter().map(|n| (n.bbox_min, n.bbox_max))) {
-            for k in 0..3 {
-                lo[k] = lo[k].min(a[k]);
-                hi[k] = hi[k].max(b[k]);
-            }
-        }
+        let (lo, hi) = crate::pm::out_of_core_bbox(&dpm);
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) || lo.iter().zip(&hi).any(|(a, b)| a > b) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
