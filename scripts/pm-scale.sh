@@ -8,7 +8,7 @@
 # loaded, and the resident, required and slot counts of nodes.
 # Usage: [MESH=FILE] scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
 #   e.g. scripts/pm-scale.sh 13M /tmp/tessera-pm 16 128
-#   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=1 scripts/pm-scale.sh 100000000 /tmp/pm100 512
+#   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=2 scripts/pm-scale.sh 100000000 /tmp/pm100 512
 # ERROR_PX sets render's --error-px (default its own, 0.5): on lavapipe, which binds at most
 # 128 MiB per buffer, the adapted mesh must stay below about 1.05M vertices.
 set -euo pipefail

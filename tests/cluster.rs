@@ -552,7 +552,7 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
     ok(&alone(&["pm", "build", &bunny, "-o", ooc.to_str().unwrap(), "--node-kb", "4"]));
     // A close orbit: the bunny's box is larger than the frame. The near and far planes are
     // given: by default they follow the model's box, which an out-of-core file bounds by its
-    // nodes' boxes, larger than the in-core vertices' box.
+    // nodes' boxes cut to the quantization grid, not the in-core vertices' box.
     let camera = ["--eye", "0,0.12,0.08", "--target", "-0.02,0.1,0", "--near", "0.01", "--far", "1"];
     let view = [&["--size", "960x540", "--tiles", "4x2"][..], &camera].concat();
     let render = |model: &Path, name: &str, budget: &str| {

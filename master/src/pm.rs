@@ -250,8 +250,6 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     Ok(())
 }
 
-/// The bounding box of `p` (the unit cube when empty).
-/// The bounding box of a progressive mesh's positions; a unit box for an empty one.
 /// A box around every vertex of an out-of-core `.dpm`, from its head alone: the union of the
 /// base vertices and of the nodes' boxes (which hold every operation's bounding sphere, so
 /// every vertex), cut to the quantization grid (the header's lower corner and its largest
@@ -279,6 +277,8 @@ pub fn out_of_core_bbox(dpm: &codec::pm::format::Dpm) -> ([f32; 3], [f32; 3]) {
     (lo, hi)
 }
 
+/// The bounding box of `p` (the unit cube when empty).
+/// The bounding box of a progressive mesh's positions; a unit box for an empty one.
 pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     codec::mesh::bounding_box(p).unwrap_or(([0.0; 3], [1.0; 3]))
 }

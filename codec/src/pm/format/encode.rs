@@ -152,10 +152,10 @@ fn check_mesh(pm: &ProgressiveMesh) -> Result<(), EncodeError> {
 ///
 /// An operation's [`OpData`] is made again from the progressive mesh and the quantized
 /// values each time it is coded ([`Operations::op`]): kept, it was three quarters of the
-/// encoder's memory, and the coding costs far more than making it.
+/// encoder's memory. Making it costs time (on the dragon, compressing takes 2.4-2.5 s against
+/// 2.0 s when it was kept).
 struct Operations<'a> {
     pm: &'a ProgressiveMesh,
-    tree: &'a SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
     qcrit: &'a [[u32; 4]],
@@ -208,13 +208,13 @@ impl Operations<'_> {
         });
         let (pv, pu) = (self.qpos[split.v as usize], self.qpos[split.v_u as usize]);
         let (nv, nu) = (self.qnrm[split.v as usize], self.qnrm[split.v_u as usize]);
-        let [l, r] = self.tree.children[s];
+        let [l, r] = self.child_ops[i];
         OpData {
             ctx,
             v_u: split.v_u,
             crit: self.qcrit[s],
-            has_left: l != NONE,
-            has_right: r != NONE,
+            has_left: l != usize::MAX,
+            has_right: r != usize::MAX,
             faces,
             dpos: std::array::from_fn(|k| pu[k] as i32 - pv[k] as i32),
             dnrm: std::array::from_fn(|k| nu[k] as i32 - nv[k] as i32),
@@ -243,7 +243,7 @@ struct Choices {
 /// long for any swap to pay.
 fn uncompressed_operations<'a>(
     pm: &'a ProgressiveMesh,
-    tree: &'a SplitTree,
+    tree: &SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
     qcrit: &'a [[u32; 4]],
@@ -325,7 +325,6 @@ fn uncompressed_operations<'a>(
     let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; m], avg: 0 };
     let ops = Operations {
         pm,
-        tree,
         qpos,
         qnrm,
         qcrit,

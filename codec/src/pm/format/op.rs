@@ -77,7 +77,8 @@ pub(super) struct OpData {
     pub(super) has_left: bool,
     pub(super) has_right: bool,
     /// Standard faces first, by third-corner offset. Inline up to the two faces of a manifold
-    /// split: one heap block less per operation, a quarter of the encoder's memory.
+    /// split, so making an operation's data (each time the encoder codes it) allocates
+    /// nothing in the common case.
     pub(super) faces: SmallVec<[FaceCode; 2]>,
     /// Deltas of quantized positions (at most 24 bits) and normals (at most 16 bits).
     pub(super) dpos: [i32; 3],
