@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use codec::pm::{build, refine_all, PmError, ProgressiveMesh, Refiner};
+use codec::pm::{build, build_with_options, refine_all, BuildOptions, PmError, ProgressiveMesh, Refiner};
 use codec::{Mesh, MeshError};
 use proptest::prelude::*;
 use testkit::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
@@ -20,7 +20,17 @@ fn repeats(t: [u32; 3]) -> bool {
 /// Builds and checks everything that holds for any input: FVIDs, positions, the base mesh,
 /// the split records, and the exact round trip through `refine_all`.
 fn build_and_check(mesh: &Mesh) -> ProgressiveMesh {
-    let pm = build(mesh).expect("builds");
+    check(mesh, build(mesh).expect("builds"))
+}
+
+/// As [`build_and_check`] for a build in chunks of at most `chunk_faces`; also returns the
+/// number of chunks.
+fn build_chunked_and_check(mesh: &Mesh, chunk_faces: usize) -> (ProgressiveMesh, usize) {
+    let (pm, stats) = build_with_options(mesh, BuildOptions { chunk_faces }, &mut |_, _| {}).expect("builds");
+    (check(mesh, pm), stats.chunks)
+}
+
+fn check(mesh: &Mesh, pm: ProgressiveMesh) -> ProgressiveMesh {
     let used = mesh.used_vertices();
     let n_used = used.iter().filter(|&&u| u).count();
 
@@ -236,6 +246,43 @@ proptest! {
     fn random_soups_refine_back_to_their_input(mesh in soup()) {
         let pm = build_and_check(&mesh);
         check_every_level(&pm);
+    }
+
+    #[test]
+    fn random_soups_built_in_chunks_refine_back_to_their_input(mesh in soup(), chunk_faces in 1usize..24) {
+        let (pm, chunks) = build_chunked_and_check(&mesh, chunk_faces);
+        prop_assert_eq!(chunks > 1, mesh.triangles.len() > chunk_faces);
+        check_every_level(&pm);
+    }
+}
+
+/// A model simplified in chunks (borders locked until the chunks merge) is a valid
+/// progressive mesh: every level is consistent and refining gives back the input exactly,
+/// on scans with holes, non-manifold and degenerate meshes, in chunks small enough that
+/// most of the model's vertices sit on a chunk border at some point.
+#[test]
+fn meshes_built_in_chunks_refine_back_to_their_input() {
+    for (rel, chunk_faces) in [
+        ("stanford/bunny_npm_lowres.obj", 64),
+        ("odedstein/plane_holes.obj.gz", 500),
+        ("classic/beetle.obj", 1000),
+        ("degenerate/non_manifold_face_graph.obj", 16),
+        ("stanford/bunny_zipper_c3d.obj.gz", 4096),
+    ] {
+        let mesh = codec::load_path(&shared_meshes().join(rel)).unwrap_or_else(|e| panic!("{e}"));
+        let (pm, chunks) = build_chunked_and_check(&mesh, chunk_faces);
+        let whole = build(&mesh).unwrap();
+        eprintln!(
+            "{rel}: {} triangles in {chunks} chunks of at most {chunk_faces}: base {} vertices (whole: {})",
+            mesh.triangles.len(),
+            pm.base_vertices.len(),
+            whole.base_vertices.len()
+        );
+        assert!(chunks >= 2 * mesh.triangles.len() / chunk_faces - 1, "{rel}: {chunks} chunks");
+        assert_ne!(pm.splits, whole.splits, "{rel}: the chunked build equals the whole one");
+        if mesh.triangles.len() <= 2000 {
+            check_every_level(&pm);
+        }
     }
 }
 

@@ -295,6 +295,10 @@ pub enum Pm {
         /// this many kB (1 to 64; the paper's 64), read node by node within a memory budget.
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
         node_kb: Option<u32>,
+        /// Simplify a model of more triangles than this in spatial chunks of at most this
+        /// many, so the simplifier's memory follows the chunk, not the model (0: never).
+        #[arg(long, default_value_t = codec::pm::CHUNK_FACES)]
+        chunk_faces: usize,
     },
     /// Print the size of a .dpm file per vertex, with the breakdown.
     Stats {

@@ -17,13 +17,13 @@ use crate::progress;
 use codec::input::ModelKind;
 
 /// `tessera pm build IN -o OUT.dpm`.
-pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
+pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec::pm::BuildOptions) -> Result<()> {
     check_extension(output, &["dpm"], "the output of pm build")?;
     check_distinct(&[input], &[output])?;
     let mesh = load_mesh(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
-    let pm = codec::pm::build_with_progress(&mesh, &mut |done, bound| {
+    let (pm, stats) = codec::pm::build_with_options(&mesh, build_opts, &mut |done, bound| {
         pb.set_length(bound as u64);
         pb.set_position(done as u64);
     })
@@ -56,6 +56,12 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions) -> Result<()> {
             enc.header.splits as f64 / secs.max(1e-9)
         ),
     );
+    if stats.chunks > 1 {
+        summary(
+            output,
+            format_args!("  simplified in {} chunks of at most {} triangles", stats.chunks, build_opts.chunk_faces),
+        );
+    }
     let per_vertex = |bits: f64| bits / 8.0 / enc.header.vertices.max(1) as f64;
     summary(
         output,

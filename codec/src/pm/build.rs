@@ -92,6 +92,8 @@ pub struct BuildStats {
     /// Steps of the simplification's inner loops: face-list entries read and heap entries
     /// pushed or popped. Linear in the face count whatever the valence (a test bounds it).
     pub work: u64,
+    /// Chunks simplified (see [`BuildOptions::chunk_faces`]); 1 for a whole-model build.
+    pub chunks: usize,
 }
 
 /// Why a progressive mesh cannot be built.
@@ -233,9 +235,13 @@ struct Simplifier {
     /// Per vertex, the number of collapses done when it last absorbed a vertex.
     changed: Vec<u32>,
     alive: Vec<bool>,
+    /// Vertices that are never removed (see [`Self::new`]).
+    locked: Vec<bool>,
     /// Current vertex ids of every face (input order, so orientation is kept).
     faces: Vec<[u32; 3]>,
     face_alive: Vec<bool>,
+    /// The number of live faces.
+    live: usize,
     /// The faces of each vertex, each listed once; removed faces linger until compacted.
     vertex_faces: Vec<Vec<u32>>,
     /// Per vertex: its live faces (the entries of `vertex_faces` whose face is alive).
@@ -254,11 +260,16 @@ struct Simplifier {
 }
 
 impl Simplifier {
-    fn new(mesh: &Mesh) -> Self {
-        let n = mesh.positions.len();
+    /// The state for `faces` over vertices at `pos` (relative to the model's centre). Each
+    /// face adds its plane to its vertices' quadrics when `quadric` is `None`; a chunk of a
+    /// chunked build passes the quadrics its vertices gathered in earlier chunks instead.
+    /// `locked` vertices are never removed (their faces reach outside the chunk): an edge
+    /// collapses into them, and an edge between two of them is not offered.
+    fn new(pos: Vec<[f64; 3]>, faces: Vec<[u32; 3]>, quadric: Option<Vec<Quadric>>, locked: Vec<bool>) -> Self {
+        let n = pos.len();
         let mut alive = vec![false; n];
         let mut vertex_faces = vec![Vec::new(); n];
-        for (f, tri) in mesh.triangles.iter().enumerate() {
+        for (f, tri) in faces.iter().enumerate() {
             for (k, &v) in tri.iter().enumerate() {
                 if tri[..k].contains(&v) {
                     continue;
@@ -267,20 +278,16 @@ impl Simplifier {
                 alive[v as usize] = true;
             }
         }
-        // The used vertices' box (their positions are finite: `Mesh::validate` ran).
-        let used = mesh.positions.iter().zip(&alive).filter(|(_, &a)| a).map(|(p, _)| p);
-        let centre: [f64; 3] = match crate::mesh::bounding_box(used) {
-            Some((lo, hi)) => std::array::from_fn(|a| 0.5 * (f64::from(lo[a]) + f64::from(hi[a]))),
-            None => [0.0; 3],
-        };
-        let pos: Vec<[f64; 3]> = mesh.positions.iter().map(|p| sub(p.map(f64::from), centre)).collect();
-        let mut quadric = vec![Quadric::default(); n];
-        for tri in &mesh.triangles {
-            let q = Quadric::of_triangle(tri.map(|v| pos[v as usize]));
-            for &v in tri {
-                quadric[v as usize].add(&q);
+        let quadric = quadric.unwrap_or_else(|| {
+            let mut quadric = vec![Quadric::default(); n];
+            for tri in &faces {
+                let q = Quadric::of_triangle(tri.map(|v| pos[v as usize]));
+                for &v in tri {
+                    quadric[v as usize].add(&q);
+                }
             }
-        }
+            quadric
+        });
         let live_faces: Vec<u32> = vertex_faces.iter().map(|f| f.len() as u32).collect();
         let hub: Vec<bool> = live_faces.iter().map(|&f| f as usize > HUB_FACES).collect();
         let hubs = hub.iter().filter(|&&h| h).count();
@@ -289,8 +296,11 @@ impl Simplifier {
             quadric,
             changed: vec![0; n],
             alive,
-            faces: mesh.triangles.clone(),
-            face_alive: vec![true; mesh.triangles.len()],
+            live: faces.len(),
+            face_alive: vec![true; faces.len()],
+            work: 3 * faces.len() as u64,
+            faces,
+            locked,
             vertex_faces,
             live_faces,
             hub,
@@ -298,7 +308,6 @@ impl Simplifier {
             hub_error: 0.0,
             hubs,
             heap: QuadHeap(Vec::new()),
-            work: 3 * mesh.triangles.len() as u64,
         };
         // One entry per edge, found from its lower vertex (`last` marks the upper ones seen),
         // counted first so the heap is allocated once at its size: listing the edges of every
@@ -307,7 +316,7 @@ impl Simplifier {
         let edges_from = |a: usize, last: &mut [u32], visit: &mut dyn FnMut(u32)| {
             for &f in &s.vertex_faces[a] {
                 for b in s.faces[f as usize] {
-                    if b as usize > a && last[b as usize] != a as u32 {
+                    if b as usize > a && last[b as usize] != a as u32 && !(s.locked[a] && s.locked[b as usize]) {
                         last[b as usize] = a as u32;
                         visit(b);
                     }
@@ -337,10 +346,12 @@ impl Simplifier {
         let key = |c: f64| if c.is_nan() { f32::MAX.to_bits() } else { (c.max(0.0) as f32).to_bits() };
         let (ha, hb) = (self.hub[a as usize], self.hub[b as usize]);
         let (fa, fb) = (self.live_faces[a as usize], self.live_faces[b as usize]);
-        let into_b = match (ha, hb) {
-            (false, true) => true,
-            (true, false) => false,
-            (true, true) if fa != fb => fa < fb,
+        let into_b = match (self.locked[a as usize], self.locked[b as usize], ha, hb) {
+            (true, false, ..) => false,
+            (false, true, ..) => true,
+            (.., false, true) => true,
+            (.., true, false) => false,
+            (.., true, true) if fa != fb => fa < fb,
             _ => cb <= ca,
         };
         let (u, t, cost) = if into_b { (a, b, key(cb)) } else { (b, a, key(ca)) };
@@ -348,6 +359,9 @@ impl Simplifier {
     }
 
     fn offer(&mut self, a: u32, b: u32) {
+        if self.locked[a as usize] && self.locked[b as usize] {
+            return;
+        }
         let c = self.candidate(a, b);
         self.heap.push(c);
         self.work += 1;
@@ -418,6 +432,7 @@ impl Simplifier {
     /// Face `f` is removed: its vertices have one live face less.
     fn kill_face(&mut self, f: u32) {
         self.face_alive[f as usize] = false;
+        self.live -= 1;
         let tri = self.faces[f as usize];
         for (k, &v) in tri.iter().enumerate() {
             if !tri[..k].contains(&v) {
@@ -545,49 +560,152 @@ pub fn build_with_stats(
     mesh: &Mesh,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(ProgressiveMesh, BuildStats), PmError> {
-    mesh.validate()?;
-    let n = mesh.positions.len();
-    let bound = mesh.used_vertices().iter().filter(|&&u| u).count();
-    let mut s = Simplifier::new(mesh);
+    build_with_options(mesh, BuildOptions::default(), progress)
+}
 
-    // Collapse history: (u, t) per collapse, and the faces each removed (CSR over `removed`).
-    let mut collapses: Vec<(u32, u32)> = Vec::new();
-    let mut removed: Vec<u32> = Vec::new();
-    let mut removed_end: Vec<u32> = Vec::new();
-    let mut seen = vec![u32::MAX; n];
-    // Geometric error per collapse (section 3.2): the farthest finest vertex a vertex stands
-    // for (`reach`, a nesting bound), raised to the tracked error of every vertex around the
-    // collapse ("using the maximum of all neighbor's errors as the actual error"), which
-    // keeps the errors locally monotone against fold-overs; the result becomes `t`'s error.
-    let pos64 = |v: u32| mesh.positions[v as usize].map(f64::from);
-    let (mut reach, mut error) = (vec![0.0f64; n], vec![0.0f64; n]);
-    let mut collapse_error: Vec<f64> = Vec::new();
+/// Chunk size of [`BuildOptions::default`]: models of more faces are simplified in chunks.
+pub const CHUNK_FACES: usize = 1 << 22;
+
+/// How [`build_with_options`] works.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BuildOptions {
+    /// A model of more faces than this is simplified in spatial chunks of at most this many
+    /// faces (see [`simplify_chunked`]), so the simplifier's memory follows the chunk, not
+    /// the model; `0` never chunks.
+    pub chunk_faces: usize,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        Self { chunk_faces: CHUNK_FACES }
+    }
+}
+
+/// The collapse history: `(u, t)` per collapse in input vertex ids, the input faces each
+/// removed (CSR over `removed`), and each collapse's geometric error.
+#[derive(Default)]
+struct Log {
+    collapses: Vec<(u32, u32)>,
+    removed: Vec<u32>,
+    removed_end: Vec<u32>,
+    error: Vec<f64>,
+}
+
+/// The input ids of a simplifier's local vertices and faces (empty: the ids are the input's).
+#[derive(Clone, Copy)]
+struct Ids<'a> {
+    vertex: &'a [u32],
+    face: &'a [u32],
+}
+
+impl Ids<'_> {
+    fn vertex(&self, l: u32) -> u32 {
+        if self.vertex.is_empty() {
+            l
+        } else {
+            self.vertex[l as usize]
+        }
+    }
+
+    fn face(&self, l: u32) -> u32 {
+        if self.face.is_empty() {
+            l
+        } else {
+            self.face[l as usize]
+        }
+    }
+}
+
+/// Collapses the cheapest edges of `s` until at most `stop_faces` faces are live or no edge
+/// is left, appending them to `log`. `reach` and `error` (per local vertex) carry the
+/// geometric error of section 3.2: the farthest finest vertex a vertex stands for (`reach`, a
+/// nesting bound), raised to the tracked error of every vertex around the collapse ("using
+/// the maximum of all neighbor's errors as the actual error"), which keeps the errors locally
+/// monotone against fold-overs; the result becomes `t`'s error.
+#[allow(clippy::too_many_arguments)]
+fn run(
+    s: &mut Simplifier,
+    input: &[[f32; 3]],
+    ids: Ids,
+    reach: &mut [f64],
+    error: &mut [f64],
+    stop_faces: usize,
+    log: &mut Log,
+    progress: &mut dyn FnMut(usize),
+) {
+    let mut seen = vec![u32::MAX; reach.len()];
+    let pos64 = |v: u32| input[ids.vertex(v) as usize].map(f64::from);
     let mut around = Vec::new();
-    while let Some((u, t)) = s.next_collapse() {
+    let mut removed = Vec::new();
+    let mut stamp = 0u32;
+    while s.live > stop_faces {
+        let Some((u, t)) = s.next_collapse() else { break };
         let (ui, ti) = (u as usize, t as usize);
         reach[ti] = reach[ti].max(norm(sub(pos64(u), pos64(t))) + reach[ui]);
         around.clear();
-        let e = reach[ti].max(s.error_around(u, t, &error, &mut around));
+        let e = reach[ti].max(s.error_around(u, t, error, &mut around));
         error[ti] = e;
         s.record_error(t, e, &around);
-        collapse_error.push(e);
         // At most n - 1 < 2^31 collapses, so stamps (from 1, above the initial 0 of
         // `changed`) never reach the initial u32::MAX of `seen`.
-        let stamp = collapses.len() as u32 + 1;
-        s.collapse(u, t, &mut removed, &mut seen, stamp, &error);
-        collapses.push((u, t));
-        removed_end.push(removed.len() as u32);
-        if collapses.len().is_multiple_of(1 << 16) {
-            progress(collapses.len(), bound);
+        stamp += 1;
+        removed.clear();
+        s.collapse(u, t, &mut removed, &mut seen, stamp, error);
+        log.collapses.push((ids.vertex(u), ids.vertex(t)));
+        log.removed.extend(removed.iter().map(|&f| ids.face(f)));
+        log.removed_end.push(log.removed.len() as u32);
+        log.error.push(e);
+        if log.collapses.len().is_multiple_of(1 << 16) {
+            progress(log.collapses.len());
         }
     }
-    progress(collapses.len(), bound);
-    // Only the survivors and the statistics are read from here on: free the working state
-    // (quadrics, face lists, heap: most of the build's memory) before the forest is numbered.
-    let stats = BuildStats { collapses: collapses.len(), hubs: s.hubs, work: s.work };
-    let (alive, face_alive) = (std::mem::take(&mut s.alive), std::mem::take(&mut s.face_alive));
-    drop(s);
-    drop((seen, reach, error));
+}
+
+/// As [`build_with_stats`], with the chunk size of `opts`.
+pub fn build_with_options(
+    mesh: &Mesh,
+    opts: BuildOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(ProgressiveMesh, BuildStats), PmError> {
+    mesh.validate()?;
+    let n = mesh.positions.len();
+    let used = mesh.used_vertices();
+    let bound = used.iter().filter(|&&u| u).count();
+    // Positions relative to the centre of the used vertices' box (finite: `Mesh::validate`
+    // ran), so the quadrics of a model far from the origin keep their precision.
+    let used_positions = mesh.positions.iter().zip(&used).filter(|(_, &a)| a).map(|(p, _)| p);
+    let centre: [f64; 3] = match crate::mesh::bounding_box(used_positions) {
+        Some((lo, hi)) => std::array::from_fn(|a| 0.5 * (f64::from(lo[a]) + f64::from(hi[a]))),
+        None => [0.0; 3],
+    };
+    let mut log = Log::default();
+    let mut report = |done: usize| progress(done, bound);
+    let (stats, alive, face_alive) = if opts.chunk_faces > 0 && mesh.triangles.len() > opts.chunk_faces {
+        let stats = simplify_chunked(mesh, centre, opts.chunk_faces, &mut log, &mut report);
+        let mut alive = used;
+        for &(u, _) in &log.collapses {
+            alive[u as usize] = false;
+        }
+        let mut face_alive = vec![true; mesh.triangles.len()];
+        for &f in &log.removed {
+            face_alive[f as usize] = false;
+        }
+        (stats, alive, face_alive)
+    } else {
+        drop(used);
+        let pos = mesh.positions.iter().map(|p| sub(p.map(f64::from), centre)).collect();
+        let mut s = Simplifier::new(pos, mesh.triangles.clone(), None, vec![false; n]);
+        let (mut reach, mut error) = (vec![0.0f64; n], vec![0.0f64; n]);
+        let ids = Ids { vertex: &[], face: &[] };
+        run(&mut s, &mesh.positions, ids, &mut reach, &mut error, 0, &mut log, &mut report);
+        // Only the survivors and the statistics are read from here on: free the working
+        // state (quadrics, face lists, heap: most of the build's memory) before the forest is
+        // numbered.
+        let stats = BuildStats { collapses: log.collapses.len(), hubs: s.hubs, work: s.work, chunks: 1 };
+        (stats, std::mem::take(&mut s.alive), std::mem::take(&mut s.face_alive))
+    };
+    report(log.collapses.len());
+    let Log { collapses, removed, removed_end, error: collapse_error } = log;
 
     // The forest: each vertex's children are the vertices it absorbed, chronologically.
     let children = Csr::build(n, || collapses.iter().map(|&(u, t)| (t, u)));
@@ -632,6 +750,197 @@ pub fn build_with_stats(
     pm.normals = normals;
     pm.criteria = criteria;
     Ok((pm, stats))
+}
+
+/// A vertex that survived a chunk, with what its collapses there gathered.
+struct Carried {
+    id: u32,
+    quadric: Quadric,
+    error: f64,
+    reach: f64,
+}
+
+/// What is left of a chunk: its live faces (input face id and current vertex ids) and its
+/// surviving vertices.
+struct Part {
+    faces: Vec<(u32, [u32; 3])>,
+    vertices: Vec<Carried>,
+}
+
+/// The state shared by the chunks of [`simplify_chunked`].
+struct Chunker<'a> {
+    mesh: &'a Mesh,
+    centre: [f64; 3],
+    chunk_faces: usize,
+    /// Per input vertex: its live faces in the whole model (each face counted once).
+    live: Vec<u32>,
+    /// Per input vertex: its id in the chunk being simplified (scratch, `NONE` outside).
+    local_of: Vec<u32>,
+    stats: BuildStats,
+}
+
+/// Simplifies a model too large for one simplifier in spatial chunks, bottom-up over a
+/// kd-tree of its faces (split at the median centroid along the longest axis until a leaf
+/// holds at most `chunk_faces`): a leaf's faces are simplified to half their count, two
+/// siblings' leftovers are merged and simplified to half again, and the root runs until no
+/// edge is left, as the whole-model build does. The simplifier then holds one chunk at a time.
+///
+/// A vertex whose live faces reach outside the chunk is locked there (it may absorb
+/// vertices, never be absorbed), so every collapse of a chunk removes a vertex all of whose
+/// faces are in the chunk: the faces it removes and the faces it moves are all there, and the
+/// chunks' collapses, logged one after another, are one valid collapse sequence of the whole
+/// model, numbered into FVIDs as the whole-model build numbers its own. Quadrics are summed
+/// where a vertex meets again from two chunks (each face added its plane in exactly one leaf),
+/// errors and reaches take their maximum. Within a chunk the order is greedy by quadric
+/// error as in the whole-model build; across chunks it is not, so the result differs from it
+/// (measured in the README).
+fn simplify_chunked(
+    mesh: &Mesh,
+    centre: [f64; 3],
+    chunk_faces: usize,
+    log: &mut Log,
+    progress: &mut dyn FnMut(usize),
+) -> BuildStats {
+    let n = mesh.positions.len();
+    let mut live = vec![0u32; n];
+    for tri in &mesh.triangles {
+        for (k, &v) in tri.iter().enumerate() {
+            if !tri[..k].contains(&v) {
+                live[v as usize] += 1;
+            }
+        }
+    }
+    let mut c = Chunker { mesh, centre, chunk_faces, live, local_of: vec![NONE; n], stats: BuildStats::default() };
+    let all: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
+    c.simplify(all, true, log, progress);
+    c.stats.collapses = log.collapses.len();
+    c.stats
+}
+
+impl Chunker<'_> {
+    /// Simplifies the kd-tree node of `faces` (input face ids); the root runs to the end.
+    fn simplify(&mut self, faces: Vec<u32>, root: bool, log: &mut Log, progress: &mut dyn FnMut(usize)) -> Part {
+        let part = if faces.len() > self.chunk_faces {
+            let (left, right) = self.halve(faces);
+            let a = self.simplify(left, false, log, progress);
+            let b = self.simplify(right, false, log, progress);
+            let mut faces = a.faces;
+            faces.extend(b.faces);
+            let mut vertices = a.vertices;
+            vertices.extend(b.vertices);
+            Part { faces, vertices }
+        } else {
+            let faces = faces.into_iter().map(|f| (f, self.mesh.triangles[f as usize])).collect();
+            Part { faces, vertices: Vec::new() }
+        };
+        self.chunk(part, if root { 0 } else { self.chunk_faces / 2 }, log, progress)
+    }
+
+    /// Splits `faces` in two at the median centroid along the longest axis of the centroids.
+    fn halve(&self, mut faces: Vec<u32>) -> (Vec<u32>, Vec<u32>) {
+        let p = &self.mesh.positions;
+        let centroid = |f: u32| {
+            let t = self.mesh.triangles[f as usize];
+            std::array::from_fn::<f32, 3, _>(|a| {
+                (p[t[0] as usize][a] + p[t[1] as usize][a] + p[t[2] as usize][a]) / 3.0
+            })
+        };
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for &f in &faces {
+            let c = centroid(f);
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a]);
+            }
+        }
+        let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+        let mid = faces.len() / 2;
+        faces.select_nth_unstable_by(mid, |&a, &b| centroid(a)[axis].total_cmp(&centroid(b)[axis]).then(a.cmp(&b)));
+        let right = faces.split_off(mid);
+        faces.shrink_to_fit();
+        (faces, right)
+    }
+
+    /// Simplifies one chunk, the faces and vertices `part` gathered, down to `stop_faces`.
+    fn chunk(&mut self, part: Part, stop_faces: usize, log: &mut Log, progress: &mut dyn FnMut(usize)) -> Part {
+        // Local ids: the carried vertices first (merging a vertex carried from both halves),
+        // then the leaf faces' new ones.
+        let mut vertex: Vec<u32> = Vec::new();
+        let (mut quadric, mut error, mut reach) = (Vec::new(), Vec::new(), Vec::new());
+        for c in part.vertices {
+            let l = self.local_of[c.id as usize];
+            if l == NONE {
+                self.local_of[c.id as usize] = vertex.len() as u32;
+                vertex.push(c.id);
+                quadric.push(c.quadric);
+                error.push(c.error);
+                reach.push(c.reach);
+            } else {
+                let l = l as usize;
+                quadric[l].add(&c.quadric);
+                error[l] = f64::max(error[l], c.error);
+                reach[l] = f64::max(reach[l], c.reach);
+            }
+        }
+        // A leaf's vertices are all new (its faces add their planes in `Simplifier::new`); a
+        // merged chunk's are all carried (a live face's vertices survived its chunk).
+        let fresh = vertex.is_empty();
+        debug_assert!(fresh || part.faces.iter().all(|(_, t)| t.iter().all(|&v| self.local_of[v as usize] != NONE)));
+        let (face, tris): (Vec<u32>, Vec<[u32; 3]>) = part.faces.into_iter().unzip();
+        let local_tris: Vec<[u32; 3]> = tris
+            .iter()
+            .map(|t| {
+                t.map(|v| {
+                    if self.local_of[v as usize] == NONE {
+                        self.local_of[v as usize] = vertex.len() as u32;
+                        vertex.push(v);
+                    }
+                    self.local_of[v as usize]
+                })
+            })
+            .collect();
+        drop(tris);
+        let nl = vertex.len();
+        error.resize(nl, 0.0);
+        reach.resize(nl, 0.0);
+        let mut before = vec![0u32; nl];
+        for t in &local_tris {
+            for (k, &v) in t.iter().enumerate() {
+                if !t[..k].contains(&v) {
+                    before[v as usize] += 1;
+                }
+            }
+        }
+        let locked: Vec<bool> = vertex.iter().zip(&before).map(|(&g, &b)| self.live[g as usize] > b).collect();
+        let pos = vertex.iter().map(|&g| sub(self.mesh.positions[g as usize].map(f64::from), self.centre)).collect();
+        let mut s = Simplifier::new(pos, local_tris, (!fresh).then_some(quadric), locked);
+        let first = log.collapses.len();
+        let ids = Ids { vertex: &vertex, face: &face };
+        run(&mut s, &self.mesh.positions, ids, &mut reach, &mut error, stop_faces, log, progress);
+        self.stats.hubs += s.hubs;
+        self.stats.work += s.work;
+        self.stats.chunks += 1;
+
+        let mut dead = vec![false; nl];
+        for &(u, _) in &log.collapses[first..] {
+            dead[self.local_of[u as usize] as usize] = true;
+        }
+        for (l, &g) in vertex.iter().enumerate() {
+            let after = if dead[l] { 0 } else { s.live_faces[l] };
+            self.live[g as usize] = self.live[g as usize] - before[l] + after;
+            self.local_of[g as usize] = NONE;
+        }
+        let faces = (0..s.faces.len())
+            .filter(|&f| s.face_alive[f])
+            .map(|f| (face[f], s.faces[f].map(|l| vertex[l as usize])))
+            .collect();
+        // A survivor without live faces anywhere is never touched again.
+        let vertices = (0..nl)
+            .filter(|&l| !dead[l] && self.live[vertex[l] as usize] > 0)
+            .map(|l| Carried { id: vertex[l], quadric: s.quadric[l], error: error[l], reach: reach[l] })
+            .collect();
+        Part { faces, vertices }
+    }
 }
 
 /// Relative slack of the nesting bounds (radius, cone angle) per level.
