@@ -741,12 +741,11 @@ pub fn build_with_options(
         })
         .collect();
     drop((children, collapses, removed, removed_end, alive, face_alive));
-    let finest: Vec<[u32; 3]> = (0..mesh.triangles.len() as u32).map(to_fvid).collect();
     let mut pm = ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input, ..Default::default() };
     // Splits run coarse to fine, the reverse of the collapses.
     let mut geometric = collapse_error;
     geometric.reverse();
-    let (normals, criteria) = criteria(&pm, &finest, &geometric);
+    let (normals, criteria) = criteria(&pm, &mesh.triangles, &geometric);
     pm.normals = normals;
     pm.criteria = criteria;
     Ok((pm, stats))
@@ -963,17 +962,19 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
     norm(cross(a, b)).atan2(d)
 }
 
-/// The per-FVID normals and the per-split criteria (see the module docs).
-fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]], geometric: &[f64]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
+/// The per-FVID normals and the per-split criteria (see the module docs) of the input
+/// triangles `input` (input vertex ids, read through `pm.fvid_of_input` rather than copied).
+fn criteria(pm: &ProgressiveMesh, input: &[[u32; 3]], geometric: &[f64]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
-    let pos: Vec<[f64; 3]> = pm.positions.iter().map(|p| p.map(f64::from)).collect();
+    let pos = |f: usize| pm.positions[f].map(f64::from);
+    let finest = || input.iter().map(|t| t.map(|v| pm.fvid_of_input[v as usize]));
     let face_normal = |t: &[u32; 3]| {
-        let [a, b, c] = t.map(|f| pos[f as usize]);
+        let [a, b, c] = t.map(|f| pos(f as usize));
         cross(sub(b, a), sub(c, a))
     };
     let mut normal = vec![[0.0f64; 3]; n];
-    for t in finest {
-        let fnrm = face_normal(t);
+    for t in finest() {
+        let fnrm = face_normal(&t);
         for (k, &f) in t.iter().enumerate() {
             if !t[..k].contains(&f) {
                 for a in 0..3 {
@@ -988,14 +989,14 @@ fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]], geometric: &[f64]) -> (Ve
     }
     // Leaf cones: the angle between a vertex normal and its incident face normals.
     let mut leaf_alpha = vec![0.0f64; n];
-    for t in finest {
-        let fnrm = face_normal(t);
+    for t in finest() {
+        let fnrm = face_normal(&t);
         let l = norm(fnrm);
         if !(l > 0.0 && l.is_finite()) {
             continue;
         }
         let fnrm = fnrm.map(|x| x / l);
-        for &f in t {
+        for f in t {
             let a = angle(normal[f as usize], fnrm);
             leaf_alpha[f as usize] = leaf_alpha[f as usize].max(a);
         }
@@ -1018,7 +1019,7 @@ fn criteria(pm: &ProgressiveMesh, finest: &[[u32; 3]], geometric: &[f64]) -> (Ve
         // may exceed its region (raised to its neighbours'), and the runtime tests spheres,
         // which must nest for a child never to ask for a split its parent does not.
         let nest = |c: [f64; 4], d: f64| (d + c[0]) * (1.0 + SLACK);
-        let radius = geometric[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos[u], pos[v]))));
+        let radius = geometric[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
         let attribute = l[2].max(norm(sub(normal[u], normal[v])) + r[2]);
         let alpha = (l[3].max(angle(normal[v], normal[u]) + r[3]) * (1.0 + SLACK) + SLACK).min(max_angle);
         let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };

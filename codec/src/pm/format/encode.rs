@@ -108,7 +108,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
         h.nodes = ooc.infos.len() as u32;
         let mut addresses = vec![0usize; ops.order.len()];
         for (i, &s) in ops.order.iter().enumerate() {
-            addresses[s as usize] = ooc.addr[i];
+            addresses[s as usize] = ooc.addr[i] as usize;
         }
         (ooc.nodes.concat(), addresses, ooc.tables, write_node_table(&ooc.infos))
     };
@@ -519,7 +519,7 @@ struct OutOfCore {
     tables: Vec<Table>,
     nodes: Vec<Vec<u8>>,
     infos: Vec<NodeInfo>,
-    addr: Vec<usize>,
+    addr: Vec<u32>,
 }
 
 /// How an operation of an out-of-core file is coded: its swap, the in-node offset of the child
@@ -527,7 +527,8 @@ struct OutOfCore {
 #[derive(Clone, Copy, Debug, Default)]
 struct OocCoding {
     swap: bool,
-    offset: u64,
+    /// Within a node: below [`NODE_BYTES`].
+    offset: u32,
     locs: [Loc; 2],
 }
 
@@ -549,8 +550,8 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
             let s = ops.order[i] as usize;
             let c = dequantize_criteria(ops.qcrit[s], h);
             OpGeometry {
-                children: ops.child_ops[i],
-                size: u64::from(incore.bytes.len[i]) + 1,
+                children: ops.child_ops[i].map(|c| if c == usize::MAX { NONE } else { c as u32 }),
+                size: incore.bytes.len[i] + 1,
                 error: c.geometric_error,
                 attribute_error: c.attribute_error,
                 center: dequantize_position(ops.qpos[ops.pm.splits[s].v as usize], h),
@@ -579,7 +580,7 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
             if round == 0 {
                 let counts = count_coded(ops, h.avg_op_size, &|i| {
                     let c = coding[i];
-                    (c.swap, c.offset, Some(c.locs))
+                    (c.swap, u64::from(c.offset), Some(c.locs))
                 });
                 tables = counts.iter().map(every_symbol).collect();
             } else {
@@ -595,8 +596,9 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
     }
 }
 
-/// A node's bytes, and per operation in it its index, address and coding.
-type CodedNode = (Vec<u8>, Vec<(usize, usize, OocCoding)>);
+/// A node's bytes, and per operation in it its index, address and coding (`u32` as the
+/// addresses are: these lists hold a whole level's operations at once).
+type CodedNode = (Vec<u8>, Vec<(u32, u32, OocCoding)>);
 
 /// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
 /// each in parallel with the others of its depth, so that a child's address is known when its
@@ -606,28 +608,28 @@ fn code_nodes(
     hier: &Hierarchy,
     tables: &[Table],
     avg: u32,
-) -> (Vec<Vec<u8>>, Vec<usize>, Vec<OocCoding>) {
+) -> (Vec<Vec<u8>>, Vec<u32>, Vec<OocCoding>) {
     let m = ops.len();
     let count = hier.parents.len();
     let mut depth = vec![0usize; count];
     for n in 0..count {
         depth[n] = hier.parents[n].map_or(0, |p| depth[p as usize] + 1);
     }
-    let mut members: Vec<Vec<usize>> = vec![vec![]; count];
+    let mut members: Vec<Vec<u32>> = vec![vec![]; count];
     for (i, &n) in hier.node_of.iter().enumerate() {
-        members[n as usize].push(i);
+        members[n as usize].push(i as u32);
     }
-    let mut parent_op = vec![usize::MAX; m];
+    let mut parent_op = vec![NONE; m];
     for (i, c) in ops.child_ops.iter().enumerate() {
         for &c in c.iter().filter(|&&c| c != usize::MAX) {
-            parent_op[c] = i;
+            parent_op[c] = i as u32;
         }
     }
     let mut by_depth: Vec<Vec<usize>> = vec![vec![]; depth.iter().max().map_or(0, |d| d + 1)];
     for (n, &d) in depth.iter().enumerate() {
         by_depth[d].push(n);
     }
-    let mut addr = vec![usize::MAX; m];
+    let mut addr = vec![NONE; m];
     let mut coding = vec![OocCoding::default(); m];
     let mut nodes: Vec<Vec<u8>> = vec![vec![]; count];
     for level in by_depth.iter().rev() {
@@ -637,8 +639,8 @@ fn code_nodes(
             .collect();
         for (&n, (bytes, placed)) in level.iter().zip(coded) {
             for (i, a, c) in placed {
-                addr[i] = a;
-                coding[i] = c;
+                addr[i as usize] = a;
+                coding[i as usize] = c;
             }
             nodes[n] = bytes;
         }
@@ -655,18 +657,19 @@ fn code_nodes(
 fn code_node(
     ops: &Operations,
     hier: &Hierarchy,
-    list: &[usize],
+    list: &[u32],
     n: u32,
-    parent_op: &[usize],
-    addr: &[usize],
+    parent_op: &[u32],
+    addr: &[u32],
     tables: &[Table],
     avg: u32,
 ) -> CodedNode {
-    let idx = |i: usize| list.binary_search(&i).ok();
+    let idx = |i: usize| list.binary_search(&(i as u32)).ok();
     let mut inner = vec![0u64; list.len()];
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
     let mut coding = vec![OocCoding::default(); list.len()];
     for (k, &i) in list.iter().enumerate().rev() {
+        let i = i as usize;
         let d = ops.op(i);
         let [l, r] = ops.child_ops[i];
         // A child's location and the bytes of its subtree's part in this node.
@@ -675,8 +678,8 @@ fn code_node(
                 (Loc::default(), inner[idx(c).expect("in the node")])
             } else {
                 let a = addr[c];
-                debug_assert!(hier.node_of[c] > n && a != usize::MAX);
-                (Loc { delta: hier.node_of[c] - n, local: (a % NODE_BYTES) as u32 }, 0)
+                debug_assert!(hier.node_of[c] > n && a != NONE);
+                (Loc { delta: hier.node_of[c] - n, local: a % NODE_BYTES as u32 }, 0)
             }
         };
         let code = |swap: bool| {
@@ -690,7 +693,7 @@ fn code_node(
             let mut w = OpWriter::coding(tables);
             write_op(&mut w, &d, swap, offset, avg, ops.normal_bits, Some(locs));
             let (b, bits) = w.finish();
-            (b, bits, OocCoding { swap, offset, locs })
+            (b, bits, OocCoding { swap, offset: offset as u32, locs })
         };
         let (b, _, c) = if d.has_left && d.has_right {
             let plain = code(false);
@@ -712,14 +715,14 @@ fn code_node(
     let mut placed = Vec::with_capacity(list.len());
     let mut stack = vec![];
     for (k, &i) in list.iter().enumerate() {
-        let p = parent_op[i];
-        if p != usize::MAX && hier.node_of[p] == n {
+        let p = parent_op[i as usize];
+        if p != NONE && hier.node_of[p as usize] == n {
             continue;
         }
         stack.push(k);
         while let Some(k) = stack.pop() {
-            let i = list[k];
-            placed.push((i, n as usize * NODE_BYTES + out.len(), coding[k]));
+            let i = list[k] as usize;
+            placed.push((i as u32, n * NODE_BYTES as u32 + out.len() as u32, coding[k]));
             out.extend_from_slice(&bytes[k]);
             let [l, r] = ops.child_ops[i];
             let (first, second) = if coding[k].swap { (r, l) } else { (l, r) };

@@ -24,12 +24,14 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
+use crate::pm::NONE;
+
 /// What the hierarchy needs of an operation.
 pub(super) struct OpGeometry {
-    /// Its children's operations (`usize::MAX`: none).
-    pub(super) children: [usize; 2],
+    /// Its children's operations ([`NONE`]: none).
+    pub(super) children: [u32; 2],
     /// Its coded size (an estimate while the hierarchy is built).
-    pub(super) size: u64,
+    pub(super) size: u32,
     /// Its geometric and attribute errors (as they decode).
     pub(super) error: f32,
     pub(super) attribute_error: f32,
@@ -39,6 +41,12 @@ pub(super) struct OpGeometry {
 }
 
 /// The hierarchy: per operation its node, per node its parent.
+impl OpGeometry {
+    fn children(&self) -> impl Iterator<Item = usize> + '_ {
+        self.children.iter().filter(|&&c| c != NONE).map(|&c| c as usize)
+    }
+}
+
 pub(super) struct Hierarchy {
     pub(super) node_of: Vec<u32>,
     pub(super) parents: Vec<Option<u32>>,
@@ -70,8 +78,7 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
     // Subtree sizes, children before parents.
     let mut subtree = vec![0u64; m];
     for i in (0..m).rev() {
-        subtree[i] =
-            ops[i].size + ops[i].children.iter().filter(|&&c| c != usize::MAX).map(|&c| subtree[c]).sum::<u64>();
+        subtree[i] = u64::from(ops[i].size) + ops[i].children().map(|c| subtree[c]).sum::<u64>();
     }
     let mut node_of = vec![u32::MAX; m];
     let mut parents: Vec<Option<u32>> = vec![];
@@ -85,7 +92,7 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
             let mut todo = frontier;
             while let Some(i) = todo.pop() {
                 node_of[i] = id;
-                todo.extend(ops[i].children.iter().filter(|&&c| c != usize::MAX));
+                todo.extend(ops[i].children());
             }
             continue;
         }
@@ -94,13 +101,13 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
         let mut used = 0u64;
         while let Some(top) = heap.peek() {
             let i = top.1;
-            if used + ops[i].size > s_max {
+            if used + u64::from(ops[i].size) > s_max {
                 break;
             }
             heap.pop();
-            used += ops[i].size;
+            used += u64::from(ops[i].size);
             node_of[i] = id;
-            for &c in ops[i].children.iter().filter(|&&c| c != usize::MAX) {
+            for c in ops[i].children() {
                 heap.push(ByError(ops[c].error, c));
             }
         }
