@@ -2,8 +2,8 @@
 //! operations, built top-down. A node takes, from the operation subtrees handed to it, the
 //! operations with the greatest geometric error first ("those with the highest simplification
 //! error are required first"), as many as fit in its size; the subtrees below them go to its
-//! children, split in two, so a complete operation subtree stays in one subtree of the
-//! hierarchy and inner nodes hold the coarse operations.
+//! children, so a complete operation subtree stays in one subtree of the hierarchy and inner
+//! nodes hold the coarse operations.
 //!
 //! **The split differs from the paper's.** The paper splits by a modified surface area
 //! heuristic, `A ≈ A_l log2[s_l / (s_max + 1)] + A_r log2[s_r / (s_max + 1)]` (`A` a side's box
@@ -14,8 +14,18 @@
 //! close view required 80% of the file. The split here halves the subtrees' bytes along the
 //! longest axis of their centres (measured: the same view then requires 75%, the file is 4%
 //! smaller as fewer pointers cross nodes, `cargo test -p tessera-codec --test pm_adapt
-//! out_of_core -- --nocapture`). Occlusion culling, which the paper's heuristic also serves,
-//! is not done yet.
+//! out_of_core -- --nocapture`).
+//!
+//! **Four children, not two.** An inner node is a cut through the top of the subtrees handed
+//! to it, so nearly every operation in it has a child in another node, and such a pointer
+//! costs a node delta and a whole local address (about 2.7 bytes): with two children per
+//! node, inner nodes hold half the operations and the layout cost 1.18 (bunny) and 1.39
+//! (dragon) bytes per operation over the in-core file, above the paper's "approximately 1".
+//! The remaining subtrees are therefore halved twice (each half again only while it holds
+//! more than a node), into up to four children: 1.03 and 0.70 bytes per operation, and a close
+//! view of the bunny in 4 kB nodes requires 74% of the file against 73% (eight children:
+//! 0.34 and 0.62, but 80%: inner nodes then span too much of the model). `cargo test -p
+//! tessera-codec --release --test pm_ooc -- --ignored --nocapture` prints the sizes.
 //!
 //! Where the paper is silent: a node whose remaining subtrees fit in one node gets a single
 //! child; nodes are numbered in pre-order (a parent before its children, which out-of-core
@@ -25,6 +35,9 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use crate::pm::NONE;
+
+/// Halvings of an inner node's remaining subtrees into its children (2^SPLITS children).
+const SPLITS: usize = 2;
 
 /// What the hierarchy needs of an operation.
 pub(super) struct OpGeometry {
@@ -122,10 +135,25 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
             stack.push((rest, Some(id)));
             continue;
         }
-        let (left, right) = partition(ops, &subtree, rest);
-        // The left side is numbered next (pre-order).
-        stack.push((right, Some(id)));
-        stack.push((left, Some(id)));
+        // Split in halves, each half again while it holds more than a node (SPLITS times):
+        // up to 2^SPLITS children, pushed so that the first is numbered next (pre-order).
+        let mut parts = vec![rest];
+        for _ in 0..SPLITS {
+            parts = parts
+                .into_iter()
+                .flat_map(|p| {
+                    if p.len() > 1 && p.iter().map(|&i| subtree[i]).sum::<u64>() > s_max {
+                        let (l, r) = partition(ops, &subtree, p);
+                        vec![l, r]
+                    } else {
+                        vec![p]
+                    }
+                })
+                .collect();
+        }
+        for p in parts.into_iter().rev() {
+            stack.push((p, Some(id)));
+        }
     }
     Some(Hierarchy { node_of, parents })
 }
