@@ -32,9 +32,13 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
     // The progressive mesh holds every position and face: the input is not read again.
     drop(mesh);
     let build_s = start.elapsed().as_secs_f64();
-    let pb = progress::spinner(format!("compressing {} operations", pm.splits.len()));
+    let ops = pm.splits.len();
+    let pb = progress::spinner(format!("compressing {ops} operations"));
     let t = Instant::now();
-    let enc = format::encode(&pm, opts).context("cannot encode the progressive mesh")?;
+    let enc = format::encode_with_progress(&pm, opts, &mut |step| {
+        pb.set_message(format!("compressing {ops} operations: {step}"));
+    })
+    .context("cannot encode the progressive mesh")?;
     pb.finish_and_clear();
     let enc_s = t.elapsed().as_secs_f64();
     write_bytes(output, &enc.bytes)?;

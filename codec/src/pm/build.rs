@@ -31,6 +31,10 @@
 //!   vertex), so numbering leaves left to right is a pre-order walk of that tree. Roots are
 //!   numbered in ascending input index.
 //!
+//! * **Chunks.** A model of more than [`BuildOptions::chunk_faces`] faces is simplified in
+//!   spatial chunks with their borders locked (`simplify_chunked`), so the simplifier's
+//!   memory follows the chunk: greedy within a chunk, one valid collapse sequence in all.
+//!
 //! The refinement criteria ([`Criteria`], section 4 and 4.2.3) are computed after the
 //! numbering, bottom-up over the split tree ([`SplitTree`]), in `f64`:
 //!
@@ -570,7 +574,7 @@ pub const CHUNK_FACES: usize = 1 << 22;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BuildOptions {
     /// A model of more faces than this is simplified in spatial chunks of at most this many
-    /// faces (see [`simplify_chunked`]), so the simplifier's memory follows the chunk, not
+    /// faces (see the module docs), so the simplifier's memory follows the chunk, not
     /// the model; `0` never chunks.
     pub chunk_faces: usize,
 }

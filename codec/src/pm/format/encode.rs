@@ -80,8 +80,19 @@ fn invalid(msg: &str) -> EncodeError {
 /// Encodes a progressive mesh from [`super::build`](fn@crate::pm::build) (or any with the same
 /// structure: every split reachable from the base vertices, FVID ranges as in section 3.2).
 pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, EncodeError> {
+    encode_with_progress(pm, opts, &mut |_| {})
+}
+
+/// As [`encode`], naming each step to `step` as it starts (for a progress display: a model of
+/// a hundred million triangles takes minutes).
+pub fn encode_with_progress(
+    pm: &ProgressiveMesh,
+    opts: EncodeOptions,
+    step: &mut dyn FnMut(&str),
+) -> Result<Encoded, EncodeError> {
     let mut h = fit_header(pm, opts)?;
     check_mesh(pm)?;
+    step("preparing the operations");
     let qpos: Vec<[u32; 3]> = pm.positions.iter().map(|&p| quantize_position(p, &h)).collect();
     let qnrm: Vec<[u32; 2]> = pm.normals.iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
     let qcrit: Vec<[u32; 4]> = pm.criteria.iter().map(|c| quantize_criteria(c, &h)).collect();
@@ -89,7 +100,9 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
 
     let (ops, first_guess) = uncompressed_operations(pm, &tree, &qpos, &qnrm, &qcrit, h.normal_bits)?;
     let (first_tables, _) = probability_tables(&ops, &first_guess);
+    step("coding bottom-up with estimated tables");
     let offsets = compress_in_reverse_order(&ops, &first_tables);
+    step("coding again with the counted tables");
     let last = recompute_and_recompress(&ops, &offsets);
     h.avg_op_size = offsets.avg;
 
@@ -104,7 +117,7 @@ pub fn encode(pm: &ProgressiveMesh, opts: EncodeOptions) -> Result<Encoded, Enco
         // Nothing to page: a mesh without operations is an in-core file.
         (vec![], vec![], last.tables, vec![])
     } else {
-        let ooc = out_of_core(&ops, &last, &h, opts.node_bytes)?;
+        let ooc = out_of_core(&ops, &last, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
         let mut addresses = vec![0usize; ops.order.len()];
         for (i, &s) in ops.order.iter().enumerate() {
@@ -539,7 +552,13 @@ struct OocCoding {
 /// `node_bytes`, the hierarchy is built again with a smaller size limit ("we iteratively reduce
 /// the maximum node size when building the hierarchy and store the model as soon as all
 /// nodes are small enough after compression").
-fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: u32) -> Result<OutOfCore, EncodeError> {
+fn out_of_core(
+    ops: &Operations,
+    incore: &Recompressed,
+    h: &Header,
+    node_bytes: u32,
+    step: &mut dyn FnMut(&str),
+) -> Result<OutOfCore, EncodeError> {
     if node_bytes as usize > NODE_BYTES || node_bytes < 256 {
         return Err(EncodeError::InvalidOptions(format!("node size {node_bytes} bytes outside 256 to {NODE_BYTES}")));
     }
@@ -562,6 +581,7 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
     let roots: Vec<usize> = ops.root_ops.iter().copied().filter(|&r| r != usize::MAX).collect();
     let mut s_max = node_bytes as u64 * 15 / 16;
     loop {
+        step(&format!("grouping the operations into nodes of at most {s_max} bytes"));
         let hier = hierarchy::build(&geometry, &roots, s_max)
             .ok_or_else(|| invalid(&format!("an operation is larger than a node of {node_bytes} bytes")))?;
         if hier.parents.len() > MAX_NODES as usize {
@@ -572,6 +592,7 @@ fn out_of_core(ops: &Operations, incore: &Recompressed, h: &Header, node_bytes: 
         let mut tables = incore.tables.clone();
         let mut largest = 0;
         for round in 0..2 {
+            step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
             let (nodes, addr, coding) = code_nodes(ops, &hier, &tables, h.avg_op_size);
             largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
             if largest > node_bytes as usize {
