@@ -143,6 +143,17 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} triangles", original.triangles.len())));
     assert_eq!(codec::load_path(&full).unwrap().triangles.len(), original.triangles.len());
 
+    // Simplified in chunks: a different file that refines to the same triangles.
+    let chunked = dir.path().join("chunked.dpm");
+    let o = tessera(&["pm", "build", s(&input), "-o", s(&chunked), "--chunk-faces", "1000"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("simplified in 15 chunks of at most 1000 triangles"), "{out}");
+    assert_ne!(std::fs::read(&chunked).unwrap(), std::fs::read(&dpm).unwrap());
+    let o = tessera(&["pm", "adapt", s(&chunked), "--full", "-o", s(&full)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(codec::load_path(&full).unwrap().triangles.len(), original.triangles.len());
+
     let view = dir.path().join("view.ply");
     let o = tessera(&["pm", "adapt", s(&dpm), "--size", "64x48", "--error-px", "0.5", "-o", s(&view)]);
     assert!(o.status.success(), "{}", stderr(&o));
