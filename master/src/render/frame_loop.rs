@@ -84,7 +84,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     if let Scene::Pm(PmScene { source, .. }) = &scene {
         let model = match source {
             PmSource::Bytes(bytes) => ToWorker::Model(bytes.clone()).encode(),
-            PmSource::File { path, gpu_budget } => {
+            PmSource::File { path, gpu_budget, .. } => {
                 ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget }.encode()
             }
         };
@@ -104,7 +104,11 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     // Sorter ranks send the workers their shares of one frame at a time (the protocol has no
     // frame in flight beside another), so with --sorters a frame waits for the one before.
     let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
-    let writer = Writer::start(args, plan, movie, stats, depth, epoch);
+    let budget_slots = match &scene {
+        Scene::Pm(PmScene { source: PmSource::File { slots, .. }, .. }) => Some(*slots),
+        _ => None,
+    };
+    let writer = Writer::start(args, plan, movie, stats, depth, epoch, budget_slots);
 
     let direct =
         plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), args.display_ranks as usize));
@@ -286,6 +290,7 @@ impl Writer {
         mut stats: Option<LineLog>,
         depth: usize,
         epoch: f64,
+        budget_slots: Option<u32>,
     ) -> Writer {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
         let (out, frames, wall, stereo) = (args.out.clone(), args.frames, plan.wall.clone(), plan.stereo);
@@ -296,6 +301,8 @@ impl Writer {
         let thread = std::thread::spawn(move || -> Result<()> {
             let begin = Instant::now();
             let mut last = begin;
+            // Workers already told about a node pool smaller than their budget.
+            let mut capped = std::collections::HashSet::new();
             // A frame's views (eyes, displays with frames of their own) wait for the last.
             let mut views: Vec<Written> = Vec::with_capacity(per_frame);
             for w in rx {
@@ -348,6 +355,13 @@ impl Writer {
                     path.display()
                 );
                 let write = Span::between("write", write_start, unix_ms(), epoch);
+                for Written { workers, .. } in &views {
+                    for w in workers {
+                        if let Some(note) = capped_slots_note(budget_slots, w, &mut capped) {
+                            eprintln!("{note}");
+                        }
+                    }
+                }
                 for Written { stats: mut line, workers, .. } in views {
                     (line.write_ms, line.frame_ms) = (write_ms, frame_ms);
                     line.timeline.push(write.clone());
@@ -499,9 +513,36 @@ pub fn orbit_by(cam: &Camera, k: u32, n: u32, degrees: f32) -> Camera {
     Camera { eye: cam.target + rot * (cam.eye - cam.target), ..*cam }
 }
 
+/// Once per worker, a note when its node pool holds fewer slots than `--gpu-budget-mb`
+/// makes: its GPU binds less than the budget in one buffer, which the pool is.
+fn capped_slots_note(
+    budget_slots: Option<u32>,
+    w: &super::stats::WorkerStats,
+    told: &mut std::collections::HashSet<usize>,
+) -> Option<String> {
+    let note = slots_note(w.rank, budget_slots?, w.node_slots()?)?;
+    told.insert(w.rank).then_some(note)
+}
+
+fn slots_note(rank: usize, budget_slots: u32, slots: u32) -> Option<String> {
+    (slots < budget_slots).then(|| {
+        format!(
+            "note: rank {rank} keeps {slots} node slots, fewer than the {budget_slots} --gpu-budget-mb allows: \
+             its GPU binds less than the budget in one buffer"
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pool_smaller_than_the_budget_is_noted() {
+        assert_eq!(slots_note(1, 288, 288), None);
+        let note = slots_note(2, 9000, 2356).unwrap();
+        assert!(note.starts_with("note: rank 2 keeps 2356 node slots, fewer than the 9000"), "{note}");
+    }
 
     #[test]
     fn orbit_keeps_distance_and_returns() {

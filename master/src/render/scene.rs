@@ -68,9 +68,9 @@ pub(super) struct PmScene {
 pub(super) enum PmSource {
     /// An in-core file's bytes, sent to every worker.
     Bytes(Vec<u8>),
-    /// An out-of-core file's absolute path, and the bytes of graphics memory each worker
-    /// keeps of its nodes.
-    File { path: String, gpu_budget: u64 },
+    /// An out-of-core file's absolute path, the bytes of graphics memory each worker keeps
+    /// of its nodes, and the node slots that budget makes (at most one per node).
+    File { path: String, gpu_budget: u64, slots: u32 },
 }
 
 impl Scene {
@@ -155,6 +155,7 @@ impl PmScene {
         }
         let abs = std::fs::canonicalize(path).with_context(named)?;
         let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();
-        Ok(PmScene { source: PmSource::File { path, gpu_budget }, bbox: (lo, hi) })
+        let slots = (gpu_budget / slot_bytes as u64).min(dpm.nodes.len() as u64) as u32;
+        Ok(PmScene { source: PmSource::File { path, gpu_budget, slots }, bbox: (lo, hi) })
     }
 }

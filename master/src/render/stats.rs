@@ -158,6 +158,13 @@ struct WorkerTileStats {
     readback_ms: f64,
 }
 
+impl WorkerStats {
+    /// The worker's node slots, for a progressive mesh out of core.
+    pub(super) fn node_slots(&self) -> Option<u32> {
+        self.pm.as_ref().map(|p| p.node_slots).filter(|&s| s > 0)
+    }
+}
+
 /// A worker's line for `frame`, from the tiles it sent back and its span of work, on a run
 /// that began at `epoch` (Unix milliseconds).
 pub(super) fn worker_stats(
