@@ -805,14 +805,7 @@ fn simplify_chunked(
     progress: &mut dyn FnMut(usize),
 ) -> BuildStats {
     let n = mesh.positions.len();
-    let mut live = vec![0u32; n];
-    for tri in &mesh.triangles {
-        for (k, &v) in tri.iter().enumerate() {
-            if !tri[..k].contains(&v) {
-                live[v as usize] += 1;
-            }
-        }
-    }
+    let live = face_counts(n, &mesh.triangles);
     let mut c = Chunker { mesh, centre, chunk_faces, live, local_of: vec![NONE; n], stats: BuildStats::default() };
     let all: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
     c.simplify(all, true, log, progress);
@@ -906,14 +899,7 @@ impl Chunker<'_> {
         let nl = vertex.len();
         error.resize(nl, 0.0);
         reach.resize(nl, 0.0);
-        let mut before = vec![0u32; nl];
-        for t in &local_tris {
-            for (k, &v) in t.iter().enumerate() {
-                if !t[..k].contains(&v) {
-                    before[v as usize] += 1;
-                }
-            }
-        }
+        let before = face_counts(nl, &local_tris);
         let locked: Vec<bool> = vertex.iter().zip(&before).map(|(&g, &b)| self.live[g as usize] > b).collect();
         let pos = vertex.iter().map(|&g| sub(self.mesh.positions[g as usize].map(f64::from), self.centre)).collect();
         let mut s = Simplifier::new(pos, local_tris, (!fresh).then_some(quadric), locked);
@@ -944,6 +930,19 @@ impl Chunker<'_> {
             .collect();
         Part { faces, vertices }
     }
+}
+
+/// Per vertex of `0..n`, the faces of `faces` that hold it (each face counted once).
+fn face_counts(n: usize, faces: &[[u32; 3]]) -> Vec<u32> {
+    let mut count = vec![0u32; n];
+    for t in faces {
+        for (k, &v) in t.iter().enumerate() {
+            if !t[..k].contains(&v) {
+                count[v as usize] += 1;
+            }
+        }
+    }
+    count
 }
 
 /// Relative slack of the nesting bounds (radius, cone angle) per level.

@@ -155,7 +155,7 @@ impl PmScene {
         }
         let abs = std::fs::canonicalize(path).with_context(named)?;
         let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();
-        let slots = (gpu_budget / slot_bytes as u64).min(dpm.nodes.len() as u64) as u32;
+        let slots = worker::pm_adapt::decoder::slots_within(&dpm, gpu_budget);
         Ok(PmScene { source: PmSource::File { path, gpu_budget, slots }, bbox: (lo, hi) })
     }
 }

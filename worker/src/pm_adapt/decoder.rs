@@ -78,6 +78,11 @@ pub fn slot_bytes(dpm: &Dpm) -> u32 {
     dpm.nodes.iter().map(|n| n.len).max().unwrap_or(0).next_multiple_of(4).max(4)
 }
 
+/// The slots of [`slot_bytes`] that `bytes` of graphics memory hold, at most one per node.
+pub fn slots_within(dpm: &Dpm, bytes: u64) -> u32 {
+    (bytes / slot_bytes(dpm) as u64).min(dpm.nodes.len() as u64) as u32
+}
+
 /// What the decoder keeps of `dpm` besides its operations: the `tables` buffer's words (a word
 /// per table of the format with where its words start, the distinct tables, then the value
 /// tables: the `f32` bits of the 256 `sin(alpha)` codes and the log tables of the lengths and

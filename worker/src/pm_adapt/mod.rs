@@ -76,7 +76,7 @@ use buffers::{
     init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, PENDING,
     READBACK_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
-use decoder::{decoder_data, slot_bytes, DecodeFailure};
+use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
 use occlusion::Occluder;
 use pipelines::Pipelines;
@@ -231,7 +231,7 @@ impl GpuAdapter {
         let slot = slot_bytes(dpm);
         // At most one slot per node, and within what one binding and a 32-bit address allow.
         let limit = gpu.device().limits().max_storage_buffer_binding_size.min(u32::MAX as u64);
-        let slots = (ooc.budget_bytes.min(limit) / slot as u64).min(dpm.nodes.len() as u64) as u32;
+        let slots = slots_within(dpm, ooc.budget_bytes.min(limit));
         if slots == 0 {
             return Err(AdaptError::Budget { budget: ooc.budget_bytes, slot_bytes: slot });
         }
