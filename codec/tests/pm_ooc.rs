@@ -251,7 +251,7 @@ fn out_of_core_sizes() {
 
 /// Inner nodes split what is left below them into up to four children, so fewer operations
 /// sit in inner nodes, where nearly every pointer leaves the node: the bunny in 4 kB nodes
-/// costs at most 1.1 bytes per operation more than in core (1.53 with two children).
+/// costs at most 1.1 bytes per operation more than in core (1.33 with two children).
 #[test]
 fn inner_nodes_have_up_to_four_children_and_the_layout_costs_about_a_byte_per_operation() {
     let pm = build(&load("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
