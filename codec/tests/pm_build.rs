@@ -280,6 +280,13 @@ fn meshes_built_in_chunks_refine_back_to_their_input() {
         );
         assert!(chunks >= 2 * mesh.triangles.len() / chunk_faces - 1, "{rel}: {chunks} chunks");
         assert_ne!(pm.splits, whole.splits, "{rel}: the chunked build equals the whole one");
+        // Sibling chunks run in parallel; the result does not depend on how many threads
+        // there are or how they interleave.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let again = pool.install(|| build_with_options(&mesh, BuildOptions { chunk_faces }, &mut |_, _| {}));
+            assert!(again.unwrap().0 == pm, "{rel}: the chunked build differs on {threads} threads");
+        }
         if mesh.triangles.len() <= 2000 {
             check_every_level(&pm);
         }

@@ -34,6 +34,8 @@
 //! * **Chunks.** A model of more than [`BuildOptions::chunk_faces`] faces is simplified in
 //!   spatial chunks with their borders locked (`simplify_chunked`), so the simplifier's
 //!   memory follows the chunk: greedy within a chunk, one valid collapse sequence in all.
+//!   Sibling chunks run in parallel; a vertex is locked when it has an input face outside
+//!   the chunk, which no thread changes, so the result does not depend on the threads.
 //!
 //! The refinement criteria ([`Criteria`], section 4 and 4.2.3) are computed after the
 //! numbering, bottom-up over the split tree ([`SplitTree`]), in `f64`:
@@ -76,7 +78,11 @@
 //! quadrics tie every cost), so their progressive meshes are the ones of the plain greedy
 //! order.
 
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rustc_hash::FxHashMap;
 
 use thiserror::Error;
 
@@ -764,39 +770,62 @@ struct Carried {
 }
 
 /// What is left of a chunk: its live faces (input face id and current vertex ids) and its
-/// surviving vertices.
+/// surviving vertices; and what its subtree did: its collapses, in order, and its statistics.
 struct Part {
     faces: Vec<(u32, [u32; 3])>,
     vertices: Vec<Carried>,
+    log: Log,
+    stats: BuildStats,
 }
 
-/// The state shared by the chunks of [`simplify_chunked`].
+impl Log {
+    /// Appends `other`'s collapses after this log's.
+    fn append(&mut self, other: Log) {
+        let offset = self.removed.len() as u32;
+        self.collapses.extend(other.collapses);
+        self.removed.extend(other.removed);
+        self.removed_end.extend(other.removed_end.into_iter().map(|e| e + offset));
+        self.error.extend(other.error);
+    }
+}
+
+/// A node of the chunks' kd-tree: a leaf's input faces, or two halves. Leaves are numbered
+/// depth-first, so a node covers the leaves `first..end`.
+enum Kd {
+    Leaf(Vec<u32>),
+    Inner(Box<Kd>, Box<Kd>),
+}
+
+/// The state shared by the chunks of [`simplify_chunked`], read-only while they run.
 struct Chunker<'a> {
     mesh: &'a Mesh,
     centre: [f64; 3],
     chunk_faces: usize,
-    /// Per input vertex: its live faces in the whole model (each face counted once).
-    live: Vec<u32>,
-    /// Per input vertex: its id in the chunk being simplified (scratch, `NONE` outside).
-    local_of: Vec<u32>,
-    stats: BuildStats,
+    /// Per input vertex: the first and the last leaf that holds one of its faces.
+    leaves: Vec<(u32, u32)>,
+    /// Collapses done so far, in all chunks (for the progress report).
+    done: AtomicUsize,
 }
 
 /// Simplifies a model too large for one simplifier in spatial chunks, bottom-up over a
 /// kd-tree of its faces (split at the median centroid along the longest axis until a leaf
 /// holds at most `chunk_faces`): a leaf's faces are simplified to half their count, two
 /// siblings' leftovers are merged and simplified to half again, and the root runs until no
-/// edge is left, as the whole-model build does. The simplifier then holds one chunk at a time.
+/// edge is left, as the whole-model build does. The simplifier then holds one chunk at a time
+/// per thread: sibling subtrees are simplified in parallel (`rayon::join`).
 ///
-/// A vertex whose live faces reach outside the chunk is locked there (it may absorb
-/// vertices, never be absorbed), so every collapse of a chunk removes a vertex all of whose
-/// faces are in the chunk: the faces it removes and the faces it moves are all there, and the
-/// chunks' collapses, logged one after another, are one valid collapse sequence of the whole
-/// model, numbered into FVIDs as the whole-model build numbers its own. Quadrics are summed
-/// where a vertex meets again from two chunks (each face added its plane in exactly one leaf),
-/// errors and reaches take their maximum. Within a chunk the order is greedy by quadric
-/// error as in the whole-model build; across chunks it is not, so the result differs from it
-/// (measured in the README).
+/// A vertex with a face of the input outside the chunk is locked there (it may absorb
+/// vertices, never be absorbed). A face outside the chunk can only have gained the vertex in
+/// its own chunk, where the vertex then had an input face, so every collapse of a chunk
+/// removes a vertex all of whose live faces are in the chunk: the faces it removes and the
+/// faces it moves are all there, and the chunks' collapses, logged one subtree after the
+/// other, are one valid collapse sequence of the whole model, numbered into FVIDs as the
+/// whole-model build numbers its own. That a chunk tests the input faces, not the live ones,
+/// keeps it from depending on how far its sibling got: the build is the same whatever the
+/// threads do. Quadrics are summed where a vertex meets again from two chunks (each face added
+/// its plane in exactly one leaf), errors and reaches take their maximum. Within a chunk the
+/// order is greedy by quadric error as in the whole-model build; across chunks it is not, so
+/// the result differs from it (measured in the README).
 fn simplify_chunked(
     mesh: &Mesh,
     centre: [f64; 3],
@@ -805,31 +834,68 @@ fn simplify_chunked(
     progress: &mut dyn FnMut(usize),
 ) -> BuildStats {
     let n = mesh.positions.len();
-    let live = face_counts(n, &mesh.triangles);
-    let mut c = Chunker { mesh, centre, chunk_faces, live, local_of: vec![NONE; n], stats: BuildStats::default() };
-    let all: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
-    c.simplify(all, true, log, progress);
-    c.stats.collapses = log.collapses.len();
-    c.stats
+    let mut c = Chunker { mesh, centre, chunk_faces, leaves: vec![(u32::MAX, 0); n], done: AtomicUsize::new(0) };
+    let mut count = 0;
+    let tree = c.partition((0..mesh.triangles.len() as u32).collect(), &mut count);
+    let c = &c;
+    // The chunks run on rayon's threads; this one reports their progress meanwhile.
+    let part = std::thread::scope(|scope| {
+        let work = scope.spawn(move || c.simplify(tree, 0, count, true));
+        while !work.is_finished() {
+            progress(c.done.load(Ordering::Relaxed));
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        work.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    });
+    *log = part.log;
+    BuildStats { collapses: log.collapses.len(), ..part.stats }
 }
 
 impl Chunker<'_> {
-    /// Simplifies the kd-tree node of `faces` (input face ids); the root runs to the end.
-    fn simplify(&mut self, faces: Vec<u32>, root: bool, log: &mut Log, progress: &mut dyn FnMut(usize)) -> Part {
-        let part = if faces.len() > self.chunk_faces {
+    /// The kd-tree of `faces` (input face ids), its leaves numbered from `*count` on; records
+    /// each vertex's first and last leaf.
+    fn partition(&mut self, faces: Vec<u32>, count: &mut u32) -> Kd {
+        if faces.len() > self.chunk_faces {
             let (left, right) = self.halve(faces);
-            let a = self.simplify(left, false, log, progress);
-            let b = self.simplify(right, false, log, progress);
-            let mut faces = a.faces;
-            faces.extend(b.faces);
-            let mut vertices = a.vertices;
-            vertices.extend(b.vertices);
-            Part { faces, vertices }
-        } else {
-            let faces = faces.into_iter().map(|f| (f, self.mesh.triangles[f as usize])).collect();
-            Part { faces, vertices: Vec::new() }
+            let a = self.partition(left, count);
+            let b = self.partition(right, count);
+            return Kd::Inner(Box::new(a), Box::new(b));
+        }
+        let leaf = *count;
+        *count += 1;
+        for &f in &faces {
+            for v in self.mesh.triangles[f as usize] {
+                let l = &mut self.leaves[v as usize];
+                *l = (l.0.min(leaf), l.1.max(leaf));
+            }
+        }
+        Kd::Leaf(faces)
+    }
+
+    /// Simplifies the kd-tree node `kd`, which covers the leaves `first..end`; the root runs
+    /// to the end.
+    fn simplify(&self, kd: Kd, first: u32, end: u32, root: bool) -> Part {
+        let part = match kd {
+            Kd::Inner(a, b) => {
+                let mid = first + leaf_count(&a);
+                let (mut a, b) =
+                    rayon::join(|| self.simplify(*a, first, mid, false), || self.simplify(*b, mid, end, false));
+                a.faces.extend(b.faces);
+                a.vertices.extend(b.vertices);
+                a.log.append(b.log);
+                a.stats.hubs += b.stats.hubs;
+                a.stats.work += b.stats.work;
+                a.stats.chunks += b.stats.chunks;
+                a
+            }
+            Kd::Leaf(faces) => Part {
+                faces: faces.into_iter().map(|f| (f, self.mesh.triangles[f as usize])).collect(),
+                vertices: Vec::new(),
+                log: Log::default(),
+                stats: BuildStats::default(),
+            },
         };
-        self.chunk(part, if root { 0 } else { self.chunk_faces / 2 }, log, progress)
+        self.chunk(part, (first, end), if root { 0 } else { self.chunk_faces / 2 })
     }
 
     /// Splits `faces` in two at the median centroid along the longest axis of the centroids.
@@ -857,41 +923,45 @@ impl Chunker<'_> {
         (faces, right)
     }
 
-    /// Simplifies one chunk, the faces and vertices `part` gathered, down to `stop_faces`.
-    fn chunk(&mut self, part: Part, stop_faces: usize, log: &mut Log, progress: &mut dyn FnMut(usize)) -> Part {
+    /// Simplifies one chunk, the faces and vertices `part` gathered from the leaves
+    /// `first..end`, down to `stop_faces`, appending its collapses to the part's log.
+    fn chunk(&self, part: Part, (first, end): (u32, u32), stop_faces: usize) -> Part {
+        let Part { faces, vertices, mut log, mut stats } = part;
         // Local ids: the carried vertices first (merging a vertex carried from both halves),
         // then the leaf faces' new ones.
+        let mut local: FxHashMap<u32, u32> = FxHashMap::default();
         let mut vertex: Vec<u32> = Vec::new();
         let (mut quadric, mut error, mut reach) = (Vec::new(), Vec::new(), Vec::new());
-        for c in part.vertices {
-            let l = self.local_of[c.id as usize];
-            if l == NONE {
-                self.local_of[c.id as usize] = vertex.len() as u32;
-                vertex.push(c.id);
-                quadric.push(c.quadric);
-                error.push(c.error);
-                reach.push(c.reach);
-            } else {
-                let l = l as usize;
-                quadric[l].add(&c.quadric);
-                error[l] = f64::max(error[l], c.error);
-                reach[l] = f64::max(reach[l], c.reach);
+        for c in vertices {
+            match local.entry(c.id) {
+                Entry::Vacant(e) => {
+                    e.insert(vertex.len() as u32);
+                    vertex.push(c.id);
+                    quadric.push(c.quadric);
+                    error.push(c.error);
+                    reach.push(c.reach);
+                }
+                Entry::Occupied(e) => {
+                    let l = *e.get() as usize;
+                    quadric[l].add(&c.quadric);
+                    error[l] = f64::max(error[l], c.error);
+                    reach[l] = f64::max(reach[l], c.reach);
+                }
             }
         }
         // A leaf's vertices are all new (its faces add their planes in `Simplifier::new`); a
         // merged chunk's are all carried (a live face's vertices survived its chunk).
         let fresh = vertex.is_empty();
-        debug_assert!(fresh || part.faces.iter().all(|(_, t)| t.iter().all(|&v| self.local_of[v as usize] != NONE)));
-        let (face, tris): (Vec<u32>, Vec<[u32; 3]>) = part.faces.into_iter().unzip();
+        debug_assert!(fresh || faces.iter().all(|(_, t)| t.iter().all(|v| local.contains_key(v))));
+        let (face, tris): (Vec<u32>, Vec<[u32; 3]>) = faces.into_iter().unzip();
         let local_tris: Vec<[u32; 3]> = tris
             .iter()
             .map(|t| {
                 t.map(|v| {
-                    if self.local_of[v as usize] == NONE {
-                        self.local_of[v as usize] = vertex.len() as u32;
+                    *local.entry(v).or_insert_with(|| {
                         vertex.push(v);
-                    }
-                    self.local_of[v as usize]
+                        vertex.len() as u32 - 1
+                    })
                 })
             })
             .collect();
@@ -899,50 +969,52 @@ impl Chunker<'_> {
         let nl = vertex.len();
         error.resize(nl, 0.0);
         reach.resize(nl, 0.0);
-        let before = face_counts(nl, &local_tris);
-        let locked: Vec<bool> = vertex.iter().zip(&before).map(|(&g, &b)| self.live[g as usize] > b).collect();
+        let locked: Vec<bool> = vertex
+            .iter()
+            .map(|&g| {
+                let (lo, hi) = self.leaves[g as usize];
+                lo < first || hi >= end
+            })
+            .collect();
         let pos = vertex.iter().map(|&g| sub(self.mesh.positions[g as usize].map(f64::from), self.centre)).collect();
         let mut s = Simplifier::new(pos, local_tris, (!fresh).then_some(quadric), locked);
-        let first = log.collapses.len();
+        let start = log.collapses.len();
         let ids = Ids { vertex: &vertex, face: &face };
-        run(&mut s, &self.mesh.positions, ids, &mut reach, &mut error, stop_faces, log, progress);
-        self.stats.hubs += s.hubs;
-        self.stats.work += s.work;
-        self.stats.chunks += 1;
+        let mut reported = start;
+        let mut report = |k: usize| {
+            self.done.fetch_add(k - reported, Ordering::Relaxed);
+            reported = k;
+        };
+        run(&mut s, &self.mesh.positions, ids, &mut reach, &mut error, stop_faces, &mut log, &mut report);
+        report(log.collapses.len());
+        stats.hubs += s.hubs;
+        stats.work += s.work;
+        stats.chunks += 1;
 
         let mut dead = vec![false; nl];
-        for &(u, _) in &log.collapses[first..] {
-            dead[self.local_of[u as usize] as usize] = true;
-        }
-        for (l, &g) in vertex.iter().enumerate() {
-            let after = if dead[l] { 0 } else { s.live_faces[l] };
-            self.live[g as usize] = self.live[g as usize] - before[l] + after;
-            self.local_of[g as usize] = NONE;
+        for &(u, _) in &log.collapses[start..] {
+            dead[local[&u] as usize] = true;
         }
         let faces = (0..s.faces.len())
             .filter(|&f| s.face_alive[f])
             .map(|f| (face[f], s.faces[f].map(|l| vertex[l as usize])))
             .collect();
-        // A survivor without live faces anywhere is never touched again.
+        // A survivor without live faces in the chunk or input faces outside it is never
+        // touched again.
         let vertices = (0..nl)
-            .filter(|&l| !dead[l] && self.live[vertex[l] as usize] > 0)
+            .filter(|&l| !dead[l] && (s.live_faces[l] > 0 || s.locked[l]))
             .map(|l| Carried { id: vertex[l], quadric: s.quadric[l], error: error[l], reach: reach[l] })
             .collect();
-        Part { faces, vertices }
+        Part { faces, vertices, log, stats }
     }
 }
 
-/// Per vertex of `0..n`, the faces of `faces` that hold it (each face counted once).
-fn face_counts(n: usize, faces: &[[u32; 3]]) -> Vec<u32> {
-    let mut count = vec![0u32; n];
-    for t in faces {
-        for (k, &v) in t.iter().enumerate() {
-            if !t[..k].contains(&v) {
-                count[v as usize] += 1;
-            }
-        }
+/// The number of leaves under `kd`.
+fn leaf_count(kd: &Kd) -> u32 {
+    match kd {
+        Kd::Leaf(_) => 1,
+        Kd::Inner(a, b) => leaf_count(a) + leaf_count(b),
     }
-    count
 }
 
 /// Relative slack of the nesting bounds (radius, cone angle) per level.
