@@ -574,7 +574,12 @@ pub fn build_with_stats(
 }
 
 /// Chunk size of [`BuildOptions::default`]: models of more faces are simplified in chunks.
-pub const CHUNK_FACES: usize = 1 << 22;
+/// Measured on the dragon (871k faces, 2 cores, one run after the other): 64k-face chunks
+/// simplify it 2.3x faster than one whole-model simplifier (3.5 s against 8.1 s, smaller
+/// working sets and two chunks at a time) into 9.80 bytes/vertex against 9.79, adapting to
+/// 0.2% more triangles for the same view; 16k-face chunks were about as fast (3.2 s) and cost
+/// 0.4%, 128k-face chunks were slower (4.4 s).
+pub const CHUNK_FACES: usize = 1 << 16;
 
 /// How [`build_with_options`] works.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
