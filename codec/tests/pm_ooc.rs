@@ -218,13 +218,14 @@ fn a_cache_of_slots_never_overflows_while_views_move_on() {
 }
 
 /// The cost of the out-of-core layout per operation in 64 kB nodes (the paper: about 1 byte;
-/// here 1.03 on the bunny and 0.70 on the dragon, with up to four children per node; 1.18 and
+/// here 1.03 on the bunny and 0.55 on the dragon, with up to four children per node and a
+/// last halving into leaves (0.70 on the dragon without it); 1.18 and
 /// 1.39 with two, see `hierarchy.rs`):
 /// `cargo test -p tessera-codec --release --test pm_ooc -- --ignored --nocapture`.
 #[test]
 #[ignore = "builds the bunny and the 871k-triangle dragon; run in release"]
 fn out_of_core_sizes() {
-    for (rel, bound) in [("stanford/bunny_zipper_c3d.obj.gz", 1.1), ("stanford/dragon_vrip.ply.gz", 1.0)] {
+    for (rel, bound) in [("stanford/bunny_zipper_c3d.obj.gz", 1.1), ("stanford/dragon_vrip.ply.gz", 0.6)] {
         let pm = build(&load(rel)).unwrap();
         let incore = encode(&pm, EncodeOptions::default()).unwrap();
         let t = std::time::Instant::now();
@@ -249,7 +250,8 @@ fn out_of_core_sizes() {
     }
 }
 
-/// Inner nodes split what is left below them into up to four children, so fewer operations
+/// Inner nodes split what is left below them into up to four children (eight where a last
+/// halving makes them leaves), so fewer operations
 /// sit in inner nodes, where nearly every pointer leaves the node: the bunny in 4 kB nodes
 /// costs at most 1.1 bytes per operation more than in core (1.33 with two children).
 #[test]
@@ -265,7 +267,7 @@ fn inner_nodes_have_up_to_four_children_and_the_layout_costs_about_a_byte_per_op
         }
     }
     let most = children.iter().max().copied().unwrap_or(0);
-    assert!(most == 4, "at most {most} children a node");
+    assert!((4..=8).contains(&most), "at most {most} children a node");
     let more = (enc.bytes.len() as f64 - incore.bytes.len() as f64) / pm.splits.len() as f64;
     eprintln!("{} nodes, {more:.3} bytes more per operation", dpm.nodes.len());
     assert!(more <= 1.1, "{more:.3} bytes more per operation");
