@@ -794,11 +794,12 @@ impl Log {
     }
 }
 
-/// A node of the chunks' kd-tree: a leaf's input faces, or two halves. Leaves are numbered
-/// depth-first, so a node covers the leaves `first..end`.
+/// A node of the chunks' kd-tree: a leaf's input faces, or two halves and the number of the
+/// right half's first leaf. Leaves are numbered depth-first, so a node covers the leaves
+/// `first..end`.
 enum Kd {
     Leaf(Vec<u32>),
-    Inner(Box<Kd>, Box<Kd>),
+    Inner(Box<Kd>, Box<Kd>, u32),
 }
 
 /// The state shared by the chunks of [`simplify_chunked`], read-only while they run.
@@ -863,8 +864,9 @@ impl Chunker<'_> {
         if faces.len() > self.chunk_faces {
             let (left, right) = self.halve(faces);
             let a = self.partition(left, count);
+            let mid = *count;
             let b = self.partition(right, count);
-            return Kd::Inner(Box::new(a), Box::new(b));
+            return Kd::Inner(Box::new(a), Box::new(b), mid);
         }
         let leaf = *count;
         *count += 1;
@@ -881,8 +883,7 @@ impl Chunker<'_> {
     /// to the end.
     fn simplify(&self, kd: Kd, first: u32, end: u32, root: bool) -> Part {
         let part = match kd {
-            Kd::Inner(a, b) => {
-                let mid = first + leaf_count(&a);
+            Kd::Inner(a, b, mid) => {
                 let (mut a, b) =
                     rayon::join(|| self.simplify(*a, first, mid, false), || self.simplify(*b, mid, end, false));
                 a.faces.extend(b.faces);
@@ -1011,14 +1012,6 @@ impl Chunker<'_> {
             .map(|l| Carried { id: vertex[l], quadric: s.quadric[l], error: error[l], reach: reach[l] })
             .collect();
         Part { faces, vertices, log, stats }
-    }
-}
-
-/// The number of leaves under `kd`.
-fn leaf_count(kd: &Kd) -> u32 {
-    match kd {
-        Kd::Leaf(_) => 1,
-        Kd::Inner(a, b) => leaf_count(a) + leaf_count(b),
     }
 }
 
