@@ -4,13 +4,15 @@
 # a hundred million) from $MESH (default the dragon) by subdivision into a temporary
 # folder, builds it out of core in 64 kB nodes (time and peak memory, /usr/bin/time -v), and
 # renders an orbit with one worker at 1920x1080 under each GPU budget, printing per frame the
-# adapted triangles, the worker's graphics memory (node pool and adapted mesh), the node bytes
-# loaded, and the resident, required and slot counts of nodes.
+# adapted triangles, the worker's graphics memory (node pool, tables and adapted mesh: within
+# the budget), the node bytes loaded, the resident, required and slot counts of nodes, and the
+# factor on --error-px the budget held the mesh to.
 # Usage: [MESH=FILE] scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
 #   e.g. scripts/pm-scale.sh 13M /tmp/tessera-pm 16 128
 #   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=2 scripts/pm-scale.sh 100000000 /tmp/pm100 512
-# ERROR_PX sets render's --error-px (default its own, 0.5): on lavapipe, which binds at most
-# 128 MiB per buffer, the adapted mesh must stay below about 1.05M vertices.
+# ERROR_PX sets render's --error-px (default its own, 0.5). Where the budget, or lavapipe's
+# 128 MiB per buffer (about 1.05M vertices), cannot hold the mesh at that error, the worker
+# adapts to a larger one (the error scale column).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MIN="${1:-13M}"
@@ -47,13 +49,14 @@ for B in "${BUDGETS[@]}"; do
   echo "   peak memory of a rank $(peak "$DIR/b$B.time")"
   python3 - "$DIR/b$B.jsonl" <<'EOF'
 import json, sys
-print("   frame  triangles  adapt ms  GPU MB  loaded kB  resident/required nodes  slots")
+print("   frame  triangles  adapt ms  GPU MB  loaded kB  resident/required nodes  slots  error scale")
 for l in open(sys.argv[1]):
     d = json.loads(l)
     if d.get("rank") != 1 or "pm" not in d:
         continue
     p = d["pm"]
     print(f"   {d['frame']:5d}  {d['tiles'][0]['triangles']:9d}  {d['adapt_ms']:8.0f}  {p['gpu_bytes'] / 2**20:6.1f}"
-          f"  {p['loaded_bytes'] / 1024:9.0f}  {p['resident_nodes']:8d} / {p['required_nodes']:<8d}  {p['node_slots']:5d}")
+          f"  {p['loaded_bytes'] / 1024:9.0f}  {p['resident_nodes']:8d} / {p['required_nodes']:<8d}  {p['node_slots']:5d}"
+          f"  {p['error_scale']:11.3f}")
 EOF
 done

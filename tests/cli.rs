@@ -176,8 +176,10 @@ fn pm_build_stats_adapt_and_corrupt_file() {
 }
 
 /// `pm adapt --gpu` writes the CPU's file, from an in-core `.dpm` and from an out-of-core one
-/// (4 kB nodes, every node in graphics memory); a budget for fewer nodes gives a coarser mesh,
-/// and one that holds no node is refused in one line.
+/// (4 kB nodes, every node in graphics memory); a node pool for fewer nodes gives a coarser
+/// mesh, and one that holds no node is refused in one line; a GPU budget too small for the
+/// mesh at the view's error gives a coarser one at a larger error, said in a note, and one
+/// below the base mesh is refused in one line.
 #[test]
 fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -217,7 +219,7 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
     }
     let out = dir.path().join("small.ply");
     let small = codec::load_path(&{
-        read(run(&ooc, &close, &["--gpu", "--gpu-budget-mb", "0.1"], &out), &out);
+        read(run(&ooc, &close, &["--gpu", "--gpu-nodes-mb", "0.1"], &out), &out);
         out.clone()
     })
     .unwrap();
@@ -228,13 +230,35 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
         small.triangles.len(),
         whole.triangles.len()
     );
-    let o = run(&ooc, &close, &["--gpu", "--gpu-budget-mb", "0.001"], &dir.path().join("none.ply"));
+    let o = run(&ooc, &close, &["--gpu", "--gpu-nodes-mb", "0.001"], &dir.path().join("none.ply"));
     assert!(!o.status.success() && !dir.path().join("none.ply").exists());
     let e = stderr(&o);
     assert!(
         e.trim().lines().count() == 1
-            && e.starts_with("error: a GPU budget of 1048 bytes holds no node: the largest takes ")
-            && e.trim().ends_with("(raise --gpu-budget-mb)"),
+            && e.starts_with("error: a node pool of 1048 bytes holds no node: the largest takes ")
+            && e.trim().ends_with("(raise --gpu-budget-mb or --gpu-nodes-mb)"),
+        "{e}"
+    );
+    // 4 MB: the close view's mesh (about 9 MB with its slack) does not fit at 1 px.
+    let out = dir.path().join("budget.ply");
+    let o = run(&dpm, &close, &["--gpu", "--gpu-budget-mb", "4"], &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("to stay within --gpu-budget-mb"), "{}", stderr(&o));
+    let bounded = codec::load_path(&out).unwrap();
+    assert!(
+        !bounded.triangles.is_empty() && bounded.triangles.len() < whole.triangles.len(),
+        "4 MB: {} triangles of {}",
+        bounded.triangles.len(),
+        whole.triangles.len()
+    );
+    // Less than the in-core model's operations.
+    let o = run(&dpm, &close, &["--gpu", "--gpu-budget-mb", "0.05"], &dir.path().join("tiny.ply"));
+    assert!(!o.status.success() && !dir.path().join("tiny.ply").exists());
+    let e = stderr(&o);
+    assert!(
+        e.trim().lines().count() == 1
+            && e.starts_with("error: a GPU budget of 52428 bytes does not hold")
+            && e.trim().ends_with("raise --gpu-budget-mb"),
         "{e}"
     );
 }

@@ -539,10 +539,12 @@ fn one_worker_adapts_once_whatever_its_tiles() {
 }
 
 /// Out-of-core progressive meshes (`pm build --node-kb`): each worker reads the file's nodes
-/// itself. With a budget that holds every node the frames equal the in-core file's pixel for
-/// pixel; with a budget of a third of the nodes the stats show the slots full, node traffic in
-/// every frame and fewer triangles, and the frame still covers the model. A corrupt node stops
-/// the run in one line that names it, and no image is written.
+/// itself. With a budget whose node pool (a quarter) holds every node the frames equal the
+/// in-core file's pixel for pixel; with a pool of a third of the nodes (`--gpu-nodes-mb`) the
+/// stats show the slots full, node traffic in every frame and fewer triangles, and the frame
+/// still covers the model. A budget too small for the mesh at the frame's error keeps every
+/// frame's graphics memory within it, at a raised error (the stats' `error_scale`, a note).
+/// A corrupt node stops the run in one line that names it, and no image is written.
 #[test]
 fn out_of_core_progressive_meshes_render_within_the_budget() {
     let dir = tempfile::tempdir().unwrap();
@@ -555,9 +557,9 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
     // nodes' boxes cut to the quantization grid, not the in-core vertices' box.
     let camera = ["--eye", "0,0.12,0.08", "--target", "-0.02,0.1,0", "--near", "0.01", "--far", "1"];
     let view = [&["--size", "960x540", "--tiles", "4x2"][..], &camera].concat();
-    let render = |model: &Path, name: &str, budget: &str| {
+    let render = |model: &Path, name: &str, budget: &[&str]| {
         let (out, stats) = (dir.path().join(format!("{name}.png")), dir.path().join(format!("{name}.jsonl")));
-        let args = [model.to_str().unwrap(), "--frames", "3", "--orbit", "--gpu-budget-mb", budget];
+        let args = [&[model.to_str().unwrap(), "--frames", "3", "--orbit", "--gpu-budget-mb"][..], budget].concat();
         let o = mpirun(
             2,
             &[],
@@ -565,6 +567,7 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
                 .concat(),
         );
         ok(&o);
+        let noted = String::from_utf8_lossy(&o.stderr).contains("to keep its mesh within --gpu-budget-mb");
         let lines: Vec<serde_json::Value> = std::fs::read_to_string(&stats)
             .unwrap()
             .lines()
@@ -572,11 +575,14 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
             .filter(|l: &serde_json::Value| l["rank"] == 1)
             .collect();
         assert_eq!(lines.len(), 3, "{name}: a worker line per frame");
-        lines
+        (lines, noted)
     };
-    let a = render(&incore, "in", "512");
-    let b = render(&ooc, "all", "1");
-    let c = render(&ooc, "third", "0.12");
+    let (a, _) = render(&incore, "in", &["512"]);
+    let (b, _) = render(&ooc, "all", &["64"]);
+    let (c, _) = render(&ooc, "third", &["64", "--gpu-nodes-mb", "0.12"]);
+    // Every node (191 of 4 kB) in a 1 MB pool, and 2 MB for the tables and a mesh that at
+    // 0.5 px takes about 2.6 MB.
+    let (d, noted) = render(&ooc, "tight", &["3", "--gpu-nodes-mb", "1"]);
     for k in 1..=3 {
         let f = |name: &str| dir.path().join(format!("{name}-{k:04}.png"));
         assert!(identical(&f("in"), &f("all")), "frame {k}: the out-of-core frame differs from the in-core one");
@@ -593,7 +599,17 @@ fn out_of_core_progressive_meshes_render_within_the_budget() {
         assert!(pc["loaded_bytes"].as_u64().unwrap() > 0, "frame {k}: nodes come in as the view turns");
         assert!(pc["gpu_bytes"].as_u64().unwrap() > 0);
         assert!(tri(&c[k]) < tri(&b[k]), "frame {k}: fewer triangles within the smaller budget");
+        for (l, budget) in [(&a[k], 512), (&b[k], 64), (&c[k], 64), (&d[k], 3)] {
+            let bytes = l["pm"]["gpu_bytes"].as_u64().unwrap();
+            assert!(bytes <= budget << 20, "frame {k}: {bytes} bytes of graphics memory, budget {budget} MB");
+        }
+        for l in [&a[k], &b[k], &c[k]] {
+            assert_eq!(l["pm"]["error_scale"], 1.0, "frame {k}: the mesh fits the budget at its error");
+        }
+        let scale = d[k]["pm"]["error_scale"].as_f64().unwrap();
+        assert!(scale > 1.0 && tri(&d[k]) < tri(&b[k]), "frame {k}: 3 MB holds a coarser mesh ({scale}x the error)");
     }
+    assert!(noted, "a note says the tight budget coarsened the mesh");
     // A byte of a node flipped: its checksum fails when a worker reads it.
     let mut bytes = std::fs::read(&ooc).unwrap();
     let at = bytes.len() - 100;

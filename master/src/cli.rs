@@ -328,10 +328,17 @@ pub enum Pm {
         /// mesh written is the same as the CPU reference's.
         #[arg(long)]
         gpu: bool,
-        /// With --gpu, an out-of-core file's nodes in graphics memory, in MB (fractions
-        /// allowed): the nodes of highest priority for the view that fit. Default: all of them.
+        /// With --gpu, the graphics memory the adaptation may take, in MB (fractions allowed):
+        /// the model's operations or node pool, its tables and the adapted mesh. Where the
+        /// view would refine past it, the mesh is adapted to a larger pixel error (printed).
+        /// Default: no bound but the GPU's.
         #[arg(long, value_parser = parse_positive, requires = "gpu")]
         gpu_budget_mb: Option<f32>,
+        /// With --gpu, an out-of-core file's node pool in graphics memory, in MB (fractions
+        /// allowed): the nodes of highest priority for the view that fit. Default: a quarter
+        /// of --gpu-budget-mb, or every node without it.
+        #[arg(long, value_parser = parse_positive, requires = "gpu")]
+        gpu_nodes_mb: Option<f32>,
     },
 }
 
@@ -487,12 +494,18 @@ pub struct RenderArgs {
     /// as a pass changes nothing.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_passes: u32,
-    /// Out-of-core progressive meshes (`pm build --node-kb`): the graphics memory each worker
-    /// keeps of the model's nodes, in MB. Workers read the file themselves (a path every rank
-    /// can open), the nodes their view needs first (the paper's priority), others while room
-    /// is left. Fractions of a MB are allowed (small models, tests).
+    /// Progressive meshes: the graphics memory each worker's adaptation may take, in MB: the
+    /// model's operations (out of core its node pool, see --gpu-nodes-mb), its tables and the
+    /// adapted mesh. Where a view would refine past it, the worker adapts to a larger pixel
+    /// error (the stats' `error_scale`, and a note). Fractions of a MB are allowed.
     #[arg(long, default_value_t = 512.0, value_parser = parse_positive)]
     pub gpu_budget_mb: f32,
+    /// Out-of-core progressive meshes (`pm build --node-kb`): the part of --gpu-budget-mb each
+    /// worker keeps of the model's nodes, in MB (default: a quarter). Workers read the file
+    /// themselves (a path every rank can open), the nodes their view needs first (the
+    /// paper's priority), others while room is left. Fractions of a MB are allowed.
+    #[arg(long, value_parser = parse_positive)]
+    pub gpu_nodes_mb: Option<f32>,
     /// Progressive meshes: occlusion culling one frame late. Each worker keeps the depth of
     /// the frame it drew last and does not refine what it hid (the paper's section 5.7), so
     /// hidden parts stay at what the frame before showed of them; the first frame is drawn

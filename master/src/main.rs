@@ -35,14 +35,18 @@ fn main() -> ExitCode {
             )
         }
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
-        Command::Pm { pm: Pm::Adapt { input, view, error_px, output, full, normal_weight, gpu, gpu_budget_mb } } => {
+        Command::Pm {
+            pm: Pm::Adapt { input, view, error_px, output, full, normal_weight, gpu, gpu_budget_mb, gpu_nodes_mb },
+        } => {
+            let mb = |mb: f32| (mb as f64 * (1u64 << 20) as f64) as u64;
             let opts = master::pm::AdaptOptions {
                 size: view.size,
                 error_px: *error_px,
                 normal_weight: *normal_weight,
                 full: *full,
                 gpu: *gpu,
-                gpu_budget: gpu_budget_mb.map(|mb| (mb as f64 * (1u64 << 20) as f64) as u64),
+                gpu_budget: gpu_budget_mb.map(mb),
+                gpu_nodes: gpu_nodes_mb.map(mb),
             };
             master::pm::adapt(input, &view.camera, &opts, output)
         }

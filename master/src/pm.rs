@@ -174,8 +174,12 @@ pub struct AdaptOptions {
     pub full: bool,
     /// On the GPU ([`worker::pm_adapt::GpuAdapter`]).
     pub gpu: bool,
-    /// On the GPU, an out-of-core file's node budget in bytes (`None`: every node).
+    /// On the GPU, the bytes of graphics memory the adaptation may take (`None`: what the
+    /// device binds).
     pub gpu_budget: Option<u64>,
+    /// On the GPU, an out-of-core file's node pool in bytes (`None`: a quarter of the budget,
+    /// or every node without one).
+    pub gpu_nodes: Option<u64>,
 }
 
 /// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full] [--gpu]`.
@@ -214,16 +218,16 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
             let file =
                 std::sync::Arc::new(format::NodeFile::open(input).with_context(|| format!("{}", input.display()))?);
             let prefix = format::Dpm::parse_prefix(file.prefix())?;
-            let ooc = worker::pm_adapt::OutOfCore {
-                file: file.clone(),
-                budget_bytes: opts.gpu_budget.unwrap_or(u64::MAX),
-                background: false,
-            };
+            let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
+            let ooc = worker::pm_adapt::OutOfCore { file: file.clone(), pool_bytes, background: false };
             let mut a = worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, n_alloc)?;
+            a.set_budget(opts.gpu_budget)?;
             a.schedule(&camera_view()?)?;
             a
         } else {
-            worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?
+            let mut a = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?;
+            a.set_budget(opts.gpu_budget)?;
+            a
         };
         start = Instant::now();
         let passes = match &view {
@@ -231,6 +235,13 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
         };
         adapter.check()?;
+        if adapter.error_scale() > 1.0 {
+            eprintln!(
+                "note: adapted to {:.3} px ({:.2}x --error-px) to stay within --gpu-budget-mb",
+                error_px * adapter.error_scale(),
+                adapter.error_scale()
+            );
+        }
         (adapter.active()?, adapter.faces()?, passes)
     } else {
         let mut adapter = Adapter::new(&pm);

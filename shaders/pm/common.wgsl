@@ -63,7 +63,8 @@ struct Params {
     attribute_scale: f32,
     n: u32,        // active vertices before the pass
     m: u32,        // faces before the pass
-    mode: u32,     // 0: the view decides; 1: split every vertex that can split, collapse none
+    mode: u32,     // 0: the view decides; 1: split every vertex that can split, collapse none;
+                   // 2: the view decides collapses, nothing splits (held within a memory budget)
     n_new: u32,    // active vertices after the pass
     f_add: u32,    // faces the splits add
     m_new: u32,    // faces after the pass

@@ -88,10 +88,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let s = vstate[i];
     var state = 1u;
     var faces = 0u;
-    if (s.addr != NONE && s.flags == 0u && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
+    if (s.addr != NONE && s.flags == 0u && P.mode != 2u
+        && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
         state = 2u;
         faces = s.faces;
-    } else if (P.mode == 0u) {
+    } else if (P.mode != 1u) {
         let t = target_of(s);
         if (t != NONE && i > 0u && vfvid[i - 1u] == t && (i + 1u == n || target_of(vstate[i + 1u]) != f)) {
             // The collapse's criteria are the creator's; its vertex is the target, the

@@ -247,15 +247,15 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         }
         let msg = match msg {
             Ok(ToWorker::Shutdown) => return Ok(()),
-            Ok(ToWorker::Model(dpm)) => {
-                match PmTiles::new(&gpu, &dpm) {
+            Ok(ToWorker::Model { dpm, gpu_budget }) => {
+                match PmTiles::new(&gpu, &dpm, gpu_budget) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
                 continue;
             }
-            Ok(ToWorker::DpmFile { path, gpu_budget }) => {
-                match PmTiles::open(&gpu, Path::new(&path), gpu_budget) {
+            Ok(ToWorker::DpmFile { path, gpu_budget, pool_bytes }) => {
+                match PmTiles::open(&gpu, Path::new(&path), gpu_budget, pool_bytes) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
@@ -666,19 +666,23 @@ struct PmTiles {
 }
 
 impl PmTiles {
-    fn new(gpu: &Gpu, dpm: &[u8]) -> Result<PmTiles, WorkerError> {
+    /// An in-core `.dpm`, its adaptation within `gpu_budget` bytes of graphics memory.
+    fn new(gpu: &Gpu, dpm: &[u8], gpu_budget: u64) -> Result<PmTiles, WorkerError> {
         let dpm = codec::pm::format::Dpm::parse(dpm).map_err(WorkerError::Model)?;
-        let adapter = GpuAdapter::new(gpu, &dpm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        let mut adapter = GpuAdapter::new(gpu, &dpm, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        adapter.set_budget(Some(gpu_budget)).map_err(WorkerError::Upload)?;
         Ok(PmTiles { adapter, uploaded: 0 })
     }
 
-    /// An out-of-core `.dpm` at `path`, its nodes within `gpu_budget` bytes of graphics memory.
-    fn open(gpu: &Gpu, path: &Path, gpu_budget: u64) -> Result<PmTiles, WorkerError> {
+    /// An out-of-core `.dpm` at `path`, its adaptation within `gpu_budget` bytes of graphics
+    /// memory, `pool_bytes` of them for nodes.
+    fn open(gpu: &Gpu, path: &Path, gpu_budget: u64, pool_bytes: u64) -> Result<PmTiles, WorkerError> {
         let named = |error| WorkerError::ModelFile { path: path.display().to_string(), error };
         let file = Arc::new(codec::pm::format::NodeFile::open(path).map_err(named)?);
         let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).map_err(named)?;
-        let ooc = OutOfCore { file: file.clone(), budget_bytes: gpu_budget, background: true };
-        let adapter = GpuAdapter::out_of_core(gpu, &dpm, ooc, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        let ooc = OutOfCore { file: file.clone(), pool_bytes, background: true };
+        let mut adapter = GpuAdapter::out_of_core(gpu, &dpm, ooc, DEFAULT_N_ALLOC).map_err(WorkerError::Upload)?;
+        adapter.set_budget(Some(gpu_budget)).map_err(WorkerError::Upload)?;
         Ok(PmTiles { adapter, uploaded: 0 })
     }
 
@@ -742,11 +746,12 @@ impl PmTiles {
         };
         let uploaded = self.adapter.uploaded_bytes();
         let memory = PmMemory {
-            gpu_bytes: self.adapter.static_bytes() + self.adapter.dynamic_bytes(),
+            gpu_bytes: self.adapter.gpu_bytes(),
             loaded_bytes: uploaded - self.uploaded,
             resident_nodes: self.adapter.nodes_resident() as u32,
             required_nodes: cache.map_or(0, |c| c.required as u32),
             slots: self.adapter.node_slots().unwrap_or(0),
+            error_scale: self.adapter.error_scale(),
         };
         self.uploaded = uploaded;
         let mut out = Vec::with_capacity(job.tiles.len());

@@ -20,7 +20,8 @@
 //!                        normal count u32, then per normal: slot u32, 3 x f32
 //!   kind 2 Shutdown  (nothing)
 //!   kind 6 Model     dpm length u32 + bytes (a .dpm progressive mesh, sent once before
-//!                    its frames)
+//!                    its frames), GPU budget u64 (bytes of graphics memory for its
+//!                    adaptation)
 //!   kind 9 Sort      (to a sorter rank, `render --sorters K`) frame u32, view_proj 16 x f32,
 //!                    tile count u32, then per tile the worker rank that renders it, u32
 //!   kind 7 PmFrame   frame u32, width u32, height u32, view_proj 16 x f32, eye 3 x f32,
@@ -39,9 +40,9 @@
 //!                    u32, eye u8 (0 mono, 1 left, 2 right), tile count u32, then the tiles
 //!                    whose pixels workers send it, u32 each
 //!   kind 13 Swap     (to a display rank) view u32: write the view's displays
-//!   kind 15 DpmFile  path length u32 + UTF-8 bytes, GPU budget u64 (bytes): an out-of-core
-//!                    .dpm that every worker opens itself (a shared file system) and reads
-//!                    node by node, sent once before its `PmFrame`s
+//!   kind 15 DpmFile  path length u32 + UTF-8 bytes, GPU budget u64, node pool u64 (bytes):
+//!                    an out-of-core .dpm that every worker opens itself (a shared file
+//!                    system) and reads node by node, sent once before its `PmFrame`s
 //! worker -> master (a worker sends `Pixels` to display ranks too)
 //!   kind 3 Ready     adapter name length u32 + UTF-8 bytes, largest texture side u32
 //!   kind 8 Heartbeat (nothing): the worker is alive and working (sent every
@@ -53,7 +54,7 @@
 //!                    start, prepared, end 3 x f64 ([`FrameSpan`]); then what a progressive
 //!                    mesh's adaptation held ([`PmMemory`], zeros otherwise): GPU bytes u64,
 //!                    node bytes loaded this frame u64, resident nodes u32, required nodes u32,
-//!                    node slots u32
+//!                    node slots u32, error scale f32
 //!   kind 5 Failed    reason length u32 + UTF-8 bytes
 //!   kind 14 DisplayReady (from a display rank) view u32, display count u32, then per
 //!                    display: index u32, ready time f64 (Unix ms)
@@ -71,10 +72,11 @@ use thiserror::Error;
 const MAGIC: &[u8; 4] = b"TSRM";
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
 /// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the
-/// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`;
-/// version 1 messages had no version byte, so they read as version = their kind byte and are
-/// refused.
-pub const VERSION: u8 = 6;
+/// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`,
+/// 7 the GPU budget of `Model` and `DpmFile`, the node pool of `DpmFile` and the error scale
+/// of `Pixels`; version 1 messages had no version byte, so they read as version = their kind
+/// byte and are refused.
+pub const VERSION: u8 = 7;
 
 /// A message that does not parse.
 #[derive(Debug, Error, PartialEq)]
@@ -195,13 +197,19 @@ pub struct NspFrameJob {
 pub enum ToWorker {
     Frame(FrameJob),
     Shutdown,
-    /// The progressive mesh (`.dpm` bytes) that the following `PmFrame`s show.
-    Model(Vec<u8>),
-    /// An out-of-core progressive mesh by its path, which every worker reads itself, and the
-    /// bytes of graphics memory each may keep of its nodes.
+    /// The progressive mesh (`.dpm` bytes) that the following `PmFrame`s show, and the bytes
+    /// of graphics memory its adaptation may take on each worker.
+    Model {
+        dpm: Vec<u8>,
+        gpu_budget: u64,
+    },
+    /// An out-of-core progressive mesh by its path, which every worker reads itself, the
+    /// bytes of graphics memory each worker's adaptation may take, and those of them its
+    /// node pool takes.
     DpmFile {
         path: String,
         gpu_budget: u64,
+        pool_bytes: u64,
     },
     PmFrame(PmFrameJob),
     /// To a sorter rank: sort your share of the chunks for this frame.
@@ -272,7 +280,7 @@ pub struct FrameSpan {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PmMemory {
     /// Graphics memory of the adaptation: the static buffers (compressed operations or the
-    /// node pool, tables) and the dynamic ones at their capacities.
+    /// node pool, tables), the dynamic ones at their capacities, the occlusion pyramid.
     pub gpu_bytes: u64,
     /// Out of core: node bytes uploaded this frame (the load traffic), nodes resident at its
     /// end, nodes of priority at least 1 for its view, and the pool's slots.
@@ -280,6 +288,9 @@ pub struct PmMemory {
     pub resident_nodes: u32,
     pub required_nodes: u32,
     pub slots: u32,
+    /// The factor on the frame's pixel error the mesh was adapted to: above 1 where the GPU
+    /// budget (or the device's binding limit) held splits back (0 for other models).
+    pub error_scale: f32,
 }
 
 /// Now, in milliseconds since the Unix epoch (the clock of [`FrameSpan`] and of rank 0's
@@ -475,15 +486,17 @@ impl ToWorker {
                 j.owners.iter().for_each(|&o| w.u32(o));
                 w.0
             }
-            ToWorker::Model(dpm) => {
+            ToWorker::Model { dpm, gpu_budget } => {
                 let mut w = Writer::new(6);
                 w.bytes(dpm);
+                w.u64(*gpu_budget);
                 w.0
             }
-            ToWorker::DpmFile { path, gpu_budget } => {
+            ToWorker::DpmFile { path, gpu_budget, pool_bytes } => {
                 let mut w = Writer::new(15);
                 w.bytes(path.as_bytes());
                 w.u64(*gpu_budget);
+                w.u64(*pool_bytes);
                 w.0
             }
             ToWorker::PmFrame(f) => {
@@ -621,8 +634,12 @@ impl ToWorker {
                 let owners = (0..n).map(|_| r.u32("owner")).collect::<Result<_, _>>()?;
                 ToWorker::Sort(SortJob { frame, view_proj, owners })
             }
-            6 => ToWorker::Model(r.bytes("model")?.to_vec()),
-            15 => ToWorker::DpmFile { path: r.string("model path")?, gpu_budget: r.u64("GPU budget")? },
+            6 => ToWorker::Model { dpm: r.bytes("model")?.to_vec(), gpu_budget: r.u64("GPU budget")? },
+            15 => ToWorker::DpmFile {
+                path: r.string("model path")?,
+                gpu_budget: r.u64("GPU budget")?,
+                pool_bytes: r.u64("node pool")?,
+            },
             7 => {
                 let (frame, width, height) = (r.u32("frame")?, r.u32("width")?, r.u32("height")?);
                 let mut view_proj = [0.0f32; 16];
@@ -732,6 +749,7 @@ impl ToMaster {
                 w.u32(pm.resident_nodes);
                 w.u32(pm.required_nodes);
                 w.u32(pm.slots);
+                w.f32(pm.error_scale);
                 w.0
             }
             ToMaster::Failed { reason } => {
@@ -792,6 +810,7 @@ impl ToMaster {
                     resident_nodes: r.u32("memory")?,
                     required_nodes: r.u32("memory")?,
                     slots: r.u32("memory")?,
+                    error_scale: r.f32("memory")?,
                 };
                 ToMaster::Pixels { frame, tiles, span, pm }
             }
@@ -878,7 +897,7 @@ mod tests {
         let f = frame();
         assert_eq!(ToWorker::decode(&f.encode()), Ok(f));
         assert_eq!(ToWorker::decode(&ToWorker::Shutdown.encode()), Ok(ToWorker::Shutdown));
-        let model = ToWorker::Model(vec![4, 5, 6]);
+        let model = ToWorker::Model { dpm: vec![4, 5, 6], gpu_budget: 3 << 30 };
         assert_eq!(ToWorker::decode(&model.encode()), Ok(model));
         let pm = pm_frame();
         assert_eq!(ToWorker::decode(&pm.encode()), Ok(pm));
@@ -899,10 +918,17 @@ mod tests {
                 rgba: vec![9; 8],
             }],
             span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
-            pm: PmMemory { gpu_bytes: 1 << 33, loaded_bytes: 65536, resident_nodes: 7, required_nodes: 9, slots: 8 },
+            pm: PmMemory {
+                gpu_bytes: 1 << 33,
+                loaded_bytes: 65536,
+                resident_nodes: 7,
+                required_nodes: 9,
+                slots: 8,
+                error_scale: 2.25,
+            },
         };
         assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
-        let file = ToWorker::DpmFile { path: "/data/é.dpm".into(), gpu_budget: 512 << 20 };
+        let file = ToWorker::DpmFile { path: "/data/é.dpm".into(), gpu_budget: 512 << 20, pool_bytes: 128 << 20 };
         assert_eq!(ToWorker::decode(&file.encode()), Ok(file));
         for m in [
             ToWorker::DisplayFrame(DisplayFrameJob { view: 5, frame: 2, eye: 2, tiles: vec![0, 7, 9] }),

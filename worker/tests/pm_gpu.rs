@@ -317,7 +317,7 @@ fn out_of_core_path_matches_the_cpu_reference() {
     // of highest priority go in first), its close views less.
     let slots = dpm.nodes.len() as u64 * 2 / 3;
     for background in [false, true] {
-        let ooc = OutOfCore { file: file.clone(), budget_bytes: slots * slot, background };
+        let ooc = OutOfCore { file: file.clone(), pool_bytes: slots * slot, background };
         let mut gpu = GpuAdapter::out_of_core(&device, &dpm, ooc, 4096).unwrap();
         assert_eq!(gpu.node_slots(), Some(slots as u32));
         let mut cache = NodeCache::with_slots(&dpm, file.clone(), slots, slot, false);
@@ -422,4 +422,60 @@ fn occlusion_culling_lowers_the_triangles_and_keeps_the_frame() {
 #[ignore = "the dragon; run in release"]
 fn occlusion_culling_on_the_dragon() {
     occlusion_on("stanford/dragon_vrip.ply.gz", 0.05);
+}
+
+/// A memory budget (`GpuAdapter::set_budget`) bounds everything the adapter takes: on a
+/// close view of the bunny whose mesh needs about twice the room the budget leaves it, every
+/// pass stays within the budget, the passes that would overflow split nothing and raise the
+/// error scale, and the converged mesh is the CPU reference's at the raised error (57.7x: so
+/// close, the coarse spheres hold the eye and the error barely thins the mesh). A coarse view
+/// afterwards fits at its own error again: the scale comes back to 1 and the mesh is the
+/// CPU's for that view. A budget below the base mesh is refused.
+#[test]
+fn a_budget_bounds_the_graphics_memory() {
+    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (bytes, pm) = dpm_of("stanford/bunny_zipper_c3d.obj.gz");
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let close = path_view(&pm, 6, 24, 0.5);
+    // The whole bunny at 48 px: a quarter of the triangles of the close view.
+    let far = path_view(&pm, 0, 24, 48.0);
+    let converge = |gpu: &mut GpuAdapter, view: &Viewpoint, budget: u64| {
+        for pass in 0..200 {
+            let st = gpu.adapt(view).unwrap();
+            assert!(gpu.gpu_bytes() <= budget, "pass {pass}: {} bytes, budget {budget}", gpu.gpu_bytes());
+            if st.converged() {
+                return;
+            }
+        }
+        panic!("not converged in 200 passes");
+    };
+    let cpu_at = |view: &Viewpoint, scale: f32| {
+        let mut cpu = Adapter::new(&pm);
+        cpu.adapt_until_converged(&Viewpoint { error_px: view.error_px * scale, ..*view }, 200).unwrap();
+        sorted_canonical(cpu.face_fvids())
+    };
+    let mut free = GpuAdapter::new(&device, &dpm, 4096).unwrap();
+    converge(&mut free, &close, u64::MAX);
+    let (fixed, full) = (free.static_bytes(), free.gpu_bytes());
+    let budget = fixed + (full - fixed) / 2;
+
+    let mut gpu = GpuAdapter::new(&device, &dpm, 4096).unwrap();
+    gpu.set_budget(Some(budget)).unwrap();
+    converge(&mut gpu, &close, budget);
+    let scale = gpu.error_scale();
+    assert!(scale > 1.0, "the budget raised the error");
+    let (tri, free_tri) = (gpu.counts().1, free.counts().1);
+    assert!(tri < free_tri, "{tri} triangles within the budget, {free_tri} without");
+    assert_eq!(sorted_canonical(gpu.face_fvids().unwrap()), cpu_at(&close, scale), "the CPU's mesh at {scale}x");
+    eprintln!(
+        "bunny, close view at 0.5 px: {free_tri} triangles in {full} bytes; within {budget} bytes {tri} triangles \
+         at {scale}x the error ({} bytes)",
+        gpu.gpu_bytes()
+    );
+    converge(&mut gpu, &far, budget);
+    assert_eq!(gpu.error_scale(), 1.0, "a view that fits adapts at its own error");
+    assert_eq!(sorted_canonical(gpu.face_fvids().unwrap()), cpu_at(&far, 1.0));
+
+    let small = fixed + 1000;
+    assert!(matches!(gpu.set_budget(Some(small)), Err(worker::pm_adapt::AdaptError::MeshBudget { .. })));
 }

@@ -239,12 +239,15 @@ pub struct PassStats {
     /// Active vertices and faces after the pass.
     pub vertices: usize,
     pub faces: usize,
+    /// The pass kept its splits back, or changed the error it adapts to, to stay within a
+    /// memory budget (the GPU adapter's `set_budget`; never the CPU's): not converged.
+    pub held: bool,
 }
 
 impl PassStats {
-    /// No split and no collapse: the state is converged for this view.
+    /// No split, no collapse and nothing held back: the state is converged for this view.
     pub fn converged(&self) -> bool {
-        self.splits == 0 && self.collapses == 0
+        self.splits == 0 && self.collapses == 0 && !self.held
     }
 }
 
@@ -490,7 +493,7 @@ impl<'a> Adapter<'a> {
         // Algorithm 2: collapses whose target splits are cancelled.
         let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
         if splits == 0 && collapses == 0 {
-            return PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() };
+            return PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len(), held: false };
         }
 
         // Algorithm 3: memory management.
@@ -562,6 +565,6 @@ impl<'a> Adapter<'a> {
         self.node = vertices.par_iter().map(|v| v.2).collect();
         self.split_cache = vertices.par_iter().map(|v| v.3).collect();
         self.collapse_cache = vertices.par_iter().map(|v| v.4).collect();
-        PassStats { splits, collapses, cancelled, vertices: self.fvid.len(), faces }
+        PassStats { splits, collapses, cancelled, vertices: self.fvid.len(), faces, held: false }
     }
 }

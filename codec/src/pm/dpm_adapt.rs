@@ -222,7 +222,14 @@ impl<'a> DpmAdapter<'a> {
         // Algorithm 2: collapses whose target splits are cancelled.
         let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
         if splits == 0 && collapses == 0 {
-            return Ok(PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len() });
+            return Ok(PassStats {
+                splits,
+                collapses,
+                cancelled,
+                vertices: n,
+                faces: self.face_idx.len(),
+                held: false,
+            });
         }
 
         // The operations of the splitting vertices, decoded once for the pass.
@@ -306,7 +313,7 @@ impl<'a> DpmAdapter<'a> {
             new_faces,
         );
         self.vertices = new;
-        Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces })
+        Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces, held: false })
     }
 }
 

@@ -83,9 +83,11 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
     if let Scene::Pm(PmScene { source, .. }) = &scene {
         let model = match source {
-            PmSource::Bytes(bytes) => ToWorker::Model(bytes.clone()).encode(),
-            PmSource::File { path, gpu_budget, .. } => {
-                ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget }.encode()
+            PmSource::Bytes { bytes, gpu_budget } => {
+                ToWorker::Model { dpm: bytes.clone(), gpu_budget: *gpu_budget }.encode()
+            }
+            PmSource::File { path, gpu_budget, pool_bytes, .. } => {
+                ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget, pool_bytes: *pool_bytes }.encode()
             }
         };
         t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
@@ -303,6 +305,8 @@ impl Writer {
             let mut last = begin;
             // Workers already told about a node pool smaller than their budget.
             let mut capped = std::collections::HashSet::new();
+            // Workers already told about a mesh coarsened to stay within the budget.
+            let mut coarsened = std::collections::HashSet::new();
             // A frame's views (eyes, displays with frames of their own) wait for the last.
             let mut views: Vec<Written> = Vec::with_capacity(per_frame);
             for w in rx {
@@ -359,6 +363,14 @@ impl Writer {
                     for w in workers {
                         if let Some(note) = capped_slots_note(budget_slots, w, &mut capped) {
                             eprintln!("{note}");
+                        }
+                        if let Some(scale) = w.error_scale().filter(|_| coarsened.insert(w.rank)) {
+                            eprintln!(
+                                "note: rank {} adapts frame {} at {scale:.2}x --error-px to keep its mesh within \
+                                 --gpu-budget-mb (the stats' error_scale, each frame)",
+                                w.rank,
+                                k + 1
+                            );
                         }
                     }
                 }

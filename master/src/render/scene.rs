@@ -66,11 +66,13 @@ pub(super) struct PmScene {
 }
 
 pub(super) enum PmSource {
-    /// An in-core file's bytes, sent to every worker.
-    Bytes(Vec<u8>),
-    /// An out-of-core file's absolute path, the bytes of graphics memory each worker keeps
-    /// of its nodes, and the node slots that budget makes (at most one per node).
-    File { path: String, gpu_budget: u64, slots: u32 },
+    /// An in-core file's bytes, sent to every worker, and the bytes of graphics memory each
+    /// worker's adaptation may take.
+    Bytes { bytes: Vec<u8>, gpu_budget: u64 },
+    /// An out-of-core file's absolute path, the bytes of graphics memory each worker's
+    /// adaptation may take, those of them it keeps of the nodes, and the node slots they make
+    /// (at most one per node).
+    File { path: String, gpu_budget: u64, pool_bytes: u64, slots: u32 },
 }
 
 impl Scene {
@@ -110,8 +112,10 @@ impl Scene {
             }));
         }
         let named = || format!("{}", path.display());
+        let gpu_budget = (args.gpu_budget_mb as f64 * MB as f64) as u64;
         if let Some(file) = codec::pm::format::NodeFile::open_out_of_core(path).with_context(named)? {
-            return PmScene::out_of_core(path, &file, (args.gpu_budget_mb as f64 * MB as f64) as u64).map(Scene::Pm);
+            let nodes = args.gpu_nodes_mb.map(|mb| (mb as f64 * MB as f64) as u64);
+            return PmScene::out_of_core(path, &file, gpu_budget, nodes).map(Scene::Pm);
         }
         let bytes = crate::commands::read_input(path)?;
         // Decoded here once, so that a corrupt file fails before any worker sees it.
@@ -120,7 +124,7 @@ impl Scene {
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
-        Ok(Scene::Pm(PmScene { source: PmSource::Bytes(bytes), bbox: (lo, hi) }))
+        Ok(Scene::Pm(PmScene { source: PmSource::Bytes { bytes, gpu_budget }, bbox: (lo, hi) }))
     }
 
     /// The camera of the first frame: the flags given, the rest framing the model.
@@ -140,22 +144,28 @@ impl Scene {
 impl PmScene {
     /// An out-of-core `.dpm`: its head is read and checked here (the nodes are checked by
     /// their checksums as workers read them); its box is [`crate::pm::out_of_core_bbox`].
-    fn out_of_core(path: &Path, file: &codec::pm::format::NodeFile, gpu_budget: u64) -> Result<PmScene> {
+    fn out_of_core(
+        path: &Path,
+        file: &codec::pm::format::NodeFile,
+        gpu_budget: u64,
+        nodes: Option<u64>,
+    ) -> Result<PmScene> {
         let named = || format!("{}", path.display());
         let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).with_context(named)?;
         let (lo, hi) = crate::pm::out_of_core_bbox(&dpm);
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) || lo.iter().zip(&hi).any(|(a, b)| a > b) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
-        // Each worker's pool holds slots of the largest node's size: a budget below one slot
+        // Each worker's pool holds slots of the largest node's size: a pool below one slot
         // is refused here, before any worker starts on it.
+        let pool_bytes = worker::pm_adapt::pool_bytes(Some(gpu_budget), nodes)?;
         let slot_bytes = worker::pm_adapt::decoder::slot_bytes(&dpm);
-        if gpu_budget < slot_bytes as u64 {
-            return Err(worker::pm_adapt::AdaptError::Budget { budget: gpu_budget, slot_bytes }.into());
+        if pool_bytes < slot_bytes as u64 {
+            return Err(worker::pm_adapt::AdaptError::Budget { budget: pool_bytes, slot_bytes }.into());
         }
         let abs = std::fs::canonicalize(path).with_context(named)?;
         let path = abs.to_str().with_context(|| format!("{}: the path is not UTF-8", abs.display()))?.to_string();
-        let slots = worker::pm_adapt::decoder::slots_within(&dpm, gpu_budget);
-        Ok(PmScene { source: PmSource::File { path, gpu_budget, slots }, bbox: (lo, hi) })
+        let slots = worker::pm_adapt::decoder::slots_within(&dpm, pool_bytes);
+        Ok(PmScene { source: PmSource::File { path, gpu_budget, pool_bytes, slots }, bbox: (lo, hi) })
     }
 }

@@ -130,7 +130,8 @@ pub(super) struct WorkerStats {
     tiles: Vec<WorkerTileStats>,
     /// A progressive mesh's memory: graphics memory of the adaptation (static and dynamic
     /// buffers), and out of core the node bytes loaded this frame, the nodes resident, the
-    /// nodes the view requires (priority at least 1) and the slots the budget holds.
+    /// nodes the view requires (priority at least 1) and the slots the budget holds; and the
+    /// factor on `--error-px` the mesh was adapted to (above 1 where the budget held it back).
     #[serde(skip_serializing_if = "Option::is_none")]
     pm: Option<PmMemoryStats>,
     /// The worker's stages: `decode` (or `adapt` for a progressive mesh), then `render`
@@ -145,6 +146,7 @@ struct PmMemoryStats {
     resident_nodes: u32,
     required_nodes: u32,
     node_slots: u32,
+    error_scale: f32,
 }
 
 #[derive(Serialize)]
@@ -162,6 +164,11 @@ impl WorkerStats {
     /// The worker's node slots, for a progressive mesh out of core.
     pub(super) fn node_slots(&self) -> Option<u32> {
         self.pm.as_ref().map(|p| p.node_slots).filter(|&s| s > 0)
+    }
+
+    /// The factor on `--error-px` the worker's progressive mesh was adapted to, where above 1.
+    pub(super) fn error_scale(&self) -> Option<f32> {
+        self.pm.as_ref().map(|p| p.error_scale).filter(|&s| s > 1.0)
     }
 }
 
@@ -205,6 +212,7 @@ pub(super) fn worker_stats(
             resident_nodes: pm.resident_nodes,
             required_nodes: pm.required_nodes,
             node_slots: pm.slots,
+            error_scale: pm.error_scale,
         }),
         timeline: vec![
             Span::between(first, span.start_ms, span.prepared_ms, epoch),

@@ -114,7 +114,7 @@ impl VertexSet {
 }
 
 pub(super) const STATE_BYTES: u64 = std::mem::size_of::<GpuVState>() as u64;
-const POINT_BYTES: u64 = std::mem::size_of::<crate::render::PmPoint>() as u64;
+pub(super) const POINT_BYTES: u64 = std::mem::size_of::<crate::render::PmPoint>() as u64;
 
 pub(super) struct FaceSet {
     /// Current vertex indices, 3 per face: the draw's index buffer.

@@ -74,7 +74,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
     init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, PENDING,
-    READBACK_BYTES, STATS_BYTES, VERTEX_USAGE,
+    POINT_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
@@ -83,6 +83,24 @@ use pipelines::Pipelines;
 
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
 pub const DEFAULT_N_ALLOC: u32 = 1 << 15;
+
+/// The factor by which a pass held back by the memory budget raises the error the passes
+/// after it adapt to, and by which a converged mesh with room to spare lowers it again.
+/// A step of 1.5 changes the mesh by up to 2.25x (screen-space error e leaves about 1/e^2 of
+/// the triangles of a distant view; a close one, whose coarse spheres hold the eye, changes
+/// far less: the bunny seen from close needs 57.7x the error for 43% of its triangles).
+/// [`GpuAdapter::fits_finer`] lowers the error where the mesh takes at most half the room,
+/// and a view goes no lower than the scale that last overflowed for it.
+const SCALE_STEP: f32 = 1.5;
+/// The largest error scale (a budget that cannot hold even a coarse mesh ends here).
+const MAX_SCALE: f32 = 1e6;
+
+/// The share of `--gpu-budget-mb` an out-of-core worker gives its node pool by default; the
+/// rest is for the tables and the adapted mesh. The 102M-triangle armadillo at 1920x1080
+/// requires 345-460 nodes of 64 kB (22-29 MB) at 3 px and adapts 180-210 MiB of mesh, so a
+/// quarter of 512 MiB holds the required nodes four times over, with room for the
+/// lower-priority ones.
+pub const DEFAULT_POOL_SHARE: f64 = 0.25;
 
 /// Why an adaptation could not start or a pass failed.
 #[derive(Debug, Error)]
@@ -114,9 +132,21 @@ pub enum AdaptError {
          {limit}: raise --error-px"
     )]
     TooLarge { elements: u64, what: &'static str, bytes: u64, limit: u64 },
-    /// The budget does not hold the largest node.
-    #[error("a GPU budget of {budget} bytes holds no node: the largest takes {slot_bytes} (raise --gpu-budget-mb)")]
+    /// The node pool's budget does not hold the largest node.
+    #[error(
+        "a node pool of {budget} bytes holds no node: the largest takes {slot_bytes} (raise --gpu-budget-mb or \
+         --gpu-nodes-mb)"
+    )]
     Budget { budget: u64, slot_bytes: u32 },
+    /// The GPU budget does not hold the static buffers and the base mesh.
+    #[error(
+        "a GPU budget of {budget} bytes does not hold the model's tables, nodes and base mesh ({need} bytes): raise \
+         --gpu-budget-mb"
+    )]
+    MeshBudget { budget: u64, need: u64 },
+    /// A node pool given as large as the whole budget or larger.
+    #[error("a node pool of {pool} bytes (--gpu-nodes-mb) leaves nothing of a GPU budget of {budget} for the mesh")]
+    PoolOverBudget { pool: u64, budget: u64 },
     /// The node pool was asked to hold more nodes than it has slots (a bug of the cache).
     #[error("GPU error: the node pool's {slots} slots are all taken")]
     PoolFull { slots: u32 },
@@ -138,13 +168,25 @@ impl AdaptError {
     }
 }
 
+/// The bytes of an out-of-core worker's node pool: `nodes` where given (less than the
+/// budget), else [`DEFAULT_POOL_SHARE`] of `budget`, else (no budget) every node.
+pub fn pool_bytes(budget: Option<u64>, nodes: Option<u64>) -> Result<u64, AdaptError> {
+    match (budget, nodes) {
+        (Some(b), Some(n)) if n >= b => Err(AdaptError::PoolOverBudget { pool: n, budget: b }),
+        (_, Some(n)) => Ok(n),
+        (Some(b), None) => Ok((b as f64 * DEFAULT_POOL_SHARE) as u64),
+        (None, None) => Ok(u64::MAX),
+    }
+}
+
 /// Where an out-of-core adapter reads its nodes and how many it keeps.
 pub struct OutOfCore {
     /// The file, open for reading nodes ([`NodeFile::open`]).
     pub file: Arc<NodeFile>,
     /// Bytes of graphics memory for nodes: the pool holds this many bytes' worth of slots
-    /// of the largest node's size.
-    pub budget_bytes: u64,
+    /// of the largest node's size. (The whole adapter's memory is bounded by
+    /// [`GpuAdapter::set_budget`].)
+    pub pool_bytes: u64,
     /// Read nodes on a thread of their own (the paper's); else while scheduling.
     pub background: bool,
 }
@@ -193,6 +235,14 @@ pub struct GpuAdapter {
     /// whose test ranks hidden nodes last out of core.
     occ: Sized,
     occluder: Option<Occluder>,
+    /// Bytes of graphics memory the adapter may take in all ([`Self::set_budget`]).
+    budget: Option<u64>,
+    /// The factor on the view's pixel error that keeps the mesh within the budget (1 when
+    /// it fits), the lowest it may go back to for the current view (the scale that last
+    /// overflowed, 1 after a new view), and that view.
+    error_scale: f32,
+    floor: f32,
+    last_view: Option<Viewpoint>,
 }
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
@@ -221,7 +271,7 @@ impl GpuAdapter {
 
     /// An adapter of an out-of-core file (`dpm` its head, [`Dpm::parse_prefix`]): its nodes
     /// come from `ooc.file` as [`Self::schedule`] asks for them and stay within
-    /// `ooc.budget_bytes` of graphics memory, a pool of slots of the largest node's size,
+    /// `ooc.pool_bytes` of graphics memory, a pool of slots of the largest node's size,
     /// chosen by the paper's priority ([`NodeCache`]). It starts at the base mesh with every
     /// operation pending; a vertex splits once its operation's node is resident.
     pub fn out_of_core(gpu: &Gpu, dpm: &Dpm, ooc: OutOfCore, n_alloc: u32) -> Result<GpuAdapter, AdaptError> {
@@ -231,9 +281,9 @@ impl GpuAdapter {
         let slot = slot_bytes(dpm);
         // At most one slot per node, and within what one binding and a 32-bit address allow.
         let limit = gpu.device().limits().max_storage_buffer_binding_size.min(u32::MAX as u64);
-        let slots = slots_within(dpm, ooc.budget_bytes.min(limit));
+        let slots = slots_within(dpm, ooc.pool_bytes.min(limit));
         if slots == 0 {
-            return Err(AdaptError::Budget { budget: ooc.budget_bytes, slot_bytes: slot });
+            return Err(AdaptError::Budget { budget: ooc.pool_bytes, slot_bytes: slot });
         }
         let cache = NodeCache::with_slots(dpm, ooc.file, slots as u64, slot as u64, ooc.background);
         Self::make(gpu, dpm, n_alloc, Some((cache, slots)))
@@ -313,6 +363,10 @@ impl GpuAdapter {
             resident,
             occ: storage(d, "pm: occlusion pyramid", 4, 4, VERTEX_USAGE),
             occluder: None,
+            budget: None,
+            error_scale: 1.0,
+            floor: 1.0,
+            last_view: None,
             gpu,
         };
         adapter.reset();
@@ -379,8 +433,83 @@ impl GpuAdapter {
         let sets: u64 = self.sets.iter().map(VertexSet::bytes).sum();
         let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
         let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
-        let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size()).sum();
+        let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size() + l.uniform.size()).sum();
         sets + faces + tmp + levels
+    }
+
+    /// Bytes of GPU memory the adapter takes besides the adapted mesh: the static buffers,
+    /// the occlusion pyramid and the per-pass records.
+    fn fixed_bytes(&self) -> u64 {
+        let records = self.params.size() + self.stats.size() + self.errors.size() + self.readback.size();
+        self.static_bytes() + self.occ.buffer.size() + records
+    }
+
+    /// Bytes of GPU memory the adapter takes now: [`Self::static_bytes`], the adapted mesh's
+    /// buffers at their capacities ([`Self::dynamic_bytes`]), the occlusion pyramid and the
+    /// per-pass records. With a budget ([`Self::set_budget`]) it stays within it.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.fixed_bytes() + self.dynamic_bytes()
+    }
+
+    /// At most how many bytes the adapted mesh's buffers take with `v` active vertices (in
+    /// either of the two sets) and `f` faces, by the `n_alloc` policy (a buffer holds at most
+    /// its need and `2 n_alloc` elements more): per vertex its FVID, state and point in both
+    /// sets and the three per-pass counts, per face its indices, FVIDs, owner and a hole
+    /// slot, per scan block 8 bytes, and a few levels' records.
+    fn mesh_bytes(&self, v: u64, f: u64) -> u64 {
+        const VERTEX: u64 = 2 * (4 + STATE_BYTES + POINT_BYTES) + 3 * 4 + 1;
+        const FACE: u64 = 12 + 12 + 4 + 4;
+        let slack = 2 * self.n_alloc as u64;
+        (v + 1 + slack) * VERTEX + (f + slack) * FACE + 4096
+    }
+
+    /// Whether a mesh of `v` vertices and `f` faces (with the `n_alloc` slack) would take the
+    /// adapter past its budget or one of its buffers past the device's binding limit.
+    fn exceeds(&self, v: u64, f: u64) -> bool {
+        let na = self.n_alloc as u64;
+        let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
+        let bound = (v + na) * STATE_BYTES > limit || (f + na) * 12 > limit;
+        bound || self.budget.is_some_and(|b| self.fixed_bytes() + self.mesh_bytes(v, f) > b)
+    }
+
+    /// Whether the mesh takes at most half the room the budget leaves it and half the
+    /// binding limit (so that one [`SCALE_STEP`] finer may fit: if it does not, the pass
+    /// that overflows raises the error back and stops it there for the view).
+    fn fits_finer(&self) -> bool {
+        let (v, f) = (self.n as u64, self.m as u64);
+        let room = self.budget.map_or(u64::MAX, |b| b.saturating_sub(self.fixed_bytes()));
+        let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
+        self.mesh_bytes(v, f).saturating_mul(2) <= room && (v * STATE_BYTES).saturating_mul(2) <= limit
+    }
+
+    /// Bounds the adapter's graphics memory ([`Self::gpu_bytes`]) by `bytes` (`None`: only
+    /// by the device's binding limit), and goes back to the base mesh. A pass whose splits
+    /// would take the mesh past it splits nothing and raises the error the passes after it
+    /// adapt to ([`Self::error_scale`]); once converged with room to spare, the error comes
+    /// back down. The `n_alloc` slack shrinks to at most an eighth of the room the budget
+    /// leaves the mesh. Fails if the budget does not hold the static buffers and the base
+    /// mesh.
+    pub fn set_budget(&mut self, bytes: Option<u64>) -> Result<(), AdaptError> {
+        if let Some(b) = bytes {
+            let per_element = self.mesh_bytes(1, 1) - self.mesh_bytes(0, 0);
+            let room = b.saturating_sub(self.fixed_bytes());
+            self.n_alloc = self.n_alloc.min((room / 16 / per_element).max(1) as u32);
+            let base = &self.shared.base;
+            let need = self.fixed_bytes() + self.mesh_bytes(base.fvid.len() as u64, base.face_idx.len() as u64);
+            if need > b {
+                return Err(AdaptError::MeshBudget { budget: b, need });
+            }
+        }
+        self.budget = bytes;
+        (self.error_scale, self.floor, self.last_view) = (1.0, 1.0, None);
+        self.reset();
+        Ok(())
+    }
+
+    /// The factor on the view's pixel error the mesh is adapted to now: 1 unless the budget
+    /// ([`Self::set_budget`]) or the binding limit held splits back.
+    pub fn error_scale(&self) -> f32 {
+        self.error_scale
     }
 
     /// Bytes of the static (per progressive mesh) buffers: the compressed operations, the
@@ -402,9 +531,18 @@ impl GpuAdapter {
 
     /// Culls with `occluder` from the next pass on (the depth of a frame drawn from this
     /// adapter's mesh: occlusion one frame late, see [`occlusion`]); `None` turns it off.
+    /// A pyramid that would take the adapter past its budget is not kept (culling is off
+    /// until one fits).
     pub fn set_occluder(&mut self, occluder: Option<Occluder>) {
         if let Some(o) = &occluder {
             let n = o.words.len() as u64;
+            if let Some(b) = self.budget {
+                let grow = (n * 2 * 4).saturating_sub(self.occ.buffer.size());
+                if self.occ.cap < n && self.gpu_bytes() + grow > b {
+                    self.occluder = None;
+                    return;
+                }
+            }
             if self.occ.cap < n {
                 self.occ = storage(self.gpu.device(), "pm: occlusion pyramid", n * 2, 4, VERTEX_USAGE);
             }
@@ -418,6 +556,8 @@ impl GpuAdapter {
     /// thread, or now when not in the background); the passes that follow upload what has
     /// arrived. Call it once per frame. `None` in core.
     pub fn schedule(&mut self, view: &Viewpoint) -> Result<Option<CacheStats>, AdaptError> {
+        // The nodes of the error the passes adapt to.
+        let view = &Viewpoint { error_px: view.error_px * self.error_scale, ..*view };
         match &mut self.resident {
             None => Ok(None),
             Some(r) => Ok(Some(match &self.occluder {

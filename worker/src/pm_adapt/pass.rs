@@ -8,7 +8,7 @@ use super::buffers::{
     STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter};
+use super::{AdaptError, GpuAdapter, MAX_SCALE, SCALE_STEP};
 use crate::gpu::GpuError;
 
 impl GpuAdapter {
@@ -44,90 +44,39 @@ impl GpuAdapter {
             params.planes = v.planes().map(|p| p.to_array());
             params.eye = [v.eye.x, v.eye.y, v.eye.z, 1.0];
             params.pixels_per_unit = v.pixels_per_unit;
-            params.error_px = v.error_px;
+            params.error_px = v.error_px * self.error_scale;
             params.c_lod = v.c_lod;
             params.attribute_scale = v.attribute_scale;
             if let Some(o) = &self.occluder {
                 (params.occ_vp, params.occ_rect, params.occ_size) = o.params();
             }
         }
-        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-
-        // Submission 1: state update, collapses, scans, and the totals read back.
-        let mut enc =
-            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
-        enc.clear_buffer(&self.stats, 0, None);
-        {
-            let set = &self.sets[self.cur];
-            let p = &self.shared.pipelines;
-            let state = p.state.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &set.fvid.buffer),
-                    ("vstate", &set.state.buffer),
-                    ("vpoint", &set.point.buffer),
-                    ("vcnt", &self.vcnt.buffer),
-                    ("fcnt", &self.fcnt.buffer),
-                    ("occ", &self.occ.buffer),
-                ],
-            );
-            let node_check = self.resident.as_ref().map(|_| {
-                p.node_check.bind(
-                    &self.gpu,
-                    &[
-                        ("P", &self.params),
-                        ("vfvid", &set.fvid.buffer),
-                        ("vstate", &set.state.buffer),
-                        ("D", &self.shared.decode),
-                        ("ops", &self.shared.ops),
-                        ("tables", &self.shared.tables),
-                        ("dec_faces", &self.faces.fvid.buffer),
-                        ("errors", &self.errors),
-                    ],
-                )
-            });
-            let collapse = p.collapse.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vstate", &set.state.buffer),
-                    ("vcnt", &self.vcnt.buffer),
-                    ("stats", &self.stats),
-                ],
-            );
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("pm: classify"),
-                timestamp_writes: None,
-            });
-            if let Some(bg) = &node_check {
-                self.dispatch(&mut pass, &p.node_check, bg, n);
+        if let Some(v) = view {
+            // A new view may refine finer than the error that overflowed for the last one.
+            if self.last_view != Some(*v) {
+                self.last_view = Some(*v);
+                self.floor = 1.0;
             }
-            self.dispatch(&mut pass, &p.state, &state, n + 1);
-            self.dispatch(&mut pass, &p.collapse, &collapse, n);
         }
-        if self.profile {
-            // Time the state update and collapses apart from the scans.
-            self.gpu.wait_for(self.gpu.queue().submit([enc.finish()]))?;
-            self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
-            enc =
-                self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
-        }
-        {
-            let mut pass = enc
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: scans"), timestamp_writes: None });
-            self.scan(&mut pass, &self.vcnt.buffer);
-            self.scan(&mut pass, &self.fcnt.buffer);
-        }
-        enc.copy_buffer_to_buffer(&self.vcnt.buffer, n as u64 * 4, &self.readback, 0, 4);
-        enc.copy_buffer_to_buffer(&self.fcnt.buffer, n as u64 * 4, &self.readback, 4, 4);
-        enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
-        enc.copy_buffer_to_buffer(&self.errors, 0, &self.readback, 8 + STATS_BYTES, ERRORS_BYTES);
-        self.gpu.queue().submit([enc.finish()]);
-        let totals = self.read_totals()?;
-        // An operation the last pass could not decode fails this one.
-        if totals[10] != 0 {
-            return Err(AdaptError::corrupt(totals[10], totals[11], self.resident.is_some()));
+        let mut totals = self.classify(&params, pass_start)?;
+        let mut held = false;
+        let over = |a: &GpuAdapter, t: &[u32; 12]| a.exceeds((t[0] as u64).max(n as u64), m as u64 + t[1] as u64);
+        // A pass whose splits would take the mesh past the budget or the binding limit splits
+        // nothing: with a view it collapses what the view lets go and raises the error the
+        // passes after it adapt to ("Memory budget" in docs/design.md); a full refinement
+        // stops there.
+        if totals[0] > n && over(self, &totals) {
+            held = true;
+            match view {
+                None => return Ok(PassStats { held, ..unchanged }),
+                Some(v) => {
+                    self.error_scale = (self.error_scale * SCALE_STEP).min(MAX_SCALE);
+                    self.floor = self.error_scale;
+                    params.mode = 2;
+                    params.error_px = v.error_px * self.error_scale;
+                    totals = self.classify(&params, pass_start)?;
+                }
+            }
         }
         self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
         let (n_new, f_add) = (totals[0], totals[1]);
@@ -140,11 +89,18 @@ impl GpuAdapter {
             collapses,
         })?;
         if splits == 0 && collapses == 0 {
-            return Ok(PassStats { cancelled: cancelled as usize, ..unchanged });
+            // Converged at a raised error with room to spare: the next passes try a finer one,
+            // not below the error that last overflowed for this view.
+            if view.is_some() && self.error_scale > self.floor && self.fits_finer() {
+                self.error_scale = (self.error_scale / SCALE_STEP).max(self.floor);
+                held = true;
+            }
+            return Ok(PassStats { cancelled: cancelled as usize, held, ..unchanged });
         }
         let m_new = m - removed + f_add;
         // Every buffer of the pass is bound whole: past the device's binding limit the pass
-        // would fail validation.
+        // would fail validation ([`GpuAdapter::exceeds`] holds splits back before that, so
+        // this fails only for a base mesh beyond it).
         let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
         for (elements, each, what) in
             [(n_new as u64 + na, STATE_BYTES, "vertices"), (m as u64 + f_add as u64 + na, 12, "faces")]
@@ -166,7 +122,7 @@ impl GpuAdapter {
         if self.faces.idx.cap < total {
             self.resize_faces(total + na, m as u64);
         }
-        if self.hole.cap < removed as u64 {
+        if needs_resize(self.hole.cap, removed as u64, self.n_alloc) {
             self.hole = storage(self.gpu.device(), "pm: face holes", removed as u64 + na, 4, VERTEX_USAGE);
             self.reallocations += 1;
         }
@@ -300,7 +256,92 @@ impl GpuAdapter {
             cancelled: cancelled as usize,
             vertices: n_new as usize,
             faces: m_new as usize,
+            held,
         })
+    }
+
+    /// Submission 1 (state update, collapses, scans) for `params`, and its totals read back:
+    /// vertices after the pass and faces its splits add, the counters, the first decoding
+    /// error (which fails the pass).
+    fn classify(&mut self, params: &Params, pass_start: std::time::Instant) -> Result<[u32; 12], AdaptError> {
+        let n = params.n;
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+        let mut enc =
+            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
+        enc.clear_buffer(&self.stats, 0, None);
+        {
+            let set = &self.sets[self.cur];
+            let p = &self.shared.pipelines;
+            let state = p.state.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vfvid", &set.fvid.buffer),
+                    ("vstate", &set.state.buffer),
+                    ("vpoint", &set.point.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("fcnt", &self.fcnt.buffer),
+                    ("occ", &self.occ.buffer),
+                ],
+            );
+            let node_check = self.resident.as_ref().map(|_| {
+                p.node_check.bind(
+                    &self.gpu,
+                    &[
+                        ("P", &self.params),
+                        ("vfvid", &set.fvid.buffer),
+                        ("vstate", &set.state.buffer),
+                        ("D", &self.shared.decode),
+                        ("ops", &self.shared.ops),
+                        ("tables", &self.shared.tables),
+                        ("dec_faces", &self.faces.fvid.buffer),
+                        ("errors", &self.errors),
+                    ],
+                )
+            });
+            let collapse = p.collapse.bind(
+                &self.gpu,
+                &[
+                    ("P", &self.params),
+                    ("vstate", &set.state.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("stats", &self.stats),
+                ],
+            );
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("pm: classify"),
+                timestamp_writes: None,
+            });
+            if let Some(bg) = &node_check {
+                self.dispatch(&mut pass, &p.node_check, bg, n);
+            }
+            self.dispatch(&mut pass, &p.state, &state, n + 1);
+            self.dispatch(&mut pass, &p.collapse, &collapse, n);
+        }
+        if self.profile {
+            // Time the state update and collapses apart from the scans.
+            self.gpu.wait_for(self.gpu.queue().submit([enc.finish()]))?;
+            self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
+            enc =
+                self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: scans") });
+        }
+        {
+            let mut pass = enc
+                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: scans"), timestamp_writes: None });
+            self.scan(&mut pass, &self.vcnt.buffer);
+            self.scan(&mut pass, &self.fcnt.buffer);
+        }
+        enc.copy_buffer_to_buffer(&self.vcnt.buffer, n as u64 * 4, &self.readback, 0, 4);
+        enc.copy_buffer_to_buffer(&self.fcnt.buffer, n as u64 * 4, &self.readback, 4, 4);
+        enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
+        enc.copy_buffer_to_buffer(&self.errors, 0, &self.readback, 8 + STATS_BYTES, ERRORS_BYTES);
+        self.gpu.queue().submit([enc.finish()]);
+        let totals = self.read_totals()?;
+        // An operation the last pass could not decode fails this one.
+        if totals[10] != 0 {
+            return Err(AdaptError::corrupt(totals[10], totals[11], self.resident.is_some()));
+        }
+        Ok(totals)
     }
 
     /// Reallocates the face buffers to `cap` faces, keeping the first `keep`.
