@@ -35,7 +35,8 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
     let ops = pm.splits.len();
     let pb = progress::spinner(format!("compressing {ops} operations"));
     let t = Instant::now();
-    let enc = format::encode_with_progress(&pm, opts, &mut |step| {
+    // Owned, so that the encoder frees the splits once it has them in its own order.
+    let enc = format::encode_owned(pm, opts, &mut |step| {
         pb.set_message(format!("compressing {ops} operations: {step}"));
     })
     .context("cannot encode the progressive mesh")?;

@@ -13,6 +13,8 @@
 //! forest one height at a time, each height in parallel. Steps 3 and 4 also choose the
 //! `v_l`/`v_u` swap of section 4.2.4 (see the format's documentation, [`super`]).
 
+use std::borrow::Cow;
+
 use rayon::prelude::*;
 use smallvec::SmallVec;
 
@@ -90,15 +92,44 @@ pub fn encode_with_progress(
     opts: EncodeOptions,
     step: &mut dyn FnMut(&str),
 ) -> Result<Encoded, EncodeError> {
-    let mut h = fit_header(pm, opts)?;
-    check_mesh(pm)?;
-    step("preparing the operations");
-    let qpos: Vec<[u32; 3]> = pm.positions.iter().map(|&p| quantize_position(p, &h)).collect();
-    let qnrm: Vec<[u32; 2]> = pm.normals.iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
-    let qcrit: Vec<[u32; 4]> = pm.criteria.iter().map(|c| quantize_criteria(c, &h)).collect();
-    let tree = SplitTree::new(pm);
+    encode_mesh(Cow::Borrowed(pm), opts, true, step)
+}
 
-    let (ops, first_guess) = uncompressed_operations(pm, &tree, &qpos, &qnrm, &qcrit, h.normal_bits)?;
+/// As [`encode_with_progress`], taking the progressive mesh so that what the encoder has copied
+/// into its own order (splits, criteria, normals, positions: 60-100 bytes an operation) is
+/// freed as soon as it is copied, and leaving [`Encoded::addresses`] and
+/// [`Encoded::contexts`] empty (56 bytes an operation more): what `tessera pm build` needs,
+/// whose peak memory is the encoder's on large models. The bytes are the same.
+pub fn encode_owned(
+    pm: ProgressiveMesh,
+    opts: EncodeOptions,
+    step: &mut dyn FnMut(&str),
+) -> Result<Encoded, EncodeError> {
+    encode_mesh(Cow::Owned(pm), opts, false, step)
+}
+
+/// [`encode_with_progress`] and [`encode_owned`]; `per_split`: whether to return the
+/// addresses and contexts.
+fn encode_mesh(
+    mut pm: Cow<ProgressiveMesh>,
+    opts: EncodeOptions,
+    per_split: bool,
+    step: &mut dyn FnMut(&str),
+) -> Result<Encoded, EncodeError> {
+    let mut h = fit_header(&pm, opts)?;
+    check_mesh(&pm)?;
+    step("preparing the operations");
+    let qpos: Vec<[u32; 3]> = pm.positions.par_iter().map(|&p| quantize_position(p, &h)).collect();
+    let qnrm: Vec<[u32; 2]> = pm.normals.par_iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
+    let qcrit: Vec<[u32; 4]> = pm.criteria.par_iter().map(|c| quantize_criteria(c, &h)).collect();
+    let tree = SplitTree::new(&pm);
+    let (ops, first_guess) = uncompressed_operations(&pm, &tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
+    // The operations hold their splits' data in their own order from here on.
+    drop(tree);
+    if let Cow::Owned(pm) = &mut pm {
+        let base = (std::mem::take(&mut pm.base_vertices), std::mem::take(&mut pm.base_faces));
+        *pm = ProgressiveMesh { base_vertices: base.0, base_faces: base.1, ..Default::default() };
+    }
     let (first_tables, _) = probability_tables(&ops, &first_guess);
     step("coding bottom-up with estimated tables");
     let offsets = compress_in_reverse_order(&ops, &first_tables);
@@ -106,33 +137,41 @@ pub fn encode_with_progress(
     let last = recompute_and_recompress(&ops, &offsets);
     h.avg_op_size = offsets.avg;
 
-    let (oper, addresses, tables, node_table) = if opts.node_bytes == 0 {
-        let (oper, addresses) = lay_out(&ops, &last.bytes, &last.choices.swaps);
+    let symbol_bits = last.symbol_bits;
+    // Per operation its address (see `Encoded::addresses`).
+    let (oper, op_addr, tables, node_table): (_, Vec<u64>, _, _) = if opts.node_bytes == 0 {
+        let (oper, op_addr) = lay_out(&ops, &last.bytes, &last.choices.swaps);
         // Offsets into the section and their residuals stay within 32 bits as zigzag values.
         if oper.len() >= 1 << 31 {
             return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
         }
-        (oper, addresses, last.tables, vec![])
+        (oper, op_addr, last.tables, vec![])
     } else if ops.len() == 0 {
         // Nothing to page: a mesh without operations is an in-core file.
         (vec![], vec![], last.tables, vec![])
     } else {
-        let ooc = out_of_core(&ops, &last, &h, opts.node_bytes, step)?;
+        // The out-of-core layout codes the operations again: of the in-core coding it needs
+        // only the tables and the sizes.
+        let Recompressed { tables, bytes: OpBytes { len: sizes, data, start }, choices, .. } = last;
+        drop((data, start, choices));
+        let ooc = out_of_core(&ops, &sizes, tables, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
-        let mut addresses = vec![0usize; ops.order.len()];
-        for (i, &s) in ops.order.iter().enumerate() {
-            addresses[s as usize] = ooc.addr[i] as usize;
-        }
-        (ooc.nodes.concat(), addresses, ooc.tables, write_node_table(&ooc.infos))
+        let op_addr = ooc.addr.iter().map(|&a| u64::from(a)).collect();
+        (ooc.nodes.concat(), op_addr, ooc.tables, write_node_table(&ooc.infos))
     };
     let tb = write_tables(&tables);
-    let bb = base_section(pm, &tree, &qpos, &qnrm, &addresses);
+    let root_addr: Vec<Option<u64>> = ops.root_ops.iter().map(|&r| (r != usize::MAX).then(|| op_addr[r])).collect();
+    let bb = base_section(&pm, &qpos, &qnrm, &root_addr);
     let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &node_table, &oper]);
-    let symbol_bits = last.symbol_bits;
-    drop(last.bytes);
-    let mut contexts = vec![OpContext::default(); ops.order.len()];
-    for (i, &s) in ops.order.iter().enumerate() {
-        contexts[s as usize] = ops.context(i);
+    drop(oper);
+    let (mut addresses, mut contexts) = (vec![], vec![]);
+    if per_split {
+        addresses = vec![0usize; ops.len()];
+        contexts = vec![OpContext::default(); ops.len()];
+        for (i, &s) in ops.order.iter().enumerate() {
+            addresses[s as usize] = op_addr[i] as usize;
+            contexts[s as usize] = ops.context(i);
+        }
     }
     Ok(Encoded { bytes, header: h, addresses, contexts, symbol_bits })
 }
@@ -163,20 +202,27 @@ fn check_mesh(pm: &ProgressiveMesh) -> Result<(), EncodeError> {
 /// The operations of step 1, in pre-order of the split forest (an operation, then `v_l`'s
 /// subtree, then `v_u`'s), and the split forest over them.
 ///
-/// An operation's [`OpData`] is made again from the progressive mesh and the quantized
-/// values each time it is coded ([`Operations::op`]): kept, it was three quarters of the
-/// encoder's memory. Making it costs time (on the dragon, compressing takes 2.4-2.5 s against
-/// 2.0 s when it was kept).
+/// The splits' data is copied into the operations' order (which is the order the passes read
+/// it in: read through the splits' refinement order, the encoder spent a fifth of its time
+/// waiting for memory). An operation's [`OpData`] is made again from it each time it is coded
+/// ([`Operations::op`]): kept, it was three quarters of the encoder's memory. Making it costs
+/// time (on the dragon, compressing took 2.4-2.5 s against 2.0 s when it was kept).
 struct Operations<'a> {
-    pm: &'a ProgressiveMesh,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
-    qcrit: &'a [[u32; 4]],
     /// Per operation: its split.
     order: Vec<u32>,
-    /// Per operation: one past the last FVID its vertex stands for.
+    /// Per operation: its split's `v` and `v_u`, and one past the last FVID its vertex stands
+    /// for.
+    v: Vec<u32>,
+    v_u: Vec<u32>,
     v_end: Vec<u32>,
-    /// Per operation: its parent's split (`NONE` for a root).
+    /// Per operation: its split's faces, `faces[faces_end[i - 1]..faces_end[i]]`.
+    faces: Vec<[u32; 3]>,
+    faces_end: Vec<u32>,
+    /// Per operation: its split's quantized criteria.
+    crit: Vec<[u32; 4]>,
+    /// Per operation: its parent operation (`NONE` for a root).
     parent: Vec<u32>,
     /// Per operation: the operations of `v_l` and `v_u` (`usize::MAX` where that child is a leaf).
     child_ops: Vec<[usize; 2]>,
@@ -194,38 +240,43 @@ impl Operations<'_> {
         self.order.len()
     }
 
+    /// Operation `i`'s faces.
+    fn faces(&self, i: usize) -> &[[u32; 3]] {
+        let start = if i == 0 { 0 } else { self.faces_end[i - 1] as usize };
+        &self.faces[start..self.faces_end[i] as usize]
+    }
+
     /// Operation `i`'s context.
     fn context(&self, i: usize) -> OpContext {
-        let split = &self.pm.splits[self.order[i] as usize];
+        let v = self.v[i];
         let p = self.parent[i];
         OpContext {
-            v: split.v,
+            v,
             v_end: self.v_end[i],
-            parent_criteria: if p == NONE { [0; 4] } else { self.qcrit[p as usize] },
-            position: self.qpos[split.v as usize],
-            normal: self.qnrm[split.v as usize],
+            parent_criteria: if p == NONE { [0; 4] } else { self.crit[p as usize] },
+            position: self.qpos[v as usize],
+            normal: self.qnrm[v as usize],
         }
     }
 
     /// Operation `i`: its context, its quantized criteria, its faces classified and sorted by
     /// third-corner offset (4.2.2), its position and normal deltas.
     fn op(&self, i: usize) -> OpData {
-        let s = self.order[i] as usize;
-        let split = &self.pm.splits[s];
         let ctx = self.context(i);
+        let (v, v_u) = (ctx.v, self.v_u[i]);
         let mut faces: SmallVec<[FaceCode; 2]> =
-            split.faces.iter().map(|&f| classify(split.v, split.v_u, ctx.v_end, f)).collect();
+            self.faces(i).iter().map(|&f| classify(v, v_u, ctx.v_end, f)).collect();
         faces.sort_by_key(|f| match *f {
             FaceCode::Standard { o, .. } => (0, o),
             FaceCode::General(_) => (1, 0),
         });
-        let (pv, pu) = (self.qpos[split.v as usize], self.qpos[split.v_u as usize]);
-        let (nv, nu) = (self.qnrm[split.v as usize], self.qnrm[split.v_u as usize]);
+        let (pv, pu) = (self.qpos[v as usize], self.qpos[v_u as usize]);
+        let (nv, nu) = (self.qnrm[v as usize], self.qnrm[v_u as usize]);
         let [l, r] = self.child_ops[i];
         OpData {
             ctx,
-            v_u: split.v_u,
-            crit: self.qcrit[s],
+            v_u,
+            crit: self.crit[i],
             has_left: l != usize::MAX,
             has_right: r != usize::MAX,
             faces,
@@ -255,19 +306,23 @@ struct Choices {
 /// subtree first: from tables built without swaps, the swapped children code would be too
 /// long for any swap to pay.
 fn uncompressed_operations<'a>(
-    pm: &'a ProgressiveMesh,
+    pm: &ProgressiveMesh,
     tree: &SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
-    qcrit: &'a [[u32; 4]],
+    qcrit: Vec<[u32; 4]>,
     normal_bits: u8,
 ) -> Result<(Operations<'a>, Choices), EncodeError> {
     let n = pm.positions.len();
     let m = pm.splits.len();
-    // Pre-order over the forest (v_l first); per op: split index, range end, parent split,
-    // children's op indices.
+    // Pre-order over the forest (v_l first); per op: split index, its data, range end, parent
+    // op, children's op indices.
     let mut order: Vec<u32> = Vec::with_capacity(m);
+    let (mut vs, mut v_us) = (Vec::with_capacity(m), Vec::with_capacity(m));
     let mut v_ends: Vec<u32> = Vec::with_capacity(m);
+    let mut faces: Vec<[u32; 3]> = Vec::with_capacity(pm.splits.iter().map(|s| s.faces.len()).sum());
+    let mut faces_end: Vec<u32> = Vec::with_capacity(m);
+    let mut crit: Vec<[u32; 4]> = Vec::with_capacity(m);
     let mut parents: Vec<u32> = Vec::with_capacity(m);
     let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(m);
     let mut visited = vec![false; m];
@@ -303,8 +358,13 @@ fn uncompressed_operations<'a>(
                 child_ops[p][side] = i;
             }
             order.push(s);
+            vs.push(split.v);
+            v_us.push(split.v_u);
             v_ends.push(v_end);
-            parents.push(parent.map_or(NONE, |(p, _)| order[p]));
+            faces.extend_from_slice(&split.faces);
+            faces_end.push(u32::try_from(faces.len()).map_err(|_| invalid("more than 2^32 faces"))?);
+            crit.push(qcrit[su]);
+            parents.push(parent.map_or(NONE, |(p, _)| p as u32));
             child_ops.push([usize::MAX; 2]);
             if has_right {
                 stack.push((r, split.v_u, v_end, Some((i, 1))));
@@ -317,7 +377,7 @@ fn uncompressed_operations<'a>(
     if order.len() != m {
         return Err(invalid("splits not reachable from the base vertices"));
     }
-    drop(visited);
+    drop((visited, qcrit));
 
     let mut height = vec![0u32; m];
     for i in (0..m).rev() {
@@ -329,20 +389,18 @@ fn uncompressed_operations<'a>(
         levels[h as usize].push(i);
     }
 
-    let smaller_first: Vec<bool> = (0..m)
-        .map(|i| {
-            let split = &pm.splits[order[i] as usize];
-            v_ends[i] - split.v_u < split.v_u - split.v
-        })
-        .collect();
+    let smaller_first: Vec<bool> = (0..m).map(|i| v_ends[i] - v_us[i] < v_us[i] - vs[i]).collect();
     let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; m], avg: 0 };
     let ops = Operations {
-        pm,
         qpos,
         qnrm,
-        qcrit,
         order,
+        v: vs,
+        v_u: v_us,
         v_end: v_ends,
+        faces,
+        faces_end,
+        crit,
         parent: parents,
         child_ops,
         root_ops,
@@ -546,7 +604,7 @@ struct OocCoding {
 }
 
 /// The out-of-core layout (sections 4.1 and 4.2): the hierarchy built over the in-core coded
-/// sizes (plus a byte for the node pointers), the operations coded node by node, children's
+/// sizes `incore_sizes` (plus a byte for the node pointers), the operations coded node by node, children's
 /// nodes first, with the in-core tables, the tables counted again from that coding and the
 /// operations coded again. As in the paper, where a node comes out larger than
 /// `node_bytes`, the hierarchy is built again with a smaller size limit ("we iteratively reduce
@@ -554,7 +612,8 @@ struct OocCoding {
 /// nodes are small enough after compression").
 fn out_of_core(
     ops: &Operations,
-    incore: &Recompressed,
+    incore_sizes: &[u32],
+    incore_tables: Vec<Table>,
     h: &Header,
     node_bytes: u32,
     step: &mut dyn FnMut(&str),
@@ -566,14 +625,13 @@ fn out_of_core(
     let geometry: Vec<OpGeometry> = (0..m)
         .into_par_iter()
         .map(|i| {
-            let s = ops.order[i] as usize;
-            let c = dequantize_criteria(ops.qcrit[s], h);
+            let c = dequantize_criteria(ops.crit[i], h);
             OpGeometry {
                 children: ops.child_ops[i].map(|c| if c == usize::MAX { NONE } else { c as u32 }),
-                size: incore.bytes.len[i] + 1,
+                size: incore_sizes[i] + 1,
                 error: c.geometric_error,
                 attribute_error: c.attribute_error,
-                center: dequantize_position(ops.qpos[ops.pm.splits[s].v as usize], h),
+                center: dequantize_position(ops.qpos[ops.v[i] as usize], h),
                 radius: c.radius,
             }
         })
@@ -589,7 +647,7 @@ fn out_of_core(
                 "more than {MAX_NODES} nodes of {node_bytes} bytes; use larger nodes or split the model into chunks"
             )));
         }
-        let mut tables = incore.tables.clone();
+        let mut tables = incore_tables.clone();
         let mut largest = 0;
         for round in 0..2 {
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
@@ -801,16 +859,16 @@ fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>]) -> V
 }
 
 /// The operations section: pre-order, each operation followed by the subtree it stores first.
-/// Returns the section and, per split (in the input's order), its operation's address.
-fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Vec<usize>) {
+/// Returns the section and per operation its address.
+fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Vec<u64>) {
     let m = op_bytes.len.len();
     let mut oper = Vec::with_capacity(op_bytes.data.len());
-    let mut op_addr = vec![0usize; m];
+    let mut op_addr = vec![0u64; m];
     let mut layout: Vec<usize> = vec![];
     for &root in ops.root_ops.iter().filter(|&&r| r != usize::MAX) {
         layout.push(root);
         while let Some(i) = layout.pop() {
-            op_addr[i] = oper.len();
+            op_addr[i] = oper.len() as u64;
             oper.extend_from_slice(op_bytes.get(i));
             let [l, r] = ops.child_ops[i];
             let (first, second) = if swaps[i] { (r, l) } else { (l, r) };
@@ -821,23 +879,13 @@ fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Ve
             }
         }
     }
-    let mut addresses = vec![0usize; ops.order.len()];
-    for (i, &s) in ops.order.iter().enumerate() {
-        addresses[s as usize] = op_addr[i];
-    }
-    (oper, addresses)
+    (oper, op_addr)
 }
 
 /// The base mesh section (LEB128): per base vertex its FVID gap to the previous one, its
-/// quantized position and normal, and its first operation's address plus one (0: none); then
-/// the base faces.
-fn base_section(
-    pm: &ProgressiveMesh,
-    tree: &SplitTree,
-    qpos: &[[u32; 3]],
-    qnrm: &[[u32; 2]],
-    addresses: &[usize],
-) -> Vec<u8> {
+/// quantized position and normal, and its first operation's address (`root_addr`) plus one (0:
+/// none); then the base faces.
+fn base_section(pm: &ProgressiveMesh, qpos: &[[u32; 3]], qnrm: &[[u32; 2]], root_addr: &[Option<u64>]) -> Vec<u8> {
     let mut bb = Vec::new();
     let mut next = 0u64;
     for (b, &v) in pm.base_vertices.iter().enumerate() {
@@ -849,8 +897,7 @@ fn base_section(
         for x in qnrm[v as usize] {
             put_varint(&mut bb, x as u64);
         }
-        let root = tree.roots[b];
-        put_varint(&mut bb, if root == NONE { 0 } else { addresses[root as usize] as u64 + 1 });
+        put_varint(&mut bb, root_addr[b].map_or(0, |a| a + 1));
     }
     for t in &pm.base_faces {
         for &x in t {
