@@ -24,7 +24,7 @@ fi
 echo "same-output: building the working tree"
 cargo build -q --release -p tessera
 scripts/outputs.sh "$BASE_BIN" "$work/before"
-scripts/outputs.sh target/release/tessera "$work/after"
+scripts/outputs.sh "${CARGO_TARGET_DIR:-target}/release/tessera" "$work/after"
 
 python3 - "$work/before" "$work/after" <<'EOF'
 import json, os, sys
