@@ -34,7 +34,7 @@ fn compare_with(decoder: &GpuOpDecoder, dpm: &Dpm, jobs: &[(usize, OpContext)], 
             (Ok(c), Ok(g)) => {
                 let ctx_s = format!("{what}: operation {i} at {addr} ({ctx:?})");
                 assert_eq!(g.v_u, c.split.v_u, "{ctx_s}: v_u");
-                assert_eq!(g.faces, c.split.faces, "{ctx_s}: faces");
+                assert_eq!(g.faces[..], c.split.faces[..], "{ctx_s}: faces");
                 assert_eq!(g.criteria_q, c.criteria_q, "{ctx_s}: criteria codes");
                 let cf =
                     [c.criteria.sin_alpha, c.criteria.geometric_error, c.criteria.attribute_error, c.criteria.radius];

@@ -295,7 +295,7 @@ pub(super) fn read_op(
     if (nf == 0 && pattern != 0) || pattern > 2 {
         return Err(corrupt("bad operation head"));
     }
-    let mut faces = Vec::with_capacity(nf as usize);
+    let mut faces = crate::pm::SplitFaces::with_capacity(nf as usize);
     let mut prev: Option<(u64, u64, u64)> = None;
     for i in 0..nf {
         let form = match (pattern, i) {
