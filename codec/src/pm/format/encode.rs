@@ -224,20 +224,26 @@ struct Operations<'a> {
     crit: Vec<[u32; 4]>,
     /// Per operation: its parent operation (`NONE` for a root).
     parent: Vec<u32>,
-    /// Per operation: the operations of `v_l` and `v_u` (`usize::MAX` where that child is a leaf).
-    child_ops: Vec<[usize; 2]>,
+    /// Per operation: the operations of `v_l` and `v_u` (`NONE` where that child is a leaf;
+    /// read as `usize` through [`Operations::children`]). 32-bit, as the layout's ids are.
+    child_ops: Vec<[u32; 2]>,
     /// Per base vertex: its first operation (`usize::MAX`: none).
     root_ops: Vec<usize>,
     /// The operations by height in the split forest (0: both children leaves): an operation's
     /// children are all of lower height, so each height is coded in parallel once the lower
     /// ones are done (pre-order puts children after their parent).
-    levels: Vec<Vec<usize>>,
+    levels: Vec<Vec<u32>>,
     normal_bits: u8,
 }
 
 impl Operations<'_> {
     fn len(&self) -> usize {
         self.order.len()
+    }
+
+    /// Operation `i`'s children's operations, `usize::MAX` where that child is a leaf.
+    fn children(&self, i: usize) -> [usize; 2] {
+        self.child_ops[i].map(|c| if c == NONE { usize::MAX } else { c as usize })
     }
 
     /// Operation `i`'s faces.
@@ -272,7 +278,7 @@ impl Operations<'_> {
         });
         let (pv, pu) = (self.qpos[v as usize], self.qpos[v_u as usize]);
         let (nv, nu) = (self.qnrm[v as usize], self.qnrm[v_u as usize]);
-        let [l, r] = self.child_ops[i];
+        let [l, r] = self.children(i);
         OpData {
             ctx,
             v_u,
@@ -324,7 +330,7 @@ fn uncompressed_operations<'a>(
     let mut faces_end: Vec<u32> = Vec::with_capacity(m);
     let mut crit: Vec<[u32; 4]> = Vec::with_capacity(m);
     let mut parents: Vec<u32> = Vec::with_capacity(m);
-    let mut child_ops: Vec<[usize; 2]> = Vec::with_capacity(m);
+    let mut child_ops: Vec<[u32; 2]> = Vec::with_capacity(m);
     let mut visited = vec![false; m];
     let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
     // Stack entries: (split, its vertex, its range end, parent op index and side).
@@ -355,7 +361,7 @@ fn uncompressed_operations<'a>(
             let i = order.len();
             visited[su] = true;
             if let Some((p, side)) = parent {
-                child_ops[p][side] = i;
+                child_ops[p][side] = i as u32;
             }
             order.push(s);
             vs.push(split.v);
@@ -365,7 +371,7 @@ fn uncompressed_operations<'a>(
             faces_end.push(u32::try_from(faces.len()).map_err(|_| invalid("more than 2^32 faces"))?);
             crit.push(qcrit[su]);
             parents.push(parent.map_or(NONE, |(p, _)| p as u32));
-            child_ops.push([usize::MAX; 2]);
+            child_ops.push([NONE; 2]);
             if has_right {
                 stack.push((r, split.v_u, v_end, Some((i, 1))));
             }
@@ -381,12 +387,12 @@ fn uncompressed_operations<'a>(
 
     let mut height = vec![0u32; m];
     for i in (0..m).rev() {
-        let h = child_ops[i].iter().filter(|&&c| c != usize::MAX).map(|&c| height[c] + 1).max().unwrap_or(0);
+        let h = child_ops[i].iter().filter(|&&c| c != NONE).map(|&c| height[c as usize] + 1).max().unwrap_or(0);
         height[i] = h;
     }
-    let mut levels: Vec<Vec<usize>> = vec![vec![]; height.iter().max().map_or(0, |&h| h as usize + 1)];
+    let mut levels: Vec<Vec<u32>> = vec![vec![]; height.iter().max().map_or(0, |&h| h as usize + 1)];
     for (i, &h) in height.iter().enumerate() {
-        levels[h as usize].push(i);
+        levels[h as usize].push(i as u32);
     }
 
     let smaller_first: Vec<bool> = (0..m).map(|i| v_ends[i] - v_us[i] < v_us[i] - vs[i]).collect();
@@ -541,7 +547,6 @@ fn symbol_bits(counts: &[[u64; 256]], tables: &[Table]) -> (f64, f64) {
 /// its bytes, swap and offset. Every operation whose children both split is coded both ways,
 /// and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
 fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (OpBytes, Choices) {
-    let child_ops = &ops.child_ops;
     let m = ops.len();
     let mut bytes = OpBytes::new(m);
     let mut subtree = vec![0u64; m];
@@ -552,8 +557,9 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (OpBytes,
         let coded: Vec<(Vec<u8>, bool, u64)> = level
             .par_iter()
             .map(|&i| {
+                let i = i as usize;
                 let d = ops.op(i);
-                let [l, r] = child_ops[i];
+                let [l, r] = ops.children(i);
                 let code = |swap: bool, offset: u64| {
                     let mut w = OpWriter::coding(tables);
                     write_op(&mut w, &d, swap, offset, avg, ops.normal_bits, None);
@@ -573,7 +579,8 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (OpBytes,
             })
             .collect();
         for (&i, (b, swap, offset)) in level.iter().zip(coded) {
-            let [l, r] = child_ops[i];
+            let i = i as usize;
+            let [l, r] = ops.children(i);
             let sub = |c: usize| if c == usize::MAX { 0 } else { subtree[c] };
             subtree[i] = b.len() as u64 + sub(l) + sub(r);
             bytes.put(i, &b);
@@ -627,7 +634,7 @@ fn out_of_core(
         .map(|i| {
             let c = dequantize_criteria(ops.crit[i], h);
             OpGeometry {
-                children: ops.child_ops[i].map(|c| if c == usize::MAX { NONE } else { c as u32 }),
+                children: ops.child_ops[i],
                 size: incore_sizes[i] + 1,
                 error: c.geometric_error,
                 attribute_error: c.attribute_error,
@@ -651,7 +658,7 @@ fn out_of_core(
         let mut largest = 0;
         for round in 0..2 {
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
-            let (nodes, addr, coding) = code_nodes(ops, &hier, &tables, h.avg_op_size);
+            let (nodes, addr, coding) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0);
             largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
             if largest > node_bytes as usize {
                 break;
@@ -675,18 +682,19 @@ fn out_of_core(
     }
 }
 
-/// A node's bytes, and per operation in it its index, address and coding (`u32` as the
-/// addresses are: these lists hold a whole level's operations at once).
+/// A node's bytes, and per operation in it its index, address and coding.
 type CodedNode = (Vec<u8>, Vec<(u32, u32, OocCoding)>);
 
 /// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
 /// each in parallel with the others of its depth, so that a child's address is known when its
-/// parent operation is coded. Returns per node its bytes, per operation its address and coding.
+/// parent operation is coded. Returns per node its bytes, per operation its address and, with
+/// `keep_coding`, its coding (else none).
 fn code_nodes(
     ops: &Operations,
     hier: &Hierarchy,
     tables: &[Table],
     avg: u32,
+    keep_coding: bool,
 ) -> (Vec<Vec<u8>>, Vec<u32>, Vec<OocCoding>) {
     let m = ops.len();
     let count = hier.parents.len();
@@ -698,28 +706,28 @@ fn code_nodes(
     for (i, &n) in hier.node_of.iter().enumerate() {
         members[n as usize].push(i as u32);
     }
-    let mut parent_op = vec![NONE; m];
-    for (i, c) in ops.child_ops.iter().enumerate() {
-        for &c in c.iter().filter(|&&c| c != usize::MAX) {
-            parent_op[c] = i as u32;
-        }
-    }
+    // Per operation its parent's.
+    let parent_op = &ops.parent;
     let mut by_depth: Vec<Vec<usize>> = vec![vec![]; depth.iter().max().map_or(0, |d| d + 1)];
     for (n, &d) in depth.iter().enumerate() {
         by_depth[d].push(n);
     }
     let mut addr = vec![NONE; m];
-    let mut coding = vec![OocCoding::default(); m];
+    let mut coding = vec![OocCoding::default(); if keep_coding { m } else { 0 }];
     let mut nodes: Vec<Vec<u8>> = vec![vec![]; count];
-    for level in by_depth.iter().rev() {
+    // In pieces of a depth, so that the operations coded in flight stay few (a whole depth
+    // holds most of the model's: 32 bytes an operation).
+    for level in by_depth.iter().rev().flat_map(|l| l.chunks(64)) {
         let coded: Vec<CodedNode> = level
             .par_iter()
-            .map(|&n| code_node(ops, hier, &members[n], n as u32, &parent_op, &addr, tables, avg))
+            .map(|&n| code_node(ops, hier, &members[n], n as u32, parent_op, &addr, tables, avg))
             .collect();
         for (&n, (bytes, placed)) in level.iter().zip(coded) {
             for (i, a, c) in placed {
                 addr[i as usize] = a;
-                coding[i as usize] = c;
+                if keep_coding {
+                    coding[i as usize] = c;
+                }
             }
             nodes[n] = bytes;
         }
@@ -750,7 +758,7 @@ fn code_node(
     for (k, &i) in list.iter().enumerate().rev() {
         let i = i as usize;
         let d = ops.op(i);
-        let [l, r] = ops.child_ops[i];
+        let [l, r] = ops.children(i);
         // A child's location and the bytes of its subtree's part in this node.
         let loc = |c: usize| -> (Loc, u64) {
             if hier.node_of[c] == n {
@@ -803,7 +811,7 @@ fn code_node(
             let i = list[k] as usize;
             placed.push((i as u32, n * NODE_BYTES as u32 + out.len() as u32, coding[k]));
             out.extend_from_slice(&bytes[k]);
-            let [l, r] = ops.child_ops[i];
+            let [l, r] = ops.children(i);
             let (first, second) = if coding[k].swap { (r, l) } else { (l, r) };
             for c in [second, first] {
                 if c != usize::MAX && hier.node_of[c] == n {
@@ -870,7 +878,7 @@ fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Ve
         while let Some(i) = layout.pop() {
             op_addr[i] = oper.len() as u64;
             oper.extend_from_slice(op_bytes.get(i));
-            let [l, r] = ops.child_ops[i];
+            let [l, r] = ops.children(i);
             let (first, second) = if swaps[i] { (r, l) } else { (l, r) };
             for c in [second, first] {
                 if c != usize::MAX {
