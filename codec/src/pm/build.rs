@@ -1103,13 +1103,13 @@ fn criteria(pm: &ProgressiveMesh, input: &[[u32; 3]], geometric: &[f64]) -> (Vec
     }
 
     let tree = SplitTree::new(pm);
-    // Per split, in f64: radius, geometric error (from the simplification), attribute
+    // Per split, in f64: radius (which is also the geometric error, see below), attribute
     // error, cone angle.
-    let mut node = vec![[0.0f64; 4]; pm.splits.len()];
+    let mut node = vec![[0.0f64; 3]; pm.splits.len()];
     let max_angle = std::f64::consts::FRAC_PI_2;
     for (s, split) in pm.splits.iter().enumerate().rev() {
         let (v, u) = (split.v as usize, split.v_u as usize);
-        let child = |c: u32, f: usize| if c == NONE { [0.0, 0.0, 0.0, leaf_alpha[f]] } else { node[c as usize] };
+        let child = |c: u32, f: usize| if c == NONE { [0.0, 0.0, leaf_alpha[f]] } else { node[c as usize] };
         let [cl, cu] = tree.children[s];
         let (l, r) = (child(cl, v), child(cu, u));
         // The geometric error is at least the farthest finest vertex of the region from `v`,
@@ -1118,21 +1118,28 @@ fn criteria(pm: &ProgressiveMesh, input: &[[u32; 3]], geometric: &[f64]) -> (Vec
         // is raised where needed so that the children's spheres nest in it: a child's error
         // may exceed its region (raised to its neighbours'), and the runtime tests spheres,
         // which must nest for a child never to ask for a split its parent does not.
-        let nest = |c: [f64; 4], d: f64| (d + c[0]) * (1.0 + SLACK);
+        let nest = |c: [f64; 3], d: f64| (d + c[0]) * (1.0 + SLACK);
         let radius = geometric[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
-        let attribute = l[2].max(norm(sub(normal[u], normal[v])) + r[2]);
-        let alpha = (l[3].max(angle(normal[v], normal[u]) + r[3]) * (1.0 + SLACK) + SLACK).min(max_angle);
+        let attribute = l[1].max(norm(sub(normal[u], normal[v])) + r[1]);
+        let alpha = (l[2].max(angle(normal[v], normal[u]) + r[2]) * (1.0 + SLACK) + SLACK).min(max_angle);
         let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
-        node[s] = [radius, radius, attribute, alpha];
+        node[s] = [radius, attribute, alpha];
     }
+    // The outputs made one after the other, each input freed once read: this is the peak of
+    // a large model's build.
+    drop((tree, leaf_alpha));
+    let normal: Vec<[f32; 3]> = {
+        let f64s = normal;
+        f64s.iter().map(|v| v.map(|x| x as f32)).collect()
+    };
     let criteria = node
         .iter()
-        .map(|&[radius, geometric, attribute, alpha]| Criteria {
+        .map(|&[radius, attribute, alpha]| Criteria {
             sin_alpha: if alpha >= max_angle { 1.0 } else { alpha.sin() as f32 },
-            geometric_error: geometric as f32,
+            geometric_error: radius as f32,
             attribute_error: attribute as f32,
             radius: radius as f32,
         })
         .collect();
-    (normal.iter().map(|v| v.map(|x| x as f32)).collect(), criteria)
+    (normal, criteria)
 }

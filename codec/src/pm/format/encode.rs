@@ -123,12 +123,15 @@ fn encode_mesh(
     let qnrm: Vec<[u32; 2]> = pm.normals.par_iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
     let qcrit: Vec<[u32; 4]> = pm.criteria.par_iter().map(|c| quantize_criteria(c, &h)).collect();
     let tree = SplitTree::new(&pm);
+    // Only the splits and the base mesh are read from here on, and after the operations are
+    // made, the base mesh alone.
+    if let Cow::Owned(pm) = &mut pm {
+        (pm.positions, pm.normals, pm.criteria, pm.fvid_of_input) = Default::default();
+    }
     let (ops, first_guess) = uncompressed_operations(&pm, &tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
-    // The operations hold their splits' data in their own order from here on.
     drop(tree);
     if let Cow::Owned(pm) = &mut pm {
-        let base = (std::mem::take(&mut pm.base_vertices), std::mem::take(&mut pm.base_faces));
-        *pm = ProgressiveMesh { base_vertices: base.0, base_faces: base.1, ..Default::default() };
+        pm.splits = Vec::new();
     }
     let (first_tables, _) = probability_tables(&ops, &first_guess);
     step("coding bottom-up with estimated tables");
@@ -319,7 +322,7 @@ fn uncompressed_operations<'a>(
     qcrit: Vec<[u32; 4]>,
     normal_bits: u8,
 ) -> Result<(Operations<'a>, Choices), EncodeError> {
-    let n = pm.positions.len();
+    let n = qpos.len();
     let m = pm.splits.len();
     // Pre-order over the forest (v_l first); per op: split index, its data, range end, parent
     // op, children's op indices.
