@@ -95,11 +95,11 @@ pub fn encode_with_progress(
     encode_mesh(Cow::Borrowed(pm), opts, true, step)
 }
 
-/// As [`encode_with_progress`], taking the progressive mesh so that what the encoder has copied
-/// into its own order (splits, criteria, normals, positions: 60-100 bytes an operation) is
-/// freed as soon as it is copied, and leaving [`Encoded::addresses`] and
-/// [`Encoded::contexts`] empty (56 bytes an operation more): what `tessera pm build` needs,
-/// whose peak memory is the encoder's on large models. The bytes are the same.
+/// As [`encode_with_progress`], taking the progressive mesh so that what the encoder has
+/// quantized or copied into its own order (positions, normals, criteria, splits: about 85
+/// bytes an operation) is freed as soon as it is, and leaving [`Encoded::addresses`] and
+/// [`Encoded::contexts`] empty (52 bytes an operation more): what `tessera pm build` needs on
+/// large models. The bytes are the same.
 pub fn encode_owned(
     pm: ProgressiveMesh,
     opts: EncodeOptions,
