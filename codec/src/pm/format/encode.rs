@@ -29,6 +29,7 @@ use super::quantize::{
 use super::symbols::OpWriter;
 use super::tables::{every_symbol, write_tables};
 use crate::container::put_varint;
+use crate::csr::Csr;
 use crate::huffman::Table;
 use crate::pm::{ProgressiveMesh, SplitTree, NONE};
 use thiserror::Error;
@@ -157,7 +158,7 @@ fn encode_mesh(
         // only the tables and the sizes.
         let Recompressed { tables, bytes: OpBytes { len: sizes, data, start }, choices, .. } = last;
         drop((data, start, choices));
-        let ooc = out_of_core(&ops, &sizes, tables, &h, opts.node_bytes, step)?;
+        let ooc = out_of_core(&ops, &sizes, &tables, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
         let op_addr = ooc.addr.iter().map(|&a| u64::from(a)).collect();
         (ooc.nodes.concat(), op_addr, ooc.tables, write_node_table(&ooc.infos))
@@ -220,9 +221,8 @@ struct Operations<'a> {
     v: Vec<u32>,
     v_u: Vec<u32>,
     v_end: Vec<u32>,
-    /// Per operation: its split's faces, `faces[faces_end[i - 1]..faces_end[i]]`.
-    faces: Vec<[u32; 3]>,
-    faces_end: Vec<u32>,
+    /// Per operation: its split's faces.
+    faces: Csr<[u32; 3]>,
     /// Per operation: its split's quantized criteria.
     crit: Vec<[u32; 4]>,
     /// Per operation: its parent operation (`NONE` for a root).
@@ -251,8 +251,7 @@ impl Operations<'_> {
 
     /// Operation `i`'s faces.
     fn faces(&self, i: usize) -> &[[u32; 3]] {
-        let start = if i == 0 { 0 } else { self.faces_end[i - 1] as usize };
-        &self.faces[start..self.faces_end[i] as usize]
+        self.faces.get(i)
     }
 
     /// Operation `i`'s context.
@@ -329,8 +328,6 @@ fn uncompressed_operations<'a>(
     let mut order: Vec<u32> = Vec::with_capacity(m);
     let (mut vs, mut v_us) = (Vec::with_capacity(m), Vec::with_capacity(m));
     let mut v_ends: Vec<u32> = Vec::with_capacity(m);
-    let mut faces: Vec<[u32; 3]> = Vec::with_capacity(pm.splits.iter().map(|s| s.faces.len()).sum());
-    let mut faces_end: Vec<u32> = Vec::with_capacity(m);
     let mut crit: Vec<[u32; 4]> = Vec::with_capacity(m);
     let mut parents: Vec<u32> = Vec::with_capacity(m);
     let mut child_ops: Vec<[u32; 2]> = Vec::with_capacity(m);
@@ -370,8 +367,6 @@ fn uncompressed_operations<'a>(
             vs.push(split.v);
             v_us.push(split.v_u);
             v_ends.push(v_end);
-            faces.extend_from_slice(&split.faces);
-            faces_end.push(u32::try_from(faces.len()).map_err(|_| invalid("more than 2^32 faces"))?);
             crit.push(qcrit[su]);
             parents.push(parent.map_or(NONE, |(p, _)| p as u32));
             child_ops.push([NONE; 2]);
@@ -387,6 +382,9 @@ fn uncompressed_operations<'a>(
         return Err(invalid("splits not reachable from the base vertices"));
     }
     drop((visited, qcrit));
+    let faces = Csr::build(m, || {
+        order.iter().enumerate().flat_map(|(i, &s)| pm.splits[s as usize].faces.iter().map(move |&f| (i as u32, f)))
+    });
 
     let mut height = vec![0u32; m];
     for i in (0..m).rev() {
@@ -408,7 +406,6 @@ fn uncompressed_operations<'a>(
         v_u: v_us,
         v_end: v_ends,
         faces,
-        faces_end,
         crit,
         parent: parents,
         child_ops,
@@ -614,16 +611,16 @@ struct OocCoding {
 }
 
 /// The out-of-core layout (sections 4.1 and 4.2): the hierarchy built over the in-core coded
-/// sizes `incore_sizes` (plus a byte for the node pointers), the operations coded node by node, children's
-/// nodes first, with the in-core tables, the tables counted again from that coding and the
-/// operations coded again. As in the paper, where a node comes out larger than
+/// sizes `incore_sizes` (plus a byte for the node pointers), the operations coded node by
+/// node, children's nodes first, with the in-core tables, the tables counted again from that
+/// coding and the operations coded again. As in the paper, where a node comes out larger than
 /// `node_bytes`, the hierarchy is built again with a smaller size limit ("we iteratively reduce
 /// the maximum node size when building the hierarchy and store the model as soon as all
 /// nodes are small enough after compression").
 fn out_of_core(
     ops: &Operations,
     incore_sizes: &[u32],
-    incore_tables: Vec<Table>,
+    incore_tables: &[Table],
     h: &Header,
     node_bytes: u32,
     step: &mut dyn FnMut(&str),
@@ -657,7 +654,7 @@ fn out_of_core(
                 "more than {MAX_NODES} nodes of {node_bytes} bytes; use larger nodes or split the model into chunks"
             )));
         }
-        let mut tables = incore_tables.clone();
+        let mut tables = incore_tables.to_vec();
         let mut largest = 0;
         for round in 0..2 {
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
