@@ -16,7 +16,7 @@ mkdir -p "$XDG_RUNTIME_DIR"
 # Open MPI refuses to run as root unless told it may.
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 cargo build --release -q -p tessera
-mpirun --oversubscribe --bind-to none -np 2 target/release/tessera render "$model" \
+mpirun --oversubscribe --bind-to none -np 2 "${CARGO_TARGET_DIR:-target}/release/tessera" render "$model" \
   --size 1280x720 --tiles 4x4 --view three-quarter --azimuth -135 \
   --out "$out/frame.png" --stats "$out/stats.jsonl" "$@" 2>&1 | grep -v '^$' || exit 1
 echo "demo frame: $out/frame.png (stats: $out/stats.jsonl)"
