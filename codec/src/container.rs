@@ -142,19 +142,43 @@ impl<'a> Reader<'a> {
 
 impl<const N: usize> Layout<N> {
     pub fn write(&self, header: &[u8], sections: [&[u8]; N]) -> Vec<u8> {
-        let mut out = Vec::with_capacity(header.len() + sections.iter().map(|s| s.len() + 12).sum::<usize>() + 16);
-        out.extend_from_slice(&self.magic);
-        out.extend_from_slice(&self.version.to_le_bytes());
-        out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-        out.extend_from_slice(header);
-        out.extend_from_slice(&crc32fast::hash(header).to_le_bytes());
-        for (tag, s) in self.tags.iter().zip(sections) {
-            out.extend_from_slice(tag);
-            out.extend_from_slice(&(s.len() as u32).to_le_bytes());
-            out.extend_from_slice(s);
-            out.extend_from_slice(&crc32fast::hash(s).to_le_bytes());
-        }
+        let mut out = Vec::with_capacity(self.written_len(header, sections.map(|s| s.len())));
+        self.write_pieces(&mut out, header, sections.each_ref().map(std::slice::from_ref))
+            .expect("writing to a Vec does not fail");
         out
+    }
+
+    /// The length of the file [`Layout::write`] makes of `header` and sections of
+    /// `section_lens` bytes.
+    pub fn written_len(&self, header: &[u8], section_lens: [usize; N]) -> usize {
+        self.magic.len() + 8 + header.len() + section_lens.iter().map(|l| l + 12).sum::<usize>()
+    }
+
+    /// Writes to `w` the file [`Layout::write`] makes, each section given as pieces in order,
+    /// so that a large section is written from its parts without first being concatenated.
+    pub fn write_pieces(
+        &self,
+        w: &mut dyn std::io::Write,
+        header: &[u8],
+        sections: [&[impl AsRef<[u8]>]; N],
+    ) -> std::io::Result<()> {
+        w.write_all(&self.magic)?;
+        w.write_all(&self.version.to_le_bytes())?;
+        w.write_all(&(header.len() as u16).to_le_bytes())?;
+        w.write_all(header)?;
+        w.write_all(&crc32fast::hash(header).to_le_bytes())?;
+        for (tag, pieces) in self.tags.iter().zip(sections) {
+            let len: usize = pieces.iter().map(|p| p.as_ref().len()).sum();
+            w.write_all(tag)?;
+            w.write_all(&(len as u32).to_le_bytes())?;
+            let mut crc = crc32fast::Hasher::new();
+            for p in pieces {
+                crc.update(p.as_ref());
+                w.write_all(p.as_ref())?;
+            }
+            w.write_all(&crc.finalize().to_le_bytes())?;
+        }
+        Ok(())
     }
 
     /// Checks magic, version, lengths and checksums; returns the version, the header and the

@@ -12,7 +12,7 @@ use serde::Serialize;
 use crate::cli::CameraArgs;
 use crate::commands::load_mesh;
 use crate::commands::{expect_kind, mesh_output, read_input, summary};
-use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
+use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
 use codec::input::ModelKind;
 
@@ -35,14 +35,15 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
     let ops = pm.splits.len();
     let pb = progress::spinner(format!("compressing {ops} operations"));
     let t = Instant::now();
-    // Owned, so that the encoder frees the splits once it has them in its own order.
+    // Owned, so that the encoder frees the splits once it has them in its own order; the file
+    // is written from its parts (a large model's nodes are never copied into one buffer).
     let enc = format::encode_owned(pm, opts, &mut |step| {
         pb.set_message(format!("compressing {ops} operations: {step}"));
     })
     .context("cannot encode the progressive mesh")?;
     pb.finish_and_clear();
     let enc_s = t.elapsed().as_secs_f64();
-    write_bytes(output, &enc.bytes)?;
+    write_atomic(output, |w| enc.write_to(w))?;
     let secs = build_s + enc_s;
     summary(
         output,
@@ -54,8 +55,8 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
             enc.header.triangles,
             enc.header.vertices,
             enc.header.splits,
-            enc.bytes.len(),
-            enc.bytes.len() as f64 / enc.header.vertices.max(1) as f64,
+            enc.len(),
+            enc.len() as f64 / enc.header.vertices.max(1) as f64,
             build_s * 1e3,
             enc_s * 1e3,
             enc.header.splits as f64 / secs.max(1e-9)

@@ -67,6 +67,45 @@ pub struct Encoded {
     pub symbol_bits: (f64, f64),
 }
 
+/// An encoded file as the parts it is written from (see [`encode_owned`]): a large model's
+/// operations are written to the file node by node, never copied into one buffer.
+#[derive(Clone, Debug)]
+pub struct EncodedFile {
+    pub header: Header,
+    /// As [`Encoded::symbol_bits`].
+    pub symbol_bits: (f64, f64),
+    /// The header's bytes, the tables, base mesh and node table sections, and the operations
+    /// section in pieces.
+    sections: (Vec<u8>, [Vec<u8>; 3], Vec<Vec<u8>>),
+}
+
+impl EncodedFile {
+    /// The file's length in bytes.
+    pub fn len(&self) -> usize {
+        let (h, [tb, bb, nt], oper) = &self.sections;
+        LAYOUT.written_len(h, [tb.len(), bb.len(), nt.len(), oper.iter().map(Vec::len).sum()])
+    }
+
+    /// Whether the file is empty (never: it has a header).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Writes the file to `w`, the bytes [`EncodedFile::into_bytes`] returns.
+    pub fn write_to(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let (h, [tb, bb, nt], oper) = &self.sections;
+        let one = std::slice::from_ref;
+        LAYOUT.write_pieces(w, h, [one(tb), one(bb), one(nt), oper])
+    }
+
+    /// The file's bytes.
+    pub fn into_bytes(self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.len());
+        self.write_to(&mut out).expect("writing to a Vec does not fail");
+        out
+    }
+}
+
 /// What keeps a progressive mesh from being encoded.
 #[derive(Debug, Error, PartialEq)]
 pub enum EncodeError {
@@ -93,20 +132,24 @@ pub fn encode_with_progress(
     opts: EncodeOptions,
     step: &mut dyn FnMut(&str),
 ) -> Result<Encoded, EncodeError> {
-    encode_mesh(Cow::Borrowed(pm), opts, true, step)
+    let (file, addresses, contexts) = encode_mesh(Cow::Borrowed(pm), opts, true, step)?;
+    let (header, symbol_bits) = (file.header, file.symbol_bits);
+    Ok(Encoded { bytes: file.into_bytes(), header, addresses, contexts, symbol_bits })
 }
 
 /// As [`encode_with_progress`], taking the progressive mesh so that what the encoder has
 /// quantized or copied into its own order (positions, normals, criteria, splits: about 85
-/// bytes an operation) is freed as soon as it is, and leaving [`Encoded::addresses`] and
-/// [`Encoded::contexts`] empty (52 bytes an operation more): what `tessera pm build` needs on
-/// large models. The bytes are the same.
+/// bytes an operation) is freed as soon as it is, without [`Encoded::addresses`] and
+/// [`Encoded::contexts`] (52 bytes an operation more), and returning the file as its parts,
+/// written with [`EncodedFile::write_to`] (an out-of-core file's nodes are never copied into
+/// one buffer, which took twice the file's size): what `tessera pm build` needs on large
+/// models. The bytes are the same.
 pub fn encode_owned(
     pm: ProgressiveMesh,
     opts: EncodeOptions,
     step: &mut dyn FnMut(&str),
-) -> Result<Encoded, EncodeError> {
-    encode_mesh(Cow::Owned(pm), opts, false, step)
+) -> Result<EncodedFile, EncodeError> {
+    Ok(encode_mesh(Cow::Owned(pm), opts, false, step)?.0)
 }
 
 /// [`encode_with_progress`] and [`encode_owned`]; `per_split`: whether to return the
@@ -116,7 +159,7 @@ fn encode_mesh(
     opts: EncodeOptions,
     per_split: bool,
     step: &mut dyn FnMut(&str),
-) -> Result<Encoded, EncodeError> {
+) -> Result<(EncodedFile, Vec<usize>, Vec<OpContext>), EncodeError> {
     let mut h = fit_header(&pm, opts)?;
     check_mesh(&pm)?;
     step("preparing the operations");
@@ -142,14 +185,15 @@ fn encode_mesh(
     h.avg_op_size = offsets.avg;
 
     let symbol_bits = last.symbol_bits;
-    // Per operation its address (see `Encoded::addresses`).
-    let (oper, op_addr, tables, node_table): (_, Vec<u64>, _, _) = if opts.node_bytes == 0 {
+    // Per operation its address (see `Encoded::addresses`): in core below 2^31, out of core
+    // `node * NODE_BYTES + local` in 32 bits.
+    let (oper, op_addr, tables, node_table): (Vec<Vec<u8>>, Vec<u32>, _, _) = if opts.node_bytes == 0 {
         let (oper, op_addr) = lay_out(&ops, &last.bytes, &last.choices.swaps);
         // Offsets into the section and their residuals stay within 32 bits as zigzag values.
         if oper.len() >= 1 << 31 {
             return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
         }
-        (oper, op_addr, last.tables, vec![])
+        (vec![oper], op_addr, last.tables, vec![])
     } else if ops.len() == 0 {
         // Nothing to page: a mesh without operations is an in-core file.
         (vec![], vec![], last.tables, vec![])
@@ -160,14 +204,12 @@ fn encode_mesh(
         drop((data, start, choices));
         let ooc = out_of_core(&ops, &sizes, &tables, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
-        let op_addr = ooc.addr.iter().map(|&a| u64::from(a)).collect();
-        (ooc.nodes.concat(), op_addr, ooc.tables, write_node_table(&ooc.infos))
+        (ooc.nodes, ooc.addr, ooc.tables, write_node_table(&ooc.infos))
     };
     let tb = write_tables(&tables);
-    let root_addr: Vec<Option<u64>> = ops.root_ops.iter().map(|&r| (r != usize::MAX).then(|| op_addr[r])).collect();
+    let root_addr: Vec<Option<u64>> =
+        ops.root_ops.iter().map(|&r| (r != usize::MAX).then(|| u64::from(op_addr[r]))).collect();
     let bb = base_section(&pm, &qpos, &qnrm, &root_addr);
-    let bytes = LAYOUT.write(&h.to_bytes(), [&tb, &bb, &node_table, &oper]);
-    drop(oper);
     let (mut addresses, mut contexts) = (vec![], vec![]);
     if per_split {
         addresses = vec![0usize; ops.len()];
@@ -177,7 +219,8 @@ fn encode_mesh(
             contexts[s as usize] = ops.context(i);
         }
     }
-    Ok(Encoded { bytes, header: h, addresses, contexts, symbol_bits })
+    let file = EncodedFile { header: h, symbol_bits, sections: (h.to_bytes(), [tb, bb, node_table], oper) };
+    Ok((file, addresses, contexts))
 }
 
 /// The checks of `pm`'s structure that need no traversal (the traversal of step 1 checks the
@@ -492,16 +535,6 @@ fn recompute_and_recompress(ops: &Operations, step3: &Choices) -> Recompressed {
 /// each with its own counts, summed at the end.
 fn count_symbols(ops: &Operations, choices: &Choices) -> Vec<[u64; 256]> {
     let Choices { swaps, offsets, avg } = choices;
-    count_coded(ops, *avg, &|i| (swaps[i], offsets[i], None))
-}
-
-/// The symbol counts per table of every operation coded with the choices `coding` gives per
-/// operation (swap, offset, out-of-core locations).
-fn count_coded(
-    ops: &Operations,
-    avg: u32,
-    coding: &(dyn Fn(usize) -> (bool, u64, Option<[Loc; 2]>) + Sync),
-) -> Vec<[u64; 256]> {
     const CHUNK: usize = 1 << 14;
     (0..ops.len().div_ceil(CHUNK))
         .into_par_iter()
@@ -509,8 +542,7 @@ fn count_coded(
             let mut counts = vec![[0u64; 256]; TABLES];
             for i in c * CHUNK..((c + 1) * CHUNK).min(ops.len()) {
                 let mut w = OpWriter::counting(&mut counts);
-                let (swap, offset, ooc) = coding(i);
-                write_op(&mut w, &ops.op(i), swap, offset, avg, ops.normal_bits, ooc);
+                write_op(&mut w, &ops.op(i), swaps[i], offsets[i], *avg, ops.normal_bits, None);
             }
             counts
         })
@@ -628,21 +660,7 @@ fn out_of_core(
     if node_bytes as usize > NODE_BYTES || node_bytes < 256 {
         return Err(EncodeError::InvalidOptions(format!("node size {node_bytes} bytes outside 256 to {NODE_BYTES}")));
     }
-    let m = ops.len();
-    let geometry: Vec<OpGeometry> = (0..m)
-        .into_par_iter()
-        .map(|i| {
-            let c = dequantize_criteria(ops.crit[i], h);
-            OpGeometry {
-                children: ops.child_ops[i],
-                size: incore_sizes[i] + 1,
-                error: c.geometric_error,
-                attribute_error: c.attribute_error,
-                center: dequantize_position(ops.qpos[ops.v[i] as usize], h),
-                radius: c.radius,
-            }
-        })
-        .collect();
+    let geometry = Geometry { ops, sizes: incore_sizes, h };
     let roots: Vec<usize> = ops.root_ops.iter().copied().filter(|&r| r != usize::MAX).collect();
     let mut s_max = node_bytes as u64 * 15 / 16;
     loop {
@@ -658,19 +676,15 @@ fn out_of_core(
         let mut largest = 0;
         for round in 0..2 {
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
-            let (nodes, addr, coding) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0);
+            let (nodes, addr, counts) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0);
             largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
             if largest > node_bytes as usize {
                 break;
             }
             if round == 0 {
-                let counts = count_coded(ops, h.avg_op_size, &|i| {
-                    let c = coding[i];
-                    (c.swap, u64::from(c.offset), Some(c.locs))
-                });
                 tables = counts.iter().map(every_symbol).collect();
             } else {
-                let infos = node_infos(&geometry, &hier, &nodes);
+                let infos = node_infos(ops, h, &hier, &nodes);
                 return Ok(OutOfCore { tables, nodes, infos, addr });
             }
         }
@@ -682,30 +696,61 @@ fn out_of_core(
     }
 }
 
-/// A node's bytes, and per operation in it its index, address and coding.
-type CodedNode = (Vec<u8>, Vec<(u32, u32, OocCoding)>);
+/// The hierarchy's view of the operations (see [`OpGeometry`]): their children, the in-core
+/// coded sizes `sizes` plus a byte for the node pointers, and their errors and centres as they
+/// decode.
+struct Geometry<'a> {
+    ops: &'a Operations<'a>,
+    sizes: &'a [u32],
+    h: &'a Header,
+}
+
+impl OpGeometry for Geometry<'_> {
+    fn len(&self) -> usize {
+        self.ops.len()
+    }
+
+    fn children(&self, i: usize) -> [u32; 2] {
+        self.ops.child_ops[i]
+    }
+
+    fn size(&self, i: usize) -> u32 {
+        self.sizes[i] + 1
+    }
+
+    fn error(&self, i: usize) -> f32 {
+        dequantize_criteria(self.ops.crit[i], self.h).geometric_error
+    }
+
+    fn center(&self, i: usize) -> [f32; 3] {
+        dequantize_position(self.ops.qpos[self.ops.v[i] as usize], self.h)
+    }
+}
+
+/// A node's bytes, per operation in it its index and address, and, where asked, the symbol
+/// counts of its operations as coded.
+type CodedNode = (Vec<u8>, Vec<(u32, u32)>, Option<Vec<[u64; 256]>>);
 
 /// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
 /// each in parallel with the others of its depth, so that a child's address is known when its
 /// parent operation is coded. Returns per node its bytes, per operation its address and, with
-/// `keep_coding`, its coding (else none).
+/// `count`, the symbols of the operations as coded counted per table (else none): what the
+/// next round's tables are made from, counted node by node rather than from a per-operation
+/// record of the choices (24 bytes an operation).
 fn code_nodes(
     ops: &Operations,
     hier: &Hierarchy,
     tables: &[Table],
     avg: u32,
-    keep_coding: bool,
-) -> (Vec<Vec<u8>>, Vec<u32>, Vec<OocCoding>) {
+    count: bool,
+) -> (Vec<Vec<u8>>, Vec<u32>, Vec<[u64; 256]>) {
     let m = ops.len();
-    let count = hier.parents.len();
-    let mut depth = vec![0usize; count];
-    for n in 0..count {
+    let nodes_count = hier.parents.len();
+    let mut depth = vec![0usize; nodes_count];
+    for n in 0..nodes_count {
         depth[n] = hier.parents[n].map_or(0, |p| depth[p as usize] + 1);
     }
-    let mut members: Vec<Vec<u32>> = vec![vec![]; count];
-    for (i, &n) in hier.node_of.iter().enumerate() {
-        members[n as usize].push(i as u32);
-    }
+    let members = Csr::build(nodes_count, || hier.node_of.iter().enumerate().map(|(i, &n)| (n, i as u32)));
     // Per operation its parent's.
     let parent_op = &ops.parent;
     let mut by_depth: Vec<Vec<usize>> = vec![vec![]; depth.iter().max().map_or(0, |d| d + 1)];
@@ -713,33 +758,35 @@ fn code_nodes(
         by_depth[d].push(n);
     }
     let mut addr = vec![NONE; m];
-    let mut coding = vec![OocCoding::default(); if keep_coding { m } else { 0 }];
-    let mut nodes: Vec<Vec<u8>> = vec![vec![]; count];
+    let mut counts = vec![[0u64; 256]; if count { TABLES } else { 0 }];
+    let mut nodes: Vec<Vec<u8>> = vec![vec![]; nodes_count];
     // In pieces of a depth, so that the operations coded in flight stay few (a whole depth
     // holds most of the model's: 32 bytes an operation).
     for level in by_depth.iter().rev().flat_map(|l| l.chunks(64)) {
         let coded: Vec<CodedNode> = level
             .par_iter()
-            .map(|&n| code_node(ops, hier, &members[n], n as u32, parent_op, &addr, tables, avg))
+            .map(|&n| code_node(ops, hier, members.get(n), n as u32, parent_op, &addr, tables, avg, count))
             .collect();
-        for (&n, (bytes, placed)) in level.iter().zip(coded) {
-            for (i, a, c) in placed {
+        for (&n, (bytes, placed, node_counts)) in level.iter().zip(coded) {
+            for (i, a) in placed {
                 addr[i as usize] = a;
-                if keep_coding {
-                    coding[i as usize] = c;
+            }
+            for (x, y) in counts.iter_mut().zip(node_counts.iter().flatten()) {
+                for (p, q) in x.iter_mut().zip(y) {
+                    *p += q;
                 }
             }
             nodes[n] = bytes;
         }
     }
-    (nodes, addr, coding)
+    (nodes, addr, counts)
 }
 
 /// Codes the operations `list` (ascending, pre-order) of node `n`, children before parents,
 /// each with the shorter of its swaps (as [`compress_bottom_up`]), and lays them out: per
 /// operation subtree entering the node, in pre-order, each operation followed by the child it
-/// stores first where that is in the node. Returns the node's bytes and per operation its
-/// address and coding.
+/// stores first where that is in the node. Returns the node's bytes, per operation its
+/// address and, with `count`, the symbols of the operations as coded, counted per table.
 #[allow(clippy::too_many_arguments)]
 fn code_node(
     ops: &Operations,
@@ -750,11 +797,13 @@ fn code_node(
     addr: &[u32],
     tables: &[Table],
     avg: u32,
+    count: bool,
 ) -> CodedNode {
     let idx = |i: usize| list.binary_search(&(i as u32)).ok();
     let mut inner = vec![0u64; list.len()];
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
     let mut coding = vec![OocCoding::default(); list.len()];
+    let mut counts = count.then(|| vec![[0u64; 256]; TABLES]);
     for (k, &i) in list.iter().enumerate().rev() {
         let i = i as usize;
         let d = ops.op(i);
@@ -793,6 +842,10 @@ fn code_node(
         } else {
             code(false)
         };
+        if let Some(counts) = &mut counts {
+            let mut w = OpWriter::counting(counts);
+            write_op(&mut w, &d, c.swap, u64::from(c.offset), avg, ops.normal_bits, Some(c.locs));
+        }
         let sub = |c: usize| if c == usize::MAX { 0 } else { loc(c).1 };
         inner[k] = b.len() as u64 + sub(l) + sub(r);
         bytes[k] = b;
@@ -809,7 +862,7 @@ fn code_node(
         stack.push(k);
         while let Some(k) = stack.pop() {
             let i = list[k] as usize;
-            placed.push((i as u32, n * NODE_BYTES as u32 + out.len() as u32, coding[k]));
+            placed.push((i as u32, n * NODE_BYTES as u32 + out.len() as u32));
             out.extend_from_slice(&bytes[k]);
             let [l, r] = ops.children(i);
             let (first, second) = if coding[k].swap { (r, l) } else { (l, r) };
@@ -820,13 +873,13 @@ fn code_node(
             }
         }
     }
-    (out, placed)
+    (out, placed, counts)
 }
 
 /// What the node table keeps of every node: its length and checksum, its parent, the box of
 /// its operations' bounding spheres (widened by a few ulps so that `f32` rounding cannot put
 /// a sphere outside it) and its greatest errors, as the operations decode.
-fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>]) -> Vec<NodeInfo> {
+fn node_infos(ops: &Operations, h: &Header, hier: &Hierarchy, nodes: &[Vec<u8>]) -> Vec<NodeInfo> {
     let mut infos: Vec<NodeInfo> = nodes
         .iter()
         .zip(&hier.parents)
@@ -854,29 +907,32 @@ fn node_infos(geometry: &[OpGeometry], hier: &Hierarchy, nodes: &[Vec<u8>]) -> V
             x - e
         }
     };
-    for (i, g) in geometry.iter().enumerate() {
-        let n = &mut infos[hier.node_of[i] as usize];
-        for k in 0..3 {
-            n.bbox_min[k] = n.bbox_min[k].min(widen(g.center[k] - g.radius, false));
-            n.bbox_max[k] = n.bbox_max[k].max(widen(g.center[k] + g.radius, true));
+    for (i, &node) in hier.node_of.iter().enumerate() {
+        let n = &mut infos[node as usize];
+        let c = dequantize_criteria(ops.crit[i], h);
+        let center = dequantize_position(ops.qpos[ops.v[i] as usize], h);
+        for (k, x) in center.into_iter().enumerate() {
+            n.bbox_min[k] = n.bbox_min[k].min(widen(x - c.radius, false));
+            n.bbox_max[k] = n.bbox_max[k].max(widen(x + c.radius, true));
         }
-        n.geometric_error = n.geometric_error.max(g.error);
-        n.attribute_error = n.attribute_error.max(g.attribute_error);
+        n.geometric_error = n.geometric_error.max(c.geometric_error);
+        n.attribute_error = n.attribute_error.max(c.attribute_error);
     }
     infos
 }
 
 /// The operations section: pre-order, each operation followed by the subtree it stores first.
 /// Returns the section and per operation its address.
-fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Vec<u64>) {
+fn lay_out(ops: &Operations, op_bytes: &OpBytes, swaps: &[bool]) -> (Vec<u8>, Vec<u32>) {
     let m = op_bytes.len.len();
     let mut oper = Vec::with_capacity(op_bytes.data.len());
-    let mut op_addr = vec![0u64; m];
+    // Addresses past 2^31 make the section too long (the caller's error), so 32 bits hold them.
+    let mut op_addr = vec![0u32; m];
     let mut layout: Vec<usize> = vec![];
     for &root in ops.root_ops.iter().filter(|&&r| r != usize::MAX) {
         layout.push(root);
         while let Some(i) = layout.pop() {
-            op_addr[i] = oper.len() as u64;
+            op_addr[i] = oper.len() as u32;
             oper.extend_from_slice(op_bytes.get(i));
             let [l, r] = ops.children(i);
             let (first, second) = if swaps[i] { (r, l) } else { (l, r) };

@@ -48,27 +48,27 @@ use crate::pm::NONE;
 /// Halvings of an inner node's remaining subtrees into its children (2^SPLITS children).
 const SPLITS: usize = 2;
 
-/// What the hierarchy needs of an operation.
-pub(super) struct OpGeometry {
-    /// Its children's operations ([`NONE`]: none).
-    pub(super) children: [u32; 2],
+/// What the hierarchy needs of the operations (in pre-order: children after their parent),
+/// read when needed: the encoder computes it from the quantized operations (a table of it
+/// cost 36 bytes an operation, a fifth of the out-of-core coding's memory).
+pub(super) trait OpGeometry {
+    fn len(&self) -> usize;
+    /// Operation `i`'s children's operations ([`NONE`]: none).
+    fn children(&self, i: usize) -> [u32; 2];
     /// Its coded size (an estimate while the hierarchy is built).
-    pub(super) size: u32,
-    /// Its geometric and attribute errors (as they decode).
-    pub(super) error: f32,
-    pub(super) attribute_error: f32,
-    /// Its bounding sphere.
-    pub(super) center: [f32; 3],
-    pub(super) radius: f32,
+    fn size(&self, i: usize) -> u32;
+    /// Its geometric error (as it decodes).
+    fn error(&self, i: usize) -> f32;
+    /// Its bounding sphere's centre.
+    fn center(&self, i: usize) -> [f32; 3];
+}
+
+/// Operation `i`'s children in `ops`.
+fn kids(ops: &dyn OpGeometry, i: usize) -> impl Iterator<Item = usize> {
+    ops.children(i).into_iter().filter(|&c| c != NONE).map(|c| c as usize)
 }
 
 /// The hierarchy: per operation its node, per node its parent.
-impl OpGeometry {
-    fn children(&self) -> impl Iterator<Item = usize> + '_ {
-        self.children.iter().filter(|&&c| c != NONE).map(|&c| c as usize)
-    }
-}
-
 pub(super) struct Hierarchy {
     pub(super) node_of: Vec<u32>,
     pub(super) parents: Vec<Option<u32>>,
@@ -95,12 +95,12 @@ impl Ord for ByError {
 /// Builds the hierarchy over the operation forest `ops` (in pre-order: children after their
 /// parent) from its `roots`, nodes of at most `s_max` bytes. `None` where an operation alone
 /// is larger than `s_max`.
-pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<Hierarchy> {
+pub(super) fn build(ops: &dyn OpGeometry, roots: &[usize], s_max: u64) -> Option<Hierarchy> {
     let m = ops.len();
     // Subtree sizes, children before parents.
     let mut subtree = vec![0u64; m];
     for i in (0..m).rev() {
-        subtree[i] = u64::from(ops[i].size) + ops[i].children().map(|c| subtree[c]).sum::<u64>();
+        subtree[i] = u64::from(ops.size(i)) + kids(ops, i).map(|c| subtree[c]).sum::<u64>();
     }
     let mut node_of = vec![u32::MAX; m];
     let mut parents: Vec<Option<u32>> = vec![];
@@ -114,23 +114,23 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
             let mut todo = frontier;
             while let Some(i) = todo.pop() {
                 node_of[i] = id;
-                todo.extend(ops[i].children());
+                todo.extend(kids(ops, i));
             }
             continue;
         }
         // The operations with the greatest error first, as many as fit.
-        let mut heap: BinaryHeap<ByError> = frontier.iter().map(|&i| ByError(ops[i].error, i)).collect();
+        let mut heap: BinaryHeap<ByError> = frontier.iter().map(|&i| ByError(ops.error(i), i)).collect();
         let mut used = 0u64;
         while let Some(top) = heap.peek() {
             let i = top.1;
-            if used + u64::from(ops[i].size) > s_max {
+            if used + u64::from(ops.size(i)) > s_max {
                 break;
             }
             heap.pop();
-            used += u64::from(ops[i].size);
+            used += u64::from(ops.size(i));
             node_of[i] = id;
-            for c in ops[i].children() {
-                heap.push(ByError(ops[c].error, c));
+            for c in kids(ops, i) {
+                heap.push(ByError(ops.error(c), c));
             }
         }
         if used == 0 {
@@ -170,17 +170,25 @@ pub(super) fn build(ops: &[OpGeometry], roots: &[usize], s_max: u64) -> Option<H
     Some(Hierarchy { node_of, parents })
 }
 
+/// `x` as an integer that orders as [`f32::total_cmp`] orders (the transformation it makes).
+fn total_order(x: f32) -> i32 {
+    let b = x.to_bits() as i32;
+    b ^ (((b >> 31) as u32) >> 1) as i32
+}
+
 /// Splits subtree roots in two halves of equal bytes along the longest axis of their centres.
-fn partition(ops: &[OpGeometry], subtree: &[u64], mut rest: Vec<usize>) -> (Vec<usize>, Vec<usize>) {
+fn partition(ops: &dyn OpGeometry, subtree: &[u64], mut rest: Vec<usize>) -> (Vec<usize>, Vec<usize>) {
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for &i in &rest {
+        let c = ops.center(i);
         for k in 0..3 {
-            lo[k] = lo[k].min(ops[i].center[k]);
-            hi[k] = hi[k].max(ops[i].center[k]);
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
         }
     }
     let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-    rest.sort_by(|&a, &b| ops[a].center[axis].total_cmp(&ops[b].center[axis]).then(a.cmp(&b)));
+    // Keyed once: the centres are computed from the quantized operations.
+    rest.sort_by_cached_key(|&i| (total_order(ops.center(i)[axis]), i));
     let total: u64 = rest.iter().map(|&i| subtree[i]).sum();
     let mut acc = 0;
     let mut k = 1;

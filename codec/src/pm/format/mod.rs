@@ -185,7 +185,9 @@ mod symbols;
 mod tables;
 
 pub use decode::{decode, Decoded, Dpm};
-pub use encode::{encode, encode_owned, encode_with_progress, wrap_for_fuzzing, EncodeError, EncodeOptions, Encoded};
+pub use encode::{
+    encode, encode_owned, encode_with_progress, wrap_for_fuzzing, EncodeError, EncodeOptions, Encoded, EncodedFile,
+};
 pub use fields::{TABLES, TABLE_BASE};
 pub use header::{DpmError, Header, MAGIC, MAX_NODES, MAX_OP_FACES, NODE_BYTES, VERSION};
 pub use nodes::{NodeFile, NodeInfo};
