@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use codec::pm::{build, build_with_options, refine_all, BuildOptions, PmError, ProgressiveMesh, Refiner};
+use codec::pm::{build, build_owned, build_with_options, refine_all, BuildOptions, PmError, ProgressiveMesh, Refiner};
 use codec::{Mesh, MeshError};
 use proptest::prelude::*;
 use testkit::{all_shared_meshes, shared_meshes, sorted_canonical, soup};
@@ -290,6 +290,9 @@ fn meshes_built_in_chunks_refine_back_to_their_input() {
         if mesh.triangles.len() <= 2000 {
             check_every_level(&pm);
         }
+        // What `tessera pm build` runs: the builder that takes the mesh and frees it early.
+        let owned = build_owned(mesh, BuildOptions { chunk_faces }, &mut |_, _| {}).unwrap().0;
+        assert!(owned == pm, "{rel}: the build that takes the mesh differs");
     }
 }
 

@@ -23,14 +23,14 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
     let mesh = load_mesh(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
-    let (pm, stats) = codec::pm::build_with_options(&mesh, build_opts, &mut |done, bound| {
+    // Owned: the progressive mesh holds every position and face, so the builder frees the
+    // input as soon as it has numbered it and made the normals.
+    let (pm, stats) = codec::pm::build_owned(mesh, build_opts, &mut |done, bound| {
         pb.set_length(bound as u64);
         pb.set_position(done as u64);
     })
     .with_context(|| format!("cannot build {}", input.display()))?;
     pb.finish_and_clear();
-    // The progressive mesh holds every position and face: the input is not read again.
-    drop(mesh);
     let build_s = start.elapsed().as_secs_f64();
     let ops = pm.splits.len();
     let pb = progress::spinner(format!("compressing {ops} operations"));

@@ -45,8 +45,8 @@ pub mod refine;
 
 pub use adapt::{Adapter, PassStats, Viewpoint};
 pub use build::{
-    build, build_with_options, build_with_progress, build_with_stats, BuildOptions, BuildStats, PmError, CHUNK_FACES,
-    HUB_FACES,
+    build, build_owned, build_with_options, build_with_progress, build_with_stats, BuildOptions, BuildStats, PmError,
+    CHUNK_FACES, HUB_FACES,
 };
 pub use dpm_adapt::DpmAdapter;
 pub use format::{DpmError, EncodeOptions as DpmOptions};

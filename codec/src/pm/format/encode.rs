@@ -172,8 +172,7 @@ fn encode_mesh(
     if let Cow::Owned(pm) = &mut pm {
         (pm.positions, pm.normals, pm.criteria, pm.fvid_of_input) = Default::default();
     }
-    let (ops, first_guess) = uncompressed_operations(&pm, &tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
-    drop(tree);
+    let (ops, first_guess) = uncompressed_operations(&pm, tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
     if let Cow::Owned(pm) = &mut pm {
         pm.splits = Vec::new();
     }
@@ -181,7 +180,9 @@ fn encode_mesh(
     step("coding bottom-up with estimated tables");
     let offsets = compress_in_reverse_order(&ops, &first_tables);
     step("coding again with the counted tables");
-    let last = recompute_and_recompress(&ops, &offsets);
+    // Out of core the operations are coded again node by node: of this coding only the
+    // lengths are read.
+    let last = recompute_and_recompress(&ops, &offsets, opts.node_bytes == 0);
     h.avg_op_size = offsets.avg;
 
     let symbol_bits = last.symbol_bits;
@@ -200,8 +201,7 @@ fn encode_mesh(
     } else {
         // The out-of-core layout codes the operations again: of the in-core coding it needs
         // only the tables and the sizes.
-        let Recompressed { tables, bytes: OpBytes { len: sizes, data, start }, choices, .. } = last;
-        drop((data, start, choices));
+        let Recompressed { tables, bytes: OpBytes { len: sizes, .. }, .. } = last;
         let ooc = out_of_core(&ops, &sizes, &tables, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
         (ooc.nodes, ooc.addr, ooc.tables, write_node_table(&ooc.infos))
@@ -358,7 +358,7 @@ struct Choices {
 /// long for any swap to pay.
 fn uncompressed_operations<'a>(
     pm: &ProgressiveMesh,
-    tree: &SplitTree,
+    tree: SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
     qcrit: Vec<[u32; 4]>,
@@ -424,7 +424,9 @@ fn uncompressed_operations<'a>(
     if order.len() != m {
         return Err(invalid("splits not reachable from the base vertices"));
     }
-    drop((visited, qcrit));
+    // The tree and the criteria in split order are not read again: freed before the faces are
+    // copied (the copy is this step's peak).
+    drop((visited, qcrit, tree));
     let faces = Csr::build(m, || {
         order.iter().enumerate().flat_map(|(i, &s)| pm.splits[s as usize].faces.iter().map(move |&f| (i as u32, f)))
     });
@@ -477,31 +479,38 @@ fn probability_tables(ops: &Operations, choices: &Choices) -> (Vec<Table>, Vec<[
 /// the average operation size `s_avg` (section 4.2.1), the second, with the estimate, gives
 /// the offsets and the swaps that step 4 counts.
 fn compress_in_reverse_order(ops: &Operations, tables: &[Table]) -> Choices {
-    let (bytes, _) = compress_bottom_up(ops, tables, 0);
+    // Of these compressions only the length and the choices are read: their bytes are not kept.
+    let len = compress_bottom_up(ops, tables, 0, false).0.total;
     // 16.16 fixed point, rounded.
-    let total = (bytes.data.len() as u64) << 16;
+    let total = len << 16;
     let n = ops.len().max(1) as u64;
     let avg = ((total + n / 2) / n).min(u32::MAX as u64) as u32;
-    compress_bottom_up(ops, tables, avg).1
+    compress_bottom_up(ops, tables, avg, false).1
 }
 
 /// Every operation's bytes in one buffer, in the order they were coded (a heap block per
-/// operation cost more memory than the bytes: the builder's memory must follow what it keeps).
+/// operation cost more memory than the bytes: the builder's memory must follow what it keeps),
+/// or, where the bytes are not kept, only their lengths.
 struct OpBytes {
     data: Vec<u8>,
     start: Vec<u64>,
     len: Vec<u32>,
+    total: u64,
+    keep: bool,
 }
 
 impl OpBytes {
-    fn new(m: usize) -> Self {
-        Self { data: vec![], start: vec![0; m], len: vec![0; m] }
+    fn new(m: usize, keep: bool) -> Self {
+        Self { data: vec![], start: if keep { vec![0; m] } else { vec![] }, len: vec![0; m], total: 0, keep }
     }
 
     fn put(&mut self, i: usize, b: &[u8]) {
-        self.start[i] = self.data.len() as u64;
         self.len[i] = b.len() as u32;
-        self.data.extend_from_slice(b);
+        self.total += b.len() as u64;
+        if self.keep {
+            self.start[i] = self.data.len() as u64;
+            self.data.extend_from_slice(b);
+        }
     }
 
     fn get(&self, i: usize) -> &[u8] {
@@ -524,10 +533,10 @@ struct Recompressed {
 /// The tables are counted from the operations as step 3 stored them (its offsets and swaps),
 /// and the final compression chooses the swaps again with those tables (every symbol has a
 /// code, so a changed choice still codes); the offset estimate keeps step 3's `s_avg`.
-fn recompute_and_recompress(ops: &Operations, step3: &Choices) -> Recompressed {
+fn recompute_and_recompress(ops: &Operations, step3: &Choices, keep_bytes: bool) -> Recompressed {
     let (tables, counts) = probability_tables(ops, step3);
     let symbol_bits = symbol_bits(&counts, &tables);
-    let (bytes, choices) = compress_bottom_up(ops, &tables, step3.avg);
+    let (bytes, choices) = compress_bottom_up(ops, &tables, step3.avg, keep_bytes);
     Recompressed { tables, bytes, choices, symbol_bits }
 }
 
@@ -576,11 +585,12 @@ fn symbol_bits(counts: &[[u64; 256]], tables: &[Table]) -> (f64, f64) {
 
 /// One bottom-up compression with `tables` and the offset estimate from `avg`: children before
 /// parents, so the sizes of both subtrees are known when an operation is coded. Per operation
-/// its bytes, swap and offset. Every operation whose children both split is coded both ways,
-/// and keeps the shorter (section 4.2.4; ties by bits, then unswapped).
-fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32) -> (OpBytes, Choices) {
+/// its bytes (their lengths only unless `keep_bytes`), swap and offset. Every operation whose
+/// children both split is coded both ways, and keeps the shorter (section 4.2.4; ties by bits,
+/// then unswapped).
+fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: bool) -> (OpBytes, Choices) {
     let m = ops.len();
-    let mut bytes = OpBytes::new(m);
+    let mut bytes = OpBytes::new(m, keep_bytes);
     let mut subtree = vec![0u64; m];
     let mut swaps = vec![false; m];
     let mut offsets = vec![0u64; m];
