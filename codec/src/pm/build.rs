@@ -772,9 +772,16 @@ fn build_mesh(
             stack.extend(children.get(x as usize).iter().rev());
         }
     }
+    // Of the input only the triangles are read from here on (by the splits' faces and the
+    // criteria's normals): an owned mesh's positions go now, with the forest.
+    drop((children, alive));
+    let triangles = match mesh {
+        Cow::Owned(m) => Cow::Owned(m.triangles),
+        Cow::Borrowed(m) => Cow::Borrowed(&m.triangles[..]),
+    };
 
-    let to_fvid = |f: u32| mesh.triangles[f as usize].map(|v| fvid_of_input[v as usize]);
-    let base_faces = (0..mesh.triangles.len() as u32).filter(|&f| face_alive[f as usize]).map(to_fvid).collect();
+    let to_fvid = |f: u32| triangles[f as usize].map(|v| fvid_of_input[v as usize]);
+    let base_faces = (0..triangles.len() as u32).filter(|&f| face_alive[f as usize]).map(to_fvid).collect();
     let splits = collapses
         .iter()
         .enumerate()
@@ -788,17 +795,12 @@ fn build_mesh(
             }
         })
         .collect();
-    drop((children, collapses, removed, removed_end, alive, face_alive));
+    drop((collapses, removed, removed_end, face_alive));
     let mut pm = ProgressiveMesh { base_vertices, base_faces, splits, positions, fvid_of_input, ..Default::default() };
     // Splits run coarse to fine, the reverse of the collapses.
     let mut geometric = collapse_error;
     geometric.reverse();
-    // Of the input only the triangles are read from here on, and by the criteria's normals.
-    let triangles = match mesh {
-        Cow::Owned(m) => Cow::Owned(m.triangles),
-        Cow::Borrowed(m) => Cow::Borrowed(&m.triangles[..]),
-    };
-    let (normals, criteria) = criteria(&pm, triangles, &geometric);
+    let (normals, criteria) = criteria(&pm, triangles, geometric);
     pm.normals = normals;
     pm.criteria = criteria;
     Ok((pm, stats))
@@ -1092,7 +1094,7 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
 /// The per-FVID normals and the per-split criteria (see the module docs) of the input
 /// triangles `input` (input vertex ids, read through `pm.fvid_of_input` rather than copied;
 /// freed, where owned, once the normals and leaf cones are made).
-fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: &[f64]) -> (Vec<[f32; 3]>, Vec<Criteria>) {
+fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
     let pos = |f: usize| pm.positions[f].map(f64::from);
     let finest = || input.iter().map(|t| t.map(|v| pm.fvid_of_input[v as usize]));
@@ -1131,15 +1133,28 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: &[f64]) -> 
     }
     drop(input);
 
-    let tree = SplitTree::new(pm);
-    // Per split, in f64: radius (which is also the geometric error, see below), attribute
-    // error, cone angle.
-    let mut node = vec![[0.0f64; 3]; pm.splits.len()];
+    // Of the tree only the children are read.
+    let SplitTree { children, .. } = SplitTree::new(pm);
+    // Per split, in f64: radius (which is also the geometric error, see below; made in place
+    // of the geometric errors, each read once before its split's radius replaces it),
+    // attribute error, cone angle.
+    let mut radius = geometric;
+    let mut attribute = vec![0.0f64; pm.splits.len()];
+    let mut cone = vec![0.0f64; pm.splits.len()];
     let max_angle = std::f64::consts::FRAC_PI_2;
     for (s, split) in pm.splits.iter().enumerate().rev() {
         let (v, u) = (split.v as usize, split.v_u as usize);
-        let child = |c: u32, f: usize| if c == NONE { [0.0, 0.0, leaf_alpha[f]] } else { node[c as usize] };
-        let [cl, cu] = tree.children[s];
+        // A child's radius, attribute error and cone angle (children come after their parent,
+        // so theirs are final here).
+        let child = |c: u32, f: usize| {
+            if c == NONE {
+                [0.0, 0.0, leaf_alpha[f]]
+            } else {
+                let c = c as usize;
+                [radius[c], attribute[c], cone[c]]
+            }
+        };
+        let [cl, cu] = children[s];
         let (l, r) = (child(cl, v), child(cu, u));
         // The geometric error is at least the farthest finest vertex of the region from `v`,
         // so it serves as the region's bounding radius (conservatively: a larger sphere only
@@ -1148,22 +1163,23 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: &[f64]) -> 
         // may exceed its region (raised to its neighbours'), and the runtime tests spheres,
         // which must nest for a child never to ask for a split its parent does not.
         let nest = |c: [f64; 3], d: f64| (d + c[0]) * (1.0 + SLACK);
-        let radius = geometric[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
-        let attribute = l[1].max(norm(sub(normal[u], normal[v])) + r[1]);
+        radius[s] = radius[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
+        attribute[s] = l[1].max(norm(sub(normal[u], normal[v])) + r[1]);
         let alpha = (l[2].max(angle(normal[v], normal[u]) + r[2]) * (1.0 + SLACK) + SLACK).min(max_angle);
-        let alpha = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
-        node[s] = [radius, attribute, alpha];
+        cone[s] = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
     }
     // The outputs made one after the other, each input freed once read: this is the peak of
     // a large model's build.
-    drop((tree, leaf_alpha));
+    drop((children, leaf_alpha));
     let normal: Vec<[f32; 3]> = {
         let f64s = normal;
         f64s.iter().map(|v| v.map(|x| x as f32)).collect()
     };
-    let criteria = node
+    let criteria = radius
         .iter()
-        .map(|&[radius, attribute, alpha]| Criteria {
+        .zip(&attribute)
+        .zip(&cone)
+        .map(|((&radius, &attribute), &alpha)| Criteria {
             sin_alpha: if alpha >= max_angle { 1.0 } else { alpha.sin() as f32 },
             geometric_error: radius as f32,
             attribute_error: attribute as f32,

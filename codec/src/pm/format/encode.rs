@@ -184,6 +184,7 @@ fn encode_mesh(
     // lengths are read.
     let last = recompute_and_recompress(&ops, &offsets, opts.node_bytes == 0);
     h.avg_op_size = offsets.avg;
+    drop(offsets);
 
     let symbol_bits = last.symbol_bits;
     // Per operation its address (see `Encoded::addresses`): in core below 2^31, out of core
@@ -201,7 +202,8 @@ fn encode_mesh(
     } else {
         // The out-of-core layout codes the operations again: of the in-core coding it needs
         // only the tables and the sizes.
-        let Recompressed { tables, bytes: OpBytes { len: sizes, .. }, .. } = last;
+        let Recompressed { tables, bytes: OpBytes { len: sizes, .. }, choices, .. } = last;
+        drop(choices);
         let ooc = out_of_core(&ops, &sizes, &tables, &h, opts.node_bytes, step)?;
         h.nodes = ooc.infos.len() as u32;
         (ooc.nodes, ooc.addr, ooc.tables, write_node_table(&ooc.infos))
@@ -737,9 +739,8 @@ impl OpGeometry for Geometry<'_> {
     }
 }
 
-/// A node's bytes, per operation in it its index and address, and, where asked, the symbol
-/// counts of its operations as coded.
-type CodedNode = (Vec<u8>, Vec<(u32, u32)>, Option<Vec<[u64; 256]>>);
+/// A node's bytes, and per operation in it its index and address.
+type CodedNode = (Vec<u8>, Vec<(u32, u32)>);
 
 /// Codes every operation of an out-of-core file (see [`out_of_core`]): nodes deepest first,
 /// each in parallel with the others of its depth, so that a child's address is known when its
@@ -772,19 +773,39 @@ fn code_nodes(
     let mut nodes: Vec<Vec<u8>> = vec![vec![]; nodes_count];
     // In pieces of a depth, so that the operations coded in flight stay few (a whole depth
     // holds most of the model's: 32 bytes an operation).
+    // The counts per thread's share of a piece (a table of counts per node in flight took
+    // more memory than the dragon's operations).
+    let tables_counted = if count { TABLES } else { 0 };
+    let add = |a: &mut Vec<[u64; 256]>, b: &[[u64; 256]]| {
+        for (x, y) in a.iter_mut().zip(b) {
+            for (p, q) in x.iter_mut().zip(y) {
+                *p += q;
+            }
+        }
+    };
     for level in by_depth.iter().rev().flat_map(|l| l.chunks(64)) {
-        let coded: Vec<CodedNode> = level
+        let (coded, level_counts) = level
             .par_iter()
-            .map(|&n| code_node(ops, hier, members.get(n), n as u32, parent_op, &addr, tables, avg, count))
-            .collect();
-        for (&n, (bytes, placed, node_counts)) in level.iter().zip(coded) {
+            .fold(
+                || (Vec::new(), vec![[0u64; 256]; tables_counted]),
+                |(mut coded, mut c), &n| {
+                    let counting = count.then_some(&mut c[..]);
+                    coded.push(code_node(ops, hier, members.get(n), n as u32, parent_op, &addr, tables, avg, counting));
+                    (coded, c)
+                },
+            )
+            .reduce(
+                || (Vec::new(), vec![[0u64; 256]; tables_counted]),
+                |(mut a, mut ca), (b, cb)| {
+                    a.extend(b);
+                    add(&mut ca, &cb);
+                    (a, ca)
+                },
+            );
+        add(&mut counts, &level_counts);
+        for (&n, (bytes, placed)) in level.iter().zip(coded) {
             for (i, a) in placed {
                 addr[i as usize] = a;
-            }
-            for (x, y) in counts.iter_mut().zip(node_counts.iter().flatten()) {
-                for (p, q) in x.iter_mut().zip(y) {
-                    *p += q;
-                }
             }
             nodes[n] = bytes;
         }
@@ -795,8 +816,8 @@ fn code_nodes(
 /// Codes the operations `list` (ascending, pre-order) of node `n`, children before parents,
 /// each with the shorter of its swaps (as [`compress_bottom_up`]), and lays them out: per
 /// operation subtree entering the node, in pre-order, each operation followed by the child it
-/// stores first where that is in the node. Returns the node's bytes, per operation its
-/// address and, with `count`, the symbols of the operations as coded, counted per table.
+/// stores first where that is in the node. Returns the node's bytes and per operation its
+/// address; adds the symbols of the operations as coded to `counts` where given.
 #[allow(clippy::too_many_arguments)]
 fn code_node(
     ops: &Operations,
@@ -807,13 +828,12 @@ fn code_node(
     addr: &[u32],
     tables: &[Table],
     avg: u32,
-    count: bool,
+    mut counts: Option<&mut [[u64; 256]]>,
 ) -> CodedNode {
     let idx = |i: usize| list.binary_search(&(i as u32)).ok();
     let mut inner = vec![0u64; list.len()];
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
     let mut coding = vec![OocCoding::default(); list.len()];
-    let mut counts = count.then(|| vec![[0u64; 256]; TABLES]);
     for (k, &i) in list.iter().enumerate().rev() {
         let i = i as usize;
         let d = ops.op(i);
@@ -852,7 +872,7 @@ fn code_node(
         } else {
             code(false)
         };
-        if let Some(counts) = &mut counts {
+        if let Some(counts) = counts.as_deref_mut() {
             let mut w = OpWriter::counting(counts);
             write_op(&mut w, &d, c.swap, u64::from(c.offset), avg, ops.normal_bits, Some(c.locs));
         }
@@ -861,7 +881,8 @@ fn code_node(
         bytes[k] = b;
         coding[k] = c;
     }
-    let mut out = Vec::with_capacity(inner.iter().sum::<u64>() as usize);
+    // The node's bytes: each operation's once (`inner` counts a subtree's at every ancestor).
+    let mut out = Vec::with_capacity(bytes.iter().map(Vec::len).sum());
     let mut placed = Vec::with_capacity(list.len());
     let mut stack = vec![];
     for (k, &i) in list.iter().enumerate() {
@@ -883,7 +904,7 @@ fn code_node(
             }
         }
     }
-    (out, placed, counts)
+    (out, placed)
 }
 
 /// What the node table keeps of every node: its length and checksum, its parent, the box of
