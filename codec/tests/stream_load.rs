@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use codec::load::load_path_streamed_counted;
 use codec::load::stream::{can_stream, for_each_triangle, read_positions};
 use codec::{load_path, LoadError, Mesh};
 use testkit::{all_shared_meshes, mesh_path, XorShift};
@@ -65,6 +66,8 @@ impl Files {
         for (name, bytes) in [(name.to_string(), bytes.to_vec()), (format!("{name}.gz"), gzip(bytes))] {
             let streamed = stream(&self.put(&name, &bytes)).unwrap_or_else(|e| panic!("stream: {e}"));
             assert!(identical(&streamed, &mesh), "{name}:\nstream {streamed:?}\nload_path {mesh:?}");
+            let loaded = load_path_streamed_counted(&self.put(&name, &bytes)).unwrap_or_else(|e| panic!("{e}"));
+            assert!(identical(&loaded.mesh, &mesh), "{name}: load_path_streamed_counted differs");
         }
         mesh
     }
@@ -78,6 +81,8 @@ impl Files {
         }
         let e = stream(&path).expect_err(name).to_string();
         assert!(e.starts_with(&path.display().to_string()), "{e}");
+        let whole = load_path_streamed_counted(&path).expect_err(name).to_string();
+        assert!(whole.starts_with(&path.display().to_string()) && !whole.contains('\n'), "{whole}");
         assert!(!e.contains('\n'), "{e}");
         e
     }
@@ -92,6 +97,9 @@ fn every_shared_ply_and_obj_mesh_streams_as_load_path_reads_it() {
         let streamed = stream(&path).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(streamed.positions.len(), mesh.positions.len(), "{}", path.display());
         assert!(identical(&streamed, &mesh), "{}: the meshes differ", path.display());
+        // What `tessera pm build` loads with: the same mesh, not holding the file.
+        let loaded = load_path_streamed_counted(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(loaded, codec::load::load_path_counted(&path).unwrap(), "{}", path.display());
     }
 }
 

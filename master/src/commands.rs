@@ -76,8 +76,18 @@ pub fn read_input(path: &Path) -> Result<Vec<u8>> {
 /// Loads a mesh file (OBJ, PLY, STL, glTF, optionally gzipped), with a spinner while it parses;
 /// points and lines it skipped are reported on stderr.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
+    load_with(path, codec::load::load_path_counted)
+}
+
+/// As [`load_mesh`], reading a PLY or OBJ file in two streaming passes instead of whole into
+/// memory (for the large models `pm build` takes: the memory then follows the mesh).
+pub fn load_mesh_streamed(path: &Path) -> Result<Mesh> {
+    load_with(path, codec::load::load_path_streamed_counted)
+}
+
+fn load_with(path: &Path, load: fn(&Path) -> Result<codec::load::Loaded, codec::LoadError>) -> Result<Mesh> {
     let pb = progress::spinner(format!("loading {}", path.display()));
-    let loaded = codec::load::load_path_counted(path);
+    let loaded = load(path);
     pb.finish_and_clear();
     let loaded = loaded?;
     note_ignored(path, loaded.ignored);

@@ -10,7 +10,7 @@ use codec::Mesh;
 use serde::Serialize;
 
 use crate::cli::CameraArgs;
-use crate::commands::load_mesh;
+use crate::commands::load_mesh_streamed;
 use crate::commands::{expect_kind, mesh_output, read_input, summary};
 use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
@@ -20,7 +20,7 @@ use codec::input::ModelKind;
 pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec::pm::BuildOptions) -> Result<()> {
     check_extension(output, &["dpm"], "the output of pm build")?;
     check_distinct(&[input], &[output])?;
-    let mesh = load_mesh(input)?;
+    let mesh = load_mesh_streamed(input)?;
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
     // Owned: the progressive mesh holds every position and face, so the builder frees the

@@ -127,7 +127,16 @@ impl<'a> Input<'a> {
 /// Both passes over bytes in memory (the in-core loader's way to read PLY and OBJ): the
 /// positions, the triangles, and the count of skipped points and lines.
 pub(crate) fn load_memory(path: &Path, bytes: &[u8], format: Format) -> Result<(Mesh, u64), LoadError> {
-    let input = Input { path, bytes: Some(bytes) };
+    load_input(Input { path, bytes: Some(bytes) }, format)
+}
+
+/// Both passes over the file at `path` itself: what [`load_memory`] reads from its bytes,
+/// without holding them.
+pub(crate) fn load_file(path: &Path, format: Format) -> Result<(Mesh, u64), LoadError> {
+    load_input(Input::file(path), format)
+}
+
+fn load_input(input: Input, format: Format) -> Result<(Mesh, u64), LoadError> {
     let mut mesh = vertices_of(input, format, &mut |_| {})?;
     let mut triangles = Vec::new();
     let counts = triangles_of(
