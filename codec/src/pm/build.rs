@@ -88,7 +88,6 @@ use rustc_hash::FxHashMap;
 use thiserror::Error;
 
 use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
-use crate::csr::Csr;
 use crate::mesh::{Mesh, MeshError};
 
 /// A vertex with more live faces than this becomes a hub (see the module docs).
@@ -755,26 +754,43 @@ fn build_mesh(
     report(log.collapses.len());
     let Log { collapses, removed, removed_end, error: collapse_error } = log;
 
-    // The forest: each vertex's children are the vertices it absorbed, chronologically.
-    let children = Csr::build(n, || collapses.iter().map(|&(u, t)| (t, u)));
-
-    // Leaves left to right = pre-order with children in chronological order.
+    // Leaves left to right = pre-order of the forest whose vertices' children are the
+    // vertices they absorbed, chronologically, roots in ascending input index. Numbered
+    // without building the forest: the subtree of a vertex `u` that `t` absorbs comes right
+    // after what `t` had gathered, so `u`'s FVID is `t`'s plus `t`'s subtree size just before
+    // (and `u`'s subtree is whole then: a dead vertex absorbs nothing). So each collapse
+    // records an offset, and the FVIDs follow from the roots' down, latest collapse first
+    // (what numbering per chunk needs: docs/design.md, "Builder memory").
+    let mut size = vec![1u32; n];
+    let offset: Vec<u32> = collapses
+        .iter()
+        .map(|&(u, t)| {
+            let o = size[t as usize];
+            size[t as usize] += size[u as usize];
+            o
+        })
+        .collect();
     let mut fvid_of_input = vec![u32::MAX; n];
-    let mut positions = Vec::new();
     let mut base_vertices = Vec::new();
-    let mut stack = Vec::new();
+    let mut numbered = 0u32;
     for root in (0..n).filter(|&v| alive[v]) {
-        base_vertices.push(positions.len() as u32);
-        stack.push(root as u32);
-        while let Some(x) = stack.pop() {
-            fvid_of_input[x as usize] = positions.len() as u32;
-            positions.push(mesh.positions[x as usize]);
-            stack.extend(children.get(x as usize).iter().rev());
+        base_vertices.push(numbered);
+        fvid_of_input[root] = numbered;
+        numbered += size[root];
+    }
+    drop((size, alive));
+    for (&(u, t), &o) in collapses.iter().zip(&offset).rev() {
+        fvid_of_input[u as usize] = fvid_of_input[t as usize] + o;
+    }
+    drop(offset);
+    let mut positions = vec![[0.0f32; 3]; numbered as usize];
+    for (&f, &p) in fvid_of_input.iter().zip(&mesh.positions) {
+        if f != u32::MAX {
+            positions[f as usize] = p;
         }
     }
     // Of the input only the triangles are read from here on (by the splits' faces and the
-    // criteria's normals): an owned mesh's positions go now, with the forest.
-    drop((children, alive));
+    // criteria's normals): an owned mesh's positions go now.
     let triangles = match mesh {
         Cow::Owned(m) => Cow::Owned(m.triangles),
         Cow::Borrowed(m) => Cow::Borrowed(&m.triangles[..]),
