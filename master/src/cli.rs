@@ -299,6 +299,11 @@ pub enum Pm {
         /// many, so the simplifier's memory follows the chunk, not the model (0: never).
         #[arg(long, default_value_t = codec::pm::CHUNK_FACES)]
         chunk_faces: usize,
+        /// Build even where the model plainly needs more memory than the machine has
+        /// available (the build holds the whole model, about 70 bytes a triangle; without this
+        /// it stops before simplifying, rather than be killed for memory later).
+        #[arg(long)]
+        no_memory_check: bool,
     },
     /// Print the size of a .dpm file per vertex, with the breakdown.
     Stats {

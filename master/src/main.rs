@@ -22,18 +22,19 @@ fn main() -> ExitCode {
         Command::Sort { model, grid, camera, dump, json, tile_coding } => {
             master::sort::run(model, grid, camera, dump.as_ref(), *json, (*tile_coding).into())
         }
-        Command::Pm { pm: Pm::Build { input, output, position_bits, normal_bits, node_kb, chunk_faces } } => {
-            master::pm::build(
-                input,
-                output,
-                codec::pm::DpmOptions {
-                    position_bits: *position_bits,
-                    normal_bits: *normal_bits,
-                    node_bytes: node_kb.map_or(0, |k| k * 1024),
-                },
-                codec::pm::BuildOptions { chunk_faces: *chunk_faces },
-            )
-        }
+        Command::Pm {
+            pm: Pm::Build { input, output, position_bits, normal_bits, node_kb, chunk_faces, no_memory_check },
+        } => master::pm::build(
+            input,
+            output,
+            codec::pm::DpmOptions {
+                position_bits: *position_bits,
+                normal_bits: *normal_bits,
+                node_bytes: node_kb.map_or(0, |k| k * 1024),
+            },
+            codec::pm::BuildOptions { chunk_faces: *chunk_faces },
+            !*no_memory_check,
+        ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
         Command::Pm {
             pm: Pm::Adapt { input, view, error_px, output, full, normal_weight, gpu, gpu_budget_mb, gpu_nodes_mb },

@@ -16,11 +16,25 @@ use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
 use codec::input::ModelKind;
 
-/// `tessera pm build IN -o OUT.dpm`.
-pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec::pm::BuildOptions) -> Result<()> {
+/// `tessera pm build IN -o OUT.dpm`; `memory_check`: stop before simplifying where the model
+/// plainly needs more memory than is available ([`memory_shortfall`]).
+pub fn build(
+    input: &Path,
+    output: &Path,
+    opts: EncodeOptions,
+    build_opts: codec::pm::BuildOptions,
+    memory_check: bool,
+) -> Result<()> {
     check_extension(output, &["dpm"], "the output of pm build")?;
     check_distinct(&[input], &[output])?;
     let mesh = load_mesh_streamed(input)?;
+    if memory_check {
+        if let Some(available) = available_memory() {
+            if let Some(msg) = memory_shortfall(mesh.triangles.len() as u64, available) {
+                anyhow::bail!("cannot build {}: {msg}", input.display());
+            }
+        }
+    }
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
     // Owned: the progressive mesh holds every position and face, so the builder frees the
@@ -79,6 +93,62 @@ pub fn build(input: &Path, output: &Path, opts: EncodeOptions, build_opts: codec
         ),
     );
     Ok(())
+}
+
+/// The bytes a triangle `pm build` holds at its peak beyond the loaded mesh, on large models:
+/// it peaks at 71 bytes a triangle (102M triangles) to 82 (13.9M) with the mesh, which takes
+/// about 18 (README, "A hundred million triangles").
+const BUILD_BYTES_PER_TRIANGLE: u64 = 53;
+
+/// Why a build of `triangles` triangles, its mesh loaded, plainly cannot fit in `available`
+/// bytes (the memory and swap free to this process), or `None`. The estimate is below what the
+/// builds measured, so a build that is refused would have run out of memory.
+pub fn memory_shortfall(triangles: u64, available: u64) -> Option<String> {
+    let need = triangles.saturating_mul(BUILD_BYTES_PER_TRIANGLE);
+    let gb = |b: u64| b as f64 / 1e9;
+    (need > available).then(|| {
+        format!(
+            "{triangles} triangles need about {:.1} GB more to build (the builder holds the whole model, \
+             about 70 bytes a triangle), and {:.1} GB is available; free memory or add swap, or pass \
+             --no-memory-check to try anyway",
+            gb(need),
+            gb(available)
+        )
+    })
+}
+
+/// The memory and swap available to this process, from `/proc/meminfo` (`MemAvailable` plus
+/// `SwapFree`) and, where it sets a lower limit, its cgroup's (v2 `memory.max`, v1
+/// `memory.limit_in_bytes`, less what the cgroup uses); `None` where `/proc/meminfo` cannot
+/// be read.
+fn available_memory() -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let field = |name: &str| -> Option<u64> {
+        let line = meminfo.lines().find(|l| l.starts_with(name))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kb| kb * 1024)
+    };
+    let available = field("MemAvailable:")?.saturating_add(field("SwapFree:").unwrap_or(0));
+    let read = |p: String| std::fs::read_to_string(p).ok().and_then(|s| s.trim().parse::<u64>().ok());
+    // This process's cgroup: `0::PATH` (v2), `N:memory:PATH` (v1).
+    let cgroups = std::fs::read_to_string("/proc/self/cgroup").unwrap_or_default();
+    let own = |v1: bool| {
+        cgroups.lines().find_map(|l| {
+            let mut f = l.splitn(3, ':');
+            let (_, controllers, path) = (f.next()?, f.next()?, f.next()?);
+            let mine = if v1 { controllers.split(',').any(|c| c == "memory") } else { controllers.is_empty() };
+            mine.then(|| path.trim_end_matches('/').to_string())
+        })
+    };
+    let v2 = own(false).map(|p| format!("/sys/fs/cgroup{p}"));
+    let v1 = own(true).map(|p| format!("/sys/fs/cgroup/memory{p}"));
+    let (limit, usage) = [(v2, "memory.max", "memory.current"), (v1, "memory.limit_in_bytes", "memory.usage_in_bytes")]
+        .into_iter()
+        .find_map(|(dir, l, u)| {
+            let dir = dir?;
+            Some((read(format!("{dir}/{l}"))?, read(format!("{dir}/{u}"))?))
+        })
+        .unwrap_or((u64::MAX, 0));
+    Some(available.min(limit.saturating_sub(usage)))
 }
 
 /// The numbers `tessera pm stats --json` prints; the `*_per_vertex` fields are the paper's
@@ -309,6 +379,20 @@ pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A model that plainly needs more than is available is refused with the figures and the
+    /// way around; one that fits, and the memory this machine reports, pass.
+    #[test]
+    fn a_build_that_cannot_fit_is_refused_before_it_starts() {
+        let msg = memory_shortfall(400_000_000, 20_000_000_000).expect("refused");
+        assert!(msg.contains("400000000 triangles need about 21.2 GB"), "{msg}");
+        assert!(msg.contains("20.0 GB is available") && msg.contains("--no-memory-check"), "{msg}");
+        assert!(!msg.contains('\n'));
+        assert_eq!(memory_shortfall(100_000_000, 20_000_000_000), None);
+        assert_eq!(memory_shortfall(0, 0), None);
+        let available = available_memory().expect("Linux reports its memory");
+        assert!(available > 0 && memory_shortfall(1_000_000, available).is_none(), "{available} bytes");
+    }
 
     /// The box of an out-of-core file holds every vertex and is cut to the quantization grid,
     /// where the union of its node boxes (the operations' spheres) reaches far past the model.
