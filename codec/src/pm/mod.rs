@@ -127,10 +127,16 @@ pub struct SplitTree {
 }
 
 impl SplitTree {
-    /// Derives the tree from the splits and base vertices (linear time, a scratch buffer per FVID).
+    /// Derives the tree from the splits and base vertices (linear time, a scratch buffer per FVID,
+    /// sized by the FVIDs they name, so that it needs no positions).
     pub fn new(pm: &ProgressiveMesh) -> Self {
         let n = pm.positions.len().max(
-            pm.base_vertices.iter().chain(pm.splits.iter().map(|s| &s.v_u)).map(|&f| f as usize + 1).max().unwrap_or(0),
+            pm.base_vertices
+                .iter()
+                .chain(pm.splits.iter().flat_map(|s| [&s.v, &s.v_u]))
+                .map(|&f| f as usize + 1)
+                .max()
+                .unwrap_or(0),
         );
         // The node each FVID's vertex currently is; roots are coded as `NONE - 1 - base index`.
         let mut node_of = vec![NONE; n];

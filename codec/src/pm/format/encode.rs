@@ -31,7 +31,7 @@ use super::tables::{every_symbol, write_tables};
 use crate::container::put_varint;
 use crate::csr::Csr;
 use crate::huffman::Table;
-use crate::pm::{ProgressiveMesh, SplitTree, NONE};
+use crate::pm::{ProgressiveMesh, Split, SplitTree, NONE};
 use thiserror::Error;
 
 /// Encoder settings.
@@ -166,16 +166,16 @@ fn encode_mesh(
     let qpos: Vec<[u32; 3]> = pm.positions.par_iter().map(|&p| quantize_position(p, &h)).collect();
     let qnrm: Vec<[u32; 2]> = pm.normals.par_iter().map(|&v| oct_encode(v, h.normal_bits)).collect();
     let qcrit: Vec<[u32; 4]> = pm.criteria.par_iter().map(|c| quantize_criteria(c, &h)).collect();
-    let tree = SplitTree::new(&pm);
     // Only the splits and the base mesh are read from here on, and after the operations are
-    // made, the base mesh alone.
+    // made, the base mesh alone: what was quantized goes before the tree is made.
     if let Cow::Owned(pm) = &mut pm {
         (pm.positions, pm.normals, pm.criteria, pm.fvid_of_input) = Default::default();
     }
-    let (ops, first_guess) = uncompressed_operations(&pm, tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
-    if let Cow::Owned(pm) = &mut pm {
-        pm.splits = Vec::new();
-    }
+    let mut tree = SplitTree::new(&pm);
+    // The walk reads the children and roots only.
+    tree.parent = Vec::new();
+    // The splits move into the operations (an owned progressive mesh keeps none).
+    let (ops, first_guess) = uncompressed_operations(&mut pm, tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
     let (first_tables, _) = probability_tables(&ops, &first_guess);
     step("coding bottom-up with estimated tables");
     let offsets = compress_in_reverse_order(&ops, &first_tables);
@@ -251,24 +251,23 @@ fn check_mesh(pm: &ProgressiveMesh) -> Result<(), EncodeError> {
 /// The operations of step 1, in pre-order of the split forest (an operation, then `v_l`'s
 /// subtree, then `v_u`'s), and the split forest over them.
 ///
-/// The splits' data is copied into the operations' order (which is the order the passes read
-/// it in: read through the splits' refinement order, the encoder spent a fifth of its time
-/// waiting for memory). An operation's [`OpData`] is made again from it each time it is coded
+/// The splits and their criteria are moved into the operations' order, in place (which is
+/// the order the passes read them in: read through the splits' refinement order, the encoder
+/// spent a fifth of its time waiting for memory; copied, the faces beside the splits were the
+/// encoder's peak). An operation's [`OpData`] is made again from it each time it is coded
 /// ([`Operations::op`]): kept, it was three quarters of the encoder's memory. Making it costs
 /// time (on the dragon, compressing took 2.4-2.5 s against 2.0 s when it was kept).
 struct Operations<'a> {
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
-    /// Per operation: its split.
+    /// Per operation: its split's index in the progressive mesh.
     order: Vec<u32>,
-    /// Per operation: its split's `v` and `v_u`, and one past the last FVID its vertex stands
-    /// for.
-    v: Vec<u32>,
-    v_u: Vec<u32>,
+    /// Per operation: its split (`v`, `v_u`, faces), the progressive mesh's own, moved into
+    /// this order in place (a copy of the faces beside them was the encoder's peak).
+    splits: Vec<Split>,
+    /// Per operation: one past the last FVID its vertex stands for.
     v_end: Vec<u32>,
-    /// Per operation: its split's faces.
-    faces: Csr<[u32; 3]>,
-    /// Per operation: its split's quantized criteria.
+    /// Per operation: its split's quantized criteria (moved into this order in place).
     crit: Vec<[u32; 4]>,
     /// Per operation: its parent operation (`NONE` for a root).
     parent: Vec<u32>,
@@ -296,12 +295,17 @@ impl Operations<'_> {
 
     /// Operation `i`'s faces.
     fn faces(&self, i: usize) -> &[[u32; 3]] {
-        self.faces.get(i)
+        &self.splits[i].faces
+    }
+
+    /// Operation `i`'s split vertex.
+    fn v(&self, i: usize) -> u32 {
+        self.splits[i].v
     }
 
     /// Operation `i`'s context.
     fn context(&self, i: usize) -> OpContext {
-        let v = self.v[i];
+        let v = self.v(i);
         let p = self.parent[i];
         OpContext {
             v,
@@ -316,7 +320,7 @@ impl Operations<'_> {
     /// third-corner offset (4.2.2), its position and normal deltas.
     fn op(&self, i: usize) -> OpData {
         let ctx = self.context(i);
-        let (v, v_u) = (ctx.v, self.v_u[i]);
+        let (v, v_u) = (ctx.v, self.splits[i].v_u);
         let mut faces: SmallVec<[FaceCode; 2]> =
             self.faces(i).iter().map(|&f| classify(v, v_u, ctx.v_end, f)).collect();
         faces.sort_by_key(|f| match *f {
@@ -359,11 +363,11 @@ struct Choices {
 /// subtree first: from tables built without swaps, the swapped children code would be too
 /// long for any swap to pay.
 fn uncompressed_operations<'a>(
-    pm: &ProgressiveMesh,
+    pm: &mut Cow<ProgressiveMesh>,
     tree: SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
-    qcrit: Vec<[u32; 4]>,
+    mut qcrit: Vec<[u32; 4]>,
     normal_bits: u8,
 ) -> Result<(Operations<'a>, Choices), EncodeError> {
     let n = qpos.len();
@@ -371,9 +375,7 @@ fn uncompressed_operations<'a>(
     // Pre-order over the forest (v_l first); per op: split index, its data, range end, parent
     // op, children's op indices.
     let mut order: Vec<u32> = Vec::with_capacity(m);
-    let (mut vs, mut v_us) = (Vec::with_capacity(m), Vec::with_capacity(m));
     let mut v_ends: Vec<u32> = Vec::with_capacity(m);
-    let mut crit: Vec<[u32; 4]> = Vec::with_capacity(m);
     let mut parents: Vec<u32> = Vec::with_capacity(m);
     let mut child_ops: Vec<[u32; 2]> = Vec::with_capacity(m);
     let mut visited = vec![false; m];
@@ -409,10 +411,7 @@ fn uncompressed_operations<'a>(
                 child_ops[p][side] = i as u32;
             }
             order.push(s);
-            vs.push(split.v);
-            v_us.push(split.v_u);
             v_ends.push(v_end);
-            crit.push(qcrit[su]);
             parents.push(parent.map_or(NONE, |(p, _)| p as u32));
             child_ops.push([NONE; 2]);
             if has_right {
@@ -426,12 +425,14 @@ fn uncompressed_operations<'a>(
     if order.len() != m {
         return Err(invalid("splits not reachable from the base vertices"));
     }
-    // The tree and the criteria in split order are not read again: freed before the faces are
-    // copied (the copy is this step's peak).
-    drop((visited, qcrit, tree));
-    let faces = Csr::build(m, || {
-        order.iter().enumerate().flat_map(|(i, &s)| pm.splits[s as usize].faces.iter().map(move |&f| (i as u32, f)))
-    });
+    drop((visited, tree));
+    // The splits and their criteria, moved into the operations' order (taken from an owned
+    // progressive mesh, copied from a borrowed one).
+    let mut splits = match pm {
+        Cow::Owned(pm) => std::mem::take(&mut pm.splits),
+        Cow::Borrowed(pm) => pm.splits.clone(),
+    };
+    permute_in_place(&mut splits, &mut qcrit, &order);
 
     let mut height = vec![0u32; m];
     for i in (0..m).rev() {
@@ -443,17 +444,15 @@ fn uncompressed_operations<'a>(
         levels[h as usize].push(i as u32);
     }
 
-    let smaller_first: Vec<bool> = (0..m).map(|i| v_ends[i] - v_us[i] < v_us[i] - vs[i]).collect();
+    let smaller_first: Vec<bool> = splits.iter().zip(&v_ends).map(|(s, &v_end)| v_end - s.v_u < s.v_u - s.v).collect();
     let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; m], avg: 0 };
     let ops = Operations {
         qpos,
         qnrm,
         order,
-        v: vs,
-        v_u: v_us,
+        splits,
         v_end: v_ends,
-        faces,
-        crit,
+        crit: qcrit,
         parent: parents,
         child_ops,
         root_ops,
@@ -461,6 +460,30 @@ fn uncompressed_operations<'a>(
         normal_bits,
     };
     Ok((ops, zero_offsets))
+}
+
+/// Moves `a[order[i]]` and `b[order[i]]` to `a[i]` and `b[i]` for every `i` (`order` a
+/// permutation), in place: cycle by cycle, a flag per element marking what is placed.
+fn permute_in_place<A: Default, B: Default>(a: &mut [A], b: &mut [B], order: &[u32]) {
+    let mut placed = vec![false; order.len()];
+    for start in 0..order.len() {
+        if placed[start] {
+            continue;
+        }
+        let (first_a, first_b) = (std::mem::take(&mut a[start]), std::mem::take(&mut b[start]));
+        let mut j = start;
+        loop {
+            placed[j] = true;
+            let k = order[j] as usize;
+            if k == start {
+                (a[j], b[j]) = (first_a, first_b);
+                break;
+            }
+            a[j] = std::mem::take(&mut a[k]);
+            b[j] = std::mem::take(&mut b[k]);
+            j = k;
+        }
+    }
 }
 
 /// Step 2 of section 4.2: "Compute the probability tables."
@@ -735,7 +758,7 @@ impl OpGeometry for Geometry<'_> {
     }
 
     fn center(&self, i: usize) -> [f32; 3] {
-        dequantize_position(self.ops.qpos[self.ops.v[i] as usize], self.h)
+        dequantize_position(self.ops.qpos[self.ops.v(i) as usize], self.h)
     }
 }
 
@@ -941,7 +964,7 @@ fn node_infos(ops: &Operations, h: &Header, hier: &Hierarchy, nodes: &[Vec<u8>])
     for (i, &node) in hier.node_of.iter().enumerate() {
         let n = &mut infos[node as usize];
         let c = dequantize_criteria(ops.crit[i], h);
-        let center = dequantize_position(ops.qpos[ops.v[i] as usize], h);
+        let center = dequantize_position(ops.qpos[ops.v(i) as usize], h);
         for (k, x) in center.into_iter().enumerate() {
             n.bbox_min[k] = n.bbox_min[k].min(widen(x - c.radius, false));
             n.bbox_max[k] = n.bbox_max[k].max(widen(x + c.radius, true));
@@ -1031,4 +1054,36 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
     }
     put_varint(&mut bb, if data.is_empty() { 0 } else { 1 });
     LAYOUT.write(&h.to_bytes(), [&tb, &bb, &[], data])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::permute_in_place;
+
+    /// Every permutation of five elements (cycles of every length) moves both slices as a
+    /// gather through the order would.
+    #[test]
+    fn permuting_in_place_is_the_gather() {
+        let mut orders = vec![vec![]];
+        for k in 0..5u32 {
+            orders = orders
+                .into_iter()
+                .flat_map(|o: Vec<u32>| {
+                    (0..=o.len()).map(move |at| {
+                        let mut o = o.clone();
+                        o.insert(at, k);
+                        o
+                    })
+                })
+                .collect();
+        }
+        assert_eq!(orders.len(), 120);
+        for order in orders {
+            let (mut a, mut b): (Vec<String>, Vec<u32>) = (0..5).map(|i| (format!("s{i}"), 10 * i)).unzip();
+            permute_in_place(&mut a, &mut b, &order);
+            let want_a: Vec<String> = order.iter().map(|&i| format!("s{i}")).collect();
+            let want_b: Vec<u32> = order.iter().map(|&i| 10 * i).collect();
+            assert_eq!((a, b), (want_a, want_b), "{order:?}");
+        }
+    }
 }
