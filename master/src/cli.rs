@@ -300,7 +300,7 @@ pub enum Pm {
         #[arg(long, default_value_t = codec::pm::CHUNK_FACES)]
         chunk_faces: usize,
         /// Build even where the model plainly needs more memory than the machine has
-        /// available (the build holds the whole model, about 70 bytes a triangle; without this
+        /// available (the build holds the whole model, about 65 bytes a triangle; without this
         /// it stops before simplifying, rather than be killed for memory later).
         #[arg(long)]
         no_memory_check: bool,

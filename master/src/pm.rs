@@ -96,9 +96,9 @@ pub fn build(
 }
 
 /// The bytes a triangle `pm build` holds at its peak beyond the loaded mesh, on large models:
-/// it peaks at 71 bytes a triangle (102M triangles) to 82 (13.9M) with the mesh, which takes
+/// it peaks at 66 bytes a triangle (102M triangles) to 77 (13.9M) with the mesh, which takes
 /// about 18 (README, "A hundred million triangles").
-const BUILD_BYTES_PER_TRIANGLE: u64 = 53;
+const BUILD_BYTES_PER_TRIANGLE: u64 = 48;
 
 /// Why a build of `triangles` triangles, its mesh loaded, plainly cannot fit in `available`
 /// bytes (the memory and swap free to this process), or `None`. The estimate is below what the
@@ -109,7 +109,7 @@ pub fn memory_shortfall(triangles: u64, available: u64) -> Option<String> {
     (need > available).then(|| {
         format!(
             "{triangles} triangles need about {:.1} GB more to build (the builder holds the whole model, \
-             about 70 bytes a triangle), and {:.1} GB is available; free memory or add swap, or pass \
+             about 65 bytes a triangle), and {:.1} GB is available; free memory or add swap, or pass \
              --no-memory-check to try anyway",
             gb(need),
             gb(available)
@@ -384,8 +384,8 @@ mod tests {
     /// way around; one that fits, and the memory this machine reports, pass.
     #[test]
     fn a_build_that_cannot_fit_is_refused_before_it_starts() {
-        let msg = memory_shortfall(400_000_000, 20_000_000_000).expect("refused");
-        assert!(msg.contains("400000000 triangles need about 21.2 GB"), "{msg}");
+        let msg = memory_shortfall(450_000_000, 20_000_000_000).expect("refused");
+        assert!(msg.contains("450000000 triangles need about 21.6 GB"), "{msg}");
         assert!(msg.contains("20.0 GB is available") && msg.contains("--no-memory-check"), "{msg}");
         assert!(!msg.contains('\n'));
         assert_eq!(memory_shortfall(100_000_000, 20_000_000_000), None);
