@@ -113,6 +113,12 @@ pub enum PmError {
     Mesh(#[from] MeshError),
 }
 
+/// The corners of `tri`, each vertex once, in corner order (a face like `[a, a, b]` is one
+/// face of `a`, not two).
+fn distinct_corners(tri: [u32; 3]) -> impl Iterator<Item = u32> {
+    (0..3).filter(move |&k| !tri[..k].contains(&tri[k])).map(move |k| tri[k])
+}
+
 /// A symmetric 4x4 error quadric, upper triangle row by row.
 #[derive(Clone, Copy, Default)]
 struct Quadric([f64; 10]);
@@ -281,20 +287,15 @@ impl Simplifier {
         // Each list allocated once at its size (pushing into empty lists reallocated them
         // on the way: a sixth of this function's time on the dragon).
         let mut count = vec![0u32; n];
-        for tri in &faces {
-            for (k, &v) in tri.iter().enumerate() {
-                if !tri[..k].contains(&v) {
-                    count[v as usize] += 1;
-                }
+        for &tri in &faces {
+            for v in distinct_corners(tri) {
+                count[v as usize] += 1;
             }
         }
         let mut vertex_faces: Vec<Vec<u32>> = count.iter().map(|&c| Vec::with_capacity(c as usize)).collect();
         drop(count);
-        for (f, tri) in faces.iter().enumerate() {
-            for (k, &v) in tri.iter().enumerate() {
-                if tri[..k].contains(&v) {
-                    continue;
-                }
+        for (f, &tri) in faces.iter().enumerate() {
+            for v in distinct_corners(tri) {
                 vertex_faces[v as usize].push(f as u32);
                 alive[v as usize] = true;
             }
@@ -454,11 +455,8 @@ impl Simplifier {
     fn kill_face(&mut self, f: u32) {
         self.face_alive[f as usize] = false;
         self.live -= 1;
-        let tri = self.faces[f as usize];
-        for (k, &v) in tri.iter().enumerate() {
-            if !tri[..k].contains(&v) {
-                self.live_faces[v as usize] -= 1;
-            }
+        for v in distinct_corners(self.faces[f as usize]) {
+            self.live_faces[v as usize] -= 1;
         }
     }
 
@@ -698,8 +696,8 @@ pub fn build_with_options(
 
 /// As [`build_with_options`], taking the mesh so that its positions are freed once numbered
 /// into the progressive mesh and its triangles once the normals are made from them (on a
-/// large model 18 bytes a triangle less at the criteria, the build's peak): what `tessera pm
-/// build` runs. The progressive mesh is the same.
+/// large model 18 bytes a triangle less while the splits and criteria are made): what
+/// `tessera pm build` runs. The progressive mesh is the same.
 pub fn build_owned(
     mesh: Mesh,
     opts: BuildOptions,
@@ -1121,11 +1119,9 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
     let mut normal = vec![[0.0f64; 3]; n];
     for t in finest() {
         let fnrm = face_normal(&t);
-        for (k, &f) in t.iter().enumerate() {
-            if !t[..k].contains(&f) {
-                for a in 0..3 {
-                    normal[f as usize][a] += fnrm[a];
-                }
+        for f in distinct_corners(t) {
+            for a in 0..3 {
+                normal[f as usize][a] += fnrm[a];
             }
         }
     }
@@ -1184,8 +1180,8 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
         let alpha = (l[2].max(angle(normal[v], normal[u]) + r[2]) * (1.0 + SLACK) + SLACK).min(max_angle);
         cone[s] = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
     }
-    // The outputs made one after the other, each input freed once read: this is the peak of
-    // a large model's build.
+    // The outputs made one after the other, each input freed once read (the end of this
+    // phase is one of a large model's build's highest points).
     drop((children, leaf_alpha));
     let normal: Vec<[f32; 3]> = {
         let f64s = normal;

@@ -583,14 +583,19 @@ fn count_symbols(ops: &Operations, choices: &Choices) -> Vec<[u64; 256]> {
         .reduce(
             || vec![[0u64; 256]; TABLES],
             |mut a, b| {
-                for (x, y) in a.iter_mut().zip(&b) {
-                    for (p, q) in x.iter_mut().zip(y) {
-                        *p += q;
-                    }
-                }
+                add_counts(&mut a, &b);
                 a
             },
         )
+}
+
+/// Adds the symbol counts per table `b` to `a`.
+fn add_counts(a: &mut [[u64; 256]], b: &[[u64; 256]]) {
+    for (x, y) in a.iter_mut().zip(b) {
+        for (p, q) in x.iter_mut().zip(y) {
+            *p += q;
+        }
+    }
 }
 
 /// The bits of the counted symbols with `tables`, and their entropy.
@@ -792,20 +797,13 @@ fn code_nodes(
         by_depth[d].push(n);
     }
     let mut addr = vec![NONE; m];
-    let mut counts = vec![[0u64; 256]; if count { TABLES } else { 0 }];
+    let tables_counted = if count { TABLES } else { 0 };
+    let mut counts = vec![[0u64; 256]; tables_counted];
     let mut nodes: Vec<Vec<u8>> = vec![vec![]; nodes_count];
     // In pieces of a depth, so that the operations coded in flight stay few (a whole depth
-    // holds most of the model's: 32 bytes an operation).
-    // The counts per thread's share of a piece (a table of counts per node in flight took
-    // more memory than the dragon's operations).
-    let tables_counted = if count { TABLES } else { 0 };
-    let add = |a: &mut Vec<[u64; 256]>, b: &[[u64; 256]]| {
-        for (x, y) in a.iter_mut().zip(b) {
-            for (p, q) in x.iter_mut().zip(y) {
-                *p += q;
-            }
-        }
-    };
+    // holds most of the model's: 32 bytes an operation), the symbols counted per thread's
+    // share of a piece (a table of counts per node in flight took more memory than the
+    // dragon's operations).
     for level in by_depth.iter().rev().flat_map(|l| l.chunks(64)) {
         let (coded, level_counts) = level
             .par_iter()
@@ -821,11 +819,11 @@ fn code_nodes(
                 || (Vec::new(), vec![[0u64; 256]; tables_counted]),
                 |(mut a, mut ca), (b, cb)| {
                     a.extend(b);
-                    add(&mut ca, &cb);
+                    add_counts(&mut ca, &cb);
                     (a, ca)
                 },
             );
-        add(&mut counts, &level_counts);
+        add_counts(&mut counts, &level_counts);
         for (&n, (bytes, placed)) in level.iter().zip(coded) {
             for (i, a) in placed {
                 addr[i as usize] = a;
