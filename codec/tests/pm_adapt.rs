@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use codec::pm::format::{decode, encode, Dpm, EncodeOptions};
-use codec::pm::{build, Adapter, DpmAdapter, ProgressiveMesh, SplitTree, Viewpoint, NONE};
+use codec::pm::{build, Adapter, DpmAdapter, Levels, ProgressiveMesh, SplitTree, Viewpoint, NONE};
 use codec::view::Camera;
 use codec::Mesh;
 use glam::Vec3;
@@ -218,6 +218,33 @@ fn check_path(pm: &ProgressiveMesh, frames: usize, error_px: f32) -> (usize, usi
     (lo, hi)
 }
 
+/// Passes of every level ([`Levels::All`]) along the camera path: each frame's first pass
+/// reaches a valid state that a second pass leaves as it is, and that state is the one the
+/// paper's one-level passes converge to, frame to frame and from the base mesh. Returns the
+/// splits and collapses the first passes did.
+fn check_all_levels(pm: &ProgressiveMesh, frames: usize, error_px: f32) -> (usize, usize) {
+    let tree = SplitTree::new(pm);
+    let mut one = Adapter::new(pm);
+    let mut all = Adapter::new(pm).with_levels(Levels::All);
+    let (mut splits, mut collapses) = (0, 0);
+    for k in 0..frames {
+        let view = path_view(pm, k, frames, error_px);
+        converge(pm, &tree, &mut one, &view);
+        let st = all.adapt(&view);
+        check_state(pm, &tree, &all);
+        assert_eq!((st.vertices, st.faces), (all.active().len(), all.faces().len()));
+        check_converged(pm, &mut all, &view);
+        assert!(all.active() == one.active(), "frame {k}: the all-levels pass and one-level passes differ");
+        assert!(sorted_canonical(all.face_fvids()) == sorted_canonical(one.face_fvids()), "frame {k}: faces differ");
+        let mut fresh = Adapter::new(pm).with_levels(Levels::All);
+        fresh.adapt(&view);
+        assert!(fresh.active() == one.active(), "frame {k}: from the base mesh, the all-levels pass differs");
+        splits += st.splits;
+        collapses += st.collapses;
+    }
+    (splits, collapses)
+}
+
 /// Criteria are monotone: a split's values are at least its children's.
 fn check_monotone(pm: &ProgressiveMesh) {
     let tree = SplitTree::new(pm);
@@ -270,8 +297,25 @@ fn shared_meshes_frame_to_frame_equals_from_base() {
     }
 }
 
+#[test]
+fn an_all_levels_pass_reaches_what_one_level_passes_converge_to() {
+    for rel in MESHES {
+        let rel = testkit::find_mesh(rel);
+        let pm = build(&load(&rel)).unwrap();
+        let (splits, collapses) = check_all_levels(&pm, 24, 1.0);
+        eprintln!("{rel}: {splits} splits and {collapses} collapses in 24 all-levels passes");
+        assert!(splits > 0 && collapses > 0, "{rel}: the path must both refine and coarsen");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_adapt_in_one_all_levels_pass(mesh in soup(), error_px in 0.5f32..40.0) {
+        let pm = build(&mesh).unwrap();
+        check_all_levels(&pm, 12, error_px);
+    }
 
     #[test]
     fn random_soups_adapt_consistently(mesh in soup(), error_px in 0.5f32..40.0) {
@@ -361,9 +405,11 @@ fn bunny_adaption_speed() {
 /// Why converging after a turn costs many passes (issue 16's adaptation target):
 /// `cargo test -p tessera-codec --release --test pm_adapt -- --ignored --nocapture orbit_steps`.
 /// The dragon at 1920x1080 and 0.5 px on a 16-frame orbit (22.5 degrees a frame), converged
-/// every frame by the CPU reference (the GPU adapter passes in lockstep with it): per frame
-/// the passes, the splits and collapses of each, and the time of the passes against one pass
-/// over the converged view, which changes nothing.
+/// every frame by the CPU reference in one-level passes (the paper's, which the GPU adapter
+/// passes in lockstep with) and in all-levels passes ([`Levels::All`]): per frame the passes,
+/// the splits and collapses of each, and the time of the passes against one pass over the
+/// converged view, which changes nothing. All-levels frames take one changing pass and land
+/// on the one-level state.
 #[test]
 #[ignore = "adapts the 871k-triangle dragon along an orbit; run in release"]
 fn orbit_steps_converge_in_passes_of_shrinking_change() {
@@ -371,34 +417,54 @@ fn orbit_steps_converge_in_passes_of_shrinking_change() {
     let pm = build(&mesh).unwrap();
     let (lo, hi) = bbox(&pm);
     let cam = Camera::framing(lo, hi, 1920.0 / 1080.0);
-    let mut a = Adapter::new(&pm);
+    let mut one = Adapter::new(&pm);
+    let mut all = Adapter::new(&pm).with_levels(Levels::All);
     let frames = 16;
+    let mut ratios = [vec![], vec![]];
     for k in 0..frames {
         let rot = glam::Quat::from_axis_angle(cam.up.normalize(), std::f32::consts::TAU * k as f32 / frames as f32);
         let view = Viewpoint::new(&Camera { eye: cam.target + rot * (cam.eye - cam.target), ..cam }, 1920, 1080, 0.5);
-        let start = Instant::now();
-        let mut steps = vec![];
-        loop {
-            let st = a.adapt(&view);
-            if st.converged() {
-                break;
+        for (m, a) in [&mut one, &mut all].into_iter().enumerate() {
+            let start = Instant::now();
+            let mut steps = vec![];
+            loop {
+                let st = a.adapt(&view);
+                if st.converged() {
+                    break;
+                }
+                steps.push((st.splits, st.collapses));
+                assert!(steps.len() < MAX_PASSES, "frame {k}: not converged in {MAX_PASSES} passes");
             }
-            steps.push((st.splits, st.collapses));
-            assert!(steps.len() < MAX_PASSES, "frame {k}: not converged in {MAX_PASSES} passes");
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let start = Instant::now();
+            assert!(a.adapt(&view).converged());
+            let still = start.elapsed().as_secs_f64() * 1e3;
+            let changes: usize = steps.iter().map(|(s, c)| s + c).sum();
+            eprintln!(
+                "frame {k} {:?}: {} passes that change (+1 that does not), {ms:.0} ms = {:.1}x a converged pass \
+                 ({still:.1} ms), {changes} splits and collapses for {} vertices; per pass {steps:?}",
+                a_levels(m),
+                steps.len(),
+                ms / still,
+                a.active().len()
+            );
+            if k > 0 {
+                ratios[m].push(ms / still);
+            }
+            if m == 1 {
+                assert!(steps.len() <= 1, "frame {k}: an all-levels frame took {} changing passes", steps.len());
+            }
         }
-        let ms = start.elapsed().as_secs_f64() * 1e3;
-        let start = Instant::now();
-        assert!(a.adapt(&view).converged());
-        let still = start.elapsed().as_secs_f64() * 1e3;
-        let changes: usize = steps.iter().map(|(s, c)| s + c).sum();
-        eprintln!(
-            "frame {k}: {} passes that change (+1 that does not), {ms:.0} ms = {:.0}x a converged pass ({still:.1} ms), \
-             {changes} splits and collapses for {} vertices; per pass {steps:?}",
-            steps.len(),
-            ms / still,
-            a.active().len()
-        );
+        assert!(one.active() == all.active(), "frame {k}: the two kinds of pass differ");
     }
+    for (m, r) in ratios.iter_mut().enumerate() {
+        r.sort_by(f64::total_cmp);
+        eprintln!("{:?}: frame / converged pass: median {:.1}x, max {:.1}x", a_levels(m), r[r.len() / 2], r[r.len() - 1]);
+    }
+}
+
+fn a_levels(m: usize) -> Levels {
+    [Levels::One, Levels::All][m]
 }
 
 /// A tile's view is the sub-frustum through the tile: the whole screen gives the same planes,

@@ -331,6 +331,18 @@ pub(super) fn update_faces(
     total
 }
 
+/// How far one [`Adapter::adapt`] pass moves a vertex in the split tree.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Levels {
+    /// One level: the paper's passes (Algorithms 1 to 5), which the GPU adapter runs in
+    /// lockstep; a view change of `k` levels takes `k` passes.
+    #[default]
+    One,
+    /// Every level the view asks for: a pass collapses whole subtrees and splits down the
+    /// subtree, so one pass reaches the converged state (see `Adapter::pass_all_levels`).
+    All,
+}
+
 /// View-dependent adaption of a progressive mesh (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Adapter<'a> {
@@ -341,7 +353,15 @@ pub struct Adapter<'a> {
     next: Vec<u32>,
     node: Vec<u32>,
     split_cache: Vec<Cached>,
+    /// The cache of the vertex's *creator*: the done split whose right child's subtree this
+    /// vertex is the leftmost leaf of ([`NONE`] for a base vertex's FVID). For a right child
+    /// the creator is its collapse (Algorithm 1 reads only those); every done split is the
+    /// creator of exactly one active vertex, which is what [`Levels::All`] evaluates.
     collapse_cache: Vec<Cached>,
+    creator: Vec<u32>,
+    /// Per split: the end of its vertex's FVID range (the range starts at the split's `v`).
+    end: Vec<u32>,
+    levels: Levels,
     /// Faces: current vertex indices, finest FVIDs, and the split that created them.
     face_idx: Vec<[u32; 3]>,
     face_fvid: Vec<[u32; 3]>,
@@ -382,6 +402,7 @@ impl<'a> Adapter<'a> {
             .iter()
             .map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32))
             .collect();
+        let end = split_ends(pm, &tree);
         Adapter {
             pm,
             tree,
@@ -390,16 +411,28 @@ impl<'a> Adapter<'a> {
             node: vec![NONE; n],
             split_cache,
             collapse_cache: vec![Cached::default(); n],
+            creator: vec![NONE; n],
+            end,
+            levels: Levels::One,
             face_idx,
             face_fvid: pm.base_faces.clone(),
             face_owner: vec![NONE; pm.base_faces.len()],
         }
     }
 
-    /// One adaption pass for `view` (Algorithms 1 to 5).
+    /// Sets how far one [`Self::adapt`] pass moves a vertex in the split tree (see [`Levels`]).
+    pub fn with_levels(mut self, levels: Levels) -> Self {
+        self.levels = levels;
+        self
+    }
+
+    /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form).
     pub fn adapt(&mut self, view: &Viewpoint) -> PassStats {
         let eval = Eval::new(view);
-        self.pass(&|c| eval.needs(c))
+        match self.levels {
+            Levels::One => self.pass(&|c| eval.needs(c)),
+            Levels::All => self.pass_all_levels(&|c| eval.needs(c)),
+        }
     }
 
     /// Passes until converged ([`PassStats::converged`]), at most `max_passes`; returns the number of
@@ -503,28 +536,24 @@ impl<'a> Adapter<'a> {
             .collect();
         let face_sum = exclusive_scan(&face_cnt);
         let vertex_sum = exclusive_scan(&cnt);
-        type Vertex = (u32, u32, u32, Cached, Cached);
         let tree = &self.tree;
-        let vertices: Vec<Vertex> = (0..n)
+        let vertices: Vec<Slot> = (0..n)
             .into_par_iter()
             .flat_map_iter(|i| {
-                let old = (self.fvid[i], self.next[i], self.node[i], self.split_cache[i], self.collapse_cache[i]);
-                let out: [Option<Vertex>; 2] = match cnt[i] {
+                let old = self.slot(i);
+                let out: [Option<Slot>; 2] = match cnt[i] {
                     0 => [None, None],
                     1 if i + 1 < n && cnt[i + 1] == 0 => {
-                        // Algorithm 2's collapse: the target takes the collapse's node.
+                        // Algorithm 2's collapse: the target takes the collapse's node and
+                        // keeps its creator.
                         let p = self.node[i + 1] >> 1;
                         let node = tree.parent[p as usize];
-                        let collapse = if node != NONE && node & 1 == 1 { node >> 1 } else { NONE };
-                        [Some((old.0, p, node, self.collapse_cache[i + 1], Cached::of(pm, collapse))), None]
+                        [Some(Slot { next: p, node, split_cache: self.collapse_cache[i + 1], ..old }), None]
                     }
                     1 => [Some(old), None],
                     _ => {
                         // Algorithm 4: the split writes v and v_u.
-                        let s = old.1;
-                        let [l, r] = tree.children[s as usize];
-                        let v = (old.0, l, 2 * s, Cached::of(pm, l), Cached::default());
-                        let u = (pm.splits[s as usize].v_u, r, 2 * s + 1, Cached::of(pm, r), old.3);
+                        let [v, u] = self.split_children(&old);
                         [Some(v), Some(u)]
                     }
                 };
@@ -532,7 +561,7 @@ impl<'a> Adapter<'a> {
             })
             .collect();
         debug_assert_eq!(vertices.len(), vertex_sum[n] as usize);
-        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.0).collect();
+        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.fvid).collect();
         debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
 
         // Algorithm 4: the new faces of the compacted splits.
@@ -560,11 +589,221 @@ impl<'a> Adapter<'a> {
             &|i| node[i] >> 1,
             new_faces,
         );
-        self.fvid = new_fvid;
-        self.next = vertices.par_iter().map(|v| v.1).collect();
-        self.node = vertices.par_iter().map(|v| v.2).collect();
-        self.split_cache = vertices.par_iter().map(|v| v.3).collect();
-        self.collapse_cache = vertices.par_iter().map(|v| v.4).collect();
+        self.store(new_fvid, &vertices);
         PassStats { splits, collapses, cancelled, vertices: self.fvid.len(), faces, held: false }
     }
+
+    /// Active vertex `i`'s state.
+    fn slot(&self, i: usize) -> Slot {
+        Slot {
+            fvid: self.fvid[i],
+            next: self.next[i],
+            node: self.node[i],
+            split_cache: self.split_cache[i],
+            collapse_cache: self.collapse_cache[i],
+            creator: self.creator[i],
+        }
+    }
+
+    /// The two children of a vertex whose next split is done: `v` keeps the FVID and the
+    /// creator, `v_u` gets the split as its creator (and collapse).
+    fn split_children(&self, old: &Slot) -> [Slot; 2] {
+        let (pm, s) = (self.pm, old.next);
+        let [l, r] = self.tree.children[s as usize];
+        let v = Slot { next: l, node: 2 * s, split_cache: Cached::of(pm, l), ..*old };
+        let u = Slot {
+            fvid: pm.splits[s as usize].v_u,
+            next: r,
+            node: 2 * s + 1,
+            split_cache: Cached::of(pm, r),
+            collapse_cache: old.split_cache,
+            creator: s,
+        };
+        [v, u]
+    }
+
+    /// Replaces the vertex state by `vertices` (sorted by FVID, `new_fvid` their FVIDs).
+    fn store(&mut self, new_fvid: Vec<u32>, vertices: &[Slot]) {
+        self.fvid = new_fvid;
+        self.next = vertices.par_iter().map(|v| v.next).collect();
+        self.node = vertices.par_iter().map(|v| v.node).collect();
+        self.split_cache = vertices.par_iter().map(|v| v.split_cache).collect();
+        self.collapse_cache = vertices.par_iter().map(|v| v.collapse_cache).collect();
+        self.creator = vertices.par_iter().map(|v| v.creator).collect();
+    }
+
+    /// One pass of [`Levels::All`]: reaches the converged state of the view in one pass.
+    ///
+    /// 1. Every done split is the creator of exactly one active vertex, which evaluates it: the
+    ///    done splits the view no longer asks for are *undone*. Their FVID ranges are nested or
+    ///    disjoint; each outermost one is a *region*, whose active vertices (contiguous in the
+    ///    sorted buffer) collapse into one: the first, which keeps its FVID and creator and
+    ///    becomes the region's split's vertex again.
+    /// 2. Every other vertex whose next split is asked for splits, and so on down its subtree
+    ///    while the view asks: its leaves replace it, in FVID order.
+    /// 3. Old faces move as in Algorithm 5: a corner in a region to the region's vertex, a
+    ///    corner of a split vertex to the leaf whose range holds its FVID (binary search among
+    ///    that vertex's leaves). A face is dropped when its creating split is undone: when a
+    ///    region holds a corner and the split's FVID range lies inside the region's. The
+    ///    faces of every split done are appended, indexed by binary search.
+    ///
+    /// The result is the cut below the splits whose done ancestors are all asked for, which is
+    /// what repeated one-level passes converge to where the criteria are monotone over the
+    /// tree (the builder makes them so): an undone region's descendants are not asked for
+    /// either, so no split of a vertex in a region is lost, and a collapse never waits for one.
+    fn pass_all_levels(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
+        let pm = self.pm;
+        let n = self.fvid.len();
+        let fvid = &self.fvid;
+
+        // 1. Undone splits as ranges of positions in the sorted buffer, and their outermost ones.
+        let mut undone: Vec<(u32, u32, u32)> = (0..n)
+            .into_par_iter()
+            .filter_map(|i| {
+                let c = self.creator[i];
+                if c == NONE || need(&self.collapse_cache[i]) {
+                    return None;
+                }
+                let p = fvid.partition_point(|&x| x < pm.splits[c as usize].v);
+                let q = fvid.partition_point(|&x| x < self.end[c as usize]);
+                Some((p as u32, q as u32, c))
+            })
+            .collect();
+        undone.par_sort_unstable_by_key(|&(p, q, _)| (p, std::cmp::Reverse(q)));
+        let mut regions: Vec<(u32, u32, u32)> = Vec::new();
+        for r in undone {
+            if regions.last().is_none_or(|last| r.0 >= last.1) {
+                regions.push(r);
+            }
+        }
+        let mut region = vec![NONE; n];
+        for (k, &(p, q, _)) in regions.iter().enumerate() {
+            region[p as usize..q as usize].fill(k as u32);
+        }
+        let collapses: usize = regions.iter().map(|&(p, q, _)| (q - p - 1) as usize).sum();
+
+        // 2. The new vertices, in chunks of the sorted buffer, with the splits done.
+        const CHUNK: usize = 1 << 12;
+        let parts: Vec<(Vec<Slot>, Vec<(u32, u32)>, Vec<u32>)> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let (mut out, mut done, mut cnt) = (Vec::new(), Vec::new(), Vec::new());
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    let before = out.len();
+                    let r = region[i];
+                    if r != NONE {
+                        let (p, _, s) = regions[r as usize];
+                        if p as usize == i {
+                            let node = self.tree.parent[s as usize];
+                            out.push(Slot { next: s, node, split_cache: Cached::of(pm, s), ..self.slot(i) });
+                        }
+                    } else if self.next[i] != NONE && need(&self.split_cache[i]) {
+                        // Down the subtree while the view asks (left before right: FVID order).
+                        let mut stack = vec![self.slot(i)];
+                        while let Some(v) = stack.pop() {
+                            if v.next != NONE && need(&v.split_cache) {
+                                done.push((i as u32, v.next));
+                                let [l, u] = self.split_children(&v);
+                                stack.push(u);
+                                stack.push(l);
+                            } else {
+                                out.push(v);
+                            }
+                        }
+                    } else {
+                        out.push(self.slot(i));
+                    }
+                    cnt.push((out.len() - before) as u32);
+                }
+                (out, done, cnt)
+            })
+            .collect();
+        let splits: usize = parts.iter().map(|p| p.1.len()).sum();
+        if splits == 0 && collapses == 0 {
+            return PassStats { splits, collapses, cancelled: 0, vertices: n, faces: self.face_idx.len(), held: false };
+        }
+        let cnt: Vec<u32> = parts.iter().flat_map(|p| p.2.iter().copied()).collect();
+        let vertex_sum = exclusive_scan(&cnt);
+        let vertices: Vec<Slot> = parts.iter().flat_map(|p| p.0.iter().copied()).collect();
+        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.fvid).collect();
+        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
+        let new_ref = &new_fvid;
+        let leaf = move |f: u32| (new_ref.partition_point(|&x| x <= f) as u32).saturating_sub(1);
+
+        // 3. Faces: the old ones moved or dropped, then those of the splits done.
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = parts
+            .par_iter()
+            .flat_map_iter(|p| p.1.iter())
+            .flat_map_iter(|&(_, s)| pm.splits[s as usize].faces.iter().map(move |&t| (t.map(leaf), t, s)))
+            .collect();
+        let end = &self.end;
+        let region_of = |i: usize| (region[i] != NONE).then(|| regions[region[i] as usize]);
+        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
+            .into_par_iter()
+            .filter_map(|k| {
+                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
+                let mut idx = [0u32; 3];
+                for c in 0..3 {
+                    let i = old[c] as usize;
+                    idx[c] = if let Some((p, _, s)) = region_of(i) {
+                        let o = owner as usize;
+                        if owner != NONE && pm.splits[o].v >= fvid[p as usize] && end[o] <= end[s as usize] {
+                            return None; // its split is undone
+                        }
+                        vertex_sum[p as usize]
+                    } else if cnt[i] == 1 {
+                        vertex_sum[i]
+                    } else {
+                        let (a, b) = (vertex_sum[i] as usize, vertex_sum[i + 1] as usize);
+                        (a + new_fvid[a..b].partition_point(|&x| x <= fv[c]) - 1) as u32
+                    };
+                }
+                Some((idx, fv, owner))
+            })
+            .collect();
+        let faces = kept.len() + new_faces.len();
+        let (mut fi, mut ff, mut fo) = (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
+        for (a, b, c) in kept.into_iter().chain(new_faces) {
+            fi.push(a);
+            ff.push(b);
+            fo.push(c);
+        }
+        (self.face_idx, self.face_fvid, self.face_owner) = (fi, ff, fo);
+        self.store(new_fvid, &vertices);
+        PassStats { splits, collapses, cancelled: 0, vertices: self.fvid.len(), faces, held: false }
+    }
+}
+
+/// One active vertex's state in [`Adapter`].
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    fvid: u32,
+    next: u32,
+    node: u32,
+    split_cache: Cached,
+    collapse_cache: Cached,
+    creator: u32,
+}
+
+/// Per split: the end of its vertex's FVID range (roots end at the next base vertex, a left
+/// child at its parent's `v_u`, a right child where its parent ends). Splits come coarse to
+/// fine, so a parent is done before its children.
+fn split_ends(pm: &ProgressiveMesh, tree: &SplitTree) -> Vec<u32> {
+    let mut end = vec![NONE; pm.splits.len()];
+    let total = pm.positions.len() as u32;
+    for (b, &r) in tree.roots.iter().enumerate() {
+        if r != NONE {
+            end[r as usize] = pm.base_vertices.get(b + 1).copied().unwrap_or(total);
+        }
+    }
+    for (s, split) in pm.splits.iter().enumerate() {
+        let [l, r] = tree.children[s];
+        if l != NONE {
+            end[l as usize] = split.v_u;
+        }
+        if r != NONE {
+            end[r as usize] = end[s];
+        }
+    }
+    end
 }
