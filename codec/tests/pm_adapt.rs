@@ -459,7 +459,12 @@ fn orbit_steps_converge_in_passes_of_shrinking_change() {
     }
     for (m, r) in ratios.iter_mut().enumerate() {
         r.sort_by(f64::total_cmp);
-        eprintln!("{:?}: frame / converged pass: median {:.1}x, max {:.1}x", a_levels(m), r[r.len() / 2], r[r.len() - 1]);
+        eprintln!(
+            "{:?}: frame / converged pass: median {:.1}x, max {:.1}x",
+            a_levels(m),
+            r[r.len() / 2],
+            r[r.len() - 1]
+        );
     }
 }
 
@@ -513,13 +518,13 @@ fn tile_views_are_the_tiles_sub_frusta() {
 /// The adaption from the compressed operations ([`DpmAdapter`]) against the reference over
 /// the decoded mesh: after every pass of a camera path (each frame to convergence), then of a
 /// full refinement, the same statistics, active vertices and triangle set.
-fn check_from_compressed(mesh: &Mesh, frames: usize, error_px: f32, what: &str) -> (usize, usize) {
+fn check_from_compressed(mesh: &Mesh, frames: usize, error_px: f32, what: &str, levels: Levels) -> (usize, usize) {
     let pm = build(mesh).unwrap();
     let bytes = encode(&pm, EncodeOptions::default()).unwrap().bytes;
     let dpm = Dpm::parse(&bytes).unwrap();
     let decoded = decode(&bytes).unwrap().pm;
-    let mut reference = Adapter::new(&decoded);
-    let mut compressed = DpmAdapter::new(&dpm).unwrap();
+    let mut reference = Adapter::new(&decoded).with_levels(levels);
+    let mut compressed = DpmAdapter::new(&dpm).unwrap().with_levels(levels);
     let (mut passes, mut collapses) = (0, 0);
     let mut compare = |r: codec::pm::PassStats, c: codec::pm::PassStats, at: &str, a: &Adapter, d: &DpmAdapter| {
         assert_eq!(r, c, "{what}, {at}: pass statistics");
@@ -553,9 +558,12 @@ fn check_from_compressed(mesh: &Mesh, frames: usize, error_px: f32, what: &str) 
 fn adapting_from_the_compressed_operations_equals_the_reference() {
     for rel in MESHES.iter().copied().chain(["stanford/bunny_zipper_c3d.obj.gz"]) {
         let rel = testkit::find_mesh(rel);
-        let (passes, collapses) = check_from_compressed(&load(&rel), 16, 1.0, &rel);
-        eprintln!("{rel}: {passes} passes alike, {collapses} collapses among them");
-        assert!(collapses > 0, "{rel}: the path never coarsens");
+        let mesh = load(&rel);
+        for levels in [Levels::One, Levels::All] {
+            let (passes, collapses) = check_from_compressed(&mesh, 16, 1.0, &rel, levels);
+            eprintln!("{rel}, {levels:?}: {passes} passes alike, {collapses} collapses among them");
+            assert!(collapses > 0, "{rel}: the path never coarsens");
+        }
     }
 }
 
@@ -564,7 +572,8 @@ proptest! {
 
     #[test]
     fn random_soups_adapt_alike_from_the_compressed_operations(mesh in soup(), error_px in 0.5f32..40.0) {
-        check_from_compressed(&mesh, 8, error_px, "a random soup");
+        check_from_compressed(&mesh, 8, error_px, "a random soup", Levels::One);
+        check_from_compressed(&mesh, 8, error_px, "a random soup", Levels::All);
     }
 }
 
@@ -653,9 +662,10 @@ fn out_of_core_adaption_equals_in_core_within_a_budget() {
         .unwrap();
     let budget = required + 2 * 4096;
     eprintln!("budget {budget} bytes of the model's {total}");
-    for background in [false, true] {
+    for (background, levels) in [(false, Levels::One), (true, Levels::One), (true, Levels::All)] {
         let mut cache = NodeCache::new(&prefix, file.clone(), budget, background);
-        let (mut a, mut b) = (DpmAdapter::new(&dpm).unwrap(), DpmAdapter::new(&prefix).unwrap());
+        let (mut a, mut b) =
+            (DpmAdapter::new(&dpm).unwrap().with_levels(levels), DpmAdapter::new(&prefix).unwrap().with_levels(levels));
         let mut waited = 0;
         for k in 0..frames {
             let view = close(k);
@@ -663,7 +673,7 @@ fn out_of_core_adaption_equals_in_core_within_a_budget() {
             cache.wait().unwrap();
             for p in 0..64 {
                 let (r, c) = (a.adapt(&view).unwrap(), b.adapt_resident(&view, &cache).unwrap());
-                let at = format!("background {background}, frame {k}, pass {p}");
+                let at = format!("background {background}, {levels:?}, frame {k}, pass {p}");
                 assert_eq!(r, c, "{at}");
                 assert_eq!(a.active(), b.active(), "{at}");
                 assert_eq!(sorted_canonical(a.face_fvids()), sorted_canonical(b.face_fvids()), "{at}");

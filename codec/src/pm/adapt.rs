@@ -318,6 +318,83 @@ pub(super) fn update_faces(
             Some((idx, fv, owner))
         })
         .collect();
+    store_faces([face_idx, face_fvid], owner, kept, new_faces)
+}
+
+/// Where an old face's corner at an active vertex goes in an all-levels pass.
+pub(super) enum Corner {
+    /// The vertex is in no collapsing region: it stays or splits.
+    Free,
+    /// It is in a region that undoes the face's split: the face goes.
+    Undone,
+    /// It is in a region whose vertex is old vertex `p`.
+    Region(usize),
+}
+
+/// The outermost of the `undone` ranges of positions `(p, q, tag)` (nested or disjoint), each
+/// a collapsing region of an all-levels pass, for both adapters: the regions sorted, each
+/// position's region ([`NONE`]: none) and the vertices the collapses remove.
+pub(super) fn outermost(mut undone: Vec<(u32, u32, u32)>, n: usize) -> (Vec<(u32, u32, u32)>, Vec<u32>, usize) {
+    undone.par_sort_unstable_by_key(|&(p, q, _)| (p, std::cmp::Reverse(q)));
+    let mut regions: Vec<(u32, u32, u32)> = Vec::new();
+    for r in undone {
+        if regions.last().is_none_or(|last| r.0 >= last.1) {
+            regions.push(r);
+        }
+    }
+    let mut region = vec![NONE; n];
+    for (k, &(p, q, _)) in regions.iter().enumerate() {
+        region[p as usize..q as usize].fill(k as u32);
+    }
+    let collapses = regions.iter().map(|&(p, q, _)| (q - p - 1) as usize).sum();
+    (regions, region, collapses)
+}
+
+/// The face update of an all-levels pass, for both adapters: a corner in a region moves to the
+/// region's vertex (or the face goes, [`Corner::Undone`]), a corner of a kept vertex to its new
+/// position, one of a split vertex to the leaf whose range holds its FVID (binary search among
+/// that vertex's leaves, `new_fvid[vertex_sum[i]..vertex_sum[i + 1]]`); then `new_faces` are
+/// appended. Returns the face count.
+pub(super) fn update_faces_all_levels(
+    faces: [&mut Vec<[u32; 3]>; 2],
+    owner: &mut Vec<u32>,
+    cnt: &[u32],
+    vertex_sum: &[u32],
+    new_fvid: &[u32],
+    corner: &(dyn Fn(usize, u32) -> Corner + Sync),
+    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
+) -> usize {
+    let [face_idx, face_fvid] = faces;
+    let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..face_idx.len())
+        .into_par_iter()
+        .filter_map(|k| {
+            let (old, fv, owner) = (face_idx[k], face_fvid[k], owner[k]);
+            let mut idx = [0u32; 3];
+            for c in 0..3 {
+                let i = old[c] as usize;
+                idx[c] = match corner(i, owner) {
+                    Corner::Undone => return None,
+                    Corner::Region(p) => vertex_sum[p],
+                    Corner::Free if cnt[i] == 1 => vertex_sum[i],
+                    Corner::Free => {
+                        let (a, b) = (vertex_sum[i] as usize, vertex_sum[i + 1] as usize);
+                        (a + new_fvid[a..b].partition_point(|&x| x <= fv[c]) - 1) as u32
+                    }
+                };
+            }
+            Some((idx, fv, owner))
+        })
+        .collect();
+    store_faces([face_idx, face_fvid], owner, kept, new_faces)
+}
+
+/// Replaces the face buffers by `kept` and then `new_faces`; returns the face count.
+fn store_faces(
+    [face_idx, face_fvid]: [&mut Vec<[u32; 3]>; 2],
+    owner: &mut Vec<u32>,
+    kept: Vec<([u32; 3], [u32; 3], u32)>,
+    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
+) -> usize {
     let total = kept.len() + new_faces.len();
     let (mut fi, mut ff, mut fo) = (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
     for (a, b, c) in kept.into_iter().chain(new_faces) {
@@ -657,7 +734,7 @@ impl<'a> Adapter<'a> {
         let fvid = &self.fvid;
 
         // 1. Undone splits as ranges of positions in the sorted buffer, and their outermost ones.
-        let mut undone: Vec<(u32, u32, u32)> = (0..n)
+        let undone: Vec<(u32, u32, u32)> = (0..n)
             .into_par_iter()
             .filter_map(|i| {
                 let c = self.creator[i];
@@ -669,18 +746,7 @@ impl<'a> Adapter<'a> {
                 Some((p as u32, q as u32, c))
             })
             .collect();
-        undone.par_sort_unstable_by_key(|&(p, q, _)| (p, std::cmp::Reverse(q)));
-        let mut regions: Vec<(u32, u32, u32)> = Vec::new();
-        for r in undone {
-            if regions.last().is_none_or(|last| r.0 >= last.1) {
-                regions.push(r);
-            }
-        }
-        let mut region = vec![NONE; n];
-        for (k, &(p, q, _)) in regions.iter().enumerate() {
-            region[p as usize..q as usize].fill(k as u32);
-        }
-        let collapses: usize = regions.iter().map(|&(p, q, _)| (q - p - 1) as usize).sum();
+        let (regions, region, collapses) = outermost(undone, n);
 
         // 2. The new vertices, in chunks of the sorted buffer, with the splits done.
         const CHUNK: usize = 1 << 12;
@@ -737,38 +803,27 @@ impl<'a> Adapter<'a> {
             .flat_map_iter(|&(_, s)| pm.splits[s as usize].faces.iter().map(move |&t| (t.map(leaf), t, s)))
             .collect();
         let end = &self.end;
-        let region_of = |i: usize| (region[i] != NONE).then(|| regions[region[i] as usize]);
-        let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..self.face_idx.len())
-            .into_par_iter()
-            .filter_map(|k| {
-                let (old, fv, owner) = (self.face_idx[k], self.face_fvid[k], self.face_owner[k]);
-                let mut idx = [0u32; 3];
-                for c in 0..3 {
-                    let i = old[c] as usize;
-                    idx[c] = if let Some((p, _, s)) = region_of(i) {
-                        let o = owner as usize;
-                        if owner != NONE && pm.splits[o].v >= fvid[p as usize] && end[o] <= end[s as usize] {
-                            return None; // its split is undone
-                        }
-                        vertex_sum[p as usize]
-                    } else if cnt[i] == 1 {
-                        vertex_sum[i]
-                    } else {
-                        let (a, b) = (vertex_sum[i] as usize, vertex_sum[i + 1] as usize);
-                        (a + new_fvid[a..b].partition_point(|&x| x <= fv[c]) - 1) as u32
-                    };
+        let corner = |i: usize, owner: u32| match region[i] {
+            NONE => Corner::Free,
+            r => {
+                let (p, _, s) = regions[r as usize];
+                let o = owner as usize;
+                if owner != NONE && pm.splits[o].v >= fvid[p as usize] && end[o] <= end[s as usize] {
+                    Corner::Undone
+                } else {
+                    Corner::Region(p as usize)
                 }
-                Some((idx, fv, owner))
-            })
-            .collect();
-        let faces = kept.len() + new_faces.len();
-        let (mut fi, mut ff, mut fo) = (Vec::with_capacity(faces), Vec::with_capacity(faces), Vec::with_capacity(faces));
-        for (a, b, c) in kept.into_iter().chain(new_faces) {
-            fi.push(a);
-            ff.push(b);
-            fo.push(c);
-        }
-        (self.face_idx, self.face_fvid, self.face_owner) = (fi, ff, fo);
+            }
+        };
+        let faces = update_faces_all_levels(
+            [&mut self.face_idx, &mut self.face_fvid],
+            &mut self.face_owner,
+            &cnt,
+            &vertex_sum,
+            &new_fvid,
+            &corner,
+            new_faces,
+        );
         self.store(new_fvid, &vertices);
         PassStats { splits, collapses, cancelled: 0, vertices: self.fvid.len(), faces, held: false }
     }

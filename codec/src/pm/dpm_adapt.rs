@@ -25,12 +25,16 @@
 //! Per active vertex: FVID, its operation's address and context (range end, parent criteria,
 //! quantized position and normal), the split cache (its operation's criteria, position and
 //! normal), and its creator's address, context and criteria (the collapse cache). A face's
-//! owner is its split's address.
+//! owner is its split's `v_u` (unique per split, and the FVID of the split's creator vertex,
+//! so a collapsing vertex recognises its split's faces by its own FVID).
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{cancel_collapses, exclusive_scan, split_face_indices, update_faces, Cached, Eval};
+use super::adapt::{
+    cancel_collapses, exclusive_scan, outermost, split_face_indices, update_faces, update_faces_all_levels, Cached,
+    Corner, Eval, Levels,
+};
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
 use super::ooc::NodeCache;
 use super::{PassStats, Viewpoint, NONE};
@@ -108,6 +112,7 @@ pub struct DpmAdapter<'a> {
     face_idx: Vec<[u32; 3]>,
     face_fvid: Vec<[u32; 3]>,
     face_owner: Vec<u32>,
+    levels: Levels,
 }
 
 impl<'a> DpmAdapter<'a> {
@@ -144,20 +149,34 @@ impl<'a> DpmAdapter<'a> {
             face_idx,
             face_fvid: dpm.base_faces.clone(),
             face_owner: vec![NONE; dpm.base_faces.len()],
+            levels: Levels::One,
         })
     }
 
-    /// One adaption pass for `view` (Algorithms 1 to 5) of an in-core file.
+    /// Sets how far one pass moves a vertex in the split tree (see [`Levels`]).
+    pub fn with_levels(mut self, levels: Levels) -> Self {
+        self.levels = levels;
+        self
+    }
+
+    /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form) of an
+    /// in-core file.
     pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, DpmError> {
         let eval = Eval::new(view);
-        self.pass(&|c| eval.needs(c), Source::InCore)
+        match self.levels {
+            Levels::One => self.pass(&|c| eval.needs(c), Source::InCore),
+            Levels::All => self.pass_all_levels(&|c| eval.needs(c), Source::InCore),
+        }
     }
 
     /// One adaption pass for `view` of an out-of-core file, from the nodes resident in
     /// `nodes`: a vertex whose operation's node is not resident does not split this pass.
     pub fn adapt_resident(&mut self, view: &Viewpoint, nodes: &NodeCache) -> Result<PassStats, DpmError> {
         let eval = Eval::new(view);
-        self.pass(&|c| eval.needs(c), Source::Nodes(nodes))
+        match self.levels {
+            Levels::One => self.pass(&|c| eval.needs(c), Source::Nodes(nodes)),
+            Levels::All => self.pass_all_levels(&|c| eval.needs(c), Source::Nodes(nodes)),
+        }
     }
 
     /// One pass that splits every active vertex that has a split (and collapses nothing).
@@ -186,16 +205,47 @@ impl<'a> DpmAdapter<'a> {
         self.vertices.len() * std::mem::size_of::<Vertex>() + self.face_idx.len() * (12 + 12 + 4)
     }
 
-    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
+    /// Out of core: decodes the operations whose nodes have come in since their vertices got
+    /// them.
+    fn refresh_pending(&mut self, src: Source) -> Result<(), DpmError> {
         let dpm = self.dpm;
-        // Out of core: the operations whose nodes have come in since their vertices got them.
         self.vertices.par_iter_mut().filter(|v| v.own.pending).try_for_each(|v| -> Result<(), DpmError> {
             let o = op(dpm, src, v.own.addr, v.own.ctx)?;
             if !o.pending {
                 v.own = o;
             }
             Ok(())
-        })?;
+        })
+    }
+
+    /// Whether vertex `v` splits this pass: it has an operation, decoded and resident, that the
+    /// view asks for.
+    fn splits(v: &Vertex, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> bool {
+        v.own.addr != NONE && !v.own.pending && need(&v.own.cache) && src.resident(v.own.addr)
+    }
+
+    /// The two children of a splitting vertex `v` whose operation decoded to `d`: `v` keeps
+    /// its creator, `v_u` gets `v`'s operation as its creator.
+    fn children(dpm: &Dpm, src: Source, v: &Vertex, d: &DecodedOp) -> Result<[Vertex; 2], DpmError> {
+        let ctx = v.own.ctx;
+        let left = OpContext { v_end: d.split.v_u, parent_criteria: d.criteria_q, ..ctx };
+        let right = OpContext {
+            v: d.split.v_u,
+            v_end: ctx.v_end,
+            parent_criteria: d.criteria_q,
+            position: d.position_u,
+            normal: d.normal_u,
+        };
+        let addr = |a: Option<usize>| a.map_or(NONE, |a| a as u32);
+        Ok([
+            Vertex { own: op(dpm, src, addr(d.left), left)?, creator: v.creator },
+            Vertex { own: op(dpm, src, addr(d.right), right)?, creator: v.own },
+        ])
+    }
+
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
+        let dpm = self.dpm;
+        self.refresh_pending(src)?;
         let vs = &self.vertices;
         let n = vs.len();
 
@@ -204,7 +254,7 @@ impl<'a> DpmAdapter<'a> {
             .into_par_iter()
             .map(|i| {
                 let v = &vs[i];
-                if v.own.addr != NONE && !v.own.pending && need(&v.own.cache) && src.resident(v.own.addr) {
+                if Self::splits(v, need, src) {
                     return 2;
                 }
                 let target = v.target();
@@ -261,21 +311,8 @@ impl<'a> DpmAdapter<'a> {
                     1 => [Some(v), None],
                     _ => {
                         // Algorithm 4: the split writes v and v_u.
-                        let d = decoded[i].as_ref().expect("decoded above");
-                        let ctx = v.own.ctx;
-                        let left = OpContext { v_end: d.split.v_u, parent_criteria: d.criteria_q, ..ctx };
-                        let right = OpContext {
-                            v: d.split.v_u,
-                            v_end: ctx.v_end,
-                            parent_criteria: d.criteria_q,
-                            position: d.position_u,
-                            normal: d.normal_u,
-                        };
-                        let addr = |a: Option<usize>| a.map_or(NONE, |a| a as u32);
-                        [
-                            Some(Vertex { own: op(dpm, src, addr(d.left), left)?, creator: v.creator }),
-                            Some(Vertex { own: op(dpm, src, addr(d.right), right)?, creator: v.own }),
-                        ]
+                        let [l, u] = Self::children(dpm, src, &v, decoded[i].as_ref().expect("decoded above"))?;
+                        [Some(l), Some(u)]
                     }
                 })
             })
@@ -295,9 +332,9 @@ impl<'a> DpmAdapter<'a> {
             .filter(|&i| cnt[i] == 2)
             .flat_map_iter(|i| {
                 let d = decoded[i].as_ref().expect("decoded above");
-                let (v, v_u, owner) = (d.split.v, d.split.v_u, vs[i].own.addr);
+                let (v, v_u) = (d.split.v, d.split.v_u);
                 let j = vertex_sum[i];
-                d.split.faces.iter().map(move |&t| (split_face_indices(t, v, v_u, j, new_fvid_ref), t, owner))
+                d.split.faces.iter().map(move |&t| (split_face_indices(t, v, v_u, j, new_fvid_ref), t, v_u))
             })
             .collect();
         debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
@@ -309,11 +346,123 @@ impl<'a> DpmAdapter<'a> {
             &cnt,
             &vertex_sum,
             &new_fvid,
-            &|i| vs[i].creator.addr,
+            &|i| vs[i].fvid(),
             new_faces,
         );
         self.vertices = new;
         Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces, held: false })
+    }
+
+    /// One pass of [`Levels::All`], as [`super::Adapter`]'s: every done split is the creator of
+    /// one active vertex, whose creator descriptor holds its FVID range; the outermost undone
+    /// ones are regions, whose first vertex takes the region's operation (the outermost
+    /// creator's descriptor, carried by the vertex at its `v_u`) and keeps its own creator. A
+    /// splitting vertex decodes its operation and goes on down while the view asks and the
+    /// operations are resident. A face's owner is its split's `v_u`, which lies strictly inside
+    /// a region's FVID range exactly when the split is undone.
+    fn pass_all_levels(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
+        let dpm = self.dpm;
+        self.refresh_pending(src)?;
+        let vs = &self.vertices;
+        let n = vs.len();
+        let fvid: Vec<u32> = vs.par_iter().map(Vertex::fvid).collect();
+
+        // Undone splits as ranges of positions, with the vertex carrying each; the outermost.
+        let undone: Vec<(u32, u32, u32)> = (0..n)
+            .into_par_iter()
+            .filter_map(|i| {
+                let c = &vs[i].creator;
+                if c.addr == NONE || need(&c.cache) {
+                    return None;
+                }
+                let p = fvid.partition_point(|&x| x < c.ctx.v);
+                let q = fvid.partition_point(|&x| x < c.ctx.v_end);
+                Some((p as u32, q as u32, i as u32))
+            })
+            .collect();
+        let (regions, region, collapses) = outermost(undone, n);
+
+        // The new vertices, chunk by chunk, with the faces of the splits done (owner: `v_u`).
+        const CHUNK: usize = 1 << 12;
+        type Part = (Vec<Vertex>, Vec<([u32; 3], u32)>, Vec<u32>, usize);
+        let parts: Vec<Part> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| -> Result<Part, DpmError> {
+                let (mut out, mut faces, mut cnt, mut splits) = (Vec::new(), Vec::new(), Vec::new(), 0);
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    let before = out.len();
+                    let r = region[i];
+                    if r != NONE {
+                        let (p, _, j) = regions[r as usize];
+                        if p as usize == i {
+                            out.push(Vertex { own: vs[j as usize].creator, creator: vs[i].creator });
+                        }
+                    } else if Self::splits(&vs[i], need, src) {
+                        let mut stack = vec![vs[i]];
+                        while let Some(v) = stack.pop() {
+                            if !Self::splits(&v, need, src) {
+                                out.push(v);
+                                continue;
+                            }
+                            let d = src.decode(dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked");
+                            splits += 1;
+                            faces.extend(d.split.faces.iter().map(|&t| (t, d.split.v_u)));
+                            let [l, u] = Self::children(dpm, src, &v, &d)?;
+                            stack.push(u);
+                            stack.push(l);
+                        }
+                    } else {
+                        out.push(vs[i]);
+                    }
+                    cnt.push((out.len() - before) as u32);
+                }
+                Ok((out, faces, cnt, splits))
+            })
+            .collect::<Result<_, _>>()?;
+        let splits: usize = parts.iter().map(|p| p.3).sum();
+        if splits == 0 && collapses == 0 {
+            return Ok(PassStats {
+                splits,
+                collapses,
+                cancelled: 0,
+                vertices: n,
+                faces: self.face_idx.len(),
+                held: false,
+            });
+        }
+        let cnt: Vec<u32> = parts.iter().flat_map(|p| p.2.iter().copied()).collect();
+        let vertex_sum = exclusive_scan(&cnt);
+        let new: Vec<Vertex> = parts.iter().flat_map(|p| p.0.iter().copied()).collect();
+        let new_fvid: Vec<u32> = new.par_iter().map(Vertex::fvid).collect();
+        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
+        let new_ref = &new_fvid;
+        let leaf = move |f: u32| (new_ref.partition_point(|&x| x <= f) as u32).saturating_sub(1);
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> =
+            parts.par_iter().flat_map_iter(|p| p.1.iter()).map(|&(t, owner)| (t.map(leaf), t, owner)).collect();
+
+        // Old faces: moved, or dropped where their split is undone.
+        let corner = |i: usize, owner: u32| match region[i] {
+            NONE => Corner::Free,
+            r => {
+                let (p, _, j) = regions[r as usize];
+                if fvid[p as usize] < owner && owner < vs[j as usize].creator.ctx.v_end {
+                    Corner::Undone
+                } else {
+                    Corner::Region(p as usize)
+                }
+            }
+        };
+        let faces = update_faces_all_levels(
+            [&mut self.face_idx, &mut self.face_fvid],
+            &mut self.face_owner,
+            &cnt,
+            &vertex_sum,
+            &new_fvid,
+            &corner,
+            new_faces,
+        );
+        self.vertices = new;
+        Ok(PassStats { splits, collapses, cancelled: 0, vertices: self.vertices.len(), faces, held: false })
     }
 }
 
