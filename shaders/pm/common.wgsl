@@ -68,8 +68,12 @@ struct Params {
     n_new: u32,    // active vertices after the pass
     f_add: u32,    // faces the splits add
     m_new: u32,    // faces after the pass
-    splits: u32,   // splits performed
-    pad: u32,
+    splits: u32,   // splits performed (an all-levels pass: vertices that split)
+    levels: u32,   // 1: an all-levels pass (codec::pm::Levels::All), 0: one level
+    budget: u32,   // an all-levels pass: the most splits one vertex's descent performs
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
     // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.
@@ -88,6 +92,7 @@ const STAT_REMOVED_FACES: u32 = 2u;
 const STAT_SPLIT_CURSOR: u32 = 3u;
 const STAT_HOLE_CURSOR: u32 = 4u;
 const STAT_FILL_CURSOR: u32 = 5u;
+const STAT_SPLIT_VERTICES: u32 = 6u;   // an all-levels pass: vertices that split
 
 // The linear thread index of a 1D or 2D dispatch of WG-thread workgroups.
 fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {

@@ -10,6 +10,9 @@
 @group(0) @binding(5) var<storage, read_write> dfvid: array<u32>;
 @group(0) @binding(6) var<storage, read_write> dstate: array<VState>;
 @group(0) @binding(7) var<storage, read_write> dpoint: array<Point>;
+// An all-levels pass: per region's first vertex, 1 + the vertex carrying the region's
+// operation as its creator (0 elsewhere).
+@group(0) @binding(8) var<storage, read> root: array<u32>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -19,8 +22,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let j = vsum[i];
     if (vsum[i + 1u] - j == 1u) {
+        var s = vstate[i];
+        if (P.levels == 1u && root[i] != 0u) {
+            // A region's first vertex becomes the region's vertex again (as collapse.wgsl makes
+            // a target its creator's vertex): the region's operation, context and criteria
+            // from the vertex that carries it; it keeps its own creator.
+            let c = vstate[root[i] - 1u];
+            s.v_end = c.c_v_end;
+            s.addr = c.c_addr;
+            s.faces = c.c_faces;
+            s.pc = c.c_pc;
+            s.crit = c.c_crit;
+            s.flags = 0u;
+        }
         dfvid[j] = vfvid[i];
-        dstate[j] = vstate[i];
+        dstate[j] = s;
         dpoint[j] = vpoint[i];
     }
 }

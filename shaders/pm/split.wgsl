@@ -1,12 +1,11 @@
 // Algorithm 4, parallel vertex splits: one thread per split gives the split's faces, whose
 // FVIDs the reorganisation decoded into their slots after the old ones (at m + fsum[i]),
-// their current vertex indices and their owner (the split's address). A corner in [v, v_u)
-// is v (new slot j), one in v_u's range [v_u, FVID of slot j + 2) is v_u (slot j + 1); any
-// other corner is found by binary search in the new sorted FVID buffer: the active vertex
-// with the greatest FVID <= the corner's.
+// their current vertex indices and their owner (the split's v_u, unique per split). A corner
+// in [v, v_u) is v (new slot j), one in v_u's range [v_u, FVID of slot j + 2) is v_u (slot
+
+
 
 @group(0) @binding(1) var<storage, read> vfvid: array<u32>;
-@group(0) @binding(2) var<storage, read> vstate: array<VState>;
 @group(0) @binding(3) var<storage, read> vsum: array<u32>;
 @group(0) @binding(4) var<storage, read> fsum: array<u32>;
 @group(0) @binding(5) var<storage, read> list: array<u32>;
@@ -38,9 +37,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let i = list[k];
     let v = vfvid[i];
-    let owner = vstate[i].addr;
     let j = vsum[i];
     let v_u = dfvid[j + 1u];
+    let owner = v_u;
     var end = NONE;
     if (j + 2u < P.n_new) {
         end = dfvid[j + 2u];
@@ -62,5 +61,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             face_idx[3u * dst + c] = idx;
         }
         face_owner[dst] = owner;
+    }
+}
+
+// An all-levels pass: one thread per new face (their FVIDs and owners written by the split
+// decoding's `descend`), each corner found by binary search in the new FVID buffer.
+@compute @workgroup_size(256)
+fn index_new(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = thread_index(gid, groups);
+    if (k >= P.f_add) {
+        return;
+    }
+    let dst = P.m + k;
+    for (var c = 0u; c < 3u; c++) {
+        face_idx[3u * dst + c] = find(face_fvid[3u * dst + c]);
     }
 }

@@ -1,4 +1,4 @@
-// Algorithm 3's splits: one thread per splitting vertex (the compacted list) decodes its
+// Algorithm 3's splits (`main`, a one-level pass): one thread per splitting vertex (the compacted list) decodes its
 // operation from the .dpm's bytes (the decoder, decode.wgsl, is prepended to this file) and
 // writes its two children to their slots of the new vertex buffers, v at the vertex's slot
 // and v_u right after it (v_u's FVID follows v's left range), each with its operation's
@@ -22,31 +22,9 @@
 @group(0) @binding(12) var<storage, read> tables: array<u32>;
 @group(0) @binding(13) var<storage, read_write> dec_faces: array<u32>;
 @group(0) @binding(14) var<storage, read_write> errors: array<atomic<u32>, 2>;
-
-// The position of a quantized one, as the CPU decoder computes it.
-fn dequantize(q: vec3<u32>) -> vec3<f32> {
-    return vec3<f32>(D.grid.x + f32(q.x) * D.grid.w, D.grid.y + f32(q.y) * D.grid.w, D.grid.z + f32(q.z) * D.grid.w);
-}
-
-// The unit normal (or zero) of an octahedral code, as the CPU decoder computes it.
-fn oct_decode(q: vec2<u32>) -> vec3<f32> {
-    let zero = 1u << D.normal_bits;
-    if (q.x == zero && q.y == zero) {
-        return vec3<f32>(0.0);
-    }
-    let m = f32(zero - 1u);
-    var x = f32(q.x) / m * 2.0 - 1.0;
-    var y = f32(q.y) / m * 2.0 - 1.0;
-    let z = 1.0 - abs(x) - abs(y);
-    if (z < 0.0) {
-        let ox = x;
-        let oy = y;
-        x = (1.0 - abs(oy)) * select(-1.0, 1.0, ox >= 0.0);
-        y = (1.0 - abs(ox)) * select(-1.0, 1.0, oy >= 0.0);
-    }
-    let l = sqrt(x * x + y * y + z * z);
-    return vec3<f32>(x / l, y / l, z / l);
-}
+// An all-levels pass (`descend`): the view's occlusion test, and the new faces' owners.
+@group(0) @binding(15) var<storage, read> occ: array<u32>;
+@group(0) @binding(16) var<storage, read_write> face_owner: array<u32>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -95,4 +73,41 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     dfvid[j + 1u] = o.v_u;
     dstate[j + 1u] = r;
     dpoint[j + 1u] = Point(vec4<f32>(dequantize(o.position.xyz), 1.0), vec4<f32>(oct_decode(o.normal.xy), 0.0));
+}
+
+// An all-levels pass's splits (codec::pm::Levels::All): one thread per splitting vertex walks
+// its subtree again as the state update counted it (descent.wgsl), writing the leaves to the
+// vertex's slots in FVID order and the faces of every split done to its face slots, each
+// owned by its split's v_u; the split stage's `index_new` then indexes them.
+@compute @workgroup_size(256)
+fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = thread_index(gid, groups);
+    if (k >= P.splits) {
+        return;
+    }
+    let i = list[k];
+    let j = vsum[i];
+    let count = vsum[i + 1u] - j;
+    descent_start(vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
+    loop {
+        let step = descent_step();
+        if (step == STEP_SPLIT) {
+            for (var e = dc_faces - dc_last_faces; e < dc_faces; e++) {
+                face_owner[dc_face_out + e] = dc_last_vu;
+            }
+        }
+        if (step != STEP_LEAF) {
+            continue;
+        }
+        // Counted alike by the state update; the bound only keeps a fault in its slots.
+        if (dc_leaves < count) {
+            dfvid[j + dc_leaves] = dc_f;
+            dstate[j + dc_leaves] = dc_cur;
+            dpoint[j + dc_leaves] = dc_pt;
+        }
+        dc_leaves += 1u;
+        if (!descent_pop()) {
+            break;
+        }
+    }
 }

@@ -1,6 +1,17 @@
 // Algorithm 1, vertex state update: per active vertex, 2 (split), 1 (keep) or 0 (collapse)
 // into `vcnt`, and the number of faces its split creates into `fcnt`. Thread n writes the
 // zero that ends both arrays, so that their exclusive scans end in the totals.
+//
+// An all-levels pass (codec::pm::Levels::All) runs `mark_count` and `regions` instead:
+// `mark_count` marks every done split the view no longer asks for (each is the creator of one
+// active vertex, which evaluates it) as a range of positions [p, q) in the sorted buffer, with
+// +1 at p and -1 at q - 1 in `diff` (whose exclusive scan then counts, at each position, the
+// undone ranges that hold it and start before it), the farthest range end (an FVID) starting
+// at p in `reach`, and p + 1 in `up`; and it counts each vertex's leaves and faces down its
+// subtree (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
+// range the count 0 (it collapses), the first position of an outermost range (a region) the
+// count 1, and records in `root` which vertex carries the region's operation: the one whose
+// creator's range is the region's.
 
 @group(0) @binding(1) var<storage, read> vfvid: array<u32>;
 @group(0) @binding(2) var<storage, read> vstate: array<VState>;
@@ -10,67 +21,18 @@
 // The depth pyramid of occlusion culling: the number of levels, per level its width, height
 // and first word, then the levels' cells, the farthest depth (f32 bits) in each.
 @group(0) @binding(6) var<storage, read> occ: array<u32>;
-
-// Whether a bounding sphere was hidden in the frame of the depth pyramid (the paper's
-// occlusion culling one frame late, here of vertices' spheres): its box projected with that
-// frame's view-projection lies inside the pyramid's rectangle and behind the farthest depth
-// of every cell it covers, at the level where it spans at most two cells a side. A sphere
-// that reaches behind the eye or past the rectangle is not occluded.
-fn occluded(center: vec3<f32>, r: f32) -> bool {
-    if (P.occ_size.w == 0.0) {
-        return false;
-    }
-    var lo = vec2<f32>(3.0e38);
-    var hi = vec2<f32>(-3.0e38);
-    var zmin = 3.0e38;
-    for (var k = 0u; k < 8u; k++) {
-        let c = center + vec3<f32>(select(-r, r, (k & 1u) != 0u), select(-r, r, (k & 2u) != 0u),
-                                   select(-r, r, (k & 4u) != 0u));
-        let q = P.occ_vp * vec4<f32>(c, 1.0);
-        if (q.w <= 0.0) {
-            return false;
-        }
-        lo = min(lo, q.xy / q.w);
-        hi = max(hi, q.xy / q.w);
-        zmin = min(zmin, q.z / q.w);
-    }
-    if (zmin <= 0.0) {
-        return false;
-    }
-    let x0 = (lo.x + 1.0) * 0.5 * P.occ_size.x;
-    let x1 = (hi.x + 1.0) * 0.5 * P.occ_size.x;
-    let y0 = (1.0 - hi.y) * 0.5 * P.occ_size.y;
-    let y1 = (1.0 - lo.y) * 0.5 * P.occ_size.y;
-    if (x0 < P.occ_rect.x || y0 < P.occ_rect.y || x1 > P.occ_rect.z || y1 > P.occ_rect.w) {
-        return false;
-    }
-    let levels = occ[0];
-    var level = 0u;
-    var side = P.occ_size.z;
-    while (level + 1u < levels && max(x1 - x0, y1 - y0) > side) {
-        level++;
-        side *= 2.0;
-    }
-    let w = occ[1u + 3u * level];
-    let h = occ[2u + 3u * level];
-    let at = occ[3u + 3u * level];
-    let cx0 = min(u32((x0 - P.occ_rect.x) / side), w - 1u);
-    let cx1 = min(u32((x1 - P.occ_rect.x) / side), w - 1u);
-    let cy0 = min(u32((y0 - P.occ_rect.y) / side), h - 1u);
-    let cy1 = min(u32((y1 - P.occ_rect.y) / side), h - 1u);
-    var far = 0.0;
-    for (var cy = cy0; cy <= cy1; cy++) {
-        for (var cx = cx0; cx <= cx1; cx++) {
-            far = max(far, bitcast<f32>(occ[at + cy * w + cx]));
-        }
-    }
-    return zmin > far;
-}
-
-// The refinement test, and not hidden (occlusion culling on).
-fn wants_split(center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>) -> bool {
-    return needs_split(center, normal, crit) && !occluded(center, crit.w);
-}
+// The decoder's (the descent decodes operations).
+@group(0) @binding(7) var<uniform> D: DecodeParams;
+@group(0) @binding(8) var<storage, read> ops: array<u32>;
+@group(0) @binding(9) var<storage, read> tables: array<u32>;
+@group(0) @binding(10) var<storage, read_write> dec_faces: array<u32>;
+@group(0) @binding(11) var<storage, read_write> errors: array<atomic<u32>, 2>;
+// The all-levels marks (see above), and the counters.
+@group(0) @binding(12) var<storage, read_write> diff: array<atomic<u32>>;
+@group(0) @binding(13) var<storage, read_write> reach: array<atomic<u32>>;
+@group(0) @binding(14) var<storage, read_write> up: array<u32>;
+@group(0) @binding(15) var<storage, read_write> root: array<u32>;
+@group(0) @binding(16) var<storage, read_write> stats: array<atomic<u32>, 8>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -104,4 +66,78 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     vcnt[i] = state;
     fcnt[i] = faces;
+}
+
+@compute @workgroup_size(256)
+fn mark_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = thread_index(gid, groups);
+    let n = P.n;
+    if (i > n) {
+        return;
+    }
+    if (i == n) {
+        vcnt[n] = 0u;
+        fcnt[n] = 0u;
+        return;
+    }
+    let f = vfvid[i];
+    let s = vstate[i];
+    var mark = 0u;
+    if (P.mode != 1u && s.c_addr != NONE) {
+        // The creator's centre is its vertex's, the first of its range.
+        let p = min(lower_bound(s.c_v, n), n - 1u);
+        if (!wants_split(vpoint[p].pos.xyz, vpoint[p].nrm.xyz, s.c_crit)) {
+            let q = max(lower_bound(s.c_v_end, n), 1u);
+            atomicAdd(&diff[p], 1u);
+            atomicSub(&diff[q - 1u], 1u);
+            atomicMax(&reach[p], s.c_v_end);
+            mark = p + 1u;
+        }
+    }
+    descent_start(s, f, vpoint[i], NONE_ADDR);
+    loop {
+        if (descent_step() != STEP_LEAF) {
+            continue;
+        }
+        dc_leaves += 1u;
+        if (!descent_pop()) {
+            break;
+        }
+    }
+    vcnt[i] = dc_leaves;
+    fcnt[i] = dc_faces;
+    up[i] = mark;
+
+}
+
+@compute @workgroup_size(256)
+fn regions(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = thread_index(gid, groups);
+    if (k >= P.n) {
+        return;
+    }
+    var c = vcnt[k];
+    if (atomicLoad(&diff[k]) != 0u) {
+        // Inside an undone range that starts before it: it collapses, and its creator (undone)
+        // takes its faces.
+        c = 0u;
+        atomicAdd(&stats[STAT_COLLAPSES], 1u);
+        atomicAdd(&stats[STAT_REMOVED_FACES], vstate[k].c_faces);
+    } else if (atomicLoad(&reach[k]) != 0u) {
+        c = 1u; // a region's first vertex: it becomes the region's vertex
+    }
+    if (c != vcnt[k]) {
+        vcnt[k] = c;
+        fcnt[k] = 0u;
+    }
+    if (c >= 2u) {
+        atomicAdd(&stats[STAT_SPLIT_VERTICES], 1u);
+    }
+    let u = up[k];
+    if (u != 0u) {
+        let p = u - 1u;
+        if (atomicLoad(&diff[p]) == 0u && atomicLoad(&reach[p]) == vstate[k].c_v_end) {
+            root[p] = k + 1u;
+        }
+    }
 }

@@ -48,6 +48,8 @@ pub struct Gpu {
     queue: wgpu::Queue,
     adapter_name: Arc<str>,
     limits: Arc<wgpu::Limits>,
+    /// A software rasteriser (lavapipe): see [`Gpu::is_software`].
+    software: bool,
 }
 
 impl Gpu {
@@ -75,7 +77,8 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|source| GpuError::Device { adapter: adapter_name.clone(), source })?;
-        Ok(Gpu { device, queue, adapter_name: adapter_name.into(), limits: Arc::new(limits) })
+        let software = info.device_type == wgpu::DeviceType::Cpu;
+        Ok(Gpu { device, queue, adapter_name: adapter_name.into(), limits: Arc::new(limits), software })
     }
 
     pub fn device(&self) -> &wgpu::Device {
@@ -92,6 +95,13 @@ impl Gpu {
     }
 
     /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)" for Mesa's lavapipe.
+    /// Whether the adapter is a software one (lavapipe, on the CPU). Its compiler (llvmpipe)
+    /// caps the loop iterations of one shader invocation at 65535 in all, so long per-thread
+    /// loops must be bounded tighter there (the PM adapter's descent budget).
+    pub fn is_software(&self) -> bool {
+        self.software
+    }
+
     pub fn adapter_name(&self) -> &str {
         &self.adapter_name
     }

@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use codec::pm::format::{decode, encode, Dpm, EncodeOptions};
-use codec::pm::{build, Adapter, ProgressiveMesh, Viewpoint};
+use codec::pm::{build, Adapter, Levels, ProgressiveMesh, Viewpoint};
 use codec::view::Camera;
 use glam::Vec3;
 use testkit::sorted_canonical;
@@ -59,6 +59,7 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
         Some(v) => (cpu.adapt(v), gpu.adapt(v).unwrap()),
         None => (cpu.refine_step(), gpu.refine_step().unwrap()),
     };
+    gpu.check().unwrap();
     assert_eq!(c, g, "{what}: pass statistics differ");
     assert_eq!(gpu.active().unwrap(), cpu.active(), "{what}: active vertices differ");
     let gf = sorted_canonical(gpu.face_fvids().unwrap());
@@ -71,22 +72,25 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
     assert!(pm.positions.len() >= cpu.active().len());
 }
 
-/// Adapts along a path of `frames` frames, one pass per frame, on both.
-fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu) {
+/// Adapts along a path of `frames` frames, one pass per frame, on both, with passes of one
+/// level or of all.
+fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Levels) {
     let (bytes, pm) = dpm_of(rel);
     let dpm = Dpm::parse(&bytes).unwrap();
-    let mut cpu = Adapter::new(&pm);
+    let mut cpu = Adapter::new(&pm).with_levels(levels);
     let mut gpu = GpuAdapter::new(device, &dpm, 4096).unwrap();
+    gpu.set_levels(levels);
+    cpu.set_descent_budget(gpu.descent_budget());
     let start = Instant::now();
     let (mut lo, mut hi) = (usize::MAX, 0);
     for k in 0..frames {
         let view = path_view(&pm, k, frames, error_px);
-        pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} frame {k}"));
+        pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} {levels:?} frame {k}"));
         lo = lo.min(cpu.faces().len());
         hi = hi.max(cpu.faces().len());
     }
     eprintln!(
-        "{rel}: {frames} frames equal, {lo}..{hi} faces, {} reallocations, {:.1}s",
+        "{rel} {levels:?}: {frames} frames equal, {lo}..{hi} faces, {} reallocations, {:.1}s",
         gpu.reallocations(),
         start.elapsed().as_secs_f64()
     );
@@ -96,20 +100,26 @@ fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu) {
 #[test]
 fn bunny_path_matches_the_cpu_reference() {
     let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
-    check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &device);
+    for levels in [Levels::One, Levels::All] {
+        check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &device, levels);
+    }
 }
 
 #[test]
 fn refining_everything_on_the_gpu_matches_the_cpu() {
     let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
     // Small meshes with boundaries, non-manifold edges and degenerate faces; a tiny n_alloc
-    // so that buffers are reallocated in most passes.
-    for rel in [
+    // so that buffers are reallocated in most passes. Coarsened in passes of one level and of
+    // all, alternately.
+    for (k, rel) in [
         "classic/teapot.obj",
         "degenerate/non_manifold_face_graph.obj",
         "degenerate/fused_vertices.obj",
         "odedstein/bunny_oded_6k.obj",
-    ] {
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let rel = if testkit::mesh_path(rel).exists() {
             rel.to_string()
         } else {
@@ -133,8 +143,12 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
         let cam = Camera::framing(lo.to_array(), hi.to_array(), 1.0);
         let far = Camera { eye: cam.target + (cam.eye - cam.target) * 50.0, far: cam.far * 100.0, ..cam };
         let view = Viewpoint::new(&far, 64, 64, 4.0);
+        let levels = [Levels::One, Levels::All][k % 2];
+        cpu.set_levels(levels);
+        gpu.set_levels(levels);
+        cpu.set_descent_budget(gpu.descent_budget());
         for k in 0..passes + 2 {
-            pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} coarsen pass {k}"));
+            pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} {levels:?} coarsen pass {k}"));
         }
         assert!(gpu.reallocations() > 2, "{rel}: n_alloc = 16 should force reallocations");
         eprintln!("{rel}: {passes} refine passes, {} reallocations", gpu.reallocations());
@@ -144,7 +158,9 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
 #[test]
 fn dragon_path_matches_the_cpu_reference() {
     let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
-    check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &device);
+    for levels in [Levels::One, Levels::All] {
+        check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &device, levels);
+    }
 }
 
 /// Median of `v` (sorted in place).
@@ -316,12 +332,14 @@ fn out_of_core_path_matches_the_cpu_reference() {
     // Two thirds of the model: the path's whole views require more (then the required nodes
     // of highest priority go in first), its close views less.
     let slots = dpm.nodes.len() as u64 * 2 / 3;
-    for background in [false, true] {
+    for (background, levels) in [(false, Levels::One), (true, Levels::All)] {
         let ooc = OutOfCore { file: file.clone(), pool_bytes: slots * slot, background };
         let mut gpu = GpuAdapter::out_of_core(&device, &dpm, ooc, 4096).unwrap();
+        gpu.set_levels(levels);
         assert_eq!(gpu.node_slots(), Some(slots as u32));
         let mut cache = NodeCache::with_slots(&dpm, file.clone(), slots, slot, false);
-        let mut cpu = DpmAdapter::new(&dpm).unwrap();
+        let mut cpu = DpmAdapter::new(&dpm).unwrap().with_levels(levels);
+        cpu.set_descent_budget(gpu.descent_budget());
         let (mut waited, mut passes) = (0, 0);
         for k in 0..frames {
             let view = path_view(&decoded, k, frames, error_px);
@@ -329,8 +347,9 @@ fn out_of_core_path_matches_the_cpu_reference() {
             gpu.schedule(&view).unwrap();
             gpu.wait_for_nodes().unwrap();
             for p in 0..12 {
-                let what = format!("background {background}, frame {k}, pass {p}");
+                let what = format!("background {background}, {levels:?}, frame {k}, pass {p}");
                 let (c, g) = (cpu.adapt_resident(&view, &cache).unwrap(), gpu.adapt(&view).unwrap());
+                gpu.check().unwrap();
                 assert_eq!(c, g, "{what}: pass statistics differ");
                 assert_eq!(gpu.active().unwrap(), cpu.active(), "{what}: active vertices differ");
                 assert_eq!(sorted_canonical(gpu.face_fvids().unwrap()), sorted_canonical(cpu.face_fvids()), "{what}");
@@ -344,7 +363,7 @@ fn out_of_core_path_matches_the_cpu_reference() {
         }
         let pool = gpu.node_pool_bytes();
         eprintln!(
-            "{rel} out of core (background {background}): {passes} passes equal; {slots} slots of {slot} bytes \
+            "{rel} out of core (background {background}, {levels:?}): {passes} passes equal; {slots} slots of {slot} bytes \
              ({pool} bytes of nodes on the GPU, file {}), {} bytes uploaded, up to {waited} vertices waiting",
             bytes.len(),
             gpu.uploaded_bytes()

@@ -408,6 +408,17 @@ fn store_faces(
     total
 }
 
+/// The most levels an all-levels pass splits below one vertex ([`Levels::All`]): the depth of
+/// the GPU's descent stack. A deeper subtree goes on in the next pass.
+pub const LEVELS_PER_PASS: u32 = 32;
+
+/// The default of the most splits one vertex's descent performs in an all-levels pass (the
+/// *descent budget*): one thread's serial work on the GPU. The vertices a descent has reached
+/// when its budget is spent stay until the next pass. On the dragon's 22.5-degree orbit at
+/// 1920x1080 and 0.5 px, 256 brings every frame in one changing pass (64: 1 or 2, 16: 2 to
+/// 5; `orbit_steps` in `tests/pm_adapt.rs`).
+pub const DESCENT_BUDGET: u32 = 256;
+
 /// How far one [`Adapter::adapt`] pass moves a vertex in the split tree.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Levels {
@@ -416,7 +427,9 @@ pub enum Levels {
     #[default]
     One,
     /// Every level the view asks for: a pass collapses whole subtrees and splits down the
-    /// subtree, so one pass reaches the converged state (see `Adapter::pass_all_levels`).
+    /// subtree (at most [`LEVELS_PER_PASS`] levels and a budget of splits per vertex), so one
+    /// pass reaches the converged state where the budget suffices (see
+    /// `Adapter::pass_all_levels`).
     All,
 }
 
@@ -439,6 +452,7 @@ pub struct Adapter<'a> {
     /// Per split: the end of its vertex's FVID range (the range starts at the split's `v`).
     end: Vec<u32>,
     levels: Levels,
+    descent_budget: u32,
     /// Faces: current vertex indices, finest FVIDs, and the split that created them.
     face_idx: Vec<[u32; 3]>,
     face_fvid: Vec<[u32; 3]>,
@@ -491,6 +505,7 @@ impl<'a> Adapter<'a> {
             creator: vec![NONE; n],
             end,
             levels: Levels::One,
+            descent_budget: DESCENT_BUDGET,
             face_idx,
             face_fvid: pm.base_faces.clone(),
             face_owner: vec![NONE; pm.base_faces.len()],
@@ -499,8 +514,19 @@ impl<'a> Adapter<'a> {
 
     /// Sets how far one [`Self::adapt`] pass moves a vertex in the split tree (see [`Levels`]).
     pub fn with_levels(mut self, levels: Levels) -> Self {
-        self.levels = levels;
+        self.set_levels(levels);
         self
+    }
+
+    /// As [`Self::with_levels`], in place (the state is valid for either).
+    pub fn set_levels(&mut self, levels: Levels) {
+        self.levels = levels;
+    }
+
+    /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1;
+    /// [`DESCENT_BUDGET`] by default).
+    pub fn set_descent_budget(&mut self, splits: u32) {
+        self.descent_budget = splits.max(1);
     }
 
     /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form).
@@ -717,7 +743,9 @@ impl<'a> Adapter<'a> {
     ///    sorted buffer) collapse into one: the first, which keeps its FVID and creator and
     ///    becomes the region's split's vertex again.
     /// 2. Every other vertex whose next split is asked for splits, and so on down its subtree
-    ///    while the view asks: its leaves replace it, in FVID order.
+    ///    while the view asks, at most [`LEVELS_PER_PASS`] levels and the descent budget's
+    ///    splits: its leaves replace it, in FVID order (depth first, left before right, as the
+    ///    GPU's stack goes).
     /// 3. Old faces move as in Algorithm 5: a corner in a region to the region's vertex, a
     ///    corner of a split vertex to the leaf whose range holds its FVID (binary search among
     ///    that vertex's leaves). A face is dropped when its creating split is undone: when a
@@ -750,13 +778,15 @@ impl<'a> Adapter<'a> {
 
         // 2. The new vertices, in chunks of the sorted buffer, with the splits done.
         const CHUNK: usize = 1 << 12;
-        let parts: Vec<(Vec<Slot>, Vec<(u32, u32)>, Vec<u32>)> = (0..n.div_ceil(CHUNK))
+        // Per chunk: its new vertices, the splits done (old vertex, split), per vertex its count.
+        type Part = (Vec<Slot>, Vec<(u32, u32)>, Vec<u32>);
+        let parts: Vec<Part> = (0..n.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
                 let (mut out, mut done, mut cnt) = (Vec::new(), Vec::new(), Vec::new());
-                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                let range = c * CHUNK..((c + 1) * CHUNK).min(n);
+                for (i, &r) in range.clone().zip(&region[range]) {
                     let before = out.len();
-                    let r = region[i];
                     if r != NONE {
                         let (p, _, s) = regions[r as usize];
                         if p as usize == i {
@@ -765,13 +795,15 @@ impl<'a> Adapter<'a> {
                         }
                     } else if self.next[i] != NONE && need(&self.split_cache[i]) {
                         // Down the subtree while the view asks (left before right: FVID order).
-                        let mut stack = vec![self.slot(i)];
-                        while let Some(v) = stack.pop() {
-                            if v.next != NONE && need(&v.split_cache) {
+                        let mut stack = vec![(self.slot(i), 0)];
+                        let mut budget = self.descent_budget;
+                        while let Some((v, depth)) = stack.pop() {
+                            if budget > 0 && depth < LEVELS_PER_PASS && v.next != NONE && need(&v.split_cache) {
+                                budget -= 1;
                                 done.push((i as u32, v.next));
                                 let [l, u] = self.split_children(&v);
-                                stack.push(u);
-                                stack.push(l);
+                                stack.push((u, depth + 1));
+                                stack.push((l, depth + 1));
                             } else {
                                 out.push(v);
                             }

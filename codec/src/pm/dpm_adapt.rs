@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use super::adapt::{
     cancel_collapses, exclusive_scan, outermost, split_face_indices, update_faces, update_faces_all_levels, Cached,
-    Corner, Eval, Levels,
+    Corner, Eval, Levels, DESCENT_BUDGET, LEVELS_PER_PASS,
 };
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
 use super::ooc::NodeCache;
@@ -113,6 +113,7 @@ pub struct DpmAdapter<'a> {
     face_fvid: Vec<[u32; 3]>,
     face_owner: Vec<u32>,
     levels: Levels,
+    descent_budget: u32,
 }
 
 impl<'a> DpmAdapter<'a> {
@@ -150,6 +151,7 @@ impl<'a> DpmAdapter<'a> {
             face_fvid: dpm.base_faces.clone(),
             face_owner: vec![NONE; dpm.base_faces.len()],
             levels: Levels::One,
+            descent_budget: DESCENT_BUDGET,
         })
     }
 
@@ -157,6 +159,12 @@ impl<'a> DpmAdapter<'a> {
     pub fn with_levels(mut self, levels: Levels) -> Self {
         self.levels = levels;
         self
+    }
+
+    /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1;
+    /// [`DESCENT_BUDGET`] by default), as [`super::Adapter::set_descent_budget`].
+    pub fn set_descent_budget(&mut self, splits: u32) {
+        self.descent_budget = splits.max(1);
     }
 
     /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form) of an
@@ -398,18 +406,20 @@ impl<'a> DpmAdapter<'a> {
                             out.push(Vertex { own: vs[j as usize].creator, creator: vs[i].creator });
                         }
                     } else if Self::splits(&vs[i], need, src) {
-                        let mut stack = vec![vs[i]];
-                        while let Some(v) = stack.pop() {
-                            if !Self::splits(&v, need, src) {
+                        let mut stack = vec![(vs[i], 0)];
+                        let mut budget = self.descent_budget;
+                        while let Some((v, depth)) = stack.pop() {
+                            if budget == 0 || depth == LEVELS_PER_PASS || !Self::splits(&v, need, src) {
                                 out.push(v);
                                 continue;
                             }
+                            budget -= 1;
                             let d = src.decode(dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked");
                             splits += 1;
                             faces.extend(d.split.faces.iter().map(|&t| (t, d.split.v_u)));
                             let [l, u] = Self::children(dpm, src, &v, &d)?;
-                            stack.push(u);
-                            stack.push(l);
+                            stack.push((u, depth + 1));
+                            stack.push((l, depth + 1));
                         }
                     } else {
                         out.push(vs[i]);

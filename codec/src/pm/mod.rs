@@ -43,7 +43,7 @@ pub mod format;
 pub mod ooc;
 pub mod refine;
 
-pub use adapt::{Adapter, Levels, PassStats, Viewpoint};
+pub use adapt::{Adapter, Levels, PassStats, Viewpoint, DESCENT_BUDGET, LEVELS_PER_PASS};
 pub use build::{
     build, build_owned, build_with_options, build_with_progress, build_with_stats, BuildOptions, BuildStats, PmError,
     CHUNK_FACES, HUB_FACES,

@@ -45,7 +45,11 @@ pub(super) struct Params {
     pub(super) f_add: u32,
     pub(super) m_new: u32,
     pub(super) splits: u32,
-    pub(super) pad: u32,
+    /// 1: an all-levels pass (`codec::pm::Levels::All`), 0: one level.
+    pub(super) levels: u32,
+    /// An all-levels pass: the most splits one vertex's descent performs.
+    pub(super) budget: u32,
+    pub(super) pad: [u32; 3],
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).
@@ -68,6 +72,8 @@ pub(super) type Stats = [u32; 8];
 pub(crate) const STAT_COLLAPSES: usize = 0;
 pub(crate) const STAT_CANCELLED: usize = 1;
 pub(crate) const STAT_REMOVED_FACES: usize = 2;
+/// An all-levels pass: the vertices that split.
+pub(crate) const STAT_SPLIT_VERTICES: usize = 6;
 pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 /// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
 /// never cleared by a pass (`report` of `reorganise.wgsl`).

@@ -67,7 +67,7 @@ pub(crate) mod pipelines;
 use std::sync::Arc;
 
 use codec::pm::format::{Dpm, NodeFile, OpContext, NODE_BYTES};
-use codec::pm::{CacheStats, NodeCache, PassStats, Viewpoint, NONE};
+use codec::pm::{CacheStats, Levels, NodeCache, PassStats, Viewpoint, DESCENT_BUDGET, NONE};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
@@ -80,6 +80,16 @@ use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
 use occlusion::Occluder;
 use pipelines::Pipelines;
+
+/// The descent budget on a software adapter (lavapipe): one descent decodes at most about
+/// four operations per split (the split, its left child's criteria, its right child's when it
+/// is popped, a leaf's), each some 150 loop iterations with the bit-by-bit decoder, and
+/// llvmpipe ends every loop of an invocation after 65535 iterations in all: 32 splits keep
+/// it near 20,000.
+pub const SOFTWARE_DESCENT_BUDGET: u32 = 32;
+
+/// The labels of the all-levels marks ([`GpuAdapter`]'s `marks`).
+const MARKS: [&str; 4] = ["pm: undone ranges", "pm: region reach", "pm: undone starts", "pm: region roots"];
 
 /// The default of the paper's `n_alloc`: spare elements a reallocated buffer gets.
 pub const DEFAULT_N_ALLOC: u32 = 1 << 15;
@@ -218,8 +228,14 @@ pub struct GpuAdapter {
     fcnt: Sized,
     list: Sized,
     hole: Sized,
+    /// An all-levels pass's marks (`state.wgsl`): `diff`, `reach`, `up`, `root`.
+    marks: [Sized; 4],
+    /// How far a pass for a view moves a vertex in the split tree ([`Self::set_levels`]), and
+    /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
+    levels: Levels,
+    descent_budget: u32,
     /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
-    levels: Vec<ScanLevel>,
+    scan_levels: Vec<ScanLevel>,
     /// Active vertices and faces.
     n: u32,
     m: u32,
@@ -354,7 +370,10 @@ impl GpuAdapter {
             fcnt: storage(d, "pm: face counts", 0, 4, VERTEX_USAGE),
             list: storage(d, "pm: split list", 0, 4, VERTEX_USAGE),
             hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
-            levels: Vec::new(),
+            marks: MARKS.map(|name| storage(d, name, 0, 4, VERTEX_USAGE)),
+            levels: Levels::All,
+            descent_budget: if gpu.is_software() { SOFTWARE_DESCENT_BUDGET } else { DESCENT_BUDGET },
+            scan_levels: Vec::new(),
             n: 0,
             m: 0,
             reallocations: 0,
@@ -410,6 +429,28 @@ impl GpuAdapter {
         (self.n, self.m)
     }
 
+    /// How far a pass for a view moves a vertex in the split tree: every level the view asks
+    /// for ([`Levels::All`], the default: one pass reaches the converged mesh), or one (the
+    /// paper's passes). The passes are those of [`codec::pm::Adapter`] with the same setting.
+    /// A full refinement ([`Self::refine_step`]) goes one level a pass either way.
+    pub fn set_levels(&mut self, levels: Levels) {
+        self.levels = levels;
+    }
+
+    /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1):
+    /// one thread's serial work. By default [`codec::pm::DESCENT_BUDGET`], and
+    /// [`SOFTWARE_DESCENT_BUDGET`] on a software adapter ([`Gpu::is_software`]), whose
+    /// compiler stops an invocation's loops after 65535 iterations in all. The CPU references
+    /// take the same setting ([`codec::pm::Adapter::set_descent_budget`]).
+    pub fn set_descent_budget(&mut self, splits: u32) {
+        self.descent_budget = splits.max(1);
+    }
+
+    /// The descent budget ([`Self::set_descent_budget`]).
+    pub fn descent_budget(&self) -> u32 {
+        self.descent_budget
+    }
+
     /// With `true`, every pass waits until its second submission has run, so that
     /// [`Self::last_pass_ms`] can time it (a renderer would rather let it overlap).
     pub fn set_profiling(&mut self, on: bool) {
@@ -433,8 +474,9 @@ impl GpuAdapter {
         let sets: u64 = self.sets.iter().map(VertexSet::bytes).sum();
         let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
         let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
-        let levels: u64 = self.levels.iter().map(|l| l.sums.buffer.size() + l.uniform.size()).sum();
-        sets + faces + tmp + levels
+        let marks: u64 = self.marks.iter().map(|b| b.buffer.size()).sum();
+        let levels: u64 = self.scan_levels.iter().map(|l| l.sums.buffer.size() + l.uniform.size()).sum();
+        sets + faces + tmp + marks + levels
     }
 
     /// Bytes of GPU memory the adapter takes besides the adapted mesh: the static buffers,
@@ -454,10 +496,10 @@ impl GpuAdapter {
     /// At most how many bytes the adapted mesh's buffers take with `v` active vertices (in
     /// either of the two sets) and `f` faces, by the `n_alloc` policy (a buffer holds at most
     /// its need and `2 n_alloc` elements more): per vertex its FVID, state and point in both
-    /// sets and the three per-pass counts, per face its indices, FVIDs, owner and a hole
-    /// slot, per scan block 8 bytes, and a few levels' records.
+    /// sets, the three per-pass counts and the four all-levels marks, per face its indices,
+    /// FVIDs, owner and a hole slot, per scan block 8 bytes, and a few levels' records.
     fn mesh_bytes(&self, v: u64, f: u64) -> u64 {
-        const VERTEX: u64 = 2 * (4 + STATE_BYTES + POINT_BYTES) + 3 * 4 + 1;
+        const VERTEX: u64 = 2 * (4 + STATE_BYTES + POINT_BYTES) + 7 * 4 + 1;
         const FACE: u64 = 12 + 12 + 4 + 4;
         let slack = 2 * self.n_alloc as u64;
         (v + 1 + slack) * VERTEX + (f + slack) * FACE + 4096

@@ -3,12 +3,14 @@
 
 use codec::pm::{PassStats, Viewpoint};
 
+use codec::pm::Levels;
+
 use super::buffers::{
     needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, READBACK_BYTES,
-    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, VERTEX_USAGE,
+    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter, MAX_SCALE, SCALE_STEP};
+use super::{AdaptError, GpuAdapter, MARKS, MAX_SCALE, SCALE_STEP};
 use crate::gpu::GpuError;
 
 impl GpuAdapter {
@@ -35,10 +37,14 @@ impl GpuAdapter {
             self.vcnt = storage(self.gpu.device(), "pm: vertex counts", cap, 4, VERTEX_USAGE);
             self.fcnt = storage(self.gpu.device(), "pm: face counts", cap, 4, VERTEX_USAGE);
             self.list = storage(self.gpu.device(), "pm: split list", cap, 4, VERTEX_USAGE);
+            self.marks = MARKS.map(|name| storage(self.gpu.device(), name, cap, 4, VERTEX_USAGE));
             self.reallocations += 1;
         }
         self.prepare_scan(n as u64 + 1);
-        let mut params = Params { n, m, mode: 1, ..Default::default() };
+        // A full refinement goes one level a pass, as the CPU reference's `refine_step`.
+        let all = view.is_some() && self.levels == Levels::All;
+        let mut params =
+            Params { n, m, mode: 1, levels: all as u32, budget: self.descent_budget, ..Default::default() };
         if let Some(v) = view {
             params.mode = 0;
             params.planes = v.planes().map(|p| p.to_array());
@@ -88,6 +94,8 @@ impl GpuAdapter {
             after: n_new,
             collapses,
         })?;
+        // The threads of the split stages: one per splitting vertex.
+        let split_vertices = if all { counters[STAT_SPLIT_VERTICES] } else { splits };
         if splits == 0 && collapses == 0 {
             // Converged at a raised error with room to spare: the next passes try a finer one,
             // not below the error that last overflowed for this view.
@@ -129,7 +137,7 @@ impl GpuAdapter {
         params.n_new = n_new;
         params.f_add = f_add;
         params.m_new = m_new;
-        params.splits = splits;
+        params.splits = split_vertices;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 2: reorganisation, splits, index update, face compaction.
@@ -151,9 +159,10 @@ impl GpuAdapter {
                     ("dfvid", &dstset.fvid.buffer),
                     ("dstate", &dstset.state.buffer),
                     ("dpoint", &dstset.point.buffer),
+                    ("root", &self.marks[3].buffer),
                 ],
             );
-            let split_decode = p.split_decode.bind(
+            let split_decode = (if all { &p.descend } else { &p.split_decode }).bind_named(
                 &self.gpu,
                 &[
                     ("P", &self.params),
@@ -171,6 +180,8 @@ impl GpuAdapter {
                     ("tables", &self.shared.tables),
                     ("dec_faces", &f.fvid.buffer),
                     ("errors", &self.errors),
+                    ("occ", &self.occ.buffer),
+                    ("face_owner", &f.owner.buffer),
                 ],
             );
             let compact = p.compact_splits.bind(
@@ -182,12 +193,11 @@ impl GpuAdapter {
                     ("stats", &self.stats),
                 ],
             );
-            let split = p.split.bind(
+            let split = (if all { &p.index_new } else { &p.split }).bind_named(
                 &self.gpu,
                 &[
                     ("P", &self.params),
                     ("vfvid", &src.fvid.buffer),
-                    ("vstate", &src.state.buffer),
                     ("vsum", &self.vcnt.buffer),
                     ("fsum", &self.fcnt.buffer),
                     ("list", &self.list.buffer),
@@ -201,7 +211,7 @@ impl GpuAdapter {
                 &self.gpu,
                 &[
                     ("P", &self.params),
-                    ("vstate", &src.state.buffer),
+                    ("vfvid", &src.fvid.buffer),
                     ("vsum", &self.vcnt.buffer),
                     ("dfvid", &dstset.fvid.buffer),
                     ("face_idx", &f.idx.buffer),
@@ -232,9 +242,15 @@ impl GpuAdapter {
             let mut pass = enc
                 .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None });
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
-            self.dispatch(&mut pass, &p.split_decode, &split_decode, splits);
-            self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
-            self.dispatch(&mut pass, &p.split, &split, splits);
+            if all {
+                self.dispatch(&mut pass, &p.descend, &split_decode, split_vertices);
+                self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
+                self.dispatch(&mut pass, &p.index_new, &split, f_add);
+            } else {
+                self.dispatch(&mut pass, &p.split_decode, &split_decode, splits);
+                self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
+                self.dispatch(&mut pass, &p.split, &split, splits);
+            }
             self.dispatch(&mut pass, &p.index_update, &index, m);
             self.dispatch(&mut pass, &p.holes, &holes, m_new);
             self.dispatch(&mut pass, &p.fill, &fill, m + f_add - m_new);
@@ -269,6 +285,13 @@ impl GpuAdapter {
         let mut enc =
             self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
         enc.clear_buffer(&self.stats, 0, None);
+        let all = params.levels == 1;
+        if all {
+            // diff, reach and root start at zero; `up` is written for every vertex.
+            for k in [0, 1, 3] {
+                enc.clear_buffer(&self.marks[k].buffer, 0, Some((n as u64 + 1) * 4));
+            }
+        }
         {
             let set = &self.sets[self.cur];
             let p = &self.shared.pipelines;
@@ -315,8 +338,50 @@ impl GpuAdapter {
             if let Some(bg) = &node_check {
                 self.dispatch(&mut pass, &p.node_check, bg, n);
             }
-            self.dispatch(&mut pass, &p.state, &state, n + 1);
-            self.dispatch(&mut pass, &p.collapse, &collapse, n);
+            if all {
+                let decode = [
+                    ("D", &self.shared.decode),
+                    ("ops", &self.shared.ops),
+                    ("tables", &self.shared.tables),
+                    ("dec_faces", &self.faces.fvid.buffer),
+                    ("errors", &self.errors),
+                ];
+                let [diff, reach, up, root] = &self.marks;
+                let mut buffers = vec![
+                    ("P", &self.params),
+                    ("vfvid", &set.fvid.buffer),
+                    ("vstate", &set.state.buffer),
+                    ("vpoint", &set.point.buffer),
+                    ("vcnt", &self.vcnt.buffer),
+                    ("fcnt", &self.fcnt.buffer),
+                    ("occ", &self.occ.buffer),
+                    ("diff", &diff.buffer),
+                    ("reach", &reach.buffer),
+                    ("up", &up.buffer),
+                ];
+                buffers.extend(decode);
+                let mark = p.mark_count.bind(&self.gpu, &buffers);
+                let regions = p.regions.bind(
+                    &self.gpu,
+                    &[
+                        ("P", &self.params),
+                        ("vstate", &set.state.buffer),
+                        ("vcnt", &self.vcnt.buffer),
+                        ("fcnt", &self.fcnt.buffer),
+                        ("diff", &diff.buffer),
+                        ("reach", &reach.buffer),
+                        ("up", &up.buffer),
+                        ("root", &root.buffer),
+                        ("stats", &self.stats),
+                    ],
+                );
+                self.dispatch(&mut pass, &p.mark_count, &mark, n + 1);
+                self.scan(&mut pass, &diff.buffer);
+                self.dispatch(&mut pass, &p.regions, &regions, n);
+            } else {
+                self.dispatch(&mut pass, &p.state, &state, n + 1);
+                self.dispatch(&mut pass, &p.collapse, &collapse, n);
+            }
         }
         if self.profile {
             // Time the state update and collapses apart from the scans.
@@ -366,22 +431,22 @@ impl GpuAdapter {
         while *counts.last().expect("non-empty") > SCAN_BLOCK as u64 {
             counts.push(counts.last().expect("non-empty").div_ceil(SCAN_BLOCK as u64));
         }
-        while self.levels.len() < counts.len() {
-            let k = self.levels.len();
+        while self.scan_levels.len() < counts.len() {
+            let k = self.scan_levels.len();
             let uniform = self.gpu.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("pm: scan level {k}")),
                 size: 16,
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            self.levels.push(ScanLevel {
+            self.scan_levels.push(ScanLevel {
                 sums: storage(self.gpu.device(), "pm: scan sums", 0, 4, VERTEX_USAGE),
                 uniform,
                 blocks: 0,
             });
         }
-        self.levels.truncate(counts.len());
-        for (level, &c) in self.levels.iter_mut().zip(&counts) {
+        self.scan_levels.truncate(counts.len());
+        for (level, &c) in self.scan_levels.iter_mut().zip(&counts) {
             let blocks = c.div_ceil(SCAN_BLOCK as u64);
             if level.sums.cap < blocks {
                 level.sums = storage(self.gpu.device(), "pm: scan sums", blocks * 2, 4, VERTEX_USAGE);
@@ -395,16 +460,16 @@ impl GpuAdapter {
     /// Exclusive scan of `data` in place over the levels set by [`Self::prepare_scan`].
     fn scan(&self, pass: &mut wgpu::ComputePass<'_>, data: &wgpu::Buffer) {
         let p = &self.shared.pipelines;
-        let mut adds = Vec::with_capacity(self.levels.len());
+        let mut adds = Vec::with_capacity(self.scan_levels.len());
         // Down: scan each level's blocks, the block sums becoming the next level's data.
-        for (k, level) in self.levels.iter().enumerate() {
-            let input = if k == 0 { data } else { &self.levels[k - 1].sums.buffer };
+        for (k, level) in self.scan_levels.iter().enumerate() {
+            let input = if k == 0 { data } else { &self.scan_levels[k - 1].sums.buffer };
             let buffers = [("L", &level.uniform), ("data", input), ("sums", &level.sums.buffer)];
             self.dispatch_groups(pass, &p.scan_blocks, &p.scan_blocks.bind(&self.gpu, &buffers), level.blocks);
             adds.push(buffers);
         }
         // Up: add the scanned block sums back (the top level is a single block).
-        for (level, buffers) in self.levels.iter().zip(&adds).rev().skip(1) {
+        for (level, buffers) in self.scan_levels.iter().zip(&adds).rev().skip(1) {
             self.dispatch_groups(pass, &p.add_blocks, &p.add_blocks.bind(&self.gpu, buffers), level.blocks);
         }
     }

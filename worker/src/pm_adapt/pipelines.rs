@@ -20,6 +20,9 @@ pub(crate) const SCAN_BLOCK: u32 = 2048;
 const COMMON: &str = include_str!("../../../shaders/pm/common.wgsl");
 /// What the stages that decode share after the decoder: error reports, a vertex's split cache.
 const VERTEX_OP: &str = include_str!("../../../shaders/pm/vertex_op.wgsl");
+/// What the state update and the split decoding share after `vertex_op.wgsl`: the view test
+/// with occlusion, and the descent of an all-levels pass.
+const DESCENT: &str = include_str!("../../../shaders/pm/descent.wgsl");
 
 /// One WGSL file of the adaptation, compiled as one shader module.
 pub(crate) struct ShaderDef {
@@ -30,14 +33,20 @@ pub(crate) struct ShaderDef {
     /// Whether the operation decoder (`decode.wgsl` and its constants) and `vertex_op.wgsl`
     /// are prepended too.
     decoder: bool,
+    /// Whether `descent.wgsl` is prepended after them.
+    descent: bool,
 }
 
 impl ShaderDef {
     /// The WGSL the device compiles (and the contract test parses).
     pub(crate) fn wgsl(&self) -> Cow<'static, str> {
-        match (self.common, self.decoder) {
-            (true, true) => format!("{COMMON}\n{}\n{VERTEX_OP}\n{}", decoder_wgsl(), self.source).into(),
-            (true, false) => format!("{COMMON}\n{}", self.source).into(),
+        let levels = format!("const LEVELS_PER_PASS: u32 = {}u;", codec::pm::LEVELS_PER_PASS);
+        match (self.common, self.decoder, self.descent) {
+            (true, true, true) => {
+                format!("{COMMON}\n{levels}\n{}\n{VERTEX_OP}\n{DESCENT}\n{}", decoder_wgsl(), self.source).into()
+            }
+            (true, true, false) => format!("{COMMON}\n{}\n{VERTEX_OP}\n{}", decoder_wgsl(), self.source).into(),
+            (true, false, _) => format!("{COMMON}\n{}", self.source).into(),
             _ => self.source.into(),
         }
     }
@@ -53,7 +62,7 @@ pub(crate) struct StageDef {
 }
 
 const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
-    ShaderDef { label, source, common: true, decoder: false }
+    ShaderDef { label, source, common: true, decoder: false, descent: false }
 }
 
 const NODES_WGSL: ShaderDef = ShaderDef {
@@ -61,14 +70,22 @@ const NODES_WGSL: ShaderDef = ShaderDef {
     source: include_str!("../../../shaders/pm/nodes.wgsl"),
     common: true,
     decoder: true,
+    descent: false,
 };
-const STATE_WGSL: ShaderDef = with_common("pm: state update", include_str!("../../../shaders/pm/state.wgsl"));
+const STATE_WGSL: ShaderDef = ShaderDef {
+    label: "pm: state update",
+    source: include_str!("../../../shaders/pm/state.wgsl"),
+    common: true,
+    decoder: true,
+    descent: true,
+};
 const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("../../../shaders/pm/collapse.wgsl"));
 const SCAN_WGSL: ShaderDef = ShaderDef {
     label: "pm: scan",
     source: include_str!("../../../shaders/pm/scan.wgsl"),
     common: false,
     decoder: false,
+    descent: false,
 };
 const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("../../../shaders/pm/reorganise.wgsl"));
 const SPLIT_DECODE_WGSL: ShaderDef = ShaderDef {
@@ -76,6 +93,7 @@ const SPLIT_DECODE_WGSL: ShaderDef = ShaderDef {
     source: include_str!("../../../shaders/pm/split_decode.wgsl"),
     common: true,
     decoder: true,
+    descent: true,
 };
 const COMPACT_SPLITS_WGSL: ShaderDef =
     with_common("pm: compact splits", include_str!("../../../shaders/pm/compact_splits.wgsl"));
@@ -122,6 +140,57 @@ pub(crate) const STATE: StageDef = StageDef {
     ],
 };
 
+/// The decoder's bindings in `state.wgsl`.
+const STATE_DECODER: [Binding; 5] = [
+    Binding::uniform::<DecodeParams>(7, "D"),
+    Binding::read::<u32>(8, "ops"),
+    Binding::read::<u32>(9, "tables"),
+    Binding::read_write::<u32>(10, "dec_faces"),
+    Binding::read_write::<Errors>(11, "errors"),
+];
+
+/// An all-levels pass: the undone splits marked, every vertex's leaves and faces counted.
+pub(crate) const MARK_COUNT: StageDef = StageDef {
+    label: "pm: mark and count",
+    shader: &STATE_WGSL,
+    entry: "mark_count",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read_write::<u32>(4, "vcnt"),
+        Binding::read_write::<u32>(5, "fcnt"),
+        Binding::read::<u32>(6, "occ"),
+        STATE_DECODER[0],
+        STATE_DECODER[1],
+        STATE_DECODER[2],
+        STATE_DECODER[3],
+        STATE_DECODER[4],
+        Binding::read_write::<u32>(12, "diff"),
+        Binding::read_write::<u32>(13, "reach"),
+        Binding::read_write::<u32>(14, "up"),
+    ],
+};
+
+/// An all-levels pass: the collapsing regions, and the vertices carrying their operations.
+pub(crate) const REGIONS: StageDef = StageDef {
+    label: "pm: regions",
+    shader: &STATE_WGSL,
+    entry: "regions",
+    bindings: &[
+        PARAMS,
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read_write::<u32>(4, "vcnt"),
+        Binding::read_write::<u32>(5, "fcnt"),
+        Binding::read_write::<u32>(12, "diff"),
+        Binding::read_write::<u32>(13, "reach"),
+        Binding::read_write::<u32>(14, "up"),
+        Binding::read_write::<u32>(15, "root"),
+        Binding::read_write::<Stats>(16, "stats"),
+    ],
+};
+
 /// Algorithm 2.
 pub(crate) const COLLAPSE: StageDef = StageDef {
     label: "pm: collapse",
@@ -164,6 +233,7 @@ pub(crate) const REORGANISE: StageDef = StageDef {
         Binding::read_write::<u32>(5, "dfvid"),
         Binding::read_write::<GpuVState>(6, "dstate"),
         Binding::read_write::<PmPoint>(7, "dpoint"),
+        Binding::read::<u32>(8, "root"),
     ],
 };
 
@@ -191,6 +261,32 @@ pub(crate) const SPLIT_DECODE: StageDef = StageDef {
     ],
 };
 
+/// An all-levels pass's splits: every splitting vertex's leaves and faces written.
+pub(crate) const DESCEND: StageDef = StageDef {
+    label: "pm: descend",
+    shader: &SPLIT_DECODE_WGSL,
+    entry: "descend",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read::<u32>(4, "vsum"),
+        Binding::read::<u32>(5, "fsum"),
+        Binding::read::<u32>(6, "list"),
+        Binding::read_write::<u32>(7, "dfvid"),
+        Binding::read_write::<GpuVState>(8, "dstate"),
+        Binding::read_write::<PmPoint>(9, "dpoint"),
+        Binding::uniform::<DecodeParams>(10, "D"),
+        Binding::read::<u32>(11, "ops"),
+        Binding::read::<u32>(12, "tables"),
+        Binding::read_write::<u32>(13, "dec_faces"),
+        Binding::read_write::<Errors>(14, "errors"),
+        Binding::read::<u32>(15, "occ"),
+        Binding::read_write::<u32>(16, "face_owner"),
+    ],
+};
+
 /// Algorithm 4's first step.
 pub(crate) const COMPACT_SPLITS: StageDef = StageDef {
     label: "pm: compact splits",
@@ -212,7 +308,6 @@ pub(crate) const SPLIT: StageDef = StageDef {
     bindings: &[
         PARAMS,
         Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
         Binding::read::<u32>(3, "vsum"),
         Binding::read::<u32>(4, "fsum"),
         Binding::read::<u32>(5, "list"),
@@ -223,6 +318,19 @@ pub(crate) const SPLIT: StageDef = StageDef {
     ],
 };
 
+/// An all-levels pass's Algorithm 4: the new faces indexed, one thread each.
+pub(crate) const INDEX_NEW: StageDef = StageDef {
+    label: "pm: index new faces",
+    shader: &SPLIT_WGSL,
+    entry: "index_new",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(6, "dfvid"),
+        Binding::read_write::<u32>(7, "face_idx"),
+        Binding::read::<u32>(8, "face_fvid"),
+    ],
+};
+
 /// Algorithm 5.
 pub(crate) const INDEX_UPDATE: StageDef = StageDef {
     label: "pm: index update",
@@ -230,7 +338,7 @@ pub(crate) const INDEX_UPDATE: StageDef = StageDef {
     entry: "main",
     bindings: &[
         PARAMS,
-        Binding::read::<GpuVState>(1, "vstate"),
+        Binding::read::<u32>(1, "vfvid"),
         Binding::read::<u32>(2, "vsum"),
         Binding::read::<u32>(3, "dfvid"),
         Binding::read_write::<u32>(4, "face_idx"),
@@ -269,16 +377,20 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 12] = [
+pub(crate) const STAGES: [&StageDef; 16] = [
     &NODE_CHECK,
     &STATE,
     &COLLAPSE,
+    &MARK_COUNT,
+    &REGIONS,
     &SCAN_BLOCKS,
     &ADD_BLOCKS,
     &COMPACT_SPLITS,
     &SPLIT_DECODE,
+    &DESCEND,
     &REORGANISE,
     &SPLIT,
+    &INDEX_NEW,
     &INDEX_UPDATE,
     &HOLES,
     &FILL,
@@ -323,6 +435,13 @@ impl Stage {
     pub(super) fn bind(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
         gpu.bind_group(self.def.label, &self.layout, self.def.bindings, buffers)
     }
+
+    /// As [`Self::bind`], from the buffers of several stages: those its table names.
+    pub(super) fn bind_named(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        let used: Vec<_> =
+            buffers.iter().copied().filter(|(name, _)| self.def.bindings.iter().any(|b| b.name == *name)).collect();
+        self.bind(gpu, &used)
+    }
 }
 
 pub(super) struct Pipelines {
@@ -335,6 +454,10 @@ pub(super) struct Pipelines {
     pub(super) compact_splits: Stage,
     pub(super) split_decode: Stage,
     pub(super) split: Stage,
+    pub(super) mark_count: Stage,
+    pub(super) regions: Stage,
+    pub(super) descend: Stage,
+    pub(super) index_new: Stage,
     pub(super) index_update: Stage,
     pub(super) holes: Stage,
     pub(super) fill: Stage,
@@ -348,20 +471,28 @@ impl Pipelines {
                 source: wgpu::ShaderSource::Wgsl(shader.wgsl()),
             })
         };
-        // A module per file: the scan and the face compaction have two entry points each.
+        // A module per file: the scan, the face compaction, the state update, the split
+        // decoding and the split have two entry points or more.
         let scan = module(&SCAN_WGSL);
         let compact = module(&FACE_COMPACT_WGSL);
+        let state = module(&STATE_WGSL);
+        let split_decode = module(&SPLIT_DECODE_WGSL);
+        let split = module(&SPLIT_WGSL);
         let single = |def: &'static StageDef| Stage::new(gpu, &module(def.shader), def);
         Pipelines {
             node_check: single(&NODE_CHECK),
-            state: single(&STATE),
+            state: Stage::new(gpu, &state, &STATE),
             collapse: single(&COLLAPSE),
             scan_blocks: Stage::new(gpu, &scan, &SCAN_BLOCKS),
             add_blocks: Stage::new(gpu, &scan, &ADD_BLOCKS),
             reorganise: single(&REORGANISE),
             compact_splits: single(&COMPACT_SPLITS),
-            split_decode: single(&SPLIT_DECODE),
-            split: single(&SPLIT),
+            split_decode: Stage::new(gpu, &split_decode, &SPLIT_DECODE),
+            split: Stage::new(gpu, &split, &SPLIT),
+            mark_count: Stage::new(gpu, &state, &MARK_COUNT),
+            regions: Stage::new(gpu, &state, &REGIONS),
+            descend: Stage::new(gpu, &split_decode, &DESCEND),
+            index_new: Stage::new(gpu, &split, &INDEX_NEW),
             index_update: single(&INDEX_UPDATE),
             holes: Stage::new(gpu, &compact, &HOLES),
             fill: Stage::new(gpu, &compact, &FILL),

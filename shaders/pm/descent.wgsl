@@ -1,0 +1,272 @@
+// What the state update and the split decoding share (prepended after vertex_op.wgsl): the
+// view test with occlusion, a vertex's point, and the descent of an all-levels pass
+// (codec::pm::Levels::All): from a splitting vertex down its subtree of splits while the view
+// asks, at most LEVELS_PER_PASS levels, depth first and left before right (FVID order), as
+// codec::pm::DpmAdapter's stack goes. The state update walks it to count a vertex's leaves
+// and faces, the split decoding walks it again to write them: both make the same decisions
+// from the same data. A file that includes this declares `occ`, the depth pyramid.
+
+// Whether a bounding sphere was hidden in the frame of the depth pyramid (the paper's
+// occlusion culling one frame late, here of vertices' spheres): its box projected with that
+// frame's view-projection lies inside the pyramid's rectangle and behind the farthest depth
+// of every cell it covers, at the level where it spans at most two cells a side. A sphere
+// that reaches behind the eye or past the rectangle is not occluded.
+fn occluded(center: vec3<f32>, r: f32) -> bool {
+    if (P.occ_size.w == 0.0) {
+        return false;
+    }
+    var lo = vec2<f32>(3.0e38);
+    var hi = vec2<f32>(-3.0e38);
+    var zmin = 3.0e38;
+    for (var k = 0u; k < 8u; k++) {
+        let c = center + vec3<f32>(select(-r, r, (k & 1u) != 0u), select(-r, r, (k & 2u) != 0u),
+                                   select(-r, r, (k & 4u) != 0u));
+        let q = P.occ_vp * vec4<f32>(c, 1.0);
+        if (q.w <= 0.0) {
+            return false;
+        }
+        lo = min(lo, q.xy / q.w);
+        hi = max(hi, q.xy / q.w);
+        zmin = min(zmin, q.z / q.w);
+    }
+    if (zmin <= 0.0) {
+        return false;
+    }
+    let x0 = (lo.x + 1.0) * 0.5 * P.occ_size.x;
+    let x1 = (hi.x + 1.0) * 0.5 * P.occ_size.x;
+    let y0 = (1.0 - hi.y) * 0.5 * P.occ_size.y;
+    let y1 = (1.0 - lo.y) * 0.5 * P.occ_size.y;
+    if (x0 < P.occ_rect.x || y0 < P.occ_rect.y || x1 > P.occ_rect.z || y1 > P.occ_rect.w) {
+        return false;
+    }
+    let levels = occ[0];
+    var level = 0u;
+    var side = P.occ_size.z;
+    while (level + 1u < levels && max(x1 - x0, y1 - y0) > side) {
+        level++;
+        side *= 2.0;
+    }
+    let w = occ[1u + 3u * level];
+    let h = occ[2u + 3u * level];
+    let at = occ[3u + 3u * level];
+    let cx0 = min(u32((x0 - P.occ_rect.x) / side), w - 1u);
+    let cx1 = min(u32((x1 - P.occ_rect.x) / side), w - 1u);
+    let cy0 = min(u32((y0 - P.occ_rect.y) / side), h - 1u);
+    let cy1 = min(u32((y1 - P.occ_rect.y) / side), h - 1u);
+    var far = 0.0;
+    for (var cy = cy0; cy <= cy1; cy++) {
+        for (var cx = cx0; cx <= cx1; cx++) {
+            far = max(far, bitcast<f32>(occ[at + cy * w + cx]));
+        }
+    }
+    return zmin > far;
+}
+
+// The refinement test, and not hidden (occlusion culling on).
+fn wants_split(center: vec3<f32>, normal: vec3<f32>, crit: vec4<f32>) -> bool {
+    return needs_split(center, normal, crit) && !occluded(center, crit.w);
+}
+
+// The position of a quantized one, as the CPU decoder computes it.
+fn dequantize(q: vec3<u32>) -> vec3<f32> {
+    return vec3<f32>(D.grid.x + f32(q.x) * D.grid.w, D.grid.y + f32(q.y) * D.grid.w, D.grid.z + f32(q.z) * D.grid.w);
+}
+
+// The unit normal (or zero) of an octahedral code, as the CPU decoder computes it.
+fn oct_decode(q: vec2<u32>) -> vec3<f32> {
+    let zero = 1u << D.normal_bits;
+    if (q.x == zero && q.y == zero) {
+        return vec3<f32>(0.0);
+    }
+    let m = f32(zero - 1u);
+    var x = f32(q.x) / m * 2.0 - 1.0;
+    var y = f32(q.y) / m * 2.0 - 1.0;
+    let z = 1.0 - abs(x) - abs(y);
+    if (z < 0.0) {
+        let ox = x;
+        let oy = y;
+        x = (1.0 - abs(oy)) * select(-1.0, 1.0, ox >= 0.0);
+        y = (1.0 - abs(ox)) * select(-1.0, 1.0, oy >= 0.0);
+    }
+    let l = sqrt(x * x + y * y + z * z);
+    return vec3<f32>(x / l, y / l, z / l);
+}
+
+// The point of a vertex from its quantized position and normal.
+fn point_of(s: VState) -> Point {
+    return Point(vec4<f32>(dequantize(s.pos.xyz), 1.0), vec4<f32>(oct_decode(s.nrm.xy), 0.0));
+}
+
+// A descent in progress, per invocation: the current vertex (its state, FVID, point and depth
+// below the start, and whether its own operation's criteria and face count are still to be
+// decoded), the right children still to visit (at most one per level, a field per array), the
+// leaves visited and the faces of the splits done, which go to `dec_faces` from `dc_face_out`
+// (NONE_ADDR: counted only); `dc_last_vu` and `dc_last_faces` describe the split just done.
+//
+// `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
+// The budget bounds one invocation's work: llvmpipe (lavapipe) stops every loop of an
+// invocation after 65535 iterations in all (the decoder reads bit by bit, some 150 iterations
+// an operation), silently; GpuAdapter gives it a budget that stays well below.
+var<private> dc_cur: VState;
+var<private> dc_f: u32;
+var<private> dc_pt: Point;
+var<private> dc_depth: u32;
+var<private> dc_uncached: bool;
+var<private> dc_sp: u32;
+var<private> dc_splits: u32;
+var<private> dc_leaves: u32;
+var<private> dc_faces: u32;
+var<private> dc_face_out: u32;
+var<private> dc_last_vu: u32;
+var<private> dc_last_faces: u32;
+var<private> dc_stack_f: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_d: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_end: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_addr: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_pc: array<vec4<u32>, LEVELS_PER_PASS>;
+var<private> dc_stack_pos: array<vec4<u32>, LEVELS_PER_PASS>;
+var<private> dc_stack_nrm: array<vec2<u32>, LEVELS_PER_PASS>;
+var<private> dc_stack_caddr: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_cv: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_cfaces: array<u32, LEVELS_PER_PASS>;
+var<private> dc_stack_cpc: array<vec4<u32>, LEVELS_PER_PASS>;
+var<private> dc_stack_ccrit: array<vec4<f32>, LEVELS_PER_PASS>;
+
+fn descent_start(s: VState, f: u32, pt: Point, face_out: u32) {
+    dc_cur = s;
+    dc_f = f;
+    dc_pt = pt;
+    dc_depth = 0u;
+    dc_uncached = false;
+    dc_sp = 0u;
+    dc_splits = 0u;
+    dc_leaves = 0u;
+    dc_faces = 0u;
+    dc_face_out = face_out;
+}
+
+// What one step of a descent did.
+const STEP_CACHED: u32 = 0u; // decoded the current vertex's criteria and face count
+const STEP_SPLIT: u32 = 1u;  // split the current vertex (its left child is current now)
+const STEP_LEAF: u32 = 2u;   // the current vertex is a leaf: the caller takes it, then pops
+
+// One step: decodes the current vertex's split cache if it is not yet (as vertex_op.wgsl's
+// `with_op`), else splits it if it splits (an operation, decoded and resident, that the view
+// asks for; any in mode 1; none in mode 2; within LEVELS_PER_PASS levels and P.budget splits) as split_decode.wgsl's `main` splits one: the
+// right child waits on the stack, the left one becomes current (it keeps the point). A leaf
+// where it does not split, or its operation fails to decode (reported: the pass fails).
+fn descent_step() -> u32 {
+    let s = dc_cur;
+    let f = dc_f;
+    var run = dc_uncached && s.addr != NONE;
+    var upto = DECODE_TO_FACES;
+    if (!dc_uncached) {
+        run = dc_splits < P.budget && dc_depth < LEVELS_PER_PASS && s.addr != NONE && s.flags == 0u
+            && P.mode != 2u;
+        if (run && P.mode == 0u) {
+            run = wants_split(dc_pt.pos.xyz, dc_pt.nrm.xyz, s.crit);
+        }
+        upto = DECODE_ALL;
+    }
+    var out = NONE_ADDR;
+    if (upto == DECODE_ALL && dc_face_out != NONE_ADDR) {
+        out = dc_face_out + dc_faces;
+    }
+    var o: DecodedOp;
+    if (run) {
+        o = decode_op(s.addr, f, s.v_end, s.pc, s.pos.xyz, s.nrm.xy, out, upto);
+    }
+    if (dc_uncached) {
+        dc_uncached = false;
+        dc_cur.faces = 0u;
+        dc_cur.crit = vec4<f32>(0.0);
+        dc_cur.flags = 0u;
+        if (run) {
+            if (o.status == DEC_ABSENT) {
+                dc_cur.flags = PENDING;
+            } else if (o.status != DEC_OK) {
+                report(o.status, s.addr);
+            } else {
+                dc_cur.faces = o.faces;
+                dc_cur.crit = bitcast<vec4<f32>>(o.crit_f);
+            }
+        }
+        return STEP_CACHED;
+    }
+    if (!run) {
+        return STEP_LEAF;
+    }
+    if (o.status != DEC_OK) {
+        report(o.status, s.addr);
+        return STEP_LEAF;
+    }
+    dc_splits += 1u;
+    let sp = dc_sp;
+    dc_stack_f[sp] = o.v_u;
+    dc_stack_d[sp] = dc_depth + 1u;
+    dc_stack_end[sp] = s.v_end;
+    dc_stack_addr[sp] = o.right;
+    dc_stack_pc[sp] = o.crit;
+    dc_stack_pos[sp] = o.position;
+    dc_stack_nrm[sp] = o.normal.xy;
+    dc_stack_caddr[sp] = s.addr;
+    dc_stack_cv[sp] = f;
+    dc_stack_cfaces[sp] = o.faces;
+    dc_stack_cpc[sp] = s.pc;
+    dc_stack_ccrit[sp] = s.crit;
+    dc_sp = sp + 1u;
+    var l = s;
+    l.v_end = o.v_u;
+    l.addr = o.left;
+    l.pc = o.crit;
+    dc_cur = l;
+    dc_uncached = true;
+    dc_depth += 1u;
+    dc_last_vu = o.v_u;
+    dc_last_faces = o.faces;
+    dc_faces += o.faces;
+    return STEP_SPLIT;
+}
+
+// After a leaf: the next right child waiting becomes current (its split cache still to be
+// decoded), as split_decode.wgsl's `main` makes a right child; false when none is left.
+fn descent_pop() -> bool {
+    if (dc_sp == 0u) {
+        return false;
+    }
+    let sp = dc_sp - 1u;
+    dc_sp = sp;
+    var r: VState;
+    r.v_end = dc_stack_end[sp];
+    r.addr = dc_stack_addr[sp];
+    r.pc = dc_stack_pc[sp];
+    r.pos = dc_stack_pos[sp];
+    r.nrm = vec4<u32>(dc_stack_nrm[sp], 0u, 0u);
+    r.c_addr = dc_stack_caddr[sp];
+    r.c_v = dc_stack_cv[sp];
+    r.c_v_end = r.v_end;
+    r.c_faces = dc_stack_cfaces[sp];
+    r.c_pc = dc_stack_cpc[sp];
+    r.c_crit = dc_stack_ccrit[sp];
+    dc_cur = r;
+    dc_f = dc_stack_f[sp];
+    dc_depth = dc_stack_d[sp];
+    dc_pt = point_of(r);
+    dc_uncached = true;
+    return true;
+}
+
+// The index of the first of the `n` old active vertices whose FVID is >= f (n if none).
+fn lower_bound(f: u32, n: u32) -> u32 {
+    var lo = 0u;
+    var hi = n;
+    while (lo < hi) {
+        let mid = (lo + hi) >> 1u;
+        if (vfvid[mid] < f) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
