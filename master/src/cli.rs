@@ -344,6 +344,11 @@ pub enum Pm {
         /// of --gpu-budget-mb, or every node without it.
         #[arg(long, value_parser = parse_positive, requires = "gpu")]
         gpu_nodes_mb: Option<f32>,
+        /// Adapt in the paper's passes of one level each (a view change of k levels takes k
+        /// passes) instead of every level the view asks for in one pass. The mesh written is
+        /// the same.
+        #[arg(long)]
+        one_level: bool,
     },
 }
 

@@ -37,7 +37,19 @@ fn main() -> ExitCode {
         ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
         Command::Pm {
-            pm: Pm::Adapt { input, view, error_px, output, full, normal_weight, gpu, gpu_budget_mb, gpu_nodes_mb },
+            pm:
+                Pm::Adapt {
+                    input,
+                    view,
+                    error_px,
+                    output,
+                    full,
+                    normal_weight,
+                    gpu,
+                    gpu_budget_mb,
+                    gpu_nodes_mb,
+                    one_level,
+                },
         } => {
             let mb = |mb: f32| (mb as f64 * (1u64 << 20) as f64) as u64;
             let opts = master::pm::AdaptOptions {
@@ -48,6 +60,7 @@ fn main() -> ExitCode {
                 gpu: *gpu,
                 gpu_budget: gpu_budget_mb.map(mb),
                 gpu_nodes: gpu_nodes_mb.map(mb),
+                levels: if *one_level { codec::pm::Levels::One } else { codec::pm::Levels::All },
             };
             master::pm::adapt(input, &view.camera, &opts, output)
         }

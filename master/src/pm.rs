@@ -234,7 +234,6 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
     Ok(())
 }
 
-/// Options of `tessera pm adapt`.
 /// `pm adapt`'s options, as `master::cli` parsed and checked them.
 #[derive(Clone, Copy, Debug)]
 pub struct AdaptOptions {
@@ -252,6 +251,9 @@ pub struct AdaptOptions {
     /// On the GPU, an out-of-core file's node pool in bytes (`None`: a quarter of the budget,
     /// or every node without one).
     pub gpu_nodes: Option<u64>,
+    /// How far a pass moves a vertex in the split tree: every level the view asks for (one
+    /// pass reaches the mesh), or one (the paper's passes).
+    pub levels: codec::pm::Levels,
 }
 
 /// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full] [--gpu]`.
@@ -293,11 +295,13 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
             let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
             let ooc = worker::pm_adapt::OutOfCore { file: file.clone(), pool_bytes, background: false };
             let mut a = worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, n_alloc)?;
+            a.set_levels(opts.levels);
             a.set_budget(opts.gpu_budget)?;
             a.schedule(&camera_view()?)?;
             a
         } else {
             let mut a = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?;
+            a.set_levels(opts.levels);
             a.set_budget(opts.gpu_budget)?;
             a
         };
@@ -316,7 +320,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         }
         (adapter.active()?, adapter.faces()?, passes)
     } else {
-        let mut adapter = Adapter::new(&pm);
+        let mut adapter = Adapter::new(&pm).with_levels(opts.levels);
         let passes = match &view {
             None => adapter.refine_fully(),
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaption did not converge")?,

@@ -93,6 +93,7 @@ const STAT_SPLIT_CURSOR: u32 = 3u;
 const STAT_HOLE_CURSOR: u32 = 4u;
 const STAT_FILL_CURSOR: u32 = 5u;
 const STAT_SPLIT_VERTICES: u32 = 6u;   // an all-levels pass: vertices that split
+const STAT_DESCENTS: u32 = 7u;         // an all-levels pass: vertices that descend (listed)
 
 // The linear thread index of a 1D or 2D dispatch of WG-thread workgroups.
 fn thread_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {

@@ -2,13 +2,14 @@
 // into `vcnt`, and the number of faces its split creates into `fcnt`. Thread n writes the
 // zero that ends both arrays, so that their exclusive scans end in the totals.
 //
-// An all-levels pass (codec::pm::Levels::All) runs `mark_count` and `regions` instead:
-// `mark_count` marks every done split the view no longer asks for (each is the creator of one
+// An all-levels pass (codec::pm::Levels::All) runs `mark`, `count` and `regions` instead:
+// `mark` marks every done split the view no longer asks for (each is the creator of one
 // active vertex, which evaluates it) as a range of positions [p, q) in the sorted buffer, with
 // +1 at p and -1 at q - 1 in `diff` (whose exclusive scan then counts, at each position, the
 // undone ranges that hold it and start before it), the farthest range end (an FVID) starting
-// at p in `reach`, and p + 1 in `up`; and it counts each vertex's leaves and faces down its
-// subtree (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
+// at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count`, one thread
+// per listed vertex (dispatched indirectly), counts its leaves and faces down its subtree
+// (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
 // creator's range is the region's.
@@ -33,6 +34,9 @@
 @group(0) @binding(14) var<storage, read_write> up: array<u32>;
 @group(0) @binding(15) var<storage, read_write> root: array<u32>;
 @group(0) @binding(16) var<storage, read_write> stats: array<atomic<u32>, 8>;
+// The vertices that descend, and `count`'s dispatch.
+@group(0) @binding(17) var<storage, read_write> list: array<u32>;
+@group(0) @binding(18) var<storage, read_write> args: array<u32, 3>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -69,7 +73,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
 }
 
 @compute @workgroup_size(256)
-fn mark_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = thread_index(gid, groups);
     let n = P.n;
     if (i > n) {
@@ -80,7 +84,6 @@ fn mark_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         fcnt[n] = 0u;
         return;
     }
-    let f = vfvid[i];
     let s = vstate[i];
     var mark = 0u;
     if (P.mode != 1u && s.c_addr != NONE) {
@@ -94,7 +97,38 @@ fn mark_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
             mark = p + 1u;
         }
     }
-    descent_start(s, f, vpoint[i], NONE_ADDR);
+    up[i] = mark;
+    vcnt[i] = 1u;
+    fcnt[i] = 0u;
+    // A vertex that splits descends in `count`, one thread per such vertex.
+    if (s.addr != NONE && s.flags == 0u && P.mode != 2u
+        && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
+        list[atomicAdd(&stats[STAT_DESCENTS], 1u)] = i;
+    }
+}
+
+// The workgroups of `count`, for its indirect dispatch: one thread per descending vertex, in
+// two dimensions past the per-dimension limit.
+@compute @workgroup_size(256)
+fn count_args(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x != 0u) {
+        return;
+    }
+    let g = (atomicLoad(&stats[STAT_DESCENTS]) + WG - 1u) / WG;
+    let x = min(g, 65535u);
+    args[0] = x;
+    args[1] = select(1u, (g + x - 1u) / x, x > 0u);
+    args[2] = 1u;
+}
+
+@compute @workgroup_size(256)
+fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = thread_index(gid, groups);
+    if (k >= atomicLoad(&stats[STAT_DESCENTS])) {
+        return;
+    }
+    let i = list[k];
+    descent_start(vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
     loop {
         if (descent_step() != STEP_LEAF) {
             continue;
@@ -106,8 +140,6 @@ fn mark_count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     }
     vcnt[i] = dc_leaves;
     fcnt[i] = dc_faces;
-    up[i] = mark;
-
 }
 
 @compute @workgroup_size(256)

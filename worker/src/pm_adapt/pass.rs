@@ -347,7 +347,7 @@ impl GpuAdapter {
                     ("errors", &self.errors),
                 ];
                 let [diff, reach, up, root] = &self.marks;
-                let mut buffers = vec![
+                let buffers = [
                     ("P", &self.params),
                     ("vfvid", &set.fvid.buffer),
                     ("vstate", &set.state.buffer),
@@ -358,9 +358,14 @@ impl GpuAdapter {
                     ("diff", &diff.buffer),
                     ("reach", &reach.buffer),
                     ("up", &up.buffer),
+                    ("stats", &self.stats),
+                    ("list", &self.list.buffer),
+                    ("args", &self.args),
                 ];
-                buffers.extend(decode);
-                let mark = p.mark_count.bind(&self.gpu, &buffers);
+                let buffers: Vec<_> = buffers.into_iter().chain(decode).collect();
+                let mark = p.mark.bind_named(&self.gpu, &buffers);
+                let count_args = p.count_args.bind_named(&self.gpu, &buffers);
+                let count = p.count.bind_named(&self.gpu, &buffers);
                 let regions = p.regions.bind(
                     &self.gpu,
                     &[
@@ -375,7 +380,11 @@ impl GpuAdapter {
                         ("stats", &self.stats),
                     ],
                 );
-                self.dispatch(&mut pass, &p.mark_count, &mark, n + 1);
+                self.dispatch(&mut pass, &p.mark, &mark, n + 1);
+                self.dispatch_groups(&mut pass, &p.count_args, &count_args, 1);
+                pass.set_pipeline(&p.count.pipeline);
+                pass.set_bind_group(0, &count, &[]);
+                pass.dispatch_workgroups_indirect(&self.args, 0);
                 self.scan(&mut pass, &diff.buffer);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {

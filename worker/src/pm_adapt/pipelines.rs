@@ -149,11 +149,40 @@ const STATE_DECODER: [Binding; 5] = [
     Binding::read_write::<Errors>(11, "errors"),
 ];
 
-/// An all-levels pass: the undone splits marked, every vertex's leaves and faces counted.
-pub(crate) const MARK_COUNT: StageDef = StageDef {
-    label: "pm: mark and count",
+/// An all-levels pass: the undone splits marked, the vertices that split listed.
+pub(crate) const MARK: StageDef = StageDef {
+    label: "pm: mark",
     shader: &STATE_WGSL,
-    entry: "mark_count",
+    entry: "mark",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vfvid"),
+        Binding::read::<GpuVState>(2, "vstate"),
+        Binding::read::<PmPoint>(3, "vpoint"),
+        Binding::read_write::<u32>(4, "vcnt"),
+        Binding::read_write::<u32>(5, "fcnt"),
+        Binding::read::<u32>(6, "occ"),
+        Binding::read_write::<u32>(12, "diff"),
+        Binding::read_write::<u32>(13, "reach"),
+        Binding::read_write::<u32>(14, "up"),
+        Binding::read_write::<Stats>(16, "stats"),
+        Binding::read_write::<u32>(17, "list"),
+    ],
+};
+
+/// An all-levels pass: the indirect dispatch of [`COUNT`].
+pub(crate) const COUNT_ARGS: StageDef = StageDef {
+    label: "pm: count dispatch",
+    shader: &STATE_WGSL,
+    entry: "count_args",
+    bindings: &[Binding::read_write::<Stats>(16, "stats"), Binding::read_write::<[u32; 3]>(18, "args")],
+};
+
+/// An all-levels pass: each listed vertex's leaves and faces counted down its subtree.
+pub(crate) const COUNT: StageDef = StageDef {
+    label: "pm: count",
+    shader: &STATE_WGSL,
+    entry: "count",
     bindings: &[
         PARAMS,
         Binding::read::<u32>(1, "vfvid"),
@@ -167,9 +196,8 @@ pub(crate) const MARK_COUNT: StageDef = StageDef {
         STATE_DECODER[2],
         STATE_DECODER[3],
         STATE_DECODER[4],
-        Binding::read_write::<u32>(12, "diff"),
-        Binding::read_write::<u32>(13, "reach"),
-        Binding::read_write::<u32>(14, "up"),
+        Binding::read_write::<Stats>(16, "stats"),
+        Binding::read_write::<u32>(17, "list"),
     ],
 };
 
@@ -377,11 +405,13 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 16] = [
+pub(crate) const STAGES: [&StageDef; 18] = [
     &NODE_CHECK,
     &STATE,
     &COLLAPSE,
-    &MARK_COUNT,
+    &MARK,
+    &COUNT_ARGS,
+    &COUNT,
     &REGIONS,
     &SCAN_BLOCKS,
     &ADD_BLOCKS,
@@ -454,7 +484,9 @@ pub(super) struct Pipelines {
     pub(super) compact_splits: Stage,
     pub(super) split_decode: Stage,
     pub(super) split: Stage,
-    pub(super) mark_count: Stage,
+    pub(super) mark: Stage,
+    pub(super) count_args: Stage,
+    pub(super) count: Stage,
     pub(super) regions: Stage,
     pub(super) descend: Stage,
     pub(super) index_new: Stage,
@@ -489,7 +521,9 @@ impl Pipelines {
             compact_splits: single(&COMPACT_SPLITS),
             split_decode: Stage::new(gpu, &split_decode, &SPLIT_DECODE),
             split: Stage::new(gpu, &split, &SPLIT),
-            mark_count: Stage::new(gpu, &state, &MARK_COUNT),
+            mark: Stage::new(gpu, &state, &MARK),
+            count_args: Stage::new(gpu, &state, &COUNT_ARGS),
+            count: Stage::new(gpu, &state, &COUNT),
             regions: Stage::new(gpu, &state, &REGIONS),
             descend: Stage::new(gpu, &split_decode, &DESCEND),
             index_new: Stage::new(gpu, &split, &INDEX_NEW),
