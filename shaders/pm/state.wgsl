@@ -8,8 +8,8 @@
 // +1 at p and -1 at q - 1 in `diff` (whose exclusive scan then counts, at each position, the
 // undone ranges that hold it and start before it), the farthest range end (an FVID) starting
 // at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count`, one thread
-// per listed vertex (dispatched indirectly), counts its leaves and faces down its subtree
-// (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
+// per listed vertex (the host reads their number back), counts its leaves and faces down its
+// subtree (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
 // creator's range is the region's.
@@ -34,9 +34,8 @@
 @group(0) @binding(14) var<storage, read_write> up: array<u32>;
 @group(0) @binding(15) var<storage, read_write> root: array<u32>;
 @group(0) @binding(16) var<storage, read_write> stats: array<atomic<u32>, 8>;
-// The vertices that descend, and `count`'s dispatch.
+// The vertices that descend.
 @group(0) @binding(17) var<storage, read_write> list: array<u32>;
-@group(0) @binding(18) var<storage, read_write> args: array<u32, 3>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -105,20 +104,6 @@ fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
         list[atomicAdd(&stats[STAT_DESCENTS], 1u)] = i;
     }
-}
-
-// The workgroups of `count`, for its indirect dispatch: one thread per descending vertex, in
-// two dimensions past the per-dimension limit.
-@compute @workgroup_size(256)
-fn count_args(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x != 0u) {
-        return;
-    }
-    let g = (atomicLoad(&stats[STAT_DESCENTS]) + WG - 1u) / WG;
-    let x = min(g, 65535u);
-    args[0] = x;
-    args[1] = select(1u, (g + x - 1u) / x, x > 0u);
-    args[2] = 1u;
 }
 
 @compute @workgroup_size(256)

@@ -15,6 +15,15 @@ use worker::gpu::Gpu;
 use worker::pm_adapt::{GpuAdapter, DEFAULT_N_ALLOC};
 use worker::render::Renderer;
 
+/// A device, and a lock that runs this file's GPU tests one at a time: on lavapipe each
+/// device compiles and runs on every core, and six at once took 529 s in CI against about
+/// 60 s in turn.
+fn device() -> (std::sync::MutexGuard<'static, ()>, Gpu) {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    (guard, Gpu::new().unwrap_or_else(|e| panic!("{e}")))
+}
+
 /// The `.dpm` of a mesh and the progressive mesh it decodes to (the CPU reference's input:
 /// the GPU adapts from the compressed operations).
 fn dpm_of(rel: &str) -> (Vec<u8>, ProgressiveMesh) {
@@ -99,7 +108,7 @@ fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Lev
 
 #[test]
 fn bunny_path_matches_the_cpu_reference() {
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     for levels in [Levels::One, Levels::All] {
         check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &device, levels);
     }
@@ -107,7 +116,7 @@ fn bunny_path_matches_the_cpu_reference() {
 
 #[test]
 fn refining_everything_on_the_gpu_matches_the_cpu() {
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     // Small meshes with boundaries, non-manifold edges and degenerate faces; a tiny n_alloc
     // so that buffers are reallocated in most passes. Coarsened in passes of one level and of
     // all, alternately.
@@ -157,7 +166,7 @@ fn refining_everything_on_the_gpu_matches_the_cpu() {
 
 #[test]
 fn dragon_path_matches_the_cpu_reference() {
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     for levels in [Levels::One, Levels::All] {
         check_path("stanford/dragon_vrip.ply.gz", 50, 0.5, &device, levels);
     }
@@ -183,7 +192,7 @@ fn pm_speed() {
     let rel = std::env::var("TESSERA_PM_MESH").unwrap_or_else(|_| "stanford/dragon_vrip.ply.gz".into());
     let (bytes, pm) = dpm_of(&rel);
     let dpm = Dpm::parse(&bytes).unwrap();
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     eprintln!("adapter: {}", device.adapter_name());
     let mut renderer = Renderer::new(&device);
     let (w, h) = (1920u32, 1080u32);
@@ -278,7 +287,7 @@ fn pm_speed() {
 fn pass_overhead() {
     let (bytes, pm) = dpm_of("stanford/bunny_oded_6k.obj");
     let dpm = Dpm::parse(&bytes).unwrap();
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
     let view = path_view(&pm, 0, 1, 0.5);
     gpu.adapt_until_converged(&view, 1000).unwrap().expect("converges");
@@ -317,7 +326,7 @@ fn out_of_core_path_matches_the_cpu_reference() {
     use codec::pm::{DpmAdapter, NodeCache};
     use std::sync::Arc;
     use worker::pm_adapt::OutOfCore;
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     let rel = "stanford/bunny_zipper_c3d.obj.gz";
     let pm = build(&testkit::load_mesh(rel)).unwrap();
     let bytes = encode(&pm, EncodeOptions { node_bytes: 4096, ..EncodeOptions::default() }).unwrap().bytes;
@@ -380,7 +389,7 @@ fn out_of_core_path_matches_the_cpu_reference() {
 fn occlusion_on(rel: &str, min_saving: f64) {
     let (bytes, pm) = dpm_of(rel);
     let dpm = Dpm::parse(&bytes).unwrap();
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     let mut renderer = Renderer::new(&device);
     let (w, h) = (960u32, 540u32);
     let rect = [0, 0, w, h];
@@ -452,7 +461,7 @@ fn occlusion_culling_on_the_dragon() {
 /// CPU's for that view. A budget below the base mesh is refused.
 #[test]
 fn a_budget_bounds_the_graphics_memory() {
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     let (bytes, pm) = dpm_of("stanford/bunny_zipper_c3d.obj.gz");
     let dpm = Dpm::parse(&bytes).unwrap();
     let close = path_view(&pm, 6, 24, 0.5);
@@ -512,7 +521,7 @@ fn gpu_orbit_steps() {
     let rel = std::env::var("TESSERA_PM_MESH").unwrap_or_else(|_| "stanford/dragon_vrip.ply.gz".into());
     let (bytes, pm) = dpm_of(&rel);
     let dpm = Dpm::parse(&bytes).unwrap();
-    let device = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let (_one_at_a_time, device) = device();
     let (lo, hi) = bbox(&pm);
     let cam = Camera::framing(lo.to_array(), hi.to_array(), 1920.0 / 1080.0);
     let frames = 16;

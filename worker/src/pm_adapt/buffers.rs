@@ -74,6 +74,8 @@ pub(crate) const STAT_CANCELLED: usize = 1;
 pub(crate) const STAT_REMOVED_FACES: usize = 2;
 /// An all-levels pass: the vertices that split.
 pub(crate) const STAT_SPLIT_VERTICES: usize = 6;
+/// An all-levels pass: the vertices that descend (listed by `mark`, counted by `count`).
+pub(crate) const STAT_DESCENTS: usize = 7;
 pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 /// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
 /// never cleared by a pass (`report` of `reorganise.wgsl`).

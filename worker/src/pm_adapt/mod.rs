@@ -230,8 +230,6 @@ pub struct GpuAdapter {
     hole: Sized,
     /// An all-levels pass's marks (`state.wgsl`): `diff`, `reach`, `up`, `root`.
     marks: [Sized; 4],
-    /// An all-levels pass: the indirect dispatch of the descents' count (`state.wgsl`).
-    args: wgpu::Buffer,
     /// How far a pass for a view moves a vertex in the split tree ([`Self::set_levels`]), and
     /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
     levels: Levels,
@@ -373,7 +371,6 @@ impl GpuAdapter {
             list: storage(d, "pm: split list", 0, 4, VERTEX_USAGE),
             hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
             marks: MARKS.map(|name| storage(d, name, 0, 4, VERTEX_USAGE)),
-            args: storage(d, "pm: count dispatch", 4, 4, VERTEX_USAGE | wgpu::BufferUsages::INDIRECT).buffer,
             levels: Levels::All,
             descent_budget: if gpu.is_software() { SOFTWARE_DESCENT_BUDGET } else { DESCENT_BUDGET },
             scan_levels: Vec::new(),

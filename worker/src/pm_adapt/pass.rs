@@ -7,7 +7,8 @@ use codec::pm::Levels;
 
 use super::buffers::{
     needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, READBACK_BYTES,
-    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES, VERTEX_USAGE,
+    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_DESCENTS, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES,
+    VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter, MARKS, MAX_SCALE, SCALE_STEP};
@@ -358,34 +359,32 @@ impl GpuAdapter {
                     ("diff", &diff.buffer),
                     ("reach", &reach.buffer),
                     ("up", &up.buffer),
+                    ("root", &root.buffer),
                     ("stats", &self.stats),
                     ("list", &self.list.buffer),
-                    ("args", &self.args),
                 ];
                 let buffers: Vec<_> = buffers.into_iter().chain(decode).collect();
                 let mark = p.mark.bind_named(&self.gpu, &buffers);
-                let count_args = p.count_args.bind_named(&self.gpu, &buffers);
                 let count = p.count.bind_named(&self.gpu, &buffers);
-                let regions = p.regions.bind(
-                    &self.gpu,
-                    &[
-                        ("P", &self.params),
-                        ("vstate", &set.state.buffer),
-                        ("vcnt", &self.vcnt.buffer),
-                        ("fcnt", &self.fcnt.buffer),
-                        ("diff", &diff.buffer),
-                        ("reach", &reach.buffer),
-                        ("up", &up.buffer),
-                        ("root", &root.buffer),
-                        ("stats", &self.stats),
-                    ],
-                );
+                let regions = p.regions.bind_named(&self.gpu, &buffers);
                 self.dispatch(&mut pass, &p.mark, &mark, n + 1);
-                self.dispatch_groups(&mut pass, &p.count_args, &count_args, 1);
-                pass.set_pipeline(&p.count.pipeline);
-                pass.set_bind_group(0, &count, &[]);
-                pass.dispatch_workgroups_indirect(&self.args, 0);
                 self.scan(&mut pass, &diff.buffer);
+                drop(pass);
+                // How many vertices descend, read back to size the count's dispatch: an
+                // indirect dispatch took lavapipe 7.9 s instead of 0.5 s a frame of the
+                // cluster's worker beside a rank that polls (Open MPI's default).
+                enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
+                self.gpu.queue().submit([enc.finish()]);
+                let descents = self.read_totals()?[2 + STAT_DESCENTS];
+                enc = self
+                    .gpu
+                    .device()
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: count") });
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("pm: count"),
+                    timestamp_writes: None,
+                });
+                self.dispatch(&mut pass, &p.count, &count, descents);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {
                 self.dispatch(&mut pass, &p.state, &state, n + 1);

@@ -170,14 +170,6 @@ pub(crate) const MARK: StageDef = StageDef {
     ],
 };
 
-/// An all-levels pass: the indirect dispatch of [`COUNT`].
-pub(crate) const COUNT_ARGS: StageDef = StageDef {
-    label: "pm: count dispatch",
-    shader: &STATE_WGSL,
-    entry: "count_args",
-    bindings: &[Binding::read_write::<Stats>(16, "stats"), Binding::read_write::<[u32; 3]>(18, "args")],
-};
-
 /// An all-levels pass: each listed vertex's leaves and faces counted down its subtree.
 pub(crate) const COUNT: StageDef = StageDef {
     label: "pm: count",
@@ -405,12 +397,11 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 18] = [
+pub(crate) const STAGES: [&StageDef; 17] = [
     &NODE_CHECK,
     &STATE,
     &COLLAPSE,
     &MARK,
-    &COUNT_ARGS,
     &COUNT,
     &REGIONS,
     &SCAN_BLOCKS,
@@ -485,7 +476,6 @@ pub(super) struct Pipelines {
     pub(super) split_decode: Stage,
     pub(super) split: Stage,
     pub(super) mark: Stage,
-    pub(super) count_args: Stage,
     pub(super) count: Stage,
     pub(super) regions: Stage,
     pub(super) descend: Stage,
@@ -522,7 +512,6 @@ impl Pipelines {
             split_decode: Stage::new(gpu, &split_decode, &SPLIT_DECODE),
             split: Stage::new(gpu, &split, &SPLIT),
             mark: Stage::new(gpu, &state, &MARK),
-            count_args: Stage::new(gpu, &state, &COUNT_ARGS),
             count: Stage::new(gpu, &state, &COUNT),
             regions: Stage::new(gpu, &state, &REGIONS),
             descend: Stage::new(gpu, &split_decode, &DESCEND),
