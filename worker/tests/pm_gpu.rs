@@ -539,6 +539,9 @@ fn gpu_orbit_steps() {
             let start = Instant::now();
             assert!(gpu.adapt(&view).unwrap().converged());
             let still = start.elapsed().as_secs_f64() * 1e3;
+            if std::env::var("VERBOSE").is_ok() {
+                eprintln!("{levels:?} frame {k}: {p} passes, {ms:.0} ms, converged pass {still:.1} ms");
+            }
             if k > 0 {
                 ratios.push(ms / still);
                 frame_ms.push(ms);

@@ -29,6 +29,15 @@
 //!    compaction, splits with binary search (Algorithm 4), index update (Algorithm 5) and the
 //!    in-place face compaction (section 5.6).
 //!
+//! An all-levels pass ([`Levels::All`], the default; see `codec::pm::Adapter::pass_all_levels`)
+//! replaces the state update and collapses by `mark` (the undone splits' ranges, the
+//! vertices that split, listed), a read-back of their number, `count` (each listed vertex's
+//! leaves and faces down its subtree, `descent.wgsl`), the scan of the ranges and `regions`
+//! (the collapsing regions and the vertices carrying their operations); and the split
+//! decoding and splits by `descend` (the same descents, writing the leaves and faces) and
+//! `index_new` (the new faces' indices by binary search). Reorganisation gives a region's
+//! first vertex the region's operation.
+//!
 //! The adapted mesh stays on the GPU between passes (temporal coherence). It is drawn straight
 //! from these buffers: the face index buffer is the draw's index buffer, and the vertex shader
 //! pulls each active vertex's position and normal (see `vs_pulled` in `shaders/render.wgsl`),
