@@ -60,7 +60,7 @@ fn main() -> ExitCode {
                 gpu: *gpu,
                 gpu_budget: gpu_budget_mb.map(mb),
                 gpu_nodes: gpu_nodes_mb.map(mb),
-                levels: if *one_level { codec::pm::Levels::One } else { codec::pm::Levels::All },
+                levels: one_level.then_some(codec::pm::Levels::One),
             };
             master::pm::adapt(input, &view.camera, &opts, output)
         }

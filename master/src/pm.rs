@@ -252,8 +252,9 @@ pub struct AdaptOptions {
     /// or every node without one).
     pub gpu_nodes: Option<u64>,
     /// How far a pass moves a vertex in the split tree: every level the view asks for (one
-    /// pass reaches the mesh), or one (the paper's passes).
-    pub levels: codec::pm::Levels,
+    /// pass reaches the mesh), or one (the paper's passes); `None`: all levels on the CPU,
+    /// the GPU adapter's default on the GPU (one on a software adapter).
+    pub levels: Option<codec::pm::Levels>,
 }
 
 /// `tessera pm adapt IN.dpm [camera] --size WxH --error-px E -o OUT.ply [--full] [--gpu]`.
@@ -295,13 +296,17 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
             let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
             let ooc = worker::pm_adapt::OutOfCore { file: file.clone(), pool_bytes, background: false };
             let mut a = worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, n_alloc)?;
-            a.set_levels(opts.levels);
+            if let Some(levels) = opts.levels {
+                a.set_levels(levels);
+            }
             a.set_budget(opts.gpu_budget)?;
             a.schedule(&camera_view()?)?;
             a
         } else {
             let mut a = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?;
-            a.set_levels(opts.levels);
+            if let Some(levels) = opts.levels {
+                a.set_levels(levels);
+            }
             a.set_budget(opts.gpu_budget)?;
             a
         };
@@ -320,7 +325,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         }
         (adapter.active()?, adapter.faces()?, passes)
     } else {
-        let mut adapter = Adapter::new(&pm).with_levels(opts.levels);
+        let mut adapter = Adapter::new(&pm).with_levels(opts.levels.unwrap_or(codec::pm::Levels::All));
         let passes = match &view {
             None => adapter.refine_fully(),
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaption did not converge")?,
