@@ -22,16 +22,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let c = vstate[i];
-    var t = vstate[i - 1u];
-    t.v_end = c.c_v_end;
-    t.addr = c.c_addr;
-    t.faces = c.c_faces;
-    t.pc = c.c_pc;
-    t.crit = c.c_crit;
-    // The creator split, so its operation was decoded (and its node needs no check: a
-    // collapse decodes nothing).
-    t.flags = 0u;
-    vstate[i - 1u] = t;
+    vstate[i - 1u] = creators_vertex(vstate[i - 1u], c);
     atomicAdd(&stats[STAT_COLLAPSES], 1u);
     atomicAdd(&stats[STAT_REMOVED_FACES], c.c_faces);
 }

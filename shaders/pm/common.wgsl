@@ -47,6 +47,21 @@ fn target_of(s: VState) -> u32 {
     return NONE;
 }
 
+// Vertex `t` made the vertex of the operation `c` carries as its creator (a collapse's target,
+// an all-levels region's first vertex): that operation, its context and criteria; `t` keeps
+// its own creator, which the FVID it keeps still names. The operation was decoded when it
+// split (and needs no node check: a collapse decodes nothing), so no flags.
+fn creators_vertex(t: VState, c: VState) -> VState {
+    var s = t;
+    s.v_end = c.c_v_end;
+    s.addr = c.c_addr;
+    s.faces = c.c_faces;
+    s.pc = c.c_pc;
+    s.crit = c.c_crit;
+    s.flags = 0u;
+    return s;
+}
+
 // Per active vertex: its position and unit normal (w unused), what the renderer pulls.
 struct Point {
     pos: vec4<f32>,

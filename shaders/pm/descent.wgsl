@@ -92,6 +92,13 @@ fn oct_decode(q: vec2<u32>) -> vec3<f32> {
     return vec3<f32>(x / l, y / l, z / l);
 }
 
+// Whether a vertex with state `s` at point `pt` splits this pass: an operation, decoded and
+// resident (no flags), that the view asks for; any in mode 1; none in mode 2.
+fn splits_now(s: VState, pt: Point) -> bool {
+    return s.addr != NONE && s.flags == 0u && P.mode != 2u
+        && (P.mode == 1u || wants_split(pt.pos.xyz, pt.nrm.xyz, s.crit));
+}
+
 // The point of a vertex from its quantized position and normal.
 fn point_of(s: VState) -> Point {
     return Point(vec4<f32>(dequantize(s.pos.xyz), 1.0), vec4<f32>(oct_decode(s.nrm.xy), 0.0));
@@ -161,11 +168,7 @@ fn descent_step() -> u32 {
     var run = dc_uncached && s.addr != NONE;
     var upto = DECODE_TO_FACES;
     if (!dc_uncached) {
-        run = dc_splits < P.budget && dc_depth < LEVELS_PER_PASS && s.addr != NONE && s.flags == 0u
-            && P.mode != 2u;
-        if (run && P.mode == 0u) {
-            run = wants_split(dc_pt.pos.xyz, dc_pt.nrm.xyz, s.crit);
-        }
+        run = dc_splits < P.budget && dc_depth < LEVELS_PER_PASS && splits_now(s, dc_pt);
         upto = DECODE_ALL;
     }
     var out = NONE_ADDR;

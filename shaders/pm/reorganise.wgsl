@@ -24,16 +24,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (vsum[i + 1u] - j == 1u) {
         var s = vstate[i];
         if (P.levels == 1u && root[i] != 0u) {
-            // A region's first vertex becomes the region's vertex again (as collapse.wgsl makes
-            // a target its creator's vertex): the region's operation, context and criteria
-            // from the vertex that carries it; it keeps its own creator.
-            let c = vstate[root[i] - 1u];
-            s.v_end = c.c_v_end;
-            s.addr = c.c_addr;
-            s.faces = c.c_faces;
-            s.pc = c.c_pc;
-            s.crit = c.c_crit;
-            s.flags = 0u;
+            // A region's first vertex becomes the region's vertex again: the region's
+            // operation from the vertex that carries it.
+            s = creators_vertex(s, vstate[root[i] - 1u]);
         }
         dfvid[j] = vfvid[i];
         dstate[j] = s;

@@ -53,8 +53,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let s = vstate[i];
     var state = 1u;
     var faces = 0u;
-    if (s.addr != NONE && s.flags == 0u && P.mode != 2u
-        && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
+    if (splits_now(s, vpoint[i])) {
         state = 2u;
         faces = s.faces;
     } else if (P.mode != 1u) {
@@ -100,8 +99,7 @@ fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     vcnt[i] = 1u;
     fcnt[i] = 0u;
     // A vertex that splits descends in `count`, one thread per such vertex.
-    if (s.addr != NONE && s.flags == 0u && P.mode != 2u
-        && (P.mode == 1u || wants_split(vpoint[i].pos.xyz, vpoint[i].nrm.xyz, s.crit))) {
+    if (splits_now(s, vpoint[i])) {
         list[atomicAdd(&stats[STAT_DESCENTS], 1u)] = i;
     }
 }

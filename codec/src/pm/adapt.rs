@@ -62,6 +62,8 @@
 //! * Prefix sums are chunked parallel scans; the scatters of Algorithms 3 and 4 are
 //!   order-preserving parallel collects whose positions equal those prefix sums.
 
+use std::convert::Infallible;
+
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -274,8 +276,48 @@ pub(super) fn split_face_indices(t: [u32; 3], v: u32, v_u: u32, j: u32, new_fvid
     t.map(|f| match f {
         f if f >= v && f < v_u => j,
         f if f >= v_u && f < end => j + 1,
-        f => new_fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32,
+        f => active_of(new_fvid, f),
     })
+}
+
+/// What [`expand_chunks`] returns: the new vertices, each old vertex's count, each chunk's extra.
+pub(super) type Expanded<V, X> = (Vec<V>, Vec<u32>, Vec<X>);
+
+/// The vertices that replace the `n` of the sorted buffer in an all-levels pass, for both
+/// adapters, made in parallel chunks: `expand(i, out, extra)` pushes old vertex `i`'s (none
+/// inside a region but its first, itself, or its descent's leaves) onto `out`. Returns them in
+/// order, each old vertex's count of them, and each chunk's `extra`.
+pub(super) fn expand_chunks<V: Send, X: Default + Send, E: Send>(
+    n: usize,
+    expand: impl Fn(usize, &mut Vec<V>, &mut X) -> Result<(), E> + Sync,
+) -> Result<Expanded<V, X>, E> {
+    const CHUNK: usize = 1 << 12;
+    let parts: Vec<(Vec<V>, Vec<u32>, X)> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let (mut out, mut cnt, mut extra) = (Vec::new(), Vec::with_capacity(CHUNK), X::default());
+            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                let before = out.len();
+                expand(i, &mut out, &mut extra)?;
+                cnt.push((out.len() - before) as u32);
+            }
+            Ok((out, cnt, extra))
+        })
+        .collect::<Result<_, E>>()?;
+    let (mut vertices, mut cnt, mut extras) =
+        (Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum()), Vec::with_capacity(n), Vec::new());
+    for (v, c, x) in parts {
+        vertices.extend(v);
+        cnt.extend(c);
+        extras.push(x);
+    }
+    Ok((vertices, cnt, extras))
+}
+
+/// The index of the active vertex a finest FVID `f` stands for, in the sorted active FVIDs:
+/// the one with the greatest FVID `<= f` (0 if none).
+pub(super) fn active_of(sorted: &[u32], f: u32) -> u32 {
+    sorted.partition_point(|&x| x <= f).saturating_sub(1) as u32
 }
 
 /// Algorithm 5 and the rebuild of the face buffers, for both adapters: every old corner moves to
@@ -293,32 +335,14 @@ pub(super) fn update_faces(
     collapsed: &(dyn Fn(usize) -> u32 + Sync),
     new_faces: Vec<([u32; 3], [u32; 3], u32)>,
 ) -> usize {
-    let [face_idx, face_fvid] = faces;
-    let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..face_idx.len())
-        .into_par_iter()
-        .filter_map(|k| {
-            let (old, fv, owner) = (face_idx[k], face_fvid[k], owner[k]);
-            let mut idx = [0u32; 3];
-            for c in 0..3 {
-                let i = old[c] as usize;
-                idx[c] = match cnt[i] {
-                    0 if owner != NONE && collapsed(i) == owner => return None,
-                    0 => vertex_sum[i] - 1,
-                    1 => vertex_sum[i],
-                    _ => {
-                        let j = vertex_sum[i];
-                        if new_fvid[j as usize + 1] <= fv[c] {
-                            j + 1
-                        } else {
-                            j
-                        }
-                    }
-                };
-            }
-            Some((idx, fv, owner))
-        })
-        .collect();
-    store_faces([face_idx, face_fvid], owner, kept, new_faces)
+    // A collapsing vertex's corner goes to its target, the vertex before it, which stays (a
+    // target never collapses); a split vertex's two slots are searched as a descent's leaves.
+    let corner = |i: usize, owner: u32| match cnt[i] {
+        0 if owner != NONE && collapsed(i) == owner => Corner::Undone,
+        0 => Corner::Region(i - 1),
+        _ => Corner::Free,
+    };
+    update_faces_all_levels(faces, owner, cnt, vertex_sum, new_fvid, &corner, new_faces)
 }
 
 /// Where an old face's corner at an active vertex goes in an all-levels pass.
@@ -385,16 +409,6 @@ pub(super) fn update_faces_all_levels(
             Some((idx, fv, owner))
         })
         .collect();
-    store_faces([face_idx, face_fvid], owner, kept, new_faces)
-}
-
-/// Replaces the face buffers by `kept` and then `new_faces`; returns the face count.
-fn store_faces(
-    [face_idx, face_fvid]: [&mut Vec<[u32; 3]>; 2],
-    owner: &mut Vec<u32>,
-    kept: Vec<([u32; 3], [u32; 3], u32)>,
-    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
-) -> usize {
     let total = kept.len() + new_faces.len();
     let (mut fi, mut ff, mut fo) = (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
     for (a, b, c) in kept.into_iter().chain(new_faces) {
@@ -488,11 +502,7 @@ impl<'a> Adapter<'a> {
         let next = tree.roots.clone();
         let split_cache = next.iter().map(|&s| Cached::of(pm, s)).collect();
         let fvid = pm.base_vertices.clone();
-        let face_idx = pm
-            .base_faces
-            .iter()
-            .map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32))
-            .collect();
+        let face_idx = pm.base_faces.iter().map(|t| t.map(|f| active_of(&fvid, f))).collect();
         let end = split_ends(pm, &tree);
         Adapter {
             pm,
@@ -777,62 +787,51 @@ impl<'a> Adapter<'a> {
         let (regions, region, collapses) = outermost(undone, n);
 
         // 2. The new vertices, in chunks of the sorted buffer, with the splits done.
-        const CHUNK: usize = 1 << 12;
-        // Per chunk: its new vertices, the splits done (old vertex, split), per vertex its count.
-        type Part = (Vec<Slot>, Vec<(u32, u32)>, Vec<u32>);
-        let parts: Vec<Part> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let (mut out, mut done, mut cnt) = (Vec::new(), Vec::new(), Vec::new());
-                let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-                for (i, &r) in range.clone().zip(&region[range]) {
-                    let before = out.len();
-                    if r != NONE {
-                        let (p, _, s) = regions[r as usize];
-                        if p as usize == i {
-                            let node = self.tree.parent[s as usize];
-                            out.push(Slot { next: s, node, split_cache: Cached::of(pm, s), ..self.slot(i) });
-                        }
-                    } else if self.next[i] != NONE && need(&self.split_cache[i]) {
-                        // Down the subtree while the view asks (left before right: FVID order).
-                        let mut stack = vec![(self.slot(i), 0)];
-                        let mut budget = self.descent_budget;
-                        while let Some((v, depth)) = stack.pop() {
-                            if budget > 0 && depth < LEVELS_PER_PASS && v.next != NONE && need(&v.split_cache) {
-                                budget -= 1;
-                                done.push((i as u32, v.next));
-                                let [l, u] = self.split_children(&v);
-                                stack.push((u, depth + 1));
-                                stack.push((l, depth + 1));
-                            } else {
-                                out.push(v);
-                            }
-                        }
-                    } else {
-                        out.push(self.slot(i));
-                    }
-                    cnt.push((out.len() - before) as u32);
+        let expand = |i: usize, out: &mut Vec<Slot>, done: &mut Vec<u32>| -> Result<(), Infallible> {
+            let r = region[i];
+            if r != NONE {
+                let (p, _, s) = regions[r as usize];
+                if p as usize == i {
+                    let node = self.tree.parent[s as usize];
+                    out.push(Slot { next: s, node, split_cache: Cached::of(pm, s), ..self.slot(i) });
                 }
-                (out, done, cnt)
-            })
-            .collect();
-        let splits: usize = parts.iter().map(|p| p.1.len()).sum();
+            } else if self.next[i] != NONE && need(&self.split_cache[i]) {
+                // Down the subtree while the view asks (left before right: FVID order).
+                let mut stack = vec![(self.slot(i), 0)];
+                let mut budget = self.descent_budget;
+                while let Some((v, depth)) = stack.pop() {
+                    if budget > 0 && depth < LEVELS_PER_PASS && v.next != NONE && need(&v.split_cache) {
+                        budget -= 1;
+                        done.push(v.next);
+                        let [l, u] = self.split_children(&v);
+                        stack.push((u, depth + 1));
+                        stack.push((l, depth + 1));
+                    } else {
+                        out.push(v);
+                    }
+                }
+            } else {
+                out.push(self.slot(i));
+            }
+            Ok(())
+        };
+        let Ok((vertices, cnt, done)) = expand_chunks(n, expand);
+        let splits: usize = done.iter().map(Vec::len).sum();
         if splits == 0 && collapses == 0 {
             return PassStats { splits, collapses, cancelled: 0, vertices: n, faces: self.face_idx.len(), held: false };
         }
-        let cnt: Vec<u32> = parts.iter().flat_map(|p| p.2.iter().copied()).collect();
         let vertex_sum = exclusive_scan(&cnt);
-        let vertices: Vec<Slot> = parts.iter().flat_map(|p| p.0.iter().copied()).collect();
         let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.fvid).collect();
         debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-        let new_ref = &new_fvid;
-        let leaf = move |f: u32| (new_ref.partition_point(|&x| x <= f) as u32).saturating_sub(1);
 
         // 3. Faces: the old ones moved or dropped, then those of the splits done.
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = parts
+        let new_ref = &new_fvid;
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = done
             .par_iter()
-            .flat_map_iter(|p| p.1.iter())
-            .flat_map_iter(|&(_, s)| pm.splits[s as usize].faces.iter().map(move |&t| (t.map(leaf), t, s)))
+            .flat_map_iter(|d| d.iter())
+            .flat_map_iter(|&s| {
+                pm.splits[s as usize].faces.iter().map(move |&t| (t.map(|f| active_of(new_ref, f)), t, s))
+            })
             .collect();
         let end = &self.end;
         let corner = |i: usize, owner: u32| match region[i] {

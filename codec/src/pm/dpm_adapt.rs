@@ -32,8 +32,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::adapt::{
-    cancel_collapses, exclusive_scan, outermost, split_face_indices, update_faces, update_faces_all_levels, Cached,
-    Corner, Eval, Levels, DESCENT_BUDGET, LEVELS_PER_PASS,
+    active_of, cancel_collapses, exclusive_scan, expand_chunks, outermost, split_face_indices, update_faces,
+    update_faces_all_levels, Cached, Corner, Eval, Levels, DESCENT_BUDGET, LEVELS_PER_PASS,
 };
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
 use super::ooc::NodeCache;
@@ -139,11 +139,7 @@ impl<'a> DpmAdapter<'a> {
             vertices.push(Vertex { own, creator: Op { addr: NONE, ..Op::default() } });
         }
         let fvid: Vec<u32> = vertices.iter().map(Vertex::fvid).collect();
-        let face_idx = dpm
-            .base_faces
-            .iter()
-            .map(|t| t.map(|f| fvid.partition_point(|&x| x <= f).saturating_sub(1) as u32))
-            .collect();
+        let face_idx = dpm.base_faces.iter().map(|t| t.map(|f| active_of(&fvid, f))).collect();
         Ok(DpmAdapter {
             dpm,
             vertices,
@@ -390,46 +386,39 @@ impl<'a> DpmAdapter<'a> {
             .collect();
         let (regions, region, collapses) = outermost(undone, n);
 
-        // The new vertices, chunk by chunk, with the faces of the splits done (owner: `v_u`).
-        const CHUNK: usize = 1 << 12;
-        type Part = (Vec<Vertex>, Vec<([u32; 3], u32)>, Vec<u32>, usize);
-        let parts: Vec<Part> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|c| -> Result<Part, DpmError> {
-                let (mut out, mut faces, mut cnt, mut splits) = (Vec::new(), Vec::new(), Vec::new(), 0);
-                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                    let before = out.len();
-                    let r = region[i];
-                    if r != NONE {
-                        let (p, _, j) = regions[r as usize];
-                        if p as usize == i {
-                            out.push(Vertex { own: vs[j as usize].creator, creator: vs[i].creator });
-                        }
-                    } else if Self::splits(&vs[i], need, src) {
-                        let mut stack = vec![(vs[i], 0)];
-                        let mut budget = self.descent_budget;
-                        while let Some((v, depth)) = stack.pop() {
-                            if budget == 0 || depth == LEVELS_PER_PASS || !Self::splits(&v, need, src) {
-                                out.push(v);
-                                continue;
-                            }
-                            budget -= 1;
-                            let d = src.decode(dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked");
-                            splits += 1;
-                            faces.extend(d.split.faces.iter().map(|&t| (t, d.split.v_u)));
-                            let [l, u] = Self::children(dpm, src, &v, &d)?;
-                            stack.push((u, depth + 1));
-                            stack.push((l, depth + 1));
-                        }
-                    } else {
-                        out.push(vs[i]);
-                    }
-                    cnt.push((out.len() - before) as u32);
+        // The new vertices, chunk by chunk, with the faces of the splits done (owner: `v_u`)
+        // and their number.
+        type Done = (Vec<([u32; 3], u32)>, usize);
+        let expand = |i: usize, out: &mut Vec<Vertex>, (faces, splits): &mut Done| -> Result<(), DpmError> {
+            let r = region[i];
+            if r != NONE {
+                let (p, _, j) = regions[r as usize];
+                if p as usize == i {
+                    out.push(Vertex { own: vs[j as usize].creator, creator: vs[i].creator });
                 }
-                Ok((out, faces, cnt, splits))
-            })
-            .collect::<Result<_, _>>()?;
-        let splits: usize = parts.iter().map(|p| p.3).sum();
+            } else if Self::splits(&vs[i], need, src) {
+                let mut stack = vec![(vs[i], 0)];
+                let mut budget = self.descent_budget;
+                while let Some((v, depth)) = stack.pop() {
+                    if budget == 0 || depth == LEVELS_PER_PASS || !Self::splits(&v, need, src) {
+                        out.push(v);
+                        continue;
+                    }
+                    budget -= 1;
+                    let d = src.decode(dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked");
+                    *splits += 1;
+                    faces.extend(d.split.faces.iter().map(|&t| (t, d.split.v_u)));
+                    let [l, u] = Self::children(dpm, src, &v, &d)?;
+                    stack.push((u, depth + 1));
+                    stack.push((l, depth + 1));
+                }
+            } else {
+                out.push(vs[i]);
+            }
+            Ok(())
+        };
+        let (new, cnt, done) = expand_chunks(n, expand)?;
+        let splits: usize = done.iter().map(|d| d.1).sum();
         if splits == 0 && collapses == 0 {
             return Ok(PassStats {
                 splits,
@@ -440,15 +429,14 @@ impl<'a> DpmAdapter<'a> {
                 held: false,
             });
         }
-        let cnt: Vec<u32> = parts.iter().flat_map(|p| p.2.iter().copied()).collect();
         let vertex_sum = exclusive_scan(&cnt);
-        let new: Vec<Vertex> = parts.iter().flat_map(|p| p.0.iter().copied()).collect();
         let new_fvid: Vec<u32> = new.par_iter().map(Vertex::fvid).collect();
         debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-        let new_ref = &new_fvid;
-        let leaf = move |f: u32| (new_ref.partition_point(|&x| x <= f) as u32).saturating_sub(1);
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> =
-            parts.par_iter().flat_map_iter(|p| p.1.iter()).map(|&(t, owner)| (t.map(leaf), t, owner)).collect();
+        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = done
+            .par_iter()
+            .flat_map_iter(|d| d.0.iter())
+            .map(|&(t, owner)| (t.map(|f| active_of(&new_fvid, f)), t, owner))
+            .collect();
 
         // Old faces: moved, or dropped where their split is undone.
         let corner = |i: usize, owner: u32| match region[i] {
