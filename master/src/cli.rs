@@ -345,9 +345,8 @@ pub enum Pm {
         #[arg(long, value_parser = parse_positive, requires = "gpu")]
         gpu_nodes_mb: Option<f32>,
         /// Adapt in the paper's passes of one level each (a view change of k levels takes k
-        /// passes) instead of every level the view asks for in one pass (the default on the
-        /// CPU and on a hardware GPU; a software GPU such as lavapipe runs one level anyway).
-        /// The mesh written is the same.
+        /// passes) instead of every level the view asks for in one pass (the default). The
+        /// mesh written is the same.
         #[arg(long)]
         one_level: bool,
     },

@@ -86,9 +86,10 @@ struct Params {
     splits: u32,   // splits performed (an all-levels pass: vertices that split)
     levels: u32,   // 1: an all-levels pass (codec::pm::Levels::All), 0: one level
     budget: u32,   // an all-levels pass: the most splits one vertex's descent performs
+    stack_slots: u32, // an all-levels pass: the descents' stack slots (descent.wgsl), and
+                       // the most descents one dispatch of `count` or `descend` runs
+    chunk_base: u32,   // the first descent of this dispatch of `count` or `descend`
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
     // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.
@@ -98,7 +99,7 @@ struct Params {
 }
 
 // Every stage binds its parameters here.
-@group(0) @binding(0) var<uniform> P: Params;
+@group(0) @binding(0) var<storage, read> P: Params;
 
 // Counters the stages accumulate with atomics, read back once per pass.
 const STAT_COLLAPSES: u32 = 0u;

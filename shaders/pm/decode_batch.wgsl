@@ -14,7 +14,7 @@ struct Job {
     normal: vec4<u32>,   // xy
 }
 
-@group(0) @binding(0) var<uniform> D: DecodeParams;
+@group(0) @binding(0) var<storage, read> D: DecodeParams;
 @group(0) @binding(1) var<storage, read> ops: array<u32>;
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> jobs: array<Job>;

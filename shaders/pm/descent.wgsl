@@ -106,19 +106,27 @@ fn point_of(s: VState) -> Point {
 
 // A descent in progress, per invocation: the current vertex (its state, FVID, point and depth
 // below the start, and whether its own operation's criteria and face count are still to be
-// decoded), the right children still to visit (at most one per level, a field per array), the
-// leaves visited and the faces of the splits done, which go to `dec_faces` from `dc_face_out`
-// (NONE_ADDR: counted only); `dc_last_vu` and `dc_last_faces` describe the split just done.
+// decoded), the right children still to visit (at most one per level), the leaves visited and
+// the faces of the splits done, which go to `dec_faces` from `dc_face_out` (NONE_ADDR: counted
+// only); `dc_last_vu` and `dc_last_faces` describe the split just done.
+//
+// The right children wait in `dstack` (a storage buffer the including file declares), in the
+// invocation's slot `dc_slot` of P.stack_slots: STACK_WORDS / 4 vectors an entry, entry e's
+// vector q of slot t at ((e * STACK_WORDS / 4 + q) * P.stack_slots + t), so that neighbouring
+// invocations touch neighbouring vectors. Not in private arrays: llvmpipe (lavapipe) lowers an indexed
+// private array to a ladder of compares and took 23 s to compile the stages that hold one.
+// A slot holds min(LEVELS_PER_PASS, P.budget) entries (a descent pushes one per split).
 //
 // `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
-// The budget bounds one invocation's work: llvmpipe (lavapipe) stops every loop of an
-// invocation after 65535 iterations in all (the decoder reads bit by bit, some 150 iterations
-// an operation), silently; GpuAdapter gives it a budget that stays well below.
+// The budget bounds one invocation's work: llvmpipe stops every loop of an invocation after
+// 65535 iterations in all (the decoder reads bit by bit, some 150 iterations an operation),
+// silently; GpuAdapter gives it a budget that stays well below.
 var<private> dc_cur: VState;
 var<private> dc_f: u32;
 var<private> dc_pt: Point;
 var<private> dc_depth: u32;
 var<private> dc_uncached: bool;
+var<private> dc_slot: u32;
 var<private> dc_sp: u32;
 var<private> dc_splits: u32;
 var<private> dc_leaves: u32;
@@ -126,20 +134,19 @@ var<private> dc_faces: u32;
 var<private> dc_face_out: u32;
 var<private> dc_last_vu: u32;
 var<private> dc_last_faces: u32;
-var<private> dc_stack_f: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_d: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_end: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_addr: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_pc: array<vec4<u32>, LEVELS_PER_PASS>;
-var<private> dc_stack_pos: array<vec4<u32>, LEVELS_PER_PASS>;
-var<private> dc_stack_nrm: array<vec2<u32>, LEVELS_PER_PASS>;
-var<private> dc_stack_caddr: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_cv: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_cfaces: array<u32, LEVELS_PER_PASS>;
-var<private> dc_stack_cpc: array<vec4<u32>, LEVELS_PER_PASS>;
-var<private> dc_stack_ccrit: array<vec4<f32>, LEVELS_PER_PASS>;
 
-fn descent_start(s: VState, f: u32, pt: Point, face_out: u32) {
+// An entry of the stack, STACK_WORDS / 4 vectors: (the right child's FVID, depth, range end,
+// operation address), its context, (its quantized position xyz, its creator's address),
+// (its octahedral normal xy, its creator's vertex and face count), the creator's context,
+// the creator's criteria (f32 bits).
+const STACK_WORDS: u32 = 24u;
+
+fn sk_at(e: u32, q: u32) -> u32 {
+    return (e * (STACK_WORDS / 4u) + q) * P.stack_slots + dc_slot;
+}
+
+fn descent_start(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) {
+    dc_slot = slot;
     dc_cur = s;
     dc_f = f;
     dc_pt = pt;
@@ -205,18 +212,12 @@ fn descent_step() -> u32 {
     }
     dc_splits += 1u;
     let sp = dc_sp;
-    dc_stack_f[sp] = o.v_u;
-    dc_stack_d[sp] = dc_depth + 1u;
-    dc_stack_end[sp] = s.v_end;
-    dc_stack_addr[sp] = o.right;
-    dc_stack_pc[sp] = o.crit;
-    dc_stack_pos[sp] = o.position;
-    dc_stack_nrm[sp] = o.normal.xy;
-    dc_stack_caddr[sp] = s.addr;
-    dc_stack_cv[sp] = f;
-    dc_stack_cfaces[sp] = o.faces;
-    dc_stack_cpc[sp] = s.pc;
-    dc_stack_ccrit[sp] = s.crit;
+    dstack[sk_at(sp, 0u)] = vec4<u32>(o.v_u, dc_depth + 1u, s.v_end, o.right);
+    dstack[sk_at(sp, 1u)] = o.crit;
+    dstack[sk_at(sp, 2u)] = vec4<u32>(o.position.xyz, s.addr);
+    dstack[sk_at(sp, 3u)] = vec4<u32>(o.normal.xy, f, o.faces);
+    dstack[sk_at(sp, 4u)] = s.pc;
+    dstack[sk_at(sp, 5u)] = bitcast<vec4<u32>>(s.crit);
     dc_sp = sp + 1u;
     var l = s;
     l.v_end = o.v_u;
@@ -239,21 +240,24 @@ fn descent_pop() -> bool {
     }
     let sp = dc_sp - 1u;
     dc_sp = sp;
+    let q0 = dstack[sk_at(sp, 0u)];
+    let q2 = dstack[sk_at(sp, 2u)];
+    let q3 = dstack[sk_at(sp, 3u)];
     var r: VState;
-    r.v_end = dc_stack_end[sp];
-    r.addr = dc_stack_addr[sp];
-    r.pc = dc_stack_pc[sp];
-    r.pos = dc_stack_pos[sp];
-    r.nrm = vec4<u32>(dc_stack_nrm[sp], 0u, 0u);
-    r.c_addr = dc_stack_caddr[sp];
-    r.c_v = dc_stack_cv[sp];
+    r.v_end = q0.z;
+    r.addr = q0.w;
+    r.pc = dstack[sk_at(sp, 1u)];
+    r.pos = vec4<u32>(q2.xyz, 0u);
+    r.nrm = vec4<u32>(q3.xy, 0u, 0u);
+    r.c_addr = q2.w;
+    r.c_v = q3.z;
     r.c_v_end = r.v_end;
-    r.c_faces = dc_stack_cfaces[sp];
-    r.c_pc = dc_stack_cpc[sp];
-    r.c_crit = dc_stack_ccrit[sp];
+    r.c_faces = q3.w;
+    r.c_pc = dstack[sk_at(sp, 4u)];
+    r.c_crit = bitcast<vec4<f32>>(dstack[sk_at(sp, 5u)]);
     dc_cur = r;
-    dc_f = dc_stack_f[sp];
-    dc_depth = dc_stack_d[sp];
+    dc_f = q0.x;
+    dc_depth = q0.y;
     dc_pt = point_of(r);
     dc_uncached = true;
     return true;

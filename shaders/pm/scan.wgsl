@@ -15,7 +15,7 @@ struct Level {
     pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> L: Level;
+@group(0) @binding(0) var<storage, read> L: Level;
 @group(0) @binding(1) var<storage, read_write> data: array<u32>;
 @group(0) @binding(2) var<storage, read_write> sums: array<u32>;
 

@@ -17,7 +17,7 @@
 @group(0) @binding(7) var<storage, read_write> dfvid: array<u32>;
 @group(0) @binding(8) var<storage, read_write> dstate: array<VState>;
 @group(0) @binding(9) var<storage, read_write> dpoint: array<Point>;
-@group(0) @binding(10) var<uniform> D: DecodeParams;
+@group(0) @binding(10) var<storage, read> D: DecodeParams;
 @group(0) @binding(11) var<storage, read> ops: array<u32>;
 @group(0) @binding(12) var<storage, read> tables: array<u32>;
 @group(0) @binding(13) var<storage, read_write> dec_faces: array<u32>;
@@ -25,6 +25,8 @@
 // An all-levels pass (`descend`): the view's occlusion test, and the new faces' owners.
 @group(0) @binding(15) var<storage, read> occ: array<u32>;
 @group(0) @binding(16) var<storage, read_write> face_owner: array<u32>;
+// The descents' stacks (descent.wgsl).
+@group(0) @binding(17) var<storage, read_write> dstack: array<vec4<u32>>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -75,20 +77,22 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     dpoint[j + 1u] = Point(vec4<f32>(dequantize(o.position.xyz), 1.0), vec4<f32>(oct_decode(o.normal.xy), 0.0));
 }
 
-// An all-levels pass's splits (codec::pm::Levels::All): one thread per splitting vertex walks
+// An all-levels pass's splits (codec::pm::Levels::All): one thread per splitting vertex (in
+// dispatches of at most P.stack_slots) walks
 // its subtree again as the state update counted it (descent.wgsl), writing the leaves to the
 // vertex's slots in FVID order and the faces of every split done to its face slots, each
 // owned by its split's v_u; the split stage's `index_new` then indexes them.
 @compute @workgroup_size(256)
 fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let k = thread_index(gid, groups);
-    if (k >= P.splits) {
+    let t = thread_index(gid, groups);
+    let k = P.chunk_base + t;
+    if (t >= P.stack_slots || k >= P.splits) {
         return;
     }
     let i = list[k];
     let j = vsum[i];
     let count = vsum[i + 1u] - j;
-    descent_start(vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
+    descent_start(t, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
     loop {
         let step = descent_step();
         if (step == STEP_SPLIT) {

@@ -8,7 +8,8 @@
 // +1 at p and -1 at q - 1 in `diff` (whose exclusive scan then counts, at each position, the
 // undone ranges that hold it and start before it), the farthest range end (an FVID) starting
 // at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count`, one thread
-// per listed vertex (the host reads their number back), counts its leaves and faces down its
+// per listed vertex (the host reads their number back, and runs them in dispatches of at most
+// P.stack_slots), counts its leaves and faces down its
 // subtree (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
@@ -23,7 +24,7 @@
 // and first word, then the levels' cells, the farthest depth (f32 bits) in each.
 @group(0) @binding(6) var<storage, read> occ: array<u32>;
 // The decoder's (the descent decodes operations).
-@group(0) @binding(7) var<uniform> D: DecodeParams;
+@group(0) @binding(7) var<storage, read> D: DecodeParams;
 @group(0) @binding(8) var<storage, read> ops: array<u32>;
 @group(0) @binding(9) var<storage, read> tables: array<u32>;
 @group(0) @binding(10) var<storage, read_write> dec_faces: array<u32>;
@@ -36,6 +37,8 @@
 @group(0) @binding(16) var<storage, read_write> stats: array<atomic<u32>, 8>;
 // The vertices that descend.
 @group(0) @binding(17) var<storage, read_write> list: array<u32>;
+// The descents' stacks (descent.wgsl).
+@group(0) @binding(18) var<storage, read_write> dstack: array<vec4<u32>>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -106,12 +109,13 @@ fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
 
 @compute @workgroup_size(256)
 fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let k = thread_index(gid, groups);
-    if (k >= atomicLoad(&stats[STAT_DESCENTS])) {
+    let t = thread_index(gid, groups);
+    let k = P.chunk_base + t;
+    if (t >= P.stack_slots || k >= atomicLoad(&stats[STAT_DESCENTS])) {
         return;
     }
     let i = list[k];
-    descent_start(vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
+    descent_start(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
     loop {
         if (descent_step() != STEP_LEAF) {
             continue;

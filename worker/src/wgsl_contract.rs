@@ -189,6 +189,8 @@ fn pm_constants_match_the_rust() {
         ("STAT_REMOVED_FACES", STAT_REMOVED_FACES as u32),
         ("BLOCK", SCAN_BLOCK),
         ("PENDING", crate::pm_adapt::buffers::PENDING),
+        ("STACK_WORDS", crate::pm_adapt::STACK_WORDS as u32),
+        ("LEVELS_PER_PASS", codec::pm::LEVELS_PER_PASS),
     ];
     let shaders: Vec<Shader> = STAGES.iter().map(|s| parse(s.label, &s.shader.wgsl())).collect();
     let mut problems = Vec::new();

@@ -83,18 +83,36 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
 
 /// Adapts along a path of `frames` frames, one pass per frame, on both, with passes of one
 /// level or of all.
-fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Levels) {
+/// Returns the most descents a pass ran and the stack's slots at the end.
+fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Levels) -> (u32, u32) {
+    check_path_with(rel, frames, error_px, device, levels, None)
+}
+
+/// [`check_path`] with the descents' stacks limited to `stack_bytes`.
+fn check_path_with(
+    rel: &str,
+    frames: usize,
+    error_px: f32,
+    device: &Gpu,
+    levels: Levels,
+    stack_bytes: Option<u64>,
+) -> (u32, u32) {
     let (bytes, pm) = dpm_of(rel);
     let dpm = Dpm::parse(&bytes).unwrap();
     let mut cpu = Adapter::new(&pm).with_levels(levels);
     let mut gpu = GpuAdapter::new(device, &dpm, 4096).unwrap();
     gpu.set_levels(levels);
+    if let Some(b) = stack_bytes {
+        gpu.set_stack_limit(b);
+    }
     cpu.set_descent_budget(gpu.descent_budget());
     let start = Instant::now();
     let (mut lo, mut hi) = (usize::MAX, 0);
+    let mut most = 0;
     for k in 0..frames {
         let view = path_view(&pm, k, frames, error_px);
         pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("{rel} {levels:?} frame {k}"));
+        most = most.max(gpu.last_descents().0);
         lo = lo.min(cpu.faces().len());
         hi = hi.max(cpu.faces().len());
     }
@@ -104,6 +122,7 @@ fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Lev
         start.elapsed().as_secs_f64()
     );
     assert!(hi > lo, "{rel}: the path never changes the mesh");
+    (most, gpu.last_descents().1)
 }
 
 #[test]
@@ -112,6 +131,18 @@ fn bunny_path_matches_the_cpu_reference() {
     for levels in [Levels::One, Levels::All] {
         check_path("stanford/bunny_zipper_c3d.obj.gz", 60, 0.5, &device, levels);
     }
+}
+
+/// More descents in a pass than the stacks hold: they run in several dispatches (each
+/// descent in its own slot), and the passes stay those of the CPU reference.
+#[test]
+fn descents_beyond_the_stacks_run_in_several_dispatches() {
+    let (_one_at_a_time, device) = device();
+    // 48 slots of 32 entries of 24 words.
+    let (most, slots) =
+        check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, Some(48 * 32 * 96));
+    assert_eq!(slots, 48);
+    assert!(most > 3 * slots, "at most {most} descents a pass: one dispatch held them");
 }
 
 #[test]

@@ -49,7 +49,12 @@ pub(super) struct Params {
     pub(super) levels: u32,
     /// An all-levels pass: the most splits one vertex's descent performs.
     pub(super) budget: u32,
-    pub(super) pad: [u32; 3],
+    /// An all-levels pass: the descents' stack slots (`descent.wgsl`), and the most descents
+    /// one dispatch of `count` or `descend` runs.
+    pub(super) stack_slots: u32,
+    /// The first descent of this dispatch of `count` or `descend`.
+    pub(super) chunk_base: u32,
+    pub(super) pad: u32,
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).

@@ -193,7 +193,7 @@ pub(crate) struct RawDecoded {
 
 /// The batch entry point's bindings (checked against the WGSL by `wgsl_contract`).
 pub(crate) const BATCH_BINDINGS: &[Binding] = &[
-    Binding::uniform::<DecodeParams>(0, "D"),
+    Binding::read::<DecodeParams>(0, "D"),
     Binding::read::<u32>(1, "ops"),
     Binding::read::<u32>(2, "tables"),
     Binding::read::<Job>(3, "jobs"),
@@ -394,7 +394,7 @@ impl GpuOpDecoder {
         let face_bytes = n * max_faces * 12;
         let (raw, faces, seconds) = gpu.scoped(|| {
             let params = DecodeParams { count: jobs.len() as u32, ..self.params };
-            let uniform = init(device, "pm decode: params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+            let uniform = init(device, "pm decode: params", bytemuck::bytes_of(&params), wgpu::BufferUsages::STORAGE);
             let job_buf = init(device, "pm decode: jobs", bytemuck::cast_slice(&gpu_jobs), wgpu::BufferUsages::STORAGE);
             let out_usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
             let make = |label: &str, size: u64| {

@@ -76,7 +76,7 @@ pub(crate) mod pipelines;
 use std::sync::Arc;
 
 use codec::pm::format::{Dpm, NodeFile, OpContext, NODE_BYTES};
-use codec::pm::{CacheStats, Levels, NodeCache, PassStats, Viewpoint, DESCENT_BUDGET, NONE};
+use codec::pm::{CacheStats, Levels, NodeCache, PassStats, Viewpoint, DESCENT_BUDGET, LEVELS_PER_PASS, NONE};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
@@ -96,6 +96,14 @@ use pipelines::Pipelines;
 /// llvmpipe ends every loop of an invocation after 65535 iterations in all: 32 splits keep
 /// it near 20,000.
 pub const SOFTWARE_DESCENT_BUDGET: u32 = 32;
+
+/// Words of one entry of a descent's stack (`STACK_WORDS` of `descent.wgsl`).
+pub(crate) const STACK_WORDS: u64 = 24;
+
+/// The most bytes the descent stacks take (a budget of `b` bytes allows at most `b / 16`):
+/// 10,922 descents at a time with the default budget (1-2 dispatches for the dragon's
+/// 5,000-9,000 descents an orbit frame at 1920x1080).
+pub const MAX_STACK_BYTES: u64 = 32 << 20;
 
 /// The labels of the all-levels marks ([`GpuAdapter`]'s `marks`).
 const MARKS: [&str; 4] = ["pm: undone ranges", "pm: region reach", "pm: undone starts", "pm: region roots"];
@@ -243,6 +251,15 @@ pub struct GpuAdapter {
     /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
     levels: Levels,
     descent_budget: u32,
+    /// An all-levels pass's descent stacks (`descent.wgsl`): [`STACK_WORDS`] words an entry,
+    /// min([`LEVELS_PER_PASS`], descent budget) entries a slot, one slot a descent running;
+    /// grown to the descents of a pass up to [`Self::stack_max_bytes`] (more descents run in
+    /// several dispatches).
+    stack: Sized,
+    /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
+    /// the vertices that descended in the last pass ([`Self::last_descents`]).
+    stack_limit: u64,
+    descents: u32,
     /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
     scan_levels: Vec<ScanLevel>,
     /// Active vertices and faces.
@@ -339,7 +356,7 @@ impl GpuAdapter {
                     (pool.ops.clone(), Some(Resident { cache, pool, uploaded: 0 }))
                 }
             };
-            let decode = init(device, "pm: decode params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+            let decode = init(device, "pm: decode params", bytemuck::bytes_of(&params), wgpu::BufferUsages::STORAGE);
             let shared = Arc::new(Shared {
                 pipelines: Pipelines::new(gpu),
                 max_groups: limits.max_compute_workgroups_per_dimension,
@@ -361,7 +378,7 @@ impl GpuAdapter {
             params: d.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pm: params"),
                 size: std::mem::size_of::<Params>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
             stats: storage(d, "pm: stats", STATS_BYTES / 4, 4, VERTEX_USAGE).buffer,
@@ -380,7 +397,10 @@ impl GpuAdapter {
             list: storage(d, "pm: split list", 0, 4, VERTEX_USAGE),
             hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
             marks: MARKS.map(|name| storage(d, name, 0, 4, VERTEX_USAGE)),
-            levels: if gpu.is_software() { Levels::One } else { Levels::All },
+            stack: storage(d, "pm: descent stacks", 0, 4, VERTEX_USAGE),
+            stack_limit: MAX_STACK_BYTES,
+            descents: 0,
+            levels: Levels::All,
             descent_budget: if gpu.is_software() { SOFTWARE_DESCENT_BUDGET } else { DESCENT_BUDGET },
             scan_levels: Vec::new(),
             n: 0,
@@ -442,11 +462,8 @@ impl GpuAdapter {
     /// for ([`Levels::All`]: one pass reaches the converged mesh where the descent budget
     /// allows), or one (the paper's passes). The passes are those of [`codec::pm::Adapter`]
     /// with the same setting. A full refinement ([`Self::refine_step`]) goes one level a pass
-    /// either way. By default all levels, and one on a software adapter ([`Gpu::is_software`]):
-    /// there the all-levels stages cost 23 s of shader compilation the first time they run
-    /// (llvmpipe turns the descent's indexed private arrays into compare ladders) and gain
-    /// little (the dragon's cluster frames 513 ms against 594 ms, the first frame 3.2 s
-    /// against 1.4 s).
+    /// either way. By default all levels (on lavapipe too: 12x a converged pass an orbit frame
+    /// of the dragon against 25x in one-level passes, `gpu_orbit_steps`).
     pub fn set_levels(&mut self, levels: Levels) {
         self.levels = levels;
     }
@@ -478,6 +495,22 @@ impl GpuAdapter {
         self.times
     }
 
+    /// The vertices that descended in the last pass (all levels; 0 in a one-level pass), and
+    /// the most descents one dispatch runs now (the stacks' slots): a pass with more runs
+    /// its descents in several dispatches.
+    pub fn last_descents(&self) -> (u32, u32) {
+        (self.descents, self.stack_slots())
+    }
+
+    /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`] by default;
+    /// with a budget also by a sixteenth of it), at least one descent's; the adapter goes
+    /// back to the base mesh.
+    pub fn set_stack_limit(&mut self, bytes: u64) {
+        self.stack_limit = bytes;
+        self.stack = storage(self.gpu.device(), "pm: descent stacks", 0, 4, VERTEX_USAGE);
+        self.reset();
+    }
+
     /// How many times a buffer was reallocated by the `n_alloc` policy so far.
     pub fn reallocations(&self) -> u64 {
         self.reallocations
@@ -496,8 +529,37 @@ impl GpuAdapter {
     /// Bytes of GPU memory the adapter takes besides the adapted mesh: the static buffers,
     /// the occlusion pyramid and the per-pass records.
     fn fixed_bytes(&self) -> u64 {
+        self.fixed_bytes_within(self.budget)
+    }
+
+    /// [`Self::fixed_bytes`] under `budget`: with a budget, an all-levels adapter counts its
+    /// descent stacks at the most they may grow to.
+    fn fixed_bytes_within(&self, budget: Option<u64>) -> u64 {
         let records = self.params.size() + self.stats.size() + self.errors.size() + self.readback.size();
-        self.static_bytes() + self.occ.buffer.size() + records
+        let reserve = match (budget, self.levels) {
+            (Some(_), Levels::All) => self.stack_max_bytes(budget),
+            _ => 0,
+        };
+        self.static_bytes() + self.occ.buffer.size() + records + self.stack.buffer.size().max(reserve)
+    }
+
+    /// Bytes of one descent's stack: min(LEVELS_PER_PASS, descent budget) entries (a descent
+    /// pushes one per split, at most one per level).
+    fn stack_slot_bytes(&self) -> u64 {
+        LEVELS_PER_PASS.min(self.descent_budget) as u64 * STACK_WORDS * 4
+    }
+
+    /// The most bytes the descent stacks may take under `budget`: the stack limit
+    /// ([`Self::set_stack_limit`]), at most a sixteenth of the budget, at least one slot.
+    fn stack_max_bytes(&self, budget: Option<u64>) -> u64 {
+        let cap = budget.map_or(self.stack_limit, |b| (b / 16).min(self.stack_limit));
+        let slot = self.stack_slot_bytes();
+        (cap / slot).max(1) * slot
+    }
+
+    /// Descents the stacks hold at once now.
+    fn stack_slots(&self) -> u32 {
+        (self.stack.cap * 4 / self.stack_slot_bytes()) as u32
     }
 
     /// Bytes of GPU memory the adapter takes now: [`Self::static_bytes`], the adapted mesh's
@@ -548,10 +610,11 @@ impl GpuAdapter {
     pub fn set_budget(&mut self, bytes: Option<u64>) -> Result<(), AdaptError> {
         if let Some(b) = bytes {
             let per_element = self.mesh_bytes(1, 1) - self.mesh_bytes(0, 0);
-            let room = b.saturating_sub(self.fixed_bytes());
+            let room = b.saturating_sub(self.fixed_bytes_within(bytes));
             self.n_alloc = self.n_alloc.min((room / 16 / per_element).max(1) as u32);
             let base = &self.shared.base;
-            let need = self.fixed_bytes() + self.mesh_bytes(base.fvid.len() as u64, base.face_idx.len() as u64);
+            let need =
+                self.fixed_bytes_within(bytes) + self.mesh_bytes(base.fvid.len() as u64, base.face_idx.len() as u64);
             if need > b {
                 return Err(AdaptError::MeshBudget { budget: b, need });
             }

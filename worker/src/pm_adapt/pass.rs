@@ -14,6 +14,20 @@ use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter, MARKS, MAX_SCALE, SCALE_STEP};
 use crate::gpu::GpuError;
 
+const APPLY: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: apply") };
+const APPLY_PASS: wgpu::ComputePassDescriptor =
+    wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None };
+const COUNT: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: count") };
+const COUNT_PASS: wgpu::ComputePassDescriptor =
+    wgpu::ComputePassDescriptor { label: Some("pm: count"), timestamp_writes: None };
+
+/// The dispatches of `total` descents over `slots` stack slots: each one's first descent and
+/// its number of descents.
+fn chunks(total: u32, slots: u32) -> impl Iterator<Item = (u32, u32)> {
+    let slots = slots.max(1);
+    (0..total.div_ceil(slots)).map(move |c| (c * slots, (total - c * slots).min(slots)))
+}
+
 impl GpuAdapter {
     pub(super) fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
         let gpu = self.gpu.clone();
@@ -65,7 +79,7 @@ impl GpuAdapter {
                 self.floor = 1.0;
             }
         }
-        let mut totals = self.classify(&params, pass_start)?;
+        let mut totals = self.classify(&mut params, pass_start)?;
         let mut held = false;
         let over = |a: &GpuAdapter, t: &[u32; 12]| a.exceeds((t[0] as u64).max(n as u64), m as u64 + t[1] as u64);
         // A pass whose splits would take the mesh past the budget or the binding limit splits
@@ -81,7 +95,7 @@ impl GpuAdapter {
                     self.floor = self.error_scale;
                     params.mode = 2;
                     params.error_px = v.error_px * self.error_scale;
-                    totals = self.classify(&params, pass_start)?;
+                    totals = self.classify(&mut params, pass_start)?;
                 }
             }
         }
@@ -139,11 +153,11 @@ impl GpuAdapter {
         params.f_add = f_add;
         params.m_new = m_new;
         params.splits = split_vertices;
+        params.chunk_base = 0;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 2: reorganisation, splits, index update, face compaction.
-        let mut enc =
-            self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: apply") });
+        let mut enc = self.gpu.device().create_command_encoder(&APPLY);
         {
             let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
             let (p, f) = (&self.shared.pipelines, &self.faces);
@@ -183,6 +197,7 @@ impl GpuAdapter {
                     ("errors", &self.errors),
                     ("occ", &self.occ.buffer),
                     ("face_owner", &f.owner.buffer),
+                    ("dstack", &self.stack.buffer),
                 ],
             );
             let compact = p.compact_splits.bind(
@@ -240,11 +255,22 @@ impl GpuAdapter {
                     ("stats", &self.stats),
                 ],
             );
-            let mut pass = enc
-                .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: apply"), timestamp_writes: None });
+            let mut pass = enc.begin_compute_pass(&APPLY_PASS);
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
-                self.dispatch(&mut pass, &p.descend, &split_decode, split_vertices);
+                // More descents than stack slots run in several dispatches, each in a
+                // submission of its own after its first descent is written to the parameters.
+                for (c, (base, threads)) in chunks(split_vertices, params.stack_slots).enumerate() {
+                    if c > 0 {
+                        drop(pass);
+                        self.gpu.queue().submit([enc.finish()]);
+                        params.chunk_base = base;
+                        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+                        enc = self.gpu.device().create_command_encoder(&APPLY);
+                        pass = enc.begin_compute_pass(&APPLY_PASS);
+                    }
+                    self.dispatch(&mut pass, &p.descend, &split_decode, threads);
+                }
                 self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
                 self.dispatch(&mut pass, &p.index_new, &split, f_add);
             } else {
@@ -280,13 +306,14 @@ impl GpuAdapter {
     /// Submission 1 (state update, collapses, scans) for `params`, and its totals read back:
     /// vertices after the pass and faces its splits add, the counters, the first decoding
     /// error (which fails the pass).
-    fn classify(&mut self, params: &Params, pass_start: std::time::Instant) -> Result<[u32; 12], AdaptError> {
+    fn classify(&mut self, params: &mut Params, pass_start: std::time::Instant) -> Result<[u32; 12], AdaptError> {
         let n = params.n;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
         let mut enc =
             self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
         enc.clear_buffer(&self.stats, 0, None);
         let all = params.levels == 1;
+        self.descents = 0;
         if all {
             // diff, reach and root start at zero; `up` is written for every vertex.
             for k in [0, 1, 3] {
@@ -363,28 +390,44 @@ impl GpuAdapter {
                     ("stats", &self.stats),
                     ("list", &self.list.buffer),
                 ];
-                let buffers: Vec<_> = buffers.into_iter().chain(decode).collect();
+                let mut buffers: Vec<_> = buffers.into_iter().chain(decode).collect();
                 let mark = p.mark.bind_named(&self.gpu, &buffers);
-                let count = p.count.bind_named(&self.gpu, &buffers);
                 let regions = p.regions.bind_named(&self.gpu, &buffers);
                 self.dispatch(&mut pass, &p.mark, &mark, n + 1);
                 self.scan(&mut pass, &diff.buffer);
                 drop(pass);
-                // How many vertices descend, read back to size the count's dispatch: an
-                // indirect dispatch took lavapipe 7.9 s instead of 0.5 s a frame of the
-                // cluster's worker beside a rank that polls (Open MPI's default).
+                // How many vertices descend, read back to size the count's dispatches and
+                // the stacks (with an indirect dispatch instead, lavapipe once took 7.9 s
+                // instead of 0.5 s a cluster frame; the parameters were in a uniform buffer
+                // then, whose recompiles may account for it: docs/design.md).
                 enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
                 self.gpu.queue().submit([enc.finish()]);
                 let descents = self.read_totals()?[2 + STAT_DESCENTS];
-                enc = self
-                    .gpu
-                    .device()
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: count") });
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("pm: count"),
-                    timestamp_writes: None,
-                });
-                self.dispatch(&mut pass, &p.count, &count, descents);
+                self.descents = descents;
+                let slots = self.stack_slots();
+                let want = (descents as u64).min(self.stack_max_bytes(self.budget) / self.stack_slot_bytes());
+                if (slots as u64) < want {
+                    // Grown to the descents (at least double), within the most it may take.
+                    let max = self.stack_max_bytes(self.budget);
+                    let bytes = (want * self.stack_slot_bytes()).max(self.stack.cap * 8).min(max);
+                    self.stack = storage(self.gpu.device(), "pm: descent stacks", bytes / 4, 4, VERTEX_USAGE);
+                    self.reallocations += 1;
+                }
+                params.stack_slots = self.stack_slots();
+                buffers.push(("dstack", &self.stack.buffer));
+                let count = p.count.bind_named(&self.gpu, &buffers);
+                enc = self.gpu.device().create_command_encoder(&COUNT);
+                for (c, (base, threads)) in chunks(descents, params.stack_slots).enumerate() {
+                    if c > 0 {
+                        self.gpu.queue().submit([enc.finish()]);
+                        enc = self.gpu.device().create_command_encoder(&COUNT);
+                    }
+                    params.chunk_base = base;
+                    self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+                    let mut pass = enc.begin_compute_pass(&COUNT_PASS);
+                    self.dispatch(&mut pass, &p.count, &count, threads);
+                }
+                let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {
                 self.dispatch(&mut pass, &p.state, &state, n + 1);
@@ -444,7 +487,7 @@ impl GpuAdapter {
             let uniform = self.gpu.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("pm: scan level {k}")),
                 size: 16,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             self.scan_levels.push(ScanLevel {

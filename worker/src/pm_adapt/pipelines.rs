@@ -104,7 +104,7 @@ const FACE_COMPACT_WGSL: ShaderDef =
     with_common("pm: face compaction", include_str!("../../../shaders/pm/face_compact.wgsl"));
 
 /// `P`, the parameters every stage of `common.wgsl` binds first.
-const PARAMS: Binding = Binding::uniform::<Params>(0, "P");
+const PARAMS: Binding = Binding::read::<Params>(0, "P");
 
 /// Out of core, first in a pass: which vertices' nodes are resident, and the pending
 /// operations whose nodes came in decoded.
@@ -116,7 +116,7 @@ pub(crate) const NODE_CHECK: StageDef = StageDef {
         PARAMS,
         Binding::read::<u32>(1, "vfvid"),
         Binding::read_write::<GpuVState>(2, "vstate"),
-        Binding::uniform::<DecodeParams>(3, "D"),
+        Binding::read::<DecodeParams>(3, "D"),
         Binding::read::<u32>(4, "ops"),
         Binding::read::<u32>(5, "tables"),
         Binding::read_write::<u32>(6, "dec_faces"),
@@ -142,7 +142,7 @@ pub(crate) const STATE: StageDef = StageDef {
 
 /// The decoder's bindings in `state.wgsl`.
 const STATE_DECODER: [Binding; 5] = [
-    Binding::uniform::<DecodeParams>(7, "D"),
+    Binding::read::<DecodeParams>(7, "D"),
     Binding::read::<u32>(8, "ops"),
     Binding::read::<u32>(9, "tables"),
     Binding::read_write::<u32>(10, "dec_faces"),
@@ -190,6 +190,7 @@ pub(crate) const COUNT: StageDef = StageDef {
         STATE_DECODER[4],
         Binding::read_write::<Stats>(16, "stats"),
         Binding::read_write::<u32>(17, "list"),
+        Binding::read_write::<[u32; 4]>(18, "dstack"),
     ],
 };
 
@@ -226,7 +227,7 @@ pub(crate) const COLLAPSE: StageDef = StageDef {
 
 /// The scan's bindings, the same for both of its entry points.
 const SCAN_BINDINGS: &[Binding] = &[
-    Binding::uniform::<LevelUniform>(0, "L"),
+    Binding::read::<LevelUniform>(0, "L"),
     Binding::read_write::<u32>(1, "data"),
     Binding::read_write::<u32>(2, "sums"),
 ];
@@ -273,7 +274,7 @@ pub(crate) const SPLIT_DECODE: StageDef = StageDef {
         Binding::read_write::<u32>(7, "dfvid"),
         Binding::read_write::<GpuVState>(8, "dstate"),
         Binding::read_write::<PmPoint>(9, "dpoint"),
-        Binding::uniform::<DecodeParams>(10, "D"),
+        Binding::read::<DecodeParams>(10, "D"),
         Binding::read::<u32>(11, "ops"),
         Binding::read::<u32>(12, "tables"),
         Binding::read_write::<u32>(13, "dec_faces"),
@@ -297,13 +298,14 @@ pub(crate) const DESCEND: StageDef = StageDef {
         Binding::read_write::<u32>(7, "dfvid"),
         Binding::read_write::<GpuVState>(8, "dstate"),
         Binding::read_write::<PmPoint>(9, "dpoint"),
-        Binding::uniform::<DecodeParams>(10, "D"),
+        Binding::read::<DecodeParams>(10, "D"),
         Binding::read::<u32>(11, "ops"),
         Binding::read::<u32>(12, "tables"),
         Binding::read_write::<u32>(13, "dec_faces"),
         Binding::read_write::<Errors>(14, "errors"),
         Binding::read::<u32>(15, "occ"),
         Binding::read_write::<u32>(16, "face_owner"),
+        Binding::read_write::<[u32; 4]>(17, "dstack"),
     ],
 };
 
