@@ -97,10 +97,18 @@ use pipelines::Pipelines;
 /// it near 20,000.
 pub const SOFTWARE_DESCENT_BUDGET: u32 = 32;
 
+/// By default ([`GpuAdapter::set_levels`]), the splits a descent averages in an all-levels
+/// pass past which the later passes for the same view run one level. Measured on lavapipe
+/// (the dragon at 1920x1080, 0.5 px): from the base mesh the passes average 14-23, and all
+/// levels took 2.6 s to converge against 1.3 s in one-level passes; a 22.5 degree orbit step
+/// averages about 2 and converges in 2 all-levels passes (12x a converged pass) against 10
+/// one-level passes (25x).
+pub const DEEP_DESCENT: u32 = 8;
+
 /// Words of one entry of a descent's stack (`STACK_WORDS` of `descent.wgsl`).
 pub(crate) const STACK_WORDS: u64 = 24;
 
-/// The most bytes the descent stacks take (a budget of `b` bytes allows at most `b / 16`):
+/// The most bytes the descent stacks take (a budget of `b` bytes allows at most `b / 64`):
 /// 10,922 descents at a time with the default budget (1-2 dispatches for the dragon's
 /// 5,000-9,000 descents an orbit frame at 1920x1080).
 pub const MAX_STACK_BYTES: u64 = 32 << 20;
@@ -260,6 +268,11 @@ pub struct GpuAdapter {
     /// the vertices that descended in the last pass ([`Self::last_descents`]).
     stack_limit: u64,
     descents: u32,
+    /// Whether the kind of pass is the default's ([`Self::set_levels`] not called): all
+    /// levels, and one level for the rest of a view once an all-levels pass for it descended
+    /// deep (`deep`, [`DEEP_DESCENT`]).
+    mixed: bool,
+    deep: bool,
     /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
     scan_levels: Vec<ScanLevel>,
     /// Active vertices and faces.
@@ -400,6 +413,8 @@ impl GpuAdapter {
             stack: storage(d, "pm: descent stacks", 0, 4, VERTEX_USAGE),
             stack_limit: MAX_STACK_BYTES,
             descents: 0,
+            mixed: true,
+            deep: false,
             levels: Levels::All,
             descent_budget: if gpu.is_software() { SOFTWARE_DESCENT_BUDGET } else { DESCENT_BUDGET },
             scan_levels: Vec::new(),
@@ -423,6 +438,7 @@ impl GpuAdapter {
 
     /// Goes back to the base mesh.
     pub fn reset(&mut self) {
+        self.deep = false;
         let shared = self.shared.clone();
         let base = &shared.base;
         let (n, m) = (base.fvid.len() as u64, base.face_idx.len() as u64);
@@ -462,10 +478,14 @@ impl GpuAdapter {
     /// for ([`Levels::All`]: one pass reaches the converged mesh where the descent budget
     /// allows), or one (the paper's passes). The passes are those of [`codec::pm::Adapter`]
     /// with the same setting. A full refinement ([`Self::refine_step`]) goes one level a pass
-    /// either way. By default all levels (on lavapipe too: 12x a converged pass an orbit frame
-    /// of the dragon against 25x in one-level passes, `gpu_orbit_steps`).
+    /// either way. Setting it makes every pass for a view of that kind (the CPU references'
+    /// passes, pass for pass). By default a pass for a new view runs all levels, and the
+    /// later passes for the same view one level if it descended more than [`DEEP_DESCENT`]
+    /// splits a descent on average (a view far from the mesh, as from the base mesh: a
+    /// descent is serial work in one thread, and one-level passes spread it over threads).
     pub fn set_levels(&mut self, levels: Levels) {
         self.levels = levels;
+        self.mixed = false;
     }
 
     /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1):
@@ -503,7 +523,7 @@ impl GpuAdapter {
     }
 
     /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`] by default;
-    /// with a budget also by a sixteenth of it), at least one descent's; the adapter goes
+    /// with a budget also by a 64th of it), at least one descent's; the adapter goes
     /// back to the base mesh.
     pub fn set_stack_limit(&mut self, bytes: u64) {
         self.stack_limit = bytes;
@@ -550,9 +570,9 @@ impl GpuAdapter {
     }
 
     /// The most bytes the descent stacks may take under `budget`: the stack limit
-    /// ([`Self::set_stack_limit`]), at most a sixteenth of the budget, at least one slot.
+    /// ([`Self::set_stack_limit`]), at most a 64th of the budget, at least one slot.
     fn stack_max_bytes(&self, budget: Option<u64>) -> u64 {
-        let cap = budget.map_or(self.stack_limit, |b| (b / 16).min(self.stack_limit));
+        let cap = budget.map_or(self.stack_limit, |b| (b / 64).min(self.stack_limit));
         let slot = self.stack_slot_bytes();
         (cap / slot).max(1) * slot
     }

@@ -11,7 +11,7 @@ use super::buffers::{
     VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter, MARKS, MAX_SCALE, SCALE_STEP};
+use super::{AdaptError, GpuAdapter, DEEP_DESCENT, MARKS, MAX_SCALE, SCALE_STEP};
 use crate::gpu::GpuError;
 
 const APPLY: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: apply") };
@@ -57,7 +57,16 @@ impl GpuAdapter {
         }
         self.prepare_scan(n as u64 + 1);
         // A full refinement goes one level a pass, as the CPU reference's `refine_step`.
-        let all = view.is_some() && self.levels == Levels::All;
+        if let Some(v) = view {
+            // A new view may refine finer than the error that overflowed for the last one,
+            // and starts with all levels again.
+            if self.last_view != Some(*v) {
+                self.last_view = Some(*v);
+                self.floor = 1.0;
+                self.deep = false;
+            }
+        }
+        let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
         let mut params =
             Params { n, m, mode: 1, levels: all as u32, budget: self.descent_budget, ..Default::default() };
         if let Some(v) = view {
@@ -72,16 +81,17 @@ impl GpuAdapter {
                 (params.occ_vp, params.occ_rect, params.occ_size) = o.params();
             }
         }
-        if let Some(v) = view {
-            // A new view may refine finer than the error that overflowed for the last one.
-            if self.last_view != Some(*v) {
-                self.last_view = Some(*v);
-                self.floor = 1.0;
-            }
-        }
         let mut totals = self.classify(&mut params, pass_start)?;
         let mut held = false;
         let over = |a: &GpuAdapter, t: &[u32; 12]| a.exceeds((t[0] as u64).max(n as u64), m as u64 + t[1] as u64);
+        // An all-levels pass whose splits would take the mesh past the budget or the binding
+        // limit is tried again as a pass of one level, which may fit: the mesh then fills the
+        // room at the view's error, pass by pass, before the error is raised.
+        if all && totals[0] > n && over(self, &totals) {
+            all = false;
+            params.levels = 0;
+            totals = self.classify(&mut params, pass_start)?;
+        }
         // A pass whose splits would take the mesh past the budget or the binding limit splits
         // nothing: with a view it collapses what the view lets go and raises the error the
         // passes after it adapt to ("Memory budget" in docs/design.md); a full refinement
@@ -109,6 +119,9 @@ impl GpuAdapter {
             after: n_new,
             collapses,
         })?;
+        if all && self.mixed && splits > DEEP_DESCENT.saturating_mul(self.descents) {
+            self.deep = true;
+        }
         // The threads of the split stages: one per splitting vertex.
         let split_vertices = if all { counters[STAT_SPLIT_VERTICES] } else { splits };
         if splits == 0 && collapses == 0 {
