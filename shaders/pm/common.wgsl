@@ -23,12 +23,28 @@ struct VState {
     c_faces: u32,      // faces the creator's split made
     flags: u32,        // out of core: PENDING, ABSENT (0 in core)
     pc: vec4<u32>,     // its operation's context: the parent's quantized criteria
-    pos: vec4<u32>,    // quantized position (xyz)
-    nrm: vec4<u32>,    // octahedral normal (xy)
+    pn: vec4<u32>,     // quantized position and octahedral normal (pack_pn)
     // sin(alpha), geometric error, attribute error, radius
     crit: vec4<f32>,   // its operation's criteria
     c_pc: vec4<u32>,   // the creator's context's parent criteria
     c_crit: vec4<f32>, // the creator's criteria
+}
+
+// A vertex's quantized position (at most 24 bits a coordinate) and octahedral normal (at most
+// 17 bits a component: normal_bits up to 16 and the zero code 1 << normal_bits) in one vector:
+// x, y, z with the normal's 17th bits above x's and y's 24, and the normal's low 16 bits of
+// each component in w (a VState of 112 bytes instead of 128).
+fn pack_pn(pos: vec3<u32>, nrm: vec2<u32>) -> vec4<u32> {
+    return vec4<u32>(pos.x | ((nrm.x >> 16u) << 24u), pos.y | ((nrm.y >> 16u) << 24u), pos.z,
+                     (nrm.x & 0xffffu) | (nrm.y << 16u));
+}
+
+fn state_pos(s: VState) -> vec3<u32> {
+    return vec3<u32>(s.pn.x & 0xffffffu, s.pn.y & 0xffffffu, s.pn.z);
+}
+
+fn state_nrm(s: VState) -> vec2<u32> {
+    return vec2<u32>((s.pn.w & 0xffffu) | ((s.pn.x >> 24u) << 16u), (s.pn.w >> 16u) | ((s.pn.y >> 24u) << 16u));
 }
 
 // VState.flags, out of core only. PENDING: the operation's node was not resident when the

@@ -101,7 +101,7 @@ fn splits_now(s: VState, pt: Point) -> bool {
 
 // The point of a vertex from its quantized position and normal.
 fn point_of(s: VState) -> Point {
-    return Point(vec4<f32>(dequantize(s.pos.xyz), 1.0), vec4<f32>(oct_decode(s.nrm.xy), 0.0));
+    return Point(vec4<f32>(dequantize(state_pos(s)), 1.0), vec4<f32>(oct_decode(state_nrm(s)), 0.0));
 }
 
 // A descent in progress, per invocation: the current vertex (its state, FVID, point and depth
@@ -184,7 +184,7 @@ fn descent_step() -> u32 {
     }
     var o: DecodedOp;
     if (run) {
-        o = decode_op(s.addr, f, s.v_end, s.pc, s.pos.xyz, s.nrm.xy, out, upto);
+        o = decode_op(s.addr, f, s.v_end, s.pc, state_pos(s), state_nrm(s), out, upto);
     }
     if (dc_uncached) {
         dc_uncached = false;
@@ -247,8 +247,7 @@ fn descent_pop() -> bool {
     r.v_end = q0.z;
     r.addr = q0.w;
     r.pc = dstack[sk_at(sp, 1u)];
-    r.pos = vec4<u32>(q2.xyz, 0u);
-    r.nrm = vec4<u32>(q3.xy, 0u, 0u);
+    r.pn = pack_pn(q2.xyz, q3.xy);
     r.c_addr = q2.w;
     r.c_v = q3.z;
     r.c_v_end = r.v_end;

@@ -38,7 +38,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let j = vsum[i];
     let f = vfvid[i];
     let s = vstate[i];
-    let o = decode_op(s.addr, f, s.v_end, s.pc, s.pos.xyz, s.nrm.xy, P.m + fsum[i], DECODE_ALL);
+    let o = decode_op(s.addr, f, s.v_end, s.pc, state_pos(s), state_nrm(s), P.m + fsum[i], DECODE_ALL);
     if (o.status != DEC_OK) {
         // The pass fails (the host reads the error); the slots get harmless copies.
         report(o.status, s.addr);
@@ -60,8 +60,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     r.v_end = s.v_end;
     r.addr = o.right;
     r.pc = o.crit;
-    r.pos = o.position;
-    r.nrm = o.normal;
+    r.pn = pack_pn(o.position.xyz, o.normal.xy);
     r.c_addr = s.addr;
     r.c_v = f;
     r.c_v_end = s.v_end;

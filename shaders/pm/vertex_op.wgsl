@@ -25,7 +25,7 @@ fn with_op(s: ptr<function, VState>, fvid: u32) {
     if ((*s).addr == NONE) {
         return;
     }
-    let o = decode_op((*s).addr, fvid, (*s).v_end, (*s).pc, (*s).pos.xyz, (*s).nrm.xy, NONE_ADDR, DECODE_TO_FACES);
+    let o = decode_op((*s).addr, fvid, (*s).v_end, (*s).pc, state_pos(*s), state_nrm(*s), NONE_ADDR, DECODE_TO_FACES);
     if (o.status == DEC_ABSENT) {
         (*s).flags = PENDING;
         return;

@@ -18,11 +18,17 @@ pub(super) struct GpuVState {
     /// Out of core: [`PENDING`], `ABSENT` (`common.wgsl`).
     pub(super) flags: u32,
     pub(super) pc: [u32; 4],
-    pub(super) pos: [u32; 4],
-    pub(super) nrm: [u32; 4],
+    /// Quantized position and octahedral normal, packed ([`pack_pn`]).
+    pub(super) pn: [u32; 4],
     pub(super) crit: [f32; 4],
     pub(super) c_pc: [u32; 4],
     pub(super) c_crit: [f32; 4],
+}
+
+/// `pack_pn` of `shaders/pm/common.wgsl`: a quantized position (at most 24 bits a
+/// coordinate) and an octahedral normal (at most 17 bits a component) in four words.
+pub(super) fn pack_pn(pos: [u32; 3], nrm: [u32; 2]) -> [u32; 4] {
+    [pos[0] | (nrm[0] >> 16) << 24, pos[1] | (nrm[1] >> 16) << 24, pos[2], (nrm[0] & 0xffff) | nrm[1] << 16]
 }
 
 /// `PENDING` of `shaders/pm/common.wgsl`: the vertex's operation waits for its node.

@@ -82,8 +82,8 @@ use thiserror::Error;
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
-    init, needs_resize, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES, PENDING,
-    POINT_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
+    init, needs_resize, pack_pn, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES,
+    PENDING, POINT_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
@@ -858,8 +858,7 @@ fn base_state(dpm: &Dpm) -> Result<BaseState, AdaptError> {
             c_addr: NONE,
             c_v: NONE,
             c_v_end: NONE,
-            pos: [pos[0], pos[1], pos[2], 0],
-            nrm: [nrm[0], nrm[1], 0, 0],
+            pn: pack_pn(pos, nrm),
             ..GpuVState::default()
         };
         if let (Some(addr), true) = (dpm.roots[b], dpm.out_of_core()) {
