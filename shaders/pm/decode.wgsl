@@ -72,6 +72,7 @@ const DEC_POSITION: u32 = 8u;
 const DEC_NORMAL: u32 = 9u;
 const DEC_POINTER: u32 = 10u;
 const DEC_ABSENT: u32 = 11u;     // out of core: the operation's node is not resident (no error)
+const DEC_LOOP_LIMIT: u32 = 12u; // a descent's loop ended without finishing (a GPU's loop limit)
 
 // How far decode_op goes: everything, or up to the face count (criteria, children, v_u and
 // the number of faces: what a vertex needs to ask for its split and size it).

@@ -92,6 +92,7 @@ fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let j = vsum[i];
     let count = vsum[i + 1u] - j;
     descent_start(t, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
+    var finished = false;
     loop {
         let step = descent_step();
         if (step == STEP_SPLIT) {
@@ -110,7 +111,12 @@ fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         }
         dc_leaves += 1u;
         if (!descent_pop()) {
+            finished = true;
             break;
         }
+    }
+    // As in `count` (state.wgsl): a loop the GPU ended early fails the pass.
+    if (!finished) {
+        report(DEC_LOOP_LIMIT, vstate[i].addr);
     }
 }

@@ -116,14 +116,21 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
     }
     let i = list[k];
     descent_start(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
+    var finished = false;
     loop {
         if (descent_step() != STEP_LEAF) {
             continue;
         }
         dc_leaves += 1u;
         if (!descent_pop()) {
+            finished = true;
             break;
         }
+    }
+    // The loop ends only there; llvmpipe ends an invocation's loops after 65535 iterations
+    // in all, silently, and that fails the pass instead of giving a wrong count.
+    if (!finished) {
+        report(DEC_LOOP_LIMIT, vstate[i].addr);
     }
     vcnt[i] = dc_leaves;
     fcnt[i] = dc_faces;

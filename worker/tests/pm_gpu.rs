@@ -150,6 +150,36 @@ fn descents_beyond_the_stacks_run_in_several_dispatches() {
     assert!(most > 3 * slots, "at most {most} descents a pass: one dispatch held them");
 }
 
+/// A descent budget past what the GPU's loops allow: the pass equals the CPU reference's or
+/// fails with the loop limit in one line, never a silently wrong pass. On lavapipe (llvmpipe
+/// ends an invocation's loops after 65535 iterations in all) it fails: the dragon's descents
+/// from its base mesh run thousands of splits.
+#[test]
+fn a_descent_the_gpu_cuts_short_fails_the_pass() {
+    let (_one_at_a_time, device) = device();
+    let (bytes, pm) = dpm_of("stanford/dragon_vrip.ply.gz");
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
+    let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
+    gpu.set_levels(Levels::All);
+    gpu.set_descent_budget(1 << 20);
+    cpu.set_descent_budget(1 << 20);
+    let view = path_view(&pm, 0, 1, 0.5);
+    match gpu.adapt(&view) {
+        Ok(g) => {
+            assert!(!device.is_software(), "lavapipe's loop limit went unnoticed");
+            assert_eq!(cpu.adapt(&view), g, "pass statistics differ");
+            assert_eq!(gpu.active().unwrap(), cpu.active(), "active vertices differ");
+        }
+        Err(e) => {
+            assert!(matches!(e, worker::pm_adapt::AdaptError::LoopLimit { .. }), "{e}");
+            let line = e.to_string();
+            assert!(line.contains("loop limit") && !line.contains('\n'), "{line}");
+            eprintln!("{line}");
+        }
+    }
+}
+
 #[test]
 fn refining_everything_on_the_gpu_matches_the_cpu() {
     let (_one_at_a_time, device) = device();

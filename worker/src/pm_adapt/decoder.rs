@@ -217,6 +217,9 @@ pub enum DecodeFailure {
     Pointer,
     /// Out of core: the operation's node is not resident (not an error of the file).
     Absent,
+    /// A descent's loop ended without finishing: the GPU stopped it (llvmpipe ends an
+    /// invocation's loops after 65535 iterations in all), not an error of the file.
+    LoopLimit,
     /// A status the shader does not produce (a GPU fault).
     Unknown(u32),
 }
@@ -236,6 +239,7 @@ impl DecodeFailure {
             9 => Normal,
             10 => Pointer,
             11 => Absent,
+            12 => LoopLimit,
             s => Unknown(s),
         }
     }
@@ -256,6 +260,7 @@ impl std::fmt::Display for DecodeFailure {
             Normal => "normal out of range",
             Pointer => "bad operation pointer",
             Absent => "its node is not resident",
+            LoopLimit => "the GPU ended its descent's loop early (its loop limit): lower the descent budget",
             Unknown(_) => "an unknown status (a GPU fault)",
         })
     }

@@ -154,6 +154,10 @@ pub enum AdaptError {
     /// out of core its node) and why.
     #[error("corrupt .dpm data: {at}: {failure}")]
     Corrupt { at: String, failure: String },
+    /// A descent stopped by the GPU's loop limit (llvmpipe: 65535 iterations an invocation),
+    /// found because its loop ended without finishing: the pass would be wrong.
+    #[error("the GPU ended a descent early ({at}; its loop limit): lower the descent budget")]
+    LoopLimit { at: String },
     /// A base vertex's operation did not decode on the CPU, or a node could not be read.
     #[error(transparent)]
     Format(#[from] codec::pm::DpmError),
@@ -199,7 +203,10 @@ impl AdaptError {
         } else {
             format!("operation at byte {addr}")
         };
-        AdaptError::Corrupt { at, failure: DecodeFailure::of(status).to_string() }
+        match DecodeFailure::of(status) {
+            DecodeFailure::LoopLimit => AdaptError::LoopLimit { at },
+            failure => AdaptError::Corrupt { at, failure: failure.to_string() },
+        }
     }
 }
 
