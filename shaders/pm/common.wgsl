@@ -102,9 +102,9 @@ struct Params {
     splits: u32,   // splits performed (an all-levels pass: vertices that split)
     levels: u32,   // 1: an all-levels pass (codec::pm::Levels::All), 0: one level
     budget: u32,   // an all-levels pass: the most splits one vertex's descent performs
-    stack_slots: u32, // an all-levels pass: the descents' stack slots (descent.wgsl), and
-                       // the most descents one dispatch of `count` or `descend` runs
-    chunk_base: u32,   // the first descent of this dispatch of `count` or `descend`
+    stack_slots: u32, // an all-levels pass: the descents' stack slots (descent.wgsl), the
+                      // most descents one dispatch of `count` or `descend` runs
+    chunk_base: u32,  // the first descent of this dispatch of `count` or `descend`
     pad0: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,

@@ -113,9 +113,10 @@ fn point_of(s: VState) -> Point {
 // The right children wait in `dstack` (a storage buffer the including file declares), in the
 // invocation's slot `dc_slot` of P.stack_slots: STACK_WORDS / 4 vectors an entry, entry e's
 // vector q of slot t at ((e * STACK_WORDS / 4 + q) * P.stack_slots + t), so that neighbouring
-// invocations touch neighbouring vectors. Not in private arrays: llvmpipe (lavapipe) lowers an indexed
-// private array to a ladder of compares and took 23 s to compile the stages that hold one.
-// A slot holds min(LEVELS_PER_PASS, P.budget) entries (a descent pushes one per split).
+// invocations touch neighbouring vectors. A slot holds min(LEVELS_PER_PASS, P.budget) entries
+// (a descent pushes one per split). Not in indexed private arrays: llvmpipe (lavapipe)
+// compiles those slower (an adapter's first all-levels passes 8.6 s against 5.1 s), and a
+// hardware driver reserves their memory for every thread it can run at once.
 //
 // `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
 // The budget bounds one invocation's work: llvmpipe stops every loop of an invocation after

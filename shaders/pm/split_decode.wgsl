@@ -77,10 +77,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
 }
 
 // An all-levels pass's splits (codec::pm::Levels::All): one thread per splitting vertex (in
-// dispatches of at most P.stack_slots) walks
-// its subtree again as the state update counted it (descent.wgsl), writing the leaves to the
-// vertex's slots in FVID order and the faces of every split done to its face slots, each
-// owned by its split's v_u; the split stage's `index_new` then indexes them.
+// dispatches of at most P.stack_slots) walks its subtree again as the state update counted
+// it (descent.wgsl), writing the leaves to the vertex's slots in FVID order and the faces of
+// every split done to its face slots, each owned by its split's v_u; the split stage's
+// `index_new` then indexes them.
 @compute @workgroup_size(256)
 fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let t = thread_index(gid, groups);

@@ -9,8 +9,8 @@
 // undone ranges that hold it and start before it), the farthest range end (an FVID) starting
 // at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count`, one thread
 // per listed vertex (the host reads their number back, and runs them in dispatches of at most
-// P.stack_slots), counts its leaves and faces down its
-// subtree (descent.wgsl). After the scan of `diff`, `regions` gives a position inside an undone
+// P.stack_slots), counts its leaves and faces down its subtree (descent.wgsl). After the
+// scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
 // creator's range is the region's.

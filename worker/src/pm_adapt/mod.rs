@@ -97,8 +97,8 @@ use pipelines::Pipelines;
 /// it near 20,000.
 pub const SOFTWARE_DESCENT_BUDGET: u32 = 32;
 
-/// By default ([`GpuAdapter::set_levels`]), the splits a descent averages in an all-levels
-/// pass past which the later passes for the same view run one level. Measured on lavapipe
+/// Unless [`GpuAdapter::set_levels`] chose one kind of pass: the splits a descent averages in
+/// an all-levels pass past which the later passes for the same view run one level. Measured on lavapipe
 /// (the dragon at 1920x1080, 0.5 px): from the base mesh the passes average 14-23, and all
 /// levels took 2.6 s to converge against 1.3 s in one-level passes; a 22.5 degree orbit step
 /// averages about 2 and converges in 2 all-levels passes (12x a converged pass) against 10
@@ -108,8 +108,8 @@ pub const DEEP_DESCENT: u32 = 8;
 /// Words of one entry of a descent's stack (`STACK_WORDS` of `descent.wgsl`).
 pub(crate) const STACK_WORDS: u64 = 24;
 
-/// The most bytes the descent stacks take (a budget of `b` bytes allows at most `b / 64`):
-/// 10,922 descents at a time with the default budget (1-2 dispatches for the dragon's
+/// The most bytes the descent stacks take (a memory budget of `b` bytes allows at most
+/// `b / 64`): 10,922 descents at a time, 32 entries each (one dispatch for the dragon's
 /// 5,000-9,000 descents an orbit frame at 1920x1080).
 pub const MAX_STACK_BYTES: u64 = 32 << 20;
 
@@ -554,7 +554,7 @@ impl GpuAdapter {
     }
 
     /// Bytes of GPU memory the adapter takes besides the adapted mesh: the static buffers,
-    /// the occlusion pyramid and the per-pass records.
+    /// the occlusion pyramid, the per-pass records and the descents' stacks.
     fn fixed_bytes(&self) -> u64 {
         self.fixed_bytes_within(self.budget)
     }
@@ -590,8 +590,9 @@ impl GpuAdapter {
     }
 
     /// Bytes of GPU memory the adapter takes now: [`Self::static_bytes`], the adapted mesh's
-    /// buffers at their capacities ([`Self::dynamic_bytes`]), the occlusion pyramid and the
-    /// per-pass records. With a budget ([`Self::set_budget`]) it stays within it.
+    /// buffers at their capacities ([`Self::dynamic_bytes`]), the occlusion pyramid, the
+    /// per-pass records and the descents' stacks. With a budget ([`Self::set_budget`]) it
+    /// stays within it.
     pub fn gpu_bytes(&self) -> u64 {
         self.fixed_bytes() + self.dynamic_bytes()
     }
