@@ -105,7 +105,11 @@ struct Params {
     stack_slots: u32, // an all-levels pass: the descents' stack slots (descent.wgsl), the
                       // most descents one dispatch of `count` or `descend` runs
     chunk_base: u32,  // the first descent of this dispatch of `count` or `descend`
+    round_steps: u32, // the most steps a descent takes in one dispatch (it resumes in the next)
+    rounds: u32,      // the dispatches of `count` or `descend` that finish every descent
     pad0: u32,
+    pad1: u32,
+    pad2: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
     // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.

@@ -119,9 +119,9 @@ fn point_of(s: VState) -> Point {
 // hardware driver reserves their memory for every thread it can run at once.
 //
 // `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
-// The budget bounds one invocation's work: llvmpipe stops every loop of an invocation after
-// 65535 iterations in all (the decoder reads bit by bit, some 150 iterations an operation),
-// silently; GpuAdapter gives it a budget that stays well below.
+// llvmpipe (lavapipe) stops every loop of an invocation after 65535 iterations in all,
+// silently (the decoder reads bit by bit, some 150 iterations an operation): there a descent
+// pauses after P.round_steps steps and the next dispatch goes on with it (the resume record).
 var<private> dc_cur: VState;
 var<private> dc_f: u32;
 var<private> dc_pt: Point;
@@ -144,6 +144,75 @@ const STACK_WORDS: u32 = 24u;
 
 fn sk_at(e: u32, q: u32) -> u32 {
     return (e * (STACK_WORDS / 4u) + q) * P.stack_slots + dc_slot;
+}
+
+// After the stacks, a record per slot (RESUME_VECS vectors, vector q of slot t at
+// resume_base() + q * P.stack_slots + t) of the descent in it: (0: not started this pass, 1:
+// paused by the step cap, 2: done; rounds run, sp, depth), (FVID, splits, leaves, faces),
+// (uncached, 0, 0, 0), the current vertex's state (7 vectors) and point (2). A dispatch that
+// reaches P.round_steps steps saves the descent there and the next dispatch goes on from it,
+// so that no invocation runs past llvmpipe's loop limit however long its descent.
+const RESUME_VECS: u32 = 12u;
+
+fn resume_at(q: u32) -> u32 {
+    let entries = min(LEVELS_PER_PASS, P.budget);
+    return P.stack_slots * (entries * (STACK_WORDS / 4u) + q) + dc_slot;
+}
+
+fn resume_state(slot: u32) -> u32 {
+    dc_slot = slot;
+    return dstack[resume_at(0u)].x;
+}
+
+fn descent_save(state: u32, rounds: u32) {
+    dstack[resume_at(0u)] = vec4<u32>(state, rounds, dc_sp, dc_depth);
+    dstack[resume_at(1u)] = vec4<u32>(dc_f, dc_splits, dc_leaves, dc_faces);
+    dstack[resume_at(2u)] = vec4<u32>(select(0u, 1u, dc_uncached), 0u, 0u, 0u);
+    let c = dc_cur;
+    dstack[resume_at(3u)] = vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr);
+    dstack[resume_at(4u)] = vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags);
+    dstack[resume_at(5u)] = c.pc;
+    dstack[resume_at(6u)] = c.pn;
+    dstack[resume_at(7u)] = bitcast<vec4<u32>>(c.crit);
+    dstack[resume_at(8u)] = c.c_pc;
+    dstack[resume_at(9u)] = bitcast<vec4<u32>>(c.c_crit);
+    dstack[resume_at(10u)] = bitcast<vec4<u32>>(dc_pt.pos);
+    dstack[resume_at(11u)] = bitcast<vec4<u32>>(dc_pt.nrm);
+}
+
+// Goes on with the paused descent of slot `slot` (resume_state 1), writing to `face_out`;
+// returns the rounds it has run.
+fn descent_resume(slot: u32, face_out: u32) -> u32 {
+    dc_slot = slot;
+    let r0 = dstack[resume_at(0u)];
+    let r1 = dstack[resume_at(1u)];
+    dc_sp = r0.z;
+    dc_depth = r0.w;
+    dc_f = r1.x;
+    dc_splits = r1.y;
+    dc_leaves = r1.z;
+    dc_faces = r1.w;
+    dc_uncached = dstack[resume_at(2u)].x != 0u;
+    let a = dstack[resume_at(3u)];
+    let b = dstack[resume_at(4u)];
+    var c: VState;
+    c.v_end = a.x;
+    c.addr = a.y;
+    c.faces = a.z;
+    c.c_addr = a.w;
+    c.c_v = b.x;
+    c.c_v_end = b.y;
+    c.c_faces = b.z;
+    c.flags = b.w;
+    c.pc = dstack[resume_at(5u)];
+    c.pn = dstack[resume_at(6u)];
+    c.crit = bitcast<vec4<f32>>(dstack[resume_at(7u)]);
+    c.c_pc = dstack[resume_at(8u)];
+    c.c_crit = bitcast<vec4<f32>>(dstack[resume_at(9u)]);
+    dc_cur = c;
+    dc_pt = Point(bitcast<vec4<f32>>(dstack[resume_at(10u)]), bitcast<vec4<f32>>(dstack[resume_at(11u)]));
+    dc_face_out = face_out;
+    return r0.y;
 }
 
 fn descent_start(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) {

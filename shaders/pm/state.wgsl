@@ -115,9 +115,23 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
         return;
     }
     let i = list[k];
-    descent_start(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
+    let state = resume_state(t);
+    if (state == 2u) {
+        return;
+    }
+    var rounds = 1u;
+    if (state == 0u) {
+        descent_start(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
+    } else {
+        rounds += descent_resume(t, NONE_ADDR);
+    }
     var finished = false;
+    var steps = 0u;
     loop {
+        if (steps == P.round_steps) {
+            break;
+        }
+        steps += 1u;
         if (descent_step() != STEP_LEAF) {
             continue;
         }
@@ -127,11 +141,17 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
             break;
         }
     }
-    // The loop ends only there; llvmpipe ends an invocation's loops after 65535 iterations
-    // in all, silently, and that fails the pass instead of giving a wrong count.
     if (!finished) {
+        // Paused at the step cap: the next round goes on.
+        if (steps == P.round_steps && rounds < P.rounds) {
+            descent_save(1u, rounds);
+            return;
+        }
+        // Otherwise the GPU ended the loop (llvmpipe ends an invocation's loops after 65535
+        // iterations in all, silently): that fails the pass instead of giving a wrong count.
         report(DEC_LOOP_LIMIT, vstate[i].addr);
     }
+    dstack[resume_at(0u)] = vec4<u32>(2u, rounds, 0u, 0u);
     vcnt[i] = dc_leaves;
     fcnt[i] = dc_faces;
 }

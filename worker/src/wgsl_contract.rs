@@ -190,6 +190,7 @@ fn pm_constants_match_the_rust() {
         ("BLOCK", SCAN_BLOCK),
         ("PENDING", crate::pm_adapt::buffers::PENDING),
         ("STACK_WORDS", crate::pm_adapt::STACK_WORDS as u32),
+        ("RESUME_VECS", crate::pm_adapt::RESUME_VECS as u32),
         ("LEVELS_PER_PASS", codec::pm::LEVELS_PER_PASS),
     ];
     let shaders: Vec<Shader> = STAGES.iter().map(|s| parse(s.label, &s.shader.wgsl())).collect();

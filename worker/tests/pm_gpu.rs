@@ -143,17 +143,18 @@ fn bunny_path_matches_the_cpu_reference() {
 #[test]
 fn descents_beyond_the_stacks_run_in_several_dispatches() {
     let (_one_at_a_time, device) = device();
-    // 48 slots of 32 entries of 24 words.
+    // 48 slots of 32 entries of 24 words and a resume record of 12 vectors.
+    let slot = 32 * 96 + 12 * 16;
     let (most, slots) =
-        check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, Some(48 * 32 * 96));
+        check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, Some(48 * slot));
     assert_eq!(slots, 48);
     assert!(most > 3 * slots, "at most {most} descents a pass: one dispatch held them");
 }
 
-/// A descent budget past what the GPU's loops allow: the pass equals the CPU reference's or
-/// fails with the loop limit in one line, never a silently wrong pass. On lavapipe (llvmpipe
-/// ends an invocation's loops after 65535 iterations in all) it fails: the dragon's descents
-/// from its base mesh run thousands of splits.
+/// Descents that never pause (one dispatch each, however long): on lavapipe, whose compiler
+/// (llvmpipe) ends an invocation's loops after 65535 iterations in all, the dragon's long
+/// descents from its base mesh are cut short, and the pass fails with the loop limit in one
+/// line, never silently wrong; on a GPU without the limit it equals the CPU reference's.
 #[test]
 fn a_descent_the_gpu_cuts_short_fails_the_pass() {
     let (_one_at_a_time, device) = device();
@@ -162,8 +163,9 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
     let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
     let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
     gpu.set_levels(Levels::All);
-    gpu.set_descent_budget(1 << 20);
-    cpu.set_descent_budget(1 << 20);
+    gpu.set_descent_budget(1 << 12);
+    gpu.set_round_steps(u32::MAX);
+    cpu.set_descent_budget(1 << 12);
     let view = path_view(&pm, 0, 1, 0.5);
     match gpu.adapt(&view) {
         Ok(g) => {
@@ -177,6 +179,24 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
             assert!(line.contains("loop limit") && !line.contains('\n'), "{line}");
             eprintln!("{line}");
         }
+    }
+}
+
+/// Descents that pause every few steps and go on in the next dispatch (as on lavapipe, but
+/// after 5 steps instead of 128) make the CPU reference's passes along the bunny's path.
+#[test]
+fn paused_descents_go_on_in_the_next_dispatch() {
+    let (_one_at_a_time, device) = device();
+    let (bytes, pm) = dpm_of("stanford/bunny_zipper_c3d.obj.gz");
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
+    let mut gpu = GpuAdapter::new(&device, &dpm, 4096).unwrap();
+    gpu.set_levels(Levels::All);
+    gpu.set_round_steps(5);
+    cpu.set_descent_budget(gpu.descent_budget());
+    for k in 0..20 {
+        let view = path_view(&pm, k, 20, 0.5);
+        pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("frame {k}"));
     }
 }
 

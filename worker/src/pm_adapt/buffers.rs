@@ -60,7 +60,11 @@ pub(super) struct Params {
     pub(super) stack_slots: u32,
     /// The first descent of this dispatch of `count` or `descend`.
     pub(super) chunk_base: u32,
-    pub(super) pad: u32,
+    /// The most steps a descent takes in one dispatch (it resumes in the next), and the
+    /// dispatches (rounds) of `count` or `descend` that finish every descent.
+    pub(super) round_steps: u32,
+    pub(super) rounds: u32,
+    pub(super) pad: [u32; 3],
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).

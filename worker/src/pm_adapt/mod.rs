@@ -90,19 +90,22 @@ use nodes::NodePool;
 use occlusion::Occluder;
 use pipelines::Pipelines;
 
-/// The descent budget on a software adapter (lavapipe): one descent decodes at most about
-/// four operations per split (the split, its left child's criteria, its right child's when it
-/// is popped, a leaf's), each some 150 loop iterations with the bit-by-bit decoder, and
-/// llvmpipe ends every loop of an invocation after 65535 iterations in all: 32 splits keep
-/// it near 20,000.
-pub const SOFTWARE_DESCENT_BUDGET: u32 = 32;
+/// The most steps of a descent one dispatch runs on a software adapter (lavapipe), a step
+/// being one operation decoded (some 150 loop iterations with the bit-by-bit decoder):
+/// llvmpipe ends every loop of an invocation after 65535 iterations in all, so a descent
+/// pauses after 128 steps (near 20,000 iterations) and the next dispatch of the same stage
+/// goes on with it (`descent.wgsl`). Hardware GPUs run a descent in one dispatch.
+pub const SOFTWARE_ROUND_STEPS: u32 = 128;
+
+/// Vectors of a descent's resume record after the stacks (`RESUME_VECS` of `descent.wgsl`).
+pub(crate) const RESUME_VECS: u64 = 12;
 
 /// Unless [`GpuAdapter::set_levels`] chose one kind of pass: the splits a descent averages in
-/// an all-levels pass past which the later passes for the same view run one level. Measured on lavapipe
-/// (the dragon at 1920x1080, 0.5 px): from the base mesh the passes average 14-23, and all
-/// levels took 2.6 s to converge against 1.3 s in one-level passes; a 22.5 degree orbit step
-/// averages about 2 and converges in 2 all-levels passes (12x a converged pass) against 10
-/// one-level passes (25x).
+/// an all-levels pass past which the later passes for the same view run one level. Measured
+/// on lavapipe (the dragon at 1920x1080, 0.5 px): from the base mesh the passes average
+/// 14-23, and all levels took 2.5-3.2 s to converge against 1.0-1.3 s in one-level passes; a
+/// 22.5 degree orbit step averages about 2-6 and converges in one all-levels pass (11x a
+/// converged pass) against 10 one-level passes (24x).
 pub const DEEP_DESCENT: u32 = 8;
 
 /// Words of one entry of a descent's stack (`STACK_WORDS` of `descent.wgsl`).
@@ -266,6 +269,8 @@ pub struct GpuAdapter {
     /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
     levels: Levels,
     descent_budget: u32,
+    /// The most steps of a descent in one dispatch ([`Self::set_round_steps`]).
+    round_steps: u32,
     /// An all-levels pass's descent stacks (`descent.wgsl`): [`STACK_WORDS`] words an entry,
     /// min([`LEVELS_PER_PASS`], descent budget) entries a slot, one slot a descent running;
     /// grown to the descents of a pass up to [`Self::stack_max_bytes`] (more descents run in
@@ -423,7 +428,8 @@ impl GpuAdapter {
             mixed: true,
             deep: false,
             levels: Levels::All,
-            descent_budget: if gpu.is_software() { SOFTWARE_DESCENT_BUDGET } else { DESCENT_BUDGET },
+            descent_budget: DESCENT_BUDGET,
+            round_steps: if gpu.is_software() { SOFTWARE_ROUND_STEPS } else { u32::MAX },
             scan_levels: Vec::new(),
             n: 0,
             m: 0,
@@ -496,12 +502,29 @@ impl GpuAdapter {
     }
 
     /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1):
-    /// one thread's serial work. By default [`codec::pm::DESCENT_BUDGET`], and
-    /// [`SOFTWARE_DESCENT_BUDGET`] on a software adapter ([`Gpu::is_software`]), whose
-    /// compiler stops an invocation's loops after 65535 iterations in all. The CPU references
+    /// one thread's serial work. By default [`codec::pm::DESCENT_BUDGET`]. The CPU references
     /// take the same setting ([`codec::pm::Adapter::set_descent_budget`]).
     pub fn set_descent_budget(&mut self, splits: u32) {
         self.descent_budget = splits.max(1);
+    }
+
+    /// Sets the most steps (operations decoded) of a descent one dispatch runs before it
+    /// pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`] on a software
+    /// adapter ([`Gpu::is_software`]), whose compiler ends an invocation's loops after 65535
+    /// iterations in all; none on hardware.
+    pub fn set_round_steps(&mut self, steps: u32) {
+        self.round_steps = steps.max(1);
+    }
+
+    /// The dispatches of `count` or `descend` that finish every descent of a pass: a descent
+    /// of `b` splits takes at most `4 b + 1` steps (each vertex it visits: its cache decoded,
+    /// then a split or a leaf).
+    fn rounds(&self) -> u32 {
+        if self.round_steps == u32::MAX {
+            1
+        } else {
+            (4 * self.descent_budget.min(u32::MAX / 8) + 1).div_ceil(self.round_steps)
+        }
     }
 
     /// The descent budget ([`Self::set_descent_budget`]).
@@ -570,10 +593,17 @@ impl GpuAdapter {
         self.static_bytes() + self.occ.buffer.size() + records + self.stack.buffer.size().max(reserve)
     }
 
-    /// Bytes of one descent's stack: min(LEVELS_PER_PASS, descent budget) entries (a descent
-    /// pushes one per split, at most one per level).
+    /// Bytes of one descent's slot: its stack, min(LEVELS_PER_PASS, descent budget) entries
+    /// (a descent pushes one per split, at most one per level), and its resume record.
     fn stack_slot_bytes(&self) -> u64 {
-        LEVELS_PER_PASS.min(self.descent_budget) as u64 * STACK_WORDS * 4
+        LEVELS_PER_PASS.min(self.descent_budget) as u64 * STACK_WORDS * 4 + RESUME_VECS * 16
+    }
+
+    /// Where the resume records start in the stacks' buffer, and their bytes.
+    fn resume_range(&self) -> (u64, u64) {
+        let slots = self.stack_slots() as u64;
+        let records = slots * RESUME_VECS * 16;
+        (slots * self.stack_slot_bytes() - records, records)
     }
 
     /// The most bytes the descent stacks may take under `budget`: the stack limit

@@ -69,6 +69,7 @@ impl GpuAdapter {
         let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
         let mut params =
             Params { n, m, mode: 1, levels: all as u32, budget: self.descent_budget, ..Default::default() };
+        (params.round_steps, params.rounds) = (self.round_steps, self.rounds());
         if let Some(v) = view {
             params.mode = 0;
             params.planes = v.planes().map(|p| p.to_array());
@@ -272,18 +273,24 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
                 // More descents than stack slots run in several dispatches, each in a
-                // submission of its own after its first descent is written to the parameters.
+                // submission of its own after its first descent is written to the parameters;
+                // each in `rounds` dispatches where descents pause (a software GPU).
+                let (resume, records) = self.resume_range();
+                drop(pass);
                 for (c, (base, threads)) in chunks(split_vertices, params.stack_slots).enumerate() {
                     if c > 0 {
-                        drop(pass);
                         self.gpu.queue().submit([enc.finish()]);
                         params.chunk_base = base;
                         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
                         enc = self.gpu.device().create_command_encoder(&APPLY);
-                        pass = enc.begin_compute_pass(&APPLY_PASS);
                     }
-                    self.dispatch(&mut pass, &p.descend, &split_decode, threads);
+                    enc.clear_buffer(&self.stack.buffer, resume, Some(records));
+                    let mut pass = enc.begin_compute_pass(&APPLY_PASS);
+                    for _ in 0..params.rounds {
+                        self.dispatch(&mut pass, &p.descend, &split_decode, threads);
+                    }
                 }
+                pass = enc.begin_compute_pass(&APPLY_PASS);
                 self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
                 self.dispatch(&mut pass, &p.index_new, &split, f_add);
             } else {
@@ -430,6 +437,7 @@ impl GpuAdapter {
                 buffers.push(("dstack", &self.stack.buffer));
                 let count = p.count.bind_named(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
+                let (resume, records) = self.resume_range();
                 for (c, (base, threads)) in chunks(descents, params.stack_slots).enumerate() {
                     if c > 0 {
                         self.gpu.queue().submit([enc.finish()]);
@@ -437,8 +445,12 @@ impl GpuAdapter {
                     }
                     params.chunk_base = base;
                     self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+                    // Every descent starts; each round goes on with those the last paused.
+                    enc.clear_buffer(&self.stack.buffer, resume, Some(records));
                     let mut pass = enc.begin_compute_pass(&COUNT_PASS);
-                    self.dispatch(&mut pass, &p.count, &count, threads);
+                    for _ in 0..params.rounds {
+                        self.dispatch(&mut pass, &p.count, &count, threads);
+                    }
                 }
                 let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
