@@ -128,6 +128,8 @@ var<private> dc_pt: Point;
 var<private> dc_depth: u32;
 var<private> dc_uncached: bool;
 var<private> dc_slot: u32;
+var<private> dc_rounds: u32;
+var<private> dc_steps: u32;
 var<private> dc_sp: u32;
 var<private> dc_splits: u32;
 var<private> dc_leaves: u32;
@@ -159,13 +161,9 @@ fn resume_at(q: u32) -> u32 {
     return P.stack_slots * (entries * (STACK_WORDS / 4u) + q) + dc_slot;
 }
 
-fn resume_state(slot: u32) -> u32 {
-    dc_slot = slot;
-    return dstack[resume_at(0u)].x;
-}
-
-fn descent_save(state: u32, rounds: u32) {
-    dstack[resume_at(0u)] = vec4<u32>(state, rounds, dc_sp, dc_depth);
+// Saves the descent paused at the step cap (state 1) for the next round.
+fn descent_save() {
+    dstack[resume_at(0u)] = vec4<u32>(1u, dc_rounds, dc_sp, dc_depth);
     dstack[resume_at(1u)] = vec4<u32>(dc_f, dc_splits, dc_leaves, dc_faces);
     dstack[resume_at(2u)] = vec4<u32>(select(0u, 1u, dc_uncached), 0u, 0u, 0u);
     let c = dc_cur;
@@ -180,10 +178,9 @@ fn descent_save(state: u32, rounds: u32) {
     dstack[resume_at(11u)] = bitcast<vec4<u32>>(dc_pt.nrm);
 }
 
-// Goes on with the paused descent of slot `slot` (resume_state 1), writing to `face_out`;
-// returns the rounds it has run.
-fn descent_resume(slot: u32, face_out: u32) -> u32 {
-    dc_slot = slot;
+// Goes on with the descent of slot `dc_slot` that the last round paused, writing to
+// `face_out`, counting this round.
+fn descent_resume(face_out: u32) {
     let r0 = dstack[resume_at(0u)];
     let r1 = dstack[resume_at(1u)];
     dc_sp = r0.z;
@@ -212,7 +209,52 @@ fn descent_resume(slot: u32, face_out: u32) -> u32 {
     dc_cur = c;
     dc_pt = Point(bitcast<vec4<f32>>(dstack[resume_at(10u)]), bitcast<vec4<f32>>(dstack[resume_at(11u)]));
     dc_face_out = face_out;
-    return r0.y;
+    dc_rounds = r0.y + 1u;
+}
+
+// Starts the descent of slot `slot` from state `s` (FVID `f`, point `pt`, faces to
+// `face_out`), or goes on with it where the last round paused it; false when it is done.
+// The caller then loops while `descent_may_step`, and ends with `descent_end`.
+fn descent_begin(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) -> bool {
+    dc_slot = slot;
+    let state = dstack[resume_at(0u)].x;
+    if (state == 2u) {
+        return false;
+    }
+    dc_steps = 0u;
+    if (state == 0u) {
+        descent_start(slot, s, f, pt, face_out);
+        dc_rounds = 1u;
+    } else {
+        descent_resume(face_out);
+    }
+    return true;
+}
+
+// Whether the descent may take another step this round (counted).
+fn descent_may_step() -> bool {
+    if (dc_steps == P.round_steps) {
+        return false;
+    }
+    dc_steps += 1u;
+    return true;
+}
+
+// After a descent's loop, `finished` when it left by its one exit (no right child left):
+// marks the descent done and returns true. At the step cap it pauses for the next round
+// instead (false: nothing to write yet). Otherwise the GPU ended the loop (llvmpipe ends an
+// invocation's loops after 65535 iterations in all, silently), which fails the pass
+// (DEC_LOOP_LIMIT at `addr`) instead of a wrong result.
+fn descent_end(finished: bool, addr: u32) -> bool {
+    if (!finished) {
+        if (dc_steps == P.round_steps && dc_rounds < P.rounds) {
+            descent_save();
+            return false;
+        }
+        report(DEC_LOOP_LIMIT, addr);
+    }
+    dstack[resume_at(0u)] = vec4<u32>(2u, dc_rounds, 0u, 0u);
+    return true;
 }
 
 fn descent_start(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) {

@@ -91,23 +91,14 @@ fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let i = list[k];
     let j = vsum[i];
     let count = vsum[i + 1u] - j;
-    let state = resume_state(t);
-    if (state == 2u) {
+    if (!descent_begin(t, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i])) {
         return;
     }
-    var rounds = 1u;
-    if (state == 0u) {
-        descent_start(t, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
-    } else {
-        rounds += descent_resume(t, P.m + fsum[i]);
-    }
     var finished = false;
-    var steps = 0u;
     loop {
-        if (steps == P.round_steps) {
+        if (!descent_may_step()) {
             break;
         }
-        steps += 1u;
         let step = descent_step();
         if (step == STEP_SPLIT) {
             for (var e = dc_faces - dc_last_faces; e < dc_faces; e++) {
@@ -129,13 +120,5 @@ fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
             break;
         }
     }
-    // As in `count` (state.wgsl): paused at the step cap, or a loop the GPU ended early.
-    if (!finished) {
-        if (steps == P.round_steps && rounds < P.rounds) {
-            descent_save(1u, rounds);
-            return;
-        }
-        report(DEC_LOOP_LIMIT, vstate[i].addr);
-    }
-    dstack[resume_at(0u)] = vec4<u32>(2u, rounds, 0u, 0u);
+    descent_end(finished, vstate[i].addr);
 }

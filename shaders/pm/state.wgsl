@@ -115,23 +115,14 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
         return;
     }
     let i = list[k];
-    let state = resume_state(t);
-    if (state == 2u) {
+    if (!descent_begin(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR)) {
         return;
     }
-    var rounds = 1u;
-    if (state == 0u) {
-        descent_start(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
-    } else {
-        rounds += descent_resume(t, NONE_ADDR);
-    }
     var finished = false;
-    var steps = 0u;
     loop {
-        if (steps == P.round_steps) {
+        if (!descent_may_step()) {
             break;
         }
-        steps += 1u;
         if (descent_step() != STEP_LEAF) {
             continue;
         }
@@ -141,19 +132,10 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
             break;
         }
     }
-    if (!finished) {
-        // Paused at the step cap: the next round goes on.
-        if (steps == P.round_steps && rounds < P.rounds) {
-            descent_save(1u, rounds);
-            return;
-        }
-        // Otherwise the GPU ended the loop (llvmpipe ends an invocation's loops after 65535
-        // iterations in all, silently): that fails the pass instead of giving a wrong count.
-        report(DEC_LOOP_LIMIT, vstate[i].addr);
+    if (descent_end(finished, vstate[i].addr)) {
+        vcnt[i] = dc_leaves;
+        fcnt[i] = dc_faces;
     }
-    dstack[resume_at(0u)] = vec4<u32>(2u, rounds, 0u, 0u);
-    vcnt[i] = dc_leaves;
-    fcnt[i] = dc_faces;
 }
 
 @compute @workgroup_size(256)

@@ -90,26 +90,24 @@ fn pass_both(pm: &ProgressiveMesh, cpu: &mut Adapter, gpu: &mut GpuAdapter, view
 /// level or of all.
 /// Returns the most descents a pass ran and the stack's slots at the end.
 fn check_path(rel: &str, frames: usize, error_px: f32, device: &Gpu, levels: Levels) -> (u32, u32) {
-    check_path_with(rel, frames, error_px, device, levels, None)
+    check_path_with(rel, frames, error_px, device, levels, |_| {})
 }
 
-/// [`check_path`] with the descents' stacks limited to `stack_bytes`.
+/// [`check_path`] with the GPU adapter set up further by `setup`.
 fn check_path_with(
     rel: &str,
     frames: usize,
     error_px: f32,
     device: &Gpu,
     levels: Levels,
-    stack_bytes: Option<u64>,
+    setup: impl Fn(&mut GpuAdapter),
 ) -> (u32, u32) {
     let (bytes, pm) = dpm_of(rel);
     let dpm = Dpm::parse(&bytes).unwrap();
     let mut cpu = Adapter::new(&pm).with_levels(levels);
     let mut gpu = GpuAdapter::new(device, &dpm, 4096).unwrap();
     gpu.set_levels(levels);
-    if let Some(b) = stack_bytes {
-        gpu.set_stack_limit(b);
-    }
+    setup(&mut gpu);
     cpu.set_descent_budget(gpu.descent_budget());
     let start = Instant::now();
     let (mut lo, mut hi) = (usize::MAX, 0);
@@ -145,8 +143,9 @@ fn descents_beyond_the_stacks_run_in_several_dispatches() {
     let (_one_at_a_time, device) = device();
     // 48 slots of 32 entries of 24 words and a resume record of 12 vectors.
     let slot = 32 * 96 + 12 * 16;
-    let (most, slots) =
-        check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, Some(48 * slot));
+    let (most, slots) = check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, |g| {
+        g.set_stack_limit(48 * slot)
+    });
     assert_eq!(slots, 48);
     assert!(most > 3 * slots, "at most {most} descents a pass: one dispatch held them");
 }
@@ -187,17 +186,7 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
 #[test]
 fn paused_descents_go_on_in_the_next_dispatch() {
     let (_one_at_a_time, device) = device();
-    let (bytes, pm) = dpm_of("stanford/bunny_zipper_c3d.obj.gz");
-    let dpm = Dpm::parse(&bytes).unwrap();
-    let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
-    let mut gpu = GpuAdapter::new(&device, &dpm, 4096).unwrap();
-    gpu.set_levels(Levels::All);
-    gpu.set_round_steps(5);
-    cpu.set_descent_budget(gpu.descent_budget());
-    for k in 0..20 {
-        let view = path_view(&pm, k, 20, 0.5);
-        pass_both(&pm, &mut cpu, &mut gpu, Some(&view), &format!("frame {k}"));
-    }
+    check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, |g| g.set_round_steps(5));
 }
 
 #[test]

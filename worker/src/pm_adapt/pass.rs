@@ -272,24 +272,8 @@ impl GpuAdapter {
             let mut pass = enc.begin_compute_pass(&APPLY_PASS);
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
-                // More descents than stack slots run in several dispatches, each in a
-                // submission of its own after its first descent is written to the parameters;
-                // each in `rounds` dispatches where descents pause (a software GPU).
-                let (resume, records) = self.resume_range();
                 drop(pass);
-                for (c, (base, threads)) in chunks(split_vertices, params.stack_slots).enumerate() {
-                    if c > 0 {
-                        self.gpu.queue().submit([enc.finish()]);
-                        params.chunk_base = base;
-                        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-                        enc = self.gpu.device().create_command_encoder(&APPLY);
-                    }
-                    enc.clear_buffer(&self.stack.buffer, resume, Some(records));
-                    let mut pass = enc.begin_compute_pass(&APPLY_PASS);
-                    for _ in 0..params.rounds {
-                        self.dispatch(&mut pass, &p.descend, &split_decode, threads);
-                    }
-                }
+                self.run_descents(&mut enc, &mut params, &p.descend, &split_decode, split_vertices, &APPLY);
                 pass = enc.begin_compute_pass(&APPLY_PASS);
                 self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
                 self.dispatch(&mut pass, &p.index_new, &split, f_add);
@@ -424,11 +408,10 @@ impl GpuAdapter {
                 self.gpu.queue().submit([enc.finish()]);
                 let descents = self.read_totals()?[2 + STAT_DESCENTS];
                 self.descents = descents;
-                let slots = self.stack_slots();
-                let want = (descents as u64).min(self.stack_max_bytes(self.budget) / self.stack_slot_bytes());
+                let (slots, max) = (self.stack_slots(), self.stack_max_bytes(self.budget));
+                let want = (descents as u64).min(max / self.stack_slot_bytes());
                 if (slots as u64) < want {
                     // Grown to the descents (at least double), within the most it may take.
-                    let max = self.stack_max_bytes(self.budget);
                     let bytes = (want * self.stack_slot_bytes()).max(self.stack.cap * 8).min(max);
                     self.stack = storage(self.gpu.device(), "pm: descent stacks", bytes / 4, 4, VERTEX_USAGE);
                     self.reallocations += 1;
@@ -437,21 +420,7 @@ impl GpuAdapter {
                 buffers.push(("dstack", &self.stack.buffer));
                 let count = p.count.bind_named(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
-                let (resume, records) = self.resume_range();
-                for (c, (base, threads)) in chunks(descents, params.stack_slots).enumerate() {
-                    if c > 0 {
-                        self.gpu.queue().submit([enc.finish()]);
-                        enc = self.gpu.device().create_command_encoder(&COUNT);
-                    }
-                    params.chunk_base = base;
-                    self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
-                    // Every descent starts; each round goes on with those the last paused.
-                    enc.clear_buffer(&self.stack.buffer, resume, Some(records));
-                    let mut pass = enc.begin_compute_pass(&COUNT_PASS);
-                    for _ in 0..params.rounds {
-                        self.dispatch(&mut pass, &p.count, &count, threads);
-                    }
-                }
+                self.run_descents(&mut enc, params, &p.count, &count, descents, &COUNT);
                 let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {
@@ -483,6 +452,38 @@ impl GpuAdapter {
             return Err(AdaptError::corrupt(totals[10], totals[11], self.resident.is_some()));
         }
         Ok(totals)
+    }
+
+    /// Records `stage` (`count` or `descend`) over `total` descents into `enc`: in dispatches
+    /// of at most the stacks' slots, each after its first descent is written to the
+    /// parameters (a chunk after the first in a submission of its own, `enc` then a new
+    /// encoder labelled by `label`), its descents' resume records cleared (every descent
+    /// starts), and dispatched `rounds` times (each round goes on with the descents the last
+    /// one paused: a software GPU).
+    fn run_descents(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        params: &mut Params,
+        stage: &Stage,
+        bg: &wgpu::BindGroup,
+        total: u32,
+        label: &wgpu::CommandEncoderDescriptor,
+    ) {
+        let (resume, records) = self.resume_range();
+        for (c, (base, threads)) in chunks(total, params.stack_slots).enumerate() {
+            if c > 0 {
+                let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(label));
+                self.gpu.queue().submit([done.finish()]);
+            }
+            params.chunk_base = base;
+            self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+            enc.clear_buffer(&self.stack.buffer, resume, Some(records));
+            let mut pass =
+                enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: label.label, timestamp_writes: None });
+            for _ in 0..params.rounds {
+                self.dispatch(&mut pass, stage, bg, threads);
+            }
+        }
     }
 
     /// Reallocates the face buffers to `cap` faces, keeping the first `keep`.
