@@ -79,13 +79,13 @@ const DEC_LOOP_LIMIT: u32 = 12u; // a descent's loop ended without finishing (a 
 const DECODE_ALL: u32 = 0u;
 const DECODE_TO_FACES: u32 = 1u;
 
-// The bit reader: the next byte to load, the loaded byte, its bits not yet read, and the
-// first failure (reads after one return zeros without touching memory); r_end is one past the
-// last byte it may read (the section's, or the node's in its slot).
+// The bit reader: the byte that holds the next bit and how many of its bits were read (most
+// significant first), and the first failure (reads after one return zeros without touching
+// memory); r_end is one past the last byte it may read (the section's, or the node's in its
+// slot).
 var<private> r_byte: u32;
+var<private> r_off: u32;
 var<private> r_end: u32;
-var<private> r_buf: u32;
-var<private> r_bits: u32;
 var<private> r_err: u32;
 
 fn fail(code: u32) {
@@ -98,46 +98,114 @@ fn op_byte(i: u32) -> u32 {
     return (ops[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu;
 }
 
-// The next bit, most significant first; past the section's end a failure.
-fn read_bit() -> u32 {
+// The bits left to read before r_end, at most 32.
+fn bits_left() -> u32 {
+    if (r_byte >= r_end) {
+        return 0u;
+    }
+    return min(min(r_end - r_byte, 5u) * 8u - r_off, 32u);
+}
+
+// A word's bytes in the other order: the operations' bytes as a big-endian number.
+fn byte_swap(x: u32) -> u32 {
+    return (x << 24u) | ((x & 0xff00u) << 8u) | ((x >> 8u) & 0xff00u) | (x >> 24u);
+}
+
+// The next 32 bits, the next one the most significant, zeros past r_end (not read): at most
+// two words of `ops`.
+fn peek() -> u32 {
+    let left = bits_left();
+    if (left == 0u) {
+        return 0u;
+    }
+    let i = r_byte >> 2u;
+    let hi = byte_swap(ops[i]);
+    var lo = 0u;
+    if ((i + 1u) * 4u < r_end) {
+        lo = byte_swap(ops[i + 1u]);
+    }
+    let s = (r_byte & 3u) * 8u + r_off;
+    var w = hi;
+    if (s > 0u) {
+        w = (hi << s) | (lo >> (32u - s));
+    }
+    if (left < 32u) {
+        w &= ~(0xffffffffu >> left);
+    }
+    return w;
+}
+
+fn skip(bits: u32) {
+    let t = r_off + bits;
+    r_byte += t >> 3u;
+    r_off = t & 7u;
+}
+
+// One past the last byte read from.
+fn reader_end() -> u32 {
+    return r_byte + select(0u, 1u, r_off != 0u);
+}
+
+// The next `k` bits (1 to 32) as a number; past the end a failure.
+fn read_bits(k: u32) -> u32 {
     if (r_err != DEC_OK) {
         return 0u;
     }
-    if (r_bits == 0u) {
-        if (r_byte >= r_end) {
-            fail(DEC_TRUNCATED);
-            return 0u;
-        }
-        r_buf = op_byte(r_byte);
-        r_byte += 1u;
-        r_bits = 8u;
+    if (bits_left() < k) {
+        fail(DEC_TRUNCATED);
+        return 0u;
     }
-    r_bits -= 1u;
-    return (r_buf >> r_bits) & 1u;
+    let v = peek() >> (32u - k);
+    skip(k);
+    return v;
 }
 
-// One symbol of canonical Huffman table `t`, bit by bit. `tables[t]` is where the table's
-// TABLE_WORDS words start (identical tables share them): the first code per length (MAX_LEN + 1
-// words), the count per length, the offset of the length's symbols, the longest length, then
-// the symbols by code, four bytes per word.
+// Where a table's lookup starts among its words.
+const LUT_AT: u32 = 3u * (MAX_LEN + 1u) + 1u + 64u;
+
+// One symbol of canonical Huffman table `t`. `tables[t]` is where the table's TABLE_WORDS
+// words start (identical tables share them): the first code per length (MAX_LEN + 1 words),
+// the count per length, the offset of the length's symbols, the longest length, the symbols
+// by code, four bytes per word, then per LUT_BITS-bit pattern the symbol of the code it
+// begins with and that code's length (`sym | len << 8`, two a word), 0 where the code is
+// longer. Longer codes are compared length by length. It fails as a bit-by-bit reader would:
+// truncated where the code (or the search for one) runs past the end, else no code of the
+// table (decoder.rs `lut_entry`).
 fn read_sym(t: u32) -> u32 {
+    if (r_err != DEC_OK) {
+        return 0u;
+    }
     let base = tables[t];
     let longest = min(tables[base + 3u * (MAX_LEN + 1u)], MAX_LEN);
-    var code = 0u;
-    for (var l = 1u; l <= longest; l++) {
-        code = (code << 1u) | read_bit();
-        if (r_err != DEC_OK) {
-            return 0u;
-        }
-        let first = tables[base + l];
-        let d = code - first;
-        if (code >= first && d < tables[base + MAX_LEN + 1u + l]) {
-            let k = tables[base + 2u * (MAX_LEN + 1u) + l] + d;
-            return (tables[base + 3u * (MAX_LEN + 1u) + 1u + (k >> 2u)] >> ((k & 3u) * 8u)) & 0xffu;
+    let left = bits_left();
+    let w = peek();
+    let p = w >> (32u - LUT_BITS);
+    let e = (tables[base + LUT_AT + (p >> 1u)] >> ((p & 1u) * 16u)) & 0xffffu;
+    var len = e >> 8u;
+    var sym = e & 0xffu;
+    if (e == 0u) {
+        for (var l = LUT_BITS + 1u; l <= longest; l++) {
+            let code = w >> (32u - l);
+            let first = tables[base + l];
+            let d = code - first;
+            if (code >= first && d < tables[base + MAX_LEN + 1u + l]) {
+                let k = tables[base + 2u * (MAX_LEN + 1u) + l] + d;
+                sym = (tables[base + 3u * (MAX_LEN + 1u) + 1u + (k >> 2u)] >> ((k & 3u) * 8u)) & 0xffu;
+                len = l;
+                break;
+            }
         }
     }
-    fail(DEC_SYMBOL);
-    return 0u;
+    if (len == 0u) {
+        fail(select(DEC_SYMBOL, DEC_TRUNCATED, left < longest));
+        return 0u;
+    }
+    if (len > left) {
+        fail(DEC_TRUNCATED);
+        return 0u;
+    }
+    skip(len);
+    return sym;
 }
 
 // A value in 7-bit groups, least significant first, from the three tables at `t0` (group
@@ -176,11 +244,7 @@ fn get_bucket(t: u32) -> u32 {
         return 0u;
     }
     let raw = b - 4u;
-    var v = (8u | ((s - 16u) & 7u)) << raw;
-    for (var i = 1u; i <= raw; i++) {
-        v |= read_bit() << (raw - i);
-    }
-    return v;
+    return ((8u | ((s - 16u) & 7u)) << raw) | read_bits(raw);
 }
 
 // The inverse of the zigzag map (0, -1, 1, -2, ...), over all of u32.
@@ -350,7 +414,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     }
     r_byte = base + local;
     r_end = base + len;
-    r_bits = 0u;
+    r_off = 0u;
     r_err = DEC_OK;
     let n = D.vertices;
     let max_q = (1u << D.position_bits) - 1u;
@@ -648,7 +712,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
                 return o;
             }
         }
-        let end = r_byte;
+        let end = reader_end();
         if ((has_left || has_right) && end >= D.ops_len) {
             o.status = DEC_TRUNCATED;
             return o;
@@ -702,7 +766,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
             }
         }
         // The offsets in this node count from this operation's end.
-        let end = r_byte - base;
+        let end = reader_end() - base;
         for (var k = 0u; k < splitting; k++) {
             if (here[k]) {
                 if (at[k] >= len - min(end, len)) {
@@ -723,7 +787,7 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     } else if (has_right) {
         o.right = first_addr;
     }
-    let end = r_byte - base;
+    let end = reader_end() - base;
     o.status = DEC_OK;
     o.v_u = v_u;
     o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);
