@@ -103,13 +103,13 @@ struct Params {
     levels: u32,   // 1: an all-levels pass (codec::pm::Levels::All), 0: one level
     budget: u32,   // an all-levels pass: the most splits one vertex's descent performs
     stack_slots: u32, // an all-levels pass: the descents' stack slots (descent.wgsl), the
-                      // most descents one dispatch of `count` or `descend` runs
-    chunk_base: u32,  // the first descent of this dispatch of `count` or `descend`
-    round_steps: u32, // the most steps a descent takes in one dispatch (it resumes in the next)
-    rounds: u32,      // the dispatches of `count` or `descend` that finish every descent
+                      // threads of `count` and `descend`
+    round_steps: u32, // the most steps a slot takes in one dispatch (a descent resumes in the next)
+    rounds: u32,      // the dispatches (rounds) of `count` or `descend` the host runs
     pad0: u32,
     pad1: u32,
     pad2: u32,
+    pad3: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
     // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.

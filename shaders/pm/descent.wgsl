@@ -120,8 +120,9 @@ fn point_of(s: VState) -> Point {
 //
 // `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
 // llvmpipe (lavapipe) stops every loop of an invocation after 65535 iterations in all,
-// silently (the decoder reads bit by bit, some 150 iterations an operation): there a descent
-// pauses after P.round_steps steps and the next dispatch goes on with it (the resume record).
+// silently (as it counts them, a step takes between 128 and 256: a round of 256 steps ran,
+// one of 512 did not): there a slot pauses its descent after P.round_steps steps and the
+// next dispatch goes on with it (the resume record).
 var<private> dc_cur: VState;
 var<private> dc_f: u32;
 var<private> dc_pt: Point;
@@ -137,6 +138,9 @@ var<private> dc_faces: u32;
 var<private> dc_face_out: u32;
 var<private> dc_last_vu: u32;
 var<private> dc_last_faces: u32;
+var<private> dc_vertex: u32;
+var<private> dc_q: u32;
+var<private> dc_dsteps: u32;
 
 // An entry of the stack, STACK_WORDS / 4 vectors: (the right child's FVID, depth, range end,
 // operation address), its context, (its quantized position xyz, its creator's address),
@@ -149,11 +153,11 @@ fn sk_at(e: u32, q: u32) -> u32 {
 }
 
 // After the stacks, a record per slot (RESUME_VECS vectors, vector q of slot t at
-// resume_base() + q * P.stack_slots + t) of the descent in it: (0: not started this pass, 1:
-// paused by the step cap, 2: done; rounds run, sp, depth), (FVID, splits, leaves, faces),
-// (uncached, 0, 0, 0), the current vertex's state (7 vectors) and point (2). A dispatch that
-// reaches P.round_steps steps saves the descent there and the next dispatch goes on from it,
-// so that no invocation runs past llvmpipe's loop limit however long its descent.
+// resume_base() + q * P.stack_slots + t): (1: a descent paused in it, else 0; the rounds the
+// slot ran, sp, depth), (FVID, splits, leaves, faces), (uncached, the descent's vertex, its
+// steps so far, 0), the current vertex's state (7 vectors) and point (2). A slot that reaches
+// P.round_steps steps in a round saves its descent there and the next round (dispatch) goes
+// on with it, so that no invocation runs past llvmpipe's loop limit however long its descents.
 const RESUME_VECS: u32 = 12u;
 
 fn resume_at(q: u32) -> u32 {
@@ -161,11 +165,24 @@ fn resume_at(q: u32) -> u32 {
     return P.stack_slots * (entries * (STACK_WORDS / 4u) + q) + dc_slot;
 }
 
-// Saves the descent paused at the step cap (state 1) for the next round.
+// The descents of a stage form a queue (in `queue`, which the including file declares, from
+// word `dc_q`): the next of its list to take, the descents paused now, and of the finished
+// ones the steps in all (64 bits, low word first) and the most steps of one (what the host
+// sizes the rounds by). A slot takes the next descent whenever it finished one, so that its
+// lanes stay busy however unequal the descents (on lavapipe eight lanes wait for the longest
+// of theirs, on a GPU a warp's 32).
+const Q_NEXT: u32 = 0u;
+const Q_PAUSED: u32 = 1u;
+const Q_STEPS: u32 = 2u;
+const Q_MOST: u32 = 4u;
+const Q_COUNT: u32 = 0u;   // count's queue
+const Q_DESCEND: u32 = 8u; // descend's
+
+// Saves the descent paused at the step cap for the next round.
 fn descent_save() {
     dstack[resume_at(0u)] = vec4<u32>(1u, dc_rounds, dc_sp, dc_depth);
     dstack[resume_at(1u)] = vec4<u32>(dc_f, dc_splits, dc_leaves, dc_faces);
-    dstack[resume_at(2u)] = vec4<u32>(select(0u, 1u, dc_uncached), 0u, 0u, 0u);
+    dstack[resume_at(2u)] = vec4<u32>(select(0u, 1u, dc_uncached), dc_vertex, dc_dsteps, 0u);
     let c = dc_cur;
     dstack[resume_at(3u)] = vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr);
     dstack[resume_at(4u)] = vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags);
@@ -176,20 +193,40 @@ fn descent_save() {
     dstack[resume_at(9u)] = bitcast<vec4<u32>>(c.c_crit);
     dstack[resume_at(10u)] = bitcast<vec4<u32>>(dc_pt.pos);
     dstack[resume_at(11u)] = bitcast<vec4<u32>>(dc_pt.nrm);
+    atomicAdd(&queue[dc_q + Q_PAUSED], 1u);
 }
 
-// Goes on with the descent of slot `dc_slot` that the last round paused, writing to
-// `face_out`, counting this round.
+// A round of slot `slot` of the stage whose queue starts at word `q`: counts the round, and
+// returns the vertex of the descent the last round paused in the slot (NONE if none), which
+// the caller resumes with `descent_resume`.
+fn descent_round(slot: u32, q: u32) -> u32 {
+    dc_slot = slot;
+    dc_q = q;
+    dc_steps = 0u;
+    let r0 = dstack[resume_at(0u)];
+    dc_rounds = r0.y + 1u;
+    dstack[resume_at(0u)] = vec4<u32>(0u, dc_rounds, r0.zw);
+    if (r0.x != 1u) {
+        return NONE;
+    }
+    atomicSub(&queue[q + Q_PAUSED], 1u);
+    return dstack[resume_at(2u)].y;
+}
+
+// Goes on with the descent the last round paused in the slot, writing to `face_out`.
 fn descent_resume(face_out: u32) {
     let r0 = dstack[resume_at(0u)];
     let r1 = dstack[resume_at(1u)];
+    let r2 = dstack[resume_at(2u)];
     dc_sp = r0.z;
     dc_depth = r0.w;
     dc_f = r1.x;
     dc_splits = r1.y;
     dc_leaves = r1.z;
     dc_faces = r1.w;
-    dc_uncached = dstack[resume_at(2u)].x != 0u;
+    dc_uncached = r2.x != 0u;
+    dc_vertex = r2.y;
+    dc_dsteps = r2.z;
     let a = dstack[resume_at(3u)];
     let b = dstack[resume_at(4u)];
     var c: VState;
@@ -209,26 +246,19 @@ fn descent_resume(face_out: u32) {
     dc_cur = c;
     dc_pt = Point(bitcast<vec4<f32>>(dstack[resume_at(10u)]), bitcast<vec4<f32>>(dstack[resume_at(11u)]));
     dc_face_out = face_out;
-    dc_rounds = r0.y + 1u;
 }
 
-// Starts the descent of slot `slot` from state `s` (FVID `f`, point `pt`, faces to
-// `face_out`), or goes on with it where the last round paused it; false when it is done.
-// The caller then loops while `descent_may_step`, and ends with `descent_end`.
-fn descent_begin(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) -> bool {
-    dc_slot = slot;
-    let state = dstack[resume_at(0u)].x;
-    if (state == 2u) {
-        return false;
+// The vertex of the next descent of the queue, of `list`'s first `total`; NONE when all are
+// taken or the slot's steps of this round are spent (the caller then starts it).
+fn descent_take(total: u32) -> u32 {
+    if (dc_steps == P.round_steps) {
+        return NONE;
     }
-    dc_steps = 0u;
-    if (state == 0u) {
-        descent_start(slot, s, f, pt, face_out);
-        dc_rounds = 1u;
-    } else {
-        descent_resume(face_out);
+    let k = atomicAdd(&queue[dc_q + Q_NEXT], 1u);
+    if (k >= total) {
+        return NONE;
     }
-    return true;
+    return list[k];
 }
 
 // Whether the descent may take another step this round (counted).
@@ -237,14 +267,16 @@ fn descent_may_step() -> bool {
         return false;
     }
     dc_steps += 1u;
+    dc_dsteps += 1u;
     return true;
 }
 
 // After a descent's loop, `finished` when it left by its one exit (no right child left):
-// marks the descent done and returns true. At the step cap it pauses for the next round
-// instead (false: nothing to write yet). Otherwise the GPU ended the loop (llvmpipe ends an
-// invocation's loops after 65535 iterations in all, silently), which fails the pass
-// (DEC_LOOP_LIMIT at `addr`) instead of a wrong result.
+// counts its steps in the queue and returns true. At the step cap it pauses for the next
+// round instead (false: nothing to write yet), unless this is the last round the host runs
+// (P.rounds). Otherwise the GPU ended the loop (llvmpipe ends an invocation's loops after
+// 65535 iterations in all, silently). Both fail the pass (DEC_LOOP_LIMIT at `addr`) instead of
+// a wrong result, and end the slot's round.
 fn descent_end(finished: bool, addr: u32) -> bool {
     if (!finished) {
         if (dc_steps == P.round_steps && dc_rounds < P.rounds) {
@@ -252,13 +284,20 @@ fn descent_end(finished: bool, addr: u32) -> bool {
             return false;
         }
         report(DEC_LOOP_LIMIT, addr);
+        return false;
     }
-    dstack[resume_at(0u)] = vec4<u32>(2u, dc_rounds, 0u, 0u);
+    let before = atomicAdd(&queue[dc_q + Q_STEPS], dc_dsteps);
+    if (before + dc_dsteps < before) {
+        atomicAdd(&queue[dc_q + Q_STEPS + 1u], 1u);
+    }
+    atomicMax(&queue[dc_q + Q_MOST], dc_dsteps);
     return true;
 }
 
-fn descent_start(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) {
-    dc_slot = slot;
+// Starts the descent of vertex `i` from its state `s` (FVID `f`, point `pt`, faces to
+// `face_out`) in the slot of this round.
+fn descent_start(i: u32, s: VState, f: u32, pt: Point, face_out: u32) {
+    dc_vertex = i;
     dc_cur = s;
     dc_f = f;
     dc_pt = pt;
@@ -269,6 +308,7 @@ fn descent_start(slot: u32, s: VState, f: u32, pt: Point, face_out: u32) {
     dc_leaves = 0u;
     dc_faces = 0u;
     dc_face_out = face_out;
+    dc_dsteps = 0u;
 }
 
 // What one step of a descent did.

@@ -27,6 +27,8 @@
 @group(0) @binding(16) var<storage, read_write> face_owner: array<u32>;
 // The descents' stacks (descent.wgsl).
 @group(0) @binding(17) var<storage, read_write> dstack: array<vec4<u32>>;
+// The descents' queue (descent.wgsl).
+@group(0) @binding(18) var<storage, read_write> queue: array<atomic<u32>, 16>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -76,49 +78,60 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     dpoint[j + 1u] = Point(vec4<f32>(dequantize(o.position.xyz), 1.0), vec4<f32>(oct_decode(o.normal.xy), 0.0));
 }
 
-// An all-levels pass's splits (codec::pm::Levels::All): one thread per splitting vertex (in
-// dispatches of at most P.stack_slots) walks its subtree again as the state update counted
+// An all-levels pass's splits (codec::pm::Levels::All): each splitting vertex, taken from a
+// queue by one of P.stack_slots threads, walks its subtree again as the state update counted
 // it (descent.wgsl), writing the leaves to the vertex's slots in FVID order and the faces of
 // every split done to its face slots, each owned by its split's v_u; the split stage's
 // `index_new` then indexes them.
 @compute @workgroup_size(256)
 fn descend(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let t = thread_index(gid, groups);
-    let k = P.chunk_base + t;
-    if (t >= P.stack_slots || k >= P.splits) {
+    if (t >= P.stack_slots) {
         return;
     }
-    let i = list[k];
-    let j = vsum[i];
-    let count = vsum[i + 1u] - j;
-    if (!descent_begin(t, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i])) {
-        return;
+    var i = descent_round(t, Q_DESCEND);
+    if (i != NONE) {
+        descent_resume(P.m + fsum[i]);
     }
-    var finished = false;
     loop {
-        if (!descent_may_step()) {
-            break;
+        if (i == NONE) {
+            i = descent_take(P.splits);
+            if (i == NONE) {
+                break;
+            }
+            descent_start(i, vstate[i], vfvid[i], vpoint[i], P.m + fsum[i]);
         }
-        let step = descent_step();
-        if (step == STEP_SPLIT) {
-            for (var e = dc_faces - dc_last_faces; e < dc_faces; e++) {
-                face_owner[dc_face_out + e] = dc_last_vu;
+        let j = vsum[i];
+        let count = vsum[i + 1u] - j;
+        var finished = false;
+        loop {
+            if (!descent_may_step()) {
+                break;
+            }
+            let step = descent_step();
+            if (step == STEP_SPLIT) {
+                for (var e = dc_faces - dc_last_faces; e < dc_faces; e++) {
+                    face_owner[dc_face_out + e] = dc_last_vu;
+                }
+            }
+            if (step != STEP_LEAF) {
+                continue;
+            }
+            // Counted alike by the state update; the bound only keeps a fault in its slots.
+            if (dc_leaves < count) {
+                dfvid[j + dc_leaves] = dc_f;
+                dstate[j + dc_leaves] = dc_cur;
+                dpoint[j + dc_leaves] = dc_pt;
+            }
+            dc_leaves += 1u;
+            if (!descent_pop()) {
+                finished = true;
+                break;
             }
         }
-        if (step != STEP_LEAF) {
-            continue;
-        }
-        // Counted alike by the state update; the bound only keeps a fault in its slots.
-        if (dc_leaves < count) {
-            dfvid[j + dc_leaves] = dc_f;
-            dstate[j + dc_leaves] = dc_cur;
-            dpoint[j + dc_leaves] = dc_pt;
-        }
-        dc_leaves += 1u;
-        if (!descent_pop()) {
-            finished = true;
+        if (!descent_end(finished, vstate[i].addr)) {
             break;
         }
+        i = NONE;
     }
-    descent_end(finished, vstate[i].addr);
 }

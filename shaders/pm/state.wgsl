@@ -7,10 +7,10 @@
 // active vertex, which evaluates it) as a range of positions [p, q) in the sorted buffer, with
 // +1 at p and -1 at q - 1 in `diff` (whose exclusive scan then counts, at each position, the
 // undone ranges that hold it and start before it), the farthest range end (an FVID) starting
-// at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count`, one thread
-// per listed vertex (the host reads their number back, and runs them in dispatches of at most
-// P.stack_slots), counts its leaves and faces down its subtree (descent.wgsl). After the
-// scan of `diff`, `regions` gives a position inside an undone
+// at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count` counts each
+// listed vertex's leaves and faces down its subtree (descent.wgsl: P.stack_slots threads
+// take the listed vertices from a queue; the host reads their number back to size the
+// slots). After the scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
 // creator's range is the region's.
@@ -39,6 +39,8 @@
 @group(0) @binding(17) var<storage, read_write> list: array<u32>;
 // The descents' stacks (descent.wgsl).
 @group(0) @binding(18) var<storage, read_write> dstack: array<vec4<u32>>;
+// The descents' queue (descent.wgsl).
+@group(0) @binding(19) var<storage, read_write> queue: array<atomic<u32>, 16>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -110,31 +112,42 @@ fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
 @compute @workgroup_size(256)
 fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let t = thread_index(gid, groups);
-    let k = P.chunk_base + t;
-    if (t >= P.stack_slots || k >= atomicLoad(&stats[STAT_DESCENTS])) {
+    if (t >= P.stack_slots) {
         return;
     }
-    let i = list[k];
-    if (!descent_begin(t, vstate[i], vfvid[i], vpoint[i], NONE_ADDR)) {
-        return;
+    let total = atomicLoad(&stats[STAT_DESCENTS]);
+    var i = descent_round(t, Q_COUNT);
+    if (i != NONE) {
+        descent_resume(NONE_ADDR);
     }
-    var finished = false;
     loop {
-        if (!descent_may_step()) {
+        if (i == NONE) {
+            i = descent_take(total);
+            if (i == NONE) {
+                break;
+            }
+            descent_start(i, vstate[i], vfvid[i], vpoint[i], NONE_ADDR);
+        }
+        var finished = false;
+        loop {
+            if (!descent_may_step()) {
+                break;
+            }
+            if (descent_step() != STEP_LEAF) {
+                continue;
+            }
+            dc_leaves += 1u;
+            if (!descent_pop()) {
+                finished = true;
+                break;
+            }
+        }
+        if (!descent_end(finished, vstate[i].addr)) {
             break;
         }
-        if (descent_step() != STEP_LEAF) {
-            continue;
-        }
-        dc_leaves += 1u;
-        if (!descent_pop()) {
-            finished = true;
-            break;
-        }
-    }
-    if (descent_end(finished, vstate[i].addr)) {
         vcnt[i] = dc_leaves;
         fcnt[i] = dc_faces;
+        i = NONE;
     }
 }
 

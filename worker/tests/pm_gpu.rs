@@ -136,8 +136,8 @@ fn bunny_path_matches_the_cpu_reference() {
     }
 }
 
-/// More descents in a pass than the stacks hold: they run in several dispatches (each
-/// descent in its own slot), and the passes stay those of the CPU reference.
+/// More descents in a pass than the stacks hold: the slots take them from the queue in
+/// turn, and the passes stay those of the CPU reference.
 #[test]
 fn descents_beyond_the_stacks_run_in_several_dispatches() {
     let (_one_at_a_time, device) = device();

@@ -55,16 +55,14 @@ pub(super) struct Params {
     pub(super) levels: u32,
     /// An all-levels pass: the most splits one vertex's descent performs.
     pub(super) budget: u32,
-    /// An all-levels pass: the descents' stack slots (`descent.wgsl`), and the most descents
-    /// one dispatch of `count` or `descend` runs.
+    /// An all-levels pass: the descents' stack slots (`descent.wgsl`), the threads of
+    /// `count` and `descend`.
     pub(super) stack_slots: u32,
-    /// The first descent of this dispatch of `count` or `descend`.
-    pub(super) chunk_base: u32,
-    /// The most steps a descent takes in one dispatch (it resumes in the next), and the
-    /// dispatches (rounds) of `count` or `descend` that finish every descent.
+    /// The most steps a slot takes in one dispatch (a descent resumes in the next), and the
+    /// dispatches (rounds) of `count` or `descend` the host runs.
     pub(super) round_steps: u32,
     pub(super) rounds: u32,
-    pub(super) pad: [u32; 3],
+    pub(super) pad: [u32; 4],
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).
@@ -92,6 +90,13 @@ pub(crate) const STAT_SPLIT_VERTICES: usize = 6;
 /// An all-levels pass: the vertices that descend (listed by `mark`, counted by `count`).
 pub(crate) const STAT_DESCENTS: usize = 7;
 pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
+/// The queues of the descents of `count` (words 0-7) and `descend` (8-15), `Q_*` of
+/// `descent.wgsl`: per stage the next descent to take, the descents paused, and of the
+/// finished ones the steps in all (64 bits) and the most steps of one.
+pub(super) type Queue = [u32; 16];
+/// `Q_DESCEND` of `descent.wgsl`: where `descend`'s queue starts.
+pub(super) const Q_DESCEND: u64 = 8;
+pub(super) const QUEUE_BYTES: u64 = std::mem::size_of::<Queue>() as u64;
 /// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
 /// never cleared by a pass (`report` of `reorganise.wgsl`).
 pub(super) type Errors = [u32; 2];

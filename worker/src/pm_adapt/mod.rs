@@ -83,19 +83,26 @@ use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
     init, needs_resize, pack_pn, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES,
-    PENDING, POINT_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
+    PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
 use occlusion::Occluder;
 use pipelines::Pipelines;
 
-/// The most steps of a descent one dispatch runs on a software adapter (lavapipe), a step
-/// being one operation decoded (some 150 loop iterations with the bit-by-bit decoder):
-/// llvmpipe ends every loop of an invocation after 65535 iterations in all, so a descent
-/// pauses after 128 steps (near 20,000 iterations) and the next dispatch of the same stage
-/// goes on with it (`descent.wgsl`). Hardware GPUs run a descent in one dispatch.
+/// The most steps a descent slot runs in one dispatch on a software adapter (lavapipe), a
+/// step being one operation decoded at most: llvmpipe ends every loop of an invocation after
+/// 65535 iterations in all, silently, and counts between 128 and 256 a step (the bunny's
+/// lockstep path ran with 256 steps a round and failed with 512), so a slot pauses its
+/// descent after 128 steps and the next dispatch of the same stage goes on with it
+/// (`descent.wgsl`). Hardware GPUs never pause.
 pub const SOFTWARE_ROUND_STEPS: u32 = 128;
+
+/// The descent slots (threads of `count` and `descend`) on a software adapter, which takes
+/// a descent from the queue whenever it finished one: a few per lane of its cores, so that
+/// the lanes of a core stay busy until the queue is empty. A hardware GPU gets as many as
+/// the stacks hold, up to one per descent.
+pub const SOFTWARE_DESCENT_SLOTS: u32 = 1024;
 
 /// Vectors of a descent's resume record after the stacks (`RESUME_VECS` of `descent.wgsl`).
 pub(crate) const RESUME_VECS: u64 = 12;
@@ -112,8 +119,8 @@ pub const DEEP_DESCENT: u32 = 8;
 pub(crate) const STACK_WORDS: u64 = 24;
 
 /// The most bytes the descent stacks take (a memory budget of `b` bytes allows at most
-/// `b / 64`): 10,922 descents at a time, 32 entries each (one dispatch for the dragon's
-/// 5,000-9,000 descents an orbit frame at 1920x1080).
+/// `b / 64`): 10,922 slots, 32 entries each (a slot each for the dragon's 5,000-9,000
+/// descents an orbit frame at 1920x1080).
 pub const MAX_STACK_BYTES: u64 = 32 << 20;
 
 /// The labels of the all-levels marks ([`GpuAdapter`]'s `marks`).
@@ -269,13 +276,20 @@ pub struct GpuAdapter {
     /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
     levels: Levels,
     descent_budget: u32,
-    /// The most steps of a descent in one dispatch ([`Self::set_round_steps`]).
+    /// The most steps of a descent slot in one dispatch ([`Self::set_round_steps`]).
     round_steps: u32,
     /// An all-levels pass's descent stacks (`descent.wgsl`): [`STACK_WORDS`] words an entry,
     /// min([`LEVELS_PER_PASS`], descent budget) entries a slot, one slot a descent running;
-    /// grown to the descents of a pass up to [`Self::stack_max_bytes`] (more descents run in
-    /// several dispatches).
+    /// grown to the descents of a pass (on a software adapter to [`SOFTWARE_DESCENT_SLOTS`])
+    /// up to [`Self::stack_max_bytes`]; the slots take the descents from a queue.
     stack: Sized,
+    /// The slots (threads) of this pass's descents, and their queues ([`buffers::Queue`]).
+    slots: u32,
+    queue: wgpu::Buffer,
+    /// The steps of the last count's descents in all and the most of one (they size the
+    /// rounds of `descend`).
+    steps: u64,
+    most: u64,
     /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
     /// the vertices that descended in the last pass ([`Self::last_descents`]).
     stack_limit: u64,
@@ -423,6 +437,10 @@ impl GpuAdapter {
             hole: storage(d, "pm: face holes", 0, 4, VERTEX_USAGE),
             marks: MARKS.map(|name| storage(d, name, 0, 4, VERTEX_USAGE)),
             stack: storage(d, "pm: descent stacks", 0, 4, VERTEX_USAGE),
+            slots: 0,
+            steps: 0,
+            most: 0,
+            queue: storage(d, "pm: descent queues", QUEUE_BYTES / 4, 4, VERTEX_USAGE).buffer,
             stack_limit: MAX_STACK_BYTES,
             descents: 0,
             mixed: true,
@@ -508,23 +526,30 @@ impl GpuAdapter {
         self.descent_budget = splits.max(1);
     }
 
-    /// Sets the most steps (operations decoded) of a descent one dispatch runs before it
-    /// pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`] on a software
-    /// adapter ([`Gpu::is_software`]), whose compiler ends an invocation's loops after 65535
-    /// iterations in all; none on hardware.
+    /// Sets the most steps (operations decoded) a descent slot runs in one dispatch before its
+    /// descent pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`] on a
+    /// software adapter ([`Gpu::is_software`]), whose compiler ends an invocation's loops
+    /// after 65535 iterations in all; none on hardware.
     pub fn set_round_steps(&mut self, steps: u32) {
         self.round_steps = steps.max(1);
     }
 
-    /// The dispatches of `count` or `descend` that finish every descent of a pass: a descent
-    /// of `b` splits takes at most `4 b + 1` steps (each vertex it visits: its cache decoded,
-    /// then a split or a leaf).
-    fn rounds(&self) -> u32 {
+    /// The most steps of one descent: one of `b` splits visits at most `2 b + 1` vertices,
+    /// two steps each (its cache decoded, then a split or a leaf).
+    fn descent_steps(&self) -> u64 {
+        4 * self.descent_budget as u64 + 1
+    }
+
+    /// The dispatches (rounds) of `count` or `descend` that finish descents of `steps` steps
+    /// in all, the longest `most`, in the pass's slots: while the queue is not empty every
+    /// slot runs its round's steps in full, and once it is, each slot's last descent needs at
+    /// most `most` more. One on hardware (no pause).
+    fn rounds_for(&self, steps: u64, most: u64) -> u32 {
         if self.round_steps == u32::MAX {
-            1
-        } else {
-            (4 * self.descent_budget.min(u32::MAX / 8) + 1).div_ceil(self.round_steps)
+            return 1;
         }
+        let per_round = self.slots.max(1) as u64 * self.round_steps as u64;
+        (steps / per_round + 1 + most.div_ceil(self.round_steps as u64)).min(u32::MAX as u64) as u32
     }
 
     /// The descent budget ([`Self::set_descent_budget`]).
@@ -546,10 +571,10 @@ impl GpuAdapter {
     }
 
     /// The vertices that descended in the last pass (all levels; 0 in a one-level pass), and
-    /// the most descents one dispatch runs now (the stacks' slots): a pass with more runs
-    /// its descents in several dispatches.
+    /// the slots it ran them in (threads, each taking the next descent whenever it finished
+    /// one).
     pub fn last_descents(&self) -> (u32, u32) {
-        (self.descents, self.stack_slots())
+        (self.descents, self.slots)
     }
 
     /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`] by default;
@@ -585,7 +610,8 @@ impl GpuAdapter {
     /// [`Self::fixed_bytes`] under `budget`: with a budget, an all-levels adapter counts its
     /// descent stacks at the most they may grow to.
     fn fixed_bytes_within(&self, budget: Option<u64>) -> u64 {
-        let records = self.params.size() + self.stats.size() + self.errors.size() + self.readback.size();
+        let records =
+            self.params.size() + self.stats.size() + self.errors.size() + self.readback.size() + self.queue.size();
         let reserve = match (budget, self.levels) {
             (Some(_), Levels::All) => self.stack_max_bytes(budget),
             _ => 0,
@@ -599,9 +625,10 @@ impl GpuAdapter {
         LEVELS_PER_PASS.min(self.descent_budget) as u64 * STACK_WORDS * 4 + RESUME_VECS * 16
     }
 
-    /// Where the resume records start in the stacks' buffer, and their bytes.
+    /// Where the resume records of the pass's slots start in the stacks' buffer, and their
+    /// bytes.
     fn resume_range(&self) -> (u64, u64) {
-        let slots = self.stack_slots() as u64;
+        let slots = self.slots as u64;
         let records = slots * RESUME_VECS * 16;
         (slots * self.stack_slot_bytes() - records, records)
     }
@@ -614,7 +641,7 @@ impl GpuAdapter {
         (cap / slot).max(1) * slot
     }
 
-    /// Descents the stacks hold at once now.
+    /// Descents the stacks hold at once now (at least the pass's slots).
     fn stack_slots(&self) -> u32 {
         (self.stack.cap * 4 / self.stack_slot_bytes()) as u32
     }

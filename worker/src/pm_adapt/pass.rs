@@ -6,12 +6,12 @@ use codec::pm::{PassStats, Viewpoint};
 use codec::pm::Levels;
 
 use super::buffers::{
-    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, READBACK_BYTES,
-    STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_DESCENTS, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES,
-    VERTEX_USAGE,
+    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, Q_DESCEND,
+    READBACK_BYTES, STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_DESCENTS, STAT_REMOVED_FACES,
+    STAT_SPLIT_VERTICES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter, DEEP_DESCENT, MARKS, MAX_SCALE, SCALE_STEP};
+use super::{AdaptError, GpuAdapter, DEEP_DESCENT, MARKS, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
 use crate::gpu::GpuError;
 
 const APPLY: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: apply") };
@@ -20,13 +20,6 @@ const APPLY_PASS: wgpu::ComputePassDescriptor =
 const COUNT: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: count") };
 const COUNT_PASS: wgpu::ComputePassDescriptor =
     wgpu::ComputePassDescriptor { label: Some("pm: count"), timestamp_writes: None };
-
-/// The dispatches of `total` descents over `slots` stack slots: each one's first descent and
-/// its number of descents.
-fn chunks(total: u32, slots: u32) -> impl Iterator<Item = (u32, u32)> {
-    let slots = slots.max(1);
-    (0..total.div_ceil(slots)).map(move |c| (c * slots, (total - c * slots).min(slots)))
-}
 
 impl GpuAdapter {
     pub(super) fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
@@ -69,7 +62,7 @@ impl GpuAdapter {
         let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
         let mut params =
             Params { n, m, mode: 1, levels: all as u32, budget: self.descent_budget, ..Default::default() };
-        (params.round_steps, params.rounds) = (self.round_steps, self.rounds());
+        params.round_steps = self.round_steps;
         if let Some(v) = view {
             params.mode = 0;
             params.planes = v.planes().map(|p| p.to_array());
@@ -167,7 +160,7 @@ impl GpuAdapter {
         params.f_add = f_add;
         params.m_new = m_new;
         params.splits = split_vertices;
-        params.chunk_base = 0;
+        params.rounds = self.rounds_for(self.steps, self.most);
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 2: reorganisation, splits, index update, face compaction.
@@ -212,6 +205,7 @@ impl GpuAdapter {
                     ("occ", &self.occ.buffer),
                     ("face_owner", &f.owner.buffer),
                     ("dstack", &self.stack.buffer),
+                    ("queue", &self.queue),
                 ],
             );
             let compact = p.compact_splits.bind(
@@ -273,7 +267,9 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
                 drop(pass);
-                self.run_descents(&mut enc, &mut params, &p.descend, &split_decode, split_vertices, &APPLY);
+                if split_vertices > 0 {
+                    self.run_rounds(&mut enc, &p.descend, &split_decode, params.rounds, Some(Q_DESCEND));
+                }
                 pass = enc.begin_compute_pass(&APPLY_PASS);
                 self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
                 self.dispatch(&mut pass, &p.index_new, &split, f_add);
@@ -409,18 +405,21 @@ impl GpuAdapter {
                 let descents = self.read_totals()?[2 + STAT_DESCENTS];
                 self.descents = descents;
                 let (slots, max) = (self.stack_slots(), self.stack_max_bytes(self.budget));
-                let want = (descents as u64).min(max / self.stack_slot_bytes());
+                let cap = if self.round_steps == u32::MAX { u32::MAX } else { SOFTWARE_DESCENT_SLOTS };
+                let want = (descents.min(cap) as u64).min(max / self.stack_slot_bytes());
                 if (slots as u64) < want {
                     // Grown to the descents (at least double), within the most it may take.
                     let bytes = (want * self.stack_slot_bytes()).max(self.stack.cap * 8).min(max);
                     self.stack = storage(self.gpu.device(), "pm: descent stacks", bytes / 4, 4, VERTEX_USAGE);
                     self.reallocations += 1;
                 }
-                params.stack_slots = self.stack_slots();
+                self.slots = self.stack_slots().min(cap).min(descents.max(1));
+                params.stack_slots = self.slots;
                 buffers.push(("dstack", &self.stack.buffer));
+                buffers.push(("queue", &self.queue));
                 let count = p.count.bind_named(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
-                self.run_descents(&mut enc, params, &p.count, &count, descents, &COUNT);
+                (self.steps, self.most) = self.count_descents(&mut enc, params, &count, descents)?;
                 let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {
@@ -454,35 +453,73 @@ impl GpuAdapter {
         Ok(totals)
     }
 
-    /// Records `stage` (`count` or `descend`) over `total` descents into `enc`: in dispatches
-    /// of at most the stacks' slots, each after its first descent is written to the
-    /// parameters (a chunk after the first in a submission of its own, `enc` then a new
-    /// encoder labelled by `label`), its descents' resume records cleared (every descent
-    /// starts), and dispatched `rounds` times (each round goes on with the descents the last
-    /// one paused: a software GPU).
-    fn run_descents(
+    /// Records `count` over the pass's `total` descents into `enc` and runs it to the end:
+    /// round after round of the pass's slots until the queue is empty and no descent paused
+    /// (read back between them on a software adapter, whose slots pause; one round on
+    /// hardware). Returns the steps of the descents in all and the most of one, which size
+    /// `descend`'s rounds. `enc` is then a new encoder for what follows.
+    fn count_descents(
         &self,
         enc: &mut wgpu::CommandEncoder,
         params: &mut Params,
-        stage: &Stage,
         bg: &wgpu::BindGroup,
         total: u32,
-        label: &wgpu::CommandEncoderDescriptor,
-    ) {
-        let (resume, records) = self.resume_range();
-        for (c, (base, threads)) in chunks(total, params.stack_slots).enumerate() {
-            if c > 0 {
-                let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(label));
-                self.gpu.queue().submit([done.finish()]);
-            }
-            params.chunk_base = base;
+    ) -> Result<(u64, u64), AdaptError> {
+        let stage = &self.shared.pipelines.count;
+        if total == 0 {
+            return Ok((0, 0));
+        }
+        if self.round_steps == u32::MAX {
+            params.rounds = 1;
             self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
-            enc.clear_buffer(&self.stack.buffer, resume, Some(records));
-            let mut pass =
-                enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: label.label, timestamp_writes: None });
-            for _ in 0..params.rounds {
-                self.dispatch(&mut pass, stage, bg, threads);
+            self.run_rounds(enc, stage, bg, 1, Some(0));
+            return Ok((0, 0));
+        }
+        // Enough rounds for any descents (the most steps each), the last of which fails the
+        // pass if a descent still has to pause (descent.wgsl): the host stops there.
+        let most = self.descent_steps();
+        let bound = self.rounds_for(total as u64 * most, most);
+        params.rounds = bound;
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+        // A batch of rounds finishes the descents that a round of every slot can hold, and
+        // the longest then.
+        let batch = (most.div_ceil(self.round_steps as u64) + 1) as u32;
+        let mut run = 0;
+        loop {
+            let rounds = batch.min(bound - run);
+            self.run_rounds(enc, stage, bg, rounds, if run == 0 { Some(0) } else { None });
+            run += rounds;
+            enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 20);
+            let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(&COUNT));
+            self.gpu.queue().submit([done.finish()]);
+            let q = self.read_totals()?;
+            if (q[0] >= total && q[1] == 0) || run >= bound {
+                return Ok((q[2] as u64 | (q[3] as u64) << 32, q[4] as u64));
             }
+        }
+    }
+
+    /// Records `rounds` dispatches of `stage` (`count` or `descend`) over the pass's slots
+    /// into `enc`, each round going on with the descents the last one paused (a software
+    /// adapter) and taking more from the queue; with `fresh`, the queue at that word and the
+    /// slots' resume records are cleared first.
+    fn run_rounds(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        stage: &Stage,
+        bg: &wgpu::BindGroup,
+        rounds: u32,
+        fresh: Option<u64>,
+    ) {
+        if let Some(q) = fresh {
+            let (resume, records) = self.resume_range();
+            enc.clear_buffer(&self.stack.buffer, resume, Some(records));
+            enc.clear_buffer(&self.queue, q * 4, Some(32));
+        }
+        let mut pass = enc
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("pm: descents"), timestamp_writes: None });
+        for _ in 0..rounds {
+            self.dispatch(&mut pass, stage, bg, self.slots);
         }
     }
 

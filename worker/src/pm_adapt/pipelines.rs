@@ -6,7 +6,7 @@
 
 use std::borrow::Cow;
 
-use super::buffers::{Errors, GpuVState, LevelUniform, Params, Stats};
+use super::buffers::{Errors, GpuVState, LevelUniform, Params, Queue, Stats};
 use super::decoder::{decoder_wgsl, DecodeParams};
 use crate::gpu::{Access, Binding, Gpu};
 use crate::render::PmPoint;
@@ -191,6 +191,7 @@ pub(crate) const COUNT: StageDef = StageDef {
         Binding::read_write::<Stats>(16, "stats"),
         Binding::read_write::<u32>(17, "list"),
         Binding::read_write::<[u32; 4]>(18, "dstack"),
+        Binding::read_write::<Queue>(19, "queue"),
     ],
 };
 
@@ -306,6 +307,7 @@ pub(crate) const DESCEND: StageDef = StageDef {
         Binding::read::<u32>(15, "occ"),
         Binding::read_write::<u32>(16, "face_owner"),
         Binding::read_write::<[u32; 4]>(17, "dstack"),
+        Binding::read_write::<Queue>(18, "queue"),
     ],
 };
 
