@@ -106,7 +106,7 @@ struct Params {
                       // threads of `count` and `descend`
     round_steps: u32, // the most steps a slot takes in one dispatch (a descent resumes in the next)
     rounds: u32,      // the dispatches (rounds) of `count` or `descend` the host runs
-    pad0: u32,
+    loop_probe: u32,  // 2: the iterations of descent.wgsl's `loops_alive` probe
     pad1: u32,
     pad2: u32,
     pad3: u32,

@@ -389,6 +389,39 @@ fn offset_from(est: u32, r: i32) -> u32 {
 // stops after the face count: then only status, v_u, flags, faces and the criteria are set.
 fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: vec2<u32>, face_out: u32,
              upto: u32) -> DecodedOp {
+    let h = decode_head(addr, v, v_end, pc, pos, nrm);
+    if (upto == DECODE_TO_FACES) {
+        return h;
+    }
+    if (h.status != DEC_OK) {
+        var o: DecodedOp;
+        o.status = h.status;
+        o.left = NONE_ADDR;
+        o.right = NONE_ADDR;
+        return o;
+    }
+    return decode_tail(face_out);
+}
+
+// What decode_head leaves for decode_tail: the operation's context, where its bytes are, and
+// what the head decoded (the bit reader's position is r_byte and r_off).
+var<private> dh_v: u32;
+var<private> dh_v_end: u32;
+var<private> dh_pos: vec3<u32>;
+var<private> dh_nrm: vec2<u32>;
+var<private> dh_node: u32;
+var<private> dh_len: u32;
+var<private> dh_base: u32;
+var<private> dh_pattern: u32;
+var<private> dh_first: u32;
+var<private> dh_has_left: bool;
+var<private> dh_has_right: bool;
+var<private> dh_o: DecodedOp;
+
+// The operation's head, up to its face count (decode_op with DECODE_TO_FACES: status, v_u,
+// flags, faces and the criteria); after a head that decoded, decode_tail goes on from where
+// it stopped.
+fn decode_head(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: vec2<u32>) -> DecodedOp {
     var o: DecodedOp;
     o.left = NONE_ADDR;
     o.right = NONE_ADDR;
@@ -506,15 +539,49 @@ fn decode_op(addr: u32, v: u32, v_end: u32, pc: vec4<u32>, pos: vec3<u32>, nrm: 
     if (r_err == DEC_OK && (nf > D.max_faces || (rest < 8192u && nf > rest * 8u) || (nf == 0u && pattern != 0u))) {
         fail(DEC_FACES);
     }
-    if (upto == DECODE_TO_FACES) {
-        o.status = r_err;
-        o.v_u = v_u;
-        o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);
-        o.faces = nf;
-        o.crit = crit;
-        o.crit_f = crit_values(crit);
-        return o;
-    }
+    o.status = r_err;
+    o.v_u = v_u;
+    o.flags = select(0u, 1u, has_left) | select(0u, 2u, has_right) | select(0u, 4u, swapped);
+    o.faces = nf;
+    o.crit = crit;
+    o.crit_f = crit_values(crit);
+    dh_v = v;
+    dh_v_end = v_end;
+    dh_pos = pos;
+    dh_nrm = nrm;
+    dh_node = node;
+    dh_len = len;
+    dh_base = base;
+    dh_pattern = pattern;
+    dh_first = first;
+    dh_has_left = has_left;
+    dh_has_right = has_right;
+    dh_o = o;
+    return o;
+}
+
+// The rest of the operation decode_head began (the faces to dec_faces from face slot
+// `face_out` on, nowhere for NONE_ADDR): the whole operation, as decode_op decodes it.
+fn decode_tail(face_out: u32) -> DecodedOp {
+    var o = dh_o;
+    let v = dh_v;
+    let v_end = dh_v_end;
+    let pos = dh_pos;
+    let nrm = dh_nrm;
+    let node = dh_node;
+    let len = dh_len;
+    let base = dh_base;
+    let pattern = dh_pattern;
+    let first = dh_first;
+    let has_left = dh_has_left;
+    let has_right = dh_has_right;
+    let swapped = (o.flags & 4u) != 0u;
+    let v_u = o.v_u;
+    let nf = o.faces;
+    let crit = o.crit;
+    let n = D.vertices;
+    let max_q = (1u << D.position_bits) - 1u;
+    let size = v_end - v;
     var has_prev = false;
     var pt = 0u;
     var pu = 0u;

@@ -118,11 +118,11 @@ fn point_of(s: VState) -> Point {
 // compiles those slower (an adapter's first all-levels passes 8.6 s against 5.1 s), and a
 // hardware driver reserves their memory for every thread it can run at once.
 //
-// `descent_step` calls the decoder once, at the top of its body, so that it is inlined once.
+// `descent_step` calls each half of the decoder once, so that each is inlined once.
 // llvmpipe (lavapipe) stops every loop of an invocation after 65535 iterations in all,
-// silently (as it counts them, a step takes between 128 and 256: a round of 256 steps ran,
-// one of 512 did not): there a slot pauses its descent after P.round_steps steps and the
-// next dispatch goes on with it (the resume record).
+// silently (as it counts them a step takes up to 256-512; `loops_alive` checks that it did
+// not happen): there a slot pauses its descent after P.round_steps steps and the next
+// dispatch goes on with it (the resume record).
 var<private> dc_cur: VState;
 var<private> dc_f: u32;
 var<private> dc_pt: Point;
@@ -261,9 +261,27 @@ fn descent_take(total: u32) -> u32 {
     return list[k];
 }
 
-// Whether the descent may take another step this round (counted).
+// Whether llvmpipe's loop limit has not been reached: it ends every loop of an invocation,
+// silently, once 65535 iterations ran in all (counted from the start of the outermost loop
+// running, a nested loop's iterations included), and every loop after that runs its body
+// once. So a loop of P.loop_probe (2) iterations, a number the compiler cannot know, runs
+// both unless the limit was reached, maybe in the middle of a decode (whose values are then
+// wrong).
+fn loops_alive() -> bool {
+    var k = 0u;
+    loop {
+        k += 1u;
+        if (k >= P.loop_probe) {
+            break;
+        }
+    }
+    return k == P.loop_probe;
+}
+
+// Whether the descent may take another step this round (counted): not past the round's
+// steps, and the last step ran whole (else the caller's `descent_end` fails the pass).
 fn descent_may_step() -> bool {
-    if (dc_steps == P.round_steps) {
+    if (dc_steps == P.round_steps || !loops_alive()) {
         return false;
     }
     dc_steps += 1u;
@@ -274,10 +292,14 @@ fn descent_may_step() -> bool {
 // After a descent's loop, `finished` when it left by its one exit (no right child left):
 // counts its steps in the queue and returns true. At the step cap it pauses for the next
 // round instead (false: nothing to write yet), unless this is the last round the host runs
-// (P.rounds). Otherwise the GPU ended the loop (llvmpipe ends an invocation's loops after
-// 65535 iterations in all, silently). Both fail the pass (DEC_LOOP_LIMIT at `addr`) instead of
-// a wrong result, and end the slot's round.
+// (P.rounds). Otherwise the GPU ended the loop, or llvmpipe's loop limit was reached
+// (`loops_alive`). Those fail the pass (DEC_LOOP_LIMIT at `addr`) instead of a wrong result,
+// and end the slot's round.
 fn descent_end(finished: bool, addr: u32) -> bool {
+    if (!loops_alive()) {
+        report(DEC_LOOP_LIMIT, addr);
+        return false;
+    }
     if (!finished) {
         if (dc_steps == P.round_steps && dc_rounds < P.rounds) {
             descent_save();
@@ -312,52 +334,55 @@ fn descent_start(i: u32, s: VState, f: u32, pt: Point, face_out: u32) {
 }
 
 // What one step of a descent did.
-const STEP_CACHED: u32 = 0u; // decoded the current vertex's criteria and face count
 const STEP_SPLIT: u32 = 1u;  // split the current vertex (its left child is current now)
 const STEP_LEAF: u32 = 2u;   // the current vertex is a leaf: the caller takes it, then pops
 
-// One step: decodes the current vertex's split cache if it is not yet (as vertex_op.wgsl's
-// `with_op`), else splits it if it splits (an operation, decoded and resident, that the view
-// asks for; any in mode 1; none in mode 2; within LEVELS_PER_PASS levels and P.budget splits) as split_decode.wgsl's `main` splits one: the
-// right child waits on the stack, the left one becomes current (it keeps the point). A leaf
-// where it does not split, or its operation fails to decode (reported: the pass fails).
+// One step, one vertex visited: decodes the head of its operation (criteria, children, face
+// count) and, if the vertex's split cache is not yet made, makes it from the head (as
+// vertex_op.wgsl's `with_op`); then splits it if it splits (an operation, decoded and
+// resident, that the view asks for; any in mode 1; none in mode 2; within LEVELS_PER_PASS
+// levels and P.budget splits) as split_decode.wgsl's `main` splits one, decoding the rest of
+// the operation from where the head stopped: the right child waits on the stack, the left one
+// becomes current (it keeps the point). A leaf where it does not split, or its operation fails
+// to decode (reported: the pass fails). Head and rest in one step: each operation's head is
+// decoded once, and a step's lanes all decode (lanes waited for each other's other kind of
+// step when the split cache and the split were steps of their own).
 fn descent_step() -> u32 {
-    let s = dc_cur;
+    let s0 = dc_cur;
     let f = dc_f;
-    var run = dc_uncached && s.addr != NONE;
-    var upto = DECODE_TO_FACES;
-    if (!dc_uncached) {
-        run = dc_splits < P.budget && dc_depth < LEVELS_PER_PASS && splits_now(s, dc_pt);
-        upto = DECODE_ALL;
-    }
-    var out = NONE_ADDR;
-    if (upto == DECODE_ALL && dc_face_out != NONE_ADDR) {
-        out = dc_face_out + dc_faces;
-    }
-    var o: DecodedOp;
-    if (run) {
-        o = decode_op(s.addr, f, s.v_end, s.pc, state_pos(s), state_nrm(s), out, upto);
+    var h: DecodedOp;
+    if (s0.addr != NONE) {
+        h = decode_head(s0.addr, f, s0.v_end, s0.pc, state_pos(s0), state_nrm(s0));
     }
     if (dc_uncached) {
         dc_uncached = false;
         dc_cur.faces = 0u;
         dc_cur.crit = vec4<f32>(0.0);
         dc_cur.flags = 0u;
-        if (run) {
-            if (o.status == DEC_ABSENT) {
+        if (s0.addr != NONE) {
+            if (h.status == DEC_ABSENT) {
                 dc_cur.flags = PENDING;
-            } else if (o.status != DEC_OK) {
-                report(o.status, s.addr);
+            } else if (h.status != DEC_OK) {
+                report(h.status, s0.addr);
             } else {
-                dc_cur.faces = o.faces;
-                dc_cur.crit = bitcast<vec4<f32>>(o.crit_f);
+                dc_cur.faces = h.faces;
+                dc_cur.crit = bitcast<vec4<f32>>(h.crit_f);
             }
         }
-        return STEP_CACHED;
     }
-    if (!run) {
+    let s = dc_cur;
+    if (!(dc_splits < P.budget && dc_depth < LEVELS_PER_PASS && splits_now(s, dc_pt))) {
         return STEP_LEAF;
     }
+    if (h.status != DEC_OK) {
+        report(h.status, s.addr);
+        return STEP_LEAF;
+    }
+    var out = NONE_ADDR;
+    if (dc_face_out != NONE_ADDR) {
+        out = dc_face_out + dc_faces;
+    }
+    let o = decode_tail(out);
     if (o.status != DEC_OK) {
         report(o.status, s.addr);
         return STEP_LEAF;

@@ -62,7 +62,10 @@ pub(super) struct Params {
     /// dispatches (rounds) of `count` or `descend` the host runs.
     pub(super) round_steps: u32,
     pub(super) rounds: u32,
-    pub(super) pad: [u32; 4],
+    /// 2, the iterations of `descent.wgsl`'s probe of llvmpipe's loop limit (read at run
+    /// time, so that the compiler cannot unroll the probe).
+    pub(super) loop_probe: u32,
+    pub(super) pad: [u32; 3],
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).

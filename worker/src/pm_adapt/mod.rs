@@ -91,12 +91,15 @@ use occlusion::Occluder;
 use pipelines::Pipelines;
 
 /// The most steps a descent slot runs in one dispatch on a software adapter (lavapipe), a
-/// step being one operation decoded at most: llvmpipe ends every loop of an invocation after
-/// 65535 iterations in all, silently, and counts between 128 and 256 a step (the bunny's
-/// lockstep path ran with 256 steps a round and failed with 512), so a slot pauses its
-/// descent after 128 steps and the next dispatch of the same stage goes on with it
-/// (`descent.wgsl`). Hardware GPUs never pause.
-pub const SOFTWARE_ROUND_STEPS: u32 = 128;
+/// step being one vertex visited (its operation's head decoded, and the rest where it
+/// splits): llvmpipe ends every loop of an invocation after 65535 iterations in all,
+/// silently, and as it counts them (a loop per symbol of eight lanes, running as long as the
+/// longest code of any lane) a step took up to 256-512: the dragon's and the bunny's lockstep
+/// paths ran in rounds of 128 steps and reached the limit in rounds of 256 (the pass then
+/// fails, `loops_alive` of `descent.wgsl`). So a slot pauses its descent after 64 steps and
+/// the next dispatch of the same stage goes on with it (as fast as 128: 231 against 229 ms an
+/// orbit frame). Hardware GPUs never pause.
+pub const SOFTWARE_ROUND_STEPS: u32 = 64;
 
 /// The descent slots (threads of `count` and `descend`) on a software adapter, which takes
 /// a descent from the queue whenever it finished one: a few per lane of its cores, so that
@@ -535,9 +538,9 @@ impl GpuAdapter {
     }
 
     /// The most steps of one descent: one of `b` splits visits at most `2 b + 1` vertices,
-    /// two steps each (its cache decoded, then a split or a leaf).
+    /// a step each.
     fn descent_steps(&self) -> u64 {
-        4 * self.descent_budget as u64 + 1
+        2 * self.descent_budget as u64 + 1
     }
 
     /// The dispatches (rounds) of `count` or `descend` that finish descents of `steps` steps

@@ -60,8 +60,15 @@ impl GpuAdapter {
             }
         }
         let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
-        let mut params =
-            Params { n, m, mode: 1, levels: all as u32, budget: self.descent_budget, ..Default::default() };
+        let mut params = Params {
+            n,
+            m,
+            mode: 1,
+            levels: all as u32,
+            budget: self.descent_budget,
+            loop_probe: 2,
+            ..Default::default()
+        };
         params.round_steps = self.round_steps;
         if let Some(v) = view {
             params.mode = 0;
