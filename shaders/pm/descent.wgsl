@@ -278,6 +278,12 @@ fn loops_alive() -> bool {
     return k == P.loop_probe;
 }
 
+// Reports a decoding failure, as the loop limit where llvmpipe's was reached (the decoder's
+// loops then ended early, and what it found wrong follows from that).
+fn descent_report(status: u32, addr: u32) {
+    report(select(DEC_LOOP_LIMIT, status, loops_alive()), addr);
+}
+
 // Whether the descent may take another step this round (counted): not past the round's
 // steps, and the last step ran whole (else the caller's `descent_end` fails the pass).
 fn descent_may_step() -> bool {
@@ -363,7 +369,7 @@ fn descent_step() -> u32 {
             if (h.status == DEC_ABSENT) {
                 dc_cur.flags = PENDING;
             } else if (h.status != DEC_OK) {
-                report(h.status, s0.addr);
+                descent_report(h.status, s0.addr);
             } else {
                 dc_cur.faces = h.faces;
                 dc_cur.crit = bitcast<vec4<f32>>(h.crit_f);
@@ -375,7 +381,7 @@ fn descent_step() -> u32 {
         return STEP_LEAF;
     }
     if (h.status != DEC_OK) {
-        report(h.status, s.addr);
+        descent_report(h.status, s.addr);
         return STEP_LEAF;
     }
     var out = NONE_ADDR;
@@ -384,7 +390,7 @@ fn descent_step() -> u32 {
     }
     let o = decode_tail(out);
     if (o.status != DEC_OK) {
-        report(o.status, s.addr);
+        descent_report(o.status, s.addr);
         return STEP_LEAF;
     }
     dc_splits += 1u;

@@ -181,6 +181,42 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
     }
 }
 
+/// Rounds far longer than llvmpipe's loop limit allows (4096 steps a slot before it pauses):
+/// a pass there either equals the CPU reference's or fails with the loop limit, never adapts
+/// wrongly; on lavapipe the bunny's path reaches the limit (the probe after every step, or a
+/// decode it cut short, reports it), on a GPU without the limit every pass equals the
+/// reference's.
+#[test]
+fn rounds_past_the_loop_limit_fail_the_pass() {
+    let (_one_at_a_time, device) = device();
+    let (bytes, pm) = dpm_of("stanford/bunny_zipper_c3d.obj.gz");
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
+    let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
+    gpu.set_levels(Levels::All);
+    gpu.set_round_steps(4096);
+    cpu.set_descent_budget(gpu.descent_budget());
+    let frames = 20;
+    for k in 0..frames {
+        let view = path_view(&pm, k, frames, 0.5);
+        let c = cpu.adapt(&view);
+        match gpu.adapt(&view) {
+            Ok(g) => {
+                assert_eq!(c, g, "frame {k}: pass statistics differ");
+                assert_eq!(gpu.active().unwrap(), cpu.active(), "frame {k}: active vertices differ");
+                let (gf, cf) = (sorted_canonical(gpu.face_fvids().unwrap()), sorted_canonical(cpu.face_fvids()));
+                assert_eq!(gf, cf, "frame {k}: faces differ");
+            }
+            Err(e) => {
+                assert!(matches!(e, worker::pm_adapt::AdaptError::LoopLimit { .. }), "frame {k}: {e}");
+                eprintln!("frame {k}: {e}");
+                return;
+            }
+        }
+    }
+    assert!(!device.is_software(), "lavapipe's loop limit went unnoticed");
+}
+
 /// Descents that pause every few steps and go on in the next dispatch (as on lavapipe, but
 /// after 5 steps instead of 128) make the CPU reference's passes along the bunny's path.
 #[test]
