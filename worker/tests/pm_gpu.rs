@@ -181,6 +181,28 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
     }
 }
 
+/// A model whose split trees are far deeper than a one-level pass can follow (the planar
+/// alligator: its one-level passes from the base mesh take over a thousand) converges with the
+/// default kind of pass in a few dozen: after `DEEP_PASSES` one-level passes the view goes
+/// back to all levels. The mesh is the CPU reference's.
+#[test]
+fn deep_split_trees_go_back_to_all_levels() {
+    let (_one_at_a_time, device) = device();
+    let (bytes, pm) = dpm_of("classic/alligator.obj");
+    let dpm = Dpm::parse(&bytes).unwrap();
+    let view = path_view(&pm, 0, 1, 0.5);
+    let mut cpu = Adapter::new(&pm).with_levels(Levels::All);
+    let mut gpu = GpuAdapter::new(&device, &dpm, DEFAULT_N_ALLOC).unwrap();
+    cpu.set_descent_budget(gpu.descent_budget());
+    let cpu_passes = cpu.adapt_until_converged(&view, 10_000).expect("the CPU converges");
+    let passes = gpu.adapt_until_converged(&view, 10_000).unwrap().expect("the GPU converges");
+    eprintln!("alligator from its base mesh: {passes} passes on the GPU, {cpu_passes} all-levels passes on the CPU");
+    // The all-levels passes, and the one-level ones before the switch back (32).
+    assert!(passes <= cpu_passes + 40, "{passes} passes");
+    assert_eq!(gpu.active().unwrap(), cpu.active(), "active vertices differ");
+    assert_eq!(sorted_canonical(gpu.face_fvids().unwrap()), sorted_canonical(cpu.face_fvids()), "faces differ");
+}
+
 /// Rounds far longer than llvmpipe's loop limit allows (4096 steps a slot before it pauses):
 /// a pass there either equals the CPU reference's or fails with the loop limit, never adapts
 /// wrongly; on lavapipe the bunny's path reaches the limit (the probe after every step, or a

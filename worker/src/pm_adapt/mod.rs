@@ -118,6 +118,14 @@ pub(crate) const RESUME_VECS: u64 = 12;
 /// converged pass) against 10 one-level passes (24x).
 pub const DEEP_DESCENT: u32 = 8;
 
+/// The one-level passes that changed the mesh after which a view switched to them by
+/// [`DEEP_DESCENT`] goes back to all levels for good: its split trees are deeper than a
+/// one-level pass a level can follow (planar regions, whose errors tie, make long chains:
+/// from the base mesh the alligator took 1,110 passes, the fandisk 682), and an all-levels
+/// pass moves up to `LEVELS_PER_PASS` (32) levels. The dragon from its base mesh converges
+/// in fewer (25 one-level passes in all).
+pub const DEEP_PASSES: u32 = 32;
+
 /// Words of one entry of a descent's stack (`STACK_WORDS` of `descent.wgsl`).
 pub(crate) const STACK_WORDS: u64 = 24;
 
@@ -299,9 +307,13 @@ pub struct GpuAdapter {
     descents: u32,
     /// Whether the kind of pass is the default's ([`Self::set_levels`] not called): all
     /// levels, and one level for the rest of a view once an all-levels pass for it descended
-    /// deep (`deep`, [`DEEP_DESCENT`]).
+    /// deep (`deep`, [`DEEP_DESCENT`]), unless the view then took [`DEEP_PASSES`] one-level
+    /// passes that changed the mesh (`deep_passes`; `deep_tree`: all levels for the rest of
+    /// the view).
     mixed: bool,
     deep: bool,
+    deep_passes: u32,
+    deep_tree: bool,
     /// Per scan level, for the current pass ([`GpuAdapter::prepare_scan`]).
     scan_levels: Vec<ScanLevel>,
     /// Active vertices and faces.
@@ -448,6 +460,8 @@ impl GpuAdapter {
             descents: 0,
             mixed: true,
             deep: false,
+            deep_passes: 0,
+            deep_tree: false,
             levels: Levels::All,
             descent_budget: DESCENT_BUDGET,
             round_steps: if gpu.is_software() { SOFTWARE_ROUND_STEPS } else { u32::MAX },
@@ -472,7 +486,7 @@ impl GpuAdapter {
 
     /// Goes back to the base mesh.
     pub fn reset(&mut self) {
-        self.deep = false;
+        (self.deep, self.deep_passes, self.deep_tree) = (false, 0, false);
         let shared = self.shared.clone();
         let base = &shared.base;
         let (n, m) = (base.fvid.len() as u64, base.face_idx.len() as u64);

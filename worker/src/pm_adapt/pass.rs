@@ -11,7 +11,7 @@ use super::buffers::{
     STAT_SPLIT_VERTICES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter, DEEP_DESCENT, MARKS, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
+use super::{AdaptError, GpuAdapter, DEEP_DESCENT, DEEP_PASSES, MARKS, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
 use crate::gpu::GpuError;
 
 const APPLY: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: apply") };
@@ -56,7 +56,7 @@ impl GpuAdapter {
             if self.last_view != Some(*v) {
                 self.last_view = Some(*v);
                 self.floor = 1.0;
-                self.deep = false;
+                (self.deep, self.deep_passes, self.deep_tree) = (false, 0, false);
             }
         }
         let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
@@ -120,8 +120,14 @@ impl GpuAdapter {
             after: n_new,
             collapses,
         })?;
-        if all && self.mixed && splits > DEEP_DESCENT.saturating_mul(self.descents) {
+        if all && self.mixed && !self.deep_tree && splits > DEEP_DESCENT.saturating_mul(self.descents) {
             self.deep = true;
+        }
+        if self.deep && !all && splits + collapses > 0 {
+            self.deep_passes += 1;
+            if self.deep_passes >= DEEP_PASSES {
+                (self.deep, self.deep_tree) = (false, true);
+            }
         }
         // The threads of the split stages: one per splitting vertex.
         let split_vertices = if all { counters[STAT_SPLIT_VERTICES] } else { splits };
