@@ -301,6 +301,8 @@ pub struct GpuAdapter {
     /// rounds of `descend`).
     steps: u64,
     most: u64,
+    /// Whether this pass's classification ran `count` (its loop-limit failure can be retried).
+    count_ran: bool,
     /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
     /// the vertices that descended in the last pass ([`Self::last_descents`]).
     stack_limit: u64,
@@ -455,6 +457,7 @@ impl GpuAdapter {
             slots: 0,
             steps: 0,
             most: 0,
+            count_ran: false,
             queue: storage(d, "pm: descent queues", QUEUE_BYTES / 4, 4, VERTEX_USAGE).buffer,
             stack_limit: MAX_STACK_BYTES,
             descents: 0,
@@ -551,6 +554,12 @@ impl GpuAdapter {
         self.round_steps = steps.max(1);
     }
 
+    /// The steps a descent slot runs in one dispatch now ([`Self::set_round_steps`]; halved
+    /// where a software adapter's count reached its loop limit).
+    pub fn round_steps(&self) -> u32 {
+        self.round_steps
+    }
+
     /// The most steps of one descent: one of `b` splits visits at most `2 b + 1` vertices,
     /// a step each.
     fn descent_steps(&self) -> u64 {
@@ -558,15 +567,26 @@ impl GpuAdapter {
     }
 
     /// The dispatches (rounds) of `count` or `descend` that finish descents of `steps` steps
-    /// in all, the longest `most`, in the pass's slots: while the queue is not empty every
-    /// slot runs its round's steps in full, and once it is, each slot's last descent needs at
-    /// most `most` more. One on hardware (no pause).
-    fn rounds_for(&self, steps: u64, most: u64) -> u32 {
-        if self.round_steps == u32::MAX {
+    /// in all, the longest `most`, in the pass's slots of `round` steps a round: while the
+    /// queue is not empty every slot runs its round's steps in full, and once it is, each
+    /// slot's last descent needs at most `most` more. One on hardware (no pause).
+    fn rounds_for(&self, steps: u64, most: u64, round: u32) -> u32 {
+        if round == u32::MAX {
             return 1;
         }
-        let per_round = self.slots.max(1) as u64 * self.round_steps as u64;
-        (steps / per_round + 1 + most.div_ceil(self.round_steps as u64)).min(u32::MAX as u64) as u32
+        let per_round = self.slots.max(1) as u64 * round as u64;
+        (steps / per_round + 1 + most.div_ceil(round as u64)).min(u32::MAX as u64) as u32
+    }
+
+    /// The steps a slot of `descend` runs in a round: half the count's on a software adapter
+    /// (a step of `descend` also writes the faces' owners and the leaves), none paused on
+    /// hardware.
+    fn descend_steps(&self) -> u32 {
+        if self.round_steps == u32::MAX {
+            u32::MAX
+        } else {
+            (self.round_steps / 2).max(1)
+        }
     }
 
     /// The descent budget ([`Self::set_descent_budget`]).

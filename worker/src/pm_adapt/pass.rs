@@ -173,7 +173,9 @@ impl GpuAdapter {
         params.f_add = f_add;
         params.m_new = m_new;
         params.splits = split_vertices;
-        params.rounds = self.rounds_for(self.steps, self.most);
+        // `descend` pauses after half the count's steps: its steps also write what they find.
+        params.round_steps = self.descend_steps();
+        params.rounds = self.rounds_for(self.steps, self.most, params.round_steps);
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
 
         // Submission 2: reorganisation, splits, index update, face compaction.
@@ -318,9 +320,31 @@ impl GpuAdapter {
 
     /// Submission 1 (state update, collapses, scans) for `params`, and its totals read back:
     /// vertices after the pass and faces its splits add, the counters, the first decoding
-    /// error (which fails the pass).
+    /// error (which fails the pass). Where a software adapter's count reaches llvmpipe's loop
+    /// limit (its operations heavier than [`super::SOFTWARE_ROUND_STEPS`] allows for), the
+    /// slots' steps a round are halved for good and the submission runs again: it changes
+    /// nothing but the pass's counts.
     fn classify(&mut self, params: &mut Params, pass_start: std::time::Instant) -> Result<[u32; 12], AdaptError> {
+        loop {
+            match self.classify_once(params, pass_start) {
+                Err(AdaptError::LoopLimit { .. })
+                    if self.count_ran && self.round_steps != u32::MAX && self.round_steps > 1 =>
+                {
+                    self.round_steps /= 2;
+                    params.round_steps = self.round_steps;
+                    let mut enc = self.gpu.device().create_command_encoder(&COUNT);
+                    enc.clear_buffer(&self.errors, 0, None);
+                    self.gpu.queue().submit([enc.finish()]);
+                }
+                other => return other,
+            }
+        }
+    }
+
+    /// [`Self::classify`] once.
+    fn classify_once(&mut self, params: &mut Params, pass_start: std::time::Instant) -> Result<[u32; 12], AdaptError> {
         let n = params.n;
+        self.count_ran = false;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
         let mut enc =
             self.gpu.device().create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pm: classify") });
@@ -414,8 +438,14 @@ impl GpuAdapter {
                 // instead of 0.5 s a cluster frame; the parameters were in a uniform buffer
                 // then, whose recompiles may account for it: docs/design.md).
                 enc.copy_buffer_to_buffer(&self.stats, 0, &self.readback, 8, STATS_BYTES);
+                enc.copy_buffer_to_buffer(&self.errors, 0, &self.readback, 8 + STATS_BYTES, ERRORS_BYTES);
                 self.gpu.queue().submit([enc.finish()]);
-                let descents = self.read_totals()?[2 + STAT_DESCENTS];
+                let totals = self.read_totals()?;
+                // An operation the last pass could not decode fails this one, before the count.
+                if totals[10] != 0 {
+                    return Err(AdaptError::corrupt(totals[10], totals[11], self.resident.is_some()));
+                }
+                let descents = totals[2 + STAT_DESCENTS];
                 self.descents = descents;
                 let (slots, max) = (self.stack_slots(), self.stack_max_bytes(self.budget));
                 let cap = if self.round_steps == u32::MAX { u32::MAX } else { SOFTWARE_DESCENT_SLOTS };
@@ -432,6 +462,7 @@ impl GpuAdapter {
                 buffers.push(("queue", &self.queue));
                 let count = p.count.bind_named(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
+                self.count_ran = true;
                 (self.steps, self.most) = self.count_descents(&mut enc, params, &count, descents)?;
                 let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
@@ -491,7 +522,7 @@ impl GpuAdapter {
         // Enough rounds for any descents (the most steps each), the last of which fails the
         // pass if a descent still has to pause (descent.wgsl): the host stops there.
         let most = self.descent_steps();
-        let bound = self.rounds_for(total as u64 * most, most);
+        let bound = self.rounds_for(total as u64 * most, most, self.round_steps);
         params.rounds = bound;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
         // A batch of rounds finishes the descents that a round of every slot can hold, and
