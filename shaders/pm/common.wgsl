@@ -107,9 +107,9 @@ struct Params {
     round_steps: u32, // the most steps a slot takes in one dispatch (a descent resumes in the next)
     rounds: u32,      // the dispatches (rounds) of `count` or `descend` the host runs
     loop_probe: u32,  // 2: the iterations of descent.wgsl's `loops_alive` probe
-    pad1: u32,
-    pad2: u32,
-    pad3: u32,
+    sc_leaves: u32,   // an all-levels pass: the leaves, splits and faces the count's scratch
+    sc_splits: u32,   // area holds (state.wgsl's `count`, place.wgsl)
+    sc_faces: u32,
     // Occlusion, one frame late (state.wgsl's `occluded`): the view-projection of the frame
     // whose depth pyramid `occ` holds, the rectangle of that frame it covers (pixels x0, y0,
     // x1, y1), and the frame's width, height, the finest cell's side in pixels, 1 when on.

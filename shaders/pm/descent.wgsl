@@ -141,6 +141,10 @@ var<private> dc_last_faces: u32;
 var<private> dc_vertex: u32;
 var<private> dc_q: u32;
 var<private> dc_dsteps: u32;
+// `count` keeps what it finds (state.wgsl): a split's faces go to the scratch faces from
+// `dc_last_base` (NONE_ADDR where they did not fit).
+var<private> dc_scratch: bool;
+var<private> dc_last_base: u32;
 
 // An entry of the stack, STACK_WORDS / 4 vectors: (the right child's FVID, depth, range end,
 // operation address), its context, (its quantized position xyz, its creator's address),
@@ -175,6 +179,9 @@ const Q_NEXT: u32 = 0u;
 const Q_PAUSED: u32 = 1u;
 const Q_STEPS: u32 = 2u;
 const Q_MOST: u32 = 4u;
+const Q_SC_LEAVES: u32 = 5u; // count's scratch area: leaves, splits and faces taken
+const Q_SC_SPLITS: u32 = 6u;
+const Q_SC_FACES: u32 = 7u;
 const Q_COUNT: u32 = 0u;   // count's queue
 const Q_DESCEND: u32 = 8u; // descend's
 
@@ -385,7 +392,11 @@ fn descent_step() -> u32 {
         return STEP_LEAF;
     }
     var out = NONE_ADDR;
-    if (dc_face_out != NONE_ADDR) {
+    if (dc_scratch) {
+        let base = atomicAdd(&queue[dc_q + Q_SC_FACES], h.faces);
+        out = select(NONE_ADDR, base, base <= P.sc_faces && h.faces <= P.sc_faces - base);
+        dc_last_base = out;
+    } else if (dc_face_out != NONE_ADDR) {
         out = dc_face_out + dc_faces;
     }
     let o = decode_tail(out);

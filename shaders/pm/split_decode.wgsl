@@ -78,7 +78,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     dpoint[j + 1u] = Point(vec4<f32>(dequantize(o.position.xyz), 1.0), vec4<f32>(oct_decode(o.normal.xy), 0.0));
 }
 
-// An all-levels pass's splits (codec::pm::Levels::All): each splitting vertex, taken from a
+// An all-levels pass's splits (codec::pm::Levels::All) where the count's scratch area could
+// not hold what it found (else place.wgsl copies that): each splitting vertex, taken from a
 // queue by one of P.stack_slots threads, walks its subtree again as the state update counted
 // it (descent.wgsl), writing the leaves to the vertex's slots in FVID order and the faces of
 // every split done to its face slots, each owned by its split's v_u; the split stage's

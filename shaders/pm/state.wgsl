@@ -10,7 +10,7 @@
 // at p in `reach`, and p + 1 in `up`, and lists the vertices that split; `count` counts each
 // listed vertex's leaves and faces down its subtree (descent.wgsl: P.stack_slots threads
 // take the listed vertices from a queue; the host reads their number back to size the
-// slots). After the scan of `diff`, `regions` gives a position inside an undone
+// slots), and keeps the leaves and splits it finds in the scratch area for place.wgsl. After the scan of `diff`, `regions` gives a position inside an undone
 // range the count 0 (it collapses), the first position of an outermost range (a region) the
 // count 1, and records in `root` which vertex carries the region's operation: the one whose
 // creator's range is the region's.
@@ -41,6 +41,45 @@
 @group(0) @binding(18) var<storage, read_write> dstack: array<vec4<u32>>;
 // The descents' queue (descent.wgsl).
 @group(0) @binding(19) var<storage, read_write> queue: array<atomic<u32>, 16>;
+// The count's scratch area: from 0, P.sc_leaves leaf records of SC_LEAF_VECS vectors, then
+// P.sc_splits split records of 2 (`count` binds the scratch faces as `dec_faces`).
+@group(0) @binding(20) var<storage, read_write> scratch: array<vec4<u32>>;
+
+const SC_LEAF_VECS: u32 = 10u;
+
+// Keeps leaf `k` of vertex `i`'s descent in the scratch area, if it has room: (its FVID, i,
+// k, 0), its state (7 vectors, as descent_save) and its point (2), for place.wgsl.
+fn keep_leaf(i: u32, k: u32) {
+    let r = atomicAdd(&queue[Q_COUNT + Q_SC_LEAVES], 1u);
+    if (r >= P.sc_leaves) {
+        return;
+    }
+    let at = r * SC_LEAF_VECS;
+    let c = dc_cur;
+    scratch[at] = vec4<u32>(dc_f, i, k, 0u);
+    scratch[at + 1u] = vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr);
+    scratch[at + 2u] = vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags);
+    scratch[at + 3u] = c.pc;
+    scratch[at + 4u] = c.pn;
+    scratch[at + 5u] = bitcast<vec4<u32>>(c.crit);
+    scratch[at + 6u] = c.c_pc;
+    scratch[at + 7u] = bitcast<vec4<u32>>(c.c_crit);
+    scratch[at + 8u] = bitcast<vec4<u32>>(dc_pt.pos);
+    scratch[at + 9u] = bitcast<vec4<u32>>(dc_pt.nrm);
+}
+
+// Keeps the split just done in vertex `i`'s descent: (i, its first face's index in the
+// descent, the faces' owner v_u, their number), (where its faces are in the scratch faces,
+// NONE_ADDR if they did not fit, 0, 0, 0).
+fn keep_split(i: u32) {
+    let r = atomicAdd(&queue[Q_COUNT + Q_SC_SPLITS], 1u);
+    if (r >= P.sc_splits) {
+        return;
+    }
+    let at = P.sc_leaves * SC_LEAF_VECS + 2u * r;
+    scratch[at] = vec4<u32>(i, dc_faces - dc_last_faces, dc_last_vu, dc_last_faces);
+    scratch[at + 1u] = vec4<u32>(dc_last_base, 0u, 0u, 0u);
+}
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -116,6 +155,7 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
         return;
     }
     let total = atomicLoad(&stats[STAT_DESCENTS]);
+    dc_scratch = true;
     var i = descent_round(t, Q_COUNT);
     if (i != NONE) {
         descent_resume(NONE_ADDR);
@@ -133,9 +173,14 @@ fn count(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
             if (!descent_may_step()) {
                 break;
             }
-            if (descent_step() != STEP_LEAF) {
+            let step = descent_step();
+            if (step == STEP_SPLIT) {
+                keep_split(i);
+            }
+            if (step != STEP_LEAF) {
                 continue;
             }
+            keep_leaf(i, dc_leaves);
             dc_leaves += 1u;
             if (!descent_pop()) {
                 finished = true;

@@ -65,7 +65,11 @@ pub(super) struct Params {
     /// 2, the iterations of `descent.wgsl`'s probe of llvmpipe's loop limit (read at run
     /// time, so that the compiler cannot unroll the probe).
     pub(super) loop_probe: u32,
-    pub(super) pad: [u32; 3],
+    /// An all-levels pass: the leaves, splits and faces the count's scratch area holds
+    /// (`count` of `state.wgsl`, `place.wgsl`).
+    pub(super) sc_leaves: u32,
+    pub(super) sc_splits: u32,
+    pub(super) sc_faces: u32,
     /// Occlusion ([`super::Occluder`]): the view-projection of the frame whose depth it is,
     /// the rectangle of that frame the depth covers (x0, y0, x1, y1 in pixels), and the
     /// frame's width, height, the finest cell's side in pixels, and 1 when on (0 off).
@@ -99,6 +103,11 @@ pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 pub(super) type Queue = [u32; 16];
 /// `Q_DESCEND` of `descent.wgsl`: where `descend`'s queue starts.
 pub(super) const Q_DESCEND: u64 = 8;
+/// Vectors of a leaf's record in the count's scratch area (`SC_LEAF_VECS` of `state.wgsl`)
+/// and of a split's; bytes of a face there.
+pub(super) const SC_LEAF_BYTES: u64 = 10 * 16;
+pub(super) const SC_SPLIT_BYTES: u64 = 2 * 16;
+pub(super) const SC_FACE_BYTES: u64 = 12;
 pub(super) const QUEUE_BYTES: u64 = std::mem::size_of::<Queue>() as u64;
 /// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
 /// never cleared by a pass (`report` of `reorganise.wgsl`).

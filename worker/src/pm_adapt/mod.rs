@@ -83,7 +83,8 @@ use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
     init, needs_resize, pack_pn, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES,
-    PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
+    PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, SC_FACE_BYTES, SC_LEAF_BYTES, SC_SPLIT_BYTES, STATE_BYTES,
+    STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
@@ -133,6 +134,11 @@ pub(crate) const STACK_WORDS: u64 = 24;
 /// `b / 64`): 10,922 slots, 32 entries each (a slot each for the dragon's 5,000-9,000
 /// descents an orbit frame at 1920x1080).
 pub const MAX_STACK_BYTES: u64 = 32 << 20;
+
+/// The most bytes the count's scratch area takes (a memory budget of `b` bytes allows at
+/// most `b / 64`): 147,000 leaves with their splits and three faces a split. A pass that
+/// keeps more (from the base mesh of a large model) walks its descents again instead.
+pub const MAX_SCRATCH_BYTES: u64 = 32 << 20;
 
 /// The labels of the all-levels marks ([`GpuAdapter`]'s `marks`).
 const MARKS: [&str; 4] = ["pm: undone ranges", "pm: region reach", "pm: undone starts", "pm: region roots"];
@@ -303,6 +309,13 @@ pub struct GpuAdapter {
     most: u64,
     /// Whether this pass's classification ran `count` (its loop-limit failure can be retried).
     count_ran: bool,
+    /// The count's scratch area (`state.wgsl`, `place.wgsl`): leaf and split records, and the
+    /// splits' faces; what it holds (leaves, splits, faces) and what the last count kept
+    /// (more than it holds: the pass walks the descents again instead).
+    scratch: Sized,
+    sc_faces: Sized,
+    sc_cap: [u32; 3],
+    sc_kept: [u32; 3],
     /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
     /// the vertices that descended in the last pass ([`Self::last_descents`]).
     stack_limit: u64,
@@ -458,6 +471,10 @@ impl GpuAdapter {
             steps: 0,
             most: 0,
             count_ran: false,
+            scratch: storage(d, "pm: count scratch", 0, 16, VERTEX_USAGE),
+            sc_faces: storage(d, "pm: count scratch faces", 0, 12, VERTEX_USAGE),
+            sc_cap: [0; 3],
+            sc_kept: [0; 3],
             queue: storage(d, "pm: descent queues", QUEUE_BYTES / 4, 4, VERTEX_USAGE).buffer,
             stack_limit: MAX_STACK_BYTES,
             descents: 0,
@@ -653,7 +670,38 @@ impl GpuAdapter {
             (Some(_), Levels::All) => self.stack_max_bytes(budget),
             _ => 0,
         };
-        self.static_bytes() + self.occ.buffer.size() + records + self.stack.buffer.size().max(reserve)
+        let scratch = self.scratch.buffer.size() + self.sc_faces.buffer.size();
+        let scratch_reserve = match (budget, self.levels) {
+            (Some(b), Levels::All) => (b / 64).min(MAX_SCRATCH_BYTES),
+            _ => 0,
+        };
+        self.static_bytes()
+            + self.occ.buffer.size()
+            + records
+            + self.stack.buffer.size().max(reserve)
+            + scratch.max(scratch_reserve)
+    }
+
+    /// Grows the count's scratch area to hold `kept` (leaves, splits, faces) with a quarter
+    /// more, within [`MAX_SCRATCH_BYTES`] (and a 64th of the budget); never shrinks it.
+    fn grow_scratch(&mut self, kept: [u32; 3]) {
+        if kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c) {
+            return;
+        }
+        let max = self.budget.map_or(MAX_SCRATCH_BYTES, |b| (b / 64).min(MAX_SCRATCH_BYTES));
+        let per_leaf = SC_LEAF_BYTES + SC_SPLIT_BYTES + 3 * SC_FACE_BYTES;
+        // A leaf each split and descent, three faces a split: sized by the leaves, the most
+        // numerous, or what the faces need.
+        let want = (kept[0].max(kept[1]) as u64).max((kept[2] as u64).div_ceil(3)) * 5 / 4;
+        let k = want.min(max / per_leaf);
+        if k <= self.sc_cap[0] as u64 {
+            return;
+        }
+        let d = self.gpu.device();
+        self.scratch = storage(d, "pm: count scratch", k * (SC_LEAF_BYTES + SC_SPLIT_BYTES) / 16, 16, VERTEX_USAGE);
+        self.sc_faces = storage(d, "pm: count scratch faces", 3 * k, SC_FACE_BYTES, VERTEX_USAGE);
+        self.sc_cap = [k as u32, k as u32, 3 * k as u32];
+        self.reallocations += 1;
     }
 
     /// Bytes of one descent's slot: its stack, min(LEVELS_PER_PASS, descent budget) entries

@@ -282,10 +282,32 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
                 drop(pass);
-                if split_vertices > 0 {
+                // What the count kept, placed, where it all fitted; else the descents walked
+                // again.
+                let kept = self.sc_kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c);
+                if split_vertices > 0 && !kept {
                     self.run_rounds(&mut enc, &p.descend, &split_decode, params.rounds, Some(Q_DESCEND));
                 }
                 pass = enc.begin_compute_pass(&APPLY_PASS);
+                if split_vertices > 0 && kept {
+                    let place = [
+                        ("P", &self.params),
+                        ("vsum", &self.vcnt.buffer),
+                        ("fsum", &self.fcnt.buffer),
+                        ("dfvid", &dstset.fvid.buffer),
+                        ("dstate", &dstset.state.buffer),
+                        ("dpoint", &dstset.point.buffer),
+                        ("dec_faces", &f.fvid.buffer),
+                        ("face_owner", &f.owner.buffer),
+                        ("scratch", &self.scratch.buffer),
+                        ("sc_faces", &self.sc_faces.buffer),
+                        ("queue", &self.queue),
+                    ];
+                    let leaves = p.place_leaves.bind_named(&self.gpu, &place);
+                    let splits = p.place_splits.bind_named(&self.gpu, &place);
+                    self.dispatch(&mut pass, &p.place_leaves, &leaves, self.sc_kept[0]);
+                    self.dispatch(&mut pass, &p.place_splits, &splits, self.sc_kept[1]);
+                }
                 self.dispatch(&mut pass, &p.reorganise, &reorganise, n);
                 self.dispatch(&mut pass, &p.index_new, &split, f_add);
             } else {
@@ -306,6 +328,11 @@ impl GpuAdapter {
             self.resize_faces(m_new as u64 + na, m_new as u64);
         }
         self.cur = dst;
+        if all {
+            // Room for what this count kept, for the next passes (this one's buffers stay
+            // alive until its submission ran).
+            self.grow_scratch(self.sc_kept);
+        }
         self.n = n_new;
         self.m = m_new;
         Ok(PassStats {
@@ -458,12 +485,18 @@ impl GpuAdapter {
                 }
                 self.slots = self.stack_slots().min(cap).min(descents.max(1));
                 params.stack_slots = self.slots;
+                [params.sc_leaves, params.sc_splits, params.sc_faces] = self.sc_cap;
                 buffers.push(("dstack", &self.stack.buffer));
                 buffers.push(("queue", &self.queue));
+                buffers.push(("scratch", &self.scratch.buffer));
+                // The count writes the faces it finds to the scratch faces.
+                for b in buffers.iter_mut().filter(|(name, _)| *name == "dec_faces") {
+                    b.1 = &self.sc_faces.buffer;
+                }
                 let count = p.count.bind_named(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
                 self.count_ran = true;
-                (self.steps, self.most) = self.count_descents(&mut enc, params, &count, descents)?;
+                (self.steps, self.most, self.sc_kept) = self.count_descents(&mut enc, params, &count, descents)?;
                 let mut pass = enc.begin_compute_pass(&COUNT_PASS);
                 self.dispatch(&mut pass, &p.regions, &regions, n);
             } else {
@@ -508,16 +541,20 @@ impl GpuAdapter {
         params: &mut Params,
         bg: &wgpu::BindGroup,
         total: u32,
-    ) -> Result<(u64, u64), AdaptError> {
+    ) -> Result<(u64, u64, [u32; 3]), AdaptError> {
         let stage = &self.shared.pipelines.count;
         if total == 0 {
-            return Ok((0, 0));
+            return Ok((0, 0, [0; 3]));
         }
         if self.round_steps == u32::MAX {
             params.rounds = 1;
             self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
             self.run_rounds(enc, stage, bg, 1, Some(0));
-            return Ok((0, 0));
+            enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 32);
+            let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(&COUNT));
+            self.gpu.queue().submit([done.finish()]);
+            let q = self.read_totals()?;
+            return Ok((0, 0, [q[5], q[6], q[7]]));
         }
         // Enough rounds for any descents (the most steps each), the last of which fails the
         // pass if a descent still has to pause (descent.wgsl): the host stops there.
@@ -533,12 +570,12 @@ impl GpuAdapter {
             let rounds = batch.min(bound - run);
             self.run_rounds(enc, stage, bg, rounds, if run == 0 { Some(0) } else { None });
             run += rounds;
-            enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 20);
+            enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 32);
             let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(&COUNT));
             self.gpu.queue().submit([done.finish()]);
             let q = self.read_totals()?;
             if (q[0] >= total && q[1] == 0) || run >= bound {
-                return Ok((q[2] as u64 | (q[3] as u64) << 32, q[4] as u64));
+                return Ok((q[2] as u64 | (q[3] as u64) << 32, q[4] as u64, [q[5], q[6], q[7]]));
             }
         }
     }

@@ -95,6 +95,7 @@ const SPLIT_DECODE_WGSL: ShaderDef = ShaderDef {
     decoder: true,
     descent: true,
 };
+const PLACE_WGSL: ShaderDef = with_common("pm: place", include_str!("../../../shaders/pm/place.wgsl"));
 const COMPACT_SPLITS_WGSL: ShaderDef =
     with_common("pm: compact splits", include_str!("../../../shaders/pm/compact_splits.wgsl"));
 const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("../../../shaders/pm/split.wgsl"));
@@ -192,6 +193,7 @@ pub(crate) const COUNT: StageDef = StageDef {
         Binding::read_write::<u32>(17, "list"),
         Binding::read_write::<[u32; 4]>(18, "dstack"),
         Binding::read_write::<Queue>(19, "queue"),
+        Binding::read_write::<[u32; 4]>(20, "scratch"),
     ],
 };
 
@@ -311,6 +313,39 @@ pub(crate) const DESCEND: StageDef = StageDef {
     ],
 };
 
+/// An all-levels pass: the leaves the count kept, to their slots (`place.wgsl`).
+pub(crate) const PLACE_LEAVES: StageDef = StageDef {
+    label: "pm: place leaves",
+    shader: &PLACE_WGSL,
+    entry: "place_leaves",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vsum"),
+        Binding::read_write::<u32>(3, "dfvid"),
+        Binding::read_write::<GpuVState>(4, "dstate"),
+        Binding::read_write::<PmPoint>(5, "dpoint"),
+        Binding::read::<[u32; 4]>(8, "scratch"),
+        Binding::read::<Queue>(10, "queue"),
+    ],
+};
+
+/// An all-levels pass: the faces of the splits the count kept, to their slots (`place.wgsl`).
+pub(crate) const PLACE_SPLITS: StageDef = StageDef {
+    label: "pm: place splits",
+    shader: &PLACE_WGSL,
+    entry: "place_splits",
+    bindings: &[
+        PARAMS,
+        Binding::read::<u32>(1, "vsum"),
+        Binding::read::<u32>(2, "fsum"),
+        Binding::read_write::<u32>(6, "dec_faces"),
+        Binding::read_write::<u32>(7, "face_owner"),
+        Binding::read::<[u32; 4]>(8, "scratch"),
+        Binding::read::<u32>(9, "sc_faces"),
+        Binding::read::<Queue>(10, "queue"),
+    ],
+};
+
 /// Algorithm 4's first step.
 pub(crate) const COMPACT_SPLITS: StageDef = StageDef {
     label: "pm: compact splits",
@@ -401,7 +436,7 @@ pub(crate) const FILL: StageDef = StageDef {
 };
 
 /// Every stage, in pass order.
-pub(crate) const STAGES: [&StageDef; 17] = [
+pub(crate) const STAGES: [&StageDef; 19] = [
     &NODE_CHECK,
     &STATE,
     &COLLAPSE,
@@ -413,6 +448,8 @@ pub(crate) const STAGES: [&StageDef; 17] = [
     &COMPACT_SPLITS,
     &SPLIT_DECODE,
     &DESCEND,
+    &PLACE_LEAVES,
+    &PLACE_SPLITS,
     &REORGANISE,
     &SPLIT,
     &INDEX_NEW,
@@ -483,6 +520,8 @@ pub(super) struct Pipelines {
     pub(super) count: Stage,
     pub(super) regions: Stage,
     pub(super) descend: Stage,
+    pub(super) place_leaves: Stage,
+    pub(super) place_splits: Stage,
     pub(super) index_new: Stage,
     pub(super) index_update: Stage,
     pub(super) holes: Stage,
@@ -504,6 +543,7 @@ impl Pipelines {
         let state = module(&STATE_WGSL);
         let split_decode = module(&SPLIT_DECODE_WGSL);
         let split = module(&SPLIT_WGSL);
+        let place = module(&PLACE_WGSL);
         let single = |def: &'static StageDef| Stage::new(gpu, &module(def.shader), def);
         Pipelines {
             node_check: single(&NODE_CHECK),
@@ -519,6 +559,8 @@ impl Pipelines {
             count: Stage::new(gpu, &state, &COUNT),
             regions: Stage::new(gpu, &state, &REGIONS),
             descend: Stage::new(gpu, &split_decode, &DESCEND),
+            place_leaves: Stage::new(gpu, &place, &PLACE_LEAVES),
+            place_splits: Stage::new(gpu, &place, &PLACE_SPLITS),
             index_new: Stage::new(gpu, &split, &INDEX_NEW),
             index_update: single(&INDEX_UPDATE),
             holes: Stage::new(gpu, &compact, &HOLES),

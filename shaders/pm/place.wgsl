@@ -1,0 +1,77 @@
+// An all-levels pass's splits from what `count` kept (state.wgsl's scratch area) instead of
+// walking the descents again (split_decode.wgsl's `descend`): `place_leaves` copies each kept
+// leaf to its vertex's slots of the new vertex buffers, `place_splits` each kept split's faces
+// to their vertex's face slots, each owned by its split's v_u. A vertex that no longer splits
+// after the regions (its count below 2) is skipped. The host runs these only where every
+// leaf, split and face fitted in the scratch area.
+
+@group(0) @binding(1) var<storage, read> vsum: array<u32>;
+@group(0) @binding(2) var<storage, read> fsum: array<u32>;
+@group(0) @binding(3) var<storage, read_write> dfvid: array<u32>;
+@group(0) @binding(4) var<storage, read_write> dstate: array<VState>;
+@group(0) @binding(5) var<storage, read_write> dpoint: array<Point>;
+@group(0) @binding(6) var<storage, read_write> dec_faces: array<u32>;
+@group(0) @binding(7) var<storage, read_write> face_owner: array<u32>;
+@group(0) @binding(8) var<storage, read> scratch: array<vec4<u32>>;
+@group(0) @binding(9) var<storage, read> sc_faces: array<u32>;
+// The leaves and splits kept (the count's queue words 5 and 6, at most the scratch area's).
+@group(0) @binding(10) var<storage, read> queue: array<u32, 16>;
+
+const SC_LEAF_VECS: u32 = 10u;
+
+@compute @workgroup_size(256)
+fn place_leaves(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let r = thread_index(gid, groups);
+    if (r >= min(queue[5], P.sc_leaves)) {
+        return;
+    }
+    let at = r * SC_LEAF_VECS;
+    let m = scratch[at];
+    let i = m.y;
+    let j = vsum[i];
+    let count = vsum[i + 1u] - j;
+    if (count < 2u || m.z >= count) {
+        return;
+    }
+    let a = scratch[at + 1u];
+    let b = scratch[at + 2u];
+    var c: VState;
+    c.v_end = a.x;
+    c.addr = a.y;
+    c.faces = a.z;
+    c.c_addr = a.w;
+    c.c_v = b.x;
+    c.c_v_end = b.y;
+    c.c_faces = b.z;
+    c.flags = b.w;
+    c.pc = scratch[at + 3u];
+    c.pn = scratch[at + 4u];
+    c.crit = bitcast<vec4<f32>>(scratch[at + 5u]);
+    c.c_pc = scratch[at + 6u];
+    c.c_crit = bitcast<vec4<f32>>(scratch[at + 7u]);
+    dfvid[j + m.z] = m.x;
+    dstate[j + m.z] = c;
+    dpoint[j + m.z] = Point(bitcast<vec4<f32>>(scratch[at + 8u]), bitcast<vec4<f32>>(scratch[at + 9u]));
+}
+
+@compute @workgroup_size(256)
+fn place_splits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let r = thread_index(gid, groups);
+    if (r >= min(queue[6], P.sc_splits)) {
+        return;
+    }
+    let at = P.sc_leaves * SC_LEAF_VECS + 2u * r;
+    let m = scratch[at];
+    let base = scratch[at + 1u].x;
+    let i = m.x;
+    if (vsum[i + 1u] - vsum[i] < 2u || base == NONE) {
+        return;
+    }
+    let out = P.m + fsum[i] + m.y;
+    for (var e = 0u; e < m.w; e++) {
+        dec_faces[3u * (out + e)] = sc_faces[3u * (base + e)];
+        dec_faces[3u * (out + e) + 1u] = sc_faces[3u * (base + e) + 1u];
+        dec_faces[3u * (out + e) + 2u] = sc_faces[3u * (base + e) + 2u];
+        face_owner[out + e] = m.z;
+    }
+}
