@@ -181,6 +181,19 @@ fn a_descent_the_gpu_cuts_short_fails_the_pass() {
     }
 }
 
+/// Where the count's scratch area cannot hold what it finds, the pass walks its descents
+/// again: with no scratch area every all-levels pass does, with 64 kB the larger ones do and
+/// the others place what was kept; both stay the CPU reference's passes.
+#[test]
+fn descents_walk_again_where_the_scratch_is_full() {
+    let (_one_at_a_time, device) = device();
+    for bytes in [0, 64 << 10] {
+        check_path_with("stanford/bunny_zipper_c3d.obj.gz", 20, 0.5, &device, Levels::All, |g| {
+            g.set_scratch_limit(bytes)
+        });
+    }
+}
+
 /// A model whose split trees are far deeper than a one-level pass can follow (the planar
 /// alligator: its one-level passes from the base mesh take over a thousand) converges with the
 /// default kind of pass in a few dozen: after `DEEP_PASSES` one-level passes the view goes

@@ -316,6 +316,8 @@ pub struct GpuAdapter {
     sc_faces: Sized,
     sc_cap: [u32; 3],
     sc_kept: [u32; 3],
+    /// The most bytes the scratch area may take without a budget ([`Self::set_scratch_limit`]).
+    scratch_limit: u64,
     /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
     /// the vertices that descended in the last pass ([`Self::last_descents`]).
     stack_limit: u64,
@@ -475,6 +477,7 @@ impl GpuAdapter {
             sc_faces: storage(d, "pm: count scratch faces", 0, 12, VERTEX_USAGE),
             sc_cap: [0; 3],
             sc_kept: [0; 3],
+            scratch_limit: MAX_SCRATCH_BYTES,
             queue: storage(d, "pm: descent queues", QUEUE_BYTES / 4, 4, VERTEX_USAGE).buffer,
             stack_limit: MAX_STACK_BYTES,
             descents: 0,
@@ -640,6 +643,17 @@ impl GpuAdapter {
         self.reset();
     }
 
+    /// Bounds the count's scratch area (all levels) by `bytes` ([`MAX_SCRATCH_BYTES`] by
+    /// default; with a budget also by a 64th of it): a pass whose count keeps more than it
+    /// holds walks its descents again (0: every pass does).
+    pub fn set_scratch_limit(&mut self, bytes: u64) {
+        self.scratch_limit = bytes;
+        let d = self.gpu.device();
+        self.scratch = storage(d, "pm: count scratch", 0, 16, VERTEX_USAGE);
+        self.sc_faces = storage(d, "pm: count scratch faces", 0, 12, VERTEX_USAGE);
+        self.sc_cap = [0; 3];
+    }
+
     /// How many times a buffer was reallocated by the `n_alloc` policy so far.
     pub fn reallocations(&self) -> u64 {
         self.reallocations
@@ -672,7 +686,7 @@ impl GpuAdapter {
         };
         let scratch = self.scratch.buffer.size() + self.sc_faces.buffer.size();
         let scratch_reserve = match (budget, self.levels) {
-            (Some(b), Levels::All) => (b / 64).min(MAX_SCRATCH_BYTES),
+            (Some(b), Levels::All) => (b / 64).min(self.scratch_limit),
             _ => 0,
         };
         self.static_bytes()
@@ -688,7 +702,7 @@ impl GpuAdapter {
         if kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c) {
             return;
         }
-        let max = self.budget.map_or(MAX_SCRATCH_BYTES, |b| (b / 64).min(MAX_SCRATCH_BYTES));
+        let max = self.budget.map_or(self.scratch_limit, |b| (b / 64).min(self.scratch_limit));
         let per_leaf = SC_LEAF_BYTES + SC_SPLIT_BYTES + 3 * SC_FACE_BYTES;
         // A leaf each split and descent, three faces a split: sized by the leaves, the most
         // numerous, or what the faces need.
