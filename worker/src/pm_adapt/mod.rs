@@ -140,6 +140,15 @@ pub const MAX_STACK_BYTES: u64 = 32 << 20;
 /// keeps more (from the base mesh of a large model) walks its descents again instead.
 pub const MAX_SCRATCH_BYTES: u64 = 32 << 20;
 
+/// The count's scratch area for `k` leaves (and `k` splits, `3 k` faces): the records, and
+/// the faces.
+fn scratch_buffers(d: &wgpu::Device, k: u64) -> (Sized, Sized) {
+    (
+        storage(d, "pm: count scratch", k * (SC_LEAF_BYTES + SC_SPLIT_BYTES) / 16, 16, VERTEX_USAGE),
+        storage(d, "pm: count scratch faces", 3 * k, SC_FACE_BYTES, VERTEX_USAGE),
+    )
+}
+
 /// The labels of the all-levels marks ([`GpuAdapter`]'s `marks`).
 const MARKS: [&str; 4] = ["pm: undone ranges", "pm: region reach", "pm: undone starts", "pm: region roots"];
 
@@ -697,10 +706,21 @@ impl GpuAdapter {
     }
 
     /// Grows the count's scratch area to hold `kept` (leaves, splits, faces) with a quarter
-    /// more, within [`MAX_SCRATCH_BYTES`] (and a 64th of the budget); never shrinks it.
+    /// more ([`Self::scratch_size`]); never shrinks it.
     fn grow_scratch(&mut self, kept: [u32; 3]) {
+        if let Some(k) = self.scratch_size(kept) {
+            (self.scratch, self.sc_faces) = scratch_buffers(self.gpu.device(), k);
+            self.sc_cap = [k as u32, k as u32, 3 * k as u32];
+            self.reallocations += 1;
+        }
+    }
+
+    /// The leaves (with as many splits and three faces each) a scratch area for `kept` takes,
+    /// a quarter more than `kept` within [`MAX_SCRATCH_BYTES`] (and a 64th of the budget);
+    /// `None` where the area holds them or cannot grow.
+    fn scratch_size(&self, kept: [u32; 3]) -> Option<u64> {
         if kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c) {
-            return;
+            return None;
         }
         let max = self.budget.map_or(self.scratch_limit, |b| (b / 64).min(self.scratch_limit));
         let per_leaf = SC_LEAF_BYTES + SC_SPLIT_BYTES + 3 * SC_FACE_BYTES;
@@ -708,14 +728,7 @@ impl GpuAdapter {
         // numerous, or what the faces need.
         let want = (kept[0].max(kept[1]) as u64).max((kept[2] as u64).div_ceil(3)) * 5 / 4;
         let k = want.min(max / per_leaf);
-        if k <= self.sc_cap[0] as u64 {
-            return;
-        }
-        let d = self.gpu.device();
-        self.scratch = storage(d, "pm: count scratch", k * (SC_LEAF_BYTES + SC_SPLIT_BYTES) / 16, 16, VERTEX_USAGE);
-        self.sc_faces = storage(d, "pm: count scratch faces", 3 * k, SC_FACE_BYTES, VERTEX_USAGE);
-        self.sc_cap = [k as u32, k as u32, 3 * k as u32];
-        self.reallocations += 1;
+        (k > self.sc_cap[0] as u64).then_some(k)
     }
 
     /// Bytes of one descent's slot: its stack, min(LEVELS_PER_PASS, descent budget) entries

@@ -378,11 +378,7 @@ impl GpuAdapter {
         enc.clear_buffer(&self.stats, 0, None);
         let all = params.levels == 1;
         self.descents = 0;
-        if all && self.sc_cap[0] == 0 {
-            // Before the first count: as much room as the scratch may take (what a budget
-            // already counts), so that the first pass need not walk its descents again.
-            self.grow_scratch([u32::MAX / 2; 3]);
-        }
+
         if all {
             // diff, reach and root start at zero; `up` is written for every vertex.
             for k in [0, 1, 3] {
