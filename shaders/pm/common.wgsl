@@ -47,6 +47,18 @@ fn state_nrm(s: VState) -> vec2<u32> {
     return vec2<u32>((s.pn.w & 0xffffu) | ((s.pn.x >> 24u) << 16u), (s.pn.w >> 16u) | ((s.pn.y >> 24u) << 16u));
 }
 
+// A vertex state as the seven vectors a record keeps it in (descent.wgsl's resume records,
+// state.wgsl's scratch leaves), and back.
+fn pack_state(c: VState) -> array<vec4<u32>, 7> {
+    return array<vec4<u32>, 7>(vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr), vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags),
+                               c.pc, c.pn, bitcast<vec4<u32>>(c.crit), c.c_pc, bitcast<vec4<u32>>(c.c_crit));
+}
+
+fn unpack_state(v: array<vec4<u32>, 7>) -> VState {
+    return VState(v[0].x, v[0].y, v[0].z, v[0].w, v[1].x, v[1].y, v[1].z, v[1].w, v[2], v[3],
+                  bitcast<vec4<f32>>(v[4]), v[5], bitcast<vec4<f32>>(v[6]));
+}
+
 // VState.flags, out of core only. PENDING: the operation's node was not resident when the
 // vertex got it, so its criteria and face count are not decoded yet (`crit` and `faces` are
 // zero); ABSENT: its node is not resident this pass. A vertex with either does not split

@@ -190,14 +190,14 @@ fn descent_save() {
     dstack[resume_at(0u)] = vec4<u32>(1u, dc_rounds, dc_sp, dc_depth);
     dstack[resume_at(1u)] = vec4<u32>(dc_f, dc_splits, dc_leaves, dc_faces);
     dstack[resume_at(2u)] = vec4<u32>(select(0u, 1u, dc_uncached), dc_vertex, dc_dsteps, 0u);
-    let c = dc_cur;
-    dstack[resume_at(3u)] = vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr);
-    dstack[resume_at(4u)] = vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags);
-    dstack[resume_at(5u)] = c.pc;
-    dstack[resume_at(6u)] = c.pn;
-    dstack[resume_at(7u)] = bitcast<vec4<u32>>(c.crit);
-    dstack[resume_at(8u)] = c.c_pc;
-    dstack[resume_at(9u)] = bitcast<vec4<u32>>(c.c_crit);
+    let c = pack_state(dc_cur);
+    dstack[resume_at(3u)] = c[0];
+    dstack[resume_at(4u)] = c[1];
+    dstack[resume_at(5u)] = c[2];
+    dstack[resume_at(6u)] = c[3];
+    dstack[resume_at(7u)] = c[4];
+    dstack[resume_at(8u)] = c[5];
+    dstack[resume_at(9u)] = c[6];
     dstack[resume_at(10u)] = bitcast<vec4<u32>>(dc_pt.pos);
     dstack[resume_at(11u)] = bitcast<vec4<u32>>(dc_pt.nrm);
     atomicAdd(&queue[dc_q + Q_PAUSED], 1u);
@@ -234,23 +234,9 @@ fn descent_resume(face_out: u32) {
     dc_uncached = r2.x != 0u;
     dc_vertex = r2.y;
     dc_dsteps = r2.z;
-    let a = dstack[resume_at(3u)];
-    let b = dstack[resume_at(4u)];
-    var c: VState;
-    c.v_end = a.x;
-    c.addr = a.y;
-    c.faces = a.z;
-    c.c_addr = a.w;
-    c.c_v = b.x;
-    c.c_v_end = b.y;
-    c.c_faces = b.z;
-    c.flags = b.w;
-    c.pc = dstack[resume_at(5u)];
-    c.pn = dstack[resume_at(6u)];
-    c.crit = bitcast<vec4<f32>>(dstack[resume_at(7u)]);
-    c.c_pc = dstack[resume_at(8u)];
-    c.c_crit = bitcast<vec4<f32>>(dstack[resume_at(9u)]);
-    dc_cur = c;
+    dc_cur = unpack_state(array<vec4<u32>, 7>(dstack[resume_at(3u)], dstack[resume_at(4u)], dstack[resume_at(5u)],
+                                              dstack[resume_at(6u)], dstack[resume_at(7u)], dstack[resume_at(8u)],
+                                              dstack[resume_at(9u)]));
     dc_pt = Point(bitcast<vec4<f32>>(dstack[resume_at(10u)]), bitcast<vec4<f32>>(dstack[resume_at(11u)]));
     dc_face_out = face_out;
 }

@@ -33,22 +33,8 @@ fn place_leaves(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     if (count < 2u || m.z >= count) {
         return;
     }
-    let a = scratch[at + 1u];
-    let b = scratch[at + 2u];
-    var c: VState;
-    c.v_end = a.x;
-    c.addr = a.y;
-    c.faces = a.z;
-    c.c_addr = a.w;
-    c.c_v = b.x;
-    c.c_v_end = b.y;
-    c.c_faces = b.z;
-    c.flags = b.w;
-    c.pc = scratch[at + 3u];
-    c.pn = scratch[at + 4u];
-    c.crit = bitcast<vec4<f32>>(scratch[at + 5u]);
-    c.c_pc = scratch[at + 6u];
-    c.c_crit = bitcast<vec4<f32>>(scratch[at + 7u]);
+    let c = unpack_state(array<vec4<u32>, 7>(scratch[at + 1u], scratch[at + 2u], scratch[at + 3u], scratch[at + 4u],
+                                             scratch[at + 5u], scratch[at + 6u], scratch[at + 7u]));
     dfvid[j + m.z] = m.x;
     dstate[j + m.z] = c;
     dpoint[j + m.z] = Point(bitcast<vec4<f32>>(scratch[at + 8u]), bitcast<vec4<f32>>(scratch[at + 9u]));

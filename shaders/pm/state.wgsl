@@ -55,15 +55,15 @@ fn keep_leaf(i: u32, k: u32) {
         return;
     }
     let at = r * SC_LEAF_VECS;
-    let c = dc_cur;
+    let c = pack_state(dc_cur);
     scratch[at] = vec4<u32>(dc_f, i, k, 0u);
-    scratch[at + 1u] = vec4<u32>(c.v_end, c.addr, c.faces, c.c_addr);
-    scratch[at + 2u] = vec4<u32>(c.c_v, c.c_v_end, c.c_faces, c.flags);
-    scratch[at + 3u] = c.pc;
-    scratch[at + 4u] = c.pn;
-    scratch[at + 5u] = bitcast<vec4<u32>>(c.crit);
-    scratch[at + 6u] = c.c_pc;
-    scratch[at + 7u] = bitcast<vec4<u32>>(c.c_crit);
+    scratch[at + 1u] = c[0];
+    scratch[at + 2u] = c[1];
+    scratch[at + 3u] = c[2];
+    scratch[at + 4u] = c[3];
+    scratch[at + 5u] = c[4];
+    scratch[at + 6u] = c[5];
+    scratch[at + 7u] = c[6];
     scratch[at + 8u] = bitcast<vec4<u32>>(dc_pt.pos);
     scratch[at + 9u] = bitcast<vec4<u32>>(dc_pt.nrm);
 }
