@@ -47,6 +47,34 @@ fn state_nrm(s: VState) -> vec2<u32> {
     return vec2<u32>((s.pn.w & 0xffffu) | ((s.pn.x >> 24u) << 16u), (s.pn.w >> 16u) | ((s.pn.y >> 24u) << 16u));
 }
 
+// The words of a stage's descent queue (descent.wgsl), from Q_COUNT for `count` and
+// Q_DESCEND for `descend`: the next of its list to take, the descents paused now, and of the
+// finished ones the steps in all (64 bits, low word first) and the most steps of one (what
+// the host sizes the rounds by); `count`'s also the leaves, splits and faces its scratch
+// area was asked to keep (state.wgsl, place.wgsl).
+const Q_NEXT: u32 = 0u;
+const Q_PAUSED: u32 = 1u;
+const Q_STEPS: u32 = 2u;
+const Q_MOST: u32 = 4u;
+const Q_SC_LEAVES: u32 = 5u;
+const Q_SC_SPLITS: u32 = 6u;
+const Q_SC_FACES: u32 = 7u;
+const Q_COUNT: u32 = 0u;
+const Q_DESCEND: u32 = 8u;
+
+// Where record `r` of the count's scratch area starts (in vectors): from 0, P.sc_leaves leaf
+// records of SC_LEAF_VECS vectors, then P.sc_splits split records of SC_SPLIT_VECS.
+const SC_LEAF_VECS: u32 = 10u;
+const SC_SPLIT_VECS: u32 = 2u;
+
+fn sc_leaf_at(r: u32) -> u32 {
+    return r * SC_LEAF_VECS;
+}
+
+fn sc_split_at(r: u32) -> u32 {
+    return P.sc_leaves * SC_LEAF_VECS + r * SC_SPLIT_VECS;
+}
+
 // A vertex state as the seven vectors a record keeps it in (descent.wgsl's resume records,
 // state.wgsl's scratch leaves), and back.
 fn pack_state(c: VState) -> array<vec4<u32>, 7> {

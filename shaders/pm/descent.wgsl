@@ -170,20 +170,9 @@ fn resume_at(q: u32) -> u32 {
 }
 
 // The descents of a stage form a queue (in `queue`, which the including file declares, from
-// word `dc_q`): the next of its list to take, the descents paused now, and of the finished
-// ones the steps in all (64 bits, low word first) and the most steps of one (what the host
-// sizes the rounds by). A slot takes the next descent whenever it finished one, so that its
-// lanes stay busy however unequal the descents (on lavapipe eight lanes wait for the longest
-// of theirs, on a GPU a warp's 32).
-const Q_NEXT: u32 = 0u;
-const Q_PAUSED: u32 = 1u;
-const Q_STEPS: u32 = 2u;
-const Q_MOST: u32 = 4u;
-const Q_SC_LEAVES: u32 = 5u; // count's scratch area: leaves, splits and faces taken
-const Q_SC_SPLITS: u32 = 6u;
-const Q_SC_FACES: u32 = 7u;
-const Q_COUNT: u32 = 0u;   // count's queue
-const Q_DESCEND: u32 = 8u; // descend's
+// word `dc_q`; the Q_* words of common.wgsl). A slot takes the next descent whenever it
+// finished one, so that its lanes stay busy however unequal the descents (on lavapipe eight
+// lanes wait for the longest of theirs, on a GPU a warp's 32).
 
 // Saves the descent paused at the step cap for the next round.
 fn descent_save() {

@@ -14,18 +14,17 @@
 @group(0) @binding(7) var<storage, read_write> face_owner: array<u32>;
 @group(0) @binding(8) var<storage, read> scratch: array<vec4<u32>>;
 @group(0) @binding(9) var<storage, read> sc_faces: array<u32>;
-// The leaves and splits kept (the count's queue words 5 and 6, at most the scratch area's).
+// The leaves and splits kept (the count's queue words Q_SC_LEAVES and Q_SC_SPLITS; more than
+// the scratch area holds only where the host runs `descend` instead).
 @group(0) @binding(10) var<storage, read> queue: array<u32, 16>;
-
-const SC_LEAF_VECS: u32 = 10u;
 
 @compute @workgroup_size(256)
 fn place_leaves(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let r = thread_index(gid, groups);
-    if (r >= min(queue[5], P.sc_leaves)) {
+    if (r >= min(queue[Q_COUNT + Q_SC_LEAVES], P.sc_leaves)) {
         return;
     }
-    let at = r * SC_LEAF_VECS;
+    let at = sc_leaf_at(r);
     let m = scratch[at];
     let i = m.y;
     let j = vsum[i];
@@ -43,10 +42,10 @@ fn place_leaves(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
 @compute @workgroup_size(256)
 fn place_splits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let r = thread_index(gid, groups);
-    if (r >= min(queue[6], P.sc_splits)) {
+    if (r >= min(queue[Q_COUNT + Q_SC_SPLITS], P.sc_splits)) {
         return;
     }
-    let at = P.sc_leaves * SC_LEAF_VECS + 2u * r;
+    let at = sc_split_at(r);
     let m = scratch[at];
     let base = scratch[at + 1u].x;
     let i = m.x;

@@ -41,11 +41,9 @@
 @group(0) @binding(18) var<storage, read_write> dstack: array<vec4<u32>>;
 // The descents' queue (descent.wgsl).
 @group(0) @binding(19) var<storage, read_write> queue: array<atomic<u32>, 16>;
-// The count's scratch area: from 0, P.sc_leaves leaf records of SC_LEAF_VECS vectors, then
-// P.sc_splits split records of 2 (`count` binds the scratch faces as `dec_faces`).
+// The count's scratch area (`sc_leaf_at`, `sc_split_at` of common.wgsl; `count` binds the
+// scratch faces as `dec_faces`).
 @group(0) @binding(20) var<storage, read_write> scratch: array<vec4<u32>>;
-
-const SC_LEAF_VECS: u32 = 10u;
 
 // Keeps leaf `k` of vertex `i`'s descent in the scratch area, if it has room: (its FVID, i,
 // k, 0), its state (7 vectors, as descent_save) and its point (2), for place.wgsl.
@@ -54,7 +52,7 @@ fn keep_leaf(i: u32, k: u32) {
     if (r >= P.sc_leaves) {
         return;
     }
-    let at = r * SC_LEAF_VECS;
+    let at = sc_leaf_at(r);
     let c = pack_state(dc_cur);
     scratch[at] = vec4<u32>(dc_f, i, k, 0u);
     scratch[at + 1u] = c[0];
@@ -76,7 +74,7 @@ fn keep_split(i: u32) {
     if (r >= P.sc_splits) {
         return;
     }
-    let at = P.sc_leaves * SC_LEAF_VECS + 2u * r;
+    let at = sc_split_at(r);
     scratch[at] = vec4<u32>(i, dc_faces - dc_last_faces, dc_last_vu, dc_last_faces);
     scratch[at + 1u] = vec4<u32>(dc_last_base, 0u, 0u, 0u);
 }

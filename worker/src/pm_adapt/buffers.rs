@@ -101,8 +101,16 @@ pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 /// `descent.wgsl`: per stage the next descent to take, the descents paused, and of the
 /// finished ones the steps in all (64 bits) and the most steps of one.
 pub(super) type Queue = [u32; 16];
-/// `Q_DESCEND` of `descent.wgsl`: where `descend`'s queue starts.
+/// The `Q_*` words of `common.wgsl` the host reads or clears: where `descend`'s queue starts,
+/// and in `count`'s the next descent to take, the descents paused, the steps in all (two
+/// words), the most of one, and the leaves its scratch area was asked to keep (then the
+/// splits and the faces).
 pub(super) const Q_DESCEND: u64 = 8;
+pub(super) const Q_NEXT: usize = 0;
+pub(super) const Q_PAUSED: usize = 1;
+pub(super) const Q_STEPS: usize = 2;
+pub(super) const Q_MOST: usize = 4;
+pub(super) const Q_SC_LEAVES: usize = 5;
 /// Vectors of a leaf's record in the count's scratch area (`SC_LEAF_VECS` of `state.wgsl`)
 /// and of a split's; bytes of a face there.
 pub(super) const SC_LEAF_BYTES: u64 = 10 * 16;

@@ -452,6 +452,7 @@ impl GpuAdapter {
     /// A new adapter at the base mesh.
     fn with_shared(gpu: Gpu, shared: Arc<Shared>, n_alloc: u32, resident: Option<Resident>) -> GpuAdapter {
         let d = gpu.device();
+        let (scratch, sc_faces) = scratch_buffers(d, 0);
         let mut adapter = GpuAdapter {
             shared,
             n_alloc,
@@ -482,8 +483,8 @@ impl GpuAdapter {
             steps: 0,
             most: 0,
             count_ran: false,
-            scratch: storage(d, "pm: count scratch", 0, 16, VERTEX_USAGE),
-            sc_faces: storage(d, "pm: count scratch faces", 0, 12, VERTEX_USAGE),
+            scratch,
+            sc_faces,
             sc_cap: [0; 3],
             sc_kept: [0; 3],
             scratch_limit: MAX_SCRATCH_BYTES,
@@ -657,9 +658,7 @@ impl GpuAdapter {
     /// holds walks its descents again (0: every pass does).
     pub fn set_scratch_limit(&mut self, bytes: u64) {
         self.scratch_limit = bytes;
-        let d = self.gpu.device();
-        self.scratch = storage(d, "pm: count scratch", 0, 16, VERTEX_USAGE);
-        self.sc_faces = storage(d, "pm: count scratch faces", 0, 12, VERTEX_USAGE);
+        (self.scratch, self.sc_faces) = scratch_buffers(self.gpu.device(), 0);
         self.sc_cap = [0; 3];
     }
 
@@ -695,7 +694,7 @@ impl GpuAdapter {
         };
         let scratch = self.scratch.buffer.size() + self.sc_faces.buffer.size();
         let scratch_reserve = match (budget, self.levels) {
-            (Some(b), Levels::All) => (b / 64).min(self.scratch_limit),
+            (Some(_), Levels::All) => self.scratch_max_bytes(budget),
             _ => 0,
         };
         self.static_bytes()
@@ -703,6 +702,12 @@ impl GpuAdapter {
             + records
             + self.stack.buffer.size().max(reserve)
             + scratch.max(scratch_reserve)
+    }
+
+    /// The most bytes the count's scratch area may take under `budget`: the scratch limit
+    /// ([`Self::set_scratch_limit`]), at most a 64th of the budget.
+    fn scratch_max_bytes(&self, budget: Option<u64>) -> u64 {
+        budget.map_or(self.scratch_limit, |b| (b / 64).min(self.scratch_limit))
     }
 
     /// Grows the count's scratch area to hold `kept` (leaves, splits, faces) with a quarter
@@ -722,7 +727,7 @@ impl GpuAdapter {
         if kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c) {
             return None;
         }
-        let max = self.budget.map_or(self.scratch_limit, |b| (b / 64).min(self.scratch_limit));
+        let max = self.scratch_max_bytes(self.budget);
         let per_leaf = SC_LEAF_BYTES + SC_SPLIT_BYTES + 3 * SC_FACE_BYTES;
         // A leaf each split and descent, three faces a split: sized by the leaves, the most
         // numerous, or what the faces need.

@@ -6,9 +6,9 @@ use codec::pm::{PassStats, Viewpoint};
 use codec::pm::Levels;
 
 use super::buffers::{
-    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, Q_DESCEND,
-    READBACK_BYTES, STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES, STAT_DESCENTS, STAT_REMOVED_FACES,
-    STAT_SPLIT_VERTICES, VERTEX_USAGE,
+    needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, Q_DESCEND, Q_MOST,
+    Q_NEXT, Q_PAUSED, Q_SC_LEAVES, Q_STEPS, READBACK_BYTES, STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES,
+    STAT_DESCENTS, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES, VERTEX_USAGE,
 };
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
 use super::{AdaptError, GpuAdapter, DEEP_DESCENT, DEEP_PASSES, MARKS, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
@@ -67,9 +67,9 @@ impl GpuAdapter {
             levels: all as u32,
             budget: self.descent_budget,
             loop_probe: 2,
+            round_steps: self.round_steps,
             ..Default::default()
         };
-        params.round_steps = self.round_steps;
         if let Some(v) = view {
             params.mode = 0;
             params.planes = v.planes().map(|p| p.to_array());
@@ -533,9 +533,10 @@ impl GpuAdapter {
 
     /// Records `count` over the pass's `total` descents into `enc` and runs it to the end:
     /// round after round of the pass's slots until the queue is empty and no descent paused
-    /// (read back between them on a software adapter, whose slots pause; one round on
-    /// hardware). Returns the steps of the descents in all and the most of one, which size
-    /// `descend`'s rounds. `enc` is then a new encoder for what follows.
+    /// (a software adapter's slots pause; one round on hardware), its queue read back after
+    /// each batch of rounds. Returns the steps of the descents in all and the most of one,
+    /// which size `descend`'s rounds, and the leaves, splits and faces it asked its scratch
+    /// area to keep. `enc` is then a new encoder for what follows.
     fn count_descents(
         &self,
         enc: &mut wgpu::CommandEncoder,
@@ -543,40 +544,30 @@ impl GpuAdapter {
         bg: &wgpu::BindGroup,
         total: u32,
     ) -> Result<(u64, u64, [u32; 3]), AdaptError> {
-        let stage = &self.shared.pipelines.count;
         if total == 0 {
             return Ok((0, 0, [0; 3]));
         }
-        if self.round_steps == u32::MAX {
-            params.rounds = 1;
-            self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
-            self.run_rounds(enc, stage, bg, 1, Some(0));
-            enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 32);
-            let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(&COUNT));
-            self.gpu.queue().submit([done.finish()]);
-            let q = self.read_totals()?;
-            return Ok((0, 0, [q[5], q[6], q[7]]));
-        }
         // Enough rounds for any descents (the most steps each), the last of which fails the
-        // pass if a descent still has to pause (descent.wgsl): the host stops there.
+        // pass if a descent still has to pause (descent.wgsl): the host stops there. A batch
+        // of rounds finishes the descents that a round of every slot can hold, and the
+        // longest then.
         let most = self.descent_steps();
         let bound = self.rounds_for(total as u64 * most, most, self.round_steps);
+        let batch = if self.round_steps == u32::MAX { 1 } else { (most.div_ceil(self.round_steps as u64) + 1) as u32 };
         params.rounds = bound;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
-        // A batch of rounds finishes the descents that a round of every slot can hold, and
-        // the longest then.
-        let batch = (most.div_ceil(self.round_steps as u64) + 1) as u32;
         let mut run = 0;
         loop {
             let rounds = batch.min(bound - run);
-            self.run_rounds(enc, stage, bg, rounds, if run == 0 { Some(0) } else { None });
+            self.run_rounds(enc, &self.shared.pipelines.count, bg, rounds, (run == 0).then_some(0));
             run += rounds;
             enc.copy_buffer_to_buffer(&self.queue, 0, &self.readback, 0, 32);
             let done = std::mem::replace(enc, self.gpu.device().create_command_encoder(&COUNT));
             self.gpu.queue().submit([done.finish()]);
             let q = self.read_totals()?;
-            if (q[0] >= total && q[1] == 0) || run >= bound {
-                return Ok((q[2] as u64 | (q[3] as u64) << 32, q[4] as u64, [q[5], q[6], q[7]]));
+            if (q[Q_NEXT] >= total && q[Q_PAUSED] == 0) || run >= bound {
+                let kept = [q[Q_SC_LEAVES], q[Q_SC_LEAVES + 1], q[Q_SC_LEAVES + 2]];
+                return Ok((q[Q_STEPS] as u64 | (q[Q_STEPS + 1] as u64) << 32, q[Q_MOST] as u64, kept));
             }
         }
     }
