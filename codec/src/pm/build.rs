@@ -848,11 +848,11 @@ impl Log {
     }
 }
 
-/// A node of the chunks' kd-tree: a leaf's input faces, or two halves and the number of the
-/// right half's first leaf. Leaves are numbered depth-first, so a node covers the leaves
-/// `first..end`.
+/// A node of the chunks' kd-tree: a leaf's input faces (a range of the faces in leaf order),
+/// or two halves and the number of the right half's first leaf. Leaves are numbered
+/// depth-first, so a node covers the leaves `first..end`.
 enum Kd {
-    Leaf(Vec<u32>),
+    Leaf(std::ops::Range<usize>),
     Inner(Box<Kd>, Box<Kd>, u32),
 }
 
@@ -907,12 +907,16 @@ fn simplify_chunked(
         done: AtomicUsize::new(0),
     };
     let mut count = 0;
-    let tree = c.partition((0..mesh.triangles.len() as u32).collect(), &mut count);
+    // The input faces in leaf order, each leaf a range of them: one array (a vector per leaf,
+    // as before, kept 4 bytes a face in blocks too small for `pm build --spill-dir` to
+    // spill: 410 MB at 102M triangles).
+    let mut faces: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
+    let tree = c.partition(&mut faces, 0, &mut count);
     c.key = Vec::new();
-    let c = &c;
+    let (c, faces) = (&c, &faces[..]);
     // The chunks run on rayon's threads; this one reports their progress meanwhile.
     let part = std::thread::scope(|scope| {
-        let work = scope.spawn(move || c.simplify(tree, 0, count, true));
+        let work = scope.spawn(move || c.simplify(faces, tree, 0, count, true));
         while !work.is_finished() {
             progress(c.done.load(Ordering::Relaxed));
             std::thread::sleep(std::time::Duration::from_millis(100));
@@ -924,34 +928,38 @@ fn simplify_chunked(
 }
 
 impl Chunker<'_> {
-    /// The kd-tree of `faces` (input face ids), its leaves numbered from `*count` on; records
-    /// each vertex's first and last leaf.
-    fn partition(&mut self, faces: Vec<u32>, count: &mut u32) -> Kd {
+    /// The kd-tree of `faces` (input face ids, from `at` on in the whole array), its leaves
+    /// numbered from `*count` on, the faces reordered in place into leaf order; records each
+    /// vertex's first and last leaf.
+    fn partition(&mut self, faces: &mut [u32], at: usize, count: &mut u32) -> Kd {
         if faces.len() > self.chunk_faces {
-            let (left, right) = self.halve(faces);
-            let a = self.partition(left, count);
+            let half = self.halve(faces);
+            let (left, right) = faces.split_at_mut(half);
+            let a = self.partition(left, at, count);
             let mid = *count;
-            let b = self.partition(right, count);
+            let b = self.partition(right, at + half, count);
             return Kd::Inner(Box::new(a), Box::new(b), mid);
         }
         let leaf = *count;
         *count += 1;
-        for &f in &faces {
+        for &f in faces.iter() {
             for v in self.mesh.triangles[f as usize] {
                 let l = &mut self.leaves[v as usize];
                 *l = (l.0.min(leaf), l.1.max(leaf));
             }
         }
-        Kd::Leaf(faces)
+        Kd::Leaf(at..at + faces.len())
     }
 
-    /// Simplifies the kd-tree node `kd`, which covers the leaves `first..end`; the root runs
-    /// to the end.
-    fn simplify(&self, kd: Kd, first: u32, end: u32, root: bool) -> Part {
+    /// Simplifies the kd-tree node `kd`, which covers the leaves `first..end` (their faces in
+    /// `faces`); the root runs to the end.
+    fn simplify(&self, faces: &[u32], kd: Kd, first: u32, end: u32, root: bool) -> Part {
         let part = match kd {
             Kd::Inner(a, b, mid) => {
-                let (mut a, b) =
-                    rayon::join(|| self.simplify(*a, first, mid, false), || self.simplify(*b, mid, end, false));
+                let (mut a, b) = rayon::join(
+                    || self.simplify(faces, *a, first, mid, false),
+                    || self.simplify(faces, *b, mid, end, false),
+                );
                 a.faces.extend(b.faces);
                 a.vertices.extend(b.vertices);
                 a.log.append(b.log);
@@ -960,8 +968,8 @@ impl Chunker<'_> {
                 a.stats.chunks += b.stats.chunks;
                 a
             }
-            Kd::Leaf(faces) => Part {
-                faces: faces.into_iter().map(|f| (f, self.mesh.triangles[f as usize])).collect(),
+            Kd::Leaf(range) => Part {
+                faces: faces[range].iter().map(|&f| (f, self.mesh.triangles[f as usize])).collect(),
                 vertices: Vec::new(),
                 log: Log::default(),
                 stats: BuildStats::default(),
@@ -970,8 +978,9 @@ impl Chunker<'_> {
         self.chunk(part, (first, end), if root { 0 } else { self.chunk_faces / 2 })
     }
 
-    /// Splits `faces` in two at the median centroid along the longest axis of the centroids.
-    fn halve(&mut self, mut faces: Vec<u32>) -> (Vec<u32>, Vec<u32>) {
+    /// Splits `faces` in two at the median centroid along the longest axis of the centroids:
+    /// the lower half first, in place; returns its length.
+    fn halve(&mut self, faces: &mut [u32]) -> usize {
         let p = &self.mesh.positions;
         let centroid = |f: u32| {
             let t = self.mesh.triangles[f as usize];
@@ -980,7 +989,7 @@ impl Chunker<'_> {
             })
         };
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for &f in &faces {
+        for &f in faces.iter() {
             let c = centroid(f);
             for a in 0..3 {
                 lo[a] = lo[a].min(c[a]);
@@ -988,15 +997,13 @@ impl Chunker<'_> {
             }
         }
         let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-        for &f in &faces {
+        for &f in faces.iter() {
             self.key[f as usize] = centroid(f)[axis];
         }
         let key = &self.key;
         let mid = faces.len() / 2;
         faces.select_nth_unstable_by(mid, |&a, &b| key[a as usize].total_cmp(&key[b as usize]).then(a.cmp(&b)));
-        let right = faces.split_off(mid);
-        faces.shrink_to_fit();
-        (faces, right)
+        mid
     }
 
     /// Simplifies one chunk, the faces and vertices `part` gathered from the leaves
