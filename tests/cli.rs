@@ -175,6 +175,52 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     assert!(!out.exists());
 }
 
+/// `pm build --spill-dir` keeps its large arrays in files there (blocks of 1 MiB and more
+/// here) and writes the same bytes; a folder it cannot use is refused in one line, with no
+/// output.
+#[test]
+fn pm_build_spills_into_files_and_writes_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let (plain, spilled) = (dir.path().join("plain.dpm"), dir.path().join("spilled.dpm"));
+    let o = tessera(&["pm", "build", s(&input), "-o", s(&plain), "--node-kb", "16"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tessera(&[
+        "pm",
+        "build",
+        s(&input),
+        "-o",
+        s(&spilled),
+        "--node-kb",
+        "16",
+        "--spill-dir",
+        s(dir.path()),
+        "--spill-min-mb",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let kept = out.lines().find(|l| l.contains("of arrays in files in")).unwrap_or_else(|| panic!("{out}"));
+    let files: u32 = kept.split("at most ").nth(1).and_then(|r| r.split(' ').next()).unwrap().parse().unwrap();
+    assert!(files > 0 && !kept.contains("could not"), "{kept}");
+    assert_eq!(std::fs::read(&plain).unwrap(), std::fs::read(&spilled).unwrap());
+
+    let missing = dir.path().join("no such folder");
+    let bad = dir.path().join("bad.dpm");
+    let mut folders = vec![missing];
+    // A folder in memory would only move the memory.
+    if std::fs::metadata("/dev/shm").is_ok() {
+        folders.push("/dev/shm".into());
+    }
+    for f in folders {
+        let o = tessera(&["pm", "build", s(&input), "-o", s(&bad), "--spill-dir", s(&f)]);
+        assert_eq!(o.status.code(), Some(1));
+        let err = stderr(&o);
+        assert!(err.trim().lines().count() == 1 && err.contains("cannot keep the build's arrays in"), "{err}");
+        assert!(!bad.exists());
+    }
+}
+
 /// `pm adapt --gpu` writes the CPU's file, from an in-core `.dpm` and from an out-of-core one
 /// (4 kB nodes, every node in graphics memory); a node pool for fewer nodes gives a coarser
 /// mesh, and one that holds no node is refused in one line; a GPU budget too small for the

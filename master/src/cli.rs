@@ -304,6 +304,16 @@ pub enum Pm {
         /// it stops before simplifying, rather than be killed for memory later).
         #[arg(long)]
         no_memory_check: bool,
+        /// Keep the build's large arrays in files in this folder (on a disk), mapped, so that
+        /// a model larger than memory builds: the kernel writes their pages back and drops them
+        /// under memory pressure. Without it, a build that plainly needs more memory than is
+        /// available does this in the temporary folder ($TMPDIR or /tmp) where that is on a
+        /// disk with room.
+        #[arg(long, value_name = "DIR")]
+        spill_dir: Option<PathBuf>,
+        /// Blocks of at least this many MiB go to the spill folder (tests use a small one).
+        #[arg(long, default_value_t = 4, hide = true)]
+        spill_min_mb: usize,
     },
     /// Print the size of a .dpm file per vertex, with the breakdown.
     Stats {

@@ -16,3 +16,4 @@ pub mod pm;
 pub mod progress;
 pub mod render;
 pub mod sort;
+pub mod spill;

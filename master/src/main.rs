@@ -10,6 +10,11 @@ use master::cli::{Cli, Command, Nsp, Pm, RenderArgs};
 use master::commands;
 use worker::transport::{self, Mpi, Transport};
 
+/// Large blocks go to files once `pm build` turns spilling on (`master::spill`); until then
+/// this is the system allocator.
+#[global_allocator]
+static ALLOC: master::spill::SpillAlloc = master::spill::SpillAlloc;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     master::output::install_signal_handler();
@@ -23,7 +28,18 @@ fn main() -> ExitCode {
             master::sort::run(model, grid, camera, dump.as_ref(), *json, (*tile_coding).into())
         }
         Command::Pm {
-            pm: Pm::Build { input, output, position_bits, normal_bits, node_kb, chunk_faces, no_memory_check },
+            pm:
+                Pm::Build {
+                    input,
+                    output,
+                    position_bits,
+                    normal_bits,
+                    node_kb,
+                    chunk_faces,
+                    no_memory_check,
+                    spill_dir,
+                    spill_min_mb,
+                },
         } => master::pm::build(
             input,
             output,
@@ -33,7 +49,11 @@ fn main() -> ExitCode {
                 node_bytes: node_kb.map_or(0, |k| k * 1024),
             },
             codec::pm::BuildOptions { chunk_faces: *chunk_faces },
-            !*no_memory_check,
+            master::pm::MemoryPolicy {
+                check: !*no_memory_check,
+                spill_dir: spill_dir.clone(),
+                spill_threshold: spill_min_mb << 20,
+            },
         ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),
         Command::Pm {

@@ -1,6 +1,6 @@
 //! `tessera pm`: dependency-free progressive meshes in `.dpm` files (build, stats, adapt).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -14,26 +14,87 @@ use crate::commands::load_mesh_streamed;
 use crate::commands::{expect_kind, mesh_output, read_input, summary};
 use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
+use crate::spill;
 use codec::input::ModelKind;
 
-/// `tessera pm build IN -o OUT.dpm`; `memory_check`: stop before simplifying where the model
-/// plainly needs more memory than is available ([`memory_shortfall`]).
+/// How `pm build` meets a model larger than memory.
+#[derive(Clone, Debug)]
+pub struct MemoryPolicy {
+    /// Stop before simplifying where the model plainly needs more memory than is available
+    /// ([`memory_shortfall`]) and cannot spill either.
+    pub check: bool,
+    /// Spill large blocks into files in this folder from the start ([`crate::spill`]);
+    /// without it, spill into the temporary folder where the memory check finds a shortfall.
+    pub spill_dir: Option<PathBuf>,
+    /// Blocks of at least this many bytes spill.
+    pub spill_threshold: usize,
+}
+
+impl Default for MemoryPolicy {
+    fn default() -> Self {
+        Self { check: true, spill_dir: None, spill_threshold: spill::DEFAULT_THRESHOLD }
+    }
+}
+
+/// The disk a spilled build takes, a triangle: what it holds at its peak with the mesh
+/// (README, "A hundred million triangles"), and some room.
+const SPILL_BYTES_PER_TRIANGLE: u64 = 80;
+
+/// `tessera pm build IN -o OUT.dpm`, meeting a large model as `memory` says.
 pub fn build(
     input: &Path,
     output: &Path,
     opts: EncodeOptions,
     build_opts: codec::pm::BuildOptions,
-    memory_check: bool,
+    memory: MemoryPolicy,
 ) -> Result<()> {
     check_extension(output, &["dpm"], "the output of pm build")?;
     check_distinct(&[input], &[output])?;
+    let mut spilling = None;
+    if let Some(dir) = &memory.spill_dir {
+        spill::enable(dir, memory.spill_threshold)
+            .with_context(|| format!("cannot keep the build's arrays in {}", dir.display()))?;
+        spilling = Some(dir.clone());
+    }
     let mesh = load_mesh_streamed(input)?;
-    if memory_check {
+    if memory.check && spilling.is_none() {
         if let Some(available) = available_memory() {
             if let Some(msg) = memory_shortfall(mesh.triangles.len() as u64, available) {
-                anyhow::bail!("cannot build {}: {msg}", input.display());
+                // Spill into the temporary folder where it is on a disk with room enough.
+                let dir = std::env::temp_dir();
+                let need = mesh.triangles.len() as u64 * SPILL_BYTES_PER_TRIANGLE;
+                let room = spill::free_bytes(&dir).unwrap_or(0);
+                let why = if room < need {
+                    format!(
+                        "{} has {:.1} GB free of the {:.1} GB spilling would take",
+                        dir.display(),
+                        gb(room),
+                        gb(need)
+                    )
+                } else {
+                    match spill::enable(&dir, memory.spill_threshold) {
+                        Ok(()) => String::new(),
+                        Err(e) => format!("cannot spill into {}: {e}", dir.display()),
+                    }
+                };
+                if !why.is_empty() {
+                    anyhow::bail!(
+                        "cannot build {}: {msg}; free memory, add swap, pass --spill-dir DIR on a disk ({why}) \
+                         or --no-memory-check to try anyway",
+                        input.display()
+                    );
+                }
+                eprintln!(
+                    "note: {}: {msg}; keeping the build's large arrays in files in {} instead (--spill-dir)",
+                    input.display(),
+                    dir.display()
+                );
+                spilling = Some(dir);
             }
         }
+    }
+    if spilling.is_some() {
+        spill::drop_cached(input);
     }
     let start = Instant::now();
     let pb = progress::bar(mesh.positions.len() as u64, "simplifying (collapses)");
@@ -82,6 +143,23 @@ pub fn build(
             format_args!("  simplified in {} chunks of at most {} triangles", stats.chunks, build_opts.chunk_faces),
         );
     }
+    if let Some(dir) = &spilling {
+        let st = spill::stats();
+        summary(
+            output,
+            format_args!(
+                "  kept up to {:.2} GB of arrays in files in {} (at most {} files at once){}",
+                gb(st.peak_bytes),
+                dir.display(),
+                st.peak_files,
+                if st.fallbacks > 0 {
+                    format!(" ({} blocks could not be, and stayed in memory)", st.fallbacks)
+                } else {
+                    String::new()
+                }
+            ),
+        );
+    }
     let per_vertex = |bits: f64| bits / 8.0 / enc.header.vertices.max(1) as f64;
     summary(
         output,
@@ -105,16 +183,18 @@ const BUILD_BYTES_PER_TRIANGLE: u64 = 48;
 /// builds measured, so a build that is refused would have run out of memory.
 pub fn memory_shortfall(triangles: u64, available: u64) -> Option<String> {
     let need = triangles.saturating_mul(BUILD_BYTES_PER_TRIANGLE);
-    let gb = |b: u64| b as f64 / 1e9;
     (need > available).then(|| {
         format!(
             "{triangles} triangles need about {:.1} GB more to build (the builder holds the whole model, \
-             about 65 bytes a triangle), and {:.1} GB is available; free memory or add swap, or pass \
-             --no-memory-check to try anyway",
+             about 65 bytes a triangle), and {:.1} GB is available",
             gb(need),
             gb(available)
         )
     })
+}
+
+fn gb(b: u64) -> f64 {
+    b as f64 / 1e9
 }
 
 /// The memory and swap available to this process, from `/proc/meminfo` (`MemAvailable` plus
@@ -395,7 +475,7 @@ mod tests {
     fn a_build_that_cannot_fit_is_refused_before_it_starts() {
         let msg = memory_shortfall(450_000_000, 20_000_000_000).expect("refused");
         assert!(msg.contains("450000000 triangles need about 21.6 GB"), "{msg}");
-        assert!(msg.contains("20.0 GB is available") && msg.contains("--no-memory-check"), "{msg}");
+        assert!(msg.contains("20.0 GB is available") && msg.contains("450000000 triangles"), "{msg}");
         assert!(!msg.contains('\n'));
         assert_eq!(memory_shortfall(100_000_000, 20_000_000_000), None);
         assert_eq!(memory_shortfall(0, 0), None);
