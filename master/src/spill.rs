@@ -223,31 +223,29 @@ fn maybe_mapped(size: usize) -> bool {
     size >= THRESHOLD.load(Ordering::Relaxed)
 }
 
+/// A new block in a file where it is [`wanted`] and one can be made, else `system`'s.
+unsafe fn in_file_or(layout: Layout, system: impl FnOnce(Layout) -> *mut u8) -> *mut u8 {
+    if wanted(layout.size(), layout.align()) {
+        let p = map_new(layout.size());
+        if !p.is_null() {
+            return p;
+        }
+        FALLBACKS.fetch_add(1, Ordering::Relaxed);
+    }
+    system(layout)
+}
+
 // SAFETY: blocks in files are page-aligned (any alignment up to a page, which `wanted`
 // requires), at least `size` bytes, and freed only through `dealloc`/`realloc` here; every
 // other block is the system allocator's, as `find` tells apart by address.
 unsafe impl GlobalAlloc for SpillAlloc {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if wanted(layout.size(), layout.align()) {
-            let p = map_new(layout.size());
-            if !p.is_null() {
-                return p;
-            }
-            FALLBACKS.fetch_add(1, Ordering::Relaxed);
-        }
-        System.alloc(layout)
+        in_file_or(layout, |l| System.alloc(l))
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        if wanted(layout.size(), layout.align()) {
-            // A new file reads as zeros.
-            let p = map_new(layout.size());
-            if !p.is_null() {
-                return p;
-            }
-            FALLBACKS.fetch_add(1, Ordering::Relaxed);
-        }
-        System.alloc_zeroed(layout)
+        // A new file reads as zeros.
+        in_file_or(layout, |l| System.alloc_zeroed(l))
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {

@@ -712,18 +712,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
             }
         }
     }
-    let grain = (m / (rayon::current_num_threads() * 16)).clamp(1 << 10, 1 << 14);
-    let (mut tasks, mut top) = (Vec::new(), Vec::new());
-    let mut i = 0;
-    while i < m {
-        if count[i] as usize <= grain {
-            tasks.push(i..i + count[i] as usize);
-            i += count[i] as usize;
-        } else {
-            top.push(i);
-            i += 1;
-        }
-    }
+    let (tasks, top) = subtrees_of_at_most(&count, (m / (rayon::current_num_threads() * 16)).clamp(1 << 10, 1 << 14));
     drop(count);
     // In batches, so the coded bytes in flight stay few.
     for batch in tasks.chunks(rayon::current_num_threads() * 8) {
@@ -768,6 +757,24 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
         offsets[i] = offset;
     }
     (bytes, Choices { swaps, offsets, avg })
+}
+
+/// Of a forest in pre-order with `size[i]` elements in the subtree of `i` (the range from `i`
+/// on): the disjoint subtrees of at most `grain` elements whose parents' are larger, as
+/// ranges in pre-order, and the elements above them, ascending.
+fn subtrees_of_at_most(size: &[u32], grain: usize) -> (Vec<std::ops::Range<usize>>, Vec<usize>) {
+    let (mut tasks, mut top) = (Vec::new(), Vec::new());
+    let mut i = 0;
+    while i < size.len() {
+        if size[i] as usize <= grain {
+            tasks.push(i..i + size[i] as usize);
+            i += size[i] as usize;
+        } else {
+            top.push(i);
+            i += 1;
+        }
+    }
+    (tasks, top)
 }
 
 /// An out-of-core layout: the tables, per node its bytes and what the node table keeps of it,
@@ -908,18 +915,7 @@ fn code_nodes(
         }
     }
     let threads = rayon::current_num_threads();
-    let grain = (nodes_count / (threads * 16)).clamp(1, 64);
-    let (mut tasks, mut top) = (Vec::new(), Vec::new());
-    let mut n = 0;
-    while n < nodes_count {
-        if size[n] as usize <= grain {
-            tasks.push(n..n + size[n] as usize);
-            n += size[n] as usize;
-        } else {
-            top.push(n);
-            n += 1;
-        }
-    }
+    let (tasks, top) = subtrees_of_at_most(&size, (nodes_count / (threads * 16)).clamp(1, 64));
     drop(size);
     let code = |n: usize, addr: &dyn Fn(usize) -> u32, counting: Option<&mut [[u64; 256]]>| {
         code_node(ops, hier, members.get(n), n as u32, &ops.parent, addr, tables, avg, counting)
