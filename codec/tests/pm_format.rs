@@ -229,17 +229,17 @@ fn bunny_and_dragon_sizes() {
 fn unknown_versions_are_refused() {
     let mut bytes = encode(&build(&load("classic/teapot.obj")).unwrap(), EncodeOptions::default()).unwrap().bytes;
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), format::VERSION);
-    for v in [0u16, 1, 5, u16::MAX] {
+    for v in [0u16, 1, 6, u16::MAX] {
         bytes[8..10].copy_from_slice(&v.to_le_bytes());
         let e = decode(&bytes).unwrap_err();
-        assert_eq!(e.to_string(), format!("unsupported .dpm version {v} (this build reads version 4)"));
+        assert_eq!(e.to_string(), format!("unsupported .dpm version {v} (this build reads version 5)"));
         assert!(DpmStats::of(&bytes).is_err());
     }
-    for v in [2u16, 3] {
+    for v in [2u16, 3, 4] {
         bytes[8..10].copy_from_slice(&v.to_le_bytes());
         let e = decode(&bytes).unwrap_err().to_string();
         assert!(
-            e.starts_with(&format!(".dpm version {v} is no longer read (this build reads version 4): "))
+            e.starts_with(&format!(".dpm version {v} is no longer read (this build reads version 5): "))
                 && e.ends_with("rebuild it from its source mesh with `tessera pm build`")
                 && !e.contains('\n'),
             "{e}"

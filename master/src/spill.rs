@@ -218,9 +218,10 @@ unsafe fn unmap(b: Block) {
 }
 
 /// Blocks that may be in files have at least the threshold's size; smaller ones are the
-/// system's (the threshold is set once, before any block goes to a file, by [`enable`]).
+/// system's (the threshold is set once, before any block goes to a file, by [`enable`]). A
+/// process that never spilled (every command but a spilling `pm build`) never looks.
 fn maybe_mapped(size: usize) -> bool {
-    size >= THRESHOLD.load(Ordering::Relaxed)
+    PEAK_FILES.load(Ordering::Relaxed) > 0 && size >= THRESHOLD.load(Ordering::Relaxed)
 }
 
 /// A new block in a file where it is [`wanted`] and one can be made, else `system`'s.

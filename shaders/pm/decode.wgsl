@@ -1,4 +1,4 @@
-// Decoding one operation of a .dpm file (version 4) from its address and context on the GPU:
+// Decoding one operation of a .dpm file (version 5) from its address and context on the GPU:
 // the WGSL twin of codec/src/pm/format/op.rs `read_op`, field for field and check for check,
 // so that it decodes what the CPU decodes bit for bit and refuses what the CPU refuses
 // (worker/tests/pm_decode.rs compares the two over every operation of real meshes and over
@@ -804,10 +804,28 @@ fn decode_tail(face_out: u32) -> DecodedOp {
                 return o;
             }
             if (delta != 0u) {
-                let l = get_bucket(T_LOCAL);
-                if (r_err != DEC_OK) {
-                    o.status = r_err;
-                    return o;
+                var l = 0u;
+                if (k == 1u && !here[0] && (at[0] >> 16u) == node + delta) {
+                    // Both in one other node: v_l's part there directly before v_u's.
+                    let ls = v_u - v;
+                    let r = unzigzag(get_groups(T_POINTER + 3u * split_class(ls + 2u)));
+                    if (r_err != DEC_OK) {
+                        o.status = r_err;
+                        return o;
+                    }
+                    let part = offset_from(pointer_estimate(D.avg_op_size, ls), r);
+                    let fl = at[0] & 0xffffu;
+                    if (part == NONE_ADDR || part < 1u || part > 0xffffu || (swapped && part > fl)) {
+                        o.status = DEC_POINTER;
+                        return o;
+                    }
+                    l = select(fl + part, fl - part, swapped);
+                } else {
+                    l = get_bucket(T_LOCAL);
+                    if (r_err != DEC_OK) {
+                        o.status = r_err;
+                        return o;
+                    }
                 }
                 if (delta >= D.nodes - node || l > 0xffffu) {
                     o.status = DEC_POINTER;

@@ -8,7 +8,9 @@
 use std::sync::Arc;
 
 use super::fields::KINDS;
-use super::header::{corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT, NODELESS_VERSION, NODE_BYTES};
+use super::header::{
+    corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT, NODELESS_VERSION, NODE_BYTES, PAIRLESS_VERSION,
+};
 use super::nodes::{read_node_table, NodeInfo};
 use super::op::{read_op, DecodedOp, OpContext};
 use super::quantize::{dequantize_position, max_q, oct_decode, valid_oct};
@@ -304,7 +306,7 @@ impl<'a> Dpm<'a> {
     }
 }
 
-/// A container error, with versions 2 and 3 named as outdated and how to get a current file.
+/// A container error, with versions 2, 3 and 4 named as outdated and how to get a current file.
 pub(super) fn outdated(e: DpmError) -> DpmError {
     match e {
         DpmError::UnsupportedVersion { format, found: FLOAT_VERSION, known } => DpmError::Outdated {
@@ -319,6 +321,13 @@ pub(super) fn outdated(e: DpmError) -> DpmError {
             found: NODELESS_VERSION,
             known,
             remedy: "it has no node table; rebuild it from its source mesh with `tessera pm build`",
+        },
+        DpmError::UnsupportedVersion { format, found: PAIRLESS_VERSION, known } => DpmError::Outdated {
+            format,
+            found: PAIRLESS_VERSION,
+            known,
+            remedy: "its out-of-core pointers are coded differently; rebuild it from its source mesh with \
+                     `tessera pm build`",
         },
         e => e,
     }

@@ -7,14 +7,18 @@ use crate::container::Layout;
 pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSDPM\x1a";
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 /// The last version whose operations decode with floating-point steps (`exp`, an `f64`
 /// prediction): refused with a message that says how to get a current file.
 pub const FLOAT_VERSION: u16 = 2;
 /// The last version without a node table (`NODE`) or a node count in the header: its
-/// operations decode as version 4's in-core ones, but its container differs; refused with a
+/// operations decode as version 4's and 5's in-core ones, but its container differs; refused with a
 /// message that says how to get a current file.
 pub const NODELESS_VERSION: u16 = 3;
+/// The last version that coded a second child in the same other node as the first by its
+/// whole local address: its out-of-core files decode differently; refused with a message that
+/// says how to get a current file.
+pub const PAIRLESS_VERSION: u16 = 4;
 const HEADER_LEN: usize = 4 * 4 + 2 + 4 * 10;
 /// The `.dpm` container: sections TABL, BASE, NODE, OPER (the operations last, so that an
 /// out-of-core reader reads everything before them and then the nodes it needs).

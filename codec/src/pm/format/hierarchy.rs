@@ -35,6 +35,8 @@
 //! 313,648 bytes instead of 318,320. Up to eight nodes' bytes, the bunny in 64 kB nodes
 //! would cost 0.35 instead of 1.03, but that view would require 331,667 bytes: a leaf over a
 //! whole region carries fine operations that the remnant below a coarse inner node kept apart.
+//! (These figures predate the pairs of pointers into one node, the format's version 5, which
+//! took the layout to 0.87 bytes per operation on the bunny and 0.49 on the dragon.)
 //!
 //! Where the paper is silent: a node whose remaining subtrees fit in one node gets a single
 //! child; nodes are numbered in pre-order (a parent before its children, which out-of-core

@@ -5,8 +5,9 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSDPM\x1a"
-//! 8       2     version (u16 LE), currently 4 (2, whose operations decoded with floating-point
-//!               steps, and 3, without a node table, are refused with a note to rebuild)
+//! 8       2     version (u16 LE), currently 5 (2, whose operations decoded with floating-point
+//!               steps, 3, without a node table, and 4, whose out-of-core pointers were coded
+//!               as below without the pairs, are refused with a note to rebuild)
 //! 10      2     header length H (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
@@ -39,11 +40,20 @@
 //! its node's distance from this one (0: the same node; the children's nodes come later in
 //! the node table's pre-order) and, in another node, its local address; in the same node the
 //! child stored first follows directly and the second is coded as in core, its estimate the
-//! pointer's when the first is in the node, else 0. A reader reads everything before the
-//! operations ([`NodeFile`]) and then the nodes it needs, each checked by its own checksum.
-//! The layout costs 1.18 bytes per operation on the bunny (11 nodes) and 1.39 on the dragon
-//! (127 nodes) in 64 kB nodes (the paper: about 1; `cargo test -p tessera-codec --release --test pm_ooc --
-//! --ignored --nocapture`), mostly the local addresses of the pointers into other nodes.
+//! pointer's when the first is in the node, else 0. Where both children enter the same other
+//! node (version 5), the second's local address is not coded whole: there `v_l`'s part comes
+//! directly before `v_u`'s (the node holds the subtrees entering it in pre-order, and no
+//! descendant of `v_l` can enter it from elsewhere), so the distance between them is coded as
+//! a pointer past `v_l`'s subtree, `s_avg` times its FVID count less one its estimate (the
+//! in-core pointer's field and classes), added to the first's local address, or subtracted
+//! when swapped. Measured: the bunny's layout from 1.032 to 0.867 bytes per operation over the
+//! in-core file, the dragon's from 0.551 to 0.486 (a third of the pointers into other nodes
+//! come in such pairs). A reader reads everything before the operations ([`NodeFile`]) and
+//! then the nodes it needs, each checked by its own checksum. In 64 kB nodes the layout cost
+//! 1.18 bytes per operation on the bunny (11 nodes) and 1.39 on the dragon (127 nodes) with
+//! the paper's two children per node; see `hierarchy.rs` for what lowered it (the paper:
+//! about 1; `cargo test -p tessera-codec --release --test pm_ooc -- --ignored --nocapture`),
+//! mostly the local addresses of the pointers into other nodes.
 //!
 //! Every value is coded in a *context*: its field and a class computed from what the decoder
 //! already has (the operation's context and the fields before it), each with its own tables.

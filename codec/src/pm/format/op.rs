@@ -204,7 +204,15 @@ pub(super) fn write_op(
             let splitting = d.has_left as usize + d.has_right as usize;
             for (k, loc) in locs.iter().enumerate().take(splitting) {
                 w.put(NODE_DELTA, k, loc.delta as u64);
-                if loc.delta != 0 {
+                if loc.delta != 0 && k == 1 && locs[0].delta == loc.delta {
+                    // Both children enter the same other node, where `v_l`'s part comes
+                    // directly before `v_u`'s: the distance between them, as an in-node
+                    // pointer past `v_l`'s subtree.
+                    let (first, second) = (i64::from(locs[0].local), i64::from(loc.local));
+                    let part = if swapped { first - second } else { second - first };
+                    debug_assert!(part >= 1, "v_l's part in the node precedes v_u's");
+                    w.put_signed(POINTER, split_class(v_u - v + 2), part - pointer_estimate(avg, v_u - v));
+                } else if loc.delta != 0 {
                     w.put(LOCAL, 0, loc.local as u64);
                 } else if k == 1 {
                     let estimate = if locs[0].delta == 0 { pointer_estimate(avg, first_size) } else { 0 };
@@ -391,11 +399,25 @@ pub(super) fn read_op(
                 Here(u64),
                 There(usize),
             }
-            let mut read_child = |k: usize, first_here: bool| -> Result<At, DpmError> {
+            let mut read_child = |k: usize, first: Option<&At>| -> Result<At, DpmError> {
                 let delta = r.get(NODE_DELTA, k)?;
                 if delta != 0 {
-                    let local = r.get(LOCAL, 0)?;
                     let target = n as u64 + delta;
+                    let local = match first {
+                        // Both in one other node: `v_l`'s part there directly before `v_u`'s.
+                        Some(&At::There(a)) if (a / NODE_BYTES) as u64 == target => {
+                            let l_size = v_u - v;
+                            let residual = r.get_signed(POINTER, split_class(l_size + 2))?;
+                            let part = pointer_estimate(h.avg_op_size, l_size).saturating_add(residual);
+                            let first_local = (a % NODE_BYTES) as i64;
+                            let local = if swapped { first_local - part } else { first_local.saturating_add(part) };
+                            if part < 1 || local < 0 {
+                                return Err(corrupt("bad operation pointer"));
+                            }
+                            local as u64
+                        }
+                        _ => r.get(LOCAL, 0)?,
+                    };
                     if target >= h.nodes as u64 || local >= NODE_BYTES as u64 {
                         return Err(corrupt("operation pointer past the last node"));
                     }
@@ -406,6 +428,7 @@ pub(super) fn read_op(
                 if k == 0 {
                     return Ok(At::Here(0));
                 }
+                let first_here = matches!(first, Some(At::Here(_)));
                 let estimate = if first_here { pointer_estimate(h.avg_op_size, first_size) } else { 0 };
                 let o = estimate.saturating_add(r.get_signed(POINTER, split_class(first_size + 2))?);
                 if o < 0 || (first_here && o < 1) {
@@ -414,9 +437,8 @@ pub(super) fn read_op(
                 Ok(At::Here(o as u64))
             };
             let splitting = has_left as usize + has_right as usize;
-            let first = if splitting > 0 { Some(read_child(0, false)?) } else { None };
-            let first_here = matches!(first, Some(At::Here(_)));
-            let second = if splitting > 1 { Some(read_child(1, first_here)?) } else { None };
+            let first = if splitting > 0 { Some(read_child(0, None)?) } else { None };
+            let second = if splitting > 1 { Some(read_child(1, first.as_ref())?) } else { None };
             // The offsets in this node are from this operation's end, known only now.
             let end = r.end() as u64;
             let resolve = |a: Option<At>, k: usize| -> Result<usize, DpmError> {
