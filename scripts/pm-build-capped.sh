@@ -13,7 +13,7 @@ MODEL="$1"
 SPILL="$2"
 shift 2
 cargo build --release -q -p tessera --bin tessera
-T="$(pwd)/${CARGO_TARGET_DIR:-target}/release/tessera"
+T="$(realpath "${CARGO_TARGET_DIR:-target}")/release/tessera"
 mkdir -p "$SPILL"
 OUT="$SPILL/capped-reference.dpm"
 show() {
