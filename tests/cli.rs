@@ -205,6 +205,36 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     assert!(files > 0 && !kept.contains("could not"), "{kept}");
     assert_eq!(std::fs::read(&plain).unwrap(), std::fs::read(&spilled).unwrap());
 
+    // Spilling by itself where the memory is short (1 MiB taken as available), into the
+    // temporary folder; refused in one line where that folder is in memory.
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let auto = dir.path().join("auto.dpm");
+    let args = ["pm", "build", s(&input), "-o", s(&auto), "--node-kb", "16", "--assume-available-mb", "1"];
+    let o = Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).env("TMPDIR", &tmp).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    // Decided from the vertex count, before the triangles were read.
+    assert!(
+        err.contains("(twice its 34834 vertices) need about")
+            && err.contains(&format!("keeping the build's large arrays in files in {}", tmp.display())),
+        "{err}"
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("of arrays in files in"));
+    assert_eq!(std::fs::read(&plain).unwrap(), std::fs::read(&auto).unwrap());
+    if std::fs::metadata("/dev/shm").is_ok() {
+        let bad = dir.path().join("bad.dpm");
+        let args = ["pm", "build", s(&input), "-o", s(&bad), "--assume-available-mb", "1"];
+        let o = Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).env("TMPDIR", "/dev/shm").output().unwrap();
+        assert_eq!(o.status.code(), Some(1));
+        let err = stderr(&o);
+        assert!(
+            err.trim().lines().count() == 1 && err.contains("--spill-dir DIR on a disk (cannot spill into /dev/shm"),
+            "{err}"
+        );
+        assert!(!bad.exists());
+    }
+
     let missing = dir.path().join("no such folder");
     let bad = dir.path().join("bad.dpm");
     let mut folders = vec![missing];

@@ -220,11 +220,20 @@ pub fn load_bytes_counted(path: &Path, raw: &[u8], format: Format) -> Result<Loa
 /// the file: a binary PLY of 102M triangles was held twice (3.9 GB) beside its 1.84 GB mesh.
 /// The same mesh, or the same refusal; a gzipped file is decompressed once per pass.
 pub fn load_path_streamed_counted(path: &Path) -> Result<Loaded, LoadError> {
+    load_path_streamed_between(path, &mut |_| {})
+}
+
+/// As [`load_path_streamed_counted`], calling `between` with the vertex count once the
+/// positions are read and before the triangles are (for PLY and OBJ; after loading for the
+/// others): where the caller can decide how to hold what follows (`pm build` spills).
+pub fn load_path_streamed_between(path: &Path, between: &mut dyn FnMut(usize)) -> Result<Loaded, LoadError> {
     let format = Format::of_file(path)?;
     if !matches!(format, Format::Ply | Format::Obj) {
-        return load_path_counted(path);
+        let loaded = load_path_counted(path)?;
+        between(loaded.mesh.positions.len());
+        return Ok(loaded);
     }
-    let (mesh, ignored) = stream::load_file(path, format)?;
+    let (mesh, ignored) = stream::load_file(path, format, between)?;
     checked(path, mesh, ignored)
 }
 

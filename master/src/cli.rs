@@ -314,6 +314,9 @@ pub enum Pm {
         /// Blocks of at least this many MiB go to the spill folder (tests use a small one).
         #[arg(long, default_value_t = 4, hide = true)]
         spill_min_mb: usize,
+        /// Take this many MiB as the memory available (tests of spilling by itself).
+        #[arg(long, hide = true)]
+        assume_available_mb: Option<u64>,
     },
     /// Print the size of a .dpm file per vertex, with the breakdown.
     Stats {

@@ -80,12 +80,14 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
 }
 
 /// As [`load_mesh`], reading a PLY or OBJ file in two streaming passes instead of whole into
-/// memory (for the large models `pm build` takes: the memory then follows the mesh).
-pub fn load_mesh_streamed(path: &Path) -> Result<Mesh> {
-    load_with(path, codec::load::load_path_streamed_counted)
+/// memory (for the large models `pm build` takes: the memory then follows the mesh), calling
+/// `between` with the vertex count before the triangles are read
+/// ([`codec::load::load_path_streamed_between`]).
+pub fn load_mesh_streamed(path: &Path, between: &mut dyn FnMut(usize)) -> Result<Mesh> {
+    load_with(path, |p| codec::load::load_path_streamed_between(p, between))
 }
 
-fn load_with(path: &Path, load: fn(&Path) -> Result<codec::load::Loaded, codec::LoadError>) -> Result<Mesh> {
+fn load_with(path: &Path, load: impl FnOnce(&Path) -> Result<codec::load::Loaded, codec::LoadError>) -> Result<Mesh> {
     let pb = progress::spinner(format!("loading {}", path.display()));
     let loaded = load(path);
     pb.finish_and_clear();

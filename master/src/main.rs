@@ -39,6 +39,7 @@ fn main() -> ExitCode {
                     no_memory_check,
                     spill_dir,
                     spill_min_mb,
+                    assume_available_mb,
                 },
         } => master::pm::build(
             input,
@@ -53,6 +54,7 @@ fn main() -> ExitCode {
                 check: !*no_memory_check,
                 spill_dir: spill_dir.clone(),
                 spill_threshold: spill_min_mb << 20,
+                available: assume_available_mb.map(|mb| mb << 20),
             },
         ),
         Command::Pm { pm: Pm::Stats { input, json } } => master::pm::stats(input, *json),

@@ -28,11 +28,13 @@ pub struct MemoryPolicy {
     pub spill_dir: Option<PathBuf>,
     /// Blocks of at least this many bytes spill.
     pub spill_threshold: usize,
+    /// The memory taken as available instead of what the system says (tests).
+    pub available: Option<u64>,
 }
 
 impl Default for MemoryPolicy {
     fn default() -> Self {
-        Self { check: true, spill_dir: None, spill_threshold: spill::DEFAULT_THRESHOLD }
+        Self { check: true, spill_dir: None, spill_threshold: spill::DEFAULT_THRESHOLD, available: None }
     }
 }
 
@@ -56,41 +58,51 @@ pub fn build(
             .with_context(|| format!("cannot keep the build's arrays in {}", dir.display()))?;
         spilling = Some(dir.clone());
     }
-    let mesh = load_mesh_streamed(input)?;
-    if memory.check && spilling.is_none() {
-        if let Some(available) = available_memory() {
-            if let Some(msg) = memory_shortfall(mesh.triangles.len() as u64, available) {
-                // Spill into the temporary folder where it is on a disk with room enough.
-                let dir = std::env::temp_dir();
-                let need = mesh.triangles.len() as u64 * SPILL_BYTES_PER_TRIANGLE;
-                let room = spill::free_bytes(&dir).unwrap_or(0);
-                let why = if room < need {
-                    format!(
-                        "{} has {:.1} GB free of the {:.1} GB spilling would take",
-                        dir.display(),
-                        gb(room),
-                        gb(need)
-                    )
-                } else {
-                    match spill::enable(&dir, memory.spill_threshold) {
-                        Ok(()) => String::new(),
-                        Err(e) => format!("cannot spill into {}: {e}", dir.display()),
-                    }
-                };
-                if !why.is_empty() {
-                    anyhow::bail!(
-                        "cannot build {}: {msg}; free memory, add swap, pass --spill-dir DIR on a disk ({why}) \
-                         or --no-memory-check to try anyway",
-                        input.display()
+    let available = || memory.available.or_else(available_memory);
+    // Where the model plainly cannot fit, spill into the temporary folder, from before the
+    // triangles are read where the vertex count says so (a closed mesh has about twice as
+    // many triangles as vertices), else once they are counted; or say why not.
+    let try_spill = |triangles: u64, vertices: Option<usize>, spilling: &mut Option<PathBuf>| {
+        let mut msg = memory_shortfall(triangles, available()?)?;
+        if let Some(v) = vertices {
+            let estimate = format!("about {triangles} triangles (twice its {v} vertices)");
+            msg = msg.replacen(&format!("{triangles} triangles"), &estimate, 1);
+        }
+        let dir = std::env::temp_dir();
+        let need = triangles * SPILL_BYTES_PER_TRIANGLE;
+        let room = spill::free_bytes(&dir).unwrap_or(0);
+        let why = if room < need {
+            format!("{} has {:.1} GB free of the {:.1} GB spilling would take", dir.display(), gb(room), gb(need))
+        } else {
+            match spill::enable(&dir, memory.spill_threshold) {
+                Ok(()) => {
+                    eprintln!(
+                        "note: {}: {msg}; keeping the build's large arrays in files in {} instead (--spill-dir)",
+                        input.display(),
+                        dir.display()
                     );
+                    *spilling = Some(dir);
+                    return None;
                 }
-                eprintln!(
-                    "note: {}: {msg}; keeping the build's large arrays in files in {} instead (--spill-dir)",
-                    input.display(),
-                    dir.display()
-                );
-                spilling = Some(dir);
+                Err(e) => format!("cannot spill into {}: {e}", dir.display()),
             }
+        };
+        Some((msg, why))
+    };
+    let checking = memory.check && spilling.is_none();
+    let mesh = load_mesh_streamed(input, &mut |vertices| {
+        if checking {
+            // An estimate: where it cannot spill, the check after loading decides.
+            let _ = try_spill(2 * vertices as u64, Some(vertices), &mut spilling);
+        }
+    })?;
+    if checking && spilling.is_none() {
+        if let Some((msg, why)) = try_spill(mesh.triangles.len() as u64, None, &mut spilling) {
+            anyhow::bail!(
+                "cannot build {}: {msg}; free memory, add swap, pass --spill-dir DIR on a disk ({why}) \
+                 or --no-memory-check to try anyway",
+                input.display()
+            );
         }
     }
     if spilling.is_some() {

@@ -127,17 +127,19 @@ impl<'a> Input<'a> {
 /// Both passes over bytes in memory (the in-core loader's way to read PLY and OBJ): the
 /// positions, the triangles, and the count of skipped points and lines.
 pub(crate) fn load_memory(path: &Path, bytes: &[u8], format: Format) -> Result<(Mesh, u64), LoadError> {
-    load_input(Input { path, bytes: Some(bytes) }, format)
+    load_input(Input { path, bytes: Some(bytes) }, format, &mut |_| {})
 }
 
 /// Both passes over the file at `path` itself: what [`load_memory`] reads from its bytes,
 /// without holding them.
-pub(crate) fn load_file(path: &Path, format: Format) -> Result<(Mesh, u64), LoadError> {
-    load_input(Input::file(path), format)
+/// `between` is called with the vertex count between the passes.
+pub(crate) fn load_file(path: &Path, format: Format, between: &mut dyn FnMut(usize)) -> Result<(Mesh, u64), LoadError> {
+    load_input(Input::file(path), format, between)
 }
 
-fn load_input(input: Input, format: Format) -> Result<(Mesh, u64), LoadError> {
+fn load_input(input: Input, format: Format, between: &mut dyn FnMut(usize)) -> Result<(Mesh, u64), LoadError> {
     let mut mesh = vertices_of(input, format, &mut |_| {})?;
+    between(mesh.positions.len());
     let mut triangles = Vec::new();
     let counts = triangles_of(
         input,
