@@ -63,7 +63,9 @@ pub fn build(
     // triangles are read where the vertex count says so (a closed mesh has about twice as
     // many triangles as vertices), else once they are counted; or say why not.
     let try_spill = |triangles: u64, vertices: Option<usize>, spilling: &mut Option<PathBuf>| {
-        let mut msg = memory_shortfall(triangles, available()?)?;
+        // Before the triangles are read, what is left once they are (12 bytes each).
+        let unread = if vertices.is_some() { triangles * 12 } else { 0 };
+        let mut msg = memory_shortfall(triangles, available()?.saturating_sub(unread))?;
         if let Some(v) = vertices {
             let estimate = format!("about {triangles} triangles (twice its {v} vertices)");
             msg = msg.replacen(&format!("{triangles} triangles"), &estimate, 1);
