@@ -229,7 +229,9 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
         assert_eq!(o.status.code(), Some(1));
         let err = stderr(&o);
         assert!(
-            err.trim().lines().count() == 1 && err.contains("--spill-dir DIR on a disk (cannot spill into /dev/shm"),
+            err.trim().lines().count() == 1
+                && err.contains("--spill-dir DIR on a disk (cannot spill into /dev/shm")
+                && err.contains("--no-memory-check"),
             "{err}"
         );
         assert!(!bad.exists());

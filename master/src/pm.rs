@@ -18,7 +18,7 @@ use crate::spill;
 use codec::input::ModelKind;
 
 /// How `pm build` meets a model larger than memory.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct MemoryPolicy {
     /// Stop before simplifying where the model plainly needs more memory than is available
     /// ([`memory_shortfall`]) and cannot spill either.
@@ -30,12 +30,6 @@ pub struct MemoryPolicy {
     pub spill_threshold: usize,
     /// The memory taken as available instead of what the system says (tests).
     pub available: Option<u64>,
-}
-
-impl Default for MemoryPolicy {
-    fn default() -> Self {
-        Self { check: true, spill_dir: None, spill_threshold: spill::DEFAULT_THRESHOLD, available: None }
-    }
 }
 
 /// The disk a spilled build takes, a triangle: what it holds at its peak with the mesh
@@ -65,11 +59,7 @@ pub fn build(
     let try_spill = |triangles: u64, vertices: Option<usize>, spilling: &mut Option<PathBuf>| {
         // Before the triangles are read, what is left once they are (12 bytes each).
         let unread = if vertices.is_some() { triangles * 12 } else { 0 };
-        let mut msg = memory_shortfall(triangles, available()?.saturating_sub(unread))?;
-        if let Some(v) = vertices {
-            let estimate = format!("about {triangles} triangles (twice its {v} vertices)");
-            msg = msg.replacen(&format!("{triangles} triangles"), &estimate, 1);
-        }
+        let msg = memory_shortfall(triangles, vertices, available()?.saturating_sub(unread))?;
         let dir = std::env::temp_dir();
         let need = triangles * SPILL_BYTES_PER_TRIANGLE;
         let room = spill::free_bytes(&dir).unwrap_or(0);
@@ -193,13 +183,18 @@ pub fn build(
 const BUILD_BYTES_PER_TRIANGLE: u64 = 48;
 
 /// Why a build of `triangles` triangles, its mesh loaded, plainly cannot fit in `available`
-/// bytes (the memory and swap free to this process), or `None`. The estimate is below what the
-/// builds measured, so a build that is refused would have run out of memory.
-pub fn memory_shortfall(triangles: u64, available: u64) -> Option<String> {
+/// bytes (the memory and swap free to this process), or `None`; `estimated_from`: the count
+/// is twice these vertices, not the triangles read. The estimate is below what the builds
+/// measured, so a build that is refused would have run out of memory.
+pub fn memory_shortfall(triangles: u64, estimated_from: Option<usize>, available: u64) -> Option<String> {
     let need = triangles.saturating_mul(BUILD_BYTES_PER_TRIANGLE);
+    let count = match estimated_from {
+        Some(v) => format!("about {triangles} triangles (twice its {v} vertices)"),
+        None => format!("{triangles} triangles"),
+    };
     (need > available).then(|| {
         format!(
-            "{triangles} triangles need about {:.1} GB more to build (the builder holds the whole model, \
+            "{count} need about {:.1} GB more to build (the builder holds the whole model, \
              about 65 bytes a triangle), and {:.1} GB is available",
             gb(need),
             gb(available)
@@ -487,14 +482,16 @@ mod tests {
     /// way around; one that fits, and the memory this machine reports, pass.
     #[test]
     fn a_build_that_cannot_fit_is_refused_before_it_starts() {
-        let msg = memory_shortfall(450_000_000, 20_000_000_000).expect("refused");
+        let msg = memory_shortfall(450_000_000, None, 20_000_000_000).expect("refused");
         assert!(msg.contains("450000000 triangles need about 21.6 GB"), "{msg}");
-        assert!(msg.contains("20.0 GB is available") && msg.contains("450000000 triangles"), "{msg}");
+        assert!(msg.contains("20.0 GB is available"), "{msg}");
+        let estimated = memory_shortfall(450_000_000, Some(225_000_000), 20_000_000_000).expect("refused");
+        assert!(estimated.starts_with("about 450000000 triangles (twice its 225000000 vertices) need about 21.6 GB"));
         assert!(!msg.contains('\n'));
-        assert_eq!(memory_shortfall(100_000_000, 20_000_000_000), None);
-        assert_eq!(memory_shortfall(0, 0), None);
+        assert_eq!(memory_shortfall(100_000_000, None, 20_000_000_000), None);
+        assert_eq!(memory_shortfall(0, None, 0), None);
         let available = available_memory().expect("Linux reports its memory");
-        assert!(available > 0 && memory_shortfall(1_000_000, available).is_none(), "{available} bytes");
+        assert!(available > 0 && memory_shortfall(1_000_000, None, available).is_none(), "{available} bytes");
     }
 
     /// The box of an out-of-core file holds every vertex and is cut to the quantization grid,

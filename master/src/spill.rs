@@ -236,6 +236,19 @@ unsafe fn in_file_or(layout: Layout, system: impl FnOnce(Layout) -> *mut u8) -> 
     system(layout)
 }
 
+/// The block in a file at `ptr` (of `old.size()` bytes) moved into a new system block of
+/// `new_size` bytes, its file gone; null, the block left as it was, where there is no memory.
+unsafe fn into_memory(ptr: *mut u8, old: Layout, new_size: usize) -> *mut u8 {
+    let new = System.alloc(Layout::from_size_align_unchecked(new_size, old.align()));
+    if !new.is_null() {
+        std::ptr::copy_nonoverlapping(ptr, new, old.size().min(new_size));
+        if let Some(b) = find(ptr, true) {
+            unmap(b);
+        }
+    }
+    new
+}
+
 // SAFETY: blocks in files are page-aligned (any alignment up to a page, which `wanted`
 // requires), at least `size` bytes, and freed only through `dealloc`/`realloc` here; every
 // other block is the system allocator's, as `find` tells apart by address.
@@ -271,12 +284,7 @@ unsafe impl GlobalAlloc for SpillAlloc {
                     // No space for the larger file: into memory, as any block that cannot
                     // have a file.
                     FALLBACKS.fetch_add(1, Ordering::Relaxed);
-                    let new = System.alloc(Layout::from_size_align_unchecked(new_size, layout.align()));
-                    if !new.is_null() {
-                        std::ptr::copy_nonoverlapping(ptr, new, layout.size());
-                        unmap(find(ptr, true).unwrap_or(b));
-                    }
-                    return new;
+                    return into_memory(ptr, layout, new_size);
                 }
                 let p = libc::mremap(ptr as *mut libc::c_void, b.len, len, libc::MREMAP_MAYMOVE);
                 if p == libc::MAP_FAILED {
@@ -293,17 +301,8 @@ unsafe impl GlobalAlloc for SpillAlloc {
                 count(len as i64 - b.len as i64);
                 p as *mut u8
             }
-            Some(_) => {
-                // Shrunk below the threshold: back to the system allocator.
-                let new = System.alloc(Layout::from_size_align_unchecked(new_size, layout.align()));
-                if !new.is_null() {
-                    std::ptr::copy_nonoverlapping(ptr, new, new_size);
-                    if let Some(b) = find(ptr, true) {
-                        unmap(b);
-                    }
-                }
-                new
-            }
+            // Shrunk below the threshold: back to the system allocator.
+            Some(_) => into_memory(ptr, layout, new_size),
             None if wanted(new_size, layout.align()) => {
                 let new = map_new(new_size);
                 if new.is_null() {

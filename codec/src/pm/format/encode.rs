@@ -679,8 +679,8 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
     let mut subtree = vec![0u64; m];
     let mut swaps = vec![false; m];
     let mut offsets = vec![0u64; m];
-    // An operation's bytes, swap and offset, from its children's subtree bytes.
-    let code_op = |i: usize, sub: &dyn Fn(usize) -> u64| -> (Vec<u8>, bool, u64) {
+    // An operation's bytes, swap, offset and subtree bytes, from its children's subtree bytes.
+    let code_op = |i: usize, sub: &dyn Fn(usize) -> u64| -> (Vec<u8>, bool, u64, u64) {
         let d = ops.op(i);
         let [l, r] = ops.children(i);
         let code = |swap: bool, offset: u64| {
@@ -688,7 +688,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
             write_op(&mut w, &d, swap, offset, avg, ops.normal_bits, None);
             w.finish()
         };
-        if d.has_left && d.has_right {
+        let (b, swap, offset) = if d.has_left && d.has_right {
             let (plain, plain_bits) = code(false, sub(l));
             let (other, other_bits) = code(true, sub(r));
             if (other.len(), other_bits) < (plain.len(), plain_bits) {
@@ -698,11 +698,10 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
             }
         } else {
             (code(false, 0).0, false, 0)
-        }
-    };
-    let subtree_bytes = |len: usize, [l, r]: [usize; 2], sub: &dyn Fn(usize) -> u64| {
-        let s = |c: usize| if c == usize::MAX { 0 } else { sub(c) };
-        len as u64 + s(l) + s(r)
+        };
+        let child = |c: usize| if c == usize::MAX { 0 } else { sub(c) };
+        let total = b.len() as u64 + child(l) + child(r);
+        (b, swap, offset, total)
     };
     // Operations per subtree; a subtree is the pre-order range from its root on.
     let mut count = vec![1u32; m];
@@ -726,9 +725,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
                 let mut data = Vec::new();
                 let mut per_op = vec![(0u32, false, 0u64, 0u64); range.len()];
                 for i in range.clone().rev() {
-                    let sub = |c: usize| per_op[c - range.start].3;
-                    let (b, swap, offset) = code_op(i, &sub);
-                    let total = subtree_bytes(b.len(), ops.children(i), &sub);
+                    let (b, swap, offset, total) = code_op(i, &|c| per_op[c - range.start].3);
                     data.extend_from_slice(&b);
                     per_op[i - range.start] = (b.len() as u32, swap, offset, total);
                 }
@@ -749,9 +746,7 @@ fn compress_bottom_up(ops: &Operations, tables: &[Table], avg: u32, keep_bytes: 
         }
     }
     for &i in top.iter().rev() {
-        let sub = |c: usize| subtree[c];
-        let (b, swap, offset) = code_op(i, &sub);
-        let total = subtree_bytes(b.len(), ops.children(i), &sub);
+        let (b, swap, offset, total) = code_op(i, &|c| subtree[c]);
         subtree[i] = total;
         bytes.put(i, &b);
         swaps[i] = swap;
