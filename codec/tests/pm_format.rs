@@ -266,3 +266,42 @@ fn an_operation_error_names_the_operation() {
     let e = cut.decode_op(addr, &ctx).unwrap_err().to_string();
     assert_eq!(e, format!("corrupt .dpm data: operation at byte {addr}: the operations section ends inside it"));
 }
+
+/// The encoder's walk in the sorted pre-order refuses split structures no build makes, each
+/// with an error rather than a file: a vertex split before the split that makes it, a split
+/// whose new vertex lies outside its vertex's FVID range, and one that no base vertex
+/// reaches.
+#[test]
+fn malformed_split_trees_are_refused() {
+    let pm = build(&load("classic/teapot.obj")).unwrap();
+    assert!(encode(&pm, EncodeOptions::default()).is_ok());
+    let refused = |what: &str, pm: &ProgressiveMesh| {
+        let e = encode(pm, EncodeOptions::default()).err();
+        assert!(e.is_some(), "{what}: encoded");
+        e.unwrap().to_string()
+    };
+    // The split that makes a vertex moved after one that splits it.
+    let tree = SplitTree::new(&pm);
+    let (s, c) = (0..pm.splits.len())
+        .find_map(|s| (tree.children[s][1] != NONE).then(|| (s, tree.children[s][1] as usize)))
+        .unwrap();
+    let mut bad = pm.clone();
+    bad.splits.swap(s, c);
+    bad.criteria.swap(s, c);
+    let msg = refused("made after it splits", &bad);
+    assert!(msg.contains("split"), "{msg}");
+    // A new vertex past its vertex's range: the first split's `v_u` moved to the last FVID of
+    // the next base vertex's range.
+    let mut bad = pm.clone();
+    let root = tree.roots.iter().position(|&r| r != NONE).unwrap();
+    let r = tree.roots[root] as usize;
+    bad.splits[r].v_u = pm.positions.len() as u32 - 1;
+    if pm.base_vertices.get(root + 1).is_some() {
+        refused("outside its range", &bad);
+    }
+    // A split of a vertex no walk reaches: one split's vertex moved past every other one's.
+    let mut bad = pm.clone();
+    let last = pm.splits.len() - 1;
+    bad.splits[last].v = pm.positions.len() as u32 - 1;
+    refused("unreachable", &bad);
+}

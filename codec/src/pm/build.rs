@@ -87,7 +87,8 @@ use rustc_hash::FxHashMap;
 
 use thiserror::Error;
 
-use super::{Criteria, ProgressiveMesh, Split, SplitTree, NONE};
+use super::order::{permute_in_place, place, preorder};
+use super::{Criteria, ProgressiveMesh, Split};
 use crate::mesh::{Mesh, MeshError};
 
 /// A vertex with more live faces than this becomes a hub (see the module docs).
@@ -725,6 +726,7 @@ fn build_mesh(
     };
     let mut log = Log::default();
     let mut report = |done: usize| progress(done, bound);
+    super::trace("simplifying");
     let (stats, alive, face_alive) = if opts.chunk_faces > 0 && mesh.triangles.len() > opts.chunk_faces {
         let stats = simplify_chunked(&mesh, centre, opts.chunk_faces, &mut log, &mut report);
         let mut alive = used;
@@ -750,6 +752,7 @@ fn build_mesh(
         (stats, std::mem::take(&mut s.alive), std::mem::take(&mut s.face_alive))
     };
     report(log.collapses.len());
+    super::trace("numbering");
     let Log { collapses, removed, removed_end, error: collapse_error } = log;
 
     // Leaves left to right = pre-order of the forest whose vertices' children are the
@@ -781,6 +784,7 @@ fn build_mesh(
         fvid_of_input[u as usize] = fvid_of_input[t as usize] + o;
     }
     drop(offset);
+    super::trace("positions into FVID order");
     let mut positions = vec![[0.0f32; 3]; numbered as usize];
     for (&f, &p) in fvid_of_input.iter().zip(&mesh.positions) {
         if f != u32::MAX {
@@ -794,6 +798,7 @@ fn build_mesh(
         Cow::Borrowed(m) => Cow::Borrowed(&m.triangles[..]),
     };
 
+    super::trace("base faces and splits");
     let to_fvid = |f: u32| triangles[f as usize].map(|v| fvid_of_input[v as usize]);
     let base_faces = (0..triangles.len() as u32).filter(|&f| face_alive[f as usize]).map(to_fvid).collect();
     let splits = collapses
@@ -814,7 +819,9 @@ fn build_mesh(
     // Splits run coarse to fine, the reverse of the collapses.
     let mut geometric = collapse_error;
     geometric.reverse();
+    super::trace("criteria: normals");
     let (normals, criteria) = criteria(&pm, triangles, geometric);
+    super::trace("criteria done");
     pm.normals = normals;
     pm.criteria = criteria;
     Ok((pm, stats))
@@ -912,6 +919,7 @@ fn simplify_chunked(
     // spill: 410 MB at 102M triangles).
     let mut faces: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
     let tree = c.partition(&mut faces, 0, &mut count);
+    super::trace("kd-tree made, chunks");
     c.key = Vec::new();
     let (c, faces) = (&c, &faces[..]);
     // The chunks run on rayon's threads; this one reports their progress meanwhile.
@@ -1136,6 +1144,7 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
         let l = norm(*v);
         *v = if l > 0.0 && l.is_finite() { v.map(|x| x / l) } else { [0.0; 3] };
     }
+    super::trace("criteria: leaf cones");
     // Leaf cones: the angle between a vertex normal and its incident face normals.
     let mut leaf_alpha = vec![0.0f64; n];
     for t in finest() {
@@ -1151,30 +1160,36 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
         }
     }
     drop(input);
+    super::trace("criteria: split tree");
 
-    // Of the tree only the children are read.
-    let SplitTree { children, .. } = SplitTree::new(pm);
-    // Per split, in f64: radius (which is also the geometric error, see below; made in place
-    // of the geometric errors, each read once before its split's radius replaces it),
-    // attribute error, cone angle.
-    let mut radius = geometric;
-    let mut attribute = vec![0.0f64; pm.splits.len()];
-    let mut cone = vec![0.0f64; pm.splits.len()];
+    // Per split, in f64: radius (which is also the geometric error, see below; made from
+    // the geometric error), attribute error, cone angle; a split's from its children's, so
+    // bottom-up: in the reverse of the split tree's pre-order, a sort ([`preorder`]), where a
+    // split's children are the two subtrees done last and its FVIDs those of the splits
+    // around it (in split order, what this followed before, a split's children and FVIDs lie
+    // anywhere in the arrays: a spilled build read their pages back again and again).
+    super::trace("criteria: per split");
+    let mut order = preorder(&pm.splits);
+    let mut vertices: Vec<[u32; 2]> = pm.splits.iter().map(|s| [s.v, s.v_u]).collect();
+    let mut geometric = geometric;
+    permute_in_place(&mut vertices, &mut geometric, &order);
     let max_angle = std::f64::consts::FRAC_PI_2;
-    for (s, split) in pm.splits.iter().enumerate().rev() {
-        let (v, u) = (split.v as usize, split.v_u as usize);
-        // A child's radius, attribute error and cone angle (children come after their parent,
-        // so theirs are final here).
-        let child = |c: u32, f: usize| {
-            if c == NONE {
-                [0.0, 0.0, leaf_alpha[f]]
-            } else {
-                let c = c as usize;
-                [radius[c], attribute[c], cone[c]]
+    // The subtrees done whose parent is not yet: their vertex, radius, attribute error and
+    // cone angle.
+    let mut done: Vec<(u32, [f64; 3])> = Vec::new();
+    let mut criteria = vec![Criteria::default(); pm.splits.len()];
+    for (p, &[v, u]) in vertices.iter().enumerate().rev() {
+        // A child's radius, attribute error and cone angle: the subtree done last where it
+        // splits `f` (the left child splits `v` again, the right one `v_u`), else a leaf's.
+        let mut child = |f: u32| match done.last() {
+            Some(&(w, c)) if w == f => {
+                done.pop();
+                c
             }
+            _ => [0.0, 0.0, leaf_alpha[f as usize]],
         };
-        let [cl, cu] = children[s];
-        let (l, r) = (child(cl, v), child(cu, u));
+        let (l, r) = (child(v), child(u));
+        let (v, u) = (v as usize, u as usize);
         // The geometric error is at least the farthest finest vertex of the region from `v`,
         // so it serves as the region's bounding radius (conservatively: a larger sphere only
         // refines more near the frustum's sides), and the radius costs nothing to store. It
@@ -1182,28 +1197,21 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
         // may exceed its region (raised to its neighbours'), and the runtime tests spheres,
         // which must nest for a child never to ask for a split its parent does not.
         let nest = |c: [f64; 3], d: f64| (d + c[0]) * (1.0 + SLACK);
-        radius[s] = radius[s].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
-        attribute[s] = l[1].max(norm(sub(normal[u], normal[v])) + r[1]);
+        let radius = geometric[p].max(nest(l, 0.0)).max(nest(r, norm(sub(pos(u), pos(v)))));
+        let attribute = l[1].max(norm(sub(normal[u], normal[v])) + r[1]);
         let alpha = (l[2].max(angle(normal[v], normal[u]) + r[2]) * (1.0 + SLACK) + SLACK).min(max_angle);
-        cone[s] = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
-    }
-    // The outputs made one after the other, each input freed once read (the end of this
-    // phase is one of a large model's build's highest points).
-    drop((children, leaf_alpha));
-    let normal: Vec<[f32; 3]> = {
-        let f64s = normal;
-        f64s.iter().map(|v| v.map(|x| x as f32)).collect()
-    };
-    let criteria = radius
-        .iter()
-        .zip(&attribute)
-        .zip(&cone)
-        .map(|((&radius, &attribute), &alpha)| Criteria {
-            sin_alpha: if alpha >= max_angle { 1.0 } else { alpha.sin() as f32 },
+        let cone = if norm(normal[v]) == 0.0 { max_angle } else { alpha };
+        done.push((v as u32, [radius, attribute, cone]));
+        criteria[p] = Criteria {
+            sin_alpha: if cone >= max_angle { 1.0 } else { cone.sin() as f32 },
             geometric_error: radius as f32,
             attribute_error: attribute as f32,
             radius: radius as f32,
-        })
-        .collect();
+        };
+    }
+    drop((vertices, geometric, leaf_alpha));
+    // Into split order.
+    place(&mut criteria, &mut order, 0);
+    let normal: Vec<[f32; 3]> = normal.iter().map(|v| v.map(|x| x as f32)).collect();
     (normal, criteria)
 }

@@ -31,7 +31,8 @@ use super::tables::{every_symbol, write_tables};
 use crate::container::put_varint;
 use crate::csr::Csr;
 use crate::huffman::Table;
-use crate::pm::{ProgressiveMesh, Split, SplitTree, NONE};
+use crate::pm::order::{permute_in_place, preorder};
+use crate::pm::{ProgressiveMesh, Split, NONE};
 use thiserror::Error;
 
 /// Encoder settings.
@@ -160,6 +161,10 @@ fn encode_mesh(
     per_split: bool,
     step: &mut dyn FnMut(&str),
 ) -> Result<(EncodedFile, Vec<usize>, Vec<OpContext>), EncodeError> {
+    let step = &mut |s: &str| {
+        crate::pm::trace(s);
+        step(s)
+    };
     let mut h = fit_header(&pm, opts)?;
     check_mesh(&pm)?;
     step("preparing the operations");
@@ -171,11 +176,8 @@ fn encode_mesh(
     if let Cow::Owned(pm) = &mut pm {
         (pm.positions, pm.normals, pm.criteria, pm.fvid_of_input) = Default::default();
     }
-    let mut tree = SplitTree::new(&pm);
-    // The walk reads the children and roots only.
-    tree.parent = Vec::new();
-    // The splits move into the operations (an owned progressive mesh keeps none).
-    let (ops, first_guess) = uncompressed_operations(&mut pm, tree, &qpos, &qnrm, qcrit, h.normal_bits)?;
+    let (ops, first_guess) = uncompressed_operations(&mut pm, &qpos, &qnrm, qcrit, h.normal_bits)?;
+    step("first tables");
     let (first_tables, _) = probability_tables(&ops, &first_guess);
     step("coding bottom-up with estimated tables");
     let offsets = compress_in_reverse_order(&ops, &first_tables);
@@ -358,9 +360,13 @@ struct Choices {
 /// normal deltas. The choices go with zero offsets and a first guess at the swaps, the smaller
 /// subtree first: from tables built without swaps, the swapped children code would be too
 /// long for any swap to pay.
+///
+/// The pre-order is a sort ([`preorder`]); the splits are moved into it first and the walk
+/// reads them in it, one after the other, keeping a stack of the FVID ranges still to split
+/// (following the tree's children from the roots read the splits at random: a spilled
+/// build's pages read back again and again).
 fn uncompressed_operations<'a>(
     pm: &mut Cow<ProgressiveMesh>,
-    tree: SplitTree,
     qpos: &'a [[u32; 3]],
     qnrm: &'a [[u32; 2]],
     mut qcrit: Vec<[u32; 4]>,
@@ -368,67 +374,69 @@ fn uncompressed_operations<'a>(
 ) -> Result<(Operations<'a>, Choices), EncodeError> {
     let n = qpos.len();
     let m = pm.splits.len();
-    // Pre-order over the forest (v_l first); per op: split index, its data, range end, parent
-    // op, children's op indices.
-    let mut order: Vec<u32> = Vec::with_capacity(m);
-    let mut v_ends: Vec<u32> = Vec::with_capacity(m);
-    let mut parents: Vec<u32> = Vec::with_capacity(m);
-    let mut child_ops: Vec<[u32; 2]> = Vec::with_capacity(m);
-    let mut visited = vec![false; m];
-    let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
-    // Stack entries: (split, its vertex, its range end, parent op index and side).
-    type Pending = (u32, u32, u32, Option<(usize, usize)>);
-    let mut stack: Vec<Pending> = vec![];
-    for (b, &v) in pm.base_vertices.iter().enumerate() {
-        let v_end = pm.base_vertices.get(b + 1).copied().unwrap_or(n as u32);
-        let root = tree.roots[b];
-        if root == NONE {
-            if v_end - v != 1 {
-                return Err(invalid("FVID range of an unsplit base vertex"));
-            }
-            continue;
-        }
-        root_ops[b] = order.len();
-        stack.push((root, v, v_end, None));
-        while let Some((s, v, v_end, parent)) = stack.pop() {
-            let su = s as usize;
-            let split = &pm.splits[su];
-            if split.v != v || split.v_u <= v || split.v_u >= v_end || visited[su] {
-                return Err(invalid("split outside its vertex's FVID range"));
-            }
-            let [l, r] = tree.children[su];
-            let (has_left, has_right) = (l != NONE, r != NONE);
-            if (!has_left && split.v_u != split.v + 1) || (!has_right && v_end != split.v_u + 1) {
-                return Err(invalid("split tree inconsistent with the FVID ranges"));
-            }
-            let i = order.len();
-            visited[su] = true;
-            if let Some((p, side)) = parent {
-                child_ops[p][side] = i as u32;
-            }
-            order.push(s);
-            v_ends.push(v_end);
-            parents.push(parent.map_or(NONE, |(p, _)| p as u32));
-            child_ops.push([NONE; 2]);
-            if has_right {
-                stack.push((r, split.v_u, v_end, Some((i, 1))));
-            }
-            if has_left {
-                stack.push((l, v, split.v_u, Some((i, 0))));
-            }
-        }
-    }
-    if order.len() != m {
-        return Err(invalid("splits not reachable from the base vertices"));
-    }
-    drop((visited, tree));
+    crate::pm::trace("sorting the splits into pre-order");
+    let order = preorder(&pm.splits);
     // The splits and their criteria, moved into the operations' order (taken from an owned
     // progressive mesh, copied from a borrowed one).
     let mut splits = match pm {
         Cow::Owned(pm) => std::mem::take(&mut pm.splits),
         Cow::Borrowed(pm) => pm.splits.clone(),
     };
+    crate::pm::trace("moving the splits into pre-order");
     permute_in_place(&mut splits, &mut qcrit, &order);
+    crate::pm::trace("walking the split tree");
+    // Per op: its range end, parent op, children's op indices.
+    let mut v_ends: Vec<u32> = Vec::with_capacity(m);
+    let mut parents: Vec<u32> = Vec::with_capacity(m);
+    let mut child_ops: Vec<[u32; 2]> = Vec::with_capacity(m);
+    let mut root_ops = vec![usize::MAX; pm.base_vertices.len()];
+    // Ranges of more than one FVID still to split, the last pushed split next: (their first
+    // FVID, their end, the parent op and side).
+    type Pending = (u32, u32, Option<(usize, usize)>);
+    let mut stack: Vec<Pending> = vec![];
+    for (b, &v) in pm.base_vertices.iter().enumerate() {
+        let v_end = pm.base_vertices.get(b + 1).copied().unwrap_or(n as u32);
+        if v_end <= v {
+            return Err(invalid("base vertices not in ascending FVID order"));
+        }
+        if v_end - v == 1 {
+            continue;
+        }
+        if splits.get(v_ends.len()).is_none_or(|s| s.v != v) {
+            return Err(invalid("FVID range of an unsplit base vertex"));
+        }
+        root_ops[b] = v_ends.len();
+        stack.push((v, v_end, None));
+        while let Some((v, v_end, parent)) = stack.pop() {
+            let i = v_ends.len();
+            let Some(split) = splits.get(i).filter(|s| s.v == v) else {
+                return Err(invalid("split tree inconsistent with the FVID ranges"));
+            };
+            if split.v_u <= v || split.v_u >= v_end {
+                return Err(invalid("split outside its vertex's FVID range"));
+            }
+            if let Some((p, side)) = parent {
+                // A vertex splits after the split that made it (its left siblings' order is
+                // the sort's).
+                if side == 1 && order[p] > order[i] {
+                    return Err(invalid("a split before the split that makes its vertex"));
+                }
+                child_ops[p][side] = i as u32;
+            }
+            v_ends.push(v_end);
+            parents.push(parent.map_or(NONE, |(p, _)| p as u32));
+            child_ops.push([NONE; 2]);
+            if v_end - split.v_u > 1 {
+                stack.push((split.v_u, v_end, Some((i, 1))));
+            }
+            if split.v_u - v > 1 {
+                stack.push((v, split.v_u, Some((i, 0))));
+            }
+        }
+    }
+    if v_ends.len() != m {
+        return Err(invalid("splits not reachable from the base vertices"));
+    }
 
     let smaller_first: Vec<bool> = splits.iter().zip(&v_ends).map(|(s, &v_end)| v_end - s.v_u < s.v_u - s.v).collect();
     let zero_offsets = Choices { swaps: smaller_first, offsets: vec![0; m], avg: 0 };
@@ -445,93 +453,6 @@ fn uncompressed_operations<'a>(
         normal_bits,
     };
     Ok((ops, zero_offsets))
-}
-
-/// Moves `a[order[i]]` and `b[order[i]]` to `a[i]` and `b[i]` for every `i` (`order` a
-/// permutation), in place, in passes that keep to a few hundred places at a time: each
-/// element's destination is distributed by its top bits into [`BUCKETS`] buckets (a pass of
-/// an American flag sort: every bucket filled from its head, swapping what does not belong
-/// there to where it does), then each bucket the same way, until a bucket holds at most
-/// [`PLACED_BY_CYCLES`] elements, which are placed by following the permutation's cycles.
-///
-/// Following the cycles through the whole arrays (what this did before) reads and writes
-/// them at random: fine in memory, but where the arrays are pages the kernel may drop
-/// (`pm build --spill-dir`), the 102M build in a 3 GB cgroup reached it after 9 minutes and was
-/// still in it at 15, when it was stopped.
-/// Here each pass reads and writes the arrays as [`BUCKETS`] sequential streams.
-///
-/// The two slices are moved one after the other, so that a pass works over one of them (a
-/// spilled build's pages in use at once: the splits' 32 bytes an operation, then the
-/// criteria's 16, rather than both).
-fn permute_in_place<A, B>(a: &mut [A], b: &mut [B], order: &[u32]) {
-    let dest = || {
-        let mut dest = vec![0u32; order.len()];
-        for (i, &k) in order.iter().enumerate() {
-            dest[k as usize] = i as u32;
-        }
-        dest
-    };
-    place(a, &mut dest(), 0);
-    place(b, &mut dest(), 0);
-}
-
-/// Buckets a pass of [`permute_in_place`] distributes into.
-const BUCKETS: usize = 256;
-/// The most elements [`permute_in_place`] places by following cycles.
-const PLACED_BY_CYCLES: usize = 1 << 12;
-
-/// Places the elements of `a` where `dest` says, less `first` (the slices' first
-/// destination), swapping both slices together.
-fn place<A>(a: &mut [A], dest: &mut [u32], first: u32) {
-    let n = dest.len();
-    if n <= PLACED_BY_CYCLES {
-        for i in 0..n {
-            while (dest[i] - first) as usize != i {
-                let j = (dest[i] - first) as usize;
-                a.swap(i, j);
-                dest.swap(i, j);
-            }
-        }
-        return;
-    }
-    // Bucket `k` holds the destinations `first + k * width ..`.
-    let width = n.div_ceil(BUCKETS);
-    let bucket = |d: u32| (d - first) as usize / width;
-    let mut end = [0usize; BUCKETS];
-    for &d in dest.iter() {
-        end[bucket(d)] += 1;
-    }
-    let mut head = [0usize; BUCKETS];
-    let mut at = 0;
-    for k in 0..BUCKETS {
-        head[k] = at;
-        at += end[k];
-        end[k] = at;
-    }
-    for k in 0..BUCKETS {
-        while head[k] < end[k] {
-            let i = head[k];
-            let t = bucket(dest[i]);
-            if t == k {
-                head[k] += 1;
-            } else {
-                let j = head[t];
-                head[t] += 1;
-                a.swap(i, j);
-                dest.swap(i, j);
-            }
-        }
-    }
-    let (mut a, mut dest) = (a, dest);
-    let mut start = first;
-    while !dest.is_empty() {
-        let len = width.min(dest.len());
-        let (a0, a1) = a.split_at_mut(len);
-        let (d0, d1) = dest.split_at_mut(len);
-        place(a0, d0, start);
-        (a, dest) = (a1, d1);
-        start += len as u32;
-    }
 }
 
 /// Step 2 of section 4.2: "Compute the probability tables."
@@ -1185,49 +1106,4 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
     }
     put_varint(&mut bb, if data.is_empty() { 0 } else { 1 });
     LAYOUT.write(&h.to_bytes(), [&tb, &bb, &[], data])
-}
-
-#[cfg(test)]
-mod tests {
-    use super::permute_in_place;
-
-    /// Every permutation of five elements (cycles of every length) moves both slices as a
-    /// gather through the order would.
-    #[test]
-    fn permuting_in_place_is_the_gather() {
-        let mut orders = vec![vec![]];
-        for k in 0..5u32 {
-            orders = orders
-                .into_iter()
-                .flat_map(|o: Vec<u32>| {
-                    (0..=o.len()).map(move |at| {
-                        let mut o = o.clone();
-                        o.insert(at, k);
-                        o
-                    })
-                })
-                .collect();
-        }
-        assert_eq!(orders.len(), 120);
-        // And permutations past a pass of buckets (two levels of them, and remainders).
-        for n in [5_000u32, 1_300_000] {
-            let mut order: Vec<u32> = (0..n).collect();
-            let mut x = 0x9e37_79b9u64;
-            for i in (1..order.len()).rev() {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                order.swap(i, (x % (i as u64 + 1)) as usize);
-            }
-            orders.push(order);
-        }
-        for order in orders {
-            let n = order.len() as u32;
-            let (mut a, mut b): (Vec<String>, Vec<u32>) = (0..n).map(|i| (format!("s{i}"), 10 * i)).unzip();
-            permute_in_place(&mut a, &mut b, &order);
-            let want_a: Vec<String> = order.iter().map(|&i| format!("s{i}")).collect();
-            let want_b: Vec<u32> = order.iter().map(|&i| 10 * i).collect();
-            assert_eq!((a, b), (want_a, want_b), "{order:?}");
-        }
-    }
 }
