@@ -47,12 +47,17 @@ pub fn build(
     check_extension(output, &["dpm"], "the output of pm build")?;
     check_distinct(&[input], &[output])?;
     let mut spilling = None;
+    let available = || memory.available.or_else(available_memory);
+    // Segments by the memory there is and what may spill (see `spill::segment_for`): the
+    // spilled arrays take up to 80 bytes a triangle, and a binary PLY holds about 19 bytes a
+    // triangle (half a vertex's 12 and a face's 13), so ten times the input's bytes.
+    let input_bytes = std::fs::metadata(input).map_or(0, |m| m.len());
+    let segment = || spill::segment_for(available().unwrap_or(u64::MAX), input_bytes.saturating_mul(10));
     if let Some(dir) = &memory.spill_dir {
-        spill::enable(dir, memory.spill_threshold)
+        spill::enable(dir, memory.spill_threshold, segment())
             .with_context(|| format!("cannot keep the build's arrays in {}", dir.display()))?;
         spilling = Some(dir.clone());
     }
-    let available = || memory.available.or_else(available_memory);
     // Where the model plainly cannot fit, spill into the temporary folder, from before the
     // triangles are read where the vertex count says so (a closed mesh has about twice as
     // many triangles as vertices), else once they are counted; or say why not.
@@ -66,7 +71,7 @@ pub fn build(
         let why = if room < need {
             format!("{} has {:.1} GB free of the {:.1} GB spilling would take", dir.display(), gb(room), gb(need))
         } else {
-            match spill::enable(&dir, memory.spill_threshold) {
+            match spill::enable(&dir, memory.spill_threshold, segment()) {
                 Ok(()) => {
                     eprintln!(
                         "note: {}: {msg}; keeping the build's large arrays in files in {} instead (--spill-dir)",
