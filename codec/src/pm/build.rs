@@ -863,6 +863,12 @@ enum Kd {
     Inner(Box<Kd>, Box<Kd>, u32),
 }
 
+/// An input face `f` with its centroid `c`, while the chunks' kd-tree is built.
+struct Centred {
+    c: [f32; 3],
+    f: u32,
+}
+
 /// The state shared by the chunks of [`simplify_chunked`], read-only while they run.
 struct Chunker<'a> {
     mesh: &'a Mesh,
@@ -870,10 +876,6 @@ struct Chunker<'a> {
     chunk_faces: usize,
     /// Per input vertex: the first and the last leaf that holds one of its faces.
     leaves: Vec<(u32, u32)>,
-    /// Per input face, while the kd-tree is built: its centroid on the axis being split (read
-    /// by the median search's comparisons, which computed it again each time: 3% of the
-    /// dragon's build).
-    key: Vec<f32>,
     /// Collapses done so far, in all chunks (for the progress report).
     done: AtomicUsize,
 }
@@ -905,22 +907,28 @@ fn simplify_chunked(
     progress: &mut dyn FnMut(usize),
 ) -> BuildStats {
     let n = mesh.positions.len();
-    let mut c = Chunker {
-        mesh,
-        centre,
-        chunk_faces,
-        leaves: vec![(u32::MAX, 0); n],
-        key: vec![0.0; mesh.triangles.len()],
-        done: AtomicUsize::new(0),
-    };
+    let mut c = Chunker { mesh, centre, chunk_faces, leaves: vec![(u32::MAX, 0); n], done: AtomicUsize::new(0) };
     let mut count = 0;
     // The input faces in leaf order, each leaf a range of them: one array (a vector per leaf,
     // as before, kept 4 bytes a face in blocks too small for `pm build --spill-dir` to
     // spill: 410 MB at 102M triangles).
-    let mut faces: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
-    let tree = c.partition(&mut faces, 0, &mut count);
+    // Partitioned with their centroids beside them (made once), so that the median searches
+    // and the passes over a node's faces read one array in order: with a face's centroid
+    // looked up by its id (an array per face, and the triangles and positions before it), a
+    // spilled build read the three at random on every level, and the 13.9M build in 200 MB
+    // did not get through the kd-tree in a minute.
+    let p = &mesh.positions;
+    let mut items: Vec<Centred> = (0..mesh.triangles.len() as u32)
+        .map(|f| {
+            let t = mesh.triangles[f as usize];
+            let c = std::array::from_fn(|a| (p[t[0] as usize][a] + p[t[1] as usize][a] + p[t[2] as usize][a]) / 3.0);
+            Centred { c, f }
+        })
+        .collect();
+    let tree = c.partition(&mut items, 0, &mut count);
+    let faces: Vec<u32> = items.iter().map(|i| i.f).collect();
+    drop(items);
     super::trace("kd-tree made, chunks");
-    c.key = Vec::new();
     let (c, faces) = (&c, &faces[..]);
     // The chunks run on rayon's threads; this one reports their progress meanwhile.
     let part = std::thread::scope(|scope| {
@@ -936,10 +944,10 @@ fn simplify_chunked(
 }
 
 impl Chunker<'_> {
-    /// The kd-tree of `faces` (input face ids, from `at` on in the whole array), its leaves
-    /// numbered from `*count` on, the faces reordered in place into leaf order; records each
-    /// vertex's first and last leaf.
-    fn partition(&mut self, faces: &mut [u32], at: usize, count: &mut u32) -> Kd {
+    /// The kd-tree of `faces` (input faces with their centroids, from `at` on in the whole
+    /// array), its leaves numbered from `*count` on, the faces reordered in place into leaf
+    /// order; records each vertex's first and last leaf.
+    fn partition(&mut self, faces: &mut [Centred], at: usize, count: &mut u32) -> Kd {
         if faces.len() > self.chunk_faces {
             let half = self.halve(faces);
             let (left, right) = faces.split_at_mut(half);
@@ -950,8 +958,8 @@ impl Chunker<'_> {
         }
         let leaf = *count;
         *count += 1;
-        for &f in faces.iter() {
-            for v in self.mesh.triangles[f as usize] {
+        for i in faces.iter() {
+            for v in self.mesh.triangles[i.f as usize] {
                 let l = &mut self.leaves[v as usize];
                 *l = (l.0.min(leaf), l.1.max(leaf));
             }
@@ -986,31 +994,19 @@ impl Chunker<'_> {
         self.chunk(part, (first, end), if root { 0 } else { self.chunk_faces / 2 })
     }
 
-    /// Splits `faces` in two at the median centroid along the longest axis of the centroids:
-    /// the lower half first, in place; returns its length.
-    fn halve(&mut self, faces: &mut [u32]) -> usize {
-        let p = &self.mesh.positions;
-        let centroid = |f: u32| {
-            let t = self.mesh.triangles[f as usize];
-            std::array::from_fn::<f32, 3, _>(|a| {
-                (p[t[0] as usize][a] + p[t[1] as usize][a] + p[t[2] as usize][a]) / 3.0
-            })
-        };
+    /// Splits `faces` in two at the median centroid along the longest axis of the centroids
+    /// (ties by face id): the lower half first, in place; returns its length.
+    fn halve(&self, faces: &mut [Centred]) -> usize {
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for &f in faces.iter() {
-            let c = centroid(f);
+        for i in faces.iter() {
             for a in 0..3 {
-                lo[a] = lo[a].min(c[a]);
-                hi[a] = hi[a].max(c[a]);
+                lo[a] = lo[a].min(i.c[a]);
+                hi[a] = hi[a].max(i.c[a]);
             }
         }
         let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-        for &f in faces.iter() {
-            self.key[f as usize] = centroid(f)[axis];
-        }
-        let key = &self.key;
         let mid = faces.len() / 2;
-        faces.select_nth_unstable_by(mid, |&a, &b| key[a as usize].total_cmp(&key[b as usize]).then(a.cmp(&b)));
+        faces.select_nth_unstable_by(mid, |a, b| a.c[axis].total_cmp(&b.c[axis]).then(a.f.cmp(&b.f)));
         mid
     }
 
