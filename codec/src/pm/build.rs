@@ -87,7 +87,7 @@ use rustc_hash::FxHashMap;
 
 use thiserror::Error;
 
-use super::order::{permute_in_place, place, preorder};
+use super::order::{permute_in_place, place, preorder, sort_in_place_by_key};
 use super::{Criteria, ProgressiveMesh, Split};
 use crate::mesh::{Mesh, MeshError};
 
@@ -1117,12 +1117,24 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The per-FVID normals and the per-split criteria (see the module docs) of the input
-/// triangles `input` (input vertex ids, read through `pm.fvid_of_input` rather than copied;
-/// freed, where owned, once the normals and leaf cones are made).
+/// triangles `input` (input vertex ids, made FVIDs through `pm.fvid_of_input`, in place where
+/// owned; freed once the normals and leaf cones are made).
 fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
     let pos = |f: usize| pm.positions[f].map(f64::from);
-    let finest = || input.iter().map(|t| t.map(|v| pm.fvid_of_input[v as usize]));
+    // The finest faces in FVIDs (an owned input's triangles made them in place), sorted by
+    // their first FVID, so that the passes below read and add to the per-FVID arrays in a
+    // sweep: in input order they went at random through 44 bytes an FVID, and the 102M build
+    // in 1.5 GB spent 115 s in them.
+    let mut faces = match input {
+        Cow::Owned(mut t) => {
+            t.iter_mut().for_each(|t| *t = t.map(|v| pm.fvid_of_input[v as usize]));
+            t
+        }
+        Cow::Borrowed(t) => t.iter().map(|t| t.map(|v| pm.fvid_of_input[v as usize])).collect(),
+    };
+    sort_in_place_by_key(&mut faces, &|t: &[u32; 3]| t[0].min(t[1]).min(t[2]));
+    let finest = || faces.iter().copied();
     let face_normal = |t: &[u32; 3]| {
         let [a, b, c] = t.map(|f| pos(f as usize));
         cross(sub(b, a), sub(c, a))
@@ -1155,7 +1167,7 @@ fn criteria(pm: &ProgressiveMesh, input: Cow<[[u32; 3]]>, geometric: Vec<f64>) -
             leaf_alpha[f as usize] = leaf_alpha[f as usize].max(a);
         }
     }
-    drop(input);
+    drop(faces);
     super::trace("criteria: split tree");
 
     // Per split, in f64: radius (which is also the geometric error, see below; made from

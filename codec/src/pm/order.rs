@@ -47,6 +47,52 @@ pub(crate) fn preorder(splits: &[Split]) -> Vec<u32> {
     a.into_iter().map(|x| x as u32).collect()
 }
 
+/// Sorts `a` by `key` in place, in passes that read and write it as [`BUCKETS`] sequential
+/// streams (an American flag sort on the key's top byte, then each bucket on the next, until
+/// a bucket is small enough for `sort_unstable_by_key`), for the same reason as
+/// [`permute_in_place`]. Unstable, and the same order on every run.
+pub(crate) fn sort_in_place_by_key<T, K: Fn(&T) -> u32>(a: &mut [T], key: &K) {
+    let max = a.iter().map(key).max().unwrap_or(0);
+    sort_digits(a, key, 32 - max.leading_zeros());
+}
+
+/// [`sort_in_place_by_key`] of elements whose keys agree above their lowest `bits` bits.
+fn sort_digits<T, K: Fn(&T) -> u32>(a: &mut [T], key: &K, bits: u32) {
+    if a.len() <= PLACED_BY_CYCLES || bits == 0 {
+        a.sort_unstable_by_key(key);
+        return;
+    }
+    let shift = bits.saturating_sub(8);
+    let bucket = |x: &T| ((key(x) >> shift) & 0xff) as usize;
+    let mut end = [0usize; BUCKETS];
+    for x in a.iter() {
+        end[bucket(x)] += 1;
+    }
+    let mut head = [0usize; BUCKETS];
+    let mut at = 0;
+    for k in 0..BUCKETS {
+        head[k] = at;
+        at += end[k];
+        end[k] = at;
+    }
+    let starts = head;
+    for k in 0..BUCKETS {
+        while head[k] < end[k] {
+            let i = head[k];
+            let t = bucket(&a[i]);
+            if t == k {
+                head[k] += 1;
+            } else {
+                a.swap(i, head[t]);
+                head[t] += 1;
+            }
+        }
+    }
+    for k in 0..BUCKETS {
+        sort_digits(&mut a[starts[k]..end[k]], key, shift);
+    }
+}
+
 /// Moves `a[order[i]]` and `b[order[i]]` to `a[i]` and `b[i]` for every `i` (`order` a
 /// permutation), in place, in passes that keep to a few hundred places at a time: each
 /// element's destination is distributed by its top bits into [`BUCKETS`] buckets (a pass of
@@ -136,7 +182,7 @@ pub(crate) fn place<A>(a: &mut [A], dest: &mut [u32], first: u32) {
 
 #[cfg(test)]
 mod tests {
-    use super::{permute_in_place, preorder};
+    use super::{permute_in_place, preorder, sort_in_place_by_key};
     use crate::pm::Split;
 
     /// Every permutation of five elements (cycles of every length) moves both slices as a
@@ -209,5 +255,27 @@ mod tests {
             .map(|&(v, v_u)| Split { v, v_u, ..Default::default() })
             .collect();
         assert_eq!(preorder(&splits), [5, 1, 4, 3, 0, 2]);
+    }
+
+    /// Sorting in place sorts, past the small case (keys of several bytes, many equal).
+    #[test]
+    fn sorting_in_place_sorts() {
+        let mut x = 0x2545_f491u64;
+        for (n, range) in [(100usize, 1u64 << 31), (50_000, 1 << 24), (300_000, 1000), (70_000, 1 << 32)] {
+            let mut a: Vec<(u32, u32)> = (0..n as u32)
+                .map(|i| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    ((x % range) as u32, i)
+                })
+                .collect();
+            let mut want = a.clone();
+            want.sort_unstable();
+            sort_in_place_by_key(&mut a, &|p: &(u32, u32)| p.0);
+            assert!(a.windows(2).all(|w| w[0].0 <= w[1].0), "n {n}: not sorted");
+            a.sort_unstable();
+            assert_eq!(a, want, "n {n}: not a permutation");
+        }
     }
 }
