@@ -64,17 +64,7 @@ fn sort_digits<T, K: Fn(&T) -> u32>(a: &mut [T], key: &K, bits: u32) {
     }
     let shift = bits.saturating_sub(8);
     let bucket = |x: &T| ((key(x) >> shift) & 0xff) as usize;
-    let mut end = [0usize; BUCKETS];
-    for x in a.iter() {
-        end[bucket(x)] += 1;
-    }
-    let mut head = [0usize; BUCKETS];
-    let mut at = 0;
-    for k in 0..BUCKETS {
-        head[k] = at;
-        at += end[k];
-        end[k] = at;
-    }
+    let (mut head, end) = bucket_bounds(a.iter().map(bucket));
     let starts = head;
     for k in 0..BUCKETS {
         while head[k] < end[k] {
@@ -91,6 +81,22 @@ fn sort_digits<T, K: Fn(&T) -> u32>(a: &mut [T], key: &K, bits: u32) {
     for k in 0..BUCKETS {
         sort_digits(&mut a[starts[k]..end[k]], key, shift);
     }
+}
+
+/// Per bucket of a pass its first place and its end, from each element's bucket in turn.
+fn bucket_bounds(buckets: impl Iterator<Item = usize>) -> ([usize; BUCKETS], [usize; BUCKETS]) {
+    let mut end = [0usize; BUCKETS];
+    for b in buckets {
+        end[b] += 1;
+    }
+    let mut head = [0usize; BUCKETS];
+    let mut at = 0;
+    for k in 0..BUCKETS {
+        head[k] = at;
+        at += end[k];
+        end[k] = at;
+    }
+    (head, end)
 }
 
 /// Moves `a[order[i]]` and `b[order[i]]` to `a[i]` and `b[i]` for every `i` (`order` a
@@ -143,17 +149,7 @@ pub(crate) fn place<A>(a: &mut [A], dest: &mut [u32], first: u32) {
     // Bucket `k` holds the destinations `first + k * width ..`.
     let width = n.div_ceil(BUCKETS);
     let bucket = |d: u32| (d - first) as usize / width;
-    let mut end = [0usize; BUCKETS];
-    for &d in dest.iter() {
-        end[bucket(d)] += 1;
-    }
-    let mut head = [0usize; BUCKETS];
-    let mut at = 0;
-    for k in 0..BUCKETS {
-        head[k] = at;
-        at += end[k];
-        end[k] = at;
-    }
+    let (mut head, end) = bucket_bounds(dest.iter().map(|&d| bucket(d)));
     for k in 0..BUCKETS {
         while head[k] < end[k] {
             let i = head[k];
