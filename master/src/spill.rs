@@ -198,13 +198,14 @@ fn count(delta: i64) {
 
 /// Maps the bytes `from..to` of the block at `base` (whole segments) to new files of a
 /// segment each, zeroed, over whatever `base + from..` held; false where a file cannot be
-/// made (what was mapped stays, for the caller to unmap).
+/// made, what it mapped unmapped again (the caller releases the rest of its reservation).
 unsafe fn map_segments(base: *mut u8, from: usize, to: usize) -> bool {
     let dir = DIR.load(Ordering::Relaxed);
     let seg = SEGMENT.load(Ordering::Relaxed);
     for at in (from..to).step_by(seg) {
         let fd = libc::openat(dir, c".".as_ptr(), libc::O_TMPFILE | libc::O_RDWR | libc::O_CLOEXEC, 0o600);
         if fd < 0 {
+            unmap_segments(base, from, at);
             return false;
         }
         // The mapping keeps the file; it goes when the mapping does.
@@ -219,6 +220,7 @@ unsafe fn map_segments(base: *mut u8, from: usize, to: usize) -> bool {
             ) != libc::MAP_FAILED;
         libc::close(fd);
         if !ok {
+            unmap_segments(base, from, at);
             return false;
         }
         let files = FILES.fetch_add(1, Ordering::Relaxed) + 1;
@@ -257,7 +259,7 @@ unsafe fn map_new(size: usize) -> *mut u8 {
         return p;
     }
     if !map_segments(p, 0, len) {
-        unmap_segments(p, 0, len);
+        libc::munmap(p as *mut libc::c_void, len);
         return std::ptr::null_mut();
     }
     let mut blocks = BLOCKS.lock().unwrap_or_else(|e| e.into_inner());
@@ -285,7 +287,7 @@ unsafe fn grow(b: Block, len: usize) -> *mut u8 {
         if map_segments(ptr, b.len, len) {
             return ptr;
         }
-        unmap_segments(ptr, b.len, len);
+        libc::munmap(ptr.add(b.len) as *mut libc::c_void, len - b.len);
         return std::ptr::null_mut();
     }
     let new = reserve(std::ptr::null_mut(), len);
@@ -293,17 +295,23 @@ unsafe fn grow(b: Block, len: usize) -> *mut u8 {
         return new;
     }
     if !map_segments(new, b.len, len) {
-        unmap_segments(new, 0, len);
+        libc::munmap(new as *mut libc::c_void, len);
         return std::ptr::null_mut();
     }
     let seg = SEGMENT.load(Ordering::Relaxed);
+    let fixed = libc::MREMAP_MAYMOVE | libc::MREMAP_FIXED;
+    let move_segment = |from: *mut u8, to: *mut u8| {
+        libc::mremap(from as *mut libc::c_void, seg, seg, fixed, to as *mut libc::c_void) != libc::MAP_FAILED
+    };
     for at in (0..b.len).step_by(seg) {
-        let to = new.add(at) as *mut libc::c_void;
-        let moved =
-            libc::mremap(ptr.add(at) as *mut libc::c_void, seg, seg, libc::MREMAP_MAYMOVE | libc::MREMAP_FIXED, to);
-        if moved == libc::MAP_FAILED {
-            // Not expected (the target is this block's own reservation): the block cannot
-            // be kept whole, which the caller reports as no memory.
+        if !move_segment(ptr.add(at), new.add(at)) {
+            // Not expected (the target is this block's own reservation); the moved
+            // segments go back where they were, and the block stays as it was.
+            for back in (0..at).step_by(seg) {
+                move_segment(new.add(back), ptr.add(back));
+            }
+            unmap_segments(new, b.len, len);
+            libc::munmap(new as *mut libc::c_void, len);
             return std::ptr::null_mut();
         }
     }

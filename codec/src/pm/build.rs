@@ -38,7 +38,8 @@
 //!   the chunk, which no thread changes, so the result does not depend on the threads.
 //!
 //! The refinement criteria ([`Criteria`], section 4 and 4.2.3) are computed after the
-//! numbering, bottom-up over the split tree ([`SplitTree`]), in `f64`:
+//! numbering, bottom-up over the split tree ([`SplitTree`](super::SplitTree), in the reverse of
+//! its pre-order), in `f64`:
 //!
 //! * a leaf (a finest vertex) has radius and errors zero and the normal cone of its incident
 //!   faces around its own normal; faces without area have no normal and are left out;
