@@ -232,9 +232,11 @@ unsafe fn map_segments(base: *mut u8, from: usize, to: usize) -> bool {
 /// `len` bytes of address space, mapped to nothing yet (at `at` where given, else anywhere);
 /// null where there is none.
 unsafe fn reserve(at: *mut u8, len: usize) -> *mut u8 {
-    let flags = libc::MAP_PRIVATE | libc::MAP_ANONYMOUS | libc::MAP_NORESERVE;
-    let (hint, flags) = if at.is_null() { (at, flags) } else { (at, flags | libc::MAP_FIXED_NOREPLACE) };
-    let p = libc::mmap(hint as *mut libc::c_void, len, libc::PROT_NONE, flags, -1, 0);
+    let mut flags = libc::MAP_PRIVATE | libc::MAP_ANONYMOUS | libc::MAP_NORESERVE;
+    if !at.is_null() {
+        flags |= libc::MAP_FIXED_NOREPLACE;
+    }
+    let p = libc::mmap(at as *mut libc::c_void, len, libc::PROT_NONE, flags, -1, 0);
     if p == libc::MAP_FAILED || (!at.is_null() && p as *mut u8 != at) {
         if p != libc::MAP_FAILED {
             libc::munmap(p, len);

@@ -925,12 +925,11 @@ fn simplify_chunked(
     let mut count = 0;
     // The input faces in leaf order, each leaf a range of them: one array (a vector per leaf,
     // as before, kept 4 bytes a face in blocks too small for `pm build --spill-dir` to
-    // spill: 410 MB at 102M triangles).
-    // Partitioned with their centroids beside them (made once), so that the median searches
-    // and the passes over a node's faces read one array in order: with a face's centroid
-    // looked up by its id (an array per face, and the triangles and positions before it), a
-    // spilled build read the three at random on every level, and the 13.9M build in 200 MB
-    // did not get through the kd-tree in a minute.
+    // spill: 410 MB at 102M triangles). They are partitioned with their centroids beside
+    // them (made once), so that the median searches and the passes over a node's faces read
+    // one array in order: with a face's centroid looked up by its id (an array per face, and
+    // the triangles and positions before it), a spilled build read the three at random on
+    // every level, and the 13.9M build in 200 MB did not get through the kd-tree in a minute.
     let p = &mesh.positions;
     let mut items: Vec<Centred> = (0..mesh.triangles.len() as u32)
         .map(|f| {

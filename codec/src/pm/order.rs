@@ -226,11 +226,7 @@ mod tests {
     /// several times each).
     #[test]
     fn the_sort_is_the_split_trees_preorder() {
-        let mesh = crate::load::load_path(std::path::Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/meshes/stanford/bunny_zipper_c3d.obj.gz"
-        )))
-        .unwrap();
+        let mesh = crate::load::load_path(&testkit::mesh_path("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
         let pm = crate::pm::build(&mesh).unwrap();
         let tree = crate::pm::SplitTree::new(&pm);
         let mut want = Vec::new();

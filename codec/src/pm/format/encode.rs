@@ -402,15 +402,16 @@ fn uncompressed_operations<'a>(
         if v_end - v == 1 {
             continue;
         }
-        if splits.get(v_ends.len()).is_none_or(|s| s.v != v) {
-            return Err(invalid("FVID range of an unsplit base vertex"));
-        }
         root_ops[b] = v_ends.len();
         stack.push((v, v_end, None));
         while let Some((v, v_end, parent)) = stack.pop() {
             let i = v_ends.len();
             let Some(split) = splits.get(i).filter(|s| s.v == v) else {
-                return Err(invalid("split tree inconsistent with the FVID ranges"));
+                return Err(invalid(if parent.is_none() {
+                    "FVID range of an unsplit base vertex"
+                } else {
+                    "split tree inconsistent with the FVID ranges"
+                }));
             };
             if split.v_u <= v || split.v_u >= v_end {
                 return Err(invalid("split outside its vertex's FVID range"));
