@@ -877,18 +877,25 @@ enum Kd {
     Inner(Box<Kd>, Box<Kd>, u32),
 }
 
-/// An input face `f` with its centroid `c`, while the chunks' kd-tree is built.
+/// An input face `f`, its corners `t` and its centroid `c`, while the chunks' kd-tree is built.
 struct Centred {
     c: [f32; 3],
     f: u32,
+    t: [u32; 3],
 }
 
-/// The state shared by the chunks of [`simplify_chunked`], read-only while they run.
-struct Chunker<'a> {
-    mesh: &'a Mesh,
+/// The state shared by the chunks of [`simplify_chunked`], read-only while they run. The
+/// chunks see the model in leaf order: the faces in the kd-tree's leaf order and the vertices
+/// numbered in the order those faces first use them (chunk ids), so that a chunk reads a
+/// range of each array, not the whole input at random.
+struct Chunker {
     centre: [f64; 3],
     chunk_faces: usize,
-    /// Per input vertex: the first and the last leaf that holds one of its faces.
+    /// The input faces in leaf order, their corners in chunk ids.
+    tris: Vec<[u32; 3]>,
+    /// Per chunk id: the vertex's input position.
+    positions: Vec<[f32; 3]>,
+    /// Per chunk id: the first and the last leaf that holds one of the vertex's faces.
     leaves: Vec<(u32, u32)>,
     /// Collapses done so far, in all chunks (for the progress report).
     done: AtomicUsize,
@@ -913,6 +920,11 @@ struct Chunker<'a> {
 /// its plane in exactly one leaf), errors and reaches take their maximum. Within a chunk the
 /// order is greedy by quadric error as in the whole-model build; across chunks it is not, so
 /// the result differs from it (measured in the README).
+///
+/// The chunks run on the model in leaf order ([`Chunker`]) and their log is put back into
+/// input ids at the end; no decision depends on the ids' values (a chunk numbers its
+/// vertices by first use in its faces, which are in the same order either way), so the log is
+/// the one the input ids give.
 fn simplify_chunked(
     mesh: &Mesh,
     centre: [f64; 3],
@@ -920,32 +932,58 @@ fn simplify_chunked(
     log: &mut Log,
     progress: &mut dyn FnMut(usize),
 ) -> BuildStats {
-    let n = mesh.positions.len();
-    let mut c = Chunker { mesh, centre, chunk_faces, leaves: vec![(u32::MAX, 0); n], done: AtomicUsize::new(0) };
-    let mut count = 0;
-    // The input faces in leaf order, each leaf a range of them: one array (a vector per leaf,
-    // as before, kept 4 bytes a face in blocks too small for `pm build --spill-dir` to
-    // spill: 410 MB at 102M triangles). They are partitioned with their centroids beside
-    // them (made once), so that the median searches and the passes over a node's faces read
-    // one array in order: with a face's centroid looked up by its id (an array per face, and
-    // the triangles and positions before it), a spilled build read the three at random on
-    // every level, and the 13.9M build in 200 MB did not get through the kd-tree in a minute.
+    // The input faces are partitioned with their corners and centroids beside them (made
+    // once), so that the median searches, the passes over a node's faces and the leaf order
+    // read one array in order: with a face's centroid looked up by its id (and the triangles
+    // and positions before it), a spilled build read the three at random on every level, and
+    // the 13.9M build in 200 MB did not get through the kd-tree in a minute.
     let p = &mesh.positions;
-    let mut items: Vec<Centred> = (0..mesh.triangles.len() as u32)
-        .map(|f| {
-            let t = mesh.triangles[f as usize];
+    let mut items: Vec<Centred> = (0..)
+        .zip(&mesh.triangles)
+        .map(|(f, &t)| {
             let c = std::array::from_fn(|a| (p[t[0] as usize][a] + p[t[1] as usize][a] + p[t[2] as usize][a]) / 3.0);
-            Centred { c, f }
+            Centred { c, f, t }
         })
         .collect();
-    let tree = c.partition(&mut items, 0, &mut count);
-    let faces: Vec<u32> = items.iter().map(|i| i.f).collect();
-    drop(items);
-    super::trace("kd-tree made, chunks");
-    let (c, faces) = (&c, &faces[..]);
+    let mut ends = Vec::new();
+    let tree = partition(&mut items, 0, chunk_faces, &mut ends);
+    super::trace("kd-tree made, the model into leaf order");
+    // The faces in leaf order and the vertices numbered by their first use there: a vertex's
+    // leaves then only grow, and a chunk's vertices are mostly a range of the chunk ids. The
+    // chunks read the input by id before, at random: the 102M build in 1 GB spent 219 s in
+    // them and 89 s in the kd-tree (its leaf pass wrote the leaves per input vertex), now
+    // 106 s and 67 s, plus 18 s for this reordering.
+    let mut chunk_id = vec![u32::MAX; mesh.positions.len()];
+    let (mut input_id, mut leaves) = (Vec::new(), Vec::new());
+    let (mut tris, mut faces) = (Vec::with_capacity(items.len()), Vec::with_capacity(items.len()));
+    let mut start = 0;
+    for (leaf, &end) in (0u32..).zip(&ends) {
+        for i in &items[start..end] {
+            tris.push(i.t.map(|v| {
+                let id = &mut chunk_id[v as usize];
+                if *id == u32::MAX {
+                    *id = input_id.len() as u32;
+                    input_id.push(v);
+                    leaves.push((leaf, leaf));
+                } else {
+                    leaves[*id as usize].1 = leaf;
+                }
+                *id
+            }));
+            faces.push(i.f);
+        }
+        start = end;
+    }
+    drop((items, chunk_id));
+    let positions = input_id.iter().map(|&v| p[v as usize]).collect();
+    let count = ends.len() as u32;
+    drop(ends);
+    super::trace("chunks");
+    let c = Chunker { centre, chunk_faces, tris, positions, leaves, done: AtomicUsize::new(0) };
+    let c = &c;
     // The chunks run on rayon's threads; this one reports their progress meanwhile.
     let part = std::thread::scope(|scope| {
-        let work = scope.spawn(move || c.simplify(faces, tree, 0, count, true));
+        let work = scope.spawn(move || c.simplify(tree, 0, count, true));
         while !work.is_finished() {
             progress(c.done.load(Ordering::Relaxed));
             std::thread::sleep(std::time::Duration::from_millis(100));
@@ -953,42 +991,55 @@ fn simplify_chunked(
         work.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
     });
     *log = part.log;
+    for (u, t) in &mut log.collapses {
+        (*u, *t) = (input_id[*u as usize], input_id[*t as usize]);
+    }
+    for f in &mut log.removed {
+        *f = faces[*f as usize];
+    }
     BuildStats { collapses: log.collapses.len(), ..part.stats }
 }
 
-impl Chunker<'_> {
-    /// The kd-tree of `faces` (input faces with their centroids, from `at` on in the whole
-    /// array), its leaves numbered from `*count` on, the faces reordered in place into leaf
-    /// order; records each vertex's first and last leaf.
-    fn partition(&mut self, faces: &mut [Centred], at: usize, count: &mut u32) -> Kd {
-        if faces.len() > self.chunk_faces {
-            let half = self.halve(faces);
-            let (left, right) = faces.split_at_mut(half);
-            let a = self.partition(left, at, count);
-            let mid = *count;
-            let b = self.partition(right, at + half, count);
-            return Kd::Inner(Box::new(a), Box::new(b), mid);
-        }
-        let leaf = *count;
-        *count += 1;
-        for i in faces.iter() {
-            for v in self.mesh.triangles[i.f as usize] {
-                let l = &mut self.leaves[v as usize];
-                *l = (l.0.min(leaf), l.1.max(leaf));
-            }
-        }
-        Kd::Leaf(at..at + faces.len())
+/// The kd-tree of `faces` (input faces with their centroids, from `at` on in the whole
+/// array), the faces reordered in place into leaf order; pushes each leaf's end (in the whole
+/// array) to `ends`, so a leaf's number is its index there.
+fn partition(faces: &mut [Centred], at: usize, chunk_faces: usize, ends: &mut Vec<usize>) -> Kd {
+    if faces.len() > chunk_faces {
+        let half = halve(faces);
+        let (left, right) = faces.split_at_mut(half);
+        let a = partition(left, at, chunk_faces, ends);
+        let mid = ends.len() as u32;
+        let b = partition(right, at + half, chunk_faces, ends);
+        return Kd::Inner(Box::new(a), Box::new(b), mid);
     }
+    ends.push(at + faces.len());
+    Kd::Leaf(at..at + faces.len())
+}
 
-    /// Simplifies the kd-tree node `kd`, which covers the leaves `first..end` (their faces in
-    /// `faces`); the root runs to the end.
-    fn simplify(&self, faces: &[u32], kd: Kd, first: u32, end: u32, root: bool) -> Part {
+/// Splits `faces` in two at the median centroid along the longest axis of the centroids
+/// (ties by face id): the lower half first, in place; returns its length.
+fn halve(faces: &mut [Centred]) -> usize {
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for i in faces.iter() {
+        for a in 0..3 {
+            lo[a] = lo[a].min(i.c[a]);
+            hi[a] = hi[a].max(i.c[a]);
+        }
+    }
+    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+    let mid = faces.len() / 2;
+    faces.select_nth_unstable_by(mid, |a, b| a.c[axis].total_cmp(&b.c[axis]).then(a.f.cmp(&b.f)));
+    mid
+}
+
+impl Chunker {
+    /// Simplifies the kd-tree node `kd`, which covers the leaves `first..end`; the root runs
+    /// to the end.
+    fn simplify(&self, kd: Kd, first: u32, end: u32, root: bool) -> Part {
         let part = match kd {
             Kd::Inner(a, b, mid) => {
-                let (mut a, b) = rayon::join(
-                    || self.simplify(faces, *a, first, mid, false),
-                    || self.simplify(faces, *b, mid, end, false),
-                );
+                let (mut a, b) =
+                    rayon::join(|| self.simplify(*a, first, mid, false), || self.simplify(*b, mid, end, false));
                 a.faces.extend(b.faces);
                 a.vertices.extend(b.vertices);
                 a.log.append(b.log);
@@ -998,29 +1049,13 @@ impl Chunker<'_> {
                 a
             }
             Kd::Leaf(range) => Part {
-                faces: faces[range].iter().map(|&f| (f, self.mesh.triangles[f as usize])).collect(),
+                faces: range.map(|k| (k as u32, self.tris[k])).collect(),
                 vertices: Vec::new(),
                 log: Log::default(),
                 stats: BuildStats::default(),
             },
         };
         self.chunk(part, (first, end), if root { 0 } else { self.chunk_faces / 2 })
-    }
-
-    /// Splits `faces` in two at the median centroid along the longest axis of the centroids
-    /// (ties by face id): the lower half first, in place; returns its length.
-    fn halve(&self, faces: &mut [Centred]) -> usize {
-        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for i in faces.iter() {
-            for a in 0..3 {
-                lo[a] = lo[a].min(i.c[a]);
-                hi[a] = hi[a].max(i.c[a]);
-            }
-        }
-        let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-        let mid = faces.len() / 2;
-        faces.select_nth_unstable_by(mid, |a, b| a.c[axis].total_cmp(&b.c[axis]).then(a.f.cmp(&b.f)));
-        mid
     }
 
     /// Simplifies one chunk, the faces and vertices `part` gathered from the leaves
@@ -1076,7 +1111,7 @@ impl Chunker<'_> {
                 lo < first || hi >= end
             })
             .collect();
-        let pos = vertex.iter().map(|&g| sub(self.mesh.positions[g as usize].map(f64::from), self.centre)).collect();
+        let pos = vertex.iter().map(|&g| sub(self.positions[g as usize].map(f64::from), self.centre)).collect();
         let mut s = Simplifier::new(pos, local_tris, (!fresh).then_some(quadric), locked);
         let start = log.collapses.len();
         let ids = Ids { vertex: &vertex, face: &face };
@@ -1085,7 +1120,7 @@ impl Chunker<'_> {
             self.done.fetch_add(k - reported, Ordering::Relaxed);
             reported = k;
         };
-        run(&mut s, &self.mesh.positions, ids, &mut reach, &mut error, stop_faces, &mut log, &mut report);
+        run(&mut s, &self.positions, ids, &mut reach, &mut error, stop_faces, &mut log, &mut report);
         report(log.collapses.len());
         stats.hubs += s.hubs;
         stats.work += s.work;
