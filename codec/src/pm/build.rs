@@ -607,8 +607,9 @@ impl Default for BuildOptions {
     }
 }
 
-/// The collapse history: `(u, t)` per collapse in input vertex ids, the input faces each
-/// removed (CSR over `removed`), and each collapse's geometric error.
+/// The collapse history: `(u, t)` per collapse in input vertex ids, the faces each removed
+/// (CSR over `removed`; their indices in [`Model::triangles`] once the simplification is
+/// done), and each collapse's geometric error.
 #[derive(Default)]
 struct Log {
     collapses: Vec<(u32, u32)>,
@@ -728,13 +729,13 @@ fn build_mesh(
     let mut log = Log::default();
     let mut report = |done: usize| progress(done, bound);
     super::trace("simplifying");
-    let (stats, alive) = if opts.chunk_faces > 0 && mesh.triangles.len() > opts.chunk_faces {
-        let stats = simplify_chunked(&mesh, centre, opts.chunk_faces, &mut log, &mut report);
+    let (stats, alive, model) = if opts.chunk_faces > 0 && mesh.triangles.len() > opts.chunk_faces {
+        let (stats, model) = simplify_chunked(mesh, centre, opts.chunk_faces, &mut log, &mut report);
         let mut alive = used;
         for &(u, _) in &log.collapses {
             alive[u as usize] = false;
         }
-        (stats, alive)
+        (stats, alive, model)
     } else {
         drop(used);
         let pos = mesh.positions.iter().map(|p| sub(p.map(f64::from), centre)).collect();
@@ -746,7 +747,13 @@ fn build_mesh(
         // state (quadrics, face lists, heap: most of the build's memory) before the forest is
         // numbered.
         let stats = BuildStats { collapses: log.collapses.len(), hubs: s.hubs, work: s.work, chunks: 1 };
-        (stats, std::mem::take(&mut s.alive))
+        let alive = std::mem::take(&mut s.alive);
+        drop(s);
+        let (positions, triangles) = match mesh {
+            Cow::Owned(m) => (m.positions, m.triangles),
+            Cow::Borrowed(m) => (m.positions.clone(), m.triangles.clone()),
+        };
+        (stats, alive, Model { positions, input_id: Vec::new(), triangles, input_face: Vec::new() })
     };
     report(log.collapses.len());
     super::trace("numbering");
@@ -782,19 +789,21 @@ fn build_mesh(
     }
     drop(offset);
     super::trace("positions into FVID order");
+    let Model { positions: model_positions, input_id, mut triangles, input_face } = model;
+    // Per vertex of the model its FVID (`u32::MAX`: none), read in its order below.
+    let fvid: Cow<[u32]> = if input_id.is_empty() {
+        Cow::Borrowed(&fvid_of_input)
+    } else {
+        Cow::Owned(input_id.iter().map(|&v| fvid_of_input[v as usize]).collect())
+    };
+    drop(input_id);
     let mut positions = vec![[0.0f32; 3]; numbered as usize];
-    for (&f, &p) in fvid_of_input.iter().zip(&mesh.positions) {
+    for (&f, &p) in fvid.iter().zip(&model_positions) {
         if f != u32::MAX {
             positions[f as usize] = p;
         }
     }
-    // Of the input only the triangles are read from here on (by the splits' faces and the
-    // criteria's normals): an owned mesh's positions go now (a borrowed one's triangles are
-    // copied, to be moved below).
-    let mut triangles = match mesh {
-        Cow::Owned(m) => m.triangles,
-        Cow::Borrowed(m) => m.triangles.clone(),
-    };
+    drop(model_positions);
 
     super::trace("base faces and splits");
     // The triangles moved into the order they are read in: each removed face's to its place
@@ -808,13 +817,14 @@ fn build_mesh(
         dest[f as usize] = k as u32;
     }
     drop(removed);
-    for (next, d) in (removed_faces as u32..).zip(dest.iter_mut().filter(|d| **d == u32::MAX)) {
-        *d = next;
-    }
+    base_faces_after(&mut dest, &input_face, removed_faces as u32);
+    drop(input_face);
     place(&mut triangles, &mut dest, 0);
     drop(dest);
-    let to_fvid = |t: &[u32; 3]| t.map(|v| fvid_of_input[v as usize]);
-    let base_faces = triangles[removed_faces..].iter().map(to_fvid).collect();
+    // The corners as FVIDs, in place (what the splits, the base mesh and the criteria read).
+    triangles.iter_mut().for_each(|t| *t = t.map(|v| fvid[v as usize]));
+    drop(fvid);
+    let base_faces = triangles[removed_faces..].to_vec();
     let splits = collapses
         .iter()
         .enumerate()
@@ -824,7 +834,7 @@ fn build_mesh(
             Split {
                 v: fvid_of_input[t as usize],
                 v_u: fvid_of_input[u as usize],
-                faces: triangles[start..removed_end[i] as usize].iter().map(to_fvid).collect(),
+                faces: triangles[start..removed_end[i] as usize].iter().copied().collect(),
             }
         })
         .collect();
@@ -839,6 +849,52 @@ fn build_mesh(
     pm.normals = normals;
     pm.criteria = criteria;
     Ok((pm, stats))
+}
+
+/// The model as the steps after the simplification read it: in the input's order after a
+/// whole-model simplification, in leaf order after a chunked one (see [`Chunker`]), where
+/// what the log's faces and the numbering refer to is the input's ids.
+struct Model {
+    /// Per vertex: its position.
+    positions: Vec<[f32; 3]>,
+    /// Per vertex: its input id (empty: the ids are the input's).
+    input_id: Vec<u32>,
+    /// The faces, their corners in this model's vertex ids; the log's removed faces are
+    /// indices here.
+    triangles: Vec<[u32; 3]>,
+    /// Per face: its input id (empty: the ids are the input's).
+    input_face: Vec<u32>,
+}
+
+/// Gives the faces not yet placed in `dest` (`u32::MAX`, the base faces: never removed) their
+/// places from `first` on, in input order: by their index where `input_face` is empty, else by
+/// their input ids there (ranked with a bit per input face, so that no array of the faces'
+/// size is read at random).
+fn base_faces_after(dest: &mut [u32], input_face: &[u32], first: u32) {
+    if input_face.is_empty() {
+        for (next, d) in (first..).zip(dest.iter_mut().filter(|d| **d == u32::MAX)) {
+            *d = next;
+        }
+        return;
+    }
+    let mut base = vec![0u64; dest.len().div_ceil(64)];
+    for (&d, &f) in dest.iter().zip(input_face) {
+        if d == u32::MAX {
+            base[f as usize / 64] |= 1 << (f % 64);
+        }
+    }
+    let mut before = Vec::with_capacity(base.len());
+    let mut count = first;
+    for w in &base {
+        before.push(count);
+        count += w.count_ones();
+    }
+    for (d, &f) in dest.iter_mut().zip(input_face) {
+        if *d == u32::MAX {
+            let (w, b) = (f as usize / 64, f % 64);
+            *d = before[w] + (base[w] & ((1u64 << b) - 1)).count_ones();
+        }
+    }
 }
 
 /// A vertex that survived a chunk, with what its collapses there gathered.
@@ -921,30 +977,37 @@ struct Chunker {
 /// order is greedy by quadric error as in the whole-model build; across chunks it is not, so
 /// the result differs from it (measured in the README).
 ///
-/// The chunks run on the model in leaf order ([`Chunker`]) and their log is put back into
-/// input ids at the end; no decision depends on the ids' values (a chunk numbers its
-/// vertices by first use in its faces, which are in the same order either way), so the log is
-/// the one the input ids give.
+/// The chunks run on the model in leaf order ([`Chunker`]), which is returned, and their
+/// collapses are put back into input ids at the end (their faces stay leaf-order indices); no
+/// decision depends on the ids' values (a chunk numbers its vertices by first use in its
+/// faces, which are in the same order either way), so the log is the one the input ids give.
+/// An owned mesh's triangles are freed once the faces are partitioned with their corners, and
+/// its positions once copied into leaf order (what the steps after read).
 fn simplify_chunked(
-    mesh: &Mesh,
+    mesh: Cow<Mesh>,
     centre: [f64; 3],
     chunk_faces: usize,
     log: &mut Log,
     progress: &mut dyn FnMut(usize),
-) -> BuildStats {
+) -> (BuildStats, Model) {
     // The input faces are partitioned with their corners and centroids beside them (made
     // once), so that the median searches, the passes over a node's faces and the leaf order
     // read one array in order: with a face's centroid looked up by its id (and the triangles
     // and positions before it), a spilled build read the three at random on every level, and
     // the 13.9M build in 200 MB did not get through the kd-tree in a minute.
-    let p = &mesh.positions;
+    let n = mesh.positions.len();
+    let (p, triangles): (Cow<[_]>, Cow<[_]>) = match mesh {
+        Cow::Owned(m) => (Cow::Owned(m.positions), Cow::Owned(m.triangles)),
+        Cow::Borrowed(m) => (Cow::Borrowed(&m.positions), Cow::Borrowed(&m.triangles)),
+    };
     let mut items: Vec<Centred> = (0..)
-        .zip(&mesh.triangles)
+        .zip(triangles.iter())
         .map(|(f, &t)| {
             let c = std::array::from_fn(|a| (p[t[0] as usize][a] + p[t[1] as usize][a] + p[t[2] as usize][a]) / 3.0);
             Centred { c, f, t }
         })
         .collect();
+    drop(triangles);
     let mut ends = Vec::new();
     let tree = partition(&mut items, 0, chunk_faces, &mut ends);
     super::trace("kd-tree made, the model into leaf order");
@@ -953,7 +1016,7 @@ fn simplify_chunked(
     // chunks read the input by id before, at random: the 102M build in 1 GB spent 219 s in
     // them and 89 s in the kd-tree (its leaf pass wrote the leaves per input vertex), now
     // 106 s and 67 s, plus 18 s for this reordering.
-    let mut chunk_id = vec![u32::MAX; mesh.positions.len()];
+    let mut chunk_id = vec![u32::MAX; n];
     let (mut input_id, mut leaves) = (Vec::new(), Vec::new());
     let (mut tris, mut faces) = (Vec::with_capacity(items.len()), Vec::with_capacity(items.len()));
     let mut start = 0;
@@ -976,16 +1039,17 @@ fn simplify_chunked(
     }
     drop((items, chunk_id));
     let positions = input_id.iter().map(|&v| p[v as usize]).collect();
+    drop(p);
     let count = ends.len() as u32;
     drop(ends);
     super::trace("chunks");
     let c = Chunker { centre, chunk_faces, tris, positions, leaves, done: AtomicUsize::new(0) };
-    let c = &c;
+    let cr = &c;
     // The chunks run on rayon's threads; this one reports their progress meanwhile.
     let part = std::thread::scope(|scope| {
-        let work = scope.spawn(move || c.simplify(tree, 0, count, true));
+        let work = scope.spawn(move || cr.simplify(tree, 0, count, true));
         while !work.is_finished() {
-            progress(c.done.load(Ordering::Relaxed));
+            progress(cr.done.load(Ordering::Relaxed));
             std::thread::sleep(std::time::Duration::from_millis(100));
         }
         work.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
@@ -994,10 +1058,9 @@ fn simplify_chunked(
     for (u, t) in &mut log.collapses {
         (*u, *t) = (input_id[*u as usize], input_id[*t as usize]);
     }
-    for f in &mut log.removed {
-        *f = faces[*f as usize];
-    }
-    BuildStats { collapses: log.collapses.len(), ..part.stats }
+    let stats = BuildStats { collapses: log.collapses.len(), ..part.stats };
+    let Chunker { tris, positions, .. } = c;
+    (stats, Model { positions, input_id, triangles: tris, input_face: faces })
 }
 
 /// The kd-tree of `faces` (input faces with their centroids, from `at` on in the whole
@@ -1170,10 +1233,9 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
 fn criteria(pm: &ProgressiveMesh, mut faces: Vec<[u32; 3]>, geometric: Vec<f64>) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
     let pos = |f: usize| pm.positions[f].map(f64::from);
-    // The finest faces in FVIDs, sorted by their first FVID, so that the passes below read
+    // The finest faces (in FVIDs) sorted by their first FVID, so that the passes below read
     // and add to the per-FVID arrays in a sweep: in input order they went at random through
     // 44 bytes an FVID, and the 102M build in 1.5 GB spent 115 s in them.
-    faces.iter_mut().for_each(|t| *t = t.map(|v| pm.fvid_of_input[v as usize]));
     sort_in_place_by_key(&mut faces, &|t: &[u32; 3]| t[0].min(t[1]).min(t[2]));
     let finest = || faces.iter().copied();
     let face_normal = |t: &[u32; 3]| {
