@@ -715,12 +715,13 @@ struct OocCoding {
 }
 
 /// The out-of-core layout (sections 4.1 and 4.2): the hierarchy built over the in-core coded
-/// sizes `incore_sizes` (plus a byte for the node pointers), the operations coded node by
+/// sizes `incore_sizes` (the pointers out of a node estimated from their count, see
+/// `hierarchy.rs`), the operations coded node by
 /// node, children's nodes first, with the in-core tables, the tables counted again from that
 /// coding and the operations coded again. As in the paper, where a node comes out larger than
-/// `node_bytes`, the hierarchy is built again with a smaller size limit ("we iteratively reduce
-/// the maximum node size when building the hierarchy and store the model as soon as all
-/// nodes are small enough after compression").
+/// `node_bytes` (in the final coding), the hierarchy is built again with a smaller size limit
+/// ("we iteratively reduce the maximum node size when building the hierarchy and store the
+/// model as soon as all nodes are small enough after compression").
 fn out_of_core(
     ops: &Operations,
     incore_sizes: &[u32],
@@ -750,7 +751,10 @@ fn out_of_core(
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
             let (nodes, addr, counts) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0);
             largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
-            if largest > node_bytes as usize {
+            // Only the final coding has to fit `node_bytes`: the first, with the in-core
+            // tables, only counts the symbols (its nodes come out a few percent larger), as
+            // long as its addresses are whole (a node within `NODE_BYTES`).
+            if largest > [NODE_BYTES, node_bytes as usize][round] {
                 break;
             }
             if round == 0 {
@@ -769,7 +773,7 @@ fn out_of_core(
 }
 
 /// The hierarchy's view of the operations (see [`OpGeometry`]): their children, the in-core
-/// coded sizes `sizes` plus a byte for the node pointers, and their errors and centres as they
+/// coded sizes `sizes`, and their errors and centres as they
 /// decode.
 struct Geometry<'a> {
     ops: &'a Operations<'a>,
@@ -787,7 +791,7 @@ impl OpGeometry for Geometry<'_> {
     }
 
     fn size(&self, i: usize) -> u32 {
-        self.sizes[i] + 1
+        self.sizes[i]
     }
 
     fn error(&self, i: usize) -> f32 {
@@ -969,7 +973,9 @@ fn code_node(
         stack.push(k);
         while let Some(k) = stack.pop() {
             let i = list[k] as usize;
-            placed.push((i as u32, n * NODE_BYTES as u32 + out.len() as u32));
+            // Wrapping: the counting coding may make a node larger than `NODE_BYTES`, and is
+            // then thrown away (see `out_of_core`).
+            placed.push((i as u32, (n * NODE_BYTES as u32).wrapping_add(out.len() as u32)));
             out.extend_from_slice(&bytes[k]);
             let [l, r] = ops.children(i);
             let (first, second) = if coding[k].swap { (r, l) } else { (l, r) };

@@ -36,7 +36,11 @@
 //! would cost 0.35 instead of 1.03, but that view would require 331,667 bytes: a leaf over a
 //! whole region carries fine operations that the remnant below a coarse inner node kept apart.
 //! (These figures predate the pairs of pointers into one node, the format's version 5, which
-//! took the layout to 0.87 bytes per operation on the bunny and 0.49 on the dragon.)
+//! took the layout to 0.87 bytes per operation on the bunny and 0.49 on the dragon, and the
+//! estimate of a node's bytes that counts its pointers ([`UNITS`]), which took it to 0.31 and
+//! 0.46: the nodes come out as large as asked instead of a fifth smaller. The close bunny view
+//! in 4 kB nodes then requires 321,565 bytes of a 400,434-byte file, against 305,152 of
+//! 414,960: larger nodes carry more than a view needs, as above.)
 //!
 //! Where the paper is silent: a node whose remaining subtrees fit in one node gets a single
 //! child; nodes are numbered in pre-order (a parent before its children, which out-of-core
@@ -49,6 +53,21 @@ use crate::pm::NONE;
 
 /// Halvings of an inner node's remaining subtrees into its children (2^SPLITS children).
 const SPLITS: usize = 2;
+
+/// The estimate of a node's coded bytes, in units of a quarter byte: an operation's in-core
+/// coded size, plus [`OP_EXTRA`] (out of core every child that splits costs a node-delta
+/// symbol), plus [`POINTER`] per child whose operation is in another node (its node delta and
+/// local address instead of an in-node offset). Measured on the first out-of-core coding (with
+/// the in-core tables, the costlier of the two) of the dragon subdivided to 13.9M triangles:
+/// 0.78 bytes an operation, 3.0 bytes a pointer (the final coding, with the counted tables:
+/// 0.10 and 1.9; on the bunny and the dragon 0.10-0.12 and 1.8-1.9). Before, a byte an
+/// operation stood for both: leaves came out below the limit and inner nodes, nearly all
+/// pointers, above it, so that every large model was grouped and coded again with a limit
+/// about a fifth lower (the 13.9M dragon in 2,389 nodes of at most 49,964 bytes instead of
+/// 1,365: 0.2% larger).
+const UNITS: u64 = 4;
+const OP_EXTRA: u64 = 3;
+const POINTER: u64 = 12;
 
 /// What the hierarchy needs of the operations (in pre-order: children after their parent),
 /// read when needed: the encoder computes it from the quantized operations (a table of it
@@ -76,9 +95,15 @@ pub(super) struct Hierarchy {
     pub(super) parents: Vec<Option<u32>>,
 }
 
-/// An operation in a node's heap: by greatest error, then first in pre-order.
-#[derive(PartialEq)]
-struct ByError(f32, usize);
+/// An operation in a node's heap: by greatest error, then first in pre-order; and whether its
+/// parent operation is in the node (its pointer then stays inside if it is taken too).
+struct ByError(f32, usize, bool);
+
+impl PartialEq for ByError {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
 
 impl Eq for ByError {}
 
@@ -95,14 +120,16 @@ impl Ord for ByError {
 }
 
 /// Builds the hierarchy over the operation forest `ops` (in pre-order: children after their
-/// parent) from its `roots`, nodes of at most `s_max` bytes. `None` where an operation alone
-/// is larger than `s_max`.
+/// parent) from its `roots`, nodes of at most `s_max` bytes as estimated (see [`UNITS`]). `None`
+/// where an operation alone is larger than `s_max`.
 pub(super) fn build(ops: &dyn OpGeometry, roots: &[usize], s_max: u64) -> Option<Hierarchy> {
     let m = ops.len();
-    // Subtree sizes, children before parents.
+    let s_max = s_max * UNITS;
+    let cost = |i: usize| u64::from(ops.size(i)) * UNITS + OP_EXTRA;
+    // Subtree sizes (a whole subtree has no pointer out of it), children before parents.
     let mut subtree = vec![0u64; m];
     for i in (0..m).rev() {
-        subtree[i] = u64::from(ops.size(i)) + kids(ops, i).map(|c| subtree[c]).sum::<u64>();
+        subtree[i] = cost(i) + kids(ops, i).map(|c| subtree[c]).sum::<u64>();
     }
     let mut node_of = vec![u32::MAX; m];
     let mut parents: Vec<Option<u32>> = vec![];
@@ -120,19 +147,23 @@ pub(super) fn build(ops: &dyn OpGeometry, roots: &[usize], s_max: u64) -> Option
             }
             continue;
         }
-        // The operations with the greatest error first, as many as fit.
-        let mut heap: BinaryHeap<ByError> = frontier.iter().map(|&i| ByError(ops.error(i), i)).collect();
+        // The operations with the greatest error first, as many as fit: an operation costs
+        // its bytes and a pointer per child (out of the node until the child is taken), and
+        // takes its own pointer back into the node.
+        let mut heap: BinaryHeap<ByError> = frontier.iter().map(|&i| ByError(ops.error(i), i, false)).collect();
         let mut used = 0u64;
         while let Some(top) = heap.peek() {
-            let i = top.1;
-            if used + u64::from(ops.size(i)) > s_max {
+            let (i, inside) = (top.1, top.2);
+            let pointers = POINTER * kids(ops, i).count() as u64;
+            let back = if inside { POINTER } else { 0 };
+            if used + cost(i) + pointers - back > s_max {
                 break;
             }
             heap.pop();
-            used += u64::from(ops.size(i));
+            used += cost(i) + pointers - back;
             node_of[i] = id;
             for c in kids(ops, i) {
-                heap.push(ByError(ops.error(c), c));
+                heap.push(ByError(ops.error(c), c, true));
             }
         }
         if used == 0 {
@@ -142,7 +173,8 @@ pub(super) fn build(ops: &dyn OpGeometry, roots: &[usize], s_max: u64) -> Option
         if rest.is_empty() {
             continue;
         }
-        if rest.len() == 1 || total - used <= s_max {
+        let below: u64 = rest.iter().map(|&i| subtree[i]).sum();
+        if rest.len() == 1 || below <= s_max {
             stack.push((rest, Some(id)));
             continue;
         }
@@ -150,7 +182,7 @@ pub(super) fn build(ops: &dyn OpGeometry, roots: &[usize], s_max: u64) -> Option
         // up to 2^SPLITS children, pushed so that the first is numbered next (pre-order).
         // Where one more halving would leave parts of about a node, the children are leaves
         // (up to 2^(SPLITS+1)) instead of inner nodes with a remnant each.
-        let halvings = if 2 * (total - used) <= 3 * (s_max << SPLITS) { SPLITS + 1 } else { SPLITS };
+        let halvings = if 2 * below <= 3 * (s_max << SPLITS) { SPLITS + 1 } else { SPLITS };
         let mut parts = vec![rest];
         for _ in 0..halvings {
             parts = parts
