@@ -1326,3 +1326,50 @@ fn criteria(pm: &ProgressiveMesh, mut faces: Vec<[u32; 3]>, geometric: Vec<f64>)
     let normal: Vec<[f32; 3]> = normal.iter().map(|v| v.map(|x| x as f32)).collect();
     (normal, criteria)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::base_faces_after;
+
+    /// The base faces (those `dest` leaves unplaced) take the places after `first` in the
+    /// order of their input ids, whatever order the faces are in: against sorting them.
+    #[test]
+    fn base_faces_are_placed_in_input_order() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for len in [0usize, 1, 63, 64, 65, 1000, 4099] {
+            // A permutation of the input ids (Fisher-Yates), about every third face removed.
+            let mut input_face: Vec<u32> = (0..len as u32).collect();
+            for i in (1..len).rev() {
+                input_face.swap(i, next() as usize % (i + 1));
+            }
+            let removed: Vec<usize> = (0..len).filter(|_| next() % 3 == 0).collect();
+            let mut dest = vec![u32::MAX; len];
+            for (place, &k) in removed.iter().enumerate() {
+                dest[k] = place as u32;
+            }
+            let first = removed.len() as u32;
+            let mut expected = dest.clone();
+            let mut base: Vec<usize> = (0..len).filter(|&k| dest[k] == u32::MAX).collect();
+            base.sort_by_key(|&k| input_face[k]);
+            for (place, k) in (first..).zip(base) {
+                expected[k] = place;
+            }
+            let mut identity = dest.clone();
+            base_faces_after(&mut dest, &input_face, first);
+            assert_eq!(dest, expected, "{len} faces");
+            // In input order already (no permutation): the places by index.
+            let mut by_index = identity.clone();
+            for (place, k) in (first..).zip((0..len).filter(|&k| identity[k] == u32::MAX)) {
+                by_index[k] = place;
+            }
+            base_faces_after(&mut identity, &[], first);
+            assert_eq!(identity, by_index, "{len} faces in input order");
+        }
+    }
+}
