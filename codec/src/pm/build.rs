@@ -852,8 +852,9 @@ fn build_mesh(
 }
 
 /// The model as the steps after the simplification read it: in the input's order after a
-/// whole-model simplification, in leaf order after a chunked one (see [`Chunker`]), where
-/// what the log's faces and the numbering refer to is the input's ids.
+/// whole-model simplification, in leaf order after a chunked one (see [`Chunker`]). The log's
+/// removed faces are indices into its `triangles`; the log's collapses, and the numbering,
+/// use input vertex ids.
 struct Model {
     /// Per vertex: its position.
     positions: Vec<[f32; 3]>,
@@ -1015,7 +1016,7 @@ fn simplify_chunked(
     // leaves then only grow, and a chunk's vertices are mostly a range of the chunk ids. The
     // chunks read the input by id before, at random: the 102M build in 1 GB spent 219 s in
     // them and 89 s in the kd-tree (its leaf pass wrote the leaves per input vertex), now
-    // 106 s and 67 s, plus 18 s for this reordering.
+    // 106-138 s (three runs) and 66-67 s, plus 18-21 s for this reordering.
     let mut chunk_id = vec![u32::MAX; n];
     let (mut input_id, mut leaves) = (Vec::new(), Vec::new());
     let (mut tris, mut faces) = (Vec::with_capacity(items.len()), Vec::with_capacity(items.len()));
