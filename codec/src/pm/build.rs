@@ -1229,8 +1229,8 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The per-FVID normals and the per-split criteria (see the module docs) of the input
-/// triangles `faces` (input vertex ids, in any order; made FVIDs through `pm.fvid_of_input`
-/// in place, and freed once the normals and leaf cones are made).
+/// triangles `faces` (in FVIDs, in any order; sorted in place, and freed once the normals and
+/// leaf cones are made).
 fn criteria(pm: &ProgressiveMesh, mut faces: Vec<[u32; 3]>, geometric: Vec<f64>) -> (Vec<[f32; 3]>, Vec<Criteria>) {
     let n = pm.positions.len();
     let pos = |f: usize| pm.positions[f].map(f64::from);
@@ -1336,13 +1336,8 @@ mod tests {
     /// order of their input ids, whatever order the faces are in: against sorting them.
     #[test]
     fn base_faces_are_placed_in_input_order() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut rng = testkit::XorShift(0x9e37_79b9_7f4a_7c15);
+        let mut next = || rng.next_u64();
         for len in [0usize, 1, 63, 64, 65, 1000, 4099] {
             // A permutation of the input ids (Fisher-Yates), about every third face removed.
             let mut input_face: Vec<u32> = (0..len as u32).collect();

@@ -252,16 +252,9 @@ mod tests {
     /// Sorting in place sorts, past the small case (keys of several bytes, many equal).
     #[test]
     fn sorting_in_place_sorts() {
-        let mut x = 0x2545_f491u64;
+        let mut rng = testkit::XorShift(0x2545_f491);
         for (n, range) in [(100usize, 1u64 << 31), (50_000, 1 << 24), (300_000, 1000), (70_000, 1 << 32)] {
-            let mut a: Vec<(u32, u32)> = (0..n as u32)
-                .map(|i| {
-                    x ^= x << 13;
-                    x ^= x >> 7;
-                    x ^= x << 17;
-                    ((x % range) as u32, i)
-                })
-                .collect();
+            let mut a: Vec<(u32, u32)> = (0..n as u32).map(|i| ((rng.next_u64() % range) as u32, i)).collect();
             let mut want = a.clone();
             want.sort_unstable();
             sort_in_place_by_key(&mut a, &|p: &(u32, u32)| p.0);
