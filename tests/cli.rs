@@ -253,8 +253,65 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     }
 }
 
+/// `pm adapt` of an out-of-core file reads the nodes its view needs, not the file (the count
+/// is on stdout: a close view reads fewer than all), and writes the in-core file's mesh for the
+/// same camera (given whole: the default camera frames the node boxes, as `render` does); a
+/// corrupt node that the view needs is a one-line error naming it, and nothing is written.
+#[test]
+fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (dpm, ooc) = (dir.path().join("bunny.dpm"), dir.path().join("bunny-nodes.dpm"));
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    for (out, nodes) in [(&dpm, None), (&ooc, Some("4"))] {
+        let mut args = vec!["pm", "build", s(&bunny), "-o", s(out)];
+        args.extend(nodes.map(|kb| ["--node-kb", kb]).into_iter().flatten());
+        let o = tessera(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let frame = ["--near", "0.01", "--far", "1", "--target", "-0.02,0.1,0"];
+    let close = ["--size", "960x540", "--error-px", "4", "--eye", "0,0.1,0.05"];
+    let whole = ["--size", "640x480", "--error-px", "0.5", "--eye", "0.1,0.15,0.3"];
+    let out = dir.path().join("out.ply");
+    let mut read_counts = vec![];
+    for view in [&close, &whole] {
+        let mut meshes = vec![];
+        for model in [&dpm, &ooc] {
+            let mut args = vec!["pm", "adapt", s(model), "-o", s(&out)];
+            args.extend(view.iter().chain(&frame));
+            let o = tessera(&args);
+            assert!(o.status.success(), "{}", stderr(&o));
+            let said = String::from_utf8_lossy(&o.stdout).to_string();
+            meshes.push(std::fs::read(&out).unwrap());
+            if model == &ooc {
+                // "; read K of N nodes (X of Y MB)"
+                let counts = said.split("; read ").nth(1).expect(&said).split(" nodes").next().unwrap();
+                let k: Vec<usize> = counts.split(" of ").map(|n| n.parse().unwrap()).collect();
+                read_counts.push((k[0], k[1]));
+            }
+        }
+        assert!(meshes[0].len() > 1000 && meshes[0] == meshes[1], "{view:?}: the out-of-core mesh differs");
+    }
+    let [(close_read, nodes), (whole_read, _)] = read_counts[..] else { panic!("{read_counts:?}") };
+    assert!(0 < close_read && close_read < whole_read && whole_read <= nodes, "{read_counts:?}");
+
+    // A flipped byte in the first node (the hierarchy's root, which every refinement needs).
+    let file = codec::pm::format::NodeFile::open(&ooc).unwrap();
+    let mut bytes = std::fs::read(&ooc).unwrap();
+    bytes[file.prefix().len() + 5] ^= 0x10;
+    let bad = dir.path().join("bad.dpm");
+    std::fs::write(&bad, &bytes).unwrap();
+    let bad_out = dir.path().join("bad.ply");
+    let mut args = vec!["pm", "adapt", s(&bad), "-o", s(&bad_out)];
+    args.extend(close.iter().chain(&frame));
+    let o = tessera(&args);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.trim().lines().count() == 1 && e.contains("node 0: checksum mismatch"), "{e}");
+    assert!(!bad_out.exists());
+}
+
 /// `pm adapt --gpu` writes the CPU's file, from an in-core `.dpm` and from an out-of-core one
-/// (4 kB nodes, every node in graphics memory); a node pool for fewer nodes gives a coarser
+/// (4 kB nodes, every node in graphics memory; the CPU reads the nodes the view needs); a node pool for fewer nodes gives a coarser
 /// mesh, and one that holds no node is refused in one line; a GPU budget too small for the
 /// mesh at the view's error gives a coarser one at a larger error, said in a note, and one
 /// below the base mesh is refused in one line.
@@ -288,9 +345,9 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
         &close,
     ] {
         let out = dir.path().join("out.ply");
-        let cpu = read(run(&dpm, view, &[], &out), &out);
-        assert!(cpu.len() > 1000, "{view:?}: a mesh is written");
         for (model, what) in [(&dpm, "in core"), (&ooc, "out of core")] {
+            let cpu = read(run(model, view, &[], &out), &out);
+            assert!(cpu.len() > 1000, "{view:?}: a mesh is written");
             let gpu = read(run(model, view, &["--gpu"], &out), &out);
             assert!(cpu == gpu, "{view:?}: the GPU's PLY ({what}) differs from the CPU's");
         }

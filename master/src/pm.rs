@@ -356,67 +356,113 @@ pub struct AdaptOptions {
 /// The PLY holds the active vertices in FVID order and the faces sorted by their index
 /// triples (orientation kept), so that the CPU and GPU paths, whose face orders differ, write
 /// the same file for the same mesh.
+///
+/// An out-of-core file is adapted from the nodes the view needs (read from the file; on the
+/// CPU exactly the nodes of priority at least 1, on the GPU within its node pool), never
+/// decoded whole: its memory follows the view. Its default camera frames
+/// [`out_of_core_bbox`], as `render`'s does. `--full` on the CPU decodes the file (the mesh is
+/// the model).
 pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
-    let (size, error_px) = (opts.size, opts.error_px);
     let writer = mesh_output(input, output, "the output of pm adapt")?;
     expect_kind(input, ModelKind::Dpm, "pm adapt", "adapt")?;
+    let at = || format!("{}", input.display());
+    let adapted = match format::NodeFile::open_out_of_core(input).with_context(at)? {
+        Some(file) if opts.gpu || !opts.full => adapt_out_of_core(input, std::sync::Arc::new(file), camera, opts)?,
+        _ => adapt_in_core(input, camera, opts)?,
+    };
+    let (mut mesh, passes, secs, read) = adapted;
+    let read = read.map_or(String::new(), |r| {
+        let mb = |b: u64| b as f64 / 1e6;
+        format!("; read {} of {} nodes ({:.1} of {:.1} MB)", r.nodes, r.of_nodes, mb(r.bytes), mb(r.of_bytes))
+    });
+    mesh.triangles.sort_unstable();
+    write_atomic(output, |w| writer(&mesh, w))?;
+    summary(
+        output,
+        format_args!(
+            "{} -> {}: {} triangles, {} vertices ({} passes{}) in {:.1} ms{}",
+            input.display(),
+            output.display(),
+            mesh.triangles.len(),
+            mesh.positions.len(),
+            passes,
+            if opts.gpu { " on the GPU" } else { "" },
+            secs * 1e3,
+            read
+        ),
+    );
+    Ok(())
+}
+
+/// The most passes `pm adapt` runs before it calls the adaption unconverged.
+const MAX_PASSES: usize = 10_000;
+
+/// An adapted mesh (faces unsorted), its passes, the seconds they took, and out of core what
+/// was read of the file's nodes.
+type Adapted = (Mesh, usize, f64, Option<NodesRead>);
+
+/// The nodes an out-of-core `pm adapt` read, of the file's.
+struct NodesRead {
+    nodes: usize,
+    bytes: u64,
+    of_nodes: usize,
+    of_bytes: u64,
+}
+
+impl NodesRead {
+    fn new(prefix: &format::Dpm, nodes: usize, bytes: u64) -> NodesRead {
+        let of_bytes = prefix.nodes.iter().map(|n| n.len as u64).sum();
+        NodesRead { nodes, bytes, of_nodes: prefix.nodes.len(), of_bytes }
+    }
+}
+
+/// The view `pm adapt` adapts to, for a model in the box `lo`-`hi`.
+fn adapt_view(camera: &CameraArgs, opts: &AdaptOptions, (lo, hi): ([f32; 3], [f32; 3])) -> Result<Viewpoint> {
+    let size = opts.size;
+    let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
+    crate::cli::check_camera(&cam, size.1)?;
+    let mut view = Viewpoint::new(&cam, size.0, size.1, opts.error_px);
+    view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
+    Ok(view)
+}
+
+/// Prints the error the GPU adapted to where its budget made it coarser than asked.
+fn note_error_scale(opts: &AdaptOptions, scale: f32) {
+    if scale > 1.0 {
+        eprintln!(
+            "note: adapted to {:.3} px ({:.2}x --error-px) to stay within --gpu-budget-mb",
+            opts.error_px * scale,
+            scale
+        );
+    }
+}
+
+/// `pm adapt` of an in-core file (or `--full` on the CPU): decoded whole.
+fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Result<Adapted> {
     let bytes = read_input(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
     pb.finish_and_clear();
     let pm = decoded?.pm;
-    let (lo, hi) = bbox(&pm.positions);
-    let camera_view = || -> Result<Viewpoint> {
-        let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
-        crate::cli::check_camera(&cam, size.1)?;
-        let mut view = Viewpoint::new(&cam, size.0, size.1, error_px);
-        view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
-        Ok(view)
-    };
-    let view = if opts.full { None } else { Some(camera_view()?) };
-    const MAX_PASSES: usize = 10_000;
+    let view = if opts.full { None } else { Some(adapt_view(camera, opts, bbox(&pm.positions))?) };
     // Timed from the base mesh on the device (for the GPU, after the device, pipelines and
     // static buffers are set up).
     let mut start = Instant::now();
-    let (active, mut faces, passes) = if opts.gpu {
+    let (active, faces, passes) = if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
         let dpm = format::Dpm::parse(&bytes)?;
-        let n_alloc = worker::pm_adapt::DEFAULT_N_ALLOC;
-        let mut adapter = if dpm.out_of_core() {
-            // Nodes read from the file as the view's priorities ask, within the budget.
-            let file =
-                std::sync::Arc::new(format::NodeFile::open(input).with_context(|| format!("{}", input.display()))?);
-            let prefix = format::Dpm::parse_prefix(file.prefix())?;
-            let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
-            let ooc = worker::pm_adapt::OutOfCore { file: file.clone(), pool_bytes, background: false };
-            let mut a = worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, n_alloc)?;
-            if let Some(levels) = opts.levels {
-                a.set_levels(levels);
-            }
-            a.set_budget(opts.gpu_budget)?;
-            a.schedule(&camera_view()?)?;
-            a
-        } else {
-            let mut a = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, n_alloc)?;
-            if let Some(levels) = opts.levels {
-                a.set_levels(levels);
-            }
-            a.set_budget(opts.gpu_budget)?;
-            a
-        };
+        let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
+        if let Some(levels) = opts.levels {
+            adapter.set_levels(levels);
+        }
+        adapter.set_budget(opts.gpu_budget)?;
         start = Instant::now();
         let passes = match &view {
             None => adapter.refine_fully()?,
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
         };
         adapter.check()?;
-        if adapter.error_scale() > 1.0 {
-            eprintln!(
-                "note: adapted to {:.3} px ({:.2}x --error-px) to stay within --gpu-budget-mb",
-                error_px * adapter.error_scale(),
-                adapter.error_scale()
-            );
-        }
+        note_error_scale(opts, adapter.error_scale());
         (adapter.active()?, adapter.faces()?, passes)
     } else {
         let mut adapter = Adapter::new(&pm).with_levels(opts.levels.unwrap_or(codec::pm::Levels::All));
@@ -427,23 +473,65 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
         (adapter.active().to_vec(), adapter.faces().to_vec(), passes)
     };
     let secs = start.elapsed().as_secs_f64();
-    faces.sort_unstable();
-    let mesh = Mesh::new(active.iter().map(|&f| pm.positions[f as usize]).collect(), faces);
-    write_atomic(output, |w| writer(&mesh, w))?;
-    summary(
-        output,
-        format_args!(
-            "{} -> {}: {} triangles, {} vertices ({} passes{}) in {:.1} ms",
-            input.display(),
-            output.display(),
-            mesh.triangles.len(),
-            mesh.positions.len(),
-            passes,
-            if opts.gpu { " on the GPU" } else { "" },
-            secs * 1e3
-        ),
-    );
-    Ok(())
+    let positions = active.iter().map(|&f| pm.positions[f as usize]).collect();
+    Ok((Mesh::new(positions, faces), passes, secs, None))
+}
+
+/// `pm adapt` of an out-of-core file from the nodes its view needs (see [`adapt`]).
+fn adapt_out_of_core(
+    input: &Path,
+    file: std::sync::Arc<format::NodeFile>,
+    camera: &CameraArgs,
+    opts: &AdaptOptions,
+) -> Result<Adapted> {
+    let at = || format!("{}", input.display());
+    let head = file.clone();
+    let prefix = format::Dpm::parse_prefix(head.prefix()).with_context(at)?;
+    let view = adapt_view(camera, opts, out_of_core_bbox(&prefix))?;
+    if opts.gpu {
+        let gpu = worker::gpu::Gpu::new()?;
+        let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
+        let ooc = worker::pm_adapt::OutOfCore { file, pool_bytes, background: false };
+        let mut adapter =
+            worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, worker::pm_adapt::DEFAULT_N_ALLOC)?;
+        if let Some(levels) = opts.levels {
+            adapter.set_levels(levels);
+        }
+        adapter.set_budget(opts.gpu_budget)?;
+        let stats = adapter.schedule(&view)?.context("an out-of-core adapter without a node cache")?;
+        let read = NodesRead::new(&prefix, stats.loaded, stats.loaded_bytes);
+        let start = Instant::now();
+        let passes = if opts.full {
+            adapter.refine_fully()?
+        } else {
+            adapter.adapt_until_converged(&view, MAX_PASSES)?.context("the adaption did not converge")?
+        };
+        adapter.check()?;
+        let secs = start.elapsed().as_secs_f64();
+        note_error_scale(opts, adapter.error_scale());
+        let positions = adapter.quantized_positions()?.into_iter().map(|q| prefix.position(q)).collect();
+        return Ok((Mesh::new(positions, adapter.faces()?), passes, secs, Some(read)));
+    }
+    // Exactly the nodes that can hold an operation the view asks for.
+    let planes = view.planes();
+    let required: u64 = prefix.nodes.iter().filter(|n| n.priority(&view, &planes) >= 1.0).map(|n| n.len as u64).sum();
+    let mut cache = codec::pm::NodeCache::new(&prefix, file, required, false);
+    let stats = cache.schedule(&view).with_context(at)?;
+    let read = NodesRead::new(&prefix, stats.loaded, stats.loaded_bytes);
+    let start = Instant::now();
+    let mut adapter = codec::pm::DpmAdapter::new(&prefix)
+        .with_context(at)?
+        .with_levels(opts.levels.unwrap_or(codec::pm::Levels::All));
+    let mut passes = None;
+    for p in 0..MAX_PASSES {
+        if adapter.adapt_resident(&view, &cache).with_context(at)?.converged() {
+            passes = Some(p);
+            break;
+        }
+    }
+    let passes = passes.context("the adaption did not converge")?;
+    let secs = start.elapsed().as_secs_f64();
+    Ok((Mesh::new(adapter.positions(), adapter.faces().to_vec()), passes, secs, Some(read)))
 }
 
 /// A box around every vertex of an out-of-core `.dpm`, from its head alone: the union of the

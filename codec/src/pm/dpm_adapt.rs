@@ -198,6 +198,17 @@ impl<'a> DpmAdapter<'a> {
         self.vertices.iter().map(Vertex::fvid).collect()
     }
 
+    /// The active vertices' positions, in [`Self::active`]'s order (dequantized as
+    /// [`super::format::decode`] dequantizes them, so the same floats).
+    pub fn positions(&self) -> Vec<[f32; 3]> {
+        self.vertices.par_iter().map(|v| self.dpm.position(v.own.ctx.position)).collect()
+    }
+
+    /// The current faces as indices into [`Self::active`].
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.face_idx
+    }
+
     /// The current faces as FVID triples of active vertices.
     pub fn face_fvids(&self) -> Vec<[u32; 3]> {
         self.face_idx.par_iter().map(|t| t.map(|i| self.vertices[i as usize].fvid())).collect()

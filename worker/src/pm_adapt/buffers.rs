@@ -31,6 +31,11 @@ pub(super) fn pack_pn(pos: [u32; 3], nrm: [u32; 2]) -> [u32; 4] {
     [pos[0] | (nrm[0] >> 16) << 24, pos[1] | (nrm[1] >> 16) << 24, pos[2], (nrm[0] & 0xffff) | nrm[1] << 16]
 }
 
+/// The quantized position of [`pack_pn`]'s four words.
+pub(super) fn unpack_position(pn: [u32; 4]) -> [u32; 3] {
+    [pn[0] & 0xff_ffff, pn[1] & 0xff_ffff, pn[2]]
+}
+
 /// `PENDING` of `shaders/pm/common.wgsl`: the vertex's operation waits for its node.
 pub(crate) const PENDING: u32 = 1;
 

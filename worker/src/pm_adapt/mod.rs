@@ -82,9 +82,9 @@ use thiserror::Error;
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
 use buffers::{
-    init, needs_resize, pack_pn, storage, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet, ERRORS_BYTES,
-    PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, SC_FACE_BYTES, SC_LEAF_BYTES, SC_SPLIT_BYTES, STATE_BYTES,
-    STATS_BYTES, VERTEX_USAGE,
+    init, needs_resize, pack_pn, storage, unpack_position, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet,
+    ERRORS_BYTES, PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, SC_FACE_BYTES, SC_LEAF_BYTES, SC_SPLIT_BYTES,
+    STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
@@ -980,6 +980,14 @@ impl GpuAdapter {
     pub fn active(&self) -> Result<Vec<u32>, AdaptError> {
         let bytes = self.read_buffer(&self.sets[self.cur].fvid.buffer, self.n as u64 * 4)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// The active vertices' quantized positions, in [`Self::active`]'s order (read back from
+    /// their state; [`Dpm::position`] dequantizes them as the decoder does).
+    pub fn quantized_positions(&self) -> Result<Vec<[u32; 3]>, AdaptError> {
+        let bytes = self.read_buffer(&self.sets[self.cur].state.buffer, self.n as u64 * STATE_BYTES)?;
+        let states: Vec<GpuVState> = bytemuck::pod_collect_to_vec(&bytes);
+        Ok(states.iter().map(|s| unpack_position(s.pn)).collect())
     }
 
     /// The current faces as indices into [`Self::active`] (read back; the order is the GPU's).
