@@ -76,15 +76,59 @@ pub struct EncodedFile {
     /// As [`Encoded::symbol_bits`].
     pub symbol_bits: (f64, f64),
     /// The header's bytes, the tables, base mesh and node table sections, and the operations
-    /// section in pieces.
-    sections: (Vec<u8>, [Vec<u8>; 3], Vec<Vec<u8>>),
+    /// section in pieces (its nodes out of core).
+    sections: (Vec<u8>, [Vec<u8>; 3], Pieces),
+}
+
+/// Byte strings kept one after another in one block, each found by its span: an out-of-core
+/// file's nodes, coded in any order and written in theirs. A `Vec` per node was the only
+/// memory of a spilled build that grew with the model outside its files (the system allocator
+/// keeps blocks below the spill threshold: the 102M build's 492 MB of nodes, against about 90
+/// MB of everything else); as one block it goes to files with the build's other arrays.
+#[derive(Clone, Debug, Default)]
+struct Pieces {
+    bytes: Vec<u8>,
+    /// Per piece: its start in `bytes` and its length.
+    spans: Vec<(usize, usize)>,
+}
+
+impl Pieces {
+    /// One piece.
+    fn one(bytes: Vec<u8>) -> Pieces {
+        let spans = vec![(0, bytes.len())];
+        Pieces { bytes, spans }
+    }
+
+    /// `n` empty pieces.
+    fn empty(n: usize) -> Pieces {
+        Pieces { bytes: vec![], spans: vec![(0, 0); n] }
+    }
+
+    /// Makes piece `i` the bytes `b` (appended to the block).
+    fn set(&mut self, i: usize, b: &[u8]) {
+        self.spans[i] = (self.bytes.len(), b.len());
+        self.bytes.extend_from_slice(b);
+    }
+
+    fn get(&self, i: usize) -> &[u8] {
+        let (start, len) = self.spans[i];
+        &self.bytes[start..start + len]
+    }
+
+    fn len(&self) -> usize {
+        self.spans.len()
+    }
+
+    fn iter(&self) -> impl Iterator<Item = &[u8]> + '_ {
+        (0..self.len()).map(|i| self.get(i))
+    }
 }
 
 impl EncodedFile {
     /// The file's length in bytes.
     pub fn len(&self) -> usize {
         let (h, [tb, bb, nt], oper) = &self.sections;
-        LAYOUT.written_len(h, [tb.len(), bb.len(), nt.len(), oper.iter().map(Vec::len).sum()])
+        LAYOUT.written_len(h, [tb.len(), bb.len(), nt.len(), oper.spans.iter().map(|s| s.1).sum()])
     }
 
     /// Whether the file is empty (never: it has a header).
@@ -95,8 +139,8 @@ impl EncodedFile {
     /// Writes the file to `w`, the bytes [`EncodedFile::into_bytes`] returns.
     pub fn write_to(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         let (h, [tb, bb, nt], oper) = &self.sections;
-        let one = std::slice::from_ref;
-        LAYOUT.write_pieces(w, h, [one(tb), one(bb), one(nt), oper])
+        let pieces: Vec<&[u8]> = oper.iter().collect();
+        LAYOUT.write_pieces(w, h, [&[&tb[..]], &[&bb[..]], &[&nt[..]], &pieces])
     }
 
     /// The file's bytes.
@@ -191,16 +235,16 @@ fn encode_mesh(
     let symbol_bits = last.symbol_bits;
     // Per operation its address (see `Encoded::addresses`): in core below 2^31, out of core
     // `node * NODE_BYTES + local` in 32 bits.
-    let (oper, op_addr, tables, node_table): (Vec<Vec<u8>>, Vec<u32>, _, _) = if opts.node_bytes == 0 {
+    let (oper, op_addr, tables, node_table): (Pieces, Vec<u32>, _, _) = if opts.node_bytes == 0 {
         let (oper, op_addr) = lay_out(&ops, &last.bytes, &last.choices.swaps);
         // Offsets into the section and their residuals stay within 32 bits as zigzag values.
         if oper.len() >= 1 << 31 {
             return Err(invalid("the operations take 2 GiB or more; split the model into chunks"));
         }
-        (vec![oper], op_addr, last.tables, vec![])
+        (Pieces::one(oper), op_addr, last.tables, vec![])
     } else if ops.len() == 0 {
         // Nothing to page: a mesh without operations is an in-core file.
-        (vec![], vec![], last.tables, vec![])
+        (Pieces::default(), vec![], last.tables, vec![])
     } else {
         // The out-of-core layout codes the operations again: of the in-core coding it needs
         // only the tables and the sizes.
@@ -699,7 +743,7 @@ fn subtrees_of_at_most(size: &[u32], grain: usize) -> (Vec<std::ops::Range<usize
 /// per operation its address (`node * NODE_BYTES + local`).
 struct OutOfCore {
     tables: Vec<Table>,
-    nodes: Vec<Vec<u8>>,
+    nodes: Pieces,
     infos: Vec<NodeInfo>,
     addr: Vec<u32>,
 }
@@ -746,11 +790,12 @@ fn out_of_core(
             )));
         }
         let mut tables = incore_tables.to_vec();
-        let mut largest = 0;
+        let (mut largest, mut total) = (0, 0);
         for round in 0..2 {
             step(&format!("coding {} nodes, {} tables", hier.parents.len(), ["in-core", "counted"][round]));
-            let (nodes, addr, counts) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0);
-            largest = nodes.iter().map(Vec::len).max().unwrap_or(0);
+            let (nodes, addr, counts) = code_nodes(ops, &hier, &tables, h.avg_op_size, round == 0, total);
+            largest = nodes.spans.iter().map(|s| s.1).max().unwrap_or(0);
+            total = nodes.spans.iter().map(|s| s.1).sum();
             // Only the final coding has to fit `node_bytes`: the first, with the in-core
             // tables, only counts the symbols (its nodes come out a few percent larger), as
             // long as its addresses are whole (a node within `NODE_BYTES`).
@@ -808,10 +853,12 @@ type CodedNode = (Vec<u8>, Vec<(u32, u32)>);
 
 /// Codes every operation of an out-of-core file (see [`out_of_core`]), a node's children
 /// before it, so that a child's address is known when its parent operation is coded. Returns
-/// per node its bytes, per operation its address and, with `count`, the symbols of the
+/// per node its bytes (with `count`, only their lengths: that round's nodes are not written),
+/// per operation its address and, with `count`, the symbols of the
 /// operations as coded counted per table (else none): what the next round's tables are made
 /// from, counted node by node rather than from a per-operation record of the choices (24
-/// bytes an operation).
+/// bytes an operation). `reserve`: the bytes to make room for at once (the round before's
+/// total: growing the block by doubling copied it, and could take twice its bytes).
 ///
 /// Nodes are numbered in pre-order, so a node's subtree of the hierarchy is the range of
 /// node ids from it on: disjoint subtrees of at most 64 nodes are coded in parallel, each
@@ -825,7 +872,8 @@ fn code_nodes(
     tables: &[Table],
     avg: u32,
     count: bool,
-) -> (Vec<Vec<u8>>, Vec<u32>, Vec<[u64; 256]>) {
+    reserve: usize,
+) -> (Pieces, Vec<u32>, Vec<[u64; 256]>) {
     let m = ops.len();
     let nodes_count = hier.parents.len();
     let members = Csr::build(nodes_count, || hier.node_of.iter().enumerate().map(|(i, &n)| (n, i as u32)));
@@ -845,7 +893,17 @@ fn code_nodes(
     let mut addr = vec![NONE; m];
     let tables_counted = if count { TABLES } else { 0 };
     let mut counts = vec![[0u64; 256]; tables_counted];
-    let mut nodes: Vec<Vec<u8>> = vec![vec![]; nodes_count];
+    let mut nodes = Pieces::empty(nodes_count);
+    if !count {
+        nodes.bytes.reserve_exact(reserve);
+    }
+    let put = |nodes: &mut Pieces, n: usize, bytes: &[u8]| {
+        if count {
+            nodes.spans[n] = (0, bytes.len());
+        } else {
+            nodes.set(n, bytes);
+        }
+    };
     // In batches, so that the nodes coded in flight stay few; the symbols counted per
     // thread's share of a batch (a table of counts per node in flight took more memory than
     // the dragon's operations).
@@ -880,7 +938,7 @@ fn code_nodes(
             for (i, a) in placed {
                 addr[i as usize] = a;
             }
-            nodes[n] = bytes;
+            put(&mut nodes, n, &bytes);
         }
     }
     for &n in top.iter().rev() {
@@ -888,7 +946,7 @@ fn code_nodes(
         for (i, a) in placed {
             addr[i as usize] = a;
         }
-        nodes[n] = bytes;
+        put(&mut nodes, n, &bytes);
     }
     (nodes, addr, counts)
 }
@@ -992,7 +1050,7 @@ fn code_node(
 /// What the node table keeps of every node: its length and checksum, its parent, the box of
 /// its operations' bounding spheres (widened by a few ulps so that `f32` rounding cannot put
 /// a sphere outside it) and its greatest errors, as the operations decode.
-fn node_infos(ops: &Operations, h: &Header, hier: &Hierarchy, nodes: &[Vec<u8>]) -> Vec<NodeInfo> {
+fn node_infos(ops: &Operations, h: &Header, hier: &Hierarchy, nodes: &Pieces) -> Vec<NodeInfo> {
     let mut infos: Vec<NodeInfo> = nodes
         .iter()
         .zip(&hier.parents)
