@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds a model with `tessera pm build --spill-dir` in memory cgroups of the given limits (the
 # build's data larger than memory, issue 16 item 2), after a build without a limit, and
-# prints per build its wall time, peak resident memory and whether the file is the same
-# bytes. Not run by CI: it needs root and a writable cgroup memory controller (v2 or v1).
+# prints per build its wall time, peak resident memory, its peak anonymous memory (`RssAnon`
+# sampled every half second: what stays in memory outside the spill files, about 100 MB
+# whatever the model) and whether the file is the same bytes. Not run by CI: it needs root and a writable cgroup memory controller (v2 or v1).
 # Usage: scripts/pm-build-capped.sh MODEL.ply SPILL_DIR LIMIT... (LIMIT as the kernel takes
 # it: 900M, 3500M, ...)
 #   e.g. scripts/pm-build-capped.sh /tmp/pm13/d.ply /tmp/spill 900M 700M 550M
@@ -19,6 +20,21 @@ OUT="$SPILL/capped-reference.dpm"
 show() {
   grep -E "built in|kept up to|Maximum resident|Elapsed" "$1" | sed 's/^[[:space:]]*/   /'
 }
+# The most anonymous memory (MB) of the child of process $1 (the build under /usr/bin/time)
+# while $1 runs.
+anon_peak() {
+  local max=0 child a
+  while kill -0 "$1" 2>/dev/null; do
+    child="$(pgrep -P "$1" | head -1 || true)"
+    if [ -n "$child" ]; then
+      a="$(awk '/^RssAnon/ {print $2}' "/proc/$child/status" 2>/dev/null || true)"
+      if [ -n "$a" ] && [ "$a" -gt "$max" ]; then max="$a"; fi
+    fi
+    sleep 0.5
+  done
+  echo $(( max / 1024 ))
+}
+
 echo "== without a limit"
 /usr/bin/time -v "$T" pm build "$MODEL" -o "$OUT" --node-kb 64 > "$SPILL/capped.log" 2>&1
 show "$SPILL/capped.log"
@@ -44,11 +60,14 @@ for LIMIT in "$@"; do
   X="$SPILL/capped-$LIMIT.dpm"
   set +e
   bash -c "echo \$\$ > $CG/cgroup.procs; exec /usr/bin/time -v $T pm build $MODEL -o $X --node-kb 64 --spill-dir $SPILL" \
-    > "$SPILL/capped.log" 2>&1
+    > "$SPILL/capped.log" 2>&1 &
+  BUILD=$!
+  ANON="$(anon_peak "$BUILD")"
+  wait "$BUILD"
   rc=$?
   set -e
   show "$SPILL/capped.log"
-  echo "   exit $rc, cgroup peak $(( $(cat "$CG/$PEAK" 2>/dev/null || echo 0) / 1048576 )) MiB"
+  echo "   exit $rc, cgroup peak $(( $(cat "$CG/$PEAK" 2>/dev/null || echo 0) / 1048576 )) MiB, anonymous memory at most $ANON MB"
   if cmp -s "$OUT" "$X"; then echo "   the same bytes"; else echo "   DIFFERENT bytes"; fi
   rm -f "$X"
   rmdir "$CG" 2>/dev/null || true

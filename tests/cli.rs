@@ -257,6 +257,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
 /// is on stdout: a close view reads fewer than all), and writes the in-core file's mesh for the
 /// same camera (given whole: the default camera frames the node boxes, as `render` does); a
 /// corrupt node that the view needs is a one-line error naming it, and nothing is written.
+/// `pm stats` of it reads node by node.
 #[test]
 fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
     let dir = tempfile::tempdir().unwrap();
@@ -293,6 +294,13 @@ fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
     }
     let [(close_read, nodes), (whole_read, _)] = read_counts[..] else { panic!("{read_counts:?}") };
     assert!(0 < close_read && close_read < whole_read && whole_read <= nodes, "{read_counts:?}");
+    // `pm stats` reads it node by node too: its numbers are the file's.
+    let o = tessera(&["pm", "stats", s(&ooc), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["bytes"], std::fs::metadata(&ooc).unwrap().len());
+    assert_eq!(j["nodes"].as_u64(), Some(nodes as u64));
+    assert!(j["node_reads"].as_u64().unwrap() >= nodes as u64, "{j}");
 
     // A flipped byte in the first node (the hierarchy's root, which every refinement needs).
     let file = codec::pm::format::NodeFile::open(&ooc).unwrap();

@@ -175,6 +175,34 @@ fn node_files_read_and_check_their_nodes() {
     assert!(NodeFile::open(&path).is_err());
 }
 
+/// The stats of an out-of-core file read node by node equal those of the file read whole (the
+/// same walk decodes every operation: the same bits per kind), every node read at least
+/// once; a corrupt node is an error naming it.
+#[test]
+fn out_of_core_stats_read_node_by_node_equal_the_whole_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.dpm");
+    for (rel, node_bytes) in [("classic/teapot.obj", 512), ("classic/spot.obj", 1024), ("classic/spot.obj", 65536)] {
+        let pm = build(&load(rel)).unwrap();
+        let enc = encode(&pm, out_of_core(node_bytes)).unwrap();
+        std::fs::write(&path, &enc.bytes).unwrap();
+        let file = NodeFile::open(&path).unwrap();
+        let (streamed, reads) = DpmStats::of_out_of_core(&file).unwrap();
+        assert_eq!(streamed, DpmStats::of(&enc.bytes).unwrap(), "{rel} in nodes of {node_bytes} bytes");
+        let nodes = enc.header.nodes as u64;
+        assert!(reads >= nodes, "{rel}: {reads} node reads of {nodes} nodes");
+        eprintln!("{rel} in nodes of {node_bytes} bytes: {reads} node reads of {nodes} nodes");
+        let mut bad = enc.bytes.clone();
+        let dpm = Dpm::parse(&enc.bytes).unwrap();
+        let last = dpm.nodes.len() - 1;
+        bad[file.prefix().len() + dpm.nodes[last].offset as usize] ^= 0x01;
+        std::fs::write(&path, &bad).unwrap();
+        let file = NodeFile::open(&path).unwrap();
+        let e = DpmStats::of_out_of_core(&file).unwrap_err().to_string();
+        assert_eq!(e, format!("corrupt .dpm data: node {last}: checksum mismatch"));
+    }
+}
+
 /// A cache of fixed slots (what a GPU pool holds) never holds more nodes than its slots, even
 /// when the view moves on faster than the loader thread reads: nodes that arrive no longer
 /// wanted are dropped, and a wanted one evicts the worst unwanted one.

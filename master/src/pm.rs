@@ -265,17 +265,19 @@ pub struct PmStatsReport {
     pub padding_per_vertex: f64,
     pub base_mesh_bytes: usize,
     pub table_bytes: usize,
-    /// Out of core: the nodes and the node table's bytes (0 in core).
+    /// Out of core: the nodes, the node table's bytes and the node reads of the walk that
+    /// decoded every operation (0 in core).
     pub nodes: u32,
     pub node_table_bytes: usize,
+    pub node_reads: u64,
     pub framing_bytes: usize,
 }
 
 impl PmStatsReport {
-    pub fn of(bytes: &[u8]) -> Result<Self> {
-        let s = DpmStats::of(bytes)?;
+    /// The report of a file's stats, and out of core the node reads they took.
+    pub fn new(s: DpmStats, node_reads: u64) -> Self {
         let h = s.header;
-        Ok(PmStatsReport {
+        PmStatsReport {
             bytes: s.bytes,
             vertices: h.vertices,
             triangles: h.triangles,
@@ -294,16 +296,24 @@ impl PmStatsReport {
             table_bytes: s.table_bytes,
             nodes: h.nodes,
             node_table_bytes: s.node_table_bytes,
+            node_reads,
             framing_bytes: s.framing_bytes,
-        })
+        }
     }
 }
 
-/// `tessera pm stats IN.dpm [--json]` (decodes every operation, so corruption is reported).
+/// `tessera pm stats IN.dpm [--json]` (decodes every operation, so corruption is reported; an
+/// out-of-core file node by node, never read whole).
 pub fn stats(input: &Path, json: bool) -> Result<()> {
     expect_kind(input, ModelKind::Dpm, "pm stats", "stats")?;
-    let bytes = read_input(input)?;
-    let r = PmStatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
+    let at = || format!("{}", input.display());
+    let r = match format::NodeFile::open_out_of_core(input).with_context(at)? {
+        Some(file) => {
+            let (s, reads) = DpmStats::of_out_of_core(&file).with_context(at)?;
+            PmStatsReport::new(s, reads)
+        }
+        None => PmStatsReport::new(DpmStats::of(&read_input(input)?).with_context(at)?, 0),
+    };
     if json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
@@ -322,7 +332,10 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         println!("  padding        {:>12.2} bytes/vertex", r.padding_per_vertex);
         println!("  base, tables   {:>12} + {} bytes", r.base_mesh_bytes, r.table_bytes);
         if r.nodes > 0 {
-            println!("  nodes          {:>12}   (out of core; node table {} bytes)", r.nodes, r.node_table_bytes);
+            println!(
+                "  nodes          {:>12}   (out of core; node table {} bytes; {} node reads)",
+                r.nodes, r.node_table_bytes, r.node_reads
+            );
         }
     }
     Ok(())

@@ -198,7 +198,7 @@ impl<'a> Dpm<'a> {
         self.read_in(node, addr, ctx, None)
     }
 
-    fn read_in(
+    pub(super) fn read_in(
         &self,
         node: &[u8],
         addr: usize,
@@ -227,16 +227,54 @@ impl<'a> Dpm<'a> {
         let n = h.vertices as usize;
         let mut positions = vec![[0f32; 3]; n];
         let mut normals = vec![[0f32; 3]; n];
+        for (b, &v) in self.base_vertices.iter().enumerate() {
+            positions[v as usize] = dequantize_position(self.base_positions[b], h);
+            normals[v as usize] = oct_decode(self.base_normals[b], h.normal_bits);
+        }
         let mut splits = Vec::with_capacity(h.splits as usize);
         let mut criteria = Vec::with_capacity(h.splits as usize);
         let mut addresses = Vec::with_capacity(h.splits as usize);
         let mut contexts = Vec::with_capacity(h.splits as usize);
+        self.walk(&mut |addr, ctx| self.read(addr, ctx, bits.as_deref_mut()), &mut |addr, ctx, op| {
+            let v_u = op.split.v_u as usize;
+            positions[v_u] = dequantize_position(op.position_u, h);
+            normals[v_u] = oct_decode(op.normal_u, h.normal_bits);
+            addresses.push(addr);
+            contexts.push(*ctx);
+            criteria.push(op.criteria);
+            splits.push(op.split);
+        })?;
+        Ok(Decoded {
+            pm: ProgressiveMesh {
+                base_vertices: self.base_vertices.clone(),
+                base_faces: self.base_faces.clone(),
+                splits,
+                positions,
+                fvid_of_input: (0..h.vertices).collect(),
+                normals,
+                criteria,
+            },
+            header: *h,
+            addresses,
+            contexts,
+        })
+    }
+
+    /// Walks every operation in pre-order over the forest, reading each with `read` (its
+    /// address and context) and handing it to `visit`, and checks the split tree against the
+    /// FVID ranges and the header's operation and triangle counts. Keeps a stack of the
+    /// operations still to read, nothing per operation.
+    pub(super) fn walk(
+        &self,
+        read: &mut dyn FnMut(usize, &OpContext) -> Result<DecodedOp, DpmError>,
+        visit: &mut dyn FnMut(usize, &OpContext, DecodedOp),
+    ) -> Result<(), DpmError> {
+        let h = &self.header;
+        let (mut ops, mut triangles) = (0u64, self.base_faces.len() as u64);
         let mut stack: Vec<(usize, OpContext)> = vec![];
         for b in 0..self.base_vertices.len() {
             let v = self.base_vertices[b];
             let v_end = self.base_vertices.get(b + 1).copied().unwrap_or(h.vertices);
-            positions[v as usize] = dequantize_position(self.base_positions[b], h);
-            normals[v as usize] = oct_decode(self.base_normals[b], h.normal_bits);
             let Some(root) = self.roots[b] else {
                 if v_end - v != 1 {
                     return Err(corrupt("split tree inconsistent with the FVID ranges"));
@@ -254,13 +292,13 @@ impl<'a> Dpm<'a> {
                 },
             ));
             while let Some((addr, ctx)) = stack.pop() {
-                if splits.len() >= h.splits as usize {
+                if ops >= h.splits as u64 {
                     return Err(corrupt("more operations than the header says"));
                 }
-                let op = self.read(addr, &ctx, bits.as_deref_mut())?;
+                ops += 1;
+                let op = read(addr, &ctx)?;
                 let v_u = op.split.v_u;
-                positions[v_u as usize] = dequantize_position(op.position_u, h);
-                normals[v_u as usize] = oct_decode(op.normal_u, h.normal_bits);
+                triangles += op.split.faces.len() as u64;
                 if let Some(a) = op.right {
                     stack.push((
                         a,
@@ -276,33 +314,16 @@ impl<'a> Dpm<'a> {
                 if let Some(a) = op.left {
                     stack.push((a, OpContext { v_end: v_u, parent_criteria: op.criteria_q, ..ctx }));
                 }
-                addresses.push(addr);
-                contexts.push(ctx);
-                criteria.push(op.criteria);
-                splits.push(op.split);
+                visit(addr, &ctx, op);
             }
         }
-        if splits.len() != h.splits as usize {
+        if ops != h.splits as u64 {
             return Err(corrupt("fewer operations than the header says"));
         }
-        let triangles = self.base_faces.len() as u64 + splits.iter().map(|s| s.faces.len() as u64).sum::<u64>();
         if triangles != h.triangles as u64 {
             return Err(corrupt("triangle count differs from the header"));
         }
-        Ok(Decoded {
-            pm: ProgressiveMesh {
-                base_vertices: self.base_vertices.clone(),
-                base_faces: self.base_faces.clone(),
-                splits,
-                positions,
-                fvid_of_input: (0..h.vertices).collect(),
-                normals,
-                criteria,
-            },
-            header: *h,
-            addresses,
-            contexts,
-        })
+        Ok(())
     }
 }
 
