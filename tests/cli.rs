@@ -319,7 +319,7 @@ fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
 }
 
 /// `pm adapt --gpu` writes the CPU's file, from an in-core `.dpm` and from an out-of-core one
-/// (4 kB nodes, every node in graphics memory; the CPU reads the nodes the view needs); a node pool for fewer nodes gives a coarser
+/// (4 kB nodes; both read the nodes the view requires, every node to refine fully); a node pool for fewer nodes gives a coarser
 /// mesh, and one that holds no node is refused in one line; a GPU budget too small for the
 /// mesh at the view's error gives a coarser one at a larger error, said in a note, and one
 /// below the base mesh is refused in one line.
@@ -350,13 +350,24 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
         &["--full"][..],
         &["--size", "1920x1080", "--error-px", "0.5"],
         &["--size", "640x480", "--error-px", "2", "--eye", "0.3,0.1,0.2", "--normal-weight", "0.02"],
+        // Out of core, 122 of the 149 nodes.
+        &["--size", "960x540", "--error-px", "4", "--eye", "0,0.1,0.05", "--target", "-0.02,0.1,0"],
         &close,
     ] {
         let out = dir.path().join("out.ply");
         for (model, what) in [(&dpm, "in core"), (&ooc, "out of core")] {
-            let cpu = read(run(model, view, &[], &out), &out);
+            // "; read K of N nodes (...)": out of core, the required nodes on both.
+            let nodes_read = |o: &Output| String::from_utf8_lossy(&o.stdout).split("; read ").nth(1).map(str::to_owned);
+            let o = run(model, view, &[], &out);
+            let cpu_read = nodes_read(&o);
+            let cpu = read(o, &out);
             assert!(cpu.len() > 1000, "{view:?}: a mesh is written");
-            let gpu = read(run(model, view, &["--gpu"], &out), &out);
+            let o = run(model, view, &["--gpu"], &out);
+            assert_eq!(cpu_read.is_some(), model == &ooc && view != ["--full"], "{view:?}");
+            if cpu_read.is_some() {
+                assert_eq!(nodes_read(&o), cpu_read, "{view:?}");
+            }
+            let gpu = read(o, &out);
             assert!(cpu == gpu, "{view:?}: the GPU's PLY ({what}) differs from the CPU's");
         }
     }

@@ -354,7 +354,8 @@ pub enum Pm {
         gpu_budget_mb: Option<f32>,
         /// With --gpu, an out-of-core file's node pool in graphics memory, in MB (fractions
         /// allowed): the nodes of highest priority for the view that fit. Default: a quarter
-        /// of --gpu-budget-mb, or every node without it.
+        /// of --gpu-budget-mb, or without it slots for the nodes the view requires (every
+        /// node with --full).
         #[arg(long, value_parser = parse_positive, requires = "gpu")]
         gpu_nodes_mb: Option<f32>,
         /// Adapt in the paper's passes of one level each (a view change of k levels takes k

@@ -370,9 +370,9 @@ pub struct AdaptOptions {
 /// triples (orientation kept), so that the CPU and GPU paths, whose face orders differ, write
 /// the same file for the same mesh.
 ///
-/// An out-of-core file is adapted from the nodes the view needs (read from the file; on the
-/// CPU exactly the nodes of priority at least 1, on the GPU within its node pool), never
-/// decoded whole: its memory follows the view. Its default camera frames
+/// An out-of-core file is adapted from the nodes the view needs (read from the file: the nodes
+/// of priority at least 1; on the GPU those that its node pool holds, by default slots for
+/// all of them), never decoded whole: its memory follows the view. Its default camera frames
 /// [`out_of_core_bbox`], as `render`'s does. `--full` on the CPU decodes the file (the mesh is
 /// the model).
 pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
@@ -501,9 +501,19 @@ fn adapt_out_of_core(
     let head = file.clone();
     let prefix = format::Dpm::parse_prefix(head.prefix()).with_context(at)?;
     let view = adapt_view(camera, opts, out_of_core_bbox(&prefix))?;
+    // The nodes that can hold an operation the view asks for.
+    let planes = view.planes();
+    let required = || prefix.nodes.iter().filter(|n| n.priority(&view, &planes) >= 1.0);
     if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
-        let pool_bytes = worker::pm_adapt::pool_bytes(opts.gpu_budget, opts.gpu_nodes)?;
+        let pool_bytes = match (opts.gpu_budget, opts.gpu_nodes, opts.full) {
+            // Slots for the required nodes (every node to refine fully).
+            (None, None, false) => {
+                let slot = u64::from(worker::pm_adapt::decoder::slot_bytes(&prefix));
+                required().count().max(1) as u64 * slot
+            }
+            (budget, nodes, _) => worker::pm_adapt::pool_bytes(budget, nodes)?,
+        };
         let ooc = worker::pm_adapt::OutOfCore { file, pool_bytes, background: false };
         let mut adapter =
             worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, worker::pm_adapt::DEFAULT_N_ALLOC)?;
@@ -525,10 +535,9 @@ fn adapt_out_of_core(
         let positions = adapter.quantized_positions()?.into_iter().map(|q| prefix.position(q)).collect();
         return Ok((Mesh::new(positions, adapter.faces()?), passes, secs, Some(read)));
     }
-    // Exactly the nodes that can hold an operation the view asks for.
-    let planes = view.planes();
-    let required: u64 = prefix.nodes.iter().filter(|n| n.priority(&view, &planes) >= 1.0).map(|n| n.len as u64).sum();
-    let mut cache = codec::pm::NodeCache::new(&prefix, file, required, false);
+    // Exactly the required nodes.
+    let bytes = required().map(|n| n.len as u64).sum();
+    let mut cache = codec::pm::NodeCache::new(&prefix, file, bytes, false);
     let stats = cache.schedule(&view).with_context(at)?;
     let read = NodesRead::new(&prefix, stats.loaded, stats.loaded_bytes);
     let start = Instant::now();
