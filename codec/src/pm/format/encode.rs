@@ -83,7 +83,7 @@ pub struct EncodedFile {
 /// Byte strings kept one after another in one block, each found by its span: an out-of-core
 /// file's nodes, coded in any order and written in theirs. A `Vec` per node was the only
 /// memory of a spilled build that grew with the model outside its files (the system allocator
-/// keeps blocks below the spill threshold: the 102M build's 492 MB of nodes, against about 90
+/// keeps blocks below the spill threshold: the 102M build's 492 MB of nodes, against 80-104
 /// MB of everything else); as one block it goes to files with the build's other arrays.
 #[derive(Clone, Debug, Default)]
 struct Pieces {
