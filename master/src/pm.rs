@@ -439,8 +439,32 @@ fn adapt_view(camera: &CameraArgs, opts: &AdaptOptions, (lo, hi): ([f32; 3], [f3
     Ok(view)
 }
 
-/// Prints the error the GPU adapted to where its budget made it coarser than asked.
-fn note_error_scale(opts: &AdaptOptions, scale: f32) {
+/// Sets a GPU adapter up as `opts` ask: its levels per pass and its budget.
+fn configure_gpu(adapter: &mut worker::pm_adapt::GpuAdapter, opts: &AdaptOptions) -> Result<()> {
+    if let Some(levels) = opts.levels {
+        adapter.set_levels(levels);
+    }
+    adapter.set_budget(opts.gpu_budget)?;
+    Ok(())
+}
+
+/// Adapts a GPU adapter to `view` (every split without one) and checks it, printing the error
+/// it adapted to where its budget made it coarser than asked: the passes and the seconds they
+/// took (timed from the base mesh on the device, after the device, pipelines, static buffers
+/// and nodes are set up).
+fn run_gpu(
+    adapter: &mut worker::pm_adapt::GpuAdapter,
+    view: Option<&Viewpoint>,
+    opts: &AdaptOptions,
+) -> Result<(usize, f64)> {
+    let start = Instant::now();
+    let passes = match view {
+        None => adapter.refine_fully()?,
+        Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
+    };
+    adapter.check()?;
+    let secs = start.elapsed().as_secs_f64();
+    let scale = adapter.error_scale();
     if scale > 1.0 {
         eprintln!(
             "note: adapted to {:.3} px ({:.2}x --error-px) to stay within --gpu-budget-mb",
@@ -448,6 +472,7 @@ fn note_error_scale(opts: &AdaptOptions, scale: f32) {
             scale
         );
     }
+    Ok((passes, secs))
 }
 
 /// `pm adapt` of an in-core file (or `--full` on the CPU): decoded whole.
@@ -458,34 +483,22 @@ fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Resu
     pb.finish_and_clear();
     let pm = decoded?.pm;
     let view = if opts.full { None } else { Some(adapt_view(camera, opts, bbox(&pm.positions))?) };
-    // Timed from the base mesh on the device (for the GPU, after the device, pipelines and
-    // static buffers are set up).
-    let mut start = Instant::now();
-    let (active, faces, passes) = if opts.gpu {
+    let (active, faces, passes, secs) = if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
         let dpm = format::Dpm::parse(&bytes)?;
         let mut adapter = worker::pm_adapt::GpuAdapter::new(&gpu, &dpm, worker::pm_adapt::DEFAULT_N_ALLOC)?;
-        if let Some(levels) = opts.levels {
-            adapter.set_levels(levels);
-        }
-        adapter.set_budget(opts.gpu_budget)?;
-        start = Instant::now();
-        let passes = match &view {
-            None => adapter.refine_fully()?,
-            Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
-        };
-        adapter.check()?;
-        note_error_scale(opts, adapter.error_scale());
-        (adapter.active()?, adapter.faces()?, passes)
+        configure_gpu(&mut adapter, opts)?;
+        let (passes, secs) = run_gpu(&mut adapter, view.as_ref(), opts)?;
+        (adapter.active()?, adapter.faces()?, passes, secs)
     } else {
+        let start = Instant::now();
         let mut adapter = Adapter::new(&pm).with_levels(opts.levels.unwrap_or(codec::pm::Levels::All));
         let passes = match &view {
             None => adapter.refine_fully(),
             Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaption did not converge")?,
         };
-        (adapter.active().to_vec(), adapter.faces().to_vec(), passes)
+        (adapter.active().to_vec(), adapter.faces().to_vec(), passes, start.elapsed().as_secs_f64())
     };
-    let secs = start.elapsed().as_secs_f64();
     let positions = active.iter().map(|&f| pm.positions[f as usize]).collect();
     Ok((Mesh::new(positions, faces), passes, secs, None))
 }
@@ -517,21 +530,10 @@ fn adapt_out_of_core(
         let ooc = worker::pm_adapt::OutOfCore { file, pool_bytes, background: false };
         let mut adapter =
             worker::pm_adapt::GpuAdapter::out_of_core(&gpu, &prefix, ooc, worker::pm_adapt::DEFAULT_N_ALLOC)?;
-        if let Some(levels) = opts.levels {
-            adapter.set_levels(levels);
-        }
-        adapter.set_budget(opts.gpu_budget)?;
+        configure_gpu(&mut adapter, opts)?;
         let stats = adapter.schedule(&view)?.context("an out-of-core adapter without a node cache")?;
         let read = NodesRead::new(&prefix, stats.loaded, stats.loaded_bytes);
-        let start = Instant::now();
-        let passes = if opts.full {
-            adapter.refine_fully()?
-        } else {
-            adapter.adapt_until_converged(&view, MAX_PASSES)?.context("the adaption did not converge")?
-        };
-        adapter.check()?;
-        let secs = start.elapsed().as_secs_f64();
-        note_error_scale(opts, adapter.error_scale());
+        let (passes, secs) = run_gpu(&mut adapter, (!opts.full).then_some(&view), opts)?;
         let positions = adapter.quantized_positions()?.into_iter().map(|q| prefix.position(q)).collect();
         return Ok((Mesh::new(positions, adapter.faces()?), passes, secs, Some(read)));
     }
