@@ -374,6 +374,51 @@ fn under_mpirun_the_timeout_measures_silence() {
 }
 
 #[test]
+fn a_silent_worker_ends_the_run_at_any_frames_in_flight() {
+    // The bunny's tiles are far larger than MPI sends at once, so with frames in flight rank
+    // 0 is sending frame 2 to the silent rank when frame 1's pixels fail to come: the send
+    // must give up after the timeout as the receive does.
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f.png");
+    for depth in ["1", "2", "3"] {
+        let args = [
+            "render",
+            &model,
+            "--size",
+            "640x480",
+            "--tiles",
+            "2x2",
+            "--frames",
+            "4",
+            "--frames-in-flight",
+            depth,
+            "--timeout",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        let started = Instant::now();
+        let o = mpirun(3, &[("TESSERA_FAULT", "hang:2")], &args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "--frames-in-flight {depth}: must fail");
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "--frames-in-flight {depth}: took {:?}",
+            started.elapsed()
+        );
+        // One frame in flight: rank 0 waits for the pixels; more: it is still sending.
+        let needle = if depth == "1" {
+            "rank 2 sent nothing for 2 s"
+        } else {
+            "rank 2 took no message and sent nothing for 2 s"
+        };
+        assert!(err.contains(needle), "--frames-in-flight {depth}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
 fn bad_input_is_reported_before_any_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.png");

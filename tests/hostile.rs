@@ -466,3 +466,286 @@ fn damaged_chunked_models_name_the_chunk() {
         assert!(!out.exists(), "{tiles}: no image");
     }
 }
+
+// Issue 47: hostile inputs, round two (outputs, hangs, signals, bounds, cameras).
+
+#[test]
+fn a_broken_pipe_ends_quietly() {
+    // The reader is gone before the first byte: every write to standard output fails.
+    let mut child = cmd()
+        .args(["sort", &mesh("classic/woody.obj"), "--size", "256x256", "--tiles", "16x16", "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(141), "the status a shell gives a command ended by SIGPIPE");
+    assert_eq!(stderr(&o), "", "quietly");
+}
+
+#[test]
+fn signals_are_taken_by_one_thread_and_end_the_run_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("s.jsonl");
+    for round in 0..3 {
+        let child = cmd()
+            .env("TESSERA_FAULT", "slow-write:400")
+            .args(["render", &mesh("classic/woody.obj"), "--size", "32x24", "--frames", "1000", "--orbit"])
+            .args(["--out", s(&dir.path().join("f.png")), "--stats", s(&stats)])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while leftovers(dir.path()).is_empty() {
+            assert!(start.elapsed() < Duration::from_secs(60), "no frame is being written");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        // Every thread (the writer, the worker, rayon's, lavapipe's) blocks the three
+        // signals but one, which waits for them.
+        let mut open = Vec::new();
+        for task in std::fs::read_dir(format!("/proc/{}/task", child.id())).unwrap() {
+            let status = std::fs::read_to_string(task.unwrap().path().join("status")).unwrap_or_default();
+            let blocked = status.lines().find_map(|l| l.strip_prefix("SigBlk:")).map(str::trim).unwrap_or("0");
+            let mask = u64::from_str_radix(blocked, 16).unwrap();
+            let all = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP].iter().all(|&s| mask & (1 << (s - 1)) != 0);
+            if !all {
+                open.push(status.lines().next().unwrap_or("").to_string());
+            }
+        }
+        assert_eq!(open.len(), 1, "threads that take SIGINT, SIGTERM or SIGHUP: {open:?}");
+        let signal = ["-INT", "-TERM", "-HUP"][round];
+        assert!(Command::new("kill").arg(signal).arg(child.id().to_string()).status().unwrap().success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "{signal}: {}", stderr(&o));
+        assert!(stderr(&o).ends_with("tessera: interrupted\n"), "{signal}: {}", stderr(&o));
+        assert!(leftovers(dir.path()).is_empty(), "{signal}: {:?}", leftovers(dir.path()));
+        let text = std::fs::read_to_string(&stats).unwrap();
+        assert!(text.lines().all(|l| serde_json::from_str::<serde_json::Value>(l).is_ok()), "whole lines");
+    }
+}
+
+/// A movie of `frames` frames of woody into `out`.
+fn movie(out: &Path, frames: &str) -> Output {
+    let model = mesh("classic/woody.obj");
+    tessera(&["render", &model, "--size", "32x24", "--frames", frames, "--orbit", "--out", s(out)])
+}
+
+#[test]
+fn movies_follow_the_output_rules() {
+    let dir = tempfile::tempdir().unwrap();
+    // A symlink to a movie: the file it names is replaced, the link stays.
+    let real = dir.path().join("real.mp4");
+    std::fs::write(&real, b"old").unwrap();
+    let link = dir.path().join("link.mp4");
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    ok(&movie(&link, "3"));
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    let bytes = std::fs::read(&real).unwrap();
+    assert!(bytes.len() > 100 && &bytes[4..8] == b"ftyp", "an MP4 in the linked file");
+    // A FIFO gets the movie's bytes and stays a FIFO.
+    let fifo = dir.path().join("pipe.mp4");
+    mkfifo(&fifo);
+    let reader = drain(&fifo);
+    ok(&movie(&fifo, "3"));
+    assert_eq!(&reader.join().unwrap()[4..8], b"ftyp");
+    assert!(is_fifo(&fifo));
+    // A private copy of the null device stays a device.
+    let null = dir.path().join("null.mp4");
+    assert!(Command::new("mknod").arg(&null).args(["c", "1", "3"]).status().unwrap().success());
+    ok(&movie(&null, "2"));
+    assert!(std::os::unix::fs::FileTypeExt::is_char_device(&std::fs::symlink_metadata(&null).unwrap().file_type()));
+    assert!(leftovers(dir.path()).is_empty() && leftovers(&std::env::temp_dir()).iter().all(|n| !n.contains("movie")));
+}
+
+#[test]
+fn a_movie_pipe_that_stops_draining_ends_the_run() {
+    // An "ffmpeg" that answers -version, then never reads a frame.
+    let dir = tempfile::tempdir().unwrap();
+    let fake = dir.path().join("ffmpeg");
+    std::fs::write(&fake, "#!/bin/sh\n[ \"$1\" = -version ] && exit 0\nexec sleep 120\n").unwrap();
+    std::fs::set_permissions(&fake, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let path = format!("{}:{}", dir.path().display(), std::env::var("PATH").unwrap_or_default());
+    let out = dir.path().join("m.mp4");
+    let start = Instant::now();
+    // 256 KB frames: the pipe's buffer fills on the first.
+    let model = mesh("classic/woody.obj");
+    let args = ["render", &model, "--size", "256x256", "--frames", "8", "--timeout", "2", "--out", s(&out)];
+    let o = tessera_env(&[("PATH", &path)], &args);
+    refused(&o, "ffmpeg read nothing of frame");
+    assert!(start.elapsed() < Duration::from_secs(60), "took {:?}", start.elapsed());
+    assert!(!out.exists() && leftovers(dir.path()).is_empty());
+}
+
+#[test]
+fn standard_output_takes_one_image() {
+    let model = mesh("classic/woody.obj");
+    refused(&tessera(&["render", &model, "--size", "32x24", "--frames", "2", "--out", "-"]), "--out - takes one image");
+    refused(
+        &tessera(&["render", &model, "--size", "32x24", "--stereo", "0.1", "--out", "-"]),
+        "--out - takes one image",
+    );
+    let o = tessera(&["render", &model, "--size", "32x24", "--out", "-"]);
+    ok(&o);
+    assert!(o.stdout.starts_with(b"\x89PNG"));
+    assert!(!std::path::Path::new("--0002.png").exists());
+}
+
+#[test]
+fn two_runs_cannot_share_a_stats_file() {
+    use std::os::fd::AsRawFd;
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("s.jsonl");
+    std::fs::write(&stats, b"{\"a run\": 1}\n").unwrap();
+    // Another run holds the file (as a running tessera does).
+    let held = std::fs::OpenOptions::new().append(true).open(&stats).unwrap();
+    assert_eq!(unsafe { libc::flock(held.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) }, 0);
+    let model = mesh("classic/woody.obj");
+    let png = dir.path().join("f.png");
+    let o = tessera(&["render", &model, "--size", "32x24", "--out", s(&png), "--stats", s(&stats)]);
+    refused(&o, "being written by another tessera run");
+    assert_eq!(std::fs::read(&stats).unwrap(), b"{\"a run\": 1}\n", "the other run's lines are untouched");
+    assert!(!png.exists());
+    drop(held);
+    ok(&tessera(&["render", &model, "--size", "32x24", "--out", s(&png), "--stats", s(&stats)]));
+    assert!(std::fs::read_to_string(&stats).unwrap().lines().all(|l| l.contains("\"frame\"")));
+}
+
+#[test]
+fn an_unwritable_output_folder_is_found_before_the_work() {
+    // /proc takes no new files, for root too.
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    for args in [
+        vec!["encode", &model, "-o", "/proc/tessera-out.bft"],
+        vec!["pm", "build", &model, "-o", "/proc/tessera-out.dpm"],
+        vec!["render", &model, "--size", "32x24", "--out", "/proc/tessera-out.png"],
+        vec!["nsp", "build", &model, "-o", "/proc/tessera-out.nsp"],
+    ] {
+        let start = Instant::now();
+        let o = tessera(&args);
+        refused(&o, "its folder /proc is not writable");
+        assert!(start.elapsed() < Duration::from_secs(5), "{args:?}: took {:?}", start.elapsed());
+    }
+}
+
+#[test]
+fn dumps_clear_only_the_files_they_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/woody.obj");
+    // A user's file named like a tile is not a dump's.
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("tile-7.ply"), b"ply mine").unwrap();
+    refused(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "4x4", "--dump", s(&mine)]), "tile-7.ply");
+    assert_eq!(std::fs::read(mine.join("tile-7.ply")).unwrap(), b"ply mine");
+    // And neither is a summary.json of the user's, whatever it lists.
+    std::fs::write(mine.join("summary.json"), b"{\"dump_files\": []}").unwrap();
+    refused(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "4x4", "--dump", s(&mine)]), "tile-7.ply");
+    std::fs::write(mine.join("summary.json"), b"{\"totals\": {}}").unwrap();
+    std::fs::remove_file(mine.join("tile-7.ply")).unwrap();
+    refused(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "4x4", "--dump", s(&mine)]), "not written by");
+    assert_eq!(std::fs::read(mine.join("summary.json")).unwrap(), b"{\"totals\": {}}");
+    // A dump records its files; the next one removes exactly those.
+    let dump = dir.path().join("dump");
+    ok(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "4x4", "--dump", s(&dump)]));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dump.join("summary.json")).unwrap()).unwrap();
+    let recorded: Vec<&str> = summary["dump_files"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    let mut on_disk: Vec<String> = std::fs::read_dir(&dump)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n != "summary.json")
+        .collect();
+    on_disk.sort();
+    let mut sorted = recorded.clone();
+    sorted.sort();
+    assert_eq!(on_disk, sorted);
+    assert!(recorded.len() > 1);
+    ok(&tessera(&["sort", &model, "--size", "64x64", "--tiles", "1x1", "--dump", s(&dump)]));
+    assert_eq!(std::fs::read_dir(&dump).unwrap().count(), 2, "summary.json and tile-0.ply");
+}
+
+#[test]
+fn plots_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("t.png");
+    let stats = |ranks: usize| {
+        let path = dir.path().join(format!("s{ranks}.jsonl"));
+        let mut text = String::new();
+        for rank in 0..ranks {
+            text += &format!(
+                "{{\"frame\":0,\"rank\":{rank},\"timeline\":[{{\"stage\":\"render\",\"start_ms\":0,\"end_ms\":1}}]}}\n"
+            );
+        }
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let start = Instant::now();
+    let many = stats(200_000);
+    refused(&tessera(&["plot", s(&many), "-o", s(&png)]), "200000 timeline rows");
+    assert!(start.elapsed() < Duration::from_secs(20), "took {:?}", start.elapsed());
+    let wide = stats(256);
+    refused(&tessera(&["plot", s(&wide), "-o", s(&png), "--width", "16384"]), "--width 16384");
+    assert!(!png.exists());
+    ok(&tessera(&["plot", s(&stats(3)), "-o", s(&png)]));
+}
+
+#[test]
+fn walls_have_a_bounded_number_of_displays() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("f.png");
+    let model = mesh("classic/woody.obj");
+    let wall = dir.path().join("wall.toml");
+    let start = Instant::now();
+    std::fs::write(&wall, "columns = 400\nrows = 400\ndisplay_width = 1\ndisplay_height = 1\n").unwrap();
+    refused(&tessera(&["render", &model, "--wall", s(&wall), "--out", s(&png)]), "at most 1024");
+    let listed: String =
+        (0..1100).map(|i| format!("[[display]]\nx = {}\ny = 0\nwidth = 1\nheight = 1\n", i * 2)).collect();
+    std::fs::write(&wall, listed).unwrap();
+    refused(&tessera(&["render", &model, "--wall", s(&wall), "--out", s(&png)]), "at most 1024");
+    assert!(start.elapsed() < Duration::from_secs(10), "took {:?}", start.elapsed());
+}
+
+#[test]
+fn start_up_does_not_depend_on_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("s.jsonl");
+    let mut child = cmd()
+        .args(["render", &mesh("classic/woody.obj"), "--size", "32x24", "--frames", "4294967295"])
+        .args(["--out", s(&dir.path().join("f.png")), "--stats", s(&stats)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 2 {
+        assert!(start.elapsed() < Duration::from_secs(30), "no first frame");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    assert!(dir.path().join("f-0001.png").exists());
+}
+
+#[test]
+fn every_camera_of_a_run_is_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("f.png");
+    let model = mesh("classic/woody.obj");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", &model, "--size", "64x48", "--out", s(&png)];
+        args.extend(extra);
+        tessera(&args)
+    };
+    // Stereo eyes this far apart look through a window a trillion frames off their axis.
+    let o = render(&["--stereo", "1e30"]);
+    refused(&o, "lens shift");
+    assert!(stderr(&o).contains("left eye"), "{}", stderr(&o));
+    // The last frame of this zoom has its near plane at 1e-30 of the first's.
+    let o = render(&["--frames", "3", "--zoom", "1e-30"]);
+    refused(&o, "far/near");
+    assert!(stderr(&o).contains("frame 3"), "{}", stderr(&o));
+    assert!(!dir.path().join("f-0001.png").exists(), "refused before the first frame");
+    ok(&render(&["--stereo", "0.05"]));
+}

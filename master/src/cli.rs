@@ -687,11 +687,38 @@ pub const MIN_PIXEL_ANGLE: f64 = 1e-6;
 /// Pixel angles below this get a warning.
 pub const WARN_PIXEL_ANGLE: f64 = 1e-5;
 
-/// Refuses a camera whose depth range or field of view the 32-bit depth buffer and float
-/// projection cannot represent at `height` pixels, and returns warnings (with the numbers)
-/// for ones that are close.
+/// Lens shifts beyond this many half-frames are refused: the image window would lie a
+/// thousand frames off the view axis, and a float shift that large is rounded to about half
+/// a pixel of a 16384-pixel frame (stereo eyes far apart for their focal distance, or a wall
+/// seen from far off to its side).
+pub const MAX_SHIFT: f64 = 1e3;
+
+/// Refuses a camera whose depth range, field of view or lens shift the 32-bit depth buffer
+/// and float projection cannot represent at `height` pixels, or that is not finite, and
+/// returns warnings (with the numbers) for ones that are close. Every camera a run uses is
+/// checked: each stereo eye, the first and last frames of a zoom, each eye through a wall.
 pub fn check_precision(cam: &Camera, height: u32) -> Result<Vec<String>> {
     let mut warnings = Vec::new();
+    let finite = cam.eye.is_finite()
+        && cam.target.is_finite()
+        && cam.up.is_finite()
+        && [cam.fovy, cam.near, cam.far, cam.shift[0], cam.shift[1]].iter().all(|v| v.is_finite());
+    if !finite {
+        bail!(
+            "a camera with eye {}, target {}, near {}, far {} and shift {:?} is not finite; the flags that set it are too large",
+            cam.eye,
+            cam.target,
+            cam.near,
+            cam.far,
+            cam.shift
+        );
+    }
+    let shift = cam.shift[0].abs().max(cam.shift[1].abs()) as f64;
+    if shift > MAX_SHIFT {
+        bail!(
+            "a lens shift of {shift:.3e} half-frames (at most {MAX_SHIFT:e}) puts the image window beyond what float projection resolves; a stereo eye separation or an eye this far to the side of a wall is too large"
+        );
+    }
     let ratio = cam.far as f64 / cam.near as f64;
     let depth_step = ratio * 2f64.powi(-24);
     if ratio > MAX_DEPTH_RATIO {

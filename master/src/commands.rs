@@ -16,11 +16,12 @@ use crate::output::{check_distinct, check_extension, write_atomic};
 use crate::progress;
 
 /// Prints a command's summary line: on stdout, unless the output itself goes there (`-o -`).
-pub fn summary(output: &Path, line: std::fmt::Arguments) {
+pub fn summary(output: &Path, line: std::fmt::Arguments) -> std::io::Result<()> {
     if output.as_os_str() == "-" {
         eprintln!("{line}");
+        Ok(())
     } else {
-        println!("{line}");
+        crate::outln!("{line}")
     }
 }
 
@@ -210,7 +211,7 @@ pub fn encode(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
             h.quant_bits,
             secs * 1e3
         ),
-    );
+    )?;
     Ok(())
 }
 
@@ -234,7 +235,7 @@ pub fn decode(input: &Path, output: &Path) -> Result<()> {
             mesh.positions.len(),
             secs * 1e3
         ),
-    );
+    )?;
     Ok(())
 }
 
@@ -322,41 +323,52 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         report.components = decoded.to_mesh().components() as u32;
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        crate::outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
         let r = &report;
-        println!("{}", input.display());
-        println!("  triangles      {:>12}   ({} components, {} loose)", r.triangles, r.components, r.loose_triangles);
-        println!("  vertices       {:>12}   ({} slots, {} duplicated)", r.vertices, r.slots, r.duplicate_slots);
-        println!("  bytes          {:>12}", r.bytes);
+        crate::outln!("{}", input.display())?;
+        crate::outln!(
+            "  triangles      {:>12}   ({} components, {} loose)",
+            r.triangles,
+            r.components,
+            r.loose_triangles
+        )?;
+        crate::outln!("  vertices       {:>12}   ({} slots, {} duplicated)", r.vertices, r.slots, r.duplicate_slots)?;
+        crate::outln!("  bytes          {:>12}", r.bytes)?;
         if r.chunks > 1 {
-            println!("  chunks         {:>12}   ({} bytes of border tables)", r.chunks, r.border_bytes);
+            crate::outln!("  chunks         {:>12}   ({} bytes of border tables)", r.chunks, r.border_bytes)?;
         }
-        println!(
+        crate::outln!(
             "  connectivity   {:>12.3} bits/triangle ({} bytes)",
-            r.connectivity_bits_per_triangle, r.connectivity_bytes
-        );
-        println!(
+            r.connectivity_bits_per_triangle,
+            r.connectivity_bytes
+        )?;
+        crate::outln!(
             "  geometry       {:>12.2} bits/vertex at {} bits ({} bytes)",
-            r.geometry_bits_per_vertex, r.quant_bits, r.geometry_bytes
-        );
+            r.geometry_bits_per_vertex,
+            r.quant_bits,
+            r.geometry_bytes
+        )?;
         if r.color_bytes > 0 {
             let kind = if r.color_alpha { "RGBA" } else { "RGB" };
-            println!(
+            crate::outln!(
                 "  colours        {:>12.2} bits/vertex, 8-bit {kind} ({} bytes)",
-                r.color_bits_per_vertex, r.color_bytes
-            );
+                r.color_bits_per_vertex,
+                r.color_bytes
+            )?;
         }
         if r.normal_bytes > 0 {
-            println!(
+            crate::outln!(
                 "  normals        {:>12.2} bits/vertex, octahedral at {} bits ({} bytes)",
-                r.normal_bits_per_vertex, r.normal_bits, r.normal_bytes
-            );
+                r.normal_bits_per_vertex,
+                r.normal_bits,
+                r.normal_bytes
+            )?;
         }
         if r.order_bytes > 0 {
-            println!("  vertex order   {:>12.2} bits/vertex ({} bytes)", r.order_bits_per_vertex, r.order_bytes);
+            crate::outln!("  vertex order   {:>12.2} bits/vertex ({} bytes)", r.order_bits_per_vertex, r.order_bytes)?;
         }
-        println!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64);
+        crate::outln!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64)?;
     }
     Ok(())
 }

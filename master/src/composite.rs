@@ -229,6 +229,11 @@ impl Default for Bezel {
     }
 }
 
+/// The most displays a wall may have. The largest walls built have a few hundred; each
+/// display costs an image per frame and the overlap check compares every pair, so a wall
+/// file of a few lines cannot ask for a frame's worth of work per pixel.
+pub const MAX_DISPLAYS: u64 = 1024;
+
 impl Wall {
     pub fn load(path: &Path) -> Result<Wall> {
         let bytes = crate::commands::read_input(path)?;
@@ -339,6 +344,9 @@ impl Wall {
         if columns == 0 || rows == 0 || w == 0 || h == 0 {
             bail!("columns, rows and display sizes must be at least 1");
         }
+        if columns as u64 * rows as u64 > MAX_DISPLAYS {
+            bail!("a grid of {columns}x{rows} displays; a wall has at most {MAX_DISPLAYS}");
+        }
         // In u64, where no sum of u32 products can wrap.
         let side = |n: u32, size: u32, bezel: u32| n as u64 * size as u64 + (n as u64 - 1) * bezel as u64;
         let (fw, fh) = (side(columns, w, bx), side(rows, h, by));
@@ -361,6 +369,9 @@ impl Wall {
     }
 
     fn listed(list: Vec<DisplayFile>) -> Result<Wall> {
+        if list.len() as u64 > MAX_DISPLAYS {
+            bail!("{} displays; a wall has at most {MAX_DISPLAYS}", list.len());
+        }
         let (mut width, mut height) = (0u64, 0u64);
         let mut displays = Vec::with_capacity(list.len());
         for (i, d) in list.into_iter().enumerate() {

@@ -5,6 +5,17 @@
 //! tile walls ([`composite`]), output files that are never left half-written
 //! ([`output`]), and the timeline of a run's stats ([`plot`]). `main.rs` decides each process's role.
 
+/// `println!` that returns an error instead of panicking when standard output is closed
+/// (`tessera sort --json | head -c 1`): the caller propagates it with `?`, and `main` ends a
+/// broken pipe quietly with a non-zero status ([`output::is_broken_pipe`]).
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use ::std::io::Write as _;
+        ::std::writeln!(::std::io::stdout().lock(), $($arg)*)
+    }};
+}
+
 pub mod cli;
 pub mod commands;
 pub mod composite;

@@ -16,8 +16,9 @@ use worker::transport::{self, Mpi, Transport};
 static ALLOC: master::spill::SpillAlloc = master::spill::SpillAlloc;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // Before anything else starts a thread: every thread inherits the blocked signals.
     master::output::install_signal_handler();
+    let cli = Cli::parse();
     codec::input::set_max_decompressed_bytes(cli.max_decompressed);
     let result = match &cli.command {
         Command::Encode { input, output, options } => commands::encode(input, output, options),
@@ -106,6 +107,9 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader of our output went away: nothing to say to anyone, and 141 is what a
+        // shell reports for a command ended by SIGPIPE.
+        Err(e) if master::output::is_broken_pipe(&e) => ExitCode::from(141),
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

@@ -83,7 +83,7 @@ pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path
             secs,
             h.input_triangles as f64 / secs.max(1e-9)
         ),
-    );
+    )?;
     summary(
         output,
         format_args!(
@@ -93,7 +93,7 @@ pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path
             cost_bits[2] / points,
             temp_mb.map_or(String::new(), |mb| format!("; out of core, temporary files up to {mb:.0} MB"))
         ),
-    );
+    )?;
     Ok(())
 }
 
@@ -164,27 +164,37 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
     let file = open(input)?;
     let r = NspStatsReport::of(&file);
     if json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::outln!("{}", serde_json::to_string_pretty(&r)?)?;
         return Ok(());
     }
-    println!("{}", input.display());
-    println!(
+    crate::outln!("{}", input.display())?;
+    crate::outln!(
         "  parameters     p = {} bits, p_r = {}, n = {}, N_min = {}",
-        r.bits, r.root_bits, r.splits, r.min_simplices
-    );
-    println!("  input          {:>12} triangles, {} vertices", r.input_triangles, r.input_vertices);
-    println!(
+        r.bits,
+        r.root_bits,
+        r.splits,
+        r.min_simplices
+    )?;
+    crate::outln!("  input          {:>12} triangles, {} vertices", r.input_triangles, r.input_vertices)?;
+    crate::outln!(
         "  canonical      {:>12} triangles, {} edges, {} isolated points, {} points (coincident vertices merged)",
-        r.triangles, r.edges, r.isolated_points, r.points
-    );
-    println!(
+        r.triangles,
+        r.edges,
+        r.isolated_points,
+        r.points
+    )?;
+    crate::outln!(
         "  cells          {:>12}   ({} split, {} empty, depth {}; duplication {:.3})",
-        r.cells, r.split_cells, r.empty_cells, r.depth, r.duplication
-    );
-    println!("  bytes          {:>12}   ({:.2} bits/point)", r.bytes, r.bits_per_point);
-    println!("    header+table {:>12}", r.header_and_table_bytes);
-    println!("    cell streams {:>12}", r.stream_bytes);
-    println!("    cell table   {:>12}", r.cell_table_bytes);
+        r.cells,
+        r.split_cells,
+        r.empty_cells,
+        r.depth,
+        r.duplication
+    )?;
+    crate::outln!("  bytes          {:>12}   ({:.2} bits/point)", r.bytes, r.bits_per_point)?;
+    crate::outln!("    header+table {:>12}", r.header_and_table_bytes)?;
+    crate::outln!("    cell streams {:>12}", r.stream_bytes)?;
+    crate::outln!("    cell table   {:>12}", r.cell_table_bytes)?;
     Ok(())
 }
 
@@ -233,7 +243,7 @@ pub fn adapt(
             file.file_len,
             secs * 1e3
         ),
-    );
+    )?;
     Ok(())
 }
 

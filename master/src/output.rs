@@ -24,8 +24,9 @@ use anyhow::{bail, Context, Result};
 /// Temporary files not yet renamed into place.
 static IN_FLIGHT: Mutex<Option<HashSet<PathBuf>>> = Mutex::new(None);
 
-/// Registers a temporary file another process writes (ffmpeg's movie), so that a signal
-/// removes it as it removes this process's own.
+/// Registers a temporary file another process writes (ffmpeg's movie), or a temporary
+/// folder (a build's scratch space: removed with everything in it), so that a signal removes
+/// it as it removes this process's own temporary files.
 pub fn register_in_flight(path: &Path) {
     IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert_with(HashSet::new).insert(path.to_path_buf());
 }
@@ -41,29 +42,72 @@ fn unregister(path: &Path) {
     }
 }
 
-/// Removes every temporary file in flight and exits with `code`, holding the registry's lock
-/// so that no thread can create another temporary file in between (creation and registration
-/// happen under the same lock, see [`write_atomic`]).
+/// Removes every temporary file in flight and ends the process with `code`, holding the
+/// registry's lock so that no thread can create another temporary file in between (creation
+/// and registration happen under the same lock, see [`write_atomic`]). `_exit`, not `exit`:
+/// the other threads are still running (the writer in an `fsync`, rayon, MPI's), and `exit`
+/// would run the C library's and MPI's exit handlers and free what they are using.
 fn remove_in_flight_and_exit(code: i32) -> ! {
     let mut guard = IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner());
     if let Some(set) = guard.as_mut() {
         for p in set.drain() {
-            let _ = std::fs::remove_file(p);
+            match std::fs::symlink_metadata(&p) {
+                Ok(m) if m.is_dir() => drop(std::fs::remove_dir_all(&p)),
+                _ => drop(std::fs::remove_file(&p)),
+            }
         }
     }
-    eprintln!("tessera: interrupted");
-    std::process::exit(code)
+    // Straight to the file descriptor: the message must not wait for a lock another thread
+    // holds.
+    let msg = b"tessera: interrupted\n";
+    // Safety: writing a static buffer to fd 2, then ending the process without unwinding.
+    unsafe {
+        libc::write(2, msg.as_ptr().cast(), msg.len());
+        libc::_exit(code)
+    }
 }
 
+/// The signals that interrupt a command.
+const INTERRUPTS: [libc::c_int; 3] = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP];
+
 /// On SIGINT, SIGTERM or SIGHUP: remove the temporary files in flight, say so, and exit with
-/// 130 (the shell's code for an interrupted command). Call once, at start-up.
+/// 130 (the shell's code for an interrupted command). Call once, at start-up, before any
+/// other thread exists: the three signals are blocked in the calling thread, so every thread
+/// started later inherits the mask, and one thread of their own takes them with `sigwait`.
+/// No signal handler runs, so no thread is ever interrupted inside `malloc` or an `fsync`.
 pub fn install_signal_handler() {
-    // `ctrlc` runs the handler on its own thread, so it may take the lock freely.
-    let _ = ctrlc::set_handler(|| remove_in_flight_and_exit(130));
+    // Safety: plain libc calls on a local signal set.
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for s in INTERRUPTS {
+            libc::sigaddset(&mut set, s);
+        }
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+        set
+    };
+    let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || loop {
+        let mut sig = 0;
+        // Safety: `set` is a valid signal set; sigwait only writes `sig`.
+        if unsafe { libc::sigwait(&set, &mut sig) } == 0 {
+            remove_in_flight_and_exit(130);
+        }
+    });
+    if spawned.is_err() {
+        // Without the waiting thread the signals must not stay blocked.
+        // Safety: as above.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+    }
+}
+
+/// Whether an error comes from writing to a closed pipe (`tessera sort --json | head -c 1`):
+/// `main` then ends quietly with a non-zero status, as a command in a pipeline should.
+pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe))
 }
 
 /// Where an output goes.
-enum Target {
+pub(crate) enum Target {
     Stdout,
     /// An existing file that is not regular (device, FIFO, socket): written in place.
     Special(PathBuf),
@@ -71,7 +115,7 @@ enum Target {
     Regular(PathBuf),
 }
 
-fn target(path: &Path) -> Result<Target> {
+pub(crate) fn target(path: &Path) -> Result<Target> {
     if path.as_os_str() == "-" {
         return Ok(Target::Stdout);
     }
@@ -197,18 +241,21 @@ impl Identity {
 }
 
 /// Refuses, before any work, an output that is the same file as an input or as another
-/// output (by device and inode, so hard links, symlinks and `./` spellings are caught), and
-/// an output whose folder does not exist.
+/// output (by device and inode, so hard links, symlinks and `./` spellings are caught), an
+/// output whose folder does not exist, and one whose folder cannot be written (a probe file
+/// is created there and removed: this finds a read-only file system or an immutable folder,
+/// which permission bits do not show to root). Linear in the number of paths.
 pub fn check_distinct(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
-    let mut seen: Vec<(Identity, &Path, &str)> = Vec::new();
+    let mut seen: std::collections::HashMap<Identity, (&Path, &str)> = std::collections::HashMap::new();
     for &p in inputs {
         if let Ok(id @ Identity::File { .. }) = Identity::of(p) {
-            seen.push((id, p, "input"));
+            seen.entry(id).or_insert((p, "input"));
         }
     }
+    let mut probed: HashSet<PathBuf> = HashSet::new();
     for &p in outputs {
         let id = Identity::of(p)?;
-        if let Some((_, other, role)) = seen.iter().find(|(i, _, _)| *i == id) {
+        if let Some((other, role)) = seen.get(&id) {
             if other.as_os_str() == p.as_os_str() {
                 bail!("{} is given twice as an output", p.display());
             }
@@ -218,9 +265,31 @@ pub fn check_distinct(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
                 other.display()
             );
         }
-        seen.push((id, p, "output"));
+        if let Ok(Target::Regular(dest)) = target(p) {
+            let dir = folder_of(&dest).to_path_buf();
+            if probed.insert(dir.clone()) {
+                probe_writable(p, &dir)?;
+            }
+        }
+        seen.insert(id, (p, "output"));
     }
     Ok(())
+}
+
+/// The folder a regular output's temporary file goes to.
+fn folder_of(dest: &Path) -> &Path {
+    match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// Creates and removes a temporary file in `dir`, where `output` will be written.
+pub fn probe_writable(output: &Path, dir: &Path) -> Result<()> {
+    match tempfile::Builder::new().prefix(".tessera-").tempfile_in(dir) {
+        Ok(_) => Ok(()),
+        Err(e) => bail!("cannot write {}: its folder {} is not writable ({e})", output.display(), dir.display()),
+    }
 }
 
 /// Refuses an output path whose extension is not one of `allowed` (`-`, standard output,
@@ -245,15 +314,33 @@ pub struct LineLog {
 }
 
 impl LineLog {
-    /// Creates or truncates `path` (a special file is opened in place, `-` is standard output).
+    /// Creates or truncates `path` (a special file is opened in place, `-` is standard
+    /// output). A regular file is locked (`flock`) for as long as the log is open, so two
+    /// runs given the same stats file cannot interleave their lines: the second is refused
+    /// before it truncates anything.
     pub fn create(path: &Path) -> Result<LineLog> {
         let cannot = || format!("cannot write {}", path.display());
         let out: Box<dyn Write + Send> = match target(path)? {
             Target::Stdout => Box::new(std::io::stdout()),
             Target::Special(p) => Box::new(std::fs::OpenOptions::new().append(true).open(p).with_context(cannot)?),
-            Target::Regular(p) => Box::new(
-                std::fs::OpenOptions::new().write(true).create(true).truncate(true).open(p).with_context(cannot)?,
-            ),
+            Target::Regular(p) => {
+                let f = std::fs::OpenOptions::new()
+                    .write(true)
+                    .create(true)
+                    .truncate(false)
+                    .open(&p)
+                    .with_context(cannot)?;
+                use std::os::fd::AsRawFd;
+                // Safety: flock on a descriptor this function owns; the lock ends with it.
+                if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+                    bail!(
+                        "{} is being written by another tessera run; give each run its own stats file",
+                        path.display()
+                    );
+                }
+                f.set_len(0).with_context(cannot)?;
+                Box::new(f)
+            }
         };
         Ok(LineLog { out, path: path.to_path_buf() })
     }

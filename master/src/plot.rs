@@ -58,6 +58,13 @@ pub struct Timeline {
     pub periods: Vec<f64>,
 }
 
+/// The most rows (a rank each, and rank 0's writer) a timeline draws: 256 rows are an image
+/// 14,456 pixels tall, 69 MB of RGB at the default width.
+pub const MAX_ROWS: usize = 256;
+
+/// The most pixels a timeline image has (192 MB of RGB), whatever `--width` asks.
+pub const MAX_PIXELS: u64 = 64 << 20;
+
 impl Timeline {
     /// Reads `render --stats` lines, keeping frames `first..=last`.
     pub fn parse(text: &str, frames: Option<(u32, u32)>) -> Result<Timeline> {
@@ -96,6 +103,12 @@ impl Timeline {
             bail!("no stages in the frames asked for");
         }
         let keys: BTreeMap<(usize, u8), usize> = bars.iter().map(|b| (b.0, 0)).collect();
+        if keys.len() > MAX_ROWS {
+            bail!(
+                "{} timeline rows (ranks, and rank 0's writer); a plot draws at most {MAX_ROWS}, one band each",
+                keys.len()
+            );
+        }
         let rows: BTreeMap<(usize, u8), usize> = keys.keys().enumerate().map(|(i, &k)| (k, i)).collect();
         let names = rows
             .keys()
@@ -117,6 +130,14 @@ impl Timeline {
     pub fn draw(&self, width: u32, title: &str) -> Result<Drawn> {
         register_font()?;
         let height = Self::height(self.rows.len());
+        let pixels = width as u64 * height as u64;
+        if pixels > MAX_PIXELS {
+            bail!(
+                "--width {width}: a timeline of {} rows would be {width}x{height} pixels, more than {} million; give a smaller --width",
+                self.rows.len(),
+                MAX_PIXELS >> 20
+            );
+        }
         let mut pixels = vec![0u8; width as usize * height as usize * 3];
         let mut centers = Vec::with_capacity(self.bars.len());
         {
@@ -248,7 +269,7 @@ pub fn plot(input: &Path, output: &Path, frames: Option<(u32, u32)>, width: u32)
     let drawn = timeline.draw(width, &title)?;
     let png = crate::composite::encode_png(drawn.width, drawn.height, png::ColorType::Rgb, &drawn.rgb)?;
     write_bytes(output, &png)?;
-    summary(output, format_args!("{} -> {}: {title}", input.display(), output.display()));
+    summary(output, format_args!("{} -> {}: {title}", input.display(), output.display()))?;
     Ok(())
 }
 

@@ -145,12 +145,12 @@ pub fn build(
             enc_s * 1e3,
             enc.header.splits as f64 / secs.max(1e-9)
         ),
-    );
+    )?;
     if stats.chunks > 1 {
         summary(
             output,
             format_args!("  simplified in {} chunks of at most {} triangles", stats.chunks, build_opts.chunk_faces),
-        );
+        )?;
     }
     if let Some(dir) = &spilling {
         let st = spill::stats();
@@ -167,7 +167,7 @@ pub fn build(
                     String::new()
                 }
             ),
-        );
+        )?;
     }
     let per_vertex = |bits: f64| bits / 8.0 / enc.header.vertices.max(1) as f64;
     summary(
@@ -178,7 +178,7 @@ pub fn build(
             per_vertex(enc.symbol_bits.0),
             per_vertex(enc.symbol_bits.1)
         ),
-    );
+    )?;
     Ok(())
 }
 
@@ -315,27 +315,31 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
         None => PmStatsReport::new(DpmStats::of(&read_input(input)?).with_context(at)?, 0),
     };
     if json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::outln!("{}", serde_json::to_string_pretty(&r)?)?;
     } else {
-        println!("{}", input.display());
-        println!("  vertices       {:>12}   ({} in the base mesh)", r.vertices, r.base_vertices);
-        println!("  triangles      {:>12}   ({} in the base mesh)", r.triangles, r.base_faces);
-        println!("  operations     {:>12}", r.operations);
-        println!("  bytes          {:>12}   ({:.2} per vertex)", r.bytes, r.bytes_per_vertex);
-        println!("  criteria       {:>12.2} bytes/vertex", r.criteria_per_vertex);
-        println!("  tree pointers  {:>12.2} bytes/vertex", r.tree_pointers_per_vertex);
-        println!("  connectivity   {:>12.2} bytes/vertex", r.connectivity_per_vertex);
-        println!(
+        crate::outln!("{}", input.display())?;
+        crate::outln!("  vertices       {:>12}   ({} in the base mesh)", r.vertices, r.base_vertices)?;
+        crate::outln!("  triangles      {:>12}   ({} in the base mesh)", r.triangles, r.base_faces)?;
+        crate::outln!("  operations     {:>12}", r.operations)?;
+        crate::outln!("  bytes          {:>12}   ({:.2} per vertex)", r.bytes, r.bytes_per_vertex)?;
+        crate::outln!("  criteria       {:>12.2} bytes/vertex", r.criteria_per_vertex)?;
+        crate::outln!("  tree pointers  {:>12.2} bytes/vertex", r.tree_pointers_per_vertex)?;
+        crate::outln!("  connectivity   {:>12.2} bytes/vertex", r.connectivity_per_vertex)?;
+        crate::outln!(
             "  geometry       {:>12.2} bytes/vertex ({} bits positions, {} bits normals)",
-            r.geometry_per_vertex, r.position_bits, r.normal_bits
-        );
-        println!("  padding        {:>12.2} bytes/vertex", r.padding_per_vertex);
-        println!("  base, tables   {:>12} + {} bytes", r.base_mesh_bytes, r.table_bytes);
+            r.geometry_per_vertex,
+            r.position_bits,
+            r.normal_bits
+        )?;
+        crate::outln!("  padding        {:>12.2} bytes/vertex", r.padding_per_vertex)?;
+        crate::outln!("  base, tables   {:>12} + {} bytes", r.base_mesh_bytes, r.table_bytes)?;
         if r.nodes > 0 {
-            println!(
+            crate::outln!(
                 "  nodes          {:>12}   (out of core; node table {} bytes; {} node reads)",
-                r.nodes, r.node_table_bytes, r.node_reads
-            );
+                r.nodes,
+                r.node_table_bytes,
+                r.node_reads
+            )?;
         }
     }
     Ok(())
@@ -403,7 +407,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
             secs * 1e3,
             read
         ),
-    );
+    )?;
     Ok(())
 }
 

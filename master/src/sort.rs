@@ -284,18 +284,43 @@ pub fn sort_chunked_frame(
     Ok((summary, tiles.into_iter().map(|(i, s, _, _)| (i, s)).collect()))
 }
 
-/// Whether a file name is one that `--dump` writes: `tile-<index>.ply` or `summary.json`.
-fn is_dump_file(name: &std::ffi::OsStr) -> bool {
-    let Some(name) = name.to_str() else { return false };
-    name == "summary.json"
-        || name
-            .strip_prefix("tile-")
-            .and_then(|n| n.strip_suffix(".ply"))
-            .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+/// The key of a dump's `summary.json` that lists the files the dump wrote: the only files a
+/// later dump into the same folder removes.
+const DUMP_FILES: &str = "dump_files";
+
+/// The files an earlier dump in `dir` recorded in its `summary.json` (the summary itself
+/// included), or `None` when the folder holds no summary. A summary that is not a dump's, or
+/// that names anything but a plain file name, is an error: nothing is removed on its word.
+fn recorded_dump(dir: &Path) -> Result<Option<std::collections::HashSet<std::ffi::OsString>>> {
+    let path = dir.join("summary.json");
+    match std::fs::symlink_metadata(&path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Ok(m) if m.is_file() => {}
+        _ => bail!("--dump {}: its summary.json is not a regular file; give an empty or new folder", dir.display()),
+    }
+    let not_ours = || {
+        anyhow::anyhow!(
+            "--dump {}: its summary.json was not written by tessera sort --dump; give an empty or new folder",
+            dir.display()
+        )
+    };
+    let text = crate::commands::read_input(&path)?;
+    let json: serde_json::Value = serde_json::from_slice(&text).map_err(|_| not_ours())?;
+    let files = json.get(DUMP_FILES).and_then(|f| f.as_array()).ok_or_else(not_ours)?;
+    let mut names = std::collections::HashSet::from([std::ffi::OsString::from("summary.json")]);
+    for f in files {
+        let name = f.as_str().ok_or_else(not_ours)?;
+        if name.is_empty() || name.contains('/') || name == "." || name == ".." {
+            return Err(not_ours());
+        }
+        names.insert(name.into());
+    }
+    Ok(Some(names))
 }
 
-/// Checks, before any work, that `--dump DIR` is new, empty, or holds only an earlier dump's
-/// files (which [`clear_dump`] then removes); anything else in it is refused, never deleted.
+/// Checks, before any work, that `--dump DIR` is new, empty, or holds only the files an
+/// earlier dump recorded in its summary (which [`clear_dump`] then removes); anything else in
+/// it is refused, never deleted, whatever its name.
 fn prepare_dump(dir: &Path, model: &Path) -> Result<()> {
     match std::fs::symlink_metadata(dir) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -304,10 +329,12 @@ fn prepare_dump(dir: &Path, model: &Path) -> Result<()> {
         Err(e) => Err(e).with_context(|| format!("cannot use {}", dir.display())),
         Ok(m) if !m.is_dir() => bail!("--dump {}: not a folder", dir.display()),
         Ok(_) => {
+            crate::output::probe_writable(&dir.join("summary.json"), dir)?;
+            let recorded = recorded_dump(dir)?.unwrap_or_default();
+            let model_id = crate::output::Identity::of(model).ok();
             for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
                 let entry = entry.with_context(|| format!("cannot read {}", dir.display()))?;
                 let is_file = entry.file_type().is_ok_and(|t| t.is_file());
-                let model_id = crate::output::Identity::of(model).ok();
                 if model_id.is_some() && crate::output::Identity::of(&entry.path()).ok() == model_id {
                     bail!(
                         "--dump {}: the model {} is in the folder the dump would clear",
@@ -315,9 +342,9 @@ fn prepare_dump(dir: &Path, model: &Path) -> Result<()> {
                         model.display()
                     );
                 }
-                if !is_file || !is_dump_file(&entry.file_name()) {
+                if !is_file || !recorded.contains(&entry.file_name()) {
                     bail!(
-                        "--dump {}: the folder holds {}, which is not from an earlier dump; give an empty or new folder",
+                        "--dump {}: the folder holds {}, which no earlier dump recorded; give an empty or new folder",
                         dir.display(),
                         entry.file_name().to_string_lossy()
                     );
@@ -328,12 +355,15 @@ fn prepare_dump(dir: &Path, model: &Path) -> Result<()> {
     }
 }
 
-/// Removes an earlier dump's files from `dir` (checked by [`prepare_dump`]).
+/// Removes the files an earlier dump recorded in `dir` (checked by [`prepare_dump`]).
 fn clear_dump(dir: &Path) -> Result<()> {
-    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
-        let entry = entry.with_context(|| format!("cannot read {}", dir.display()))?;
-        if entry.file_type().is_ok_and(|t| t.is_file()) && is_dump_file(&entry.file_name()) {
-            std::fs::remove_file(entry.path()).with_context(|| format!("cannot remove {}", entry.path().display()))?;
+    for name in recorded_dump(dir)?.unwrap_or_default() {
+        let path = dir.join(&name);
+        match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("cannot remove {}", path.display()))
+            }
+            _ => {}
         }
     }
     Ok(())
@@ -366,6 +396,12 @@ pub fn run(
     };
     if let Some(dir) = dump {
         clear_dump(dir)?;
+        // The summary, written first, records the files the dump writes, so that a later dump
+        // removes exactly those, even after this one was interrupted.
+        let mut record = serde_json::to_value(&summary)?;
+        let files: Vec<String> = tiles.iter().map(|(index, _)| format!("tile-{index}.ply")).collect();
+        record[DUMP_FILES] = serde_json::json!(files);
+        write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&record)?.as_bytes())?;
         for (index, streams) in &tiles {
             let mut mesh = codec::Mesh::default();
             for s in streams {
@@ -376,13 +412,12 @@ pub fn run(
             }
             write_atomic(&dir.join(format!("tile-{index}.ply")), |w| codec::save::write_ply(&mesh, w))?;
         }
-        write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        crate::outln!("{}", serde_json::to_string_pretty(&summary)?)?;
     } else {
         let t = &summary.totals;
-        println!(
+        crate::outln!(
             "{}: {}x{} tiles on {}x{}, {} of {} triangles visible, {} non-empty tiles",
             summary.model,
             grid.cols,
@@ -392,22 +427,26 @@ pub fn run(
             t.visible_triangles,
             t.triangles,
             t.nonempty_tiles
-        );
-        println!("  BFT        {:>12} bytes   (whole model)", t.bft_bytes);
-        println!("  Tiled BFT  {:>12} bytes   sort {:.1} ms", t.tiled_bft_bytes, summary.sort_ms);
-        println!("  Tri        {:>12} bytes", t.tri_bytes);
+        )?;
+        crate::outln!("  BFT        {:>12} bytes   (whole model)", t.bft_bytes)?;
+        crate::outln!("  Tiled BFT  {:>12} bytes   sort {:.1} ms", t.tiled_bft_bytes, summary.sort_ms)?;
+        crate::outln!("  Tri        {:>12} bytes", t.tri_bytes)?;
         match &summary.chunks {
-            None => println!("  Tiled Tri  {:>12} bytes   sort {:.1} ms", t.tiled_tri_bytes, summary.tri_sort_ms),
+            None => crate::outln!("  Tiled Tri  {:>12} bytes   sort {:.1} ms", t.tiled_tri_bytes, summary.tri_sort_ms)?,
             Some(c) => {
-                println!("  Tiled Tri  {:>12} bytes", t.tiled_tri_bytes);
-                println!(
+                crate::outln!("  Tiled Tri  {:>12} bytes", t.tiled_tri_bytes)?;
+                crate::outln!(
                     "  chunks     {:>12}   {} culled, {} verbatim, {} straddling ({} triangles sorted)",
-                    c.chunks, c.culled, c.verbatim, c.straddling, c.straddling_triangles
-                );
+                    c.chunks,
+                    c.culled,
+                    c.verbatim,
+                    c.straddling,
+                    c.straddling_triangles
+                )?;
             }
         }
         if let Some(dir) = dump {
-            println!("  wrote {} tiles and summary.json to {}", tiles.len(), dir.display());
+            crate::outln!("  wrote {} tiles and summary.json to {}", tiles.len(), dir.display())?;
         }
     }
     Ok(())

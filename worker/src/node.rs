@@ -379,7 +379,8 @@ fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TileP
         .map(|p| TilePixels { rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]], rgba: Vec::new(), ..p })
         .collect();
     msgs.push((0, ToMaster::Pixels { frame, tiles: stripped, span, pm }.encode()));
-    t.send_many(&msgs);
+    // Rank 0 and the display ranks wait for these; a rank that died ends the job from there.
+    let _ = t.send_many(msgs, crate::transport::NO_TIMEOUT);
 }
 
 /// The span of a frame whose first phase (an adaptation or an `.nsp` refinement, done once

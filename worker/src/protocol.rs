@@ -434,6 +434,22 @@ impl<'a> Reader<'a> {
 }
 
 impl ToWorker {
+    /// The message's kind, for errors that name one without dumping its contents.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ToWorker::Frame(_) => "a frame",
+            ToWorker::Shutdown => "a shutdown",
+            ToWorker::Model { .. } => "a progressive mesh",
+            ToWorker::DpmFile { .. } => "a progressive mesh file",
+            ToWorker::PmFrame(_) => "a progressive-mesh frame",
+            ToWorker::Sort(_) => "a sort job",
+            ToWorker::NspModel(_) => "an nSP-tree model",
+            ToWorker::NspFrame(_) => "an nSP-tree frame",
+            ToWorker::DisplayFrame(_) => "a display frame",
+            ToWorker::Swap { .. } => "a swap",
+        }
+    }
+
     pub fn encode(&self) -> Vec<u8> {
         match self {
             ToWorker::Frame(f) => {
@@ -720,6 +736,17 @@ impl ToWorker {
 }
 
 impl ToMaster {
+    /// The message's kind, for errors that name one without dumping its contents.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ToMaster::Ready { .. } => "its adapter",
+            ToMaster::Heartbeat => "a heartbeat",
+            ToMaster::Pixels { .. } => "pixels",
+            ToMaster::Failed { .. } => "a failure",
+            ToMaster::DisplayReady { .. } => "a display's readiness",
+        }
+    }
+
     pub fn encode(&self) -> Vec<u8> {
         match self {
             ToMaster::Ready { adapter, max_texture_side } => {

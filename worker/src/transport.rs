@@ -20,13 +20,26 @@ pub enum RecvError {
 /// Sends one message to a fixed rank from any thread ([`Transport::sender`]).
 pub type SendFn = Box<dyn Fn(&[u8]) + Send>;
 
+/// A send that its receiver did not take while it stayed silent for the whole timeout (a
+/// stopped or hung rank: a live one sends heartbeats while it works).
+#[derive(Debug, PartialEq)]
+pub struct Stalled {
+    /// The rank that took nothing.
+    pub rank: usize,
+}
+
+/// A timeout for sends whose receiver is trusted to be waiting (a worker's pixels to rank 0).
+pub const NO_TIMEOUT: Duration = Duration::from_secs(1 << 40);
+
 /// Point-to-point messaging between ranks.
 pub trait Transport {
     fn rank(&self) -> usize;
     fn size(&self) -> usize;
     fn send(&self, to: usize, msg: &[u8]);
-    /// Sends each `(rank, message)`, all in flight at once, and waits for them.
-    fn send_many(&self, msgs: &[(usize, Vec<u8>)]);
+    /// Sends each `(rank, message)`, all in flight at once, and waits for them; gives up on a
+    /// rank that takes nothing and says nothing for `timeout` (the job is then to end: the
+    /// messages may stay with MPI).
+    fn send_many(&self, msgs: Vec<(usize, Vec<u8>)>, timeout: Duration) -> Result<(), Stalled>;
     /// The next message from any rank, as `(source, bytes)`.
     fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError>;
     /// Ends every rank of the job with a non-zero status.
@@ -98,38 +111,64 @@ impl Transport for Mpi {
     /// frames in flight, rank 0 sends frame k+1's tiles to a worker that is itself sending
     /// frame k's pixels, and two large sends facing each other would wait for each other's
     /// receive for ever. What is received meanwhile waits in the stash for [`Transport::recv`].
-    fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
+    /// A rank whose send has not completed and from which nothing has arrived for `timeout`
+    /// is [`Stalled`]: its request is left with MPI and the messages are leaked, since MPI
+    /// may still read them until the job ends.
+    fn send_many(&self, msgs: Vec<(usize, Vec<u8>)>, timeout: Duration) -> Result<(), Stalled> {
         let _calls = mpi_lock();
-        mpi::request::scope(|scope| {
+        let start = Instant::now();
+        let mut heard: std::collections::HashMap<usize, Instant> = Default::default();
+        let stalled = mpi::request::scope(|scope| {
             let mut pending: Vec<_> = msgs
                 .iter()
-                .map(|(to, m)| Some(self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..])))
+                .map(|(to, m)| Some((*to, self.world.process_at_rank(*to as i32).immediate_send(scope, &m[..]))))
                 .collect();
             let mut spins = 0u32;
             loop {
                 let mut left = false;
                 for slot in pending.iter_mut() {
-                    if let Some(r) = slot.take() {
+                    if let Some((to, r)) = slot.take() {
                         if let Err(r) = r.test() {
-                            *slot = Some(r);
+                            *slot = Some((to, r));
                             left = true;
                         }
                     }
                 }
                 if !left {
-                    break;
+                    return None;
                 }
                 if let Some(m) = self.try_receive() {
+                    heard.insert(m.0, Instant::now());
                     self.stash.lock().unwrap_or_else(|e| e.into_inner()).push_back(m);
                     spins = 0;
-                } else {
-                    spins += 1;
-                    if spins > 1000 {
-                        std::thread::sleep(Duration::from_micros(50));
+                    continue;
+                }
+                let silent = pending
+                    .iter()
+                    .flatten()
+                    .map(|(to, _)| *to)
+                    .find(|to| heard.get(to).copied().unwrap_or(start).elapsed() >= timeout);
+                if let Some(rank) = silent {
+                    for (_, r) in pending.into_iter().flatten() {
+                        // Safety: the request stays with MPI, and its buffer (in `msgs`) is
+                        // leaked below, so it outlives the request.
+                        let _ = unsafe { r.into_raw() };
                     }
+                    return Some(rank);
+                }
+                spins += 1;
+                if spins > 1000 {
+                    std::thread::sleep(Duration::from_micros(50));
                 }
             }
         });
+        match stalled {
+            None => Ok(()),
+            Some(rank) => {
+                std::mem::forget(msgs);
+                Err(Stalled { rank })
+            }
+        }
     }
 
     fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError> {
@@ -211,10 +250,12 @@ impl Transport for Local {
         }
     }
 
-    fn send_many(&self, msgs: &[(usize, Vec<u8>)]) {
-        for (to, m) in msgs {
+    fn send_many(&self, msgs: Vec<(usize, Vec<u8>)>, _timeout: Duration) -> Result<(), Stalled> {
+        // Channels never block a sender.
+        for (to, m) in &msgs {
             self.send(*to, m);
         }
+        Ok(())
     }
 
     fn recv(&self, timeout: Duration) -> Result<(usize, Vec<u8>), RecvError> {
@@ -246,7 +287,7 @@ mod tests {
     fn local_ranks_exchange_messages() {
         let mut ranks = local_ranks(3);
         let (r2, r1, r0) = (ranks.pop().unwrap(), ranks.pop().unwrap(), ranks.pop().unwrap());
-        r0.send_many(&[(1, vec![1]), (2, vec![2, 2])]);
+        r0.send_many(vec![(1, vec![1]), (2, vec![2, 2])], NO_TIMEOUT).unwrap();
         assert_eq!(r1.recv(Duration::from_secs(1)), Ok((0, vec![1])));
         assert_eq!(r2.recv(Duration::from_secs(1)), Ok((0, vec![2, 2])));
         r2.send(0, &[7]);

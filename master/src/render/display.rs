@@ -138,7 +138,7 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
                     }
                     continue;
                 }
-                other => bail!("unexpected message from rank 0: {other:?}"),
+                other => bail!("unexpected message from rank 0: {}", other.name()),
             }
         } else {
             match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {from}"))? {
@@ -159,7 +159,7 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
                     frame
                 }
                 ToMaster::Heartbeat => continue,
-                other => bail!("unexpected message from rank {from}: {other:?}"),
+                other => bail!("unexpected message from rank {from}: {}", other.name()),
             }
         };
         // A display is complete when every tile rank 0 said reaches it has come.

@@ -12,7 +12,7 @@ use worker::transport::Transport;
 
 use super::display::DirectSend;
 use super::jobs::{FrameContext, FrameJobs};
-use super::link::{handshake, receive_pixels, receive_ready, Answer, Early, Silence};
+use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Early, Silence};
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{NspScene, PmScene, PmSource, Scene};
 use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
@@ -74,9 +74,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
-    for v in frame_views(&scene, args, plan, &cam, 0)? {
-        crate::cli::check_camera(&v.camera, v.grid.height)?;
-    }
+    check_cameras(&scene, args, plan, &cam)?;
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
     let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     let adapters = handshake(t, args.timeout, grid)?;
@@ -90,16 +88,16 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget, pool_bytes: *pool_bytes }.encode()
             }
         };
-        t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
+        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
     }
     if let Scene::Nsp(nsp) = &scene {
         let NspScene { file, .. } = nsp.as_ref();
         let model = ToWorker::NspModel(file.skeleton().to_vec()).encode();
-        t.send_many(&(1..=workers).map(|w| (w, model.clone())).collect::<Vec<_>>());
+        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
     }
     let movie = if crate::movie::is_movie(&args.out) {
         let width = if plan.stereo.is_some() { grid.width * 2 } else { grid.width };
-        Some(crate::movie::Movie::start(&args.out, width, grid.height, args.fps)?)
+        Some(crate::movie::Movie::start(&args.out, width, grid.height, args.fps, args.timeout)?)
     } else {
         None
     };
@@ -130,7 +128,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 let start = Instant::now();
                 let sort_start = unix_ms();
                 let ctx = FrameContext { frame: view, camera, grid, workers, args, costs: &costs };
-                t.send_many(&scene.announce(&ctx));
+                send_all(t, scene.announce(&ctx), args.timeout)?;
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
                 if let Some(d) = direct {
                     let indices: Vec<u32> = tiles.iter().map(|s| s.index).collect();
@@ -139,12 +137,12 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                         Some(Eye::Left) => 1,
                         Some(Eye::Right) => 2,
                     };
-                    t.send_many(&d.frame_messages(view, k, code, &indices, grid));
+                    send_all(t, d.frame_messages(view, k, code, &indices, grid), args.timeout)?;
                 }
                 let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
                 let sort_ms = ms(start);
                 let (start, send_start) = (Instant::now(), unix_ms());
-                t.send_many(&msgs);
+                send_all(t, msgs, args.timeout)?;
                 let send_ms = ms(start);
                 let timeline = vec![
                     Span::between("sort", sort_start, send_start, epoch),
@@ -169,7 +167,10 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
         Ok(())
     })();
     let shutdown = ToWorker::Shutdown.encode();
-    t.send_many(&(1..t.size()).map(|r| (r, shutdown.clone())).collect::<Vec<_>>());
+    // Small enough for MPI to buffer at once; a rank that takes nothing within a moment is
+    // already the run's error, which the result below reports.
+    let shutdown_wait = args.timeout.min(std::time::Duration::from_secs(2));
+    let _ = t.send_many((1..t.size()).map(|r| (r, shutdown.clone())).collect(), shutdown_wait);
     // The writer's own error (a full disk, ffmpeg) is the cause when sending to it failed.
     let written = writer.finish();
     match (result, written) {
@@ -234,7 +235,7 @@ fn complete(
                 ready.extend(r.displays);
             }
             let swap = ToWorker::Swap { view }.encode();
-            t.send_many(&d.display_ranks().map(|r| (r, swap.clone())).collect::<Vec<_>>());
+            send_all(t, d.display_ranks().map(|r| (r, swap.clone())).collect(), args.timeout)?;
             let swap_ms = unix_ms();
             timeline.push(Span::between("swap", receive_end, swap_ms, epoch));
             let (first, last) =
@@ -490,6 +491,36 @@ fn frame_views(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u
         .enumerate()
         .map(|(e, camera)| ViewSpec { camera, eye: eye_of(e), display: None, grid: plan.grid })
         .collect())
+}
+
+/// Checks every camera the run will use before any work ([`crate::cli::check_precision`]),
+/// printing its warnings once: each view (eye, display) of the first and the last frame,
+/// which bound a zoom (an orbit changes no depth range, field of view or shift), and of
+/// every frame when `--eye-path` moves the eye.
+fn check_cameras(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera) -> Result<()> {
+    let last = args.frames.saturating_sub(1);
+    let frames: Vec<u32> = if plan.eyes.is_some() { (0..args.frames).collect() } else { vec![0, last] };
+    let mut warned = std::collections::HashSet::new();
+    for k in frames {
+        for v in frame_views(scene, args, plan, cam, k).with_context(|| format!("frame {}", k + 1))? {
+            let eye = match v.eye {
+                Some(Eye::Left) => ", left eye",
+                Some(Eye::Right) => ", right eye",
+                None => "",
+            };
+            let display = match (v.display, &plan.wall) {
+                (Some(i), Some(w)) => format!(", display {}", w.displays[i].name),
+                _ => String::new(),
+            };
+            let what = format!("frame {}{eye}{display}", k + 1);
+            for w in crate::cli::check_precision(&v.camera, v.grid.height).with_context(|| what.clone())? {
+                if warned.insert(w.clone()) {
+                    eprintln!("warning: {w}");
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// This process's resident memory in MB (Linux: `/proc/self/statm`), for the stats.

@@ -17,6 +17,18 @@ pub(super) fn report_failure(t: &dyn Transport, prefix: &str, result: Result<()>
     result
 }
 
+/// Sends `msgs` all at once (see [`Transport::send_many`]); a rank that takes nothing and
+/// says nothing for `timeout` (`--timeout`) ends the run, as silence does while receiving.
+pub(super) fn send_all(t: &dyn Transport, msgs: Vec<(usize, Vec<u8>)>, timeout: Duration) -> Result<()> {
+    t.send_many(msgs, timeout).map_err(|s| {
+        anyhow::anyhow!(
+            "rank {} took no message and sent nothing for {:.0} s (--timeout); counting it as dead",
+            s.rank,
+            timeout.as_secs_f64()
+        )
+    })
+}
+
 /// When each worker was last heard from, for telling a dead worker from a busy one: a worker
 /// sends heartbeats while it works, so only silence longer than the timeout counts.
 pub(super) struct Silence {
@@ -100,7 +112,7 @@ pub(super) fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -
                 adapters[rank] = format!("rank {rank}: {adapter}");
             }
             ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
-            other => bail!("rank {rank} sent {other:?} before it was ready"),
+            other => bail!("rank {rank} sent {} before it was ready", other.name()),
         }
     }
     Ok(adapters.split_off(1))

@@ -25,8 +25,10 @@ pub struct Plan {
     pub inputs: Vec<Identity>,
 }
 /// Above this many output files the up-front identity check looks only at the first and
-/// last frames' names (each frame is checked again as it is written).
-const CHECKED_OUTPUTS: u64 = 100_000;
+/// last frames' names (each frame is checked again as it is written), so that start-up does
+/// not grow with `--frames`: frames' names differ in their numbers, so only an input can
+/// clash with a later frame, and that is what the per-frame check catches.
+const CHECKED_OUTPUTS: u64 = 1_000;
 
 /// Checks the flags that need more than their own value (the wall, the grid against the
 /// frame, outputs against inputs); every rank runs it before MPI starts.
@@ -93,6 +95,15 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
         }
         if stereo == Some(StereoOutput::SideBySide) {
             bail!("display ranks write each eye's displays separately: leave out --stereo-output side-by-side");
+        }
+    }
+    if args.out.as_os_str() == "-" {
+        let images = args.frames as u64 * if stereo == Some(StereoOutput::Separate) { 2 } else { 1 };
+        if images > 1 || wall.is_some() {
+            bail!(
+                "--out - takes one image; for {} name a file (its images are numbered) or a movie",
+                if wall.is_some() { "a wall's displays" } else { "several images" }
+            );
         }
     }
     if movie && stereo == Some(StereoOutput::Separate) {

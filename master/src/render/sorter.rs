@@ -58,9 +58,9 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
                 let owners = &job.owners;
                 let Share { jobs, .. } =
                     scene.share_jobs(&ctx, s, |tiles| tiles.iter().map(|&i| owners[i] as usize).collect())?;
-                t.send_many(&frame_messages(jobs));
+                super::link::send_all(t, frame_messages(jobs), args.timeout)?;
             }
-            other => bail!("unexpected message from rank 0: {other:?}"),
+            other => bail!("unexpected message from rank 0: {}", other.name()),
         }
     }
 }
