@@ -749,3 +749,32 @@ fn every_camera_of_a_run_is_checked() {
     assert!(!dir.path().join("f-0001.png").exists(), "refused before the first frame");
     ok(&render(&["--stereo", "0.05"]));
 }
+
+#[test]
+fn errors_are_one_line_in_the_users_terms() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/woody.obj");
+    let png = dir.path().join("f.png");
+    let bad_wall = dir.path().join("bad.toml");
+    std::fs::write(&bad_wall, "columns = 2\nrows = x\n").unwrap();
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(
+        &wall,
+        "plane = { bottom_left = [0,0,0], bottom_right = [1,0,0], top_left = [0,1,0] }\n\
+         columns = 2\nrows = 1\ndisplay_width = 64\ndisplay_height = 64\n",
+    )
+    .unwrap();
+    let eyes = dir.path().join("eyes.txt");
+    std::fs::write(&eyes, "0 0.5 2\nfoo\n").unwrap();
+    for (args, needle) in [
+        (vec!["render", &model, "--wall", s(&bad_wall), "--out", s(&png)], "bad.toml: not a valid wall description"),
+        (
+            vec!["render", &model, "--wall", s(&wall), "--eye-path", s(&eyes), "--out", s(&png)],
+            "eyes.txt: line 2: expected x,y,z, got 'foo'",
+        ),
+    ] {
+        let o = tessera(&args);
+        refused(&o, needle);
+        assert_eq!(stderr(&o).trim_end().lines().count(), 1, "one line: {}", stderr(&o));
+    }
+}

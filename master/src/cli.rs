@@ -114,7 +114,12 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 fn parse_floats<const N: usize>(s: &str, shape: &str) -> Result<[f32; N], String> {
     let v: Vec<f32> = s
         .split(',')
-        .map(|c| c.trim().parse::<f32>().map_err(|_| format!("'{c}' is not a number in '{s}'")))
+        .map(|c| {
+            c.trim().parse::<f32>().map_err(|_| match c.trim() == s.trim() {
+                true => format!("expected {shape}, got '{s}'"),
+                false => format!("'{c}' is not a number in '{s}'"),
+            })
+        })
         .collect::<Result<_, _>>()?;
     let v: [f32; N] = v.try_into().map_err(|_| format!("expected {shape}, got '{s}'"))?;
     if !v.iter().all(|c| c.is_finite()) {

@@ -251,7 +251,8 @@ impl Wall {
                 let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
                 format!(" at line {line}, column {column}")
             });
-            anyhow::anyhow!("not a valid wall description{at}: {}", e.message().trim())
+            let message: Vec<&str> = e.message().lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+            anyhow::anyhow!("not a valid wall description{at}: {}", message.join("; "))
         })?;
         let grid = [file.columns, file.rows, file.display_width, file.display_height];
         let (plane, eye) = (file.plane, file.eye.map(glam::Vec3::from));

@@ -111,7 +111,7 @@ fn main() -> ExitCode {
         // shell reports for a command ended by SIGPIPE.
         Err(e) if master::output::is_broken_pipe(&e) => ExitCode::from(141),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", master::output::one_line(&e));
             ExitCode::FAILURE
         }
     }

@@ -100,6 +100,13 @@ pub fn install_signal_handler() {
     }
 }
 
+/// An error as the one line a user reads: its causes joined by `: ` (anyhow's `{:#}`), and
+/// any line breaks a cause carries (a parser's snippet, a tool's message) joined by `; `.
+pub fn one_line(e: &anyhow::Error) -> String {
+    let text = format!("{e:#}");
+    text.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join("; ")
+}
+
 /// Whether an error comes from writing to a closed pipe (`tessera sort --json | head -c 1`):
 /// `main` then ends quietly with a non-zero status, as a command in a pipeline should.
 pub fn is_broken_pipe(e: &anyhow::Error) -> bool {

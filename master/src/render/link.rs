@@ -12,7 +12,7 @@ use worker::transport::{RecvError, Transport};
 /// rank 0, which ends the job with it (`prefix` says who failed), and returned.
 pub(super) fn report_failure(t: &dyn Transport, prefix: &str, result: Result<()>) -> Result<()> {
     if let Err(e) = &result {
-        t.send(0, &ToMaster::Failed { reason: format!("{prefix}{e:#}") }.encode());
+        t.send(0, &ToMaster::Failed { reason: format!("{prefix}{}", crate::output::one_line(e)) }.encode());
     }
     result
 }

@@ -52,7 +52,7 @@ pub fn run_master(mpi: &transport::Mpi, args: &RenderArgs, plan: &Plan) -> Resul
         anyhow::bail!("run with at least 2 ranks: rank 0 sorts and composites, ranks 1.. render");
     }
     if let Err(e) = frame_loop::run(mpi, args, plan) {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", crate::output::one_line(&e));
         mpi.abort(1);
     }
     Ok(())
