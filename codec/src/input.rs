@@ -13,7 +13,7 @@
 
 use std::io::Read;
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// The default cap on decompressed input, 1 GiB: about 40M triangles of binary PLY, and
 /// far beyond any real mesh's gzip ratio at the sizes a user feeds one process.
@@ -29,6 +29,48 @@ pub fn set_max_decompressed_bytes(bytes: u64) {
 /// The cap on decompressed input now in force.
 pub fn max_decompressed_bytes() -> u64 {
     MAX_DECOMPRESSED.load(Ordering::Relaxed)
+}
+
+static ALLOW_OUTSIDE_URIS: AtomicBool = AtomicBool::new(false);
+
+/// Lets a glTF file's buffer and image URIs name files outside its folder (absolute paths,
+/// `..` that leaves it, symlinks that lead out of it) for this process: the
+/// `--allow-outside-uris` flag. Off by default, so a model file cannot make Tessera read any
+/// other file on the machine.
+pub fn set_allow_outside_uris(allow: bool) {
+    ALLOW_OUTSIDE_URIS.store(allow, Ordering::Relaxed);
+}
+
+/// Whether glTF URIs may leave the model's folder ([`set_allow_outside_uris`]).
+pub fn allow_outside_uris() -> bool {
+    ALLOW_OUTSIDE_URIS.load(Ordering::Relaxed)
+}
+
+/// Refuses, before anything is allocated, `count` values of `each` bytes that a file's
+/// `field` asks for when they would take more than [`max_decompressed_bytes`]: the message
+/// names the field, the count and the memory, and the flag that raises the cap.
+pub fn check_decoded(field: &str, count: u64, unit: &str, each: u64) -> Result<(), String> {
+    let cap = max_decompressed_bytes();
+    let need = count.saturating_mul(each);
+    if need > cap {
+        return Err(format!(
+            "{field}: {count} {unit} would take {} decoded, above the cap on decompressed input of {} \
+             (raise it with --max-decompressed)",
+            mib(need),
+            mib(cap)
+        ));
+    }
+    Ok(())
+}
+
+/// Bytes in MiB for messages ("3.2 MiB", "49152 MiB").
+fn mib(bytes: u64) -> String {
+    let m = bytes as f64 / (1u64 << 20) as f64;
+    if m < 10.0 {
+        format!("{m:.1} MiB")
+    } else {
+        format!("{m:.0} MiB")
+    }
 }
 
 /// Reads a whole regular file. Anything else (a device, a FIFO, a socket, a directory, or a

@@ -146,6 +146,10 @@ pub struct Cli {
     /// The most bytes a gzip-compressed input may expand to (K, M, G, T suffixes allowed).
     #[arg(long, global = true, value_parser = parse_bytes, default_value = "1G")]
     pub max_decompressed: u64,
+    /// Let a glTF model's buffer URIs name files outside its folder (absolute paths, `..`,
+    /// symlinks that lead out); by default they are refused.
+    #[arg(long, global = true)]
+    pub allow_outside_uris: bool,
 }
 
 #[derive(Subcommand)]

@@ -20,6 +20,7 @@ fn main() -> ExitCode {
     master::output::install_signal_handler();
     let cli = Cli::parse();
     codec::input::set_max_decompressed_bytes(cli.max_decompressed);
+    codec::input::set_allow_outside_uris(cli.allow_outside_uris);
     let result = match &cli.command {
         Command::Encode { input, output, options } => commands::encode(input, output, options),
         Command::Decode { input, output } => commands::decode(input, output),

@@ -26,8 +26,21 @@
 //! * **Attributes**: positions only for now; `NORMAL` and `COLOR_0` are present in the
 //!   files we read but the mesh does not carry attributes yet (issue 17, item 3).
 //!
+//! * **Files**: a buffer URI names a file in the model's folder (or below it). An absolute
+//!   path, a `..` that leads out of the folder, or a symlink that does (the canonical paths
+//!   compared) is refused unless `--allow-outside-uris` is given
+//!   ([`crate::input::allow_outside_uris`]); a URI with a scheme other than `data:` (`http:`,
+//!   `https:`, `file://`) is refused as remote. Images are not read.
+//! * **Sizes**: what a file can make the reader allocate is checked before it is allocated,
+//!   against the cap on decompressed input ([`crate::input::max_decompressed_bytes`],
+//!   `--max-decompressed`): each accessor's values (8 bytes each, with or without a buffer
+//!   view), the buffer files read and the meshopt fallback buffers together, a Draco
+//!   stream's decoded values (Draco's own limits), and the running totals of the model's
+//!   vertices (28 bytes each: position, normal, colour) and triangles (12), every instance of
+//!   a mesh that several nodes use counted.
+//!
 //! Every error is one line naming what is wrong and where (buffer, view, accessor, mesh and
-//! primitive by index).
+//! primitive by index; attributes by their glTF names).
 
 use std::collections::HashSet;
 use std::path::Path;
@@ -61,7 +74,8 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
         for (p, prim) in mesh.primitives.iter().enumerate() {
             for (semantic, acc) in &prim.attributes {
                 if acc.value() >= root.accessors.len() {
-                    let what = format!("mesh {m} primitive {p}: attribute {semantic:?} names accessor {}", acc.value());
+                    let semantic = semantic.to_string();
+                    let what = format!("mesh {m} primitive {p}: attribute {semantic} names accessor {}", acc.value());
                     return Err(fail(format!("{what}, but the file has {}", root.accessors.len())));
                 }
             }
@@ -144,24 +158,32 @@ fn read_optional(
     let comps = match (acc.dimensions(), &semantic) {
         (Dimensions::Vec3, _) => 3,
         (Dimensions::Vec4, Semantic::Colors(_)) => 4,
-        _ => return Err(format!("{semantic:?} accessor {} has the wrong type", acc.index())),
+        _ => return Err(format!("{} accessor {} has the wrong type", semantic.to_string(), acc.index())),
     };
     if acc.count() != n {
-        return Err(format!("{semantic:?} accessor {} has {} values for {n} vertices", acc.index(), acc.count()));
+        let name = semantic.to_string();
+        return Err(format!("{name} accessor {} has {} values for {n} vertices", acc.index(), acc.count()));
     }
     let flat = read_accessor(&acc, buffers)?;
     Ok(Some(flat.chunks_exact(comps).map(|c| [c[0], c[1], c[2], if comps == 4 { c[3] } else { 1.0 }]).collect()))
 }
 
-/// Every buffer's bytes: a data URI decoded, a file beside the glTF read, the GLB's binary
-/// chunk, or zeros for a meshopt fallback buffer (filled by [`decode_meshopt_views`]).
+/// Every buffer's bytes: a data URI decoded, a file in the glTF's folder read
+/// ([`resolve_uri`]), the GLB's binary chunk, or zeros for a meshopt fallback buffer (filled
+/// by [`decode_meshopt_views`]). The files read and the fallback buffers take at most the cap
+/// on decompressed input in all (a file may name one buffer file many times).
 fn load_buffers(path: &Path, doc: &gltf::Document, bin: Option<Vec<u8>>) -> Result<Vec<Vec<u8>>, LoadError> {
     let mut bin = bin;
     let mut out = Vec::new();
+    let mut total = 0u64;
     for buffer in doc.buffers() {
         let fail = |what: String| err(path, format!("glTF: buffer {}: {what}", buffer.index()));
         let len = buffer.length();
         let fallback = buffer.extension_value("EXT_meshopt_compression").is_some();
+        let mut room = |bytes: u64, what: &str| {
+            total = total.saturating_add(bytes);
+            crate::input::check_decoded(&format!("buffers read so far ({what})"), total, "bytes", 1).map_err(fail)
+        };
         let data = match buffer.source() {
             gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
                 let (_, payload) =
@@ -171,14 +193,14 @@ fn load_buffers(path: &Path, doc: &gltf::Document, bin: Option<Vec<u8>>) -> Resu
                     .map_err(|e| fail(format!("bad base64 data: {e}")))?
             }
             gltf::buffer::Source::Uri(uri) => {
-                let file = path.parent().unwrap_or(Path::new(".")).join(percent_decode(uri));
-                crate::input::read_file(&file).map_err(|e| fail(format!("{}: {e}", file.display())))?
+                let file = resolve_uri(path, uri).map_err(|e| fail(format!("URI '{uri}': {e}")))?;
+                let size = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
+                room(size, &format!("'{uri}'"))?;
+                crate::input::read_file(&file).map_err(|e| fail(format!("URI '{uri}': {e}")))?
             }
             gltf::buffer::Source::Bin if buffer.index() == 0 && bin.is_some() => bin.take().unwrap_or_default(),
             gltf::buffer::Source::Bin if fallback => {
-                if len as u64 > crate::input::max_decompressed_bytes() {
-                    return Err(fail(format!("a fallback buffer of {len} bytes is larger than allowed")));
-                }
+                room(len as u64, "an EXT_meshopt_compression fallback buffer")?;
                 vec![0; len]
             }
             gltf::buffer::Source::Bin => return Err(fail("no data (no URI, and not a GLB's binary chunk)".into())),
@@ -189,6 +211,58 @@ fn load_buffers(path: &Path, doc: &gltf::Document, bin: Option<Vec<u8>>) -> Resu
         out.push(data);
     }
     Ok(out)
+}
+
+/// The file a buffer URI names, confined to the model's folder: a relative reference, its
+/// `%XX` escapes decoded, joined to the folder of `model`. Refused unless
+/// [`crate::input::allow_outside_uris`] (`--allow-outside-uris`): an absolute path, a `..`
+/// that leads out of the folder, and a path that leads out through a symlink (the
+/// canonical paths compared). A URI with a scheme (`http:`, `https:`, `file://`, ...) is
+/// refused always: Tessera reads no network and no other URI scheme.
+fn resolve_uri(model: &Path, uri: &str) -> Result<std::path::PathBuf, String> {
+    let scheme = uri.split_once(':').map(|(s, _)| s).filter(|s| {
+        s.len() > 1
+            && s.starts_with(|c: char| c.is_ascii_alphabetic())
+            && s.chars().all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+    });
+    if let Some(scheme) = scheme {
+        let lower = scheme.to_ascii_lowercase();
+        if lower == "http" || lower == "https" || uri[scheme.len() + 1..].starts_with("//") {
+            return Err(format!("remote URIs are not supported ({lower}:); put the data beside the model"));
+        }
+    }
+    let relative = percent_decode(uri);
+    let folder = model.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let file = folder.join(&relative);
+    if crate::input::allow_outside_uris() {
+        return Ok(file);
+    }
+    let rel = Path::new(&relative);
+    if rel.has_root() {
+        return Err("an absolute path; buffers must lie in the model's folder (--allow-outside-uris allows it)".into());
+    }
+    let mut depth = 0i64;
+    for c in rel.components() {
+        match c {
+            std::path::Component::ParentDir => depth -= 1,
+            std::path::Component::Normal(_) => depth += 1,
+            _ => {}
+        }
+        if depth < 0 {
+            return Err("'..' leads out of the model's folder (--allow-outside-uris allows it)".into());
+        }
+    }
+    // Symlinks: the file's canonical path must lie under the folder's. A file that does not
+    // exist is reported by the read that follows.
+    if let (Ok(dir), Ok(target)) = (std::fs::canonicalize(folder), std::fs::canonicalize(&file)) {
+        if !target.starts_with(&dir) {
+            return Err(format!(
+                "a symlink leads out of the model's folder, to {} (--allow-outside-uris allows it)",
+                target.display()
+            ));
+        }
+    }
+    Ok(file)
 }
 
 /// A relative URI's `%XX` escapes decoded (file names with spaces are written `%20`).
@@ -235,6 +309,10 @@ fn decode_meshopt_views(doc: &gltf::Document, buffers: &mut [Vec<u8>]) -> Result
             .checked_mul(stride)
             .filter(|&s| s <= view.length())
             .ok_or_else(|| fail("count x byteStride exceeds the view"))?;
+        // The view's place in its buffer, checked before its decoded bytes are allocated.
+        if buffers[view.buffer().index()].len().checked_sub(view.offset()).is_none_or(|room| room < size) {
+            return Err(fail("the view lies outside its buffer"));
+        }
         if stride == 0
             || stride > 256
             || (mode != "ATTRIBUTES" && stride != 2 && stride != 4)
@@ -356,6 +434,13 @@ fn read_primitive(
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
         return Err(format!("index {bad}, but it has {n} vertices"));
     }
+    // The whole model so far, with this primitive: each vertex takes a position, a normal and
+    // a colour (28 bytes), each triangle 12. A mesh that many nodes instance is counted at
+    // every instance.
+    let vertices = out.mesh.positions.len() as u64 + n as u64;
+    crate::input::check_decoded("the primitives read so far", vertices, "vertices", 28)?;
+    let triangles = out.mesh.triangles.len() as u64 + indices.len() as u64;
+    crate::input::check_decoded("the primitives read so far", triangles, "triangles at most", 12)?;
     let base = u32::try_from(out.mesh.positions.len())
         .ok()
         .filter(|b| b.checked_add(n as u32).is_some())
@@ -363,7 +448,7 @@ fn read_primitive(
     for (k, p) in positions.iter().enumerate() {
         let q = world.transform_point3(DVec3::from(*p)).to_array().map(|c| c as f32);
         if !q.iter().all(|c| c.is_finite()) {
-            return Err(format!("vertex {k}: a non-finite position {q:?}"));
+            return Err(format!("vertex {k}: a non-finite position ({}, {}, {})", q[0], q[1], q[2]));
         }
         out.mesh.positions.push(q);
     }
@@ -381,7 +466,7 @@ fn read_primitive(
             for (k, v) in normals.iter().enumerate() {
                 let m = (to_world * DVec3::new(v[0], v[1], v[2])).normalize_or_zero().to_array().map(|c| c as f32);
                 if !m.iter().all(|c| c.is_finite()) {
-                    return Err(format!("vertex {k}: a non-finite normal {v:?}"));
+                    return Err(format!("vertex {k}: a non-finite normal ({}, {}, {})", v[0], v[1], v[2]));
                 }
                 attributes.normals.push(m);
             }
@@ -447,9 +532,25 @@ fn read_draco(ext: &gltf::json::Value, doc: &gltf::Document, buffers: &[Vec<u8>]
     let doc_view = doc.views().nth(view_index).ok_or_else(|| fail("its bufferView does not exist"))?;
     let bytes = view_bytes(&doc_view, buffers)?;
     let mut mesh = draco_core::Mesh::new();
-    draco_core::MeshDecoder::new()
-        .decode(&mut draco_core::DecoderBuffer::new(bytes), &mut mesh)
-        .map_err(|e| fail(&format!("corrupt Draco stream: {e:?}")))?;
+    // Draco's own ceilings at the cap on decompressed input: its decoded values, and as many
+    // points and faces as 12 bytes each of the cap hold.
+    let cap = crate::input::max_decompressed_bytes();
+    let limits = draco_core::DecodeLimits::default()
+        .with_max_decoded_bytes(cap)
+        .with_max_points(cap / 12)
+        .with_max_faces(cap / 12);
+    draco_core::MeshDecoder::new().decode(&mut draco_core::DecoderBuffer::new(bytes).with_limits(limits), &mut mesh).map_err(
+        |e| {
+            if e.kind() == draco_core::ErrorKind::LimitExceeded {
+                fail(&format!(
+                    "the Draco stream decodes to more than the cap on decompressed input allows ({}; raise it with --max-decompressed)",
+                    one_line(&e.to_string())
+                ))
+            } else {
+                fail(&format!("corrupt Draco stream ({})", one_line(&e.to_string())))
+            }
+        },
+    )?;
     let attr = mesh.attribute_by_unique_id(unique).ok_or_else(|| fail("the stream has no POSITION attribute"))?;
     if attr.num_components() != 3 {
         return Err(fail("POSITION does not have three components"));
@@ -481,6 +582,11 @@ fn read_draco(ext: &gltf::json::Value, doc: &gltf::Document, buffers: &[Vec<u8>]
     Ok(DracoPrimitive { positions, indices, normals: optional("NORMAL", false)?, colors: optional("COLOR_0", true)? })
 }
 
+/// A message from a library on one line.
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// The bytes of a buffer view, checked against its buffer.
 fn view_bytes<'b>(view: &gltf::buffer::View, buffers: &'b [Vec<u8>]) -> Result<&'b [u8], String> {
     let buffer = &buffers[view.buffer().index()];
@@ -502,6 +608,9 @@ fn read_accessor(acc: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<Vec<f64>, 
         .checked_mul(comps)
         .filter(|&t| t <= 1 << 31)
         .ok_or_else(|| format!("accessor {}: count {count} is too large", acc.index()))?;
+    // Checked before allocating: an accessor without a buffer view (zeros, or its sparse
+    // values) costs nothing in the file whatever its count.
+    crate::input::check_decoded(&format!("accessor {} (count {count})", acc.index()), total as u64, "values", 8)?;
     let mut out = vec![0f64; total];
     let read = |bytes: &[u8], k: usize| -> f64 {
         let b = &bytes[k * csize..];
@@ -562,6 +671,9 @@ fn read_accessor(acc: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<Vec<f64>, 
     }
     if let Some(sparse) = acc.sparse() {
         let n = sparse.count();
+        if n > count {
+            return Err(format!("accessor {}: sparse count {n} exceeds its count {count}", acc.index()));
+        }
         let (iv, vv) = (sparse.indices().view(), sparse.values().view());
         let isize = match sparse.indices().index_type() {
             gltf::accessor::sparse::IndexType::U8 => 1,
