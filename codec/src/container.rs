@@ -59,8 +59,9 @@ pub enum FormatError {
     #[error("{0}")]
     Io(String),
     /// Well formed, but decoding it would take more memory than the cap on decompressed
-    /// input allows ([`crate::input::max_decompressed_bytes`]).
-    #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
+    /// input allows ([`crate::input::max_decompressed_bytes`]); the message says so, with the
+    /// flag that raises the cap ([`crate::input::check_decoded`]).
+    #[error("{0}")]
     TooLarge(String),
 }
 

@@ -93,7 +93,7 @@ fn a_one_chunk_model_is_the_single_stream_file() {
         let file = ChunkedFile::open(bytes).unwrap();
         assert_eq!(file.entries.len(), 1);
         assert!(file.border(0).unwrap().slots.is_empty(), "one chunk has no border");
-        assert!(file.chunk_bft(0)[12..] == single.bytes[12..] || mesh.used_vertices().contains(&false));
+        assert!(file.chunk_bft(0).unwrap()[12..] == single.bytes[12..] || mesh.used_vertices().contains(&false));
     }
 }
 
@@ -115,7 +115,7 @@ fn check_frame(model: &ChunkedModel<Vec<u8>>, whole: &bft::Decoded, cam: &Camera
                 let (tris, base): (Vec<[u32; 3]>, u32) = match &p.kind {
                     PieceKind::Verbatim => {
                         assert_eq!(classes[p.chunk as usize], Class::Verbatim(tile.index as u32));
-                        (bft::decode(model.file.chunk_bft(p.chunk as usize)).unwrap().triangles, e.first_slot)
+                        (bft::decode(&model.file.chunk_bft(p.chunk as usize).unwrap()).unwrap().triangles, e.first_slot)
                     }
                     PieceKind::Sorted { bytes, slots, .. } => {
                         let d = bft::decode(bytes).expect("a piece decodes");

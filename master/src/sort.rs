@@ -43,9 +43,10 @@ pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
     Ok(Model { bytes, tiles })
 }
 
-/// A chunked `.bft` model (version 3), memory-mapped: only its header and directory are read
-/// here, each chunk when a frame needs it.
-pub type Chunked = codec::bft::chunked::sort::ChunkedModel<memmap2::Mmap>;
+/// A chunked `.bft` model (version 3), read with positioned reads: only its header and
+/// directory are read here, each chunk when a frame needs it (a file truncated meanwhile is an
+/// error naming the chunk, not a SIGBUS as a mapping would give).
+pub type Chunked = codec::bft::chunked::sort::ChunkedModel<codec::bft::chunked::FileSource>;
 
 /// Opens `path` as a chunked model if it is one (`None` otherwise), with a cache of
 /// `cache_bytes` for its straddling chunks' tables.
@@ -62,11 +63,22 @@ pub fn open_chunked(path: &Path, cache_bytes: usize) -> Result<Option<Chunked>> 
     {
         return Ok(None);
     }
-    // Safety: the map is read-only; the file must not be truncated or rewritten while the
-    // process runs (as for any memory-mapped input), which the README says of `render`.
-    let map = unsafe { memmap2::Mmap::map(&file) }.with_context(|| format!("cannot map {}", path.display()))?;
-    let file = codec::bft::chunked::ChunkedFile::open(map).with_context(|| format!("{}", path.display()))?;
+    drop(file);
+    let source = codec::bft::chunked::FileSource::open(path)?;
+    let file = codec::bft::chunked::ChunkedFile::open(source).with_context(|| format!("{}", path.display()))?;
+    truncate_hook(path, file.entries.first().map_or(0, |e| e.offset));
     Ok(Some(codec::bft::chunked::sort::ChunkedModel::new(file, cache_bytes)))
+}
+
+/// Test hook: `TESSERA_FAULT=truncate-after-open` cuts a chunked model to its header and
+/// directory (`head` bytes) once they are read, so a test sees what a file truncated while
+/// in use gives. Unset in normal runs.
+fn truncate_hook(path: &Path, head: u64) {
+    if std::env::var_os("TESSERA_FAULT").is_some_and(|v| v == "truncate-after-open") {
+        if let Ok(f) = std::fs::OpenOptions::new().write(true).open(path) {
+            let _ = f.set_len(head);
+        }
+    }
 }
 
 /// The camera of a chunked model: the flags given, the rest framing its bounding box.
@@ -243,17 +255,17 @@ pub fn sort_chunked_frame(
                 .map(|p| match p.kind {
                     PieceKind::Verbatim => {
                         vertices += file.entries[p.chunk as usize].slots as usize;
-                        file.chunk_bft(p.chunk as usize).to_vec()
+                        Ok(file.chunk_bft(p.chunk as usize)?.into_owned())
                     }
                     PieceKind::Sorted { bytes, slots, .. } => {
                         vertices += slots.len();
-                        bytes
+                        Ok(bytes)
                     }
                 })
-                .collect();
-            (t.index, streams, triangles, vertices)
+                .collect::<Result<_, codec::bft::BftError>>()?;
+            Ok((t.index, streams, triangles, vertices))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let per_tile: Vec<TileSummary> = tiles
         .iter()
         .map(|(index, streams, triangles, vertices)| {
@@ -267,7 +279,7 @@ pub fn sort_chunked_frame(
         visible_triangles: counts.visible_triangles as usize,
         tiled_triangles: per_tile.iter().map(|t| t.triangles as usize).sum(),
         nonempty_tiles: tiles.len(),
-        bft_bytes: file.bytes().len(),
+        bft_bytes: file.file_len() as usize,
         tri_bytes: counts.visible_triangles as usize * tri_sort::TRIANGLE_BYTES,
         tiled_bft_bytes: per_tile.iter().map(|t| t.bytes).sum(),
         tiled_tri_bytes: per_tile.iter().map(|t| t.tri_bytes).sum(),

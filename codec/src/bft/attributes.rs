@@ -446,15 +446,7 @@ pub(crate) fn decode_order(
 ) -> Result<Vec<u32>, BftError> {
     // `Decoded::to_mesh` gives every input vertex a place, 12 bytes of position at least: a
     // header that names more than the cap allows is refused here, not allocated there.
-    let need = u64::from(limit) * 12;
-    let cap = crate::input::max_decompressed_bytes();
-    if need > cap {
-        return Err(BftError::TooLarge(format!(
-            "the vertex order names {limit} input vertices ({} MiB decoded, the cap is {} MiB)",
-            need >> 20,
-            cap >> 20
-        )));
-    }
+    crate::input::check_decoded("the vertex order", limit.into(), "input vertices", 12).map_err(BftError::TooLarge)?;
     let src = sources(slots, duplicates);
     let mut coder = crate::rangecoder::UIntCoder::default();
     let mut dec = Decoder::new(bytes);

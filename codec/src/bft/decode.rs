@@ -209,6 +209,10 @@ fn decode_streams<S: SymbolSource>(
     for _ in 0..h.tail_slots {
         let prev = st.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
         st.new_slot(Prediction::Previous, [prev, NONE, NONE])?;
+        // Past the stream's end positions decode from zeros: stop there, not at the count.
+        if st.source.overrun()[1] > 8 {
+            return Err(BftError::Truncated("geometry stream"));
+        }
     }
     if st.positions.len() != h.slots as usize {
         return Err(corrupt(format!("decoded {} vertex slots, header says {}", st.positions.len(), h.slots)));

@@ -197,7 +197,31 @@ impl Header {
         if h.loose_triangles > h.triangles || h.duplicates > h.slots || h.tail_slots > h.slots {
             return Err(corrupt("inconsistent counts in header"));
         }
+        h.check_counts()?;
         Ok(h)
+    }
+
+    /// Refuses counts whose decoded arrays would exceed the cap on decompressed input
+    /// ([`crate::input::max_decompressed_bytes`]), before the decoder allocates them: per slot
+    /// its position and the attributes the stream carries (as the decoded mesh holds them:
+    /// 12 bytes, colours 4, normals 12, the input index 4), per triangle 12 bytes, per
+    /// command 8 (the tile sort records them), and with the input order every input vertex
+    /// (`Decoded::to_mesh` gives each a place, with its colour and normal).
+    fn check_counts(&self) -> Result<(), BftError> {
+        let a = self.attributes;
+        let per_vertex = 12 + if a.colors { 4 } else { 0 } + if a.normal_bits > 0 { 12 } else { 0 };
+        let per_slot = per_vertex + if a.order { 4 } else { 0 };
+        let check = |field: &str, count: u32, unit: &str, each: u64| {
+            crate::input::check_decoded(&format!("header field {field}"), count.into(), unit, each)
+                .map_err(BftError::TooLarge)
+        };
+        check("slots", self.slots, "vertex slots", per_slot)?;
+        check("triangles", self.triangles, "triangles", 12)?;
+        check("commands", self.commands, "commands", 8)?;
+        if a.order {
+            check("input_vertices", self.input_vertices, "input vertices", per_vertex)?;
+        }
+        Ok(())
     }
 }
 
@@ -210,16 +234,35 @@ pub(crate) fn put_box(b: &mut Vec<u8>, min: [f32; 3], step: f32, max: [f32; 3]) 
 }
 
 /// The checks of a header's quantization, single-stream or chunked: 8 to 24 bits, a finite
-/// positive step, a finite and ordered box.
+/// positive step, a finite and ordered box, and a grid whose every point fits `f32` (the
+/// far corner `bbox_min + step * (2^bits - 1)`, computed as dequantization computes it), so
+/// that no decoded position, chunk box or camera built from them is infinite.
 pub(crate) fn check_quantization(bits: u8, min: [f32; 3], step: f32, max: [f32; 3]) -> Result<(), BftError> {
     if !(8..=24).contains(&bits) {
-        return Err(corrupt(format!("quantization of {bits} bits is outside 8..=24")));
+        return Err(corrupt(format!("header field quant_bits: {bits} bits is outside 8..=24")));
     }
-    if !(step.is_finite() && step > 0.0 && min.iter().all(|v| v.is_finite())) {
-        return Err(corrupt("non-finite quantization parameters"));
+    if !(step.is_finite() && step > 0.0) {
+        return Err(corrupt(format!("header field step: {step} is not a finite number above zero")));
     }
-    if !(min.iter().zip(&max).all(|(lo, hi)| hi.is_finite() && lo <= hi)) {
-        return Err(corrupt(format!("the bounding box {min:?} .. {max:?} is not finite and ordered")));
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    for a in 0..3 {
+        if !min[a].is_finite() || !max[a].is_finite() {
+            return Err(corrupt(format!(
+                "header field bbox: {} .. {} on {} does not fit f32",
+                min[a], max[a], AXES[a]
+            )));
+        }
+        if min[a] > max[a] {
+            return Err(corrupt(format!("header field bbox: {} .. {} on {} is not ordered", min[a], max[a], AXES[a])));
+        }
+        let levels = (1u32 << bits) - 1;
+        let far = min[a] + levels as f32 * step;
+        if !far.is_finite() {
+            return Err(corrupt(format!(
+                "header field step: {} + {step} x {levels} on {} does not fit f32",
+                min[a], AXES[a]
+            )));
+        }
     }
     Ok(())
 }

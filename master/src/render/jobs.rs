@@ -242,7 +242,7 @@ impl ChunkedScene {
                         } else {
                             stats.sent += 1;
                             let normals = file.border(chunk as usize)?.slot_normals();
-                            let bft = file.chunk_bft(chunk as usize).to_vec();
+                            let bft = file.chunk_bft(chunk as usize)?.into_owned();
                             mirror.insert(chunk, worker::node::kept_cost(&bft, &normals), ());
                             TileStream { source: StreamSource::Keep { chunk, bft }, normals }
                         }

@@ -57,6 +57,9 @@
 //! were distributed. (The sums are grouped by chunk, so a chunked file's normals may differ in
 //! the last bit from the single-stream file's.)
 
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+
 use crate::container::{get_varint, put_varint, Format, FormatError};
 use crate::mesh::Quantization;
 
@@ -84,6 +87,98 @@ fn corrupt(msg: impl Into<String>) -> FormatError {
 
 fn chunk_err(i: usize, msg: impl std::fmt::Display) -> FormatError {
     corrupt(format!("chunk {i}: {msg}"))
+}
+
+/// An error of chunk `i`'s own stream, named by its chunk: a corrupt stream's message once
+/// ("corrupt .bft data: chunk 3: ..."), a stream too large for the cap still too large, and a
+/// read that failed as it was.
+fn in_chunk(i: usize, e: FormatError) -> FormatError {
+    match e {
+        FormatError::Corrupt(f, m) => FormatError::Corrupt(f, format!("chunk {i}: {m}")),
+        FormatError::TooLarge(m) => FormatError::TooLarge(format!("chunk {i}: {m}")),
+        FormatError::Checksum(what) => chunk_err(i, format!("checksum mismatch in its {what}")),
+        FormatError::Truncated(what) => chunk_err(i, format!("its {what} is truncated")),
+        e @ FormatError::Io(_) => e,
+        e => chunk_err(i, e),
+    }
+}
+
+/// Where a chunked file's bytes come from: bytes in memory (anything `AsRef<[u8]>`: a `Vec`,
+/// a slice, a memory map) or a file read with positioned reads ([`FileSource`]). A chunk is
+/// read when it is used, so a file larger than memory is never held whole.
+pub trait ChunkSource: Sync {
+    /// The file's length (when it was opened, for a file).
+    fn len(&self) -> u64;
+
+    /// Whether the file has no bytes.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// `len` bytes at `offset`, borrowed from memory or read; `what` names them in an error
+    /// ("chunk 12", "the chunk directory").
+    fn read_at(&self, offset: u64, len: usize, what: &str) -> Result<Cow<'_, [u8]>, FormatError>;
+}
+
+impl<B: AsRef<[u8]> + Sync> ChunkSource for B {
+    fn len(&self) -> u64 {
+        self.as_ref().len() as u64
+    }
+
+    fn read_at(&self, offset: u64, len: usize, what: &str) -> Result<Cow<'_, [u8]>, FormatError> {
+        let b = self.as_ref();
+        usize::try_from(offset).ok().and_then(|o| b.get(o..o.checked_add(len)?)).map(Cow::Borrowed).ok_or_else(|| {
+            FormatError::Io(format!("{what}: {len} bytes at offset {offset} lie past the end ({} bytes)", b.len()))
+        })
+    }
+}
+
+/// A chunked file on disk, read with `pread` (`FileExt::read_exact_at`) chunk by chunk
+/// instead of memory-mapped: a file truncated while in use gives an error that names it and
+/// the chunk, where a mapping would kill the process with SIGBUS. A file replaced by a rename
+/// is still read through the descriptor opened here, unchanged; one rewritten in place is
+/// caught by each chunk's checksums (its stream's header and sections, its border table) and
+/// its directory entry (counts and box), as any corrupt chunk is.
+pub struct FileSource {
+    file: std::fs::File,
+    path: PathBuf,
+    len: u64,
+}
+
+impl FileSource {
+    /// Opens a regular file (anything else is refused, as [`crate::input::read_file`] does).
+    pub fn open(path: &Path) -> Result<FileSource, FormatError> {
+        let (file, len) =
+            crate::input::open_regular(path).map_err(|e| FormatError::Io(format!("{}: {e}", path.display())))?;
+        Ok(FileSource { file, path: path.to_path_buf(), len })
+    }
+
+    /// The path the file was opened by.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl ChunkSource for FileSource {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_at(&self, offset: u64, len: usize, what: &str) -> Result<Cow<'_, [u8]>, FormatError> {
+        use std::os::unix::fs::FileExt;
+        let mut buf = vec![0u8; len];
+        self.file.read_exact_at(&mut buf, offset).map_err(|e| {
+            let path = self.path.display();
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                FormatError::Io(format!(
+                    "{path}: {what}: the file was truncated or replaced while in use (expected {len} bytes at offset {offset})"
+                ))
+            } else {
+                FormatError::Io(format!("{path}: {what}: cannot read {len} bytes at offset {offset}: {e}"))
+            }
+        })?;
+        Ok(Cow::Owned(buf))
+    }
 }
 
 /// Whether `bytes` start like a chunked `.bft` file (magic and version 3).
@@ -187,6 +282,11 @@ impl ChunkedHeader {
         if h.border_slots > h.slots || h.unique_vertices > h.slots || h.unique_vertices > h.input_vertices {
             return Err(corrupt("inconsistent counts in the chunked header"));
         }
+        // A decoded model gives input vertices a place (with the input order kept, every one
+        // of them: `Decoded::to_mesh`), 12 bytes each at least; the chunks' own counts are
+        // checked as each chunk's stream is read.
+        crate::input::check_decoded("header field input_vertices", h.input_vertices.into(), "input vertices", 12)
+            .map_err(FormatError::TooLarge)?;
         Ok(h)
     }
 }
@@ -352,20 +452,31 @@ impl Border {
     }
 }
 
-/// A chunked file opened on its bytes (a `Vec`, or a memory map: only the header and the
-/// directory are read here).
-pub struct ChunkedFile<B: AsRef<[u8]>> {
+/// A chunked file opened on its source (bytes in memory, or a file read by positioned reads:
+/// only the header and the directory are read here).
+pub struct ChunkedFile<B: ChunkSource> {
     bytes: B,
     pub header: ChunkedHeader,
     pub entries: Vec<ChunkEntry>,
 }
 
 impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
+    /// The file's bytes, for a file held in memory.
+    pub fn bytes(&self) -> &[u8] {
+        self.bytes.as_ref()
+    }
+}
+
+impl<B: ChunkSource> ChunkedFile<B> {
     /// Reads and checks the header and the directory: entries contiguous and in order from the
     /// end of the directory to the end of the file, running sums and totals that agree with
     /// the header, boxes inside the quantization grid. Chunks are checked when read.
     pub fn open(bytes: B) -> Result<Self, FormatError> {
-        let b = bytes.as_ref();
+        let len = bytes.len();
+        // The fixed head (magic, version, header length, and a header of at most 64 KiB with
+        // its checksum), as much of it as the file has.
+        let head = bytes.read_at(0, len.min(16 + u16::MAX as u64) as usize, "the header")?;
+        let b = &head[..];
         if b.len() < 8 || b[..8] != MAGIC {
             return Err(if MAGIC.starts_with(b) {
                 FormatError::Truncated("magic number")
@@ -388,11 +499,16 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
         let header = ChunkedHeader::from_bytes(hbytes)?;
         let dir_start = 16 + hlen;
         let dir_len = header.chunks as usize * ENTRY_LEN;
-        if (b.len() - dir_start.min(b.len())) / ENTRY_LEN < header.chunks as usize {
+        if (len - (dir_start as u64).min(len)) / (ENTRY_LEN as u64) < header.chunks as u64
+            || len - ((dir_start + dir_len) as u64).min(len) < 4
+        {
             return Err(FormatError::Truncated("chunk directory"));
         }
-        let dir = take(dir_start, dir_len, "chunk directory")?;
-        let crc = u32::from_le_bytes(take(dir_start + dir_len, 4, "chunk directory checksum")?.try_into().unwrap());
+        // Read only now that the file is known to hold it: the directory's length is the
+        // header's chunk count times 56 bytes.
+        let dir_bytes = bytes.read_at(dir_start as u64, dir_len + 4, "the chunk directory")?;
+        let (dir, crc) = dir_bytes.split_at(dir_len);
+        let crc = u32::from_le_bytes(crc.try_into().unwrap());
         if crc != crc32fast::hash(dir) {
             return Err(FormatError::Checksum("chunk directory"));
         }
@@ -408,11 +524,8 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
                 ));
             }
             let end = e.offset + e.bft_len as u64 + e.border_len as u64;
-            if end > b.len() as u64 {
-                return Err(chunk_err(
-                    i,
-                    format!("its bytes end at {end}, past the end of the file ({} bytes)", b.len()),
-                ));
+            if end > len {
+                return Err(chunk_err(i, format!("its bytes end at {end}, past the end of the file ({len} bytes)")));
             }
             if e.first_triangle as u64 != tris || e.first_slot as u64 != slots {
                 return Err(chunk_err(i, "its first triangle or slot disagrees with the chunks before it"));
@@ -434,14 +547,20 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
                 header.triangles, header.slots
             )));
         }
-        if offset != b.len() as u64 {
-            return Err(FormatError::TrailingBytes((b.len() as u64 - offset) as usize));
+        if offset != len {
+            return Err(FormatError::TrailingBytes((len - offset) as usize));
         }
         Ok(ChunkedFile { bytes, header, entries })
     }
 
-    pub fn bytes(&self) -> &[u8] {
-        self.bytes.as_ref()
+    /// The file's length in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.bytes.len()
+    }
+
+    /// The source the file is read from.
+    pub fn source(&self) -> &B {
+        &self.bytes
     }
 
     /// The whole file's sizes, as `tessera stats` reports them: the chunks' headers summed
@@ -454,7 +573,8 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
         let (mut connectivity_bytes, mut geometry_bytes, mut border_bytes) = (0, 0, 0);
         let (mut color_bytes, mut normal_bytes, mut order_bytes) = (0, 0, 0);
         for i in 0..self.entries.len() {
-            let p = super::format::parse(self.chunk_bft(i)).map_err(|e| chunk_err(i, e))?;
+            let bft = self.chunk_bft(i)?;
+            let p = super::format::parse(&bft).map_err(|e| in_chunk(i, e))?;
             connectivity_bytes += p.sections[0].len() + p.sections[2].len() + p.sections[3].len();
             geometry_bytes += p.sections[1].len();
             color_bytes += p.sections[4].len();
@@ -465,7 +585,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
         }
         Ok(super::Stats {
             header,
-            bytes: self.bytes.as_ref().len(),
+            bytes: self.file_len() as usize,
             connectivity_bytes,
             geometry_bytes,
             color_bytes,
@@ -476,15 +596,19 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
         })
     }
 
-    /// Chunk `i`'s `.bft` stream (not yet checked).
-    pub fn chunk_bft(&self, i: usize) -> &[u8] {
-        &self.bytes.as_ref()[self.entries[i].bft_range()]
+    /// Chunk `i`'s `.bft` stream (not yet checked): borrowed from bytes in memory, read from a
+    /// file (an error if the file no longer holds it).
+    pub fn chunk_bft(&self, i: usize) -> Result<Cow<'_, [u8]>, FormatError> {
+        let e = &self.entries[i];
+        self.bytes.read_at(e.offset, e.bft_len as usize, &format!("chunk {i}"))
     }
 
     /// Chunk `i`'s border table, checked.
     pub fn border(&self, i: usize) -> Result<Border, FormatError> {
         let e = &self.entries[i];
-        Border::from_bytes(&self.bytes.as_ref()[e.border_range()], i, e)
+        let r = e.border_range();
+        let b = self.bytes.read_at(r.start as u64, r.len(), &format!("chunk {i}"))?;
+        Border::from_bytes(&b, i, e)
     }
 
     /// The float bounding box of chunk `i`'s dequantized slots (dequantization is monotone,
@@ -518,7 +642,7 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
 
     /// Decodes chunk `i` with the ordinary decoder and checks it against the directory.
     pub fn decode_chunk(&self, i: usize) -> Result<Decoded, FormatError> {
-        let d = super::decode(self.chunk_bft(i)).map_err(|e| chunk_err(i, e))?;
+        let d = super::decode(&self.chunk_bft(i)?).map_err(|e| in_chunk(i, e))?;
         self.check_chunk(i, &d.header, &d.positions)?;
         Ok(d)
     }
@@ -582,6 +706,14 @@ impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
             add_chunk_counts(&mut out.header, &d.header);
         }
         out.header.duplicates = out.duplicates.len() as u32;
+        // The chunks' streams checked their own counts; with the input order kept, the whole
+        // model's mesh gives every input vertex of the file's header a place.
+        let a = out.header.attributes;
+        if a.order {
+            let each = 12 + if a.colors { 4 } else { 0 } + if a.normal_bits > 0 { 12 } else { 0 };
+            crate::input::check_decoded("header field input_vertices", g.input_vertices.into(), "input vertices", each)
+                .map_err(FormatError::TooLarge)?;
+        }
         Ok(out)
     }
 }

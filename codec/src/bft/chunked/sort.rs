@@ -23,7 +23,7 @@ use std::sync::{Arc, Mutex};
 use glam::{Mat4, Vec4};
 use rayon::prelude::*;
 
-use super::ChunkedFile;
+use super::{ChunkSource, ChunkedFile};
 use crate::bft::format::Coding;
 use crate::bft::normals::BorderNormals;
 use crate::bft::tile_sort::{boxes_into, Boxes, SortError, Sorter, TileModel};
@@ -161,7 +161,7 @@ struct Cache {
 
 /// A chunked model ready for sorting: the file (its directory read), the chunks' float
 /// boxes, and the cache of straddling chunks' tables.
-pub struct ChunkedModel<B: AsRef<[u8]>> {
+pub struct ChunkedModel<B: ChunkSource> {
     pub file: ChunkedFile<B>,
     boxes: Vec<([f32; 3], [f32; 3])>,
     cache: Mutex<Cache>,
@@ -171,7 +171,7 @@ pub struct ChunkedModel<B: AsRef<[u8]>> {
     buffers: Mutex<Vec<(Sorter, Boxes)>>,
 }
 
-impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
+impl<B: ChunkSource> ChunkedModel<B> {
     pub fn new(file: ChunkedFile<B>, cache_limit: usize) -> ChunkedModel<B> {
         let boxes = (0..file.entries.len()).map(|i| file.chunk_box(i)).collect();
         ChunkedModel {
@@ -212,10 +212,9 @@ impl<B: AsRef<[u8]> + Sync> ChunkedModel<B> {
                 return Ok((s.clone(), false));
             }
         }
-        let err = |e: String| FormatError::Corrupt(Format::Bft, format!("chunk {i}: {e}"));
-        let model = TileModel::from_bytes(self.file.chunk_bft(i)).map_err(|e| match e {
-            SortError::Bft(e) => err(e.to_string()),
-            other => err(other.to_string()),
+        let model = TileModel::from_bytes(&self.file.chunk_bft(i)?).map_err(|e| match e {
+            SortError::Bft(e) => super::in_chunk(i, e),
+            other => FormatError::Corrupt(Format::Bft, format!("chunk {i}: {other}")),
         })?;
         self.file.check_chunk(i, &model.decoded.header, &model.decoded.positions)?;
         let mut normals = BorderNormals::of(&model.decoded);

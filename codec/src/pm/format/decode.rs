@@ -224,6 +224,7 @@ impl<'a> Dpm<'a> {
     /// Decodes every operation (pre-order over the forest), optionally counting bits per field.
     pub(super) fn decode_all(&self, mut bits: Option<&mut [u64; KINDS]>) -> Result<Decoded, DpmError> {
         let h = &self.header;
+        check_counts(h)?;
         let n = h.vertices as usize;
         let mut positions = vec![[0f32; 3]; n];
         let mut normals = vec![[0f32; 3]; n];
@@ -325,6 +326,29 @@ impl<'a> Dpm<'a> {
         }
         Ok(())
     }
+}
+
+/// Refuses a header whose whole-file decode ([`decode`]) would take more than the cap on
+/// decompressed input ([`crate::input::max_decompressed_bytes`]) before anything is
+/// allocated: per vertex a position, a normal and its FVID (28 bytes), per split what the
+/// progressive mesh keeps of it (its split with up to two faces, criteria, address and
+/// context), per triangle of the fully refined mesh 12 bytes. An out-of-core reader
+/// ([`super::NodeFile`]) reads node by node and is not bounded by this.
+fn check_counts(h: &Header) -> Result<(), DpmError> {
+    use std::mem::size_of;
+    let per_split = size_of::<crate::pm::Split>()
+        + 2 * size_of::<[u32; 3]>()
+        + size_of::<crate::pm::Criteria>()
+        + size_of::<usize>()
+        + size_of::<OpContext>();
+    let check = |field: &str, count: u32, unit: &str, each: usize| {
+        crate::input::check_decoded(&format!("header field {field}"), count.into(), unit, each as u64)
+            .map_err(DpmError::TooLarge)
+    };
+    check("vertices", h.vertices, "vertices", 28)?;
+    check("splits", h.splits, "splits", per_split)?;
+    check("triangles", h.triangles, "triangles", 12)?;
+    Ok(())
 }
 
 /// A container error, with versions 2, 3 and 4 named as outdated and how to get a current file.

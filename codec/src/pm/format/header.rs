@@ -152,14 +152,29 @@ impl Header {
         if !(8..=24).contains(&h.position_bits) || !(4..=16).contains(&h.normal_bits) {
             return Err(corrupt("quantization bits out of range"));
         }
-        let pos = |x: f32| x.is_finite() && x > 0.0;
         let log_bound = |x: f32| x.is_normal() && x > 0.0 && x < 1.8e19;
-        if !(h.bbox_min.iter().all(|x| x.is_finite())
-            && pos(h.step)
-            && log_bound(h.length_step)
-            && log_bound(h.attribute_step))
-        {
-            return Err(corrupt("bad quantization parameters"));
+        if !(h.step.is_finite() && h.step > 0.0) {
+            return Err(corrupt(format!("header field step: {} is not a finite number above zero", h.step)));
+        }
+        for (field, v) in [("length_step", h.length_step), ("attribute_step", h.attribute_step)] {
+            if !log_bound(v) {
+                return Err(corrupt(format!("header field {field}: {v} is not a normal f32 between 0 and 2^64")));
+            }
+        }
+        // Every point of the quantization grid fits f32, computed as dequantization computes
+        // it, so that no decoded position (nor a box or camera made from them) is infinite.
+        let levels = super::quantize::max_q(h.position_bits);
+        for (a, axis) in ["x", "y", "z"].into_iter().enumerate() {
+            let min = h.bbox_min[a];
+            if !min.is_finite() {
+                return Err(corrupt(format!("header field bbox_min: {min} on {axis} does not fit f32")));
+            }
+            if !(min + levels as f32 * h.step).is_finite() {
+                return Err(corrupt(format!(
+                    "header field step: {min} + {} x {levels} on {axis} does not fit f32",
+                    h.step
+                )));
+            }
         }
         if h.base_vertices as u64 + h.splits as u64 != h.vertices as u64 || h.vertices >= 1 << 31 {
             return Err(corrupt("vertex counts do not add up"));
