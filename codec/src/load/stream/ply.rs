@@ -1,5 +1,7 @@
-//! PLY for the streaming reader: a header parser that accepts exactly the headers ply-rs
-//! accepts, and record readers that decode a binary record in place in the read buffer and
+//! PLY for the streaming reader: a header parser that accepts the headers ply-rs accepts,
+//! and also their lines with spaces or tabs before a keyword or several between words, as
+//! Draco's reader (`SplitWords`: any run of whitespace separates words) reads them; and record
+//! readers that decode a binary record in place in the read buffer and
 //! an ASCII record from its line, handing the values they are asked for to a [`Sink`].
 //!
 //! What `load_path` (through ply-rs) makes of a file, and so what this reader reproduces:
@@ -254,15 +256,19 @@ enum Line<'s> {
     Property(&'s str, Kind),
 }
 
-/// A header line without its line break (`\r\n`, `\n` or `\r`) and trailing spaces and
-/// tabs; `None` if another line break is left inside it (a line feed in a file whose lines
-/// end in carriage returns, or the other way round).
+/// The characters that separate the words of a header line, as in Draco's reader: spaces,
+/// tabs, vertical tabs and form feeds (line breaks end the line).
+const BLANKS: [char; 4] = [' ', '\t', '\x0b', '\x0c'];
+
+/// A header line without its line break (`\r\n`, `\n` or `\r`) and the spaces and tabs
+/// around it; `None` if another line break is left inside it (a line feed in a file whose
+/// lines end in carriage returns, or the other way round).
 fn header_content(text: &str) -> Option<&str> {
     let t = text.strip_suffix("\r\n").or_else(|| text.strip_suffix(['\n', '\r'])).unwrap_or(text);
     if t.contains(['\r', '\n']) {
         return None;
     }
-    Some(t.trim_end_matches([' ', '\t']))
+    Some(t.trim_matches(BLANKS))
 }
 
 /// A PLY identifier as ply-rs's grammar has it: `[A-Za-z_][A-Za-z0-9_-]*`.
@@ -279,17 +285,17 @@ fn digits(s: &str) -> Option<u64> {
     s.parse().ok()
 }
 
-/// Parses a header line's content (see [`header_content`]). Keywords must start the line
-/// and be followed by spaces or tabs, as in ply-rs's grammar; the words after them are
-/// separated by spaces or tabs.
+/// Parses a header line's content (see [`header_content`]): a keyword and its words, separated
+/// by any run of spaces or tabs (Draco reads them so; ply-rs wants the keyword first on the
+/// line).
 fn header_line(content: &str) -> Result<Line<'_>, String> {
     match content {
         "ply" => return Ok(Line::Magic),
         "end_header" => return Ok(Line::End),
         _ => {}
     }
-    let (keyword, rest) = content.split_once([' ', '\t']).unwrap_or((content, ""));
-    let words: Vec<&str> = rest.split([' ', '\t']).filter(|w| !w.is_empty()).collect();
+    let (keyword, rest) = content.split_once(BLANKS).unwrap_or((content, ""));
+    let words: Vec<&str> = rest.split(BLANKS).filter(|w| !w.is_empty()).collect();
     let scalar = |w: &str| Scalar::from_name(w).ok_or_else(|| format!("unknown property type '{w}'"));
     match (keyword, &words[..]) {
         ("comment" | "obj_info", _) => Ok(Line::Note),
@@ -1136,7 +1142,6 @@ mod tests {
             "ply\nformat ascii 1.0\nformat binary_little_endian 1.0\nend_header\n".to_string(),
             "ply\nelement vertex 1\nend_header\n".to_string(),
             "ply\nformat ascii 1.0\nproperty float x\nend_header\n".to_string(),
-            "ply\nformat ascii 1.0\n element vertex 1\nend_header\n".to_string(),
             "ply\nformat ascii 1.0\nelement vertex -1\nend_header\n".to_string(),
             "ply\nformat ascii 1.0\nelement 1vertex 1\nend_header\n".to_string(),
             "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x y\nend_header\n".to_string(),
@@ -1164,6 +1169,22 @@ mod tests {
                 (Err(_), None) => {}
                 _ => panic!("{text:?}: ours {ours:?}, ply-rs {theirs:?}"),
             }
+        }
+    }
+
+    /// Extra spaces and tabs (before a keyword, between words, after the line) read as Draco
+    /// reads them: as the same header without them.
+    #[test]
+    fn headers_with_extra_blanks_read_as_draco_reads_them() {
+        let plain = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty list uchar int vertex_indices\nend_header\n";
+        let spaced = "ply\n  format \t ascii  1.0\n element vertex 3\n\tproperty  float\tx \n property list  uchar int \t vertex_indices\n  end_header\n";
+        let (a, b) = (ours(plain).unwrap(), ours(spaced).unwrap());
+        assert_eq!((&a.encoding, &a.elements), (&b.encoding, &b.elements));
+        // Blanks do not make a bad line good.
+        for bad in
+            ["ply\nformat ascii 1.0\n element vertex 1 2\nend_header\n", "ply\nformat ascii 1.0\n\t\nend_header\n"]
+        {
+            assert!(ours(bad).is_err(), "{bad:?}");
         }
     }
 
