@@ -36,6 +36,27 @@ impl Cube {
         Some(Cube { origin: lo, side: if side > 0.0 { side } else { 1.0 }, bits })
     }
 
+    /// Whether every point of the cube is a finite `f32` (what a decoder draws is inside it):
+    /// its side is positive and its origin and far corner on each axis convert to finite
+    /// `f32`s; otherwise which does not.
+    pub fn check_f32(&self) -> Result<(), String> {
+        let fits = |x: f64| x.is_finite() && (x as f32).is_finite();
+        if !(self.side.is_finite() && self.side > 0.0) {
+            return Err(format!("the cube's side is {}, not a positive number", self.side));
+        }
+        for a in 0..3 {
+            let (lo, hi) = (self.origin[a], self.origin[a] + self.side);
+            if !(fits(lo) && fits(hi)) {
+                return Err(format!(
+                    "the cube's origin {lo} and side {} on {} do not fit f32",
+                    self.side,
+                    super::format::AXES[a]
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// `floor((x - origin) / side * 2^bits)`, clamped to the grid.
     #[inline]
     pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
@@ -111,6 +132,7 @@ impl Canonical {
     pub fn of_mesh(mesh: &Mesh, bits: u8) -> Result<Canonical, NspError> {
         mesh.validate().map_err(|e| NspError::Input(e.to_string()))?;
         let cube = Cube::fit(&mesh.positions, bits).ok_or(NspError::Empty)?;
+        cube.check_f32().map_err(|e| NspError::Input(format!("its positions do not fit an .nsp cube: {e}")))?;
         let mut cube_extent = [0f64; 3];
         for p in mesh.positions.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
             for a in 0..3 {

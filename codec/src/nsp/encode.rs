@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use super::canonical::{top_simplices, Canonical, Simplex};
 use super::complex::{BitIo, Complex, Oracle, Silent, CONTEXTS};
 use super::format::{self, CellEntry, Header};
-use super::tree::{partition, Tree};
+use super::tree::{partition_capped, Tree};
 use super::{morton, NspError, Params};
 use crate::rangecoder::Encoder;
 
@@ -72,7 +72,7 @@ pub fn encode(canon: &Canonical, params: Params, progress: &(dyn Fn(u64) + Sync)
     if canon.points.is_empty() {
         return Err(NspError::Empty);
     }
-    let part = partition(params, &canon.points, &canon.simplices);
+    let part = partition_capped(params, &canon.points, &canon.simplices)?;
     let tree = &part.tree;
     let done = std::sync::atomic::AtomicU64::new(0);
     let recorded: Vec<Recorded> = (0..tree.nodes.len() as u32)

@@ -44,6 +44,47 @@ pub const MIN_TABLE_LEN: usize = 2 + 4;
 /// A context's probability when the table does not list it.
 pub const DEFAULT_PROB: u16 = 1024;
 
+/// The axes' names, for messages.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// Bytes a reader holds per cell before decoding any (its parsed row and its tree node):
+/// the footer's count of cells times this is checked against `--max-decompressed`
+/// ([`crate::input::max_decompressed_bytes`]) before the table is read, and a build refuses
+/// to make more cells than that ([`max_cells`]).
+pub const CELL_BYTES: u64 = (std::mem::size_of::<CellEntry>() + std::mem::size_of::<super::tree::Node>() + 8) as u64;
+
+/// Bytes a cell's decoder holds per kd-cell and per top-simplex, at least: a row's "at most"
+/// figures times these are checked against `--max-decompressed` when the table is read.
+pub const KD_CELL_BYTES: u64 =
+    (std::mem::size_of::<super::complex::KdCell>() + std::mem::size_of::<smallvec::SmallVec<[u32; 8]>>() + 4) as u64;
+pub const TOP_BYTES: u64 = (std::mem::size_of::<super::complex::Top>() + 3 * 4) as u64;
+
+/// Refuses `count` things of `each` bytes (`what` names them, `field` the file's field) where
+/// they would take more than `--max-decompressed`.
+fn check_cap(count: u64, each: u64, what: impl FnOnce() -> String) -> Result<(), NspError> {
+    let need = count.saturating_mul(each);
+    let cap = crate::input::max_decompressed_bytes();
+    if need > cap {
+        return Err(NspError::TooLarge(format!("{} ({} in memory, the cap is {})", what(), size(need), size(cap))));
+    }
+    Ok(())
+}
+
+/// Bytes for a message: in MiB from 1 MiB up.
+fn size(bytes: u64) -> String {
+    if bytes < 1 << 20 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{} MiB", bytes >> 20)
+    }
+}
+
+/// The most cells a reader opens under the `--max-decompressed` now in force (a build makes
+/// no more: [`Params::check_cells`](super::Params::check_cells)).
+pub fn max_cells() -> u64 {
+    crate::input::max_decompressed_bytes() / CELL_BYTES
+}
+
 /// Bytes of the table written for `table`.
 pub fn table_len(table: &[u16]) -> usize {
     MIN_TABLE_LEN + 4 * table.iter().filter(|&&p| p != DEFAULT_PROB).count()
@@ -112,8 +153,8 @@ impl Header {
             Params { bits: b[0], root_bits: b[1], splits: b[2] as u32, advance: b[3], min_simplices: u32_at(4) };
         params.validate().map_err(|e| NspError::Format(format!("header: {e}")))?;
         let cube = Cube { origin: [f64_at(8), f64_at(16), f64_at(24)], side: f64_at(32), bits: params.bits };
-        if !(cube.origin.iter().all(|x| x.is_finite()) && cube.side.is_finite() && cube.side > 0.0) {
-            return Err(NspError::Format("header: the cube is not finite".into()));
+        if let Err(what) = cube.check_f32() {
+            return Err(NspError::Format(format!("header: {what}")));
         }
         let h = Header {
             params,
@@ -128,8 +169,11 @@ impl Header {
             extent: [f64_at(96), f64_at(104), f64_at(112)],
             leaf_simplices: u64_at(120),
         };
-        if !h.extent.iter().all(|&e| e.is_finite() && (0.0..=h.cube.side).contains(&e)) {
-            return Err(NspError::Format("header: the bounding box does not fit the cube".into()));
+        if let Some(a) = (0..3).find(|&a| !(h.extent[a].is_finite() && (0.0..=h.cube.side).contains(&h.extent[a]))) {
+            return Err(NspError::Format(format!(
+                "header: the bounding box's extent on {} is {}, outside the cube's side {}",
+                AXES[a], h.extent[a], h.cube.side
+            )));
         }
         if u32_at(92) as usize != CONTEXTS {
             return Err(NspError::Format(format!("header: {} contexts, this reader knows {CONTEXTS}", u32_at(92))));
@@ -325,6 +369,9 @@ pub fn read_footer(b: &[u8], file_len: u64, streams_start: usize) -> Result<(u64
             "footer: a cell table of {cells} cells at {offset} does not fit the file"
         )));
     }
+    check_cap(cells as u64, CELL_BYTES, || format!("the footer counts {cells} cells"))?;
+    let table_len = file_len - FOOTER_LEN as u64 - offset;
+    check_cap(table_len, 1, || format!("the cell table is {table_len} bytes"))?;
     Ok((offset, cells))
 }
 
@@ -362,6 +409,8 @@ pub fn read_entries(b: &[u8], table_offset: u64, streams_start: usize) -> Result
         if u(1) == 0 {
             return Err(bad("has an empty stream without the empty flag"));
         }
+        check_cap(u(9) as u64, KD_CELL_BYTES, || format!("cell {i}: its cell table row allows {} kd-cells", u(9)))?;
+        check_cap(u(13) as u64, TOP_BYTES, || format!("cell {i}: its cell table row allows {} top-simplices", u(13)))?;
         let reach = [[u(17), u(21), u(25)], [u(29), u(33), u(37)]];
         if (0..3).any(|a| reach[0][a] > reach[1][a]) && u(1) > 0 {
             return Err(bad("has an empty bounding box"));

@@ -112,6 +112,19 @@ pub enum NspError {
     Format(String),
     #[error("cell {cell}: {what}")]
     Cell { cell: u32, what: String },
+    /// A count the file holds, above what `--max-decompressed` lets a reader allocate.
+    #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
+    TooLarge(String),
+    /// Flags that would make more cells than a reader opens (see [`format::check_cells`]).
+    #[error("{0}")]
+    TooManyCells(String),
+    /// Writing (or reading back) the build's temporary files in `folder` failed: a full
+    /// disk, a write error. The build stops at the first failure.
+    #[error("cannot {} temporary files in {}: {error}", if *write { "write" } else { "read" }, folder.display())]
+    Temp { write: bool, folder: std::path::PathBuf, error: String },
+    /// Writing the built file failed.
+    #[error("{0}")]
+    Output(String),
 }
 
 /// Build parameters (NSP.md 1.2).
@@ -165,6 +178,27 @@ impl Params {
             return Err(NspError::Params(format!("--advance must be 0 to {MAX_ADVANCE}, not {}", self.advance)));
         }
         Ok(())
+    }
+
+    /// Refuses a tree of at least `cells` cells where a reader would not open it
+    /// ([`format::check_cells`]): how many cells a model is cut into follows from `--splits`
+    /// and `--min-simplices` (with `--bits` and `--root-bits`, the depth), so the message
+    /// names them.
+    pub fn check_cells(&self, cells: u64) -> Result<(), NspError> {
+        if cells <= format::max_cells() {
+            return Ok(());
+        }
+        Err(NspError::TooManyCells(format!(
+            "--splits {} with --min-simplices {} cuts this model into at least {cells} cells, more than the {} \
+                 a reader opens under --max-decompressed ({} MiB at {} bytes a cell); raise --min-simplices or \
+                 lower {}",
+            self.splits,
+            self.min_simplices,
+            format::max_cells(),
+            crate::input::max_decompressed_bytes() >> 20,
+            format::CELL_BYTES,
+            if self.splits > 2 { "--splits" } else { "--bits" }
+        )))
     }
 
     /// `p_l = log2 n`.

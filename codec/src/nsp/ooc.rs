@@ -28,7 +28,8 @@ use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
@@ -44,6 +45,9 @@ use crate::load::stream;
 const PAGE_CACHE_BYTES: usize = 8 << 20;
 /// A page holds whole positions (12 bytes each).
 const PAGE: usize = 12 << 12;
+/// The payload that ends the positions pass at a failed write (see `build_temp`).
+struct StopPass;
+
 /// Bits per axis of the bucket grid (8^3 = 512 bucket files).
 const BUCKET_BITS: u8 = 3;
 
@@ -117,13 +121,66 @@ impl Rec {
     }
 }
 
-fn io(what: &str) -> impl Fn(std::io::Error) -> NspError + '_ {
-    move |e| NspError::Input(format!("{what}: {e}"))
+/// A failed write of a temporary file (the folder is named once the build returns it).
+fn tw(e: std::io::Error) -> NspError {
+    NspError::Temp { write: true, folder: PathBuf::new(), error: e.to_string() }
 }
+
+/// A failed read of a temporary file.
+fn tr(e: std::io::Error) -> NspError {
+    NspError::Temp { write: false, folder: PathBuf::new(), error: e.to_string() }
+}
+
+/// A failed write of the output.
+fn ow(e: std::io::Error) -> NspError {
+    NspError::Output(e.to_string())
+}
+
+/// How the build makes its temporary files: in the caller's folder, each written through a
+/// [`TempFile`] that shares the fault hook's budget.
+struct Temp {
+    left: Option<Arc<AtomicU64>>,
+}
+
+impl Temp {
+    fn create(&self, path: &Path) -> Result<TempFile, NspError> {
+        Ok(TempFile { file: File::create(path).map_err(tw)?, left: self.left.clone() })
+    }
+
+    fn writer(&self, path: &Path, capacity: usize) -> Result<BufWriter<TempFile>, NspError> {
+        Ok(BufWriter::with_capacity(capacity, self.create(path)?))
+    }
+}
+
+/// A temporary file being written. With [`Scratch::full_after`] set, a write past the budget
+/// fails as on a full disk (`ENOSPC`).
+struct TempFile {
+    file: File,
+    left: Option<Arc<AtomicU64>>,
+}
+
+impl Write for TempFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if let Some(left) = &self.left {
+            let n = buf.len() as u64;
+            if left.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |l| l.checked_sub(n)).is_err() {
+                return Err(std::io::Error::from_raw_os_error(ENOSPC));
+            }
+        }
+        self.file.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+/// Linux's "No space left on device".
+const ENOSPC: i32 = 28;
 
 fn read_recs(path: &Path) -> Result<Vec<Rec>, NspError> {
     let mut bytes = Vec::new();
-    File::open(path).and_then(|mut f| f.read_to_end(&mut bytes)).map_err(io("temporary file"))?;
+    File::open(path).and_then(|mut f| f.read_to_end(&mut bytes)).map_err(tr)?;
     Ok(bytes.chunks_exact(REC_BYTES).map(Rec::get).collect())
 }
 
@@ -169,6 +226,18 @@ impl stream::PositionSource for Positions {
     }
 }
 
+/// Where an out-of-core build keeps its temporary files ([`build_in`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Scratch<'a> {
+    /// An existing folder of the caller's, which the build fills and the caller removes.
+    pub dir: &'a Path,
+    /// The folder messages name (the user's `--temp-dir`, not the build's own folder in it).
+    pub shown: &'a Path,
+    /// Test hook: once this many bytes of temporary files are written, every write fails as
+    /// on a full disk (`ENOSPC`).
+    pub full_after: Option<u64>,
+}
+
 /// Builds `input` (PLY or OBJ, optionally gzipped) into `out`, with temporary files in a
 /// new folder under `temp_dir` (the system's if `None`), removed when done.
 pub fn build_file(
@@ -192,43 +261,86 @@ pub fn build_file_with(
     limits: Limits,
 ) -> Result<Built, NspError> {
     params.validate()?;
-    let dir = match temp_dir {
-        Some(d) => tempfile::Builder::new().prefix("tessera-nsp").tempdir_in(d),
-        None => tempfile::Builder::new().prefix("tessera-nsp").tempdir(),
-    }
-    .map_err(io("cannot make a temporary folder"))?;
-    let tmp = dir.path().to_path_buf();
+    let parent = temp_dir.map_or_else(std::env::temp_dir, Path::to_path_buf);
+    let dir = tempfile::Builder::new().prefix("tessera-nsp").tempdir_in(&parent).map_err(|e| NspError::Temp {
+        write: true,
+        folder: parent.clone(),
+        error: e.to_string(),
+    })?;
+    build_in(input, params, Scratch { dir: dir.path(), shown: &parent, full_after: None }, out, progress, limits)
+}
+
+/// [`build_file_with`] with its temporary files in `scratch.dir`. A failed write or read of
+/// them (a full disk) ends the build at once, with a message naming `scratch.shown`.
+pub fn build_in(
+    input: &Path,
+    params: Params,
+    scratch: Scratch,
+    out: &mut dyn Write,
+    progress: Progress,
+    limits: Limits,
+) -> Result<Built, NspError> {
+    params.validate()?;
+    let temp = Temp { left: scratch.full_after.map(|n| Arc::new(AtomicU64::new(n))) };
+    build_temp(input, params, scratch.dir, &temp, out, progress, limits).map_err(|e| match e {
+        NspError::Temp { write, error, .. } => NspError::Temp { write, folder: scratch.shown.to_path_buf(), error },
+        e => e,
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_temp(
+    input: &Path,
+    params: Params,
+    tmp: &Path,
+    temp: &Temp,
+    out: &mut dyn Write,
+    progress: Progress,
+    limits: Limits,
+) -> Result<Built, NspError> {
+    let tmp = tmp.to_path_buf();
     let load = |e: crate::LoadError| NspError::Input(e.to_string());
     let file_len = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
 
     // 1. Positions to RWP, and the cube.
     let rwp_path = tmp.join("positions");
-    let mut rwp = BufWriter::with_capacity(1 << 20, File::create(&rwp_path).map_err(io("temporary file"))?);
+    let mut rwp = temp.writer(&rwp_path, 1 << 20)?;
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     let mut werr = None;
-    let vertices = stream::for_each_position(
-        input,
-        &mut |p| {
-            if p.iter().all(|c| c.is_finite()) {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(p[a] as f64);
-                    hi[a] = hi[a].max(p[a] as f64);
+    // The loader's position callback cannot fail: a failed write unwinds out of the pass
+    // (`resume_unwind` runs no panic hook) and is caught right here, so a full disk ends
+    // the pass at its first failed write instead of failing once per position.
+    let pass = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        stream::for_each_position(
+            input,
+            &mut |p| {
+                if p.iter().all(|c| c.is_finite()) {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(p[a] as f64);
+                        hi[a] = hi[a].max(p[a] as f64);
+                    }
                 }
-            }
-            for c in p {
-                if let Err(e) = rwp.write_all(&c.to_le_bytes()) {
-                    werr.get_or_insert(e);
+                let mut b = [0u8; 12];
+                for (k, c) in p.iter().enumerate() {
+                    b[4 * k..4 * k + 4].copy_from_slice(&c.to_le_bytes());
                 }
-            }
-        },
-        &mut |n| progress("reading vertices", n, file_len),
-    )
-    .map_err(load)?;
-    if let Some(e) = werr {
-        return Err(io("temporary file")(e));
-    }
-    rwp.flush().map_err(io("temporary file"))?;
+                if let Err(e) = rwp.write_all(&b) {
+                    werr = Some(e);
+                    std::panic::resume_unwind(Box::new(StopPass));
+                }
+            },
+            &mut |n| progress("reading vertices", n, file_len),
+        )
+    }));
+    let vertices = match pass {
+        Ok(r) => r.map_err(load)?,
+        Err(payload) if payload.is::<StopPass>() => {
+            return Err(tw(werr.take().expect("a failed write stops the pass")))
+        }
+        Err(payload) => std::panic::resume_unwind(payload),
+    };
+    rwp.flush().map_err(tw)?;
     drop(rwp);
     if vertices > u32::MAX as u64 {
         return Err(NspError::Input(format!("{vertices} vertices; at most 2^32 are supported")));
@@ -240,13 +352,13 @@ pub fn build_file_with(
     let cube = Cube { origin: lo, side: if side > 0.0 { side } else { 1.0 }, bits: params.bits };
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let positions = Positions {
-        file: File::open(&rwp_path).map_err(io("temporary file"))?,
+        file: File::open(&rwp_path).map_err(tr)?,
         count: vertices as usize,
         pages: Mutex::new((0..PAGE_CACHE_BYTES / PAGE).map(|_| None).collect()),
     };
 
     // 2. Triangles (and unreferenced vertices) to buckets.
-    let buckets = Buckets::create(&tmp.join("b"), params.bits, BUCKET_BITS)?;
+    let buckets = Buckets::create(temp, &tmp.join("b"), params.bits, BUCKET_BITS)?;
     let mut used = vec![0u64; (vertices as usize).div_ceil(64)];
     let mut failed: Option<NspError> = None;
     let mut t = 0u64;
@@ -260,7 +372,10 @@ pub fn build_file_with(
                 if !p.iter().all(|c| c.is_finite()) {
                     return Err(crate::LoadError {
                         path: input.to_path_buf(),
-                        message: format!("triangle {t} uses vertex {v}, whose position {p:?} is not finite"),
+                        message: format!(
+                            "triangle {t} uses vertex {v}, whose position ({}, {}, {}) is not finite",
+                            p[0], p[1], p[2]
+                        ),
                     });
                 }
                 q[k] = cube.quantize(p);
@@ -273,17 +388,19 @@ pub fn build_file_with(
                 });
             }
             if let Err(e) = buckets.put(&Rec { t: t as u32, dim: 2, q }) {
-                failed.get_or_insert(e);
+                // Ends the pass (the loader's error is replaced by this one below).
+                failed = Some(e);
+                return Err(crate::LoadError { path: input.to_path_buf(), message: String::new() });
             }
             t += 1;
             Ok(())
         },
         &mut |n| progress("reading triangles", n, file_len),
-    )
-    .map_err(load)?;
+    );
     if let Some(e) = failed {
         return Err(e);
     }
+    let triangles = triangles.map_err(load)?;
     for v in 0..vertices as u32 {
         if used[v as usize / 64] >> (v % 64) & 1 == 0 {
             let p = positions.get(v);
@@ -297,11 +414,11 @@ pub fn build_file_with(
 
     // 3. The canonical complex, bucket by bucket.
     let canon_path = tmp.join("canonical");
-    let mut canon = Canon::new(&canon_path)?;
+    let mut canon = Canon::new(temp, &canon_path)?;
     let list = buckets.files();
     for (i, (path, key)) in list.iter().enumerate() {
         progress("merging coincident vertices", i as u64, list.len() as u64);
-        canonicalize(path, *key, params.bits, BUCKET_BITS.min(params.bits), limits.bucket_records, &mut canon)?;
+        canonicalize(temp, path, *key, params.bits, BUCKET_BITS.min(params.bits), limits.bucket_records, &mut canon)?;
         let _ = std::fs::remove_file(path);
     }
     let counts = canon.finish()?;
@@ -314,20 +431,20 @@ pub fn build_file_with(
     let (tree, cell_counts) = partition(params, &canon_path, &progress)?;
 
     // 5. Leaves to batches.
-    let batches = Batches::write(&tree, &cell_counts, &canon_path, &tmp, limits.batch_records)?;
+    let batches = Batches::write(temp, &tree, &cell_counts, &canon_path, &tmp, limits.batch_records)?;
     temp_bytes = temp_bytes.max(counts.bytes + batches.bytes);
     let _ = std::fs::remove_file(&canon_path);
 
     // 6. Cells in postorder.
     let decisions_path = tmp.join("decisions");
-    let mut enc = Encoding::new(&tree, &decisions_path)?;
+    let mut enc = Encoding::new(temp, &tree, &decisions_path)?;
     for (i, batch) in batches.files.iter().enumerate() {
         progress("encoding cells", i as u64, batches.files.len() as u64);
         enc.batch(&tree, batch)?;
         let _ = std::fs::remove_file(&batch.path);
     }
     enc.finish_to(&tree, tree.nodes.len() as u32)?;
-    let written = enc.decisions.into_inner().map_err(|e| io("temporary file")(e.into_error()))?;
+    let written = enc.decisions.into_inner().map_err(|e| tw(e.into_error()))?;
     drop(written);
     temp_bytes = temp_bytes.max(std::fs::metadata(&decisions_path).map(|m| m.len()).unwrap_or(0));
 
@@ -354,19 +471,19 @@ pub fn build_file_with(
         leaf_simplices: enc.leaf_simplices,
     };
     let prefix = format::write_prefix(&header, &table);
-    out.write_all(&prefix).map_err(io("cannot write"))?;
+    out.write_all(&prefix).map_err(ow)?;
     let mut written = prefix.len() as u64;
-    let mut reader = BufReader::with_capacity(1 << 20, File::open(&decisions_path).map_err(io("temporary file"))?);
+    let mut reader = BufReader::with_capacity(1 << 20, File::open(&decisions_path).map_err(tr)?);
     let mut entries = Vec::with_capacity(tree.nodes.len());
     let mut bits: Vec<u16> = Vec::new();
     for (c, info) in enc.cells.iter().enumerate() {
         progress("writing", c as u64, tree.nodes.len() as u64);
         let mut raw = vec![0u8; info.decisions as usize * 2];
-        reader.read_exact(&mut raw).map_err(io("temporary file"))?;
+        reader.read_exact(&mut raw).map_err(tr)?;
         bits.clear();
         bits.extend(raw.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
         let stream = code_cell(&bits, &table);
-        out.write_all(&stream).map_err(io("cannot write"))?;
+        out.write_all(&stream).map_err(ow)?;
         let (ends, segment_crcs) = segments(&bits, &info.level_ends, &table, &stream);
         entries.push(CellEntry {
             split: !tree.is_leaf(c as u32),
@@ -382,24 +499,25 @@ pub fn build_file_with(
         written += stream.len() as u64;
     }
     let tail = format::write_cell_table(&entries, written);
-    out.write_all(&tail).map_err(io("cannot write"))?;
+    out.write_all(&tail).map_err(ow)?;
     written += tail.len() as u64;
     Ok(Built { header, cells: tree.nodes.len(), bytes: written, decisions, cost_bits, temp_bytes })
 }
 
 /// Bucket files of a grid of `2^bits` cells per axis (within the cell `key` of a coarser
 /// grid, for a bucket cut again), opened as records arrive.
-struct Buckets {
+struct Buckets<'t> {
+    temp: &'t Temp,
     dir: PathBuf,
     p: u8,
     bits: u8,
-    writers: Mutex<HashMap<[u32; 3], BufWriter<File>>>,
+    writers: Mutex<HashMap<[u32; 3], BufWriter<TempFile>>>,
 }
 
-impl Buckets {
-    fn create(dir: &Path, p: u8, bits: u8) -> Result<Buckets, NspError> {
-        std::fs::create_dir_all(dir).map_err(io("temporary folder"))?;
-        Ok(Buckets { dir: dir.to_path_buf(), p, bits: bits.min(p), writers: Mutex::new(HashMap::default()) })
+impl<'t> Buckets<'t> {
+    fn create(temp: &'t Temp, dir: &Path, p: u8, bits: u8) -> Result<Buckets<'t>, NspError> {
+        std::fs::create_dir_all(dir).map_err(tw)?;
+        Ok(Buckets { temp, dir: dir.to_path_buf(), p, bits: bits.min(p), writers: Mutex::new(HashMap::default()) })
     }
 
     fn key(&self, q: [u32; 3]) -> [u32; 3] {
@@ -429,12 +547,9 @@ impl Buckets {
             seen[k] = key;
             let w = match writers.entry(key) {
                 Entry::Occupied(e) => e.into_mut(),
-                Entry::Vacant(e) => {
-                    let f = File::create(self.path(key)).map_err(io("temporary file"))?;
-                    e.insert(BufWriter::with_capacity(32 << 10, f))
-                }
+                Entry::Vacant(e) => e.insert(self.temp.writer(&self.path(key), 32 << 10)?),
             };
-            r.put(w).map_err(io("temporary file"))?;
+            r.put(w).map_err(tw)?;
         }
         Ok(())
     }
@@ -444,7 +559,7 @@ impl Buckets {
         let mut writers = self.writers.lock().expect("not poisoned");
         let mut total = 0;
         for (k, w) in writers.iter_mut() {
-            w.flush().map_err(io("temporary file"))?;
+            w.flush().map_err(tw)?;
             total += std::fs::metadata(self.path(*k)).map(|m| m.len()).unwrap_or(0);
         }
         Ok(total)
@@ -461,7 +576,7 @@ impl Buckets {
 
 /// The canonical simplices' file and its counts.
 struct Canon {
-    out: BufWriter<File>,
+    out: BufWriter<TempFile>,
     counts: CanonCounts,
 }
 
@@ -475,13 +590,12 @@ struct CanonCounts {
 }
 
 impl Canon {
-    fn new(path: &Path) -> Result<Canon, NspError> {
-        let f = File::create(path).map_err(io("temporary file"))?;
-        Ok(Canon { out: BufWriter::with_capacity(1 << 20, f), counts: CanonCounts::default() })
+    fn new(temp: &Temp, path: &Path) -> Result<Canon, NspError> {
+        Ok(Canon { out: temp.writer(path, 1 << 20)?, counts: CanonCounts::default() })
     }
 
     fn finish(mut self) -> Result<CanonCounts, NspError> {
-        self.out.flush().map_err(io("temporary file"))?;
+        self.out.flush().map_err(tw)?;
         let c = &self.counts;
         let n = c.triangles + c.edges + c.isolated;
         Ok(CanonCounts { bytes: n * REC_BYTES as u64, ..std::mem::take(&mut self.counts) })
@@ -490,11 +604,19 @@ impl Canon {
 
 /// Reduces one bucket (the grid cell `key` at `bits` bits per axis) and writes the canonical
 /// simplices whose smallest corner lies in it. A bucket too large is cut by a finer grid.
-fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: &mut Canon) -> Result<(), NspError> {
+fn canonicalize(
+    temp: &Temp,
+    path: &Path,
+    key: [u32; 3],
+    p: u8,
+    bits: u8,
+    limit: u64,
+    canon: &mut Canon,
+) -> Result<(), NspError> {
     let size = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
     if size / REC_BYTES as u64 > limit && bits + 2 <= p {
-        let sub = Buckets::create(&path.with_extension("d"), p, bits + 2)?;
-        let mut reader = BufReader::with_capacity(1 << 20, File::open(path).map_err(io("temporary file"))?);
+        let sub = Buckets::create(temp, &path.with_extension("d"), p, bits + 2)?;
+        let mut reader = BufReader::with_capacity(1 << 20, File::open(path).map_err(tr)?);
         let mut b = [0u8; REC_BYTES];
         let inside = |q: [u32; 3]| (0..3).all(|a| q[a] >> (p - bits) == key[a]);
         while reader.read_exact(&mut b).is_ok() {
@@ -504,7 +626,7 @@ fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: 
         }
         sub.finish()?;
         for (sub_path, sub_key) in sub.files() {
-            canonicalize(&sub_path, sub_key, p, bits + 2, limit, canon)?;
+            canonicalize(temp, &sub_path, sub_key, p, bits + 2, limit, canon)?;
             let _ = std::fs::remove_file(&sub_path);
         }
         let _ = std::fs::remove_dir(path.with_extension("d"));
@@ -549,7 +671,7 @@ fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: 
         let t = if s.dim == 2 { first_t[&s.key()] } else { u32::MAX };
         let mut q = [[0u32; 3]; 3];
         q[..corners.len()].copy_from_slice(&corners);
-        Rec { t, dim: s.dim, q }.put(&mut canon.out).map_err(io("temporary file"))?;
+        Rec { t, dim: s.dim, q }.put(&mut canon.out).map_err(tw)?;
         match s.dim {
             2 => canon.counts.triangles += 1,
             1 => canon.counts.edges += 1,
@@ -561,13 +683,13 @@ fn canonicalize(path: &Path, key: [u32; 3], p: u8, bits: u8, limit: u64, canon: 
 
 /// Streams a file of records, one at a time.
 fn for_each_rec(path: &Path, mut f: impl FnMut(&Rec) -> Result<(), NspError>) -> Result<(), NspError> {
-    let mut reader = BufReader::with_capacity(1 << 20, File::open(path).map_err(io("temporary file"))?);
+    let mut reader = BufReader::with_capacity(1 << 20, File::open(path).map_err(tr)?);
     let mut b = [0u8; REC_BYTES];
     loop {
         match reader.read_exact(&mut b) {
             Ok(()) => f(&Rec::get(&b))?,
             Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
-            Err(e) => return Err(io("temporary file")(e)),
+            Err(e) => return Err(tr(e)),
         }
     }
 }
@@ -617,6 +739,9 @@ fn partition(params: Params, canon: &Path, progress: &Progress) -> Result<(Tree,
                 split_cells.insert((depth, c));
             }
         }
+        // Every split cell makes n^3 cells, empty ones included: refused here, before the
+        // tree, the cell table or the next depth's counts are made.
+        params.check_cells(1 + split_cells.len() as u64 * params.fan_out() as u64)?;
         splitting = next;
     }
     // The tree in postorder, every split cell with all its children.
@@ -661,7 +786,14 @@ struct Batch {
 }
 
 impl Batches {
-    fn write(tree: &Tree, counts: &CellCounts, canon: &Path, tmp: &Path, limit: u64) -> Result<Batches, NspError> {
+    fn write(
+        temp: &Temp,
+        tree: &Tree,
+        counts: &CellCounts,
+        canon: &Path,
+        tmp: &Path,
+        limit: u64,
+    ) -> Result<Batches, NspError> {
         let n = tree.nodes.len();
         // Leaves into runs of at most BATCH_RECORDS records.
         let mut batch_of = vec![u32::MAX; n];
@@ -681,10 +813,9 @@ impl Batches {
             filled += k;
             batch_of[c as usize] = lasts.len() as u32 - 1;
         }
-        let mut writers: Vec<BufWriter<File>> = (0..lasts.len())
-            .map(|i| File::create(tmp.join(format!("batch-{i}"))).map(|f| BufWriter::with_capacity(16 << 10, f)))
-            .collect::<Result<_, _>>()
-            .map_err(io("temporary file"))?;
+        let mut writers: Vec<BufWriter<TempFile>> = (0..lasts.len())
+            .map(|i| temp.writer(&tmp.join(format!("batch-{i}")), 16 << 10))
+            .collect::<Result<_, _>>()?;
         let params = tree.params;
         let leaf_of = |q: [u32; 3]| -> u32 {
             let mut c = tree.root();
@@ -709,14 +840,14 @@ impl Batches {
                 }
                 seen[k] = leaf;
                 let w = &mut writers[batch_of[leaf as usize] as usize];
-                w.write_all(&leaf.to_le_bytes()).map_err(io("temporary file"))?;
-                r.put(w).map_err(io("temporary file"))?;
+                w.write_all(&leaf.to_le_bytes()).map_err(tw)?;
+                r.put(w).map_err(tw)?;
                 bytes += 4 + REC_BYTES as u64;
             }
             Ok(())
         })?;
         for w in &mut writers {
-            w.flush().map_err(io("temporary file"))?;
+            w.flush().map_err(tw)?;
         }
         let files =
             lasts.iter().enumerate().map(|(i, &last)| Batch { path: tmp.join(format!("batch-{i}")), last }).collect();
@@ -741,7 +872,7 @@ struct Encoding {
     /// Per internal cell not yet encoded: its children's simplices clustered at its maximal
     /// precision, their reach, and with the geometry advance their points `m` bits finer.
     pending: HashMap<u32, Pending>,
-    decisions: BufWriter<File>,
+    decisions: BufWriter<TempFile>,
     counts: Vec<[u64; 2]>,
     leaf_simplices: u64,
 }
@@ -766,12 +897,12 @@ fn union(a: [[u32; 3]; 2], b: [[u32; 3]; 2]) -> [[u32; 3]; 2] {
 }
 
 impl Encoding {
-    fn new(tree: &Tree, path: &Path) -> Result<Encoding, NspError> {
+    fn new(temp: &Temp, tree: &Tree, path: &Path) -> Result<Encoding, NspError> {
         Ok(Encoding {
             next: 0,
             cells: vec![CellInfo::default(); tree.nodes.len()],
             pending: HashMap::default(),
-            decisions: BufWriter::with_capacity(1 << 20, File::create(path).map_err(io("temporary file"))?),
+            decisions: temp.writer(path, 1 << 20)?,
             counts: vec![[0; 2]; CONTEXTS],
             leaf_simplices: 0,
         })
@@ -781,7 +912,7 @@ impl Encoding {
     fn batch(&mut self, tree: &Tree, batch: &Batch) -> Result<(), NspError> {
         let mut by_leaf: HashMap<u32, Vec<Rec>> = HashMap::default();
         let mut raw = Vec::new();
-        File::open(&batch.path).and_then(|mut f| f.read_to_end(&mut raw)).map_err(io("temporary file"))?;
+        File::open(&batch.path).and_then(|mut f| f.read_to_end(&mut raw)).map_err(tr)?;
         for b in raw.chunks_exact(4 + REC_BYTES) {
             let leaf = u32::from_le_bytes(b[..4].try_into().unwrap());
             by_leaf.entry(leaf).or_default().push(Rec::get(&b[4..]));
@@ -830,7 +961,7 @@ impl Encoding {
         let reach = rec.reach;
         for &b in &rec.bits {
             self.counts[(b & 0x7fff) as usize][(b >> 15) as usize] += 1;
-            self.decisions.write_all(&b.to_le_bytes()).map_err(io("temporary file"))?;
+            self.decisions.write_all(&b.to_le_bytes()).map_err(tw)?;
         }
         self.cells[c as usize] = CellInfo {
             decisions: rec.bits.len() as u64,

@@ -122,14 +122,37 @@ pub struct Partition {
 /// below `p`; splitting makes all `n^3` children and gives each simplex to every child that
 /// holds one of its vertices.
 pub fn partition(params: Params, points: &[[u32; 3]], simplices: &[Simplex]) -> Partition {
+    partition_with(params, points, simplices, false).expect("not capped")
+}
+
+/// [`partition`], refusing a tree of more cells than a reader opens
+/// ([`Params::check_cells`]) as soon as its splits reach that many, before making them.
+pub fn partition_capped(params: Params, points: &[[u32; 3]], simplices: &[Simplex]) -> Result<Partition, NspError> {
+    partition_with(params, points, simplices, true)
+}
+
+fn partition_with(
+    params: Params,
+    points: &[[u32; 3]],
+    simplices: &[Simplex],
+    capped: bool,
+) -> Result<Partition, NspError> {
     let mut nodes = Vec::new();
     let mut members = Vec::new();
     let all: Vec<u32> = (0..simplices.len() as u32).collect();
-    build(params, points, simplices, 0, [0; 3], all, &mut nodes, &mut members);
-    Partition { tree: Tree { params, nodes }, members }
+    let mut cells = capped.then_some(1u64);
+    let mut out = Out { nodes: &mut nodes, members: &mut members, cells: &mut cells };
+    build(params, points, simplices, 0, [0; 3], all, &mut out)?;
+    Ok(Partition { tree: Tree { params, nodes }, members })
 }
 
-#[allow(clippy::too_many_arguments)]
+/// What [`build`] fills, and the cells made so far when capped.
+struct Out<'a> {
+    nodes: &'a mut Vec<Node>,
+    members: &'a mut Vec<Vec<u32>>,
+    cells: &'a mut Option<u64>,
+}
+
 fn build(
     params: Params,
     points: &[[u32; 3]],
@@ -137,12 +160,15 @@ fn build(
     depth: u8,
     coords: [u32; 3],
     mine: Vec<u32>,
-    nodes: &mut Vec<Node>,
-    members: &mut Vec<Vec<u32>>,
-) -> u32 {
+    out: &mut Out,
+) -> Result<u32, NspError> {
     let mut children = Vec::new();
     if mine.len() as u64 >= params.min_simplices as u64 && params.max_prec_at(depth) < params.bits {
         let fan = params.fan_out() as usize;
+        if let Some(cells) = out.cells.as_mut() {
+            *cells += fan as u64;
+            params.check_cells(*cells)?;
+        }
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); fan];
         let shift = params.bits - params.level_bits() * (depth + 1);
         let mask = params.splits - 1;
@@ -170,24 +196,24 @@ fn build(
         let mut mine_again = Vec::new();
         for (k, list) in lists.into_iter().enumerate() {
             let cc = params.child_coords(coords, k as u32);
-            children.push(build(params, points, simplices, depth + 1, cc, list, nodes, members));
+            children.push(build(params, points, simplices, depth + 1, cc, list, out)?);
         }
-        let id = nodes.len() as u32;
+        let id = out.nodes.len() as u32;
         for &ch in &children {
-            nodes[ch as usize].parent = id;
+            out.nodes[ch as usize].parent = id;
         }
         // An internal cell's members are the union of its children's (each simplex once).
         for &ch in &children {
-            mine_again.extend_from_slice(&members[ch as usize]);
+            mine_again.extend_from_slice(&out.members[ch as usize]);
         }
         mine_again.sort_unstable();
         mine_again.dedup();
-        nodes.push(Node { depth, coords, children, parent: u32::MAX });
-        members.push(mine_again);
-        return id;
+        out.nodes.push(Node { depth, coords, children, parent: u32::MAX });
+        out.members.push(mine_again);
+        return Ok(id);
     }
-    let id = nodes.len() as u32;
-    nodes.push(Node { depth, coords, children, parent: u32::MAX });
-    members.push(mine);
-    id
+    let id = out.nodes.len() as u32;
+    out.nodes.push(Node { depth, coords, children, parent: u32::MAX });
+    out.members.push(mine);
+    Ok(id)
 }
