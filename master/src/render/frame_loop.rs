@@ -113,9 +113,12 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let direct =
         plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), args.display_ranks as usize));
     let direct = direct.as_ref();
-    let mut costs: Vec<f64> = vec![0.0; grid.tiles()];
-    let mut silence = Silence::new(workers, args.timeout);
-    let mut early = Early::default();
+    let mut inbox = Inbox {
+        costs: vec![0.0; grid.tiles()],
+        silence: Silence::new(workers, args.timeout),
+        early: Early::default(),
+        epoch,
+    };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let result = (|| -> Result<()> {
         for k in 0..args.frames {
@@ -127,7 +130,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 let view = k * n + j as u32;
                 let start = Instant::now();
                 let sort_start = unix_ms();
-                let ctx = FrameContext { frame: view, camera, grid, workers, args, costs: &costs };
+                let ctx = FrameContext { frame: view, camera, grid, workers, args, costs: &inbox.costs };
                 send_all(t, scene.announce(&ctx), args.timeout)?;
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
                 if let Some(d) = direct {
@@ -148,20 +151,20 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                     Span::between("sort", sort_start, send_start, epoch),
                     Span::between("send", send_start, unix_ms(), epoch),
                 ];
-                silence.expect(&answering);
+                inbox.silence.expect(&answering);
                 let size = (grid.width, grid.height);
                 let f =
                     InFlight { k, view, eye, display, size, answering, tiles, chunks, nsp, sort_ms, send_ms, timeline };
                 flight.push_back(f);
                 if flight.len() >= depth {
                     let f = flight.pop_front().expect("a frame in flight");
-                    let done = complete(t, f, args, plan, direct, &mut costs, &mut silence, &mut early, epoch)?;
+                    let done = complete(t, f, args, plan, direct, &mut inbox)?;
                     writer.send(done)?;
                 }
             }
         }
         while let Some(f) = flight.pop_front() {
-            let done = complete(t, f, args, plan, direct, &mut costs, &mut silence, &mut early, epoch)?;
+            let done = complete(t, f, args, plan, direct, &mut inbox)?;
             writer.send(done)?;
         }
         Ok(())
@@ -180,19 +183,27 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     }
 }
 
+/// What rank 0 keeps from one receive to the next: when each rank was last heard from,
+/// messages that came before their turn, each tile's last measured cost (for `--balance`),
+/// and the origin of the stats' timelines.
+struct Inbox {
+    costs: Vec<f64>,
+    silence: Silence,
+    early: Early,
+    epoch: f64,
+}
+
 /// Receives and composites frame `f`'s pixels.
-#[allow(clippy::too_many_arguments)]
 fn complete(
     t: &dyn Transport,
     f: InFlight,
     args: &RenderArgs,
     plan: &Plan,
     direct: Option<&DirectSend>,
-    costs: &mut [f64],
-    silence: &mut Silence,
-    early: &mut Early,
-    epoch: f64,
+    inbox: &mut Inbox,
 ) -> Result<Written> {
+    let Inbox { costs, silence, early, epoch } = inbox;
+    let epoch = *epoch;
     let InFlight { k, view, eye, display, size, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
     let (start, receive_start) = (Instant::now(), unix_ms());
     // With display ranks the pixels go to them: rank 0 holds no frame.
