@@ -3,19 +3,9 @@
 //! and a message that decodes encodes back to the same bytes (the layout has no slack).
 //! Run: `cd fuzz && cargo fuzz run decode_protocol`
 //! (on stable Rust: `RUSTC_BOOTSTRAP=1 cargo fuzz run decode_protocol`).
-//!
-//! The protocol lives in the worker crate, which depends on wgpu and MPI; building those
-//! under the fuzzer's instrumentation would be slow and needs system libraries. The module
-//! itself depends only on `thiserror`, so it is compiled here straight from its source
-//! file, `worker/src/protocol.rs`, the same code the binary runs (not a copy).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-
-#[path = "../../worker/src/protocol.rs"]
-#[allow(dead_code)]
-mod protocol;
-
 use protocol::{ToMaster, ToWorker};
 
 fuzz_target!(|data: &[u8]| {

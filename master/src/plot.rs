@@ -4,7 +4,7 @@
 //! One row per rank (rank 0's writer thread has a row of its own, under rank 0), time from
 //! the run's start across, one bar per stage of every frame, coloured by stage and labelled
 //! with the frame's number where it fits. Workers' bars are on their own clocks moved onto
-//! rank 0's through the Unix epoch ([`worker::protocol::FrameSpan`]), so ranks on different
+//! rank 0's through the Unix epoch ([`protocol::FrameSpan`]), so ranks on different
 //! nodes line up as well as the nodes' clocks agree.
 
 use std::collections::BTreeMap;

@@ -10,16 +10,16 @@
 //!    [`render::AdaptedMesh`]: named buffers already on the device.
 //! 3. [`pm_adapt`]: the progressive-mesh adaptation on a `Gpu` (Algorithms 1 to 5 of Derzapf
 //!    and Guthe). It hands the renderer an `AdaptedMesh` and uses nothing else of it.
-//! 4. [`node`]: the worker loop, which drives the three for the [`protocol`] messages it
-//!    receives over a [`transport`], and whose errors are a [`node::WorkerError`].
+//! 4. [`node`]: the worker loop, which drives the three for the messages of the
+//!    `tessera-protocol` crate it receives over a [`transport`], and whose errors are a
+//!    [`node::WorkerError`].
 //!
-//! `protocol`, `transport` and [`chunk_cache`] need no GPU; the master uses them too.
+//! `transport` and [`chunk_cache`] need no GPU; the master uses them too.
 
 pub mod chunk_cache;
 pub mod gpu;
 pub mod node;
 pub mod pm_adapt;
-pub mod protocol;
 pub mod render;
 pub mod transport;
 #[cfg(test)]

@@ -26,7 +26,7 @@ use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::occlusion::Occluder;
 use crate::pm_adapt::{AdaptError, GpuAdapter, OutOfCore, DEFAULT_N_ALLOC};
-use crate::protocol::{
+use protocol::{
     unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, PmMemory, ProtocolError, StreamSource, TilePixels,
     TileTimes, ToMaster, ToWorker,
 };

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use worker::protocol::{unix_ms, DisplayFrameJob, ToMaster, ToWorker};
+use protocol::{unix_ms, DisplayFrameJob, ToMaster, ToWorker};
 use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
 use glam::Quat;
-use worker::protocol::{unix_ms, ToWorker};
+use protocol::{unix_ms, ToWorker};
 use worker::transport::Transport;
 
 use super::display::DirectSend;

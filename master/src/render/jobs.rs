@@ -5,7 +5,7 @@ use codec::bft::chunked::sort::{share, PieceKind};
 use codec::bft::tile_sort;
 use codec::view::{Camera, TileGrid};
 use worker::chunk_cache::ChunkCache;
-use worker::protocol::{FrameJob, NspFrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
+use protocol::{FrameJob, NspFrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
 
 use super::scene::{BftScene, ChunkedScene, NspScene, PmScene, Scene};
 use super::schedule::assign;

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use worker::protocol::{FrameSpan, PmMemory, TilePixels, ToMaster};
+use protocol::{FrameSpan, PmMemory, TilePixels, ToMaster};
 use worker::transport::{RecvError, Transport};
 
 /// How a rank that helps rank 0 (a sorter, a display rank) ends: a failure is reported to

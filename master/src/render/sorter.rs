@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use glam::Mat4;
-use worker::protocol::{ToMaster, ToWorker};
+use protocol::{ToMaster, ToWorker};
 use worker::transport::{RecvError, Transport};
 
 use super::jobs::{frame_messages, Share, ShareContext};

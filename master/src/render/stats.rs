@@ -2,7 +2,7 @@
 //! time in milliseconds and a timeline of when each stage ran (the README lists the fields).
 
 use serde::{Deserialize, Serialize};
-use worker::protocol::{FrameSpan, PmMemory, TilePixels, TileTimes};
+use protocol::{FrameSpan, PmMemory, TilePixels, TileTimes};
 
 use super::frame_loop::Eye;
 

@@ -1,6 +1,7 @@
-//! The master-worker protocol: every message between rank 0 and the workers, with its
-//! byte layout. Both transports (MPI, and channels for a run without mpirun) carry these
-//! same bytes, and every receive checks what it got.
+//! The protocol every rank of `tessera render` speaks: every message between rank 0, the
+//! workers, the sorters and the display ranks, with its byte layout. Both transports (MPI,
+//! and channels for a run without mpirun) carry these same bytes, and every receive checks
+//! what it got. It depends on nothing of Tessera, so the fuzz target reads it as it is.
 //!
 //! All integers are little-endian. A message starts with the 4-byte magic `TSRM`, the
 //! 1-byte protocol version ([`VERSION`]; a message of another version is refused by name, so
@@ -64,7 +65,7 @@
 //! a stream are those of its vertices that have triangles outside it: the worker computes
 //! every other normal from the stream's own triangles, and these make the shading at tile and
 //! chunk borders the same as in a whole-frame render. A chunk to keep goes into the worker's
-//! [`crate::chunk_cache::ChunkCache`] with its normals applied; a chunk kept before is taken
+//! chunk cache (`worker::chunk_cache::ChunkCache`) with its normals applied; a chunk kept before is taken
 //! from there (the master mirrors the cache, so it names only chunks the worker holds).
 
 use thiserror::Error;
