@@ -419,6 +419,9 @@ fn read_primitive(
         if acc.dimensions() != Dimensions::Vec3 {
             return Err(format!("POSITION accessor {} is not VEC3", acc.index()));
         }
+        // The running total (below) with this primitive's count, before its values are read.
+        let vertices = out.mesh.positions.len() as u64 + acc.count() as u64;
+        crate::input::check_decoded("the primitives read so far", vertices, "vertices", 28)?;
         let flat = read_accessor(&acc, buffers)?;
         let positions: Vec<[f64; 3]> = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let indices = match prim.indices() {
