@@ -42,14 +42,15 @@ impl Cube {
     pub fn check_f32(&self) -> Result<(), String> {
         let fits = |x: f64| x.is_finite() && (x as f32).is_finite();
         if !(self.side.is_finite() && self.side > 0.0) {
-            return Err(format!("the cube's side is {}, not a positive number", self.side));
+            return Err(format!("the cube's side is {}, not a positive number", num(self.side)));
         }
         for a in 0..3 {
             let (lo, hi) = (self.origin[a], self.origin[a] + self.side);
             if !(fits(lo) && fits(hi)) {
                 return Err(format!(
-                    "the cube's origin {lo} and side {} on {} do not fit f32",
-                    self.side,
+                    "the cube's origin {} and side {} on {} do not fit f32",
+                    num(lo),
+                    num(self.side),
                     super::format::AXES[a]
                 ));
             }
@@ -81,6 +82,15 @@ impl Cube {
     /// The canonical position of a full-precision grid point: the centre of its grid cell.
     pub fn position(&self, q: [u32; 3]) -> [f32; 3] {
         self.world([q[0] as f64 + 0.5, q[1] as f64 + 0.5, q[2] as f64 + 0.5])
+    }
+}
+
+/// A number for a message: with an exponent where plain digits would run long.
+pub fn num(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-5..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 

@@ -172,7 +172,9 @@ impl Header {
         if let Some(a) = (0..3).find(|&a| !(h.extent[a].is_finite() && (0.0..=h.cube.side).contains(&h.extent[a]))) {
             return Err(NspError::Format(format!(
                 "header: the bounding box's extent on {} is {}, outside the cube's side {}",
-                AXES[a], h.extent[a], h.cube.side
+                AXES[a],
+                super::canonical::num(h.extent[a]),
+                super::canonical::num(h.cube.side)
             )));
         }
         if u32_at(92) as usize != CONTEXTS {
