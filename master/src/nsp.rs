@@ -10,12 +10,18 @@ use serde::Serialize;
 
 use crate::cli::CameraArgs;
 use crate::commands::{expect_kind, load_mesh, mesh_output, summary};
-use crate::output::{check_distinct, check_extension, write_atomic, write_bytes};
+use crate::output::{
+    check_distinct, check_extension, register_in_flight, unregister_in_flight, write_atomic, write_bytes,
+};
 use crate::progress;
 use codec::input::ModelKind;
 
 /// `tessera nsp build IN -o OUT.nsp`: PLY and OBJ out of core (`codec::nsp::ooc`, memory
 /// that does not grow with the model), STL in core.
+///
+/// The out-of-core build's temporary folder is made here, in `temp_dir` (the system's
+/// temporary folder by default), and registered with [`register_in_flight`], so that an
+/// interrupted build removes it with everything in it; it is removed when the build ends.
 pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path>) -> Result<()> {
     check_extension(output, &["nsp"], "the output of nsp build")?;
     check_distinct(&[input], &[output])?;
@@ -23,32 +29,16 @@ pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path
     let start = Instant::now();
     let mut temp_mb = None;
     let (header, cells, bytes, cost_bits) = if codec::load::stream::can_stream(input) {
-        let pb = progress::bar(0, "reading");
-        let report = |stage: &str, done: u64, total: u64| {
-            if pb.message() != stage {
-                pb.set_message(stage.to_string());
-                pb.set_length(total);
-            }
-            pb.set_position(done);
-        };
-        let mut built = None;
-        let mut failure = None;
-        write_atomic(output, |w| match nsp::ooc::build_file(input, params, temp_dir, w, &report) {
-            Ok(b) => {
-                built = Some(b);
-                Ok(())
-            }
-            Err(e) => {
-                failure = Some(e);
-                Err(std::io::Error::other("the build failed"))
-            }
-        })
-        .map_err(|e| match failure.take() {
-            Some(f) => anyhow::Error::new(f).context(format!("cannot build {}", input.display())),
-            None => e,
-        })?;
-        pb.finish_and_clear();
-        let b = built.expect("built when written");
+        let parent = temp_dir.map_or_else(std::env::temp_dir, Path::to_path_buf);
+        let scratch = tempfile::Builder::new()
+            .prefix("tessera-nsp")
+            .tempdir_in(&parent)
+            .with_context(|| format!("cannot make a temporary folder in {}", parent.display()))?;
+        register_in_flight(scratch.path());
+        let built = build_out_of_core(input, output, params, scratch.path(), &parent);
+        unregister_in_flight(scratch.path());
+        drop(scratch);
+        let b = built?;
         temp_mb = Some(b.temp_bytes as f64 / (1 << 20) as f64);
         (b.header, b.cells, b.bytes, b.cost_bits)
     } else {
@@ -152,6 +142,61 @@ impl NspStatsReport {
             bits_per_point: file.file_len as f64 * 8.0 / h.points.max(1) as f64,
         }
     }
+}
+
+/// The out-of-core build of `input` into `output`, its temporary files in `scratch` (a
+/// folder in `shown`, which messages name).
+fn build_out_of_core(
+    input: &Path,
+    output: &Path,
+    params: Params,
+    scratch: &Path,
+    shown: &Path,
+) -> Result<nsp::ooc::Built> {
+    let pb = progress::bar(0, "reading");
+    let pause = fault("slow-build:");
+    let report = |stage: &str, done: u64, total: u64| {
+        if pb.message() != stage {
+            pb.set_message(stage.to_string());
+            pb.set_length(total);
+            // Test hook: a pause once the buckets are written, nothing else running.
+            if let Some(ms) = pause.filter(|_| stage == "merging coincident vertices") {
+                std::thread::sleep(std::time::Duration::from_millis(ms));
+            }
+        }
+        pb.set_position(done);
+    };
+    let scratch = nsp::ooc::Scratch { dir: scratch, shown, full_after: fault("temp-full:") };
+    let mut built = None;
+    let mut failure = None;
+    write_atomic(output, |w| {
+        match nsp::ooc::build_in(input, params, scratch, w, &report, nsp::ooc::Limits::default()) {
+            Ok(b) => {
+                built = Some(b);
+                Ok(())
+            }
+            // The output's own write error: `write_atomic` names the output.
+            Err(nsp::NspError::Output(e)) => Err(std::io::Error::other(e)),
+            Err(e) => {
+                failure = Some(e);
+                Err(std::io::Error::other("the build failed"))
+            }
+        }
+    })
+    .map_err(|e| match failure.take() {
+        Some(f) => anyhow::Error::new(f).context(format!("cannot build {}", input.display())),
+        None => e,
+    })?;
+    pb.finish_and_clear();
+    Ok(built.expect("built when written"))
+}
+
+/// Test hooks: `TESSERA_FAULT=slow-build:MS` pauses the out-of-core build MS milliseconds
+/// once its temporary folder holds the buckets (so a test can signal it then);
+/// `TESSERA_FAULT=temp-full:BYTES` makes its temporary files fail as on a full disk once
+/// BYTES bytes are written. Unset in normal runs.
+fn fault(prefix: &str) -> Option<u64> {
+    std::env::var("TESSERA_FAULT").ok().and_then(|v| v.strip_prefix(prefix)?.parse().ok())
 }
 
 fn open(input: &Path) -> Result<NspFile> {
