@@ -23,6 +23,12 @@
 //!   face that was not degenerate in the input never becomes degenerate while alive, an input
 //!   face like `[a, a, b]` goes with the collapse joining `a` and `b`, and `[a, a, a]` is
 //!   never removed: it ends in the base mesh.
+//! * **Faces per operation.** A `.dpm` operation adds at most [`MAX_OP_FACES`] faces, and a
+//!   collapse removes every face of its edge at once: a mesh with an edge of more faces is
+//!   refused before simplifying ([`check_op_faces`], naming the edge's vertices and the
+//!   count), and a collapse whose edge gathered more during the simplification is refused
+//!   right after it, before the numbering and the encoding. A vertex of any number of faces
+//!   builds (a fan's edges have two each).
 //! * **Duplicates are kept.** Faces that become equal (or opposite) stay separate faces;
 //!   each is removed by the collapse that degenerates it, so the splits recreate the input
 //!   multiset exactly, with orientation.
@@ -88,6 +94,7 @@ use rustc_hash::FxHashMap;
 
 use thiserror::Error;
 
+use super::format::MAX_OP_FACES;
 use super::order::{permute_in_place, place, preorder, sort_in_place_by_key};
 use super::{Criteria, ProgressiveMesh, Split};
 use crate::mesh::{Mesh, MeshError};
@@ -113,6 +120,48 @@ pub struct BuildStats {
 pub enum PmError {
     #[error("invalid input mesh: {0}")]
     Mesh(#[from] MeshError),
+    /// A collapse would remove more faces than one operation of a `.dpm` file adds
+    /// ([`MAX_OP_FACES`]): the faces of the edge between input vertices `a` and `b`
+    /// (counted from 0).
+    #[error(
+        "vertices {a} and {b} share {faces} faces; a .dpm operation adds at most {MAX_OP_FACES} \
+         (the collapse of their edge would remove them all)"
+    )]
+    OpFaces { a: u32, b: u32, faces: usize },
+}
+
+/// Refuses, before any work, a mesh with an edge of more than [`MAX_OP_FACES`] faces: the
+/// collapse of such an edge (unless its faces went with other collapses first) makes an
+/// operation the format cannot hold. A face counts once per pair of its distinct corners
+/// (`[a, a, b]` holds the edge `a b`). Counts faces per vertex first (two bytes a vertex,
+/// saturating) and pairs only among the vertices of that many faces, so a mesh without such
+/// a vertex costs one pass.
+pub fn check_op_faces(mesh: &Mesh) -> Result<(), PmError> {
+    let max = MAX_OP_FACES as usize;
+    let mut per_vertex = vec![0u16; mesh.positions.len()];
+    for &t in &mesh.triangles {
+        for v in distinct_corners(t) {
+            if let Some(c) = per_vertex.get_mut(v as usize) {
+                *c = c.saturating_add(1);
+            }
+        }
+    }
+    // Both ends of such an edge have more than `max` faces, so a saturated count.
+    let hub = |v: u32| per_vertex.get(v as usize).is_some_and(|&c| c as usize >= max.min(u16::MAX as usize));
+    let mut pairs: rustc_hash::FxHashMap<(u32, u32), usize> = Default::default();
+    for &t in &mesh.triangles {
+        let corners: smallvec::SmallVec<[u32; 3]> = distinct_corners(t).filter(|&v| hub(v)).collect();
+        for i in 0..corners.len() {
+            for j in i + 1..corners.len() {
+                let (a, b) = (corners[i].min(corners[j]), corners[i].max(corners[j]));
+                *pairs.entry((a, b)).or_default() += 1;
+            }
+        }
+    }
+    match pairs.into_iter().filter(|&(_, n)| n > max).max_by_key(|&((a, b), n)| (n, std::cmp::Reverse((a, b)))) {
+        Some(((a, b), faces)) => Err(PmError::OpFaces { a, b, faces }),
+        None => Ok(()),
+    }
 }
 
 /// The corners of `tri`, each vertex once, in corner order (a face like `[a, a, b]` is one
@@ -716,6 +765,7 @@ fn build_mesh(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(ProgressiveMesh, BuildStats), PmError> {
     mesh.validate()?;
+    check_op_faces(&mesh)?;
     let n = mesh.positions.len();
     let used = mesh.used_vertices();
     let bound = used.iter().filter(|&&u| u).count();
@@ -758,6 +808,16 @@ fn build_mesh(
     report(log.collapses.len());
     super::trace("numbering");
     let Log { collapses, removed, removed_end, error: collapse_error } = log;
+    // Faces that gathered on an edge during the simplification: refused here, before the
+    // numbering and the encoding, where the format's check would find them.
+    let mut from = 0;
+    for (&(u, t), &end) in collapses.iter().zip(&removed_end) {
+        let faces = (end - from) as usize;
+        if faces > MAX_OP_FACES as usize {
+            return Err(PmError::OpFaces { a: t.min(u), b: t.max(u), faces });
+        }
+        from = end;
+    }
 
     // Leaves left to right = pre-order of the forest whose vertices' children are the
     // vertices they absorbed, chronologically, roots in ascending input index. Numbered
