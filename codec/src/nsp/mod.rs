@@ -82,6 +82,11 @@
 //!   triangle). The view asks for connectivity `m` bits below the precision the error
 //!   bound wants. The partition and the full-precision decode are unchanged (tested).
 //! - Edges and points are kept, counted, and not drawn.
+//! - **Bounds.** A reader checks every count it allocates from against `--max-decompressed`
+//!   before allocating ([`mod@format`]: the footer's cells, the table's bytes, each row's
+//!   kd-cells and top-simplices), and refuses a header whose cube does not fit `f32`. A build
+//!   makes no more cells than a reader opens under the same cap ([`Params::check_cells`]):
+//!   `--splits 16 --min-simplices 1` would otherwise make thousands of cells per triangle.
 
 pub mod canonical;
 pub mod complex;
@@ -115,7 +120,7 @@ pub enum NspError {
     /// A count the file holds, above what `--max-decompressed` lets a reader allocate.
     #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
     TooLarge(String),
-    /// Flags that would make more cells than a reader opens (see [`format::check_cells`]).
+    /// Flags that would make more cells than a reader opens (see [`Params::check_cells`]).
     #[error("{0}")]
     TooManyCells(String),
     /// Writing (or reading back) the build's temporary files in `folder` failed: a full
@@ -181,7 +186,7 @@ impl Params {
     }
 
     /// Refuses a tree of at least `cells` cells where a reader would not open it
-    /// ([`format::check_cells`]): how many cells a model is cut into follows from `--splits`
+    /// ([`format::max_cells`]): how many cells a model is cut into follows from `--splits`
     /// and `--min-simplices` (with `--bits` and `--root-bits`, the depth), so the message
     /// names them.
     pub fn check_cells(&self, cells: u64) -> Result<(), NspError> {
