@@ -9,7 +9,10 @@
 //!   compression-domain tile sort with Table 2, and the vertex normals master and workers share;
 //! - the camera and tile conventions ([`view`]) and the independent-triangle sort ([`tri_sort`]);
 //! - dependency-free progressive meshes (Derzapf & Guthe; [`pm`]): builder, `.dpm` coder and
-//!   the CPU reference adaptation that the GPU adaptation is tested against.
+//!   the CPU reference adaptation that the GPU adaptation is tested against;
+//! - the nSP-tree store ([`nsp`]): a lossless out-of-core progressive codec (kd-tree geometry
+//!   coding inside an nSP-tree), its `.nsp` format, build, cell decoding and view selection;
+//! - what the fuzz targets check ([`fuzzing`]).
 //!
 //! ```
 //! use codec::{bft, Mesh};
@@ -26,6 +29,7 @@
 pub mod bft;
 mod container;
 mod csr;
+pub mod fuzzing;
 pub mod huffman;
 pub mod input;
 pub mod load;

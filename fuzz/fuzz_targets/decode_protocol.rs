@@ -1,18 +1,7 @@
-//! Fuzzes the master-worker protocol: any bytes must decode as a message to the worker and
-//! as one to the master, or return an error, never panic, hang or allocate without bound;
-//! and a message that decodes encodes back to the same bytes (the layout has no slack).
-//! Run: `cd fuzz && cargo fuzz run decode_protocol`
-//! (on stable Rust: `RUSTC_BOOTSTRAP=1 cargo fuzz run decode_protocol`).
+//! Fuzzes the protocol between ranks; `protocol::fuzz_round_trip` says what must hold, and the
+//! workspace's test `fuzz_regressions` runs it on `fuzz/regressions/decode_protocol/`. Run: `cd
+//! fuzz && cargo fuzz run decode_protocol` (on stable Rust: `RUSTC_BOOTSTRAP=1 cargo fuzz run
+//! decode_protocol`), or `scripts/fuzz.sh`.
 #![no_main]
 
-use libfuzzer_sys::fuzz_target;
-use protocol::{ToMaster, ToWorker};
-
-fuzz_target!(|data: &[u8]| {
-    if let Ok(m) = ToWorker::decode(data) {
-        assert_eq!(m.encode(), data, "a decoded message to the worker encodes back to its bytes");
-    }
-    if let Ok(m) = ToMaster::decode(data) {
-        assert_eq!(m.encode(), data, "a decoded message to the master encodes back to its bytes");
-    }
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| protocol::fuzz_round_trip(data));

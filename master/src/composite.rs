@@ -504,6 +504,29 @@ impl Display {
     }
 }
 
+/// What the fuzz target `parse_wall` checks (the fuzzer and the workspace's regression test
+/// over `fuzz/regressions/` run this): any bytes parse into a wall or are refused, never
+/// panic, hang or allocate without bound, and a wall that parses has at most
+/// [`MAX_DISPLAYS`] displays, each inside its frame, and splits a frame of its size.
+pub fn fuzz_wall(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else { return };
+    let Ok(wall) = Wall::parse(text) else { return };
+    let (w, h) = wall.frame_size();
+    assert!(wall.displays.len() as u64 <= MAX_DISPLAYS);
+    for d in &wall.displays {
+        let [x0, y0, x1, y1] = d.rect;
+        assert!(x0 < x1 && y0 < y1 && x1 <= w && y1 <= h, "display {} outside its {w}x{h} wall", d.name);
+    }
+    // Splitting a frame allocates the frame and every display: only for small walls here.
+    if (w as u64) * (h as u64) <= 1 << 20 {
+        let (images, overview) = wall.split(&Image::new(w, h));
+        assert_eq!((images.len(), overview.width, overview.height), (wall.displays.len(), w, h));
+    }
+    if let Some(eye) = wall.eye {
+        let _ = wall.check_eye(eye);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -858,6 +858,19 @@ impl ToMaster {
     }
 }
 
+/// What the fuzz target `decode_protocol` checks (the fuzzer and the workspace's regression
+/// test over `fuzz/regressions/` run this): any bytes decode as a message to a worker and as
+/// one to the master, or are refused, never panic or allocate without bound; and a message
+/// that decodes encodes back to the same bytes (the layout has no slack).
+pub fn fuzz_round_trip(data: &[u8]) {
+    if let Ok(m) = ToWorker::decode(data) {
+        assert_eq!(m.encode(), data, "a decoded message to the worker encodes back to its bytes");
+    }
+    if let Ok(m) = ToMaster::decode(data) {
+        assert_eq!(m.encode(), data, "a decoded message to the master encodes back to its bytes");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
