@@ -1,7 +1,7 @@
 //! glTF 2.0 in: the hand-made file (`tests/gltf/make_handmade.py`: node hierarchy and
 //! transforms, strips, fans, sparse accessors, non-indexed primitives, a mirror, a node in no
 //! scene) against its triangles worked out by hand, and files written by real peer tools
-//! (`scripts/gltf-fixtures.sh`: obj2gltf, glTF Transform's Draco and meshopt) against the
+//! (`scripts/dev/gltf-fixtures.sh`: obj2gltf, glTF Transform's Draco and meshopt) against the
 //! same mesh loaded from OBJ.
 
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 """The scaling model of docs/scaling.md: per-stage costs measured in a `tessera render
 --stats` file, and from them the frame time of a large wall driven by N render nodes.
 
-    python3 scripts/scaling_model.py s.jsonl --model-triangles 871414 [--view-triangles 1e8]
+    python3 bench/scripts/scaling_model.py s.jsonl --model-triangles 871414 [--view-triangles 1e8]
         [--displays 64 --display-size 3840x2160] [--nodes 16,64,256,1024] [--link-gbps 100]
         [--gpu-triangles-per-s 0]
 

@@ -2,9 +2,9 @@
 # Regenerates the glTF test files in codec/tests/gltf/ with real peer tools from the npm
 # registry (obj2gltf, glTF Transform's CLI), from the shared cow.obj, and the hand-made
 # one with make_handmade.py. The files are committed; this script says how they were made.
-#   bash scripts/gltf-fixtures.sh
+#   bash scripts/dev/gltf-fixtures.sh
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 out=codec/tests/gltf
 src=../shared/meshes/classic/cow.obj
 tools=$(mktemp -d)

@@ -4,12 +4,12 @@
 # prints per build its wall time, peak resident memory, its peak anonymous memory (`RssAnon`
 # sampled every half second: what stays in memory outside the spill files, about 100 MB
 # whatever the model) and whether the file is the same bytes. Not run by CI: it needs root and a writable cgroup memory controller (v2 or v1).
-# Usage: scripts/pm-build-capped.sh MODEL.ply SPILL_DIR LIMIT... (LIMIT as the kernel takes
+# Usage: bench/scripts/pm-build-capped.sh MODEL.ply SPILL_DIR LIMIT... (LIMIT as the kernel takes
 # it: 900M, 3500M, ...)
-#   e.g. scripts/pm-build-capped.sh /tmp/pm13/d.ply /tmp/spill 900M 700M 550M
-# The models come from scripts/pm-scale.sh (the dragon at 13.9M, the armadillo at 102M).
+#   e.g. bench/scripts/pm-build-capped.sh /tmp/pm13/d.ply /tmp/spill 900M 700M 550M
+# The models come from bench/scripts/pm-scale.sh (the dragon at 13.9M, the armadillo at 102M).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 MODEL="$1"
 SPILL="$2"
 shift 2

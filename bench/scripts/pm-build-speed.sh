@@ -7,10 +7,10 @@
 # operations/s and peak memory (/usr/bin/time), the medians and the ratio of the medians. The
 # two files must be identical (a speed-up must not change the bytes; a format change shows
 # as "files differ").
-#   usage: scripts/pm-build-speed.sh [REV] [RUNS]     (BASE_BIN=path skips building REV;
+#   usage: bench/scripts/pm-build-speed.sh [REV] [RUNS]     (BASE_BIN=path skips building REV;
 #          MESH=file, default the dragon; BUILD_ARGS="--node-kb 64" for an out-of-core build)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 rev="${1:-main}"
 runs="${2:-6}"
 mesh="${MESH:-../shared/meshes/stanford/dragon_vrip.ply.gz}"

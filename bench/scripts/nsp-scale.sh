@@ -4,9 +4,9 @@
 # temporary folder and builds each with `tessera nsp build` under /usr/bin/time -v, for each
 # geometry advance given, then prints time, triangles/s, peak memory and the ratio of the
 # peaks (issue 15 asks at most 300 MB, and at most 1.3x from about 2M to 20M triangles).
-# Usage: scripts/nsp-scale.sh [ADVANCES] [LOW] [HIGH] [TMPDIR]   (e.g. scripts/nsp-scale.sh "0 2")
+# Usage: bench/scripts/nsp-scale.sh [ADVANCES] [LOW] [HIGH] [TMPDIR]   (e.g. bench/scripts/nsp-scale.sh "0 2")
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 ADVANCES="${1:-0 2}"
 LOW="${2:-2}"
 HIGH="${3:-4}"

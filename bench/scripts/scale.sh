@@ -8,9 +8,9 @@
 #   2. a full view, 3 frames: sort time per frame, rank 0's resident memory;
 #   3. a close-up that sees a few percent of the model, 3 frames;
 #   4. a slow orbit (1 degree a frame, 6 frames): the bytes each frame sends against the first.
-# Usage: scripts/scale.sh [MIN_TRIANGLES] [TMPDIR]   (e.g. scripts/scale.sh 20M for a quick run)
+# Usage: bench/scripts/scale.sh [MIN_TRIANGLES] [TMPDIR]   (e.g. bench/scripts/scale.sh 20M for a quick run)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 MIN="${1:-200M}"
 DIR="${2:-${TMPDIR:-/tmp}/tessera-scale}"
 mkdir -p "$DIR"

@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Shows that a change leaves what users see byte-identical: builds `tessera` at REV (default
-# origin/main, else main) and at the working tree, writes scripts/outputs.sh's files with both,
+# origin/main, else main) and at the working tree, writes scripts/dev/outputs.sh's files with both,
 # and compares every file. In `.bft` and `.dpm` files the version field and the header CRC
 # (which covers no version, but moves with it in the comparison) are masked, so a version bump
 # alone compares equal. JSON summaries are compared without their timings (keys ending in
 # `_ms`) and with the output folder's name taken out; everything else must match byte for
 # byte.
-#   usage: scripts/same-output.sh [REV]        (BASE_BIN=path skips building REV)
+#   usage: scripts/dev/same-output.sh [REV]        (BASE_BIN=path skips building REV)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 rev="${1:-main}"
 work="$(mktemp -d /tmp/tessera-same.XXXXXX)"
 trap 'git worktree remove --force "$work/src" >/dev/null 2>&1 || true; rm -rf "$work"' EXIT
@@ -23,8 +23,8 @@ if [ -z "${BASE_BIN:-}" ]; then
 fi
 echo "same-output: building the working tree"
 cargo build -q --release -p tessera
-scripts/outputs.sh "$BASE_BIN" "$work/before"
-scripts/outputs.sh "${CARGO_TARGET_DIR:-target}/release/tessera" "$work/after"
+scripts/dev/outputs.sh "$BASE_BIN" "$work/before"
+scripts/dev/outputs.sh "${CARGO_TARGET_DIR:-target}/release/tessera" "$work/after"
 
 python3 - "$work/before" "$work/after" <<'EOF'
 import json, os, sys

@@ -2,12 +2,12 @@
 # Writes what users see from a `tessera` binary on the shared meshes into OUT, one file per
 # output: `.bft` and `.dpm` files, `sort --dump` tiles, single-process and `mpirun -np 3`
 # PNGs (sorted and progressive models, a tile wall) and `pm adapt` PLYs (CPU and GPU).
-# scripts/same-output.sh runs it for two builds and compares the folders byte for byte.
-#   usage: scripts/outputs.sh path/to/tessera OUT
+# scripts/dev/same-output.sh runs it for two builds and compares the folders byte for byte.
+#   usage: scripts/dev/outputs.sh path/to/tessera OUT
 set -euo pipefail
 bin="$(realpath "$1")"
 out="$2"
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 meshes=../shared/meshes
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp/tessera-xdg}"
 mkdir -p "$XDG_RUNTIME_DIR" "$out"

@@ -7,14 +7,14 @@
 # adapted triangles, the worker's graphics memory (node pool, tables and adapted mesh: within
 # the budget), the node bytes loaded, the resident, required and slot counts of nodes, and the
 # factor on --error-px the budget held the mesh to.
-# Usage: [MESH=FILE] scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
-#   e.g. scripts/pm-scale.sh 13M /tmp/tessera-pm 16 128
-#   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=2 scripts/pm-scale.sh 100000000 /tmp/pm100 512
+# Usage: [MESH=FILE] bench/scripts/pm-scale.sh [MIN_TRIANGLES] [TMPDIR] [BUDGETS_MB...]
+#   e.g. bench/scripts/pm-scale.sh 13M /tmp/tessera-pm 16 128
+#   MESH=../shared/meshes/stanford/armadillo_100k.obj.gz ERROR_PX=2 bench/scripts/pm-scale.sh 100000000 /tmp/pm100 512
 # ERROR_PX sets render's --error-px (default its own, 0.5). Where the budget, or lavapipe's
 # 128 MiB per buffer (about 1.05M vertices), cannot hold the mesh at that error, the worker
 # adapts to a larger one (the error scale column).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 MIN="${1:-13M}"
 DIR="${2:-${TMPDIR:-/tmp}/tessera-pm-scale}"
 shift $(( $# < 2 ? $# : 2 ))

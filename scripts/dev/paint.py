@@ -3,7 +3,7 @@
 .gz): per-vertex 8-bit RGB from a smooth procedural pattern (cow patches over a warm base,
 so Spot looks like a cow), no normals. Standard library only.
 
-    scripts/paint.py shared/meshes/odedstein/spot.obj.gz assets/spot_colored.ply.gz
+    scripts/dev/paint.py shared/meshes/odedstein/spot.obj.gz assets/spot_colored.ply.gz
 
 The demo's coloured model (assets/spot_colored.ply.gz) was made this way from Spot (Keenan
 Crane, public domain). The pattern is deterministic: the same input gives the same bytes.
@@ -48,6 +48,7 @@ def main():
     positions, faces = read_obj(src)
     lo = [min(p[a] for p in positions) for a in range(3)]
     hi = [max(p[a] for p in positions) for a in range(3)]
+    # The comment is the one in assets/spot_colored.ply.gz, so the same input gives its bytes.
     head = (
         "ply\nformat binary_little_endian 1.0\ncomment painted by scripts/paint.py from %s\n"
         "element vertex %d\nproperty float x\nproperty float y\nproperty float z\n"

@@ -7,7 +7,7 @@
 # input is under fuzz/artifacts/TARGET/). Inputs that once crashed a target are kept in
 # fuzz/regressions/TARGET/ and run first; one that still crashes fails the target too.
 #
-#   scripts/fuzz.sh [SECONDS_PER_TARGET]
+#   scripts/dev/fuzz.sh [SECONDS_PER_TARGET]
 #
 # Environment: FUZZ_RUNS=N also stops a target after N executions (whichever comes first);
 # FUZZ_TARGETS="a b" runs only those targets; FUZZ_ARGS adds libFuzzer flags; FUZZ_CARGO_ARGS
@@ -16,11 +16,11 @@
 # go to fuzz/logs/TARGET.log. cargo-fuzz is installed if missing; a nightly toolchain is
 # used when rustup has one, stable with RUSTC_BOOTSTRAP=1 otherwise.
 set -euo pipefail
-cd "$(dirname "$0")/../fuzz"
+cd "$(dirname "$0")/../../fuzz"
 
 secs="${1:-60}"
 if ! [[ "$secs" =~ ^[0-9]+$ ]] || [ "$secs" -lt 1 ]; then
-    echo "usage: scripts/fuzz.sh [SECONDS_PER_TARGET]" >&2
+    echo "usage: scripts/dev/fuzz.sh [SECONDS_PER_TARGET]" >&2
     exit 2
 fi
 
