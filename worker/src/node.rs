@@ -26,13 +26,13 @@ use crate::chunk_cache::ChunkCache;
 use crate::gpu::{Gpu, GpuError};
 use crate::pm_adapt::occlusion::Occluder;
 use crate::pm_adapt::{AdaptError, GpuAdapter, OutOfCore, DEFAULT_N_ALLOC};
-use protocol::{
-    unix_ms, FrameJob, FrameSpan, NspFrameJob, PmFrameJob, PmMemory, ProtocolError, StreamSource, TilePixels,
-    TileTimes, ToMaster, ToWorker,
-};
 use crate::render::{RenderError, Renderer};
 use crate::transport::{RecvError, Transport};
 use crate::RenderMesh;
+use protocol::{
+    unix_ms, DpmFile, Failed, FrameJob, FrameSpan, NspFrameJob, NspModel, Pixels, PmFrameJob, PmMemory, PmModel,
+    ProtocolError, Ready, StreamSource, TilePixels, TileTimes, ToMaster, ToWorker,
+};
 
 /// How long a worker waits for the master's next message. The master loads and sorts
 /// between frames; when it dies, `mpirun` (or the closed channel) ends the worker sooner.
@@ -209,7 +209,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
     let heartbeat = Heartbeat::start(t.sender(0));
     let fail = |reason: WorkerError| {
         heartbeat.busy(false);
-        t.send(0, &ToMaster::Failed { reason: reason.to_string() }.encode());
+        t.send(0, &ToMaster::Failed(Failed { reason: reason.to_string() }).encode());
         Err(RankError { rank, reason })
     };
     let gpu = match Gpu::new() {
@@ -222,7 +222,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         _ => gpu.limits().max_texture_dimension_2d,
     };
     heartbeat.busy(false);
-    t.send(0, &ToMaster::Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }.encode());
+    t.send(0, &ToMaster::Ready(Ready { adapter: gpu.adapter_name().to_string(), max_texture_side }).encode());
     let mut pm: Option<PmTiles> = None;
     let mut nsp: Option<NspView> = None;
     // One chunk cache per sorter (`render --sorters K`), each mirrored by its sorter.
@@ -247,21 +247,21 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         }
         let msg = match msg {
             Ok(ToWorker::Shutdown) => return Ok(()),
-            Ok(ToWorker::Model { dpm, gpu_budget }) => {
+            Ok(ToWorker::Model(PmModel { dpm, gpu_budget })) => {
                 match PmTiles::new(&gpu, &dpm, gpu_budget) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
                 continue;
             }
-            Ok(ToWorker::DpmFile { path, gpu_budget, pool_bytes }) => {
+            Ok(ToWorker::DpmFile(DpmFile { path, gpu_budget, pool_bytes })) => {
                 match PmTiles::open(&gpu, Path::new(&path), gpu_budget, pool_bytes) {
                     Ok(p) => pm = Some(p),
                     Err(e) => return fail(e),
                 }
                 continue;
             }
-            Ok(ToWorker::NspModel(skeleton)) => {
+            Ok(ToWorker::NspModel(NspModel { skeleton })) => {
                 match codec::nsp::NspFile::from_skeleton(skeleton) {
                     Ok(file) => nsp = Some(NspView { file, nav: Default::default() }),
                     Err(e) => return fail(WorkerError::Nsp(e)),
@@ -286,11 +286,6 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         }
         let job = match msg {
             ToWorker::Frame(job) => job,
-            ToWorker::Sort(_) => return fail(WorkerError::BadMessage(ProtocolError::Unexpected("Sort".into()))),
-            ToWorker::DisplayFrame(_) | ToWorker::Swap { .. } => {
-                let why = "a display rank's message".into();
-                return fail(WorkerError::BadMessage(ProtocolError::Unexpected(why)));
-            }
             ToWorker::NspFrame(job) => {
                 let Some(view) = nsp.as_mut() else {
                     return fail(WorkerError::NspFrame("arrived before its model"));
@@ -363,7 +358,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
 /// rectangle at the tile's corner), all at once.
 fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TilePixels>, span: FrameSpan, pm: PmMemory) {
     let Some(route) = route else {
-        t.send(0, &ToMaster::Pixels { frame, tiles, span, pm }.encode());
+        t.send(0, &ToMaster::Pixels(Pixels { frame, tiles, span, pm }).encode());
         return;
     };
     let mut to: std::collections::BTreeMap<usize, Vec<TilePixels>> = Default::default();
@@ -373,12 +368,12 @@ fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TileP
         }
     }
     let mut msgs: Vec<(usize, Vec<u8>)> =
-        to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels { frame, tiles, span, pm }.encode())).collect();
+        to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels(Pixels { frame, tiles, span, pm }).encode())).collect();
     let stripped = tiles
         .into_iter()
         .map(|p| TilePixels { rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]], rgba: Vec::new(), ..p })
         .collect();
-    msgs.push((0, ToMaster::Pixels { frame, tiles: stripped, span, pm }.encode()));
+    msgs.push((0, ToMaster::Pixels(Pixels { frame, tiles: stripped, span, pm }).encode()));
     // Rank 0 and the display ranks wait for these; a rank that died ends the job from there.
     let _ = t.send_many(msgs, crate::transport::NO_TIMEOUT);
 }

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use protocol::{unix_ms, DisplayFrameJob, ToMaster, ToWorker};
+use protocol::{unix_ms, DisplayFrameJob, DisplayReady, Pixels, Ready, Swap, ToDisplay, ToMaster};
 use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};
@@ -64,7 +64,7 @@ impl DirectSend {
             .map(|rank| {
                 let tiles =
                     tiles.iter().copied().filter(|&i| self.route(grid.tile_rect(i as usize)).contains(&rank)).collect();
-                (rank, ToWorker::DisplayFrame(DisplayFrameJob { view, frame, eye, tiles }).encode())
+                (rank, ToDisplay::DisplayFrame(DisplayFrameJob { view, frame, eye, tiles }).encode())
             })
             .collect()
     }
@@ -98,7 +98,10 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
     let wall = plan.wall.as_ref().context("--display-ranks needs --wall")?;
     let layout = DirectSend::new(wall, t.size(), args.display_ranks as usize);
     let mine: Vec<usize> = (0..wall.displays.len()).filter(|&i| layout.owner(i) == t.rank()).collect();
-    t.send(0, &ToMaster::Ready { adapter: format!("display rank {index}"), max_texture_side: u32::MAX }.encode());
+    t.send(
+        0,
+        &ToMaster::Ready(Ready { adapter: format!("display rank {index}"), max_texture_side: u32::MAX }).encode(),
+    );
     let new_view = || View {
         images: mine
             .iter()
@@ -118,14 +121,14 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
             Err(RecvError::Disconnected) => return Ok(()),
         };
         let view = if from == 0 {
-            match ToWorker::decode(&bytes).context("bad message from rank 0")? {
-                ToWorker::Shutdown => return Ok(()),
-                ToWorker::DisplayFrame(job) => {
+            match ToDisplay::decode(&bytes).context("bad message from rank 0")? {
+                ToDisplay::Shutdown => return Ok(()),
+                ToDisplay::DisplayFrame(job) => {
                     let v = job.view;
                     views.entry(v).or_insert_with(new_view).job = Some(job);
                     v
                 }
-                ToWorker::Swap { view } => {
+                ToDisplay::Swap(Swap { view }) => {
                     let v = views
                         .remove(&view)
                         .with_context(|| format!("a swap of view {view}, which it does not hold"))?;
@@ -138,11 +141,10 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
                     }
                     continue;
                 }
-                other => bail!("unexpected message from rank 0: {}", other.name()),
             }
         } else {
             match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {from}"))? {
-                ToMaster::Pixels { frame, tiles, .. } => {
+                ToMaster::Pixels(Pixels { frame, tiles, .. }) => {
                     let v = views.entry(frame).or_insert_with(new_view);
                     for tile in tiles {
                         let [x0, y0, x1, y1] = tile.rect;
@@ -183,7 +185,7 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
         if v.ready.iter().all(Option::is_some) {
             v.reported = true;
             let ready = mine.iter().zip(&v.ready).map(|(&i, r)| (i as u32, r.expect("all ready"))).collect();
-            t.send(0, &ToMaster::DisplayReady { view, ready }.encode());
+            t.send(0, &ToMaster::DisplayReady(DisplayReady { view, ready }).encode());
         }
     }
 }
@@ -217,8 +219,8 @@ mod tests {
         assert_eq!(layout.route([0, 0, 34, 10]), [3, 4]);
         let grid = TileGrid::new(34, 10, 4, 1).unwrap();
         let msgs = layout.frame_messages(7, 3, 0, &[0, 1, 3], &grid);
-        let tiles = |m: &[u8]| match ToWorker::decode(m).unwrap() {
-            ToWorker::DisplayFrame(j) => j.tiles,
+        let tiles = |m: &[u8]| match ToDisplay::decode(m).unwrap() {
+            ToDisplay::DisplayFrame(j) => j.tiles,
             other => panic!("{other:?}"),
         };
         // Tiles are 8 or 9 pixels wide: 0..8, 8..17, 17..25, 25..34.

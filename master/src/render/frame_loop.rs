@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
 use glam::Quat;
-use protocol::{unix_ms, ToWorker};
+use protocol::{unix_ms, DpmFile, NspModel, PmModel, Swap, ToDisplay, ToWorker};
 use worker::transport::Transport;
 
 use super::display::DirectSend;
@@ -82,17 +82,18 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     if let Scene::Pm(PmScene { source, .. }) = &scene {
         let model = match source {
             PmSource::Bytes { bytes, gpu_budget } => {
-                ToWorker::Model { dpm: bytes.clone(), gpu_budget: *gpu_budget }.encode()
+                ToWorker::Model(PmModel { dpm: bytes.clone(), gpu_budget: *gpu_budget }).encode()
             }
             PmSource::File { path, gpu_budget, pool_bytes, .. } => {
-                ToWorker::DpmFile { path: path.clone(), gpu_budget: *gpu_budget, pool_bytes: *pool_bytes }.encode()
+                ToWorker::DpmFile(DpmFile { path: path.clone(), gpu_budget: *gpu_budget, pool_bytes: *pool_bytes })
+                    .encode()
             }
         };
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
     }
     if let Scene::Nsp(nsp) = &scene {
         let NspScene { file, .. } = nsp.as_ref();
-        let model = ToWorker::NspModel(file.skeleton().to_vec()).encode();
+        let model = ToWorker::NspModel(NspModel { skeleton: file.skeleton().to_vec() }).encode();
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
     }
     let movie = if crate::movie::is_movie(&args.out) {
@@ -245,7 +246,7 @@ fn complete(
                 heard.push(r.rank);
                 ready.extend(r.displays);
             }
-            let swap = ToWorker::Swap { view }.encode();
+            let swap = ToDisplay::Swap(Swap { view }).encode();
             send_all(t, d.display_ranks().map(|r| (r, swap.clone())).collect(), args.timeout)?;
             let swap_ms = unix_ms();
             timeline.push(Span::between("swap", receive_end, swap_ms, epoch));

@@ -4,8 +4,8 @@ use anyhow::Result;
 use codec::bft::chunked::sort::{share, PieceKind};
 use codec::bft::tile_sort;
 use codec::view::{Camera, TileGrid};
-use worker::chunk_cache::ChunkCache;
 use protocol::{FrameJob, NspFrameJob, PmFrameJob, SortJob, StreamSource, TileJob, TileStream, ToWorker};
+use worker::chunk_cache::ChunkCache;
 
 use super::scene::{BftScene, ChunkedScene, NspScene, PmScene, Scene};
 use super::schedule::assign;
@@ -164,7 +164,7 @@ impl ChunkedScene {
             view_proj: ctx.camera.view_proj(ctx.grid.aspect()).to_cols_array(),
             owners: self.owners.iter().map(|&w| w as u32).collect(),
         };
-        let msg = ToWorker::Sort(job).encode();
+        let msg = protocol::ToSorter::Sort(job).encode();
         (1..self.sorters).map(|s| (ctx.workers + s, msg.clone())).collect()
     }
 

@@ -5,14 +5,17 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
-use protocol::{FrameSpan, PmMemory, TilePixels, ToMaster};
+use protocol::{FrameSpan, Pixels, PmMemory, TilePixels, ToMaster};
 use worker::transport::{RecvError, Transport};
 
 /// How a rank that helps rank 0 (a sorter, a display rank) ends: a failure is reported to
 /// rank 0, which ends the job with it (`prefix` says who failed), and returned.
 pub(super) fn report_failure(t: &dyn Transport, prefix: &str, result: Result<()>) -> Result<()> {
     if let Err(e) = &result {
-        t.send(0, &ToMaster::Failed { reason: format!("{prefix}{}", crate::output::one_line(e)) }.encode());
+        t.send(
+            0,
+            &ToMaster::Failed(protocol::Failed { reason: format!("{prefix}{}", crate::output::one_line(e)) }).encode(),
+        );
     }
     result
 }
@@ -100,7 +103,7 @@ pub(super) fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
             // Workers still starting (a device can take seconds to open) say so.
             ToMaster::Heartbeat => last = Instant::now(),
-            ToMaster::Ready { adapter, max_texture_side } => {
+            ToMaster::Ready(protocol::Ready { adapter, max_texture_side }) => {
                 if grid.width > max_texture_side || grid.height > max_texture_side {
                     bail!(
                         "the {}x{} frame does not fit rank {rank}'s adapter ({adapter}), whose largest texture side is {max_texture_side}",
@@ -111,7 +114,7 @@ pub(super) fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -
                 ready[rank] = true;
                 adapters[rank] = format!("rank {rank}: {adapter}");
             }
-            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
+            ToMaster::Failed(protocol::Failed { reason }) => bail!("rank {rank} failed: {reason}"),
             other => bail!("rank {rank} sent {} before it was ready", other.name()),
         }
     }
@@ -208,21 +211,21 @@ fn receive_until(t: &dyn Transport, view: u32, want: Want, silence: &mut Silence
         silence.heard(rank);
         match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
             ToMaster::Heartbeat => continue,
-            ToMaster::Pixels { frame: f, tiles, span, pm }
+            ToMaster::Pixels(Pixels { frame: f, tiles, span, pm })
                 if (f == view && want == Want::Pixels) || (f > view && silence.owes(rank) > 0) =>
             {
                 silence.answered(rank);
                 early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span, pm });
             }
-            ToMaster::DisplayReady { view: v, ready } => {
+            ToMaster::DisplayReady(protocol::DisplayReady { view: v, ready }) => {
                 early.ready.entry(v).or_default().push(Ready { rank, displays: ready })
             }
-            ToMaster::Pixels { frame: f, .. } => match want {
+            ToMaster::Pixels(Pixels { frame: f, .. }) => match want {
                 Want::Pixels => bail!("rank {rank} answered frame {f} during frame {view}"),
                 Want::Ready => bail!("rank {rank} answered frame {f} during view {view}'s swap"),
             },
-            ToMaster::Failed { reason } => bail!("rank {rank} failed: {reason}"),
-            ToMaster::Ready { .. } => bail!("rank {rank} sent Ready twice"),
+            ToMaster::Failed(protocol::Failed { reason }) => bail!("rank {rank} failed: {reason}"),
+            ToMaster::Ready(_) => bail!("rank {rank} sent Ready twice"),
         }
     }
 }

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use glam::Mat4;
-use protocol::{ToMaster, ToWorker};
+use protocol::{Ready, ToMaster, ToSorter};
 use worker::transport::{RecvError, Transport};
 
 use super::jobs::{frame_messages, Share, ShareContext};
@@ -30,7 +30,7 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
     let Scene::Chunked(mut scene) = Scene::load(&args.model, args.tile_coding.into(), args)? else {
         bail!("{}: --sorters shares the sort of a chunked .bft model", args.model.display());
     };
-    t.send(0, &ToMaster::Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }.encode());
+    t.send(0, &ToMaster::Ready(Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }).encode());
     let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     loop {
         let (from, bytes) = match t.recv(MASTER_SILENCE) {
@@ -41,9 +41,9 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
         if from != 0 {
             bail!("unexpected message from rank {from}");
         }
-        match ToWorker::decode(&bytes).context("bad message from rank 0")? {
-            ToWorker::Shutdown => return Ok(()),
-            ToWorker::Sort(job) => {
+        match ToSorter::decode(&bytes).context("bad message from rank 0")? {
+            ToSorter::Shutdown => return Ok(()),
+            ToSorter::Sort(job) => {
                 let ctx = ShareContext {
                     frame: job.frame,
                     grid: &plan.grid,
@@ -60,7 +60,6 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
                     scene.share_jobs(&ctx, s, |tiles| tiles.iter().map(|&i| owners[i] as usize).collect())?;
                 super::link::send_all(t, frame_messages(jobs), args.timeout)?;
             }
-            other => bail!("unexpected message from rank 0: {}", other.name()),
         }
     }
 }

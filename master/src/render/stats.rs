@@ -1,8 +1,8 @@
 //! The `--stats` schema: one JSON line per frame for rank 0 and one per worker, each stage's
 //! time in milliseconds and a timeline of when each stage ran (the README lists the fields).
 
-use serde::{Deserialize, Serialize};
 use protocol::{FrameSpan, PmMemory, TilePixels, TileTimes};
+use serde::{Deserialize, Serialize};
 
 use super::frame_loop::Eye;
 
