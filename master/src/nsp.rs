@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::cli::CameraArgs;
 use crate::commands::{expect_kind, load_mesh, mesh_output, summary};
 use crate::output::{
-    check_distinct, check_extension, register_in_flight, unregister_in_flight, write_atomic, write_bytes,
+    check_distinct, check_extension, temp_dir_in_flight, unregister_in_flight, write_atomic, write_bytes,
 };
 use crate::progress;
 use codec::input::ModelKind;
@@ -20,7 +20,7 @@ use codec::input::ModelKind;
 /// that does not grow with the model), STL in core.
 ///
 /// The out-of-core build's temporary folder is made here, in `temp_dir` (the system's
-/// temporary folder by default), and registered with [`register_in_flight`], so that an
+/// temporary folder by default), and registered with [`temp_dir_in_flight`], so that an
 /// interrupted build removes it with everything in it; it is removed when the build ends.
 pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path>) -> Result<()> {
     check_extension(output, &["nsp"], "the output of nsp build")?;
@@ -30,14 +30,11 @@ pub fn build(input: &Path, output: &Path, params: Params, temp_dir: Option<&Path
     let mut temp_mb = None;
     let (header, cells, bytes, cost_bits) = if codec::load::stream::can_stream(input) {
         let parent = temp_dir.map_or_else(std::env::temp_dir, Path::to_path_buf);
-        let scratch = tempfile::Builder::new()
-            .prefix("tessera-nsp")
-            .tempdir_in(&parent)
+        let scratch = temp_dir_in_flight(&parent, "tessera-nsp")
             .with_context(|| format!("cannot make a temporary folder in {}", parent.display()))?;
-        register_in_flight(scratch.path());
-        let built = build_out_of_core(input, output, params, scratch.path(), &parent);
-        unregister_in_flight(scratch.path());
-        drop(scratch);
+        let built = build_out_of_core(input, output, params, &scratch, &parent);
+        let _ = std::fs::remove_dir_all(&scratch);
+        unregister_in_flight(&scratch);
         let b = built?;
         temp_mb = Some(b.temp_bytes as f64 / (1 << 20) as f64);
         (b.header, b.cells, b.bytes, b.cost_bits)

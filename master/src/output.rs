@@ -31,6 +31,16 @@ pub fn register_in_flight(path: &Path) {
     IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert_with(HashSet::new).insert(path.to_path_buf());
 }
 
+/// Makes a temporary folder in `parent` (named `prefix` and random letters) and registers it
+/// under the registry's lock, so that no signal can come between its making and its
+/// registration; [`unregister_in_flight`] it, and remove it, once done.
+pub fn temp_dir_in_flight(parent: &Path, prefix: &str) -> std::io::Result<PathBuf> {
+    let mut in_flight = IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::Builder::new().prefix(prefix).tempdir_in(parent)?.keep();
+    in_flight.get_or_insert_with(HashSet::new).insert(dir.clone());
+    Ok(dir)
+}
+
 /// The file registered with [`register_in_flight`] is in place or gone.
 pub fn unregister_in_flight(path: &Path) {
     unregister(path);
@@ -52,7 +62,12 @@ fn remove_in_flight_and_exit(code: i32) -> ! {
     if let Some(set) = guard.as_mut() {
         for p in set.drain() {
             match std::fs::symlink_metadata(&p) {
-                Ok(m) if m.is_dir() => drop(std::fs::remove_dir_all(&p)),
+                // Another thread may still be creating files in it: try again once.
+                Ok(m) if m.is_dir() => {
+                    if std::fs::remove_dir_all(&p).is_err() {
+                        let _ = std::fs::remove_dir_all(&p);
+                    }
+                }
                 _ => drop(std::fs::remove_file(&p)),
             }
         }

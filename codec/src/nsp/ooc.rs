@@ -187,11 +187,14 @@ fn read_recs(path: &Path) -> Result<Vec<Rec>, NspError> {
 /// A page of the positions file: its number and bytes.
 type Page = (u64, Box<[u8]>);
 
-/// The positions file, read back through a direct-mapped page cache.
+/// The positions file, read back through a direct-mapped page cache. A failed read gives
+/// zeros and is kept in `failed`, which the build checks once the pass is over (the
+/// loader's callbacks that read positions cannot return an error of their own).
 struct Positions {
     file: File,
     count: usize,
     pages: Mutex<Vec<Option<Page>>>,
+    failed: Mutex<Option<std::io::Error>>,
 }
 
 impl Positions {
@@ -206,8 +209,9 @@ impl Positions {
             let mut buf = vec![0u8; PAGE].into_boxed_slice();
             let start = page * PAGE as u64;
             let len = ((self.count as u64 * 12 - start) as usize).min(PAGE);
-            // A short read leaves zeros; the file was written whole by this process.
-            let _ = self.file.read_exact_at(&mut buf[..len], start);
+            if let Err(e) = self.file.read_exact_at(&mut buf[..len], start) {
+                self.failed.lock().expect("not poisoned").get_or_insert(e);
+            }
             *slot = Some((page, buf));
         }
         let (_, buf) = slot.as_ref().expect("filled");
@@ -355,6 +359,7 @@ fn build_temp(
         file: File::open(&rwp_path).map_err(tr)?,
         count: vertices as usize,
         pages: Mutex::new((0..PAGE_CACHE_BYTES / PAGE).map(|_| None).collect()),
+        failed: Mutex::new(None),
     };
 
     // 2. Triangles (and unreferenced vertices) to buckets.
@@ -408,6 +413,9 @@ fn build_temp(
         }
     }
     drop(used);
+    if let Some(e) = positions.failed.lock().expect("not poisoned").take() {
+        return Err(tr(e));
+    }
     drop(positions);
     let _ = std::fs::remove_file(&rwp_path);
     let mut temp_bytes = buckets.finish()?;
