@@ -60,6 +60,14 @@ const HANDLED: [&str; 3] = ["KHR_draco_mesh_compression", "EXT_meshopt_compressi
 pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
     let fail = |what: String| err(path, format!("glTF: {what}"));
     let (json, bin) = if bytes.starts_with(b"glTF") {
+        // The crate subtracts the 12-byte header from the header's length field unchecked
+        // (an overflow the glTF fuzz target found): a length below 12 is refused here first.
+        let length = bytes.get(8..12).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
+        if let Some(length) = length.filter(|&l| l < 12) {
+            return Err(fail(format!(
+                "malformed GLB container: its length field says {length} bytes, less than its header"
+            )));
+        }
         let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| fail(format!("malformed GLB container: {e}")))?;
         (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
     } else {
