@@ -1,13 +1,13 @@
 //! End-to-end tests of the `tessera` binary on real files.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
+// These runs take the test process's environment as it is, as a user's shell would.
+use common::{bare as tessera, bin, ok};
 use testkit::{arg as s, mesh_path as mesh, stderr};
-
-fn tessera(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).output().expect("runs tessera")
-}
 
 #[test]
 fn encode_stats_decode_round_trip() {
@@ -15,10 +15,10 @@ fn encode_stats_decode_round_trip() {
     let input = mesh("stanford/bunny_zipper_c3d.obj.gz");
     let bft = dir.path().join("bunny.bft");
     let o = tessera(&["encode", s(&input), "-o", s(&bft), "--quant-bits", "14"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
 
     let o = tessera(&["stats", s(&bft), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["triangles"], 69_451);
     assert_eq!(j["quant_bits"], 14);
@@ -34,7 +34,7 @@ fn encode_stats_decode_round_trip() {
     for ext in ["ply", "obj"] {
         let out = dir.path().join(format!("bunny.{ext}"));
         let o = tessera(&["decode", s(&bft), "-o", s(&out)]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(&o);
         let back = codec::load_path(&out).unwrap();
         assert_eq!(back.triangles.len(), original.triangles.len());
         assert_eq!(back.positions.len(), 34_834);
@@ -56,7 +56,7 @@ fn encode_stats_decode_round_trip() {
     }
 
     let o = tessera(&["stats", s(&bft)]);
-    assert!(o.status.success());
+    ok(&o);
     assert!(String::from_utf8_lossy(&o.stdout).contains("connectivity"));
 }
 
@@ -87,7 +87,7 @@ fn bad_input_gets_a_clear_error_and_no_output() {
 
     // A corrupt .bft must not replace an existing output.
     let bft = d.join("cow.bft");
-    assert!(tessera(&["encode", s(&mesh("classic/cow.obj")), "-o", s(&bft)]).status.success());
+    ok(&tessera(&["encode", s(&mesh("classic/cow.obj")), "-o", s(&bft)]));
     let mut bytes = std::fs::read(&bft).unwrap();
     let mid = bytes.len() / 2;
     bytes[mid] ^= 0x40;
@@ -124,10 +124,10 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     let input = mesh("classic/spot.obj");
     let dpm = dir.path().join("spot.dpm");
     let o = tessera(&["pm", "build", s(&input), "-o", s(&dpm)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
 
     let o = tessera(&["pm", "stats", s(&dpm), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let bpv = j["bytes_per_vertex"].as_f64().unwrap();
     assert!(bpv > 0.0 && bpv < 40.0, "{bpv} bytes/vertex");
@@ -139,24 +139,24 @@ fn pm_build_stats_adapt_and_corrupt_file() {
     let original = codec::load_path(&input).unwrap();
     let full = dir.path().join("full.ply");
     let o = tessera(&["pm", "adapt", s(&dpm), "--full", "-o", s(&full)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} triangles", original.triangles.len())));
     assert_eq!(codec::load_path(&full).unwrap().triangles.len(), original.triangles.len());
 
     // Simplified in chunks: a different file that refines to the same triangles.
     let chunked = dir.path().join("chunked.dpm");
     let o = tessera(&["pm", "build", s(&input), "-o", s(&chunked), "--chunk-faces", "1000"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("simplified in 15 chunks of at most 1000 triangles"), "{out}");
     assert_ne!(std::fs::read(&chunked).unwrap(), std::fs::read(&dpm).unwrap());
     let o = tessera(&["pm", "adapt", s(&chunked), "--full", "-o", s(&full)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     assert_eq!(codec::load_path(&full).unwrap().triangles.len(), original.triangles.len());
 
     let view = dir.path().join("view.ply");
     let o = tessera(&["pm", "adapt", s(&dpm), "--size", "64x48", "--error-px", "0.5", "-o", s(&view)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let adapted = codec::load_path(&view).unwrap().triangles.len();
     assert!(adapted > 0 && adapted <= original.triangles.len(), "{adapted} triangles");
 
@@ -184,7 +184,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     let input = mesh("stanford/bunny_zipper_c3d.obj.gz");
     let (plain, spilled) = (dir.path().join("plain.dpm"), dir.path().join("spilled.dpm"));
     let o = tessera(&["pm", "build", s(&input), "-o", s(&plain), "--node-kb", "16"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let o = tessera(&[
         "pm",
         "build",
@@ -198,7 +198,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
         "--spill-min-mb",
         "1",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let out = String::from_utf8_lossy(&o.stdout);
     let kept = out.lines().find(|l| l.contains("of arrays in files in")).unwrap_or_else(|| panic!("{out}"));
     let files: u32 = kept.split("at most ").nth(1).and_then(|r| r.split(' ').next()).unwrap().parse().unwrap();
@@ -211,8 +211,8 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     std::fs::create_dir(&tmp).unwrap();
     let auto = dir.path().join("auto.dpm");
     let args = ["pm", "build", s(&input), "-o", s(&auto), "--node-kb", "16", "--assume-available-mb", "1"];
-    let o = Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).env("TMPDIR", &tmp).output().unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = Command::new(bin()).args(args).env("TMPDIR", &tmp).output().unwrap();
+    ok(&o);
     let err = stderr(&o);
     // Decided from the vertex count, before the triangles were read.
     assert!(
@@ -225,7 +225,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     if std::fs::metadata("/dev/shm").is_ok() {
         let bad = dir.path().join("bad.dpm");
         let args = ["pm", "build", s(&input), "-o", s(&bad), "--assume-available-mb", "1"];
-        let o = Command::new(env!("CARGO_BIN_EXE_tessera")).args(args).env("TMPDIR", "/dev/shm").output().unwrap();
+        let o = Command::new(bin()).args(args).env("TMPDIR", "/dev/shm").output().unwrap();
         assert_eq!(o.status.code(), Some(1));
         let err = stderr(&o);
         assert!(
@@ -267,7 +267,7 @@ fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
         let mut args = vec!["pm", "build", s(&bunny), "-o", s(out)];
         args.extend(nodes.map(|kb| ["--node-kb", kb]).into_iter().flatten());
         let o = tessera(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(&o);
     }
     let frame = ["--near", "0.01", "--far", "1", "--target", "-0.02,0.1,0"];
     let close = ["--size", "960x540", "--error-px", "4", "--eye", "0,0.1,0.05"];
@@ -280,7 +280,7 @@ fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
             let mut args = vec!["pm", "adapt", s(model), "-o", s(&out)];
             args.extend(view.iter().chain(&frame));
             let o = tessera(&args);
-            assert!(o.status.success(), "{}", stderr(&o));
+            ok(&o);
             let said = String::from_utf8_lossy(&o.stdout).to_string();
             meshes.push(std::fs::read(&out).unwrap());
             if model == &ooc {
@@ -296,7 +296,7 @@ fn pm_adapt_out_of_core_reads_only_the_nodes_the_view_needs() {
     assert!(0 < close_read && close_read < whole_read && whole_read <= nodes, "{read_counts:?}");
     // `pm stats` reads it node by node too: its numbers are the file's.
     let o = tessera(&["pm", "stats", s(&ooc), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["bytes"], std::fs::metadata(&ooc).unwrap().len());
     assert_eq!(j["nodes"].as_u64(), Some(nodes as u64));
@@ -330,19 +330,19 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
     let ooc = dir.path().join("bunny-nodes.dpm");
     let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
     let o = tessera(&["pm", "build", s(&bunny), "-o", s(&dpm)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let o = tessera(&["pm", "build", s(&bunny), "-o", s(&ooc), "--node-kb", "4"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let xdg = std::env::temp_dir().join("tessera-xdg");
     std::fs::create_dir_all(&xdg).unwrap();
     let run = |model: &Path, view: &[&str], gpu: &[&str], out: &Path| {
         let mut args = vec!["pm", "adapt", s(model), "-o", s(out)];
         args.extend(view);
         args.extend(gpu);
-        Command::new(env!("CARGO_BIN_EXE_tessera")).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap()
+        Command::new(bin()).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap()
     };
     let read = |o: Output, out: &Path| {
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(&o);
         std::fs::read(out).unwrap()
     };
     let close = ["--size", "960x540", "--eye", "0,0.12,0.08", "--target", "-0.02,0.1,0"];
@@ -396,7 +396,7 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
     // 4 MB: the close view's mesh (about 9 MB with its slack) does not fit at 1 px.
     let out = dir.path().join("budget.ply");
     let o = run(&dpm, &close, &["--gpu", "--gpu-budget-mb", "4"], &out);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     assert!(stderr(&o).contains("to stay within --gpu-budget-mb"), "{}", stderr(&o));
     let bounded = codec::load_path(&out).unwrap();
     assert!(
@@ -427,7 +427,7 @@ fn sort_dumps_tiles_in_either_coding() {
     for coding in ["range", "prefix"] {
         let out = dir.path().join(coding);
         let o = tessera(&["sort", s(&model), "--tiles", "4x3", "--tile-coding", coding, "--dump", s(&out)]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(&o);
         let summary: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
         let per_tile = summary["per_tile"].as_array().unwrap();
@@ -464,10 +464,10 @@ fn nsp_build_stats_adapt_and_corrupt_file() {
         "--min-simplices",
         "500",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
 
     let o = tessera(&["nsp", "stats", s(&nsp), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["bytes"], std::fs::metadata(&nsp).unwrap().len());
     assert_eq!(j["bits"], 14);
@@ -477,12 +477,12 @@ fn nsp_build_stats_adapt_and_corrupt_file() {
     let canon = codec::nsp::Canonical::of_mesh(&codec::load_path(&input).unwrap(), 14).unwrap();
     let full = dir.path().join("full.ply");
     let o = tessera(&["nsp", "adapt", s(&nsp), "--full", "-o", s(&full)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     assert_eq!(codec::load_path(&full).unwrap().triangles.len(), canon.triangles());
 
     let view = dir.path().join("view.obj");
     let o = tessera(&["nsp", "adapt", s(&nsp), "--size", "64x48", "--error-px", "4", "-o", s(&view)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(&o);
     let coarse = codec::load_path(&view).unwrap().triangles.len();
     assert!(coarse > 0 && coarse < canon.triangles() / 2, "{coarse} of {}", canon.triangles());
 
@@ -521,7 +521,7 @@ fn render_writes_a_movie_through_ffmpeg() {
         let out = dir.path().join(name);
         let size = format!("{w}x{h}");
         let o = tessera(&["render", s(&model), "--size", &size, "--frames", "4", "--orbit", "--out", s(&out)]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(&o);
         let probe = Command::new("ffprobe")
             .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
             .args(["-show_entries", "stream=nb_read_frames,width,height", "-of", "csv=p=0", s(&out)])
@@ -540,7 +540,7 @@ fn render_writes_a_movie_through_ffmpeg() {
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
     let out = dir.path().join("bad.mp4");
     let path = format!("{}:{}", fake.display(), std::env::var("PATH").unwrap_or_default());
-    let o = Command::new(env!("CARGO_BIN_EXE_tessera"))
+    let o = Command::new(bin())
         .env("PATH", path)
         .args(["render", s(&model), "--size", "64x48", "--frames", "3", "--out", s(&out)])
         .output()
@@ -571,7 +571,7 @@ fn decode_writes_colours_and_normals_back() {
             &["encode", s(&ply), "-o", s(&b), "--chunk-triangles", "0"],
         ] {
             let o = tessera(args);
-            assert!(o.status.success(), "{}", stderr(&o));
+            ok(&o);
         }
         assert!(String::from_utf8_lossy(&std::fs::read(&ply).unwrap()[..400]).contains(expect));
         let (da, db) = (codec::bft::decode_file(&a).unwrap(), codec::bft::decode_file(&b).unwrap());

@@ -4,7 +4,11 @@
 //! without a fuzzer. Every target in `fuzz/fuzz_targets/` has its check here; a target or a
 //! regression folder without one fails the test.
 
+mod common;
+
 use std::path::{Path, PathBuf};
+
+use common::entries;
 
 /// What a fuzz target runs on each input.
 type Check = fn(&[u8]);
@@ -23,16 +27,9 @@ fn fuzz_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz")
 }
 
-fn names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> =
-        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    v.sort();
-    v
-}
-
 #[test]
 fn every_fuzz_target_has_its_check_here() {
-    let targets: Vec<String> = names(&fuzz_dir().join("fuzz_targets"))
+    let targets: Vec<String> = entries(&fuzz_dir().join("fuzz_targets"))
         .iter()
         .filter_map(|n| n.strip_suffix(".rs").map(String::from))
         .collect();
@@ -43,10 +40,10 @@ fn every_fuzz_target_has_its_check_here() {
 #[test]
 fn regression_inputs_pass_their_targets_checks() {
     let mut ran = 0;
-    for target in names(&fuzz_dir().join("regressions")) {
+    for target in entries(&fuzz_dir().join("regressions")) {
         let check = CHECKS.iter().find(|(n, _)| *n == target).map(|(_, f)| f);
         let check = check.unwrap_or_else(|| panic!("fuzz/regressions/{target}: no such fuzz target"));
-        for input in names(&fuzz_dir().join("regressions").join(&target)) {
+        for input in entries(&fuzz_dir().join("regressions").join(&target)) {
             let path = fuzz_dir().join("regressions").join(&target).join(&input);
             let data = std::fs::read(&path).unwrap();
             if let Err(e) = std::panic::catch_unwind(|| check(&data)) {

@@ -4,49 +4,15 @@
 //! the test makes itself (a FIFO, a private `mknod` copy of the null device), never the
 //! system's own.
 
+mod common;
+
 use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{bin, cmd, ok, pixels, refused, tessera, tessera_env};
 use testkit::{arg as s, mesh_arg as mesh, stderr};
-
-fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_tessera")
-}
-
-fn cmd() -> Command {
-    let xdg = std::env::temp_dir().join("tessera-xdg");
-    std::fs::create_dir_all(&xdg).unwrap();
-    let mut c = Command::new(bin());
-    c.env("XDG_RUNTIME_DIR", xdg).env_remove("TESSERA_FAULT");
-    c
-}
-
-fn tessera(args: &[&str]) -> Output {
-    cmd().args(args).output().expect("runs tessera")
-}
-
-fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
-    let mut c = cmd();
-    for (k, v) in env {
-        c.env(k, v);
-    }
-    c.args(args).output().expect("runs tessera")
-}
-
-/// Fails with a one-line error that contains `needle`, and no panic.
-fn refused(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "must fail; stderr: {err}");
-    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "stderr: {}", stderr(o));
-}
 
 fn mkfifo(path: &Path) {
     assert!(Command::new("mkfifo").arg(path).status().unwrap().success());
@@ -401,7 +367,7 @@ fn a_progressive_mesh_in_many_tiles_costs_no_more_memory() {
     eprintln!("peak memory: 1x1 {one} kB, 64x64 {many} kB ({:.2}x)", many as f64 / one as f64);
     assert!(many <= 2 * one, "64x64 tiles took {many} kB, 1x1 {one} kB");
     // Grouped tiles meet the same error bound: the images agree on almost every pixel.
-    let (a, b) = (pixels(&dir.path().join("f-1x1.png")), pixels(&dir.path().join("f-64x64.png")));
+    let (a, b) = (pixels(&dir.path().join("f-1x1.png")).2, pixels(&dir.path().join("f-64x64.png")).2);
     let (mut covered, mut matching) = (0, 0);
     for (x, y) in a.chunks(4).zip(b.chunks(4)) {
         if x[3] == 0 && y[3] == 0 {
@@ -413,14 +379,6 @@ fn a_progressive_mesh_in_many_tiles_costs_no_more_memory() {
     let fraction = matching as f64 / covered as f64;
     eprintln!("{matching} of {covered} covered pixels within 8/255 ({fraction:.4})");
     assert!(covered > 1000 && fraction > 0.99, "{fraction}");
-}
-
-fn pixels(path: &Path) -> Vec<u8> {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    reader.next_frame(&mut buf).unwrap();
-    buf
 }
 
 /// A damaged chunked model: a directory that does not add up is refused when the file is

@@ -5,60 +5,14 @@
 //! has more faces than one `.dpm` operation adds. Every message is one line, names the
 //! file and field for a file's content and the flags only for the flags.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{cmd, entries, ok, refused_one_line, tessera, tessera_env};
 use testkit::{arg as s, stderr};
-
-fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_tessera")
-}
-
-fn cmd() -> Command {
-    let xdg = std::env::temp_dir().join("tessera-xdg");
-    std::fs::create_dir_all(&xdg).unwrap();
-    let mut c = Command::new(bin());
-    c.env("XDG_RUNTIME_DIR", xdg).env_remove("TESSERA_FAULT");
-    c
-}
-
-fn tessera(args: &[&str]) -> Output {
-    cmd().args(args).output().expect("runs tessera")
-}
-
-fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
-    let mut c = cmd();
-    for (k, v) in env {
-        c.env(k, v);
-    }
-    c.args(args).output().expect("runs tessera")
-}
-
-/// Fails with a one-line error that contains `needle`, and no panic or Debug output.
-fn refused(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "must fail; stderr: {err}");
-    assert_eq!(o.status.code(), Some(1), "an error, not a crash or a signal: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
-    for debug in ["{ ", "Some(", "Error {", "kind:", "Os {"] {
-        assert!(!err.contains(debug), "no Debug output: {err}");
-    }
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "stderr: {}", stderr(o));
-}
-
-/// Entries of a folder, by name.
-fn entries(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> =
-        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    v.sort();
-    v
-}
 
 /// A bumpy `n x n` grid as OBJ: `2 (n - 1)^2` triangles.
 fn grid_obj(path: &Path, n: usize) {
@@ -117,7 +71,7 @@ fn nsp_build_flags_that_cut_a_model_into_too_many_cells_are_refused() {
     for input in [&obj, &stl] {
         let t = Instant::now();
         let o = tessera(&["nsp", "build", s(input), "--splits", "16", "--min-simplices", "1", "-o", s(&out)]);
-        refused(&o, "--splits 16 with --min-simplices 1 cuts this model into at least ");
+        refused_one_line(&o, "--splits 16 with --min-simplices 1 cuts this model into at least ");
         assert!(stderr(&o).contains("raise --min-simplices or lower --splits"), "{}", stderr(&o));
         assert!(t.elapsed() < Duration::from_secs(10), "{:?}", t.elapsed());
         assert!(!out.exists());
@@ -125,7 +79,7 @@ fn nsp_build_flags_that_cut_a_model_into_too_many_cells_are_refused() {
     // The cap follows --max-decompressed: the default build of the same model is refused
     // under a cap of a few cells.
     let o = tessera(&["nsp", "build", s(&obj), "--min-simplices", "200", "--max-decompressed", "4K", "-o", s(&out)]);
-    refused(&o, "--splits 4 with --min-simplices 200 cuts this model into at least ");
+    refused_one_line(&o, "--splits 4 with --min-simplices 200 cuts this model into at least ");
     ok(&tessera(&["nsp", "build", s(&obj), "--min-simplices", "200", "-o", s(&out)]));
     assert_eq!(entries(dir.path()), ["grid.obj", "grid.stl", "m.nsp"]);
 }
@@ -168,12 +122,12 @@ fn nsp_files_whose_header_or_counts_do_not_fit_are_refused_by_file_and_field() {
         std::fs::write(&path, b).unwrap();
         for args in [vec!["nsp", "stats", s(&path)], vec!["nsp", "adapt", s(&path), "--full", "-o", s(&ply)]] {
             let o = tessera(&args);
-            refused(&o, &format!("{}: not an .nsp file: {field}", path.display()));
+            refused_one_line(&o, &format!("{}: not an .nsp file: {field}", path.display()));
         }
     }
     // The footer's count of cells against --max-decompressed, before the table is read.
     let o = tessera(&["nsp", "stats", s(&good), "--max-decompressed", "4K"]);
-    refused(&o, &format!("{}: the footer counts ", good.display()));
+    refused_one_line(&o, &format!("{}: the footer counts ", good.display()));
     assert!(stderr(&o).contains("raise it with --max-decompressed"), "{}", stderr(&o));
     ok(&tessera(&["nsp", "stats", s(&good)]));
 }
@@ -193,7 +147,7 @@ fn a_full_temporary_folder_is_one_error_naming_the_folder() {
             &[("TESSERA_FAULT", &format!("temp-full:{budget}"))],
             &["nsp", "build", s(&obj), "--temp-dir", s(&temp), "-o", s(&out)],
         );
-        refused(
+        refused_one_line(
             &o,
             &format!(
                 "error: cannot build {}: cannot write temporary files in {}: No space left on device",
@@ -287,7 +241,7 @@ fn pm_build_refuses_up_front_an_edge_of_more_faces_than_an_operation_adds() {
     let out = dir.path().join("book.dpm");
     let t = Instant::now();
     let o = tessera(&["pm", "build", s(&path), "-o", s(&out)]);
-    refused(
+    refused_one_line(
         &o,
         &format!(
             "error: cannot build {}: vertices 0 and 1 share 66000 faces; a .dpm operation adds at most 65535",

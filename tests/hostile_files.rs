@@ -3,40 +3,12 @@
 //! model cut while `sort` and `render` read it, and PLY headers with extra blanks. Every file
 //! is one the test makes itself.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
+use common::{cmd, ok, refused_last_line, tessera};
 use testkit::{arg as s, mesh_arg as mesh, stderr};
-
-fn cmd() -> Command {
-    let xdg = std::env::temp_dir().join("tessera-xdg");
-    std::fs::create_dir_all(&xdg).unwrap();
-    let mut c = Command::new(env!("CARGO_BIN_EXE_tessera"));
-    c.env("XDG_RUNTIME_DIR", xdg).env_remove("TESSERA_FAULT");
-    c
-}
-
-fn tessera(args: &[&str]) -> Output {
-    cmd().args(args).output().expect("runs tessera")
-}
-
-/// Fails with a one-line error that contains `needle`, and no panic or signal.
-fn refused(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "must fail; stderr: {err}");
-    assert!(o.status.code().is_some(), "killed by a signal: {:?}; stderr: {err}", o.status);
-    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
-    // One error line, holding the whole message (a render's progress lines may precede it).
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
-    assert!(errors.len() == 1 && errors[0].contains(needle), "one line: {err}");
-    assert!(err.trim_end().ends_with(errors[0]), "nothing after the error: {err}");
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "stderr: {}", stderr(o));
-}
 
 fn write(path: &Path, bytes: impl AsRef<[u8]>) -> PathBuf {
     std::fs::write(path, bytes).unwrap();
@@ -78,7 +50,7 @@ fn gltf_buffers_outside_the_model_folder_are_refused() {
     ] {
         let model = write(&models.join("m.gltf"), doc(uri));
         let o = tessera(&["encode", s(&model), "-o", s(&out)]);
-        refused(&o, why);
+        refused_last_line(&o, why);
         assert!(stderr(&o).contains(&format!("buffer 0: URI '{uri}'")), "{}", stderr(&o));
         assert!(!out.exists());
     }
@@ -102,9 +74,9 @@ fn forged_chunked_counts_are_refused_by_stats_and_decode() {
         patch_header(&mut b, 0, count.to_le_bytes());
         let bad = write(&dir.path().join("bad.bft"), &b);
         let needle = format!("header field input_vertices: {count} input vertices");
-        refused(&tessera(&["stats", s(&bad)]), &needle);
+        refused_last_line(&tessera(&["stats", s(&bad)]), &needle);
         let o = tessera(&["decode", s(&bad), "-o", s(&ply)]);
-        refused(&o, &needle);
+        refused_last_line(&o, &needle);
         assert!(stderr(&o).contains("--max-decompressed") && stderr(&o).contains("bad.bft"), "{}", stderr(&o));
         assert!(!ply.exists(), "nothing written");
     }
@@ -123,9 +95,9 @@ fn headers_that_do_not_fit_f32_are_corrupt() {
         let mut b = std::fs::read(&bft).unwrap();
         patch_header(&mut b, step, 1e38f32.to_le_bytes());
         write(&bft, &b);
-        refused(&tessera(&["stats", s(&bft)]), "header field step");
+        refused_last_line(&tessera(&["stats", s(&bft)]), "header field step");
         let o = tessera(&["decode", s(&bft), "-o", s(&dir.path().join("o.ply"))]);
-        refused(&o, "does not fit f32");
+        refused_last_line(&o, "does not fit f32");
         assert!(stderr(&o).contains(name), "names the file: {}", stderr(&o));
     }
 }
@@ -153,7 +125,7 @@ fn a_chunked_model_cut_while_in_use_is_an_error() {
             c.args(["--out", s(&png)]);
         }
         let o = c.output().unwrap();
-        refused(&o, "the file was truncated or replaced while in use (expected ");
+        refused_last_line(&o, "the file was truncated or replaced while in use (expected ");
         let err = stderr(&o);
         assert!(err.contains(&format!("{}: chunk ", bft.display())), "{args:?}: {err}");
         assert!(!png.exists(), "no image");

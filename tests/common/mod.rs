@@ -1,0 +1,161 @@
+//! The end-to-end tests' harness, shared by every file in `tests/` (`mod common;`): the
+//! binary under test, the environments it runs in (alone, under `mpirun`), what a run must
+//! show (`ok`, `refused` and its stricter forms), and PNGs read back and compared. Each test
+//! file uses part of it.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use testkit::stderr;
+
+/// The `tessera` binary cargo built for these tests.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_tessera")
+}
+
+/// `tessera ARGS` in the test process's own environment, as a user's shell runs it.
+pub fn bare(args: &[&str]) -> Output {
+    Command::new(bin()).args(args).output().expect("runs tessera")
+}
+
+/// The private runtime folder every run gets (`XDG_RUNTIME_DIR`), made if missing.
+fn xdg_runtime_dir() -> PathBuf {
+    let xdg = std::env::temp_dir().join("tessera-xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    xdg
+}
+
+/// A `tessera` command with the runtime folder set and no `TESSERA_FAULT` inherited, so a
+/// test injects only the faults it names.
+pub fn cmd() -> Command {
+    let mut c = Command::new(bin());
+    c.env("XDG_RUNTIME_DIR", xdg_runtime_dir()).env_remove("TESSERA_FAULT");
+    c
+}
+
+/// `tessera ARGS` through [`cmd`].
+pub fn tessera(args: &[&str]) -> Output {
+    cmd().args(args).output().expect("runs tessera")
+}
+
+/// `tessera ARGS` through [`cmd`], with `env` added.
+pub fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
+    let mut c = cmd();
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.args(args).output().expect("runs tessera")
+}
+
+/// The MPI environment: the runtime folder, and Open MPI allowed to run as root and to
+/// oversubscribe the cores.
+pub fn mpi_env(cmd: &mut Command) -> &mut Command {
+    cmd.env("XDG_RUNTIME_DIR", xdg_runtime_dir())
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+}
+
+/// `tessera ARGS` without mpirun, in the MPI environment: the master and one in-process
+/// worker.
+pub fn alone(args: &[&str]) -> Output {
+    mpi_env(&mut Command::new(bin())).args(args).output().expect("runs tessera")
+}
+
+/// `mpirun --oversubscribe -np N tessera ARGS`, with `extra_env` exported to every rank.
+pub fn mpirun(n: usize, extra_env: &[(&str, &str)], args: &[&str]) -> Output {
+    let mut cmd = Command::new("mpirun");
+    mpi_env(&mut cmd).args(["--oversubscribe", "-np", &n.to_string()]);
+    for (k, v) in extra_env {
+        cmd.args(["-x", &format!("{k}={v}")]);
+    }
+    cmd.arg(bin()).args(args).output().expect("mpirun is installed (scripts/setup.sh)")
+}
+
+/// Succeeded; otherwise fails showing the run's stdout and stderr.
+pub fn ok(o: &Output) {
+    assert!(
+        o.status.success(),
+        "failed: {}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// Fails with an error that contains `needle`, and no panic.
+pub fn refused(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "must fail; stderr: {err}");
+    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains(needle), "stderr should mention '{needle}': {err}");
+}
+
+/// [`refused`], not by a signal, with one error line holding the whole message and nothing
+/// after it (a render's progress lines may precede it).
+pub fn refused_last_line(o: &Output, needle: &str) {
+    refused(o, needle);
+    let err = stderr(o);
+    assert!(o.status.code().is_some(), "killed by a signal: {:?}; stderr: {err}", o.status);
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert!(errors.len() == 1 && errors[0].contains(needle), "one line: {err}");
+    assert!(err.trim_end().ends_with(errors[0]), "nothing after the error: {err}");
+}
+
+/// [`refused`] with exit status 1 (an error, not a crash or a signal), stderr one line, and
+/// no Debug output.
+pub fn refused_one_line(o: &Output, needle: &str) {
+    refused(o, needle);
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "an error, not a crash or a signal: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    for debug in ["{ ", "Some(", "Error {", "kind:", "Os {"] {
+        assert!(!err.contains(debug), "no Debug output: {err}");
+    }
+}
+
+/// Entries of a folder, by name, sorted.
+pub fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+/// Decoded RGBA pixels of a PNG, with its width and height.
+pub fn pixels(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+/// Pixels differing by more than 2/255 in some channel.
+pub fn differing(a: &Path, b: &Path) -> usize {
+    let (pa, pb) = (pixels(a), pixels(b));
+    assert_eq!((pa.0, pa.1), (pb.0, pb.1));
+    pa.2.chunks(4).zip(pb.2.chunks(4)).filter(|(x, y)| x.iter().zip(*y).any(|(u, v)| u.abs_diff(*v) > 2)).count()
+}
+
+/// Exactly equal images (every byte of every pixel).
+pub fn identical(a: &Path, b: &Path) -> bool {
+    pixels(a) == pixels(b)
+}
+
+/// Pixels covered by the model (alpha 255; every alpha is 0 or 255).
+pub fn covered(path: &Path) -> usize {
+    let (_, _, px) = pixels(path);
+    assert!(px.chunks(4).all(|p| p[3] == 0 || p[3] == 255), "alpha is 0 or 255");
+    px.chunks(4).filter(|p| p[3] == 255).count()
+}
+
+/// The reference: the whole frame as one tile, in one process (`DIR/reference.png`).
+pub fn reference(model: &str, size: &str, dir: &Path) -> PathBuf {
+    let out = dir.join("reference.png");
+    ok(&alone(&["render", model, "--size", size, "--tiles", "1x1", "--out", out.to_str().unwrap()]));
+    out
+}
