@@ -149,7 +149,7 @@ fn stereo_eyes_equal_mono_renders_of_their_frusta() {
 
 /// A wall of listed displays placed in the world, head tracked along `--eye-path`: every
 /// display of every frame equals the crop of one mono render with the wall's off-axis
-/// frustum from that frame's eye (the flags from [`master::composite::Wall::camera_args`]),
+/// frustum from that frame's eye (the flags from [`master::wall::Wall::camera_args`]),
 /// under `mpirun -np 3`; the picture moves as the eye does.
 #[test]
 fn a_head_tracked_wall_shows_each_eyes_window() {
@@ -161,7 +161,7 @@ fn a_head_tracked_wall_shows_each_eyes_window() {
                 [[display]]\nname = \"right\"\nx = 66\ny = 4\nwidth = 48\nheight = 40\nbezel = [4, 4, 6, 36]\n";
     let wall_path = dir.path().join("wall.toml");
     std::fs::write(&wall_path, text).unwrap();
-    let wall = master::composite::Wall::parse(text).unwrap();
+    let wall = master::wall::Wall::parse(text).unwrap();
     assert_eq!(wall.frame_size(), (120, 80));
     let eyes = [glam::Vec3::new(0.0, 0.0, 2.5), glam::Vec3::new(0.7, 0.5, 2.0)];
     let eye_path = dir.path().join("eyes.txt");
@@ -329,7 +329,7 @@ fn displays_at_an_angle_each_get_their_own_frustum() {
                 corners = { bottom_left = [3.0, -2.25, -3.0], bottom_right = [3.0, -2.25, 3.0], top_left = [3.0, 2.25, -3.0] }\n";
     let wall_path = dir.path().join("cave.toml");
     std::fs::write(&wall_path, text).unwrap();
-    let wall = master::composite::Wall::parse(text).unwrap();
+    let wall = master::wall::Wall::parse(text).unwrap();
     assert!(wall.per_display());
     let mono = |i: usize, eye: glam::Vec3, out: &Path| {
         let a = wall.display_camera_args(i, &Default::default(), eye).unwrap();

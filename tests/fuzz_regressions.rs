@@ -1,6 +1,6 @@
 //! Every input that once crashed a fuzz target (`fuzz/regressions/TARGET/`) through the same
 //! check the target runs (`codec::fuzzing`, `protocol::fuzz_round_trip`,
-//! `master::composite::fuzz_wall`), in an ordinary test: CI runs them on every change
+//! `master::wall::fuzz_wall`), in an ordinary test: CI runs them on every change
 //! without a fuzzer. Every target in `fuzz/fuzz_targets/` has its check here; a target or a
 //! regression folder without one fails the test.
 
@@ -20,7 +20,7 @@ const CHECKS: [(&str, Check); 6] = [
     ("decode_nsp", codec::fuzzing::decode_nsp),
     ("decode_protocol", protocol::fuzz_round_trip),
     ("load_gltf", codec::fuzzing::load_gltf),
-    ("parse_wall", master::composite::fuzz_wall),
+    ("parse_wall", master::wall::fuzz_wall),
 ];
 
 fn fuzz_dir() -> PathBuf {

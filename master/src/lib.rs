@@ -1,8 +1,9 @@
 //! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]), the
 //! file commands `encode`, `decode` and `stats` ([`commands`]), the one-frame tile sort
 //! ([`sort`]), the progressive-mesh commands ([`pm`]), rank 0 of `render` ([`render`]: the
-//! frame loop, tile scheduling, the workers' handshake and silence, stats), the compositor and
-//! tile walls ([`composite`]), output files that are never left half-written
+//! frame loop, tile scheduling, the workers' handshake and silence, stats), the compositor
+//! ([`composite`]), tile walls and their frusta ([`wall`]), output files that are never left
+//! half-written
 //! ([`output`]), and the timeline of a run's stats ([`plot`]). `main.rs` decides each process's role.
 
 /// `println!` that returns an error instead of panicking when standard output is closed
@@ -28,3 +29,4 @@ pub mod progress;
 pub mod render;
 pub mod sort;
 pub mod spill;
+pub mod wall;

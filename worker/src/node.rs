@@ -788,7 +788,7 @@ mod tests {
     use super::*;
 
     /// The reasons rank 0 prints (`rank R failed: <reason>`), which scripts and
-    /// `tests/cluster.rs` match, word for word.
+    /// `tests/cluster_faults.rs` match, word for word.
     #[test]
     fn failure_reasons_keep_their_wording() {
         let cases = [

@@ -16,7 +16,8 @@ use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};
 use crate::cli::{RenderArgs, StereoOutput};
-use crate::composite::{intersection, Image, Wall};
+use crate::composite::{intersection, Image};
+use crate::wall::Wall;
 
 /// Which display rank owns which display, and so which ranks a tile's pixels go to.
 #[derive(Clone, Debug)]

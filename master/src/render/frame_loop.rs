@@ -431,7 +431,7 @@ impl Writer {
 fn write_image(
     frame: &Image,
     path: &std::path::Path,
-    wall: Option<&crate::composite::Wall>,
+    wall: Option<&crate::wall::Wall>,
     right: Option<&Image>,
     movie: Option<&mut crate::movie::Movie>,
 ) -> Result<()> {

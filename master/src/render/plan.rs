@@ -8,8 +8,9 @@ use codec::view::TileGrid;
 use glam::Vec3;
 
 use crate::cli::{RenderArgs, StereoOutput};
-use crate::composite::{Image, Wall};
+use crate::composite::Image;
 use crate::output::{check_distinct, check_extension, Identity};
+use crate::wall::Wall;
 
 /// Everything checked before any rank talks to another.
 pub struct Plan {
