@@ -363,7 +363,7 @@ fn timelines_order_the_stages_and_plot_draws_them() {
     // Rows: rank 0, its writer, ranks 1 and 2.
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
     let reader = decoder.read_info().unwrap();
-    assert_eq!((reader.info().width, reader.info().height), (900, master::plot::Timeline::height(4)));
+    assert_eq!((reader.info().width, reader.info().height), (900, master::commands::plot::Timeline::height(4)));
     let bad = alone(&["plot", &bunny, "-o", png.to_str().unwrap()]);
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);

@@ -24,10 +24,11 @@ use codec::bft::chunked::sort::{ChunkedModel, PieceKind};
 use codec::bft::chunked::{encode_mesh_chunked, ChunkOptions, ChunkedFile};
 use codec::view::Camera;
 use master::cli::CameraArgs;
+use master::commands::sort::{sort_frame, SortSummary};
+use master::model::{load_model, Model};
 use master::output::write_bytes;
 use master::progress;
 use master::render::orbit_by;
-use master::sort::{load_model, sort_frame, Model, SortSummary};
 
 use crate::peers::{draco_decode, draco_encode, draco_to_mesh, Meshopt};
 /// Runs of `sort_frame` per row, the two sorts alternating and the BFT sort keeping its
@@ -446,7 +447,7 @@ const PANEL_SIZE: (u32, u32) = (900, 650);
 
 /// Renders the figure as PNG bytes: one panel per model, from that model's rows.
 fn render_plot(panels: &[&[Row]], size: (u32, u32), quant_bits: u8) -> Result<Vec<u8>> {
-    master::plot::register_font()?;
+    master::commands::plot::register_font()?;
     let cols = (panels.len() as f64).sqrt().ceil().max(1.0) as u32;
     let grid_rows = (panels.len() as u32).div_ceil(cols).max(1);
     let (w, h) = (PANEL_SIZE.0 * cols, PANEL_SIZE.1 * grid_rows + 50);

@@ -6,7 +6,8 @@ use codec::bft::tile_sort::{Boxes, Sorter};
 use codec::bft::{Coding, EncodeOptions};
 use codec::view::TileGrid;
 use master::cli::CameraArgs;
-use master::sort::{load_model, sort_frame};
+use master::commands::sort::sort_frame;
+use master::model::load_model;
 use testkit::{arg as s, mesh_path as mesh, stderr};
 
 fn bandwidth(args: &[&str]) -> Output {

@@ -1,10 +1,11 @@
-//! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]), the
-//! file commands `encode`, `decode` and `stats` ([`commands`]), the one-frame tile sort
-//! ([`sort`]), the progressive-mesh commands ([`pm`]), rank 0 of `render` ([`render`]: the
-//! frame loop, tile scheduling, the workers' handshake and silence, stats), the compositor
-//! ([`composite`]), tile walls and their frusta ([`wall`]), output files that are never left
-//! half-written
-//! ([`output`]), and the timeline of a run's stats ([`plot`]). `main.rs` decides each process's role.
+//! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]), one
+//! file per subcommand ([`commands`]: encode, decode, stats, sort, render, pm, nsp, plot),
+//! opening any model kind and its bounds ([`model`]), rank 0 of `render` and the other ranks'
+//! roles ([`render`]: the frame loop, tile scheduling, the workers' handshake and silence,
+//! sorters, display ranks, stats), the compositor ([`composite`]), tile walls and their frusta
+//! ([`wall`]), output files that are never left half-written ([`output`]), movies
+//! ([`movie`]), progress bars ([`progress`]) and the spilling allocator of `pm build`
+//! ([`spill`]). `main.rs` parses the flags and calls the command.
 
 /// `println!` that returns an error instead of panicking when standard output is closed
 /// (`tessera sort --json | head -c 1`): the caller propagates it with `?`, and `main` ends a
@@ -20,13 +21,10 @@ macro_rules! outln {
 pub mod cli;
 pub mod commands;
 pub mod composite;
+pub mod model;
 pub mod movie;
-pub mod nsp;
 pub mod output;
-pub mod plot;
-pub mod pm;
 pub mod progress;
 pub mod render;
-pub mod sort;
 pub mod spill;
 pub mod wall;

@@ -225,6 +225,24 @@ fn existing_mode(path: &Path) -> Option<u32> {
     std::fs::metadata(path).ok().map(|m| m.mode() & 0o7777)
 }
 
+/// Prints a command's summary line: on stdout, unless the output itself goes there (`-o -`).
+pub fn summary(output: &Path, line: std::fmt::Arguments) -> std::io::Result<()> {
+    if output.as_os_str() == "-" {
+        eprintln!("{line}");
+        Ok(())
+    } else {
+        crate::outln!("{line}")
+    }
+}
+
+/// Checks, before any work, a mesh output (`.ply`, `.obj`, or `-` for PLY on stdout) that
+/// must not be `input`, and returns its writer.
+pub fn mesh_output(input: &Path, output: &Path, what: &str) -> Result<codec::save::WriteMesh> {
+    check_extension(output, &["ply", "obj"], what)?;
+    check_distinct(&[input], &[output])?;
+    Ok(codec::save::writer_for(output).unwrap_or(|m, w| codec::save::write_ply(m, w)))
+}
+
 /// Writes bytes (see [`write_atomic`]).
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes))

@@ -154,7 +154,7 @@ pub const MAX_DISPLAYS: u64 = 1024;
 
 impl Wall {
     pub fn load(path: &Path) -> Result<Wall> {
-        let bytes = crate::commands::read_input(path)?;
+        let bytes = crate::model::read_input(path)?;
         let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
         Wall::parse(&text).with_context(|| format!("{}", path.display()))
     }

@@ -35,7 +35,7 @@ struct Args {
 fn run(a: &Args) -> Result<()> {
     master::output::check_extension(&a.output, &["ply"], "--output")?;
     master::output::check_distinct(&[&a.input], &[&a.output])?;
-    let mesh = master::commands::load_mesh(&a.input)?;
+    let mesh = master::model::load_mesh(&a.input)?;
     let levels = match (a.levels, a.min_triangles) {
         (Some(l), _) => l,
         (None, Some(t)) => levels_for(mesh.triangles.len() as u64, t),

@@ -150,7 +150,7 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
 /// The eyes of `--eye-path` with their line numbers: one `x y z` (or `x,y,z`) line per
 /// frame, at least `frames` of them (blank lines and `#` comments skipped).
 fn read_eyes(path: &Path, frames: u32) -> Result<Vec<(usize, Vec3)>> {
-    let bytes = crate::commands::read_input(path)?;
+    let bytes = crate::model::read_input(path)?;
     let text = String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))?;
     let mut eyes = Vec::new();
     for (i, line) in text.lines().enumerate() {

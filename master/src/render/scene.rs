@@ -12,7 +12,9 @@ use codec::view::{Camera, TileGrid};
 use worker::chunk_cache::ChunkCache;
 
 use crate::cli::{CameraArgs, RenderArgs};
-use crate::sort::{chunked_camera, load_model, open_chunked, Chunked, Model};
+use crate::model::{
+    chunked_camera, dpm_file_bbox, load_model, nsp_bbox, open_chunked, pm_bbox, read_input, Chunked, Model,
+};
 
 const MB: usize = 1 << 20;
 
@@ -117,10 +119,10 @@ impl Scene {
             let nodes = args.gpu_nodes_mb.map(|mb| (mb as f64 * MB as f64) as u64);
             return PmScene::out_of_core(path, &file, gpu_budget, nodes).map(Scene::Pm);
         }
-        let bytes = crate::commands::read_input(path)?;
+        let bytes = read_input(path)?;
         // Decoded here once, so that a corrupt file fails before any worker sees it.
         let pm = codec::pm::format::decode(&bytes).with_context(|| format!("{}", path.display()))?.pm;
-        let (lo, hi) = crate::pm::bbox(&pm.positions);
+        let (lo, hi) = pm_bbox(&pm.positions);
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }
@@ -134,7 +136,7 @@ impl Scene {
             Scene::Chunked(s) => chunked_camera(&s.model, args, grid),
             Scene::Pm(PmScene { bbox: (lo, hi), .. }) => args.camera(*lo, *hi, grid.aspect()),
             Scene::Nsp(s) => {
-                let (lo, hi) = crate::nsp::bbox(&s.file);
+                let (lo, hi) = nsp_bbox(&s.file);
                 args.camera(lo, hi, grid.aspect())
             }
         }
@@ -143,7 +145,7 @@ impl Scene {
 
 impl PmScene {
     /// An out-of-core `.dpm`: its head is read and checked here (the nodes are checked by
-    /// their checksums as workers read them); its box is [`crate::pm::out_of_core_bbox`].
+    /// their checksums as workers read them); its box is [`dpm_file_bbox`].
     fn out_of_core(
         path: &Path,
         file: &codec::pm::format::NodeFile,
@@ -152,7 +154,7 @@ impl PmScene {
     ) -> Result<PmScene> {
         let named = || format!("{}", path.display());
         let dpm = codec::pm::format::Dpm::parse_prefix(file.prefix()).with_context(named)?;
-        let (lo, hi) = crate::pm::out_of_core_bbox(&dpm);
+        let (lo, hi) = dpm_file_bbox(&dpm);
         if !lo.iter().chain(&hi).all(|v| v.is_finite()) || lo.iter().zip(&hi).any(|(a, b)| a > b) {
             bail!("{}: a bad model: its bounding box {lo:?} .. {hi:?} is not finite", path.display());
         }

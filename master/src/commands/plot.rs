@@ -14,8 +14,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 use serde::Deserialize;
 
-use crate::commands::{read_input, summary};
-use crate::output::{check_distinct, check_extension, write_bytes};
+use crate::model::read_input;
+use crate::output::{check_distinct, check_extension, summary, write_bytes};
 use crate::render::stats::Span;
 
 /// The stages, in legend order, with their colours.
@@ -250,7 +250,7 @@ pub struct Drawn {
 }
 
 /// `tessera plot STATS -o OUT.png [--frames A..B] [--width W]`.
-pub fn plot(input: &Path, output: &Path, frames: Option<(u32, u32)>, width: u32) -> Result<()> {
+pub fn run(input: &Path, output: &Path, frames: Option<(u32, u32)>, width: u32) -> Result<()> {
     check_extension(output, &["png"], "the output of plot")?;
     check_distinct(&[input], &[output])?;
     let bytes = read_input(input)?;

@@ -8,10 +8,11 @@ use anyhow::{Context, Result};
 use codec::nsp::{self, view, Canonical, NspFile, Params};
 use serde::Serialize;
 
-use crate::cli::CameraArgs;
-use crate::commands::{expect_kind, load_mesh, mesh_output, summary};
+use crate::cli::{CameraArgs, Nsp};
+use crate::model::{expect_kind, load_mesh, nsp_bbox};
 use crate::output::{
-    check_distinct, check_extension, temp_dir_in_flight, unregister_in_flight, write_atomic, write_bytes,
+    check_distinct, check_extension, mesh_output, summary, temp_dir_in_flight, unregister_in_flight, write_atomic,
+    write_bytes,
 };
 use crate::progress;
 use codec::input::ModelKind;
@@ -259,7 +260,7 @@ pub fn adapt(
         let selection: Vec<(u32, u8)> = states.iter().map(|s| (s.cell, s.precision())).collect();
         (view::draw(&file, &selection, &states.iter().collect::<Vec<_>>()), states.len())
     } else {
-        let (lo, hi) = bbox(&file);
+        let (lo, hi) = nsp_bbox(&file);
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
         crate::cli::check_camera(&cam, size.1)?;
         let v = view::View { camera: cam, width: size.0, height: size.1, error_px };
@@ -289,11 +290,22 @@ pub fn adapt(
     Ok(())
 }
 
-/// The model's bounding box, from the header.
-pub fn bbox(file: &NspFile) -> ([f32; 3], [f32; 3]) {
-    let c = &file.header.cube;
-    let e = file.header.extent;
-    let lo = [c.origin[0] as f32, c.origin[1] as f32, c.origin[2] as f32];
-    let hi = [(c.origin[0] + e[0]) as f32, (c.origin[1] + e[1]) as f32, (c.origin[2] + e[2]) as f32];
-    (lo, hi)
+/// `tessera nsp build|stats|adapt`.
+pub fn run(nsp: &Nsp) -> Result<()> {
+    match nsp {
+        Nsp::Build { input, output, bits, root_bits, splits, min_simplices, advance, temp_dir } => {
+            let params = codec::nsp::Params {
+                bits: *bits,
+                root_bits: *root_bits,
+                splits: *splits,
+                min_simplices: *min_simplices,
+                advance: *advance,
+            };
+            build(input, output, params, temp_dir.as_deref())
+        }
+        Nsp::Stats { input, json } => stats(input, *json),
+        Nsp::Adapt { input, view, error_px, output, full } => {
+            adapt(input, &view.camera, view.size, *error_px, *full, output)
+        }
+    }
 }

@@ -5,100 +5,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use codec::bft::tile_sort::{self, Boxes, Sorter, Tile, TileModel};
+use codec::bft::tile_sort::{self, Boxes, Sorter, Tile};
 use codec::bft::{self, EncodeOptions};
 use codec::tri_sort;
 use codec::view::{Camera, TileGrid};
 use serde::Serialize;
 
 use crate::cli::{CameraArgs, GridArgs};
-use crate::commands::load_mesh;
+use crate::model::{chunked_camera, load_model, open_chunked, Chunked, Model};
 use crate::output::{write_atomic, write_bytes};
-
-/// A model held by the master: its `.bft` bytes and the sort-ready form.
-pub struct Model {
-    pub bytes: Vec<u8>,
-    pub tiles: TileModel,
-}
-
-/// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL, glTF) on load with `options`.
-pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
-    let kind = codec::input::ModelKind::of(path);
-    if kind == codec::input::ModelKind::Dpm {
-        bail!("{}: a progressive mesh (.dpm); this command takes a .bft or a mesh file", path.display());
-    }
-    if kind == codec::input::ModelKind::Nsp {
-        bail!(
-            "{}: an nSP-tree store (.nsp); this command takes a .bft or a mesh file (see tessera nsp)",
-            path.display()
-        );
-    }
-    let bytes = if kind == codec::input::ModelKind::Bft {
-        crate::commands::read_input(path)?
-    } else {
-        let mesh = load_mesh(path)?;
-        bft::encode(&mesh, options).with_context(|| format!("cannot encode {}", path.display()))?.bytes
-    };
-    let tiles = TileModel::from_bytes(&bytes).with_context(|| format!("{}", path.display()))?;
-    Ok(Model { bytes, tiles })
-}
-
-/// A chunked `.bft` model (version 3), read with positioned reads: only its header and
-/// directory are read here, each chunk when a frame needs it (a file truncated meanwhile is an
-/// error naming the chunk, not a SIGBUS as a mapping would give).
-pub type Chunked = codec::bft::chunked::sort::ChunkedModel<codec::bft::chunked::FileSource>;
-
-/// Opens `path` as a chunked model if it is one (`None` otherwise), with a cache of
-/// `cache_bytes` for its straddling chunks' tables.
-pub fn open_chunked(path: &Path, cache_bytes: usize) -> Result<Option<Chunked>> {
-    use std::io::Read;
-    if codec::input::ModelKind::of(path) != codec::input::ModelKind::Bft {
-        return Ok(None);
-    }
-    let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let mut head = [0u8; 10];
-    if !file.metadata().is_ok_and(|m| m.is_file())
-        || (&file).take(10).read(&mut head).ok() != Some(10)
-        || !codec::bft::chunked::is_chunked(&head)
-    {
-        return Ok(None);
-    }
-    drop(file);
-    let source = codec::bft::chunked::FileSource::open(path)?;
-    let file = codec::bft::chunked::ChunkedFile::open(source).with_context(|| format!("{}", path.display()))?;
-    truncate_hook(path, file.entries.first().map_or(0, |e| e.offset));
-    Ok(Some(codec::bft::chunked::sort::ChunkedModel::new(file, cache_bytes)))
-}
-
-/// Test hook: `TESSERA_FAULT=truncate-after-open` cuts a chunked model to its header and
-/// directory (`head` bytes) once they are read, so a test sees what a file truncated while
-/// in use gives. Unset in normal runs.
-fn truncate_hook(path: &Path, head: u64) {
-    if std::env::var_os("TESSERA_FAULT").is_some_and(|v| v == "truncate-after-open") {
-        if let Ok(f) = std::fs::OpenOptions::new().write(true).open(path) {
-            let _ = f.set_len(head);
-        }
-    }
-}
-
-/// The camera of a chunked model: the flags given, the rest framing its bounding box.
-pub fn chunked_camera(model: &Chunked, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
-    let h = model.file.header;
-    args.camera(h.bbox_min, h.bbox_max, grid.aspect())
-}
-
-impl Model {
-    pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
-        let d = &self.tiles.decoded;
-        let h = d.header;
-        // The three-quarter view fits the vertices (dequantized: the box's own scale).
-        let points: Option<Vec<[f32; 3]>> = (args.view == crate::cli::ViewPreset::ThreeQuarter).then(|| {
-            let q = d.quantization();
-            d.positions.iter().map(|&p| q.dequantize(p)).collect()
-        });
-        args.camera_fitting(h.bbox_min, h.bbox_max, points.as_deref(), grid.aspect())
-    }
-}
 
 #[derive(Debug, Serialize)]
 pub struct TileSummary {
@@ -316,7 +231,7 @@ fn recorded_dump(dir: &Path) -> Result<Option<std::collections::HashSet<std::ffi
             dir.display()
         )
     };
-    let text = crate::commands::read_input(&path)?;
+    let text = crate::model::read_input(&path)?;
     let json: serde_json::Value = serde_json::from_slice(&text).map_err(|_| not_ours())?;
     let files = json.get(DUMP_FILES).and_then(|f| f.as_array()).ok_or_else(not_ours)?;
     let mut names = std::collections::HashSet::from([std::ffi::OsString::from("summary.json")]);

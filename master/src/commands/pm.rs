@@ -9,10 +9,9 @@ use codec::pm::{Adapter, Viewpoint};
 use codec::Mesh;
 use serde::Serialize;
 
-use crate::cli::CameraArgs;
-use crate::commands::load_mesh_streamed;
-use crate::commands::{expect_kind, mesh_output, read_input, summary};
-use crate::output::{check_distinct, check_extension, write_atomic};
+use crate::cli::{CameraArgs, Pm};
+use crate::model::{dpm_file_bbox, expect_kind, load_mesh_streamed, pm_bbox, read_input};
+use crate::output::{check_distinct, check_extension, mesh_output, summary, write_atomic};
 use crate::progress;
 use crate::spill;
 use codec::input::ModelKind;
@@ -377,7 +376,7 @@ pub struct AdaptOptions {
 /// An out-of-core file is adapted from the nodes the view needs (read from the file: the nodes
 /// of priority at least 1; on the GPU those that its node pool holds, by default slots for
 /// all of them), never decoded whole: its memory follows the view. Its default camera frames
-/// [`out_of_core_bbox`], as `render`'s does. `--full` on the CPU decodes the file (the mesh is
+/// [`dpm_file_bbox`], as `render`'s does. `--full` on the CPU decodes the file (the mesh is
 /// the model).
 pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
     let writer = mesh_output(input, output, "the output of pm adapt")?;
@@ -486,7 +485,7 @@ fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Resu
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
     pb.finish_and_clear();
     let pm = decoded?.pm;
-    let view = if opts.full { None } else { Some(adapt_view(camera, opts, bbox(&pm.positions))?) };
+    let view = if opts.full { None } else { Some(adapt_view(camera, opts, pm_bbox(&pm.positions))?) };
     let (active, faces, passes, secs) = if opts.gpu {
         let gpu = worker::gpu::Gpu::new()?;
         let dpm = format::Dpm::parse(&bytes)?;
@@ -517,7 +516,7 @@ fn adapt_out_of_core(
     let at = || format!("{}", input.display());
     let head = file.clone();
     let prefix = format::Dpm::parse_prefix(head.prefix()).with_context(at)?;
-    let view = adapt_view(camera, opts, out_of_core_bbox(&prefix))?;
+    let view = adapt_view(camera, opts, dpm_file_bbox(&prefix))?;
     // The nodes that can hold an operation the view asks for.
     let planes = view.planes();
     let required = || prefix.nodes.iter().filter(|n| n.priority(&view, &planes) >= 1.0);
@@ -562,37 +561,63 @@ fn adapt_out_of_core(
     Ok((Mesh::new(adapter.positions(), adapter.faces().to_vec()), passes, secs, Some(read)))
 }
 
-/// A box around every vertex of an out-of-core `.dpm`, from its head alone: the union of the
-/// base vertices and of the nodes' boxes (which hold every operation's bounding sphere, so
-/// every vertex), cut to the quantization grid (the header's lower corner and its largest
-/// extent), which holds every position. The spheres of coarse operations reach far past the
-/// model: uncut, the 102M-triangle armadillo's default camera framed it at a fraction of the
-/// frame.
-pub fn out_of_core_bbox(dpm: &codec::pm::format::Dpm) -> ([f32; 3], [f32; 3]) {
-    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-    let points = dpm.base_positions.iter().map(|&q| {
-        let p = dpm.position(q);
-        (p, p)
-    });
-    for (a, b) in points.chain(dpm.nodes.iter().map(|n| (n.bbox_min, n.bbox_max))) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(a[k]);
-            hi[k] = hi[k].max(b[k]);
+/// `tessera pm build|stats|adapt`: the flags resolved into each command's options.
+pub fn run(pm: &Pm) -> Result<()> {
+    match pm {
+        Pm::Build {
+            input,
+            output,
+            position_bits,
+            normal_bits,
+            node_kb,
+            chunk_faces,
+            no_memory_check,
+            spill_dir,
+            spill_min_mb,
+            assume_available_mb,
+        } => build(
+            input,
+            output,
+            codec::pm::DpmOptions {
+                position_bits: *position_bits,
+                normal_bits: *normal_bits,
+                node_bytes: node_kb.map_or(0, |k| k * 1024),
+            },
+            codec::pm::BuildOptions { chunk_faces: *chunk_faces },
+            MemoryPolicy {
+                check: !*no_memory_check,
+                spill_dir: spill_dir.clone(),
+                spill_threshold: spill_min_mb << 20,
+                available: assume_available_mb.map(|mb| mb << 20),
+            },
+        ),
+        Pm::Stats { input, json } => stats(input, *json),
+        Pm::Adapt {
+            input,
+            view,
+            error_px,
+            output,
+            full,
+            normal_weight,
+            gpu,
+            gpu_budget_mb,
+            gpu_nodes_mb,
+            one_level,
+        } => {
+            let mb = |mb: f32| (mb as f64 * (1u64 << 20) as f64) as u64;
+            let opts = AdaptOptions {
+                size: view.size,
+                error_px: *error_px,
+                normal_weight: *normal_weight,
+                full: *full,
+                gpu: *gpu,
+                gpu_budget: gpu_budget_mb.map(mb),
+                gpu_nodes: gpu_nodes_mb.map(mb),
+                levels: one_level.then_some(codec::pm::Levels::One),
+            };
+            adapt(input, &view.camera, &opts, output)
         }
     }
-    let top = (1u32 << dpm.header.position_bits) - 1;
-    let (grid_lo, grid_hi) = (dpm.position([0; 3]), dpm.position([top; 3]));
-    for k in 0..3 {
-        lo[k] = lo[k].max(grid_lo[k]);
-        hi[k] = hi[k].min(grid_hi[k]);
-    }
-    (lo, hi)
-}
-
-/// The bounding box of `p` (the unit cube when empty).
-/// The bounding box of a progressive mesh's positions; a unit box for an empty one.
-pub fn bbox(p: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
-    codec::mesh::bounding_box(p).unwrap_or(([0.0; 3], [1.0; 3]))
 }
 
 #[cfg(test)]
@@ -619,7 +644,7 @@ mod tests {
     /// where the union of its node boxes (the operations' spheres) reaches far past the model.
     #[test]
     fn the_out_of_core_box_holds_the_model_and_no_more_than_its_grid() {
-        let mesh = crate::commands::load_mesh(&testkit::mesh_path("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
+        let mesh = crate::model::load_mesh(&testkit::mesh_path("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
         let pm = codec::pm::build(&mesh).unwrap();
         let opts = EncodeOptions { node_bytes: 4096, ..EncodeOptions::default() };
         let dir = tempfile::tempdir().unwrap();
@@ -627,8 +652,8 @@ mod tests {
         std::fs::write(&path, format::encode(&pm, opts).unwrap().bytes).unwrap();
         let file = format::NodeFile::open_out_of_core(&path).unwrap().expect("out of core");
         let dpm = format::Dpm::parse_prefix(file.prefix()).unwrap();
-        let (lo, hi) = out_of_core_bbox(&dpm);
-        let (elo, ehi) = bbox(&pm.positions);
+        let (lo, hi) = dpm_file_bbox(&dpm);
+        let (elo, ehi) = pm_bbox(&pm.positions);
         let step = dpm.header.step;
         let extent = (0..3).map(|k| ehi[k] - elo[k]).fold(0.0f32, f32::max);
         let (mut ulo, mut uhi) = ([f32::MAX; 3], [f32::MIN; 3]);
