@@ -45,15 +45,15 @@ pub fn decode_dpm(data: &[u8]) {
 
 /// `fuzz/fuzz_targets/decode_nsp.rs`: the `.nsp` reader and its cell decoder.
 pub fn decode_nsp(data: &[u8]) {
-    use crate::nsp::{decode, format, NspFile};
+    use crate::nsp::{format, view, NspFile};
     // As a whole file (headers, tables, tree shape).
     if let Ok(file) = NspFile::from_bytes(data.to_vec()) {
-        let _ = decode::decode_all(&file);
+        let _ = view::decode_all(&file);
     }
     // As one cell's stream behind valid tables, at every precision.
     if let Ok(file) = NspFile::from_bytes(format::wrap_for_fuzzing(data)) {
         for bits in [3u8, 10] {
-            if let Ok(d) = decode::decode_uniform(&file, bits) {
+            if let Ok(d) = view::decode_uniform(&file, bits) {
                 let n = d.positions.len() as u32;
                 assert!(d.triangles.iter().flatten().all(|&v| v < n));
             }

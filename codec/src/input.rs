@@ -96,54 +96,6 @@ pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, u64), String> 
     Ok((file, meta.len()))
 }
 
-/// The three kinds of model Tessera reads, told apart by their magic bytes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ModelKind {
-    /// A `.bft` file (BFT command stream), which rank 0 sorts into tiles.
-    Bft,
-    /// A `.dpm` file (dependency-free progressive mesh), which workers adapt.
-    Dpm,
-    /// An `.nsp` file (nSP-tree store), whose cells workers refine.
-    Nsp,
-    /// Anything else: a mesh file for the loaders (OBJ, PLY, STL, glTF, optionally gzipped).
-    Mesh,
-}
-
-impl ModelKind {
-    /// The Tessera model whose magic number `head` (a file's first bytes) starts with, if
-    /// any: never [`ModelKind::Mesh`].
-    pub fn by_magic(head: &[u8]) -> Option<ModelKind> {
-        if head.starts_with(&crate::bft::MAGIC) {
-            Some(ModelKind::Bft)
-        } else if head.starts_with(&crate::pm::format::MAGIC) {
-            Some(ModelKind::Dpm)
-        } else if head.starts_with(&crate::nsp::format::MAGIC) {
-            Some(ModelKind::Nsp)
-        } else {
-            None
-        }
-    }
-
-    /// The kind of the model at `path`, from its first 8 bytes. A file without either magic
-    /// number whose extension is `.bft` or `.dpm` is taken for that kind, so that the
-    /// format's reader reports what is wrong with it ("bad magic number") rather than the
-    /// mesh loaders. A file that cannot be read is a mesh here; reading it reports why.
-    pub fn of(path: &Path) -> ModelKind {
-        let mut magic = [0u8; 8];
-        let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
-        let read = regular && std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok();
-        if let Some(kind) = read.then(|| ModelKind::by_magic(&magic)).flatten() {
-            return kind;
-        }
-        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-            Some("bft") => ModelKind::Bft,
-            Some("dpm") => ModelKind::Dpm,
-            Some("nsp") => ModelKind::Nsp,
-            _ => ModelKind::Mesh,
-        }
-    }
-}
-
 /// What kind of non-regular file `meta` describes, in words.
 fn kind(meta: &std::fs::Metadata) -> &'static str {
     use std::os::unix::fs::FileTypeExt;
@@ -206,23 +158,5 @@ mod tests {
         let e = read_capped(std::io::repeat(0), 1000, &mut out).unwrap_err();
         assert!(e.contains("more than 1000 bytes") && e.contains("--max-decompressed"), "{e}");
         assert!(out.len() <= 1001);
-    }
-
-    #[test]
-    fn model_kinds_by_magic_then_extension() {
-        let dir = tempfile::tempdir().unwrap();
-        let put = |name: &str, bytes: &[u8]| {
-            let p = dir.path().join(name);
-            std::fs::write(&p, bytes).unwrap();
-            p
-        };
-        let mut bft = crate::bft::MAGIC.to_vec();
-        bft.extend_from_slice(b"rest");
-        assert_eq!(ModelKind::of(&put("model.obj", &bft)), ModelKind::Bft);
-        assert_eq!(ModelKind::of(&put("pm.bin", &crate::pm::format::MAGIC)), ModelKind::Dpm);
-        assert_eq!(ModelKind::of(&put("bad.BFT", b"garbage!")), ModelKind::Bft);
-        assert_eq!(ModelKind::of(&put("bad.dpm", b"")), ModelKind::Dpm);
-        assert_eq!(ModelKind::of(&put("mesh.ply", b"ply\nformat ascii 1.0\n")), ModelKind::Mesh);
-        assert_eq!(ModelKind::of(Path::new("/dev/zero")), ModelKind::Mesh);
     }
 }

@@ -1,7 +1,7 @@
 //! Tessera's codec, everything about meshes and their files that needs no MPI and no GPU, so
 //! that it builds and tests fast and its decoders can be fuzzed (`fuzz/`):
 //! - the mesh type, its loaders and writers ([`load`], [`save`]), bounded reads and model-kind
-//!   detection ([`input`]), quantization and bounding boxes ([`mesh`]);
+//!   detection ([`input`], [`kind`]), quantization and bounding boxes ([`mesh`]);
 //! - entropy coding: the adaptive binary range coder ([`rangecoder`]) and canonical Huffman
 //!   codes ([`huffman`]);
 //! - the container both file formats share, with its one error type ([`FormatError`]);
@@ -32,6 +32,7 @@ mod csr;
 pub mod fuzzing;
 pub mod huffman;
 pub mod input;
+pub mod kind;
 pub mod load;
 pub mod mesh;
 pub mod nsp;

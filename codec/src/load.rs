@@ -145,7 +145,7 @@ const UNKNOWN: &str = "not a mesh file Tessera reads: expected OBJ, PLY, STL or 
 
 /// What Tessera model a file starting with `head` is, in words, if it is one.
 fn tessera_model(head: &[u8]) -> Option<&'static str> {
-    use crate::input::ModelKind;
+    use crate::kind::ModelKind;
     match ModelKind::by_magic(head)? {
         ModelKind::Bft => Some("a .bft model (tessera decode writes it as a mesh)"),
         ModelKind::Dpm => Some("a .dpm progressive mesh (tessera pm stats describes it)"),

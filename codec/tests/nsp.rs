@@ -74,7 +74,7 @@ fn full_decode_is_the_canonical_complex_on_shared_meshes() {
         let mesh = testkit::load_mesh(rel);
         for (bits, min) in [(12u8, 200u32), (16, 1000)] {
             let (canon, file) = build(&mesh, small_params(bits, min));
-            let drawn = decode::decode_all(&file).unwrap();
+            let drawn = view::decode_all(&file).unwrap();
             let want = canon.to_mesh();
             assert_eq!(
                 oriented_set(&drawn.positions, &drawn.triangles),
@@ -96,7 +96,7 @@ fn every_uniform_precision_is_vertex_clustering() {
     let (canon, file) = build(&mesh, small_params(14, 300));
     assert!(file.tree.nodes.len() > 64, "the test needs a split tree");
     for b in 0..=14u8 {
-        let drawn = decode::decode_uniform(&file, b).unwrap();
+        let drawn = view::decode_uniform(&file, b).unwrap();
         let (pos, tris) = clustering(&canon, b);
         assert_eq!(oriented_set(&drawn.positions, &drawn.triangles), oriented_set(&pos, &tris), "at {b} bits");
     }
@@ -195,14 +195,14 @@ fn border_rule_cracks_are_counted_on_a_closed_model() {
     let mesh = testkit::load_mesh("stanford/bunny00_cgal_75k.obj.gz");
     for advance in [0, 2] {
         let (_, file) = build(&mesh, Params { bits: 16, root_bits: 5, splits: 4, min_simplices: 3000, advance });
-        let full = decode::decode_all(&file).unwrap();
+        let full = view::decode_all(&file).unwrap();
         assert_eq!(open_edges(&full), 0, "the full decode of a closed mesh is closed");
         let mut nav = view::Navigator::default();
         for v in views(&file).iter().take(4) {
             let sel = view::select(&file, v);
             let d = view::draw(&file, &sel, &nav.update(&file, &sel).unwrap());
             let max = sel.iter().map(|s| s.1).max().unwrap();
-            let uniform = decode::decode_uniform(&file, max).unwrap();
+            let uniform = view::decode_uniform(&file, max).unwrap();
             // With the advance a vertex is drawn where the cell it lies in puts it; only a
             // kd-cell spanning several cells (or outside every drawn one) can be drawn at two
             // positions, both inside it.
@@ -248,7 +248,7 @@ fn random_cell_streams_never_panic() {
         data[0] = (i % 4) as u8;
         let file = NspFile::from_bytes(nsp::format::wrap_for_fuzzing(&data)).unwrap();
         for bits in [3u8, 10] {
-            if let Ok(d) = decode::decode_uniform(&file, bits) {
+            if let Ok(d) = view::decode_uniform(&file, bits) {
                 let n = d.positions.len() as u32;
                 assert!(d.triangles.iter().flatten().all(|&v| v < n));
                 decoded[(i % 4) as usize] += 1;
@@ -264,7 +264,7 @@ fn damaged(bytes: Vec<u8>) {
     let (c, e) = file.entries.iter().enumerate().find(|(_, e)| e.len > 40).map(|(c, e)| (c, e.clone())).unwrap();
     let mut bad = bytes.clone();
     bad[e.offset as usize + 20] ^= 0x10;
-    let err = decode::decode_all(&NspFile::from_bytes(bad).unwrap()).unwrap_err().to_string();
+    let err = view::decode_all(&NspFile::from_bytes(bad).unwrap()).unwrap_err().to_string();
     assert!(err.starts_with(&format!("cell {c}:")), "{err}");
     // Truncated, or a damaged header or table: refused when opened.
     for cut in [bytes.len() - 1, bytes.len() / 2, 10] {
@@ -289,7 +289,7 @@ fn damaged(bytes: Vec<u8>) {
         }
         nsp::format::refresh_checksums(&mut bad).unwrap();
         let f = NspFile::from_bytes(bad).unwrap();
-        if let Err(err) = decode::decode_all(&f) {
+        if let Err(err) = view::decode_all(&f) {
             assert!(err.to_string().starts_with("cell "), "{err}");
             errors += 1;
         }
@@ -348,7 +348,7 @@ fn the_geometry_advance_draws_clustering_at_descendant_means_and_stays_lossless(
         let mesh = testkit::load_mesh(rel);
         for m in [1u8, 3] {
             let (canon, file) = build(&mesh, Params { advance: m, ..small_params(12, 400) });
-            let drawn = decode::decode_all(&file).unwrap();
+            let drawn = view::decode_all(&file).unwrap();
             let want = canon.to_mesh();
             assert_eq!(
                 oriented_set(&drawn.positions, &drawn.triangles),
@@ -366,7 +366,7 @@ fn the_geometry_advance_draws_clustering_at_descendant_means_and_stays_lossless(
     assert!(file.tree.nodes == plain.tree.nodes, "the advance does not change the partition");
     let mut inside = 0usize;
     for b in 0..=p {
-        let drawn = decode::decode_uniform(&file, b).unwrap();
+        let drawn = view::decode_uniform(&file, b).unwrap();
         let (pos, tris) = clustering(&canon, b);
         assert_eq!(
             cell_set(&canon.cube, b, &drawn.positions, &drawn.triangles),

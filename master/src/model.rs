@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use codec::bft::tile_sort::TileModel;
 use codec::bft::{self, EncodeOptions};
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 use codec::view::{Camera, TileGrid};
 use codec::Mesh;
 
@@ -94,17 +94,17 @@ pub struct Model {
 
 /// Loads a `.bft` file as it is, or encodes a mesh file (OBJ, PLY, STL, glTF) on load with `options`.
 pub fn load_model(path: &Path, options: EncodeOptions) -> Result<Model> {
-    let kind = codec::input::ModelKind::of(path);
-    if kind == codec::input::ModelKind::Dpm {
+    let kind = codec::kind::ModelKind::of(path);
+    if kind == codec::kind::ModelKind::Dpm {
         bail!("{}: a progressive mesh (.dpm); this command takes a .bft or a mesh file", path.display());
     }
-    if kind == codec::input::ModelKind::Nsp {
+    if kind == codec::kind::ModelKind::Nsp {
         bail!(
             "{}: an nSP-tree store (.nsp); this command takes a .bft or a mesh file (see tessera nsp)",
             path.display()
         );
     }
-    let bytes = if kind == codec::input::ModelKind::Bft {
+    let bytes = if kind == codec::kind::ModelKind::Bft {
         read_input(path)?
     } else {
         let mesh = load_mesh(path)?;
@@ -123,7 +123,7 @@ pub type Chunked = codec::bft::chunked::sort::ChunkedModel<codec::bft::chunked::
 /// `cache_bytes` for its straddling chunks' tables.
 pub fn open_chunked(path: &Path, cache_bytes: usize) -> Result<Option<Chunked>> {
     use std::io::Read;
-    if codec::input::ModelKind::of(path) != codec::input::ModelKind::Bft {
+    if codec::kind::ModelKind::of(path) != codec::kind::ModelKind::Bft {
         return Ok(None);
     }
     let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;

@@ -5,7 +5,10 @@ use rustc_hash::FxHashMap as HashMap;
 
 use crate::mesh::Mesh;
 
-use super::NspError;
+use super::error::NspError;
+
+/// The axes' names, for messages.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
 
 /// The cubic box: origin at the minimum corner of the points' bounding box, side the largest
 /// extent (NSP.md 1.3: the minimum corner, not the centre, reproduces Table 1's cell counts).
@@ -44,14 +47,13 @@ impl Cube {
         if !(self.side.is_finite() && self.side > 0.0) {
             return Err(format!("the cube's side is {}, not a positive number", num(self.side)));
         }
-        for a in 0..3 {
-            let (lo, hi) = (self.origin[a], self.origin[a] + self.side);
+        for (origin, axis) in self.origin.iter().zip(AXES) {
+            let (lo, hi) = (*origin, origin + self.side);
             if !(fits(lo) && fits(hi)) {
                 return Err(format!(
-                    "the cube's origin {} and side {} on {} do not fit f32",
+                    "the cube's origin {} and side {} on {axis} do not fit f32",
                     num(lo),
-                    num(self.side),
-                    super::format::AXES[a]
+                    num(self.side)
                 ));
             }
         }

@@ -20,7 +20,7 @@ use super::canonical::{top_simplices, Simplex};
 
 /// Contexts: geometry per (kd level, valence bucket, binary node), then connectivity per
 /// (dimension, allowed symbols, binary node, side of the split plane), then orientation.
-pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::MAX_BITS as usize * VALENCE_BUCKETS;
+pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::params::MAX_BITS as usize * VALENCE_BUCKETS;
 /// A kd-cell's number of incident top-simplices, bucketed: more simplices, more likely
 /// several points inside.
 const VALENCE_BUCKETS: usize = 4;

@@ -7,10 +7,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use super::complex::{self, ApplyError, BitIo, Blind, Complex, KdCell, Oracle};
+use super::error::NspError;
 use super::format::{self, CellEntry, Header, FOOTER_LEN, MIN_TABLE_LEN, PREFIX_LEN};
 use super::tree::Tree;
-use super::view::{draw, Drawn};
-use super::NspError;
 use crate::rangecoder::{Decoder, DecoderState};
 
 enum Source {
@@ -538,16 +537,4 @@ pub fn decode_uniform_states(file: &NspFile, bits: u8) -> Result<Vec<CellState>,
     }
     out.sort_by_key(|s| s.cell);
     Ok(out)
-}
-
-/// Decodes every cell to a uniform precision and draws them with the border rule.
-pub fn decode_uniform(file: &NspFile, bits: u8) -> Result<Drawn, NspError> {
-    let states = decode_uniform_states(file, bits)?;
-    let selection: Vec<(u32, u8)> = states.iter().map(|s| (s.cell, s.precision())).collect();
-    Ok(draw(file, &selection, &states.iter().collect::<Vec<_>>()))
-}
-
-/// Decodes every cell to full precision: the canonical complex.
-pub fn decode_all(file: &NspFile) -> Result<Drawn, NspError> {
-    decode_uniform(file, file.header.params.bits)
 }

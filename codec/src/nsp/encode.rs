@@ -13,9 +13,10 @@ use rayon::prelude::*;
 
 use super::canonical::{top_simplices, Canonical, Simplex};
 use super::complex::{BitIo, Complex, Oracle, Silent, CONTEXTS};
+use super::error::NspError;
 use super::format::{self, CellEntry, Header};
+use super::params::{morton, Params};
 use super::tree::{partition_capped, Tree};
-use super::{morton, NspError, Params};
 use crate::rangecoder::Encoder;
 
 /// An encoded model and what it is made of.

@@ -26,8 +26,10 @@
 //! without reading it.
 
 use super::canonical::Canonical;
+use super::canonical::{Cube, AXES};
 use super::complex::CONTEXTS;
-use super::{Cube, NspError, Params};
+use super::error::NspError;
+use super::params::Params;
 
 pub const MAGIC: [u8; 4] = *b"TNSP";
 /// 2: a split's star is coded in kd-cell id order (1: kd-index order), and files may carry
@@ -43,9 +45,6 @@ pub const PREFIX_LEN: usize = 8 + HEADER_LEN + 4;
 pub const MIN_TABLE_LEN: usize = 2 + 4;
 /// A context's probability when the table does not list it.
 pub const DEFAULT_PROB: u16 = 1024;
-
-/// The axes' names, for messages.
-pub const AXES: [&str; 3] = ["x", "y", "z"];
 
 /// Bytes a reader holds per cell before decoding any (its parsed row and its tree node):
 /// the footer's count of cells times this is checked against `--max-decompressed`
@@ -80,9 +79,32 @@ fn size(bytes: u64) -> String {
 }
 
 /// The most cells a reader opens under the `--max-decompressed` now in force (a build makes
-/// no more: [`Params::check_cells`](super::Params::check_cells)).
+/// no more: [`Params::check_cells`](super::params::Params::check_cells)).
 pub fn max_cells() -> u64 {
     crate::input::max_decompressed_bytes() / CELL_BYTES
+}
+
+impl Params {
+    /// Refuses a tree of at least `cells` cells where a reader would not open it
+    /// ([`max_cells`]): how many cells a model is cut into follows from `--splits`
+    /// and `--min-simplices` (with `--bits` and `--root-bits`, the depth), so the message
+    /// names them.
+    pub fn check_cells(&self, cells: u64) -> Result<(), NspError> {
+        if cells <= max_cells() {
+            return Ok(());
+        }
+        Err(NspError::TooManyCells(format!(
+            "--splits {} with --min-simplices {} cuts this model into at least {cells} cells, more than the {} \
+                 a reader opens under --max-decompressed ({} MiB at {} bytes a cell); raise --min-simplices or \
+                 lower {}",
+            self.splits,
+            self.min_simplices,
+            max_cells(),
+            crate::input::max_decompressed_bytes() >> 20,
+            CELL_BYTES,
+            if self.splits > 2 { "--splits" } else { "--bits" }
+        )))
+    }
 }
 
 /// Bytes of the table written for `table`.

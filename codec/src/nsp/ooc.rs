@@ -36,9 +36,10 @@ use rayon::prelude::*;
 use super::canonical::{reduce, top_simplices, Cube, Simplex};
 use super::complex::CONTEXTS;
 use super::encode::{code_cell, kind_of, record_local, segments, static_prob, Recorded};
+use super::error::NspError;
 use super::format::{self, CellEntry, Header};
+use super::params::Params;
 use super::tree::{Node, Tree};
-use super::{NspError, Params};
 use crate::load::stream;
 
 /// Bytes of the page cache over the positions file.

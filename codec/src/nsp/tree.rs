@@ -2,7 +2,8 @@
 //! (NSP.md 1.2 and 1.4), and the precisions of each cell.
 
 use super::canonical::Simplex;
-use super::{NspError, Params};
+use super::error::NspError;
+use super::params::Params;
 
 /// One cell of the tree. Cells are stored in postorder: a split cell comes after its `n^3`
 /// children, which are in Morton order (x the most significant bit of each level).

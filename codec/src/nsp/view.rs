@@ -6,8 +6,8 @@ use rustc_hash::FxHashMap as HashMap;
 use glam::Mat4;
 
 use super::complex::centre;
-use super::decode::{CellState, NspFile};
-use super::NspError;
+use super::decode::{decode_uniform_states, CellState, NspFile};
+use super::error::NspError;
 use crate::view::{box_screen_rect, Camera};
 
 /// Triangles drawn from a set of cells, with shared vertices.
@@ -274,7 +274,7 @@ pub fn draw_flat(file: &NspFile, selection: &[(u32, u8)], states: &[&CellState])
     out
 }
 
-fn overlaps(tree: &super::Tree, c: u32, corner: [u32; 3], used: [u8; 3], bits: u8, pl: u32) -> bool {
+fn overlaps(tree: &super::tree::Tree, c: u32, corner: [u32; 3], used: [u8; 3], bits: u8, pl: u32) -> bool {
     let n = &tree.nodes[c as usize];
     let side = bits as u32 - pl * n.depth as u32;
     (0..3).all(|a| {
@@ -446,4 +446,16 @@ impl Navigator {
     pub fn cells(&self) -> usize {
         self.states.len()
     }
+}
+
+/// Decodes every cell to a uniform precision and draws them with the border rule.
+pub fn decode_uniform(file: &NspFile, bits: u8) -> Result<Drawn, NspError> {
+    let states = decode_uniform_states(file, bits)?;
+    let selection: Vec<(u32, u8)> = states.iter().map(|s| (s.cell, s.precision())).collect();
+    Ok(draw(file, &selection, &states.iter().collect::<Vec<_>>()))
+}
+
+/// Decodes every cell to full precision: the canonical complex.
+pub fn decode_all(file: &NspFile) -> Result<Drawn, NspError> {
+    decode_uniform(file, file.header.params.bits)
 }

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use codec::bft;
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 
 use crate::model::{expect_kind, read_input};
 use crate::output::{mesh_output, summary, write_atomic};

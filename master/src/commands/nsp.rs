@@ -15,7 +15,7 @@ use crate::output::{
     write_bytes,
 };
 use crate::progress;
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 
 /// `tessera nsp build IN -o OUT.nsp`: PLY and OBJ out of core (`codec::nsp::ooc`, memory
 /// that does not grow with the model), STL in core.

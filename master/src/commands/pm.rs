@@ -14,7 +14,7 @@ use crate::model::{dpm_file_bbox, expect_kind, load_mesh_streamed, pm_bbox, read
 use crate::output::{check_distinct, check_extension, mesh_output, summary, write_atomic};
 use crate::progress;
 use crate::spill;
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 
 /// How `pm build` meets a model larger than memory.
 #[derive(Debug)]

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use codec::bft::{self, Stats};
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 use serde::Serialize;
 
 use crate::model::{expect_kind, read_input};

@@ -11,6 +11,7 @@ use protocol::{unix_ms, DpmFile, NspModel, PmModel, Swap, ToDisplay, ToWorker};
 use worker::transport::Transport;
 
 use super::display::DirectSend;
+use super::eye::Eye;
 use super::jobs::{FrameContext, FrameJobs};
 use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Early, Silence};
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
@@ -38,14 +39,6 @@ struct InFlight {
     send_ms: f64,
     /// Rank 0's `sort` and `send` spans.
     timeline: Vec<Span>,
-}
-
-/// A stereo eye.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub(super) enum Eye {
-    Left,
-    Right,
 }
 
 /// What the writer thread does with a composited frame: write its image (or movie frame)

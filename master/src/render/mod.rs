@@ -25,6 +25,7 @@
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
 
 mod display;
+mod eye;
 mod frame_loop;
 mod jobs;
 mod link;

@@ -120,10 +120,10 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
         allowed.extend(crate::movie::EXTENSIONS);
         check_extension(&args.out, &allowed, "--out")?;
     }
-    if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Dpm {
+    if args.decode_only && codec::kind::ModelKind::of(&args.model) == codec::kind::ModelKind::Dpm {
         anyhow::bail!("--decode-only applies to sorted models; a progressive mesh (.dpm) has no tiles to decode");
     }
-    if args.decode_only && codec::input::ModelKind::of(&args.model) == codec::input::ModelKind::Nsp {
+    if args.decode_only && codec::kind::ModelKind::of(&args.model) == codec::kind::ModelKind::Nsp {
         anyhow::bail!("--decode-only applies to sorted models; an .nsp model has no tiles to decode");
     }
     // No output may be an input or another output.

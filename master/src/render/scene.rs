@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use codec::bft::normals::BorderNormals;
 use codec::bft::tile_sort::{Boxes, Sorter};
-use codec::input::ModelKind;
+use codec::kind::ModelKind;
 use codec::view::{Camera, TileGrid};
 
 use worker::chunk_cache::ChunkCache;

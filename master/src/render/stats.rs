@@ -4,7 +4,7 @@
 use protocol::{FrameSpan, PmMemory, TilePixels, TileTimes};
 use serde::{Deserialize, Serialize};
 
-use super::frame_loop::Eye;
+use super::eye::Eye;
 
 /// When a stage of a frame ran on a rank: milliseconds from the start of the run (rank 0's
 /// clock when it began; workers' spans are moved onto it through the Unix epoch, see

@@ -8,12 +8,13 @@
 use std::sync::Arc;
 
 use super::fields::KINDS;
+use super::header::max_q;
 use super::header::{
     corrupt, get_varint, Header, FLOAT_VERSION, LAYOUT, NODELESS_VERSION, NODE_BYTES, PAIRLESS_VERSION,
 };
 use super::nodes::{read_node_table, NodeInfo};
 use super::op::{read_op, DecodedOp, OpContext};
-use super::quantize::{dequantize_position, max_q, oct_decode, valid_oct};
+use super::quantize::{dequantize_position, oct_decode, valid_oct};
 use super::tables::read_tables;
 use super::DpmError;
 use crate::huffman::Table;

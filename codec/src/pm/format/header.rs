@@ -163,7 +163,7 @@ impl Header {
         }
         // Every point of the quantization grid fits f32, computed as dequantization computes
         // it, so that no decoded position (nor a box or camera made from them) is infinite.
-        let levels = super::quantize::max_q(h.position_bits);
+        let levels = max_q(h.position_bits);
         for (a, axis) in ["x", "y", "z"].into_iter().enumerate() {
             let min = h.bbox_min[a];
             if !min.is_finite() {
@@ -187,4 +187,9 @@ impl Header {
         }
         Ok(h)
     }
+}
+
+/// The largest code of a `bits`-bit coordinate.
+pub(super) fn max_q(bits: u8) -> u32 {
+    (1u32 << bits) - 1
 }

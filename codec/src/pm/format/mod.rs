@@ -187,6 +187,7 @@ mod encode;
 mod fields;
 mod header;
 mod hierarchy;
+mod node_file;
 mod nodes;
 mod op;
 mod quantize;
@@ -200,7 +201,8 @@ pub use encode::{
 };
 pub use fields::{TABLES, TABLE_BASE};
 pub use header::{DpmError, Header, MAGIC, MAX_NODES, MAX_OP_FACES, NODE_BYTES, VERSION};
-pub use nodes::{NodeFile, NodeInfo};
+pub use node_file::NodeFile;
+pub use nodes::NodeInfo;
 pub use op::{DecodedOp, OpContext};
 pub use quantize::{log_table, log_value, quantized, LOG_STEPS, MAX_K};
 pub use stats::DpmStats;

@@ -14,8 +14,9 @@ use super::fields::{
     FACE_OTHER_DELTA, FACE_T, FACE_U, GEOM, HEAD, KINDS, LOCAL, NODE_DELTA, NORMAL, POINTER, POS_NORMAL, POS_TANGENT,
     RADIUS, SIN, SPLIT,
 };
+use super::header::max_q;
 use super::header::{corrupt, Header, NODE_BYTES};
-use super::quantize::{dequantize_criteria, max_q, valid_oct, MAX_K};
+use super::quantize::{dequantize_criteria, valid_oct, MAX_K};
 use super::symbols::{unzigzag, zigzag, OpReader, OpWriter};
 use super::DpmError;
 use crate::huffman::Table;

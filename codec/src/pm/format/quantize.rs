@@ -6,7 +6,7 @@
 //! Every quantizer rounds so that what the runtime reads is safe: criteria are rounded up
 //! (a cone, an error or a radius never shrinks), positions and normals to the nearest code.
 
-use super::header::{Header, MAX_OP_FACES};
+use super::header::{max_q, Header, MAX_OP_FACES};
 use super::{EncodeError, EncodeOptions};
 use crate::pm::{Criteria, ProgressiveMesh};
 
@@ -115,11 +115,6 @@ pub(super) fn dequantize_criteria(k: [u32; 4], h: &Header) -> Criteria {
         attribute_error: log_dec(k[2], h.attribute_step),
         radius: log_dec(k[3], h.length_step),
     }
-}
-
-/// The largest code of a `bits`-bit coordinate.
-pub(super) fn max_q(bits: u8) -> u32 {
-    (1u32 << bits) - 1
 }
 
 /// The nearest point of the grid `bbox_min + q * step`, clamped to it (NaN to 0). A

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use super::decode::Dpm;
 use super::fields::{Kind, KINDS};
 use super::header::Header;
-use super::nodes::NodeFile;
+use super::node_file::NodeFile;
 use super::DpmError;
 
 /// Nodes [`DpmStats::of_out_of_core`] keeps read (4 MiB of 64 kB nodes).
