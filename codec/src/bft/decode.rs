@@ -6,8 +6,6 @@
 //! [`BftError`]; no input makes the decoder panic, and its loops are bounded by the
 //! header's counts and the stream lengths.
 
-use std::path::Path;
-
 use super::attributes::{self, SlotAttributes};
 use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
@@ -101,12 +99,6 @@ impl Decoded {
     }
 }
 
-/// Reads and decodes a `.bft` file.
-pub fn decode_file(path: &Path) -> Result<Decoded, BftError> {
-    let bytes = crate::input::read_file(path).map_err(|e| format::corrupt(format!("{}: {e}", path.display())))?;
-    decode(&bytes)
-}
-
 /// One command of a stream, with its offset (`RF<k>`, `LF<k>`, `ADD<k>`; 0 otherwise).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Op {
@@ -114,12 +106,8 @@ pub struct Op {
     pub offset: u32,
 }
 
-/// Decodes `.bft` bytes: one stream, or every chunk of a chunked file as one model
-/// ([`super::chunked::ChunkedFile::decode_all`]).
-pub fn decode(bytes: &[u8]) -> Result<Decoded, BftError> {
-    if super::chunked::is_chunked(bytes) {
-        return super::chunked::ChunkedFile::open(bytes)?.decode_all();
-    }
+/// Decodes one `.bft` stream (`super::decode` takes a chunked file too).
+pub(crate) fn decode_stream(bytes: &[u8]) -> Result<Decoded, BftError> {
     decode_inner(bytes, false).map(|(d, _)| d)
 }
 
@@ -129,7 +117,7 @@ pub fn decode_ops(bytes: &[u8]) -> Result<(Decoded, Vec<Op>), BftError> {
 }
 
 fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftError> {
-    if super::chunked::is_chunked(bytes) {
+    if format::is_chunked(bytes) {
         return Err(corrupt("a chunked file (version 3) is many streams; its chunks are sorted one by one"));
     }
     let parts = format::parse(bytes)?;

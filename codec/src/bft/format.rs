@@ -36,6 +36,14 @@ use crate::container::Layout;
 pub use crate::container::{Format, FormatError};
 
 pub const MAGIC: [u8; 8] = *b"TESSBFT\x1a";
+
+/// The version of a chunked file (many streams behind a directory, `super::chunked`).
+pub(crate) const CHUNKED_VERSION: u16 = 3;
+
+/// Whether `bytes` start like a chunked `.bft` file (magic and version 3).
+pub fn is_chunked(bytes: &[u8]) -> bool {
+    bytes.len() >= 10 && bytes[..8] == MAGIC && u16::from_le_bytes([bytes[8], bytes[9]]) == CHUNKED_VERSION
+}
 /// The version written for a stream without attributes.
 pub const VERSION: u16 = 2;
 /// The version written for a stream with attributes.
@@ -354,12 +362,8 @@ pub struct Stats {
 }
 
 impl Stats {
-    /// The sizes of a single-stream or a chunked file
-    /// ([`super::chunked::ChunkedFile::stats`]).
-    pub fn of(bytes: &[u8]) -> Result<Stats, BftError> {
-        if super::chunked::is_chunked(bytes) {
-            return super::chunked::ChunkedFile::open(bytes)?.stats();
-        }
+    /// The sizes of a single-stream file (`Stats::of` takes a chunked file too).
+    pub(crate) fn of_stream(bytes: &[u8]) -> Result<Stats, BftError> {
         let p = parse(bytes)?;
         Ok(Stats {
             header: p.header,

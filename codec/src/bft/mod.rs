@@ -88,6 +88,7 @@ pub mod attributes;
 pub mod chunked;
 mod decode;
 mod encode;
+mod file;
 mod format;
 mod frontier;
 mod model;
@@ -96,8 +97,9 @@ mod prefix;
 pub mod tile_sort;
 mod tile_writer;
 
-pub use decode::{decode, decode_file, decode_ops, Decoded, Op};
+pub use decode::{decode_ops, Decoded, Op};
 pub use encode::{encode, encode_with_progress, EncodeOptions, EncodeStats, Encoded};
+pub use file::{decode, decode_file};
 pub use format::{wrap_for_fuzzing, AttributeFlags, BftError, Coding, Header, Stats, MAGIC, READS, VERSION};
 
 /// The commands of the BFT stream, with `ADD` split by operand form and the paper's

@@ -74,7 +74,8 @@ pub use encode::{
 };
 
 /// The version of chunked files.
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = super::format::CHUNKED_VERSION;
+pub use super::format::is_chunked;
 /// The default number of triangles per chunk (see `ChunkOptions::chunk_triangles`).
 pub const DEFAULT_CHUNK_TRIANGLES: u32 = 4096;
 const HEADER_LEN: usize = 4 * 8 + 4 + 4 * 7;
@@ -179,11 +180,6 @@ impl ChunkSource for FileSource {
         })?;
         Ok(Cow::Owned(buf))
     }
-}
-
-/// Whether `bytes` start like a chunked `.bft` file (magic and version 3).
-pub fn is_chunked(bytes: &[u8]) -> bool {
-    bytes.len() >= 10 && bytes[..8] == MAGIC && u16::from_le_bytes([bytes[8], bytes[9]]) == VERSION
 }
 
 /// The fixed header of a chunked file: the whole model's counts and quantization.
@@ -642,7 +638,7 @@ impl<B: ChunkSource> ChunkedFile<B> {
 
     /// Decodes chunk `i` with the ordinary decoder and checks it against the directory.
     pub fn decode_chunk(&self, i: usize) -> Result<Decoded, FormatError> {
-        let d = super::decode(&self.chunk_bft(i)?).map_err(|e| in_chunk(i, e))?;
+        let d = super::decode::decode_stream(&self.chunk_bft(i)?).map_err(|e| in_chunk(i, e))?;
         self.check_chunk(i, &d.header, &d.positions)?;
         Ok(d)
     }
