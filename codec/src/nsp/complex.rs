@@ -21,6 +21,25 @@ use super::canonical::{top_simplices, Simplex};
 /// Contexts: geometry per (kd level, valence bucket, binary node), then connectivity per
 /// (dimension, allowed symbols, binary node, side of the split plane), then orientation.
 pub const GEOMETRY_CONTEXTS: usize = 2 * 3 * super::params::MAX_BITS as usize * VALENCE_BUCKETS;
+
+/// Which halves of a kd-cell its split leaves occupied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Halves {
+    First,
+    Second,
+    Both,
+}
+
+impl Halves {
+    /// From whether each half is occupied (the first, where neither is).
+    fn of(first: bool, second: bool) -> Halves {
+        match (first, second) {
+            (true, true) => Halves::Both,
+            (_, true) => Halves::Second,
+            (_, false) => Halves::First,
+        }
+    }
+}
 /// A kd-cell's number of incident top-simplices, bucketed: more simplices, more likely
 /// several points inside.
 const VALENCE_BUCKETS: usize = 4;
@@ -461,7 +480,7 @@ impl Complex {
             i = io.geometry_run(oracle, &mut self.cells, &order, i, level, &mut next);
             if let Some(&v) = order.get(i) {
                 // Both halves of `v` are occupied.
-                if let Some(v1) = self.descend(v, true, false, io, oracle, max_cells, max_tops)? {
+                if let Some(v1) = self.descend(v, Halves::Both, io, oracle, max_cells, max_tops)? {
                     next.push(v1);
                 }
                 i += 1;
@@ -475,13 +494,11 @@ impl Complex {
     /// Moves kd-cell `v` one kd level down, into its second half if `second`, or when `both`
     /// halves are occupied keeps `v` as the first and appends the second as `v1`, applying the
     /// connectivity change of the split; returns `v1`.
-    #[allow(clippy::too_many_arguments)]
     #[inline]
     fn descend(
         &mut self,
         v: u32,
-        both: bool,
-        second: bool,
+        halves: Halves,
         io: &mut impl BitIo,
         oracle: &mut impl Oracle,
         max_cells: usize,
@@ -491,8 +508,8 @@ impl Complex {
         let axis = (cell.level % 3) as usize;
         cell.level += 1;
         cell.xyz[axis] <<= 1;
-        if !both {
-            cell.xyz[axis] |= second as u32;
+        if halves != Halves::Both {
+            cell.xyz[axis] |= (halves == Halves::Second) as u32;
             return Ok(None);
         }
         let level = cell.level;
@@ -594,7 +611,7 @@ impl Complex {
             // The encoder's truth follows the split (and learns the level) here.
             oracle.geometry(v, level);
             next.push(v);
-            let Some(v1) = self.descend(v, has0 && has1, has1, io, oracle, max_cells, max_tops)? else {
+            let Some(v1) = self.descend(v, Halves::of(has0, has1), io, oracle, max_cells, max_tops)? else {
                 let list: SmallVec<[u16; 4]> = desc.iter().map(|&s| s & mask).collect();
                 self.ahead.desc[v as usize] = if grows { self.extend(v, &list, depth - 1, io, oracle) } else { list };
                 continue;

@@ -293,7 +293,6 @@ pub fn build_in(
     })
 }
 
-#[allow(clippy::too_many_arguments)]
 fn build_temp(
     input: &Path,
     params: Params,

@@ -692,23 +692,29 @@ impl Ids<'_> {
     }
 }
 
+/// Per local vertex, the geometric error of section 3.2 as [`run`] tracks it: `reach`, the
+/// farthest finest vertex a vertex stands for, and `error`, its tracked error.
+struct VertexErrors<'a> {
+    reach: &'a mut [f64],
+    error: &'a mut [f64],
+}
+
 /// Collapses the cheapest edges of `s` until at most `stop_faces` faces are live or no edge
 /// is left, appending them to `log`. `reach` and `error` (per local vertex) carry the
 /// geometric error of section 3.2: the farthest finest vertex a vertex stands for (`reach`, a
 /// nesting bound), raised to the tracked error of every vertex around the collapse ("using
 /// the maximum of all neighbor's errors as the actual error"), which keeps the errors locally
 /// monotone against fold-overs; the result becomes `t`'s error.
-#[allow(clippy::too_many_arguments)]
 fn run(
     s: &mut Simplifier,
     input: &[[f32; 3]],
     ids: Ids,
-    reach: &mut [f64],
-    error: &mut [f64],
+    errors: VertexErrors,
     stop_faces: usize,
     log: &mut Log,
     progress: &mut dyn FnMut(usize),
 ) {
+    let VertexErrors { reach, error } = errors;
     let mut seen = vec![u32::MAX; reach.len()];
     let pos64 = |v: u32| input[ids.vertex(v) as usize].map(f64::from);
     let mut around = Vec::new();
@@ -792,7 +798,15 @@ fn build_mesh(
         let mut s = Simplifier::new(pos, mesh.triangles.clone(), None, vec![false; n]);
         let (mut reach, mut error) = (vec![0.0f64; n], vec![0.0f64; n]);
         let ids = Ids { vertex: &[], face: &[] };
-        run(&mut s, &mesh.positions, ids, &mut reach, &mut error, 0, &mut log, &mut report);
+        run(
+            &mut s,
+            &mesh.positions,
+            ids,
+            VertexErrors { reach: &mut reach, error: &mut error },
+            0,
+            &mut log,
+            &mut report,
+        );
         // Only the survivors and the statistics are read from here on: free the working
         // state (quadrics, face lists, heap: most of the build's memory) before the forest is
         // numbered.
@@ -1244,7 +1258,8 @@ impl Chunker {
             self.done.fetch_add(k - reported, Ordering::Relaxed);
             reported = k;
         };
-        run(&mut s, &self.positions, ids, &mut reach, &mut error, stop_faces, &mut log, &mut report);
+        let errors = VertexErrors { reach: &mut reach, error: &mut error };
+        run(&mut s, &self.positions, ids, errors, stop_faces, &mut log, &mut report);
         report(log.collapses.len());
         stats.hubs += s.hubs;
         stats.work += s.work;

@@ -888,7 +888,7 @@ fn code_nodes(
     let (tasks, top) = subtrees_of_at_most(&size, (nodes_count / (threads * 16)).clamp(1, 64));
     drop(size);
     let code = |n: usize, addr: &dyn Fn(usize) -> u32, counting: Option<&mut [[u64; 256]]>| {
-        code_node(ops, hier, members.get(n), n as u32, &ops.parent, addr, tables, avg, counting)
+        code_node(ops, hier, members.get(n), n as u32, addr, &Symbols { tables, avg }, counting)
     };
     let mut addr = vec![NONE; m];
     let tables_counted = if count { TABLES } else { 0 };
@@ -951,23 +951,30 @@ fn code_nodes(
     (nodes, addr, counts)
 }
 
+/// How a node's operations are coded: the symbol tables, and the average operation size
+/// `s_avg` the offsets are estimated from (section 4.2.1).
+#[derive(Clone, Copy)]
+struct Symbols<'a> {
+    tables: &'a [Table],
+    avg: u32,
+}
+
 /// Codes the operations `list` (ascending, pre-order) of node `n`, children before parents,
 /// each with the shorter of its swaps (as [`compress_bottom_up`]), and lays them out: per
 /// operation subtree entering the node, in pre-order, each operation followed by the child it
 /// stores first where that is in the node. Returns the node's bytes and per operation its
 /// address; adds the symbols of the operations as coded to `counts` where given.
-#[allow(clippy::too_many_arguments)]
 fn code_node(
     ops: &Operations,
     hier: &Hierarchy,
     list: &[u32],
     n: u32,
-    parent_op: &[u32],
     addr: &dyn Fn(usize) -> u32,
-    tables: &[Table],
-    avg: u32,
+    symbols: &Symbols,
     mut counts: Option<&mut [[u64; 256]]>,
 ) -> CodedNode {
+    let Symbols { tables, avg } = *symbols;
+    let parent_op = &ops.parent;
     let idx = |i: usize| list.binary_search(&(i as u32)).ok();
     let mut inner = vec![0u64; list.len()];
     let mut bytes: Vec<Vec<u8>> = vec![vec![]; list.len()];
