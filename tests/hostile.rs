@@ -736,3 +736,35 @@ fn errors_are_one_line_in_the_users_terms() {
         assert_eq!(stderr(&o).trim_end().lines().count(), 1, "one line: {}", stderr(&o));
     }
 }
+
+#[test]
+fn an_interrupt_ends_the_run_even_when_it_was_ignored_at_start() {
+    // A shell without job control starts background commands with SIGINT ignored.
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("s.jsonl");
+    let script = format!(
+        "trap '' INT; exec {} render {} --size 32x24 --frames 100000 --out {} --stats {}",
+        bin(),
+        mesh("classic/woody.obj"),
+        s(&dir.path().join("f.png")),
+        s(&stats)
+    );
+    let xdg = std::env::temp_dir().join("tessera-xdg");
+    let mut child = Command::new("sh")
+        .args(["-c", &script])
+        .env("XDG_RUNTIME_DIR", xdg)
+        .env_remove("TESSERA_FAULT")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 2 {
+        assert!(start.elapsed() < Duration::from_secs(60), "no stats lines appeared");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    assert!(leftovers(dir.path()).is_empty());
+}

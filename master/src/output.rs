@@ -96,6 +96,14 @@ pub fn install_signal_handler() {
         let mut set: libc::sigset_t = std::mem::zeroed();
         libc::sigemptyset(&mut set);
         for s in INTERRUPTS {
+            // A shell without job control starts background commands with SIGINT ignored,
+            // and an ignored signal never reaches `sigwait`: the three are taken whatever
+            // they inherited, except SIGHUP under `nohup`, which stays ignored.
+            let before = libc::signal(s, libc::SIG_DFL);
+            if s == libc::SIGHUP && before == libc::SIG_IGN {
+                libc::signal(s, libc::SIG_IGN);
+                continue;
+            }
             libc::sigaddset(&mut set, s);
         }
         libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
