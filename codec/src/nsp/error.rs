@@ -18,7 +18,7 @@ pub enum NspError {
     /// A count the file holds, above what `--max-decompressed` lets a reader allocate.
     #[error("{0}, above the cap on decompressed input (raise it with --max-decompressed)")]
     TooLarge(String),
-    /// Flags that would make more cells than a reader opens (see [`Params::check_cells`]).
+    /// Flags that would make more cells than a reader opens (see [`super::Params::check_cells`]).
     #[error("{0}")]
     TooManyCells(String),
     /// Writing (or reading back) the build's temporary files in `folder` failed: a full
