@@ -40,6 +40,21 @@ fn leftovers(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// Waits until `stats` holds at least `lines` lines, at most `limit`.
+fn wait_for_lines(stats: &Path, lines: usize, limit: Duration, what: &str) {
+    let start = Instant::now();
+    while std::fs::read_to_string(stats).map_or(0, |t| t.lines().count()) < lines {
+        assert!(start.elapsed() < limit, "{what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Sends SIGINT (`-INT`) or another signal to `child` and returns its exit code.
+fn send_signal(child: &mut std::process::Child, sig: &str) -> Option<i32> {
+    assert!(Command::new("kill").args([sig, &child.id().to_string()]).status().unwrap().success());
+    child.wait().unwrap().code()
+}
+
 #[test]
 fn special_outputs_are_written_in_place() {
     let dir = tempfile::tempdir().unwrap();
@@ -147,9 +162,7 @@ fn an_interrupted_write_leaves_no_temporary_file() {
             assert!(start.elapsed() < Duration::from_secs(30), "no temporary file appeared");
             std::thread::sleep(Duration::from_millis(20));
         }
-        assert!(Command::new("kill").arg(signal).arg(child.id().to_string()).status().unwrap().success());
-        let status = child.wait().unwrap();
-        assert_eq!(status.code(), Some(130), "{signal}");
+        assert_eq!(send_signal(&mut child, signal), Some(130), "{signal}");
         assert!(leftovers(dir.path()).is_empty(), "{signal}: {:?}", leftovers(dir.path()));
         assert!(!out.exists());
     }
@@ -298,13 +311,8 @@ fn stats_survive_an_interrupted_run() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let start = Instant::now();
-    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 4 {
-        assert!(start.elapsed() < Duration::from_secs(60), "no stats lines appeared");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
-    assert_eq!(child.wait().unwrap().code(), Some(130));
+    wait_for_lines(&stats, 4, Duration::from_secs(60), "no stats lines appeared");
+    assert_eq!(send_signal(&mut child, "-INT"), Some(130));
     let text = std::fs::read_to_string(&stats).unwrap();
     let lines: Vec<serde_json::Value> =
         text.lines().map(|l| serde_json::from_str(l).expect("whole JSON lines")).collect();
@@ -676,13 +684,8 @@ fn start_up_does_not_depend_on_frames() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let start = Instant::now();
-    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 2 {
-        assert!(start.elapsed() < Duration::from_secs(30), "no first frame");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
-    assert_eq!(child.wait().unwrap().code(), Some(130));
+    wait_for_lines(&stats, 2, Duration::from_secs(30), "no first frame");
+    assert_eq!(send_signal(&mut child, "-INT"), Some(130));
     assert!(dir.path().join("f-0001.png").exists());
 }
 
@@ -758,13 +761,7 @@ fn an_interrupt_ends_the_run_even_when_it_was_ignored_at_start() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let start = Instant::now();
-    while std::fs::read_to_string(&stats).map_or(0, |t| t.lines().count()) < 2 {
-        assert!(start.elapsed() < Duration::from_secs(60), "no stats lines appeared");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
-    let status = child.wait().unwrap();
-    assert_eq!(status.code(), Some(130));
+    wait_for_lines(&stats, 2, Duration::from_secs(60), "no stats lines appeared");
+    assert_eq!(send_signal(&mut child, "-INT"), Some(130));
     assert!(leftovers(dir.path()).is_empty());
 }

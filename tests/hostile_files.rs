@@ -8,19 +8,11 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{cmd, ok, refused_last_line, tessera};
-use testkit::{arg as s, mesh_arg as mesh, stderr};
+use testkit::{arg as s, mesh_arg as mesh, patch_header, stderr};
 
 fn write(path: &Path, bytes: impl AsRef<[u8]>) -> PathBuf {
     std::fs::write(path, bytes).unwrap();
     path.to_path_buf()
-}
-
-/// Rewrites a header field (4 bytes at `offset` in the header) and the header's checksum.
-fn patch_header(bytes: &mut [u8], offset: usize, value: [u8; 4]) {
-    let hlen = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
-    bytes[12 + offset..16 + offset].copy_from_slice(&value);
-    let crc = crc32fast::hash(&bytes[12..12 + hlen]);
-    bytes[12 + hlen..16 + hlen].copy_from_slice(&crc.to_le_bytes());
 }
 
 /// The exploit: a glTF whose buffer is `../secret.bin` (or an absolute path) read

@@ -17,6 +17,7 @@ use codec::bft::{self, EncodeOptions};
 use codec::input::{max_decompressed_bytes, set_allow_outside_uris, set_max_decompressed_bytes};
 use codec::load::{load_bytes, load_path_counted, load_path_streamed_counted, Format};
 use codec::Mesh;
+use testkit::patch_header;
 
 static LOCK: Mutex<()> = Mutex::new(());
 
@@ -248,15 +249,6 @@ fn painted_grid(n: usize) -> Mesh {
     mesh.colors = (0..mesh.positions.len()).map(|i| [i as u8, 7, 9, 255]).collect();
     mesh.normals = vec![[0.0, 0.0, 1.0]; mesh.positions.len()];
     mesh
-}
-
-/// Rewrites a container's header field (a `u32` or `f32` at `offset` in the header) and its
-/// checksum.
-fn patch_header(bytes: &mut [u8], offset: usize, value: [u8; 4]) {
-    let hlen = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
-    bytes[12 + offset..16 + offset].copy_from_slice(&value);
-    let crc = crc32fast::hash(&bytes[12..12 + hlen]);
-    bytes[12 + hlen..16 + hlen].copy_from_slice(&crc.to_le_bytes());
 }
 
 /// Every count of a `.bft` header is checked against the cap before the decoder allocates

@@ -29,6 +29,28 @@ fn frame() -> ToWorker {
     })
 }
 
+fn pixels() -> ToMaster {
+    ToMaster::Pixels(Pixels {
+        frame: 7,
+        tiles: vec![TilePixels {
+            index: 3,
+            rect: [0, 0, 2, 1],
+            times: TileTimes { decode_ms: 1.0, adapt_ms: 5.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
+            triangles: 12,
+            rgba: vec![9; 8],
+        }],
+        span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
+        pm: PmMemory {
+            gpu_bytes: 1 << 33,
+            loaded_bytes: 65536,
+            resident_nodes: 7,
+            required_nodes: 9,
+            slots: 8,
+            error_scale: 2.25,
+        },
+    })
+}
+
 fn pm_frame() -> ToWorker {
     ToWorker::PmFrame(PmFrameJob {
         frame: 2,
@@ -76,25 +98,7 @@ fn messages_round_trip() {
         ToSorter::Sort(SortJob { frame: 3, view_proj: std::array::from_fn(|i| i as f32), owners: vec![1, 2, 0] });
     assert_eq!(ToSorter::decode(&sort.encode()), Ok(sort));
     assert_eq!(ToSorter::decode(&ToSorter::Shutdown.encode()), Ok(ToSorter::Shutdown));
-    let p = ToMaster::Pixels(Pixels {
-        frame: 7,
-        tiles: vec![TilePixels {
-            index: 3,
-            rect: [0, 0, 2, 1],
-            times: TileTimes { decode_ms: 1.0, adapt_ms: 5.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
-            triangles: 12,
-            rgba: vec![9; 8],
-        }],
-        span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
-        pm: PmMemory {
-            gpu_bytes: 1 << 33,
-            loaded_bytes: 65536,
-            resident_nodes: 7,
-            required_nodes: 9,
-            slots: 8,
-            error_scale: 2.25,
-        },
-    });
+    let p = pixels();
     assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
     let file = ToWorker::DpmFile(DpmFile { path: "/data/é.dpm".into(), gpu_budget: 512 << 20, pool_bytes: 128 << 20 });
     assert_eq!(ToWorker::decode(&file.encode()), Ok(file));
@@ -166,25 +170,6 @@ fn bad_messages_are_errors() {
 #[test]
 fn the_wire_bytes_of_every_message() {
     let p = |m: ToMaster| m.encode();
-    let pixels = ToMaster::Pixels(Pixels {
-        frame: 7,
-        tiles: vec![TilePixels {
-            index: 3,
-            rect: [0, 0, 2, 1],
-            times: TileTimes { decode_ms: 1.0, adapt_ms: 5.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
-            triangles: 12,
-            rgba: vec![9; 8],
-        }],
-        span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
-        pm: PmMemory {
-            gpu_bytes: 1 << 33,
-            loaded_bytes: 65536,
-            resident_nodes: 7,
-            required_nodes: 9,
-            slots: 8,
-            error_scale: 2.25,
-        },
-    });
     let encoded: Vec<(&str, Vec<u8>)> = vec![
         ("frame", frame().encode()),
         ("shutdown", ToWorker::Shutdown.encode()),
@@ -209,7 +194,7 @@ fn the_wire_bytes_of_every_message() {
         ("swap", ToDisplay::Swap(Swap { view: 5 }).encode()),
         ("ready", p(ToMaster::Ready(Ready { adapter: "llvmpipe".into(), max_texture_side: 16384 }))),
         ("heartbeat", p(ToMaster::Heartbeat)),
-        ("pixels", p(pixels)),
+        ("pixels", p(pixels())),
         ("failed", p(ToMaster::Failed(Failed { reason: "no adapter".into() }))),
         ("display_ready", p(ToMaster::DisplayReady(DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)] }))),
     ];

@@ -326,6 +326,15 @@ pub fn refresh_checksums(b: &mut [u8], mut pos: usize) {
     }
 }
 
+/// Rewrites a `.bft` or `.dpm` container's header field (4 bytes at `offset` in the header)
+/// and the header's checksum, so that only the field is wrong.
+pub fn patch_header(bytes: &mut [u8], offset: usize, value: [u8; 4]) {
+    let hlen = u16::from_le_bytes([bytes[10], bytes[11]]) as usize;
+    bytes[12 + offset..16 + offset].copy_from_slice(&value);
+    let crc = crc32fast::hash(&bytes[12..12 + hlen]);
+    bytes[12 + hlen..16 + hlen].copy_from_slice(&crc.to_le_bytes());
+}
+
 /// Where a container's first section starts: after the 12-byte prefix, the header and its CRC.
 pub fn sections_start(b: &[u8]) -> usize {
     12 + u16::from_le_bytes([b[10], b[11]]) as usize + 4
