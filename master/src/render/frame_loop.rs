@@ -504,7 +504,9 @@ fn frame_views(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u
 /// every frame when `--eye-path` moves the eye.
 fn check_cameras(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera) -> Result<()> {
     let last = args.frames.saturating_sub(1);
-    let frames: Vec<u32> = if plan.eyes.is_some() { (0..args.frames).collect() } else { vec![0, last] };
+    let mut frames: Vec<u32> = if plan.eyes.is_some() { (0..args.frames).collect() } else { vec![0, last] };
+    // One frame: its first is its last.
+    frames.dedup();
     let mut warned = std::collections::HashSet::new();
     for k in frames {
         for v in frame_views(scene, args, plan, cam, k).with_context(|| format!("frame {}", k + 1))? {
