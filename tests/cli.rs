@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 // These runs take the test process's environment as it is, as a user's shell would.
-use common::{bare as tessera, bin, ok};
+use common::{bare as tessera, bin, ok, output};
 use testkit::{arg as s, mesh_path as mesh, stderr};
 
 #[test]
@@ -211,7 +211,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     std::fs::create_dir(&tmp).unwrap();
     let auto = dir.path().join("auto.dpm");
     let args = ["pm", "build", s(&input), "-o", s(&auto), "--node-kb", "16", "--assume-available-mb", "1"];
-    let o = Command::new(bin()).args(args).env("TMPDIR", &tmp).output().unwrap();
+    let o = output(Command::new(bin()).args(args).env("TMPDIR", &tmp));
     ok(&o);
     let err = stderr(&o);
     // Decided from the vertex count, before the triangles were read.
@@ -225,7 +225,7 @@ fn pm_build_spills_into_files_and_writes_the_same_bytes() {
     if std::fs::metadata("/dev/shm").is_ok() {
         let bad = dir.path().join("bad.dpm");
         let args = ["pm", "build", s(&input), "-o", s(&bad), "--assume-available-mb", "1"];
-        let o = Command::new(bin()).args(args).env("TMPDIR", "/dev/shm").output().unwrap();
+        let o = output(Command::new(bin()).args(args).env("TMPDIR", "/dev/shm"));
         assert_eq!(o.status.code(), Some(1));
         let err = stderr(&o);
         assert!(
@@ -339,7 +339,7 @@ fn pm_adapt_on_the_gpu_writes_the_cpu_file() {
         let mut args = vec!["pm", "adapt", s(model), "-o", s(out)];
         args.extend(view);
         args.extend(gpu);
-        Command::new(bin()).env("XDG_RUNTIME_DIR", &xdg).args(&args).output().unwrap()
+        output(Command::new(bin()).env("XDG_RUNTIME_DIR", &xdg).args(&args))
     };
     let read = |o: Output, out: &Path| {
         ok(&o);
@@ -522,11 +522,14 @@ fn render_writes_a_movie_through_ffmpeg() {
         let size = format!("{w}x{h}");
         let o = tessera(&["render", s(&model), "--size", &size, "--frames", "4", "--orbit", "--out", s(&out)]);
         ok(&o);
-        let probe = Command::new("ffprobe")
-            .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
-            .args(["-show_entries", "stream=nb_read_frames,width,height", "-of", "csv=p=0", s(&out)])
-            .output()
-            .expect("ffprobe runs (scripts/setup.sh installs it)");
+        let probe =
+            output(Command::new("ffprobe").args(["-v", "error", "-count_frames", "-select_streams", "v:0"]).args([
+                "-show_entries",
+                "stream=nb_read_frames,width,height",
+                "-of",
+                "csv=p=0",
+                s(&out),
+            ]));
         let text = String::from_utf8_lossy(&probe.stdout).trim().to_string();
         // Odd sizes are padded by a pixel for 4:2:0 video.
         assert_eq!(text, format!("{},{},4", w + w % 2, h + h % 2), "{name}");
@@ -540,11 +543,16 @@ fn render_writes_a_movie_through_ffmpeg() {
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
     let out = dir.path().join("bad.mp4");
     let path = format!("{}:{}", fake.display(), std::env::var("PATH").unwrap_or_default());
-    let o = Command::new(bin())
-        .env("PATH", path)
-        .args(["render", s(&model), "--size", "64x48", "--frames", "3", "--out", s(&out)])
-        .output()
-        .unwrap();
+    let o = output(Command::new(bin()).env("PATH", path).args([
+        "render",
+        s(&model),
+        "--size",
+        "64x48",
+        "--frames",
+        "3",
+        "--out",
+        s(&out),
+    ]));
     let err = stderr(&o);
     assert!(!o.status.success() && err.contains("ffmpeg failed") && err.contains("Unknown encoder"), "{err}");
     assert_eq!(err.lines().filter(|l| l.contains("ffmpeg failed")).count(), 1, "{err}");

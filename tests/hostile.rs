@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{bin, cmd, ok, pixels, refused, tessera, tessera_env};
+use common::{bin, cmd, ok, output, pixels, refused, tessera, tessera_env};
 use testkit::{arg as s, mesh_arg as mesh, stderr};
 
 fn mkfifo(path: &Path) {
@@ -357,14 +357,14 @@ fn a_progressive_mesh_in_many_tiles_costs_no_more_memory() {
     let dpm = dir.path().join("spot.dpm");
     ok(&tessera(&["pm", "build", &mesh("classic/spot.obj"), "-o", s(&dpm)]));
     let peak_kb = |tiles: &str| -> u64 {
-        let o = Command::new("/usr/bin/time")
-            .args(["-f", "peak %M"])
-            .arg(bin())
-            .args(["render", s(&dpm), "--size", "320x180", "--tiles", tiles, "--out"])
-            .arg(dir.path().join(format!("f-{tiles}.png")))
-            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-            .output()
-            .expect("GNU time is installed (scripts/setup.sh)");
+        let o = output(
+            Command::new("/usr/bin/time")
+                .args(["-f", "peak %M"])
+                .arg(bin())
+                .args(["render", s(&dpm), "--size", "320x180", "--tiles", tiles, "--out"])
+                .arg(dir.path().join(format!("f-{tiles}.png")))
+                .env("XDG_RUNTIME_DIR", std::env::temp_dir()),
+        );
         ok(&o);
         let err = stderr(&o);
         let line = err.lines().find_map(|l| l.strip_prefix("peak ")).expect("a peak line");

@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{cmd, ok, refused_last_line, tessera};
+use common::{cmd, ok, output, refused_last_line, tessera};
 use testkit::{arg as s, mesh_arg as mesh, patch_header, stderr};
 
 fn write(path: &Path, bytes: impl AsRef<[u8]>) -> PathBuf {
@@ -116,7 +116,7 @@ fn a_chunked_model_cut_while_in_use_is_an_error() {
         if args[0] == "render" {
             c.args(["--out", s(&png)]);
         }
-        let o = c.output().unwrap();
+        let o = output(&mut c);
         refused_last_line(&o, "the file was truncated or replaced while in use (expected ");
         let err = stderr(&o);
         assert!(err.contains(&format!("{}: chunk ", bft.display())), "{args:?}: {err}");

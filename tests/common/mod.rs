@@ -4,8 +4,12 @@
 //! file uses part of it.
 #![allow(dead_code)]
 
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::Duration;
 
 use testkit::stderr;
 
@@ -14,9 +18,59 @@ pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_tessera")
 }
 
+/// The longest one command of a test may run. A run that hangs (a deadlock of ours, or
+/// mpirun's own: Open MPI 4.1's can hang at exit) then fails its test, showing what it
+/// printed, instead of holding the whole suite until CI's limit.
+const COMMAND_LIMIT: Duration = Duration::from_secs(300);
+
+/// `cmd`'s output, as `Command::output` gives it, but failing the test if the command runs
+/// past [`COMMAND_LIMIT`].
+pub fn output(cmd: &mut Command) -> Output {
+    output_within(cmd, COMMAND_LIMIT)
+}
+
+/// [`output`] with a limit of `limit`. The command gets a process group of its own, so that
+/// mpirun and its ranks end together: SIGTERM first (mpirun passes it on), SIGKILL 5 s later.
+pub fn output_within(cmd: &mut Command, limit: Duration) -> Output {
+    let child = cmd
+        .process_group(0)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot start {:?}: {e}", cmd.get_program()));
+    let group = child.id() as i32;
+    let (done, finished) = mpsc::channel::<()>();
+    let timed_out = Arc::new(AtomicBool::new(false));
+    let flag = timed_out.clone();
+    let watchdog = std::thread::spawn(move || {
+        if finished.recv_timeout(limit) == Err(mpsc::RecvTimeoutError::Timeout) {
+            flag.store(true, Ordering::SeqCst);
+            // Safety: signals to the command's own process group.
+            unsafe { libc::kill(-group, libc::SIGTERM) };
+            if finished.recv_timeout(Duration::from_secs(5)) == Err(mpsc::RecvTimeoutError::Timeout) {
+                unsafe { libc::kill(-group, libc::SIGKILL) };
+            }
+        }
+    });
+    let out = child.wait_with_output().expect("waits for the command");
+    drop(done);
+    watchdog.join().unwrap();
+    assert!(
+        !timed_out.load(Ordering::SeqCst),
+        "{:?} {:?} ran past {} s and was ended\nstdout: {}\nstderr: {}",
+        cmd.get_program(),
+        cmd.get_args().collect::<Vec<_>>(),
+        limit.as_secs_f64(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// `tessera ARGS` in the test process's own environment, as a user's shell runs it.
 pub fn bare(args: &[&str]) -> Output {
-    Command::new(bin()).args(args).output().expect("runs tessera")
+    output(Command::new(bin()).args(args))
 }
 
 /// The private runtime folder every run gets (`XDG_RUNTIME_DIR`), made if missing.
@@ -36,7 +90,7 @@ pub fn cmd() -> Command {
 
 /// `tessera ARGS` through [`cmd`].
 pub fn tessera(args: &[&str]) -> Output {
-    cmd().args(args).output().expect("runs tessera")
+    output(cmd().args(args))
 }
 
 /// `tessera ARGS` through [`cmd`], with `env` added.
@@ -45,7 +99,7 @@ pub fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
     for (k, v) in env {
         c.env(k, v);
     }
-    c.args(args).output().expect("runs tessera")
+    output(c.args(args))
 }
 
 /// The MPI environment: the runtime folder, and Open MPI allowed to run as root and to
@@ -60,7 +114,7 @@ pub fn mpi_env(cmd: &mut Command) -> &mut Command {
 /// `tessera ARGS` without mpirun, in the MPI environment: the master and one in-process
 /// worker.
 pub fn alone(args: &[&str]) -> Output {
-    mpi_env(&mut Command::new(bin())).args(args).output().expect("runs tessera")
+    output(mpi_env(&mut Command::new(bin())).args(args))
 }
 
 /// `mpirun --oversubscribe -np N tessera ARGS`, with `extra_env` exported to every rank.
@@ -70,7 +124,7 @@ pub fn mpirun(n: usize, extra_env: &[(&str, &str)], args: &[&str]) -> Output {
     for (k, v) in extra_env {
         cmd.args(["-x", &format!("{k}={v}")]);
     }
-    cmd.arg(bin()).args(args).output().expect("mpirun is installed (scripts/setup.sh)")
+    output(cmd.arg(bin()).args(args))
 }
 
 /// Succeeded; otherwise fails showing the run's stdout and stderr.
