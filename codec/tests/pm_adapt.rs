@@ -1,4 +1,4 @@
-//! The view-dependent adaption (`pm::adapt`): refining fully gives back the input, every
+//! The view-dependent adaptation (`pm::adapt`): refining fully gives back the input, every
 //! adapted mesh is valid and exactly the faces of the applied splits, adapting frame to frame
 //! converges to the same mesh as adapting from the base mesh, one pass performs every split
 //! the criteria ask for, and the criteria are monotone over the split tree.
@@ -365,7 +365,7 @@ fn base_mesh_and_refine_fully_on_a_tetrahedron() {
 /// The speed figure: `cargo test -p tessera-codec --release --test pm_adapt -- --ignored --nocapture`.
 #[test]
 #[ignore = "adapts the 70k-triangle bunny along a path; run in release"]
-fn bunny_adaption_speed() {
+fn bunny_adaptation_speed() {
     let mesh = load("stanford/bunny_zipper_c3d.obj.gz");
     let start = Instant::now();
     let pm = build(&mesh).unwrap();
@@ -529,7 +529,7 @@ fn tile_views_are_the_tiles_sub_frusta() {
     assert!(hits > 300, "{hits} points in tiles");
 }
 
-/// The adaption from the compressed operations ([`DpmAdapter`]) against the reference over
+/// The adaptation from the compressed operations ([`DpmAdapter`]) against the reference over
 /// the decoded mesh: after every pass of a camera path (each frame to convergence), then of a
 /// full refinement, the same statistics, active vertices and triangle set.
 fn check_from_compressed(mesh: &Mesh, frames: usize, error_px: f32, what: &str, levels: Levels) -> (usize, usize) {
@@ -594,7 +594,7 @@ proptest! {
 /// A soup (found by `random_soups_adapt_consistently`) in which a split's right child has an
 /// error raised by its neighbours beyond its region, so that its sphere did not nest in its
 /// parent's: the child asked for a split its parent did not, and frame-to-frame and from-base
-/// adaptions differed. The builder now raises the parent's radius to nest it.
+/// adaptations differed. The builder now raises the parent's radius to nest it.
 #[test]
 fn a_child_sphere_raised_by_its_neighbours_nests_in_its_parent() {
     let p: Vec<[f32; 3]> = vec![
@@ -633,14 +633,14 @@ fn a_child_sphere_raised_by_its_neighbours_nests_in_its_parent() {
     check_path(&pm, 20, 26.401794);
 }
 
-/// Out of core (section 5.7): the adaption from the resident nodes of an out-of-core file,
+/// Out of core (section 5.7): the adaptation from the resident nodes of an out-of-core file,
 /// loaded by priority within a budget that holds the nodes every frame requires but not the
-/// model, equals the in-core adaption pass for pass over a camera path (an operation in a node
+/// model, equals the in-core adaptation pass for pass over a camera path (an operation in a node
 /// of priority below 1 is never asked for), with operations waiting for their nodes on the
 /// way, and the resident bytes stay within the budget; the loader thread, waited for, gives
 /// the same.
 #[test]
-fn out_of_core_adaption_equals_in_core_within_a_budget() {
+fn out_of_core_adaptation_equals_in_core_within_a_budget() {
     use codec::pm::format::NodeFile;
     use codec::pm::NodeCache;
     use std::sync::Arc;

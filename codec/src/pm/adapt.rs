@@ -1,4 +1,4 @@
-//! CPU reference of the parallel view-dependent adaption (section 5, Algorithms 1 to 5), over
+//! CPU reference of the parallel view-dependent adaptation (section 5, Algorithms 1 to 5), over
 //! flat buffers as the GPU version will keep them (Table 2), rayon-parallel where the work is
 //! independent.
 //!
@@ -44,7 +44,7 @@
 //!   is done. For inputs without them the two rules agree.
 //! * **View tests on the region's bounding sphere** (centre `v`, radius from [`Criteria`]), so
 //!   that they are monotone over the split tree: with nested spheres and cones a child is
-//!   never asked to split when its parent is not, and adaption from any state converges to the
+//!   never asked to split when its parent is not, and adaptation from any state converges to the
 //!   same mesh, the cut just below the splits whose ancestors all ask to be split.
 //!   - Frustum (section 5.1): nothing is culled; a sphere outside the frustum by a world
 //!     distance `t` (greatest over the six planes, `0` inside) gets the distance
@@ -447,7 +447,7 @@ pub enum Levels {
     All,
 }
 
-/// View-dependent adaption of a progressive mesh (see the module docs).
+/// View-dependent adaptation of a progressive mesh (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Adapter<'a> {
     pm: &'a ProgressiveMesh,
@@ -539,7 +539,7 @@ impl<'a> Adapter<'a> {
         self.descent_budget = splits.max(1);
     }
 
-    /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form).
+    /// One adaptation pass for `view` (Algorithms 1 to 5, or their all-levels form).
     pub fn adapt(&mut self, view: &Viewpoint) -> PassStats {
         let eval = Eval::new(view);
         match self.levels {

@@ -62,7 +62,7 @@
 //!   It is raised, where needed, to `d + r_u` (and the left child's radius), so that the
 //!   children's bounding spheres nest in the parent's: a child's error may exceed its region
 //!   (raised to its neighbours'), and the runtime tests spheres (found on a random soup whose
-//!   frame-to-frame and from-base adaptions differed).
+//!   frame-to-frame and from-base adaptations differed).
 //! * the cone angle and the nesting radius get a relative slack of `1e-5` (plus `1e-5` rad
 //!   for the angle) per level, so the runtime tests, which recompute the nesting in `f32`,
 //!   stay monotone.

@@ -1,4 +1,4 @@
-//! The parallel view-dependent adaption of [`super::adapt`] run straight from a `.dpm` file's
+//! The parallel view-dependent adaptation of [`super::adapt`] run straight from a `.dpm` file's
 //! compressed operations, as the paper runs it on the GPU: nothing is decoded at load, every
 //! operation is decoded from its address and context when a vertex needs it, and the state is
 //! per *active* vertex, so memory follows the adapted mesh, not the model. It reaches the same
@@ -101,7 +101,7 @@ impl Vertex {
     }
 }
 
-/// View-dependent adaption from the compressed operations (see the module docs).
+/// View-dependent adaptation from the compressed operations (see the module docs).
 #[derive(Clone, Debug)]
 pub struct DpmAdapter<'a> {
     dpm: &'a Dpm<'a>,
@@ -163,7 +163,7 @@ impl<'a> DpmAdapter<'a> {
         self.descent_budget = splits.max(1);
     }
 
-    /// One adaption pass for `view` (Algorithms 1 to 5, or their all-levels form) of an
+    /// One adaptation pass for `view` (Algorithms 1 to 5, or their all-levels form) of an
     /// in-core file.
     pub fn adapt(&mut self, view: &Viewpoint) -> Result<PassStats, DpmError> {
         let eval = Eval::new(view);
@@ -173,7 +173,7 @@ impl<'a> DpmAdapter<'a> {
         }
     }
 
-    /// One adaption pass for `view` of an out-of-core file, from the nodes resident in
+    /// One adaptation pass for `view` of an out-of-core file, from the nodes resident in
     /// `nodes`: a vertex whose operation's node is not resident does not split this pass.
     pub fn adapt_resident(&mut self, view: &Viewpoint, nodes: &NodeCache) -> Result<PassStats, DpmError> {
         let eval = Eval::new(view);

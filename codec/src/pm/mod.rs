@@ -1,7 +1,8 @@
-//! Dependency-free progressive meshes (Derzapf & Guthe, "Dependency-Free Parallel
-//! Progressive Meshes"): the builder with its refinement criteria (section 4, [`Criteria`]),
+//! Dependency-free progressive meshes, after E. Derzapf and M. Guthe, "Dependency-Free
+//! Parallel Progressive Meshes", Computer Graphics Forum 31(8), 2012 (the text is in
+//! `../shared/papers/dependency-free-progressive-meshes.txt`): the builder with its refinement criteria (section 4, [`Criteria`]),
 //! a sequential reference refinement ([`refine`]) and the CPU reference of the parallel
-//! view-dependent adaption of section 5 ([`adapt`]), and the `.dpm` file ([`mod@format`]): every
+//! view-dependent adaptation of section 5 ([`adapt`]), and the `.dpm` file ([`mod@format`]): every
 //! operation coded on its own with shared static Huffman tables per context (field, byte
 //! significance and classes from what the decoder already knows, section 4.2), in tree order
 //! with pointers, so that any operation decodes from its address alone. The binary tree
@@ -88,7 +89,7 @@ pub struct ProgressiveMesh {
 /// for before the split (its subtree in the collapse forest), and their faces.
 ///
 /// The sphere's centre and the cone's axis are the position and normal of `v` (the split's
-/// FVID), which the adaption has at hand. All values are monotone: a split's values are at
+/// FVID), which the adaptation has at hand. All values are monotone: a split's values are at
 /// least those of the splits of its two children (the left child keeps `v`'s FVID, the right
 /// one is `v_u`), with the nesting made explicit (a parent sphere contains its children's
 /// spheres, a parent cone its children's cones), so a view-dependent test built from them

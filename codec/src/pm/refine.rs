@@ -1,5 +1,5 @@
 //! Reference refinement of a progressive mesh (sections 3.2 and 5.5): a sequential,
-//! CPU-side model of the paper's GPU adaption, used to check the builder.
+//! CPU-side model of the paper's GPU adaptation, used to check the builder.
 //!
 //! Faces are kept as finest-level FVID triples, as the paper's face buffer keeps them next to
 //! the index buffer (Table 2), and mapped to active vertices when asked for, which is the

@@ -410,7 +410,7 @@ pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Pa
     Ok(())
 }
 
-/// The most passes `pm adapt` runs before it calls the adaption unconverged.
+/// The most passes `pm adapt` runs before it calls the adaptation unconverged.
 const MAX_PASSES: usize = 10_000;
 
 /// An adapted mesh (faces unsorted), its passes, the seconds they took, and out of core what
@@ -463,7 +463,7 @@ fn run_gpu(
     let start = Instant::now();
     let passes = match view {
         None => adapter.refine_fully()?,
-        Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaption did not converge")?,
+        Some(v) => adapter.adapt_until_converged(v, MAX_PASSES)?.context("the adaptation did not converge")?,
     };
     adapter.check()?;
     let secs = start.elapsed().as_secs_f64();
@@ -498,7 +498,7 @@ fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Resu
         let mut adapter = Adapter::new(&pm).with_levels(opts.levels.unwrap_or(codec::pm::Levels::All));
         let passes = match &view {
             None => adapter.refine_fully(),
-            Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaption did not converge")?,
+            Some(v) => adapter.adapt_until_converged(v, MAX_PASSES).context("the adaptation did not converge")?,
         };
         (adapter.active().to_vec(), adapter.faces().to_vec(), passes, start.elapsed().as_secs_f64())
     };
@@ -556,7 +556,7 @@ fn adapt_out_of_core(
             break;
         }
     }
-    let passes = passes.context("the adaption did not converge")?;
+    let passes = passes.context("the adaptation did not converge")?;
     let secs = start.elapsed().as_secs_f64();
     Ok((Mesh::new(adapter.positions(), adapter.faces().to_vec()), passes, secs, Some(read)))
 }

@@ -1,5 +1,6 @@
 //! View-dependent adaptation of a dependency-free progressive mesh on the GPU, straight from
-//! the `.dpm`'s compressed operations: the stages of Algorithms 1 to 5 of Derzapf and Guthe as
+//! the `.dpm`'s compressed operations: the stages of Algorithms 1 to 5 of E. Derzapf and M. Guthe,
+//! "Dependency-Free Parallel Progressive Meshes", Computer Graphics Forum 31(8), 2012, as
 //! WGSL compute pipelines (`shaders/pm/*.wgsl`, one file per stage, `common.wgsl` prepended to
 //! each but the generic scan, the operation decoder `decode.wgsl` to the reorganisation),
 //! driven pass by pass from here. It keeps the state of [`codec::pm::DpmAdapter`] and reaches

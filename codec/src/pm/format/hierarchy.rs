@@ -31,7 +31,7 @@
 //! bytes, two halvings leave parts of up to one and a half nodes, each an inner node with a
 //! small remnant leaf below it; a third halving makes them leaves (up to eight children).
 //! Measured: the dragon's layout costs 0.55 bytes per operation instead of 0.70, and the close
-//! bunny view of `out_of_core_adaption_equals_in_core_within_a_budget` (4 kB nodes) requires
+//! bunny view of `out_of_core_adaptation_equals_in_core_within_a_budget` (4 kB nodes) requires
 //! 313,648 bytes instead of 318,320. Up to eight nodes' bytes, the bunny in 64 kB nodes
 //! would cost 0.35 instead of 1.03, but that view would require 331,667 bytes: a leaf over a
 //! whole region carries fine operations that the remnant below a coarse inner node kept apart.
