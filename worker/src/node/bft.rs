@@ -1,0 +1,203 @@
+//! `.bft` models on a worker, single-stream and chunked: every frame carries each tile's
+//! compressed streams (a chunked model's chunks kept from frame to frame in a [`ChunkCache`]
+//! per sorter, which that sorter mirrors), and with `render --sorters K` a frame comes in K
+//! shares that are joined in sorter order. The streams decode in parallel, then the tiles
+//! render one after the other on the one device.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::Mat4;
+use protocol::{unix_ms, FrameJob, PmMemory, ProtocolError, StreamSource, TilePixels, TileTimes, ToWorker};
+use rayon::prelude::*;
+
+use super::model::{wrong_kind, Model, Rendered};
+use super::{TileError, WorkerError};
+use crate::chunk_cache::ChunkCache;
+use crate::render::Renderer;
+use crate::RenderMesh;
+
+/// A `.bft` model's state on a worker: the chunks it keeps, one cache per sorter, and the
+/// shares of the frame received so far, by sorter.
+#[derive(Default)]
+pub(super) struct BftTiles {
+    chunks: Vec<ChunkCache<KeptChunk>>,
+    shares: Vec<Option<FrameJob>>,
+}
+
+impl Model for BftTiles {
+    fn frame(&mut self, renderer: &mut Renderer, msg: ToWorker) -> Result<Option<Rendered>, WorkerError> {
+        let ToWorker::Frame(job) = msg else { return Err(wrong_kind(&msg)) };
+        // A frame comes in `sorters` shares (one unless `render --sorters K`); it renders
+        // once every share is here.
+        let n = job.sorters as usize;
+        if self.shares.len() != n {
+            self.shares = (0..n).map(|_| None).collect();
+        }
+        if let Some(other) = self.shares.iter().flatten().find(|s| s.frame != job.frame) {
+            let why = format!("shares of frames {} and {} at once", other.frame, job.frame);
+            return Err(WorkerError::BadMessage(ProtocolError::Unexpected(why)));
+        }
+        let sorter = job.sorter as usize;
+        if self.shares[sorter].replace(job).is_some() {
+            let why = format!("sorter {sorter}'s share twice");
+            return Err(WorkerError::BadMessage(ProtocolError::Unexpected(why)));
+        }
+        if self.shares.iter().any(Option::is_none) {
+            return Ok(None);
+        }
+        let jobs: Vec<FrameJob> = self.shares.iter_mut().map(|s| s.take().expect("every share")).collect();
+        self.chunks.resize_with(n, ChunkCache::default);
+        // The first tile in order that fails is the one reported.
+        let meshes = tile_meshes(&jobs, &mut self.chunks).map_err(|(index, e)| e.at(index))?;
+        let prepared_ms = unix_ms();
+        let mut tiles = Vec::with_capacity(meshes.len());
+        for mesh in meshes {
+            tiles.push(render_tile(renderer, &jobs[0], &mesh).map_err(|e| e.at(mesh.index))?);
+        }
+        Ok(Some(Rendered { frame: jobs[0].frame, tiles, memory: PmMemory::default(), prepared_ms: Some(prepared_ms) }))
+    }
+}
+
+/// A verbatim chunk a worker keeps: its stream and its border normals, compressed as it
+/// came, so that a worker holds many more chunks than it could decoded (about 1.5 bytes a
+/// triangle against 36); it decodes them every frame, as it does every tile's stream.
+pub type KeptChunk = Arc<(Vec<u8>, Vec<(u32, [f32; 3])>)>;
+
+/// The cost of a kept chunk in a [`ChunkCache`]: its stream's bytes and 16 per normal, as
+/// the master counts it from the message it sends.
+pub fn kept_cost(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
+    bft.len() as u64 + 16 * normals.len() as u64
+}
+
+/// Every tile's mesh for a frame, with the milliseconds its streams took to decode, from the
+/// frame's shares in sorter order (a tile's streams from several sorters follow each other in
+/// that order, which is the chunks' order). First, in message order (the order each sorter's
+/// mirror of its cache in `chunks` follows), chunks to keep go into the cache and chunks kept
+/// before come out of it; then every stream decodes in parallel, and each tile's streams are
+/// joined in order.
+fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Result<Vec<TileMesh>, (u32, TileError)> {
+    let mut tiles: Vec<(u32, [u32; 4])> = Vec::new();
+    let mut slot_of: HashMap<u32, usize> = HashMap::new();
+    // (tile slot, chunk, stream), tile by tile in the order of first appearance.
+    // A stream is read from the message where it came in it, else from the cache.
+    enum Source<'a> {
+        Sent(&'a [u8], &'a [(u32, [f32; 3])]),
+        Kept(KeptChunk),
+    }
+    let mut streams: Vec<(usize, Option<u32>, Source)> = Vec::new();
+    for (job, cache) in jobs.iter().zip(chunks.iter_mut()) {
+        cache.set_limit(job.chunk_cache);
+        for tile in &job.tiles {
+            let slot = *slot_of.entry(tile.index).or_insert_with(|| {
+                tiles.push((tile.index, tile.rect));
+                tiles.len() - 1
+            });
+            for s in &tile.streams {
+                let (chunk, source) = match &s.source {
+                    StreamSource::Bytes(b) => (None, Source::Sent(b, &s.normals)),
+                    StreamSource::Keep { chunk, bft } => {
+                        let kept = Arc::new((bft.clone(), s.normals.clone()));
+                        cache.insert(*chunk, kept_cost(bft, &s.normals), kept);
+                        (Some(*chunk), Source::Sent(bft, &s.normals))
+                    }
+                    StreamSource::Kept { chunk } => match cache.get(*chunk) {
+                        Some(k) => (Some(*chunk), Source::Kept(k.clone())),
+                        None => return Err((tile.index, TileError::MissingChunk(*chunk))),
+                    },
+                };
+                streams.push((slot, chunk, source));
+            }
+        }
+    }
+    let decode_only = jobs[0].decode_only;
+    // With --decode-only a stream's mesh is dropped as soon as it is counted: nothing is
+    // drawn, and a whole large model's meshes need not be held at once.
+    type Decoded = Result<(RenderMesh, usize, f64), (u32, TileError)>;
+    let decoded: Vec<Decoded> = streams
+        .par_iter()
+        .map(|(slot, chunk, source)| {
+            let index = tiles[*slot].0;
+            let (bft, normals) = match source {
+                Source::Sent(b, n) => (*b, *n),
+                Source::Kept(k) => (&k.0[..], &k.1[..]),
+            };
+            let (mesh, ms) = decode_stream(bft, normals).map_err(|e| match (e, chunk) {
+                (TileError::Decode(e), Some(c)) => (index, TileError::ChunkDecode(*c, e)),
+                (e, _) => (index, e),
+            })?;
+            let triangles = mesh.triangle_count();
+            Ok((if decode_only { RenderMesh::default() } else { mesh }, triangles, ms))
+        })
+        .collect();
+    let mut parts: Vec<Vec<RenderMesh>> = (0..tiles.len()).map(|_| Vec::new()).collect();
+    let mut out: Vec<TileMesh> = tiles
+        .iter()
+        .map(|&(index, rect)| TileMesh { index, rect, mesh: RenderMesh::default(), triangles: 0, decode_ms: 0.0 })
+        .collect();
+    for ((slot, _, _), d) in streams.iter().zip(decoded) {
+        let (mesh, n, ms) = d?;
+        out[*slot].decode_ms += ms;
+        out[*slot].triangles += n as u32;
+        parts[*slot].push(mesh);
+    }
+    for (t, mut p) in out.iter_mut().zip(parts) {
+        t.mesh = if p.len() == 1 { p.pop().expect("one part") } else { RenderMesh::concat(&p) };
+    }
+    Ok(out)
+}
+
+/// A tile's streams decoded and joined (empty with `--decode-only`), its triangles, and the
+/// milliseconds its streams took to decode.
+struct TileMesh {
+    index: u32,
+    rect: [u32; 4],
+    mesh: RenderMesh,
+    triangles: u32,
+    decode_ms: f64,
+}
+
+/// Decodes one stream and applies the border normals the master sent; returns the mesh and
+/// the milliseconds it took.
+fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh, f64), TileError> {
+    let start = Instant::now();
+    let decoded = codec::bft::decode(bft).map_err(TileError::Decode)?;
+    let mut mesh = RenderMesh::from_decoded(&decoded);
+    // A stream with the file's normals shades with them; border normals are for computed ones.
+    let file_normals = RenderMesh::has_file_normals(&decoded);
+    for &(slot, n) in normals {
+        let Some(dst) = mesh.normals.get_mut(slot as usize) else {
+            return Err(TileError::BorderNormal { slot, vertices: mesh.positions.len() });
+        };
+        if !file_normals {
+            *dst = n;
+        }
+    }
+    Ok((mesh, start.elapsed().as_secs_f64() * 1e3))
+}
+
+/// Renders one decoded tile of `job`; with `job.decode_only`, answers transparent pixels.
+fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) -> Result<TilePixels, TileError> {
+    let TileMesh { index, rect, mesh, triangles, decode_ms } = tile_mesh;
+    let (index, rect, decode_ms) = (*index, *rect, *decode_ms);
+    let (rgba, times) = if job.decode_only {
+        let [x0, y0, x1, y1] = rect.map(|v| v as usize);
+        (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
+    } else {
+        renderer.render(mesh, Mat4::from_cols_array(&job.view_proj), (job.width, job.height), rect)?
+    };
+    Ok(TilePixels {
+        index,
+        rect,
+        times: TileTimes {
+            decode_ms,
+            adapt_ms: 0.0,
+            upload_ms: times.upload_ms,
+            render_ms: times.render_ms,
+            readback_ms: times.readback_ms,
+        },
+        triangles: *triangles,
+        rgba,
+    })
+}
