@@ -7,15 +7,14 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
 use glam::Quat;
-use protocol::{unix_ms, DpmFile, NspModel, PmModel, Swap, ToDisplay, ToWorker};
+use protocol::{unix_ms, Swap, ToDisplay, ToWorker};
 use worker::transport::Transport;
 
 use super::display::DirectSend;
 use super::eye::Eye;
-use super::jobs::{FrameContext, FrameJobs};
 use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Early, Silence};
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
-use super::scene::{NspScene, PmScene, PmSource, Scene};
+use super::scene::{FrameContext, FrameJobs, Scene};
 use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
 use crate::cli::{RenderArgs, StereoOutput};
 use crate::composite::Image;
@@ -64,29 +63,16 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let epoch = unix_ms();
     // Opened first, so that an unwritable path fails before any work.
     let stats = args.stats.as_deref().map(LineLog::create).transpose()?;
-    let mut scene = Scene::load(&args.model, args.tile_coding.into(), args)?;
+    let mut scene = super::scene::load(&args.model, args.tile_coding.into(), args)?;
     let grid = &plan.grid;
     let cam = scene.camera(&args.camera, grid)?;
-    check_cameras(&scene, args, plan, &cam)?;
+    check_cameras(scene.as_ref(), args, plan, &cam)?;
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
     let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
     let adapters = handshake(t, args.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
-    if let Scene::Pm(PmScene { source, .. }) = &scene {
-        let model = match source {
-            PmSource::Bytes { bytes, gpu_budget } => {
-                ToWorker::Model(PmModel { dpm: bytes.clone(), gpu_budget: *gpu_budget }).encode()
-            }
-            PmSource::File { path, gpu_budget, pool_bytes, .. } => {
-                ToWorker::DpmFile(DpmFile { path: path.clone(), gpu_budget: *gpu_budget, pool_bytes: *pool_bytes })
-                    .encode()
-            }
-        };
-        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
-    }
-    if let Scene::Nsp(nsp) = &scene {
-        let NspScene { file, .. } = nsp.as_ref();
-        let model = ToWorker::NspModel(NspModel { skeleton: file.skeleton().to_vec() }).encode();
+    // The kinds whose workers hold the model whole get it once, before the first frame.
+    if let Some(model) = scene.model_message() {
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
     }
     let movie = if crate::movie::is_movie(&args.out) {
@@ -98,10 +84,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     // Sorter ranks send the workers their shares of one frame at a time (the protocol has no
     // frame in flight beside another), so with --sorters a frame waits for the one before.
     let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
-    let budget_slots = match &scene {
-        Scene::Pm(PmScene { source: PmSource::File { slots, .. }, .. }) => Some(*slots),
-        _ => None,
-    };
+    let budget_slots = scene.budget_slots();
     let writer = Writer::start(args, plan, movie, stats, depth, epoch, budget_slots);
 
     let direct =
@@ -116,7 +99,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let result = (|| -> Result<()> {
         for k in 0..args.frames {
-            let views = frame_views(&scene, args, plan, &cam, k)?;
+            let views = frame_views(scene.as_ref(), args, plan, &cam, k)?;
             let n = views.len() as u32;
             for (j, spec) in views.into_iter().enumerate() {
                 let ViewSpec { camera, eye, display, grid } = spec;
@@ -451,7 +434,7 @@ struct ViewSpec {
 /// gives each eye (from the wall file or `--eye-path`) the off-axis frustum through it, or
 /// through each display; otherwise the frame's camera orbits and zooms from `cam`, and
 /// stereo eyes converge on the plane through its target.
-fn frame_views(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
+fn frame_views(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
     let half = args.stereo.map(|s| s * 0.5);
     let eye_of = |e: usize| half.map(|_| if e == 0 { Eye::Left } else { Eye::Right });
     if let Some(wall) = plan.wall.as_ref().filter(|w| w.placed()) {
@@ -502,7 +485,7 @@ fn frame_views(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u
 /// printing its warnings once: each view (eye, display) of the first and the last frame,
 /// which bound a zoom (an orbit changes no depth range, field of view or shift), and of
 /// every frame when `--eye-path` moves the eye.
-fn check_cameras(scene: &Scene, args: &RenderArgs, plan: &Plan, cam: &Camera) -> Result<()> {
+fn check_cameras(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera) -> Result<()> {
     let last = args.frames.saturating_sub(1);
     let mut frames: Vec<u32> = if plan.eyes.is_some() { (0..args.frames).collect() } else { vec![0, last] };
     // One frame: its first is its last.

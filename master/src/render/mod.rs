@@ -15,9 +15,8 @@
 //! | file | what |
 //! |---|---|
 //! | `plan.rs` | what is checked before any rank talks to another, and the output files' names |
-//! | `scene.rs` | the model rank 0 holds: a BFT model it sorts, or a progressive mesh |
+//! | `scene/` | the model rank 0 holds, a file per kind (`.bft`, chunked `.bft`, `.dpm`, `.nsp`), and each frame's messages to the workers |
 //! | `frame_loop.rs` | the frame loop |
-//! | `jobs.rs` | one frame's messages to the workers, from one `FrameContext` |
 //! | `schedule.rs` | which worker renders which tile (round robin, or balanced by cost) |
 //! | `sorter.rs` | a rank that helps rank 0 sort a chunked model (`--sorters K`) |
 //! | `link.rs` | the handshake, heartbeats and silence, receiving the tiles' pixels |
@@ -27,7 +26,6 @@
 mod display;
 mod eye;
 mod frame_loop;
-mod jobs;
 mod link;
 mod plan;
 mod scene;

@@ -12,9 +12,8 @@ use glam::Mat4;
 use protocol::{Ready, ToMaster, ToSorter};
 use worker::transport::{RecvError, Transport};
 
-use super::jobs::{frame_messages, Share, ShareContext};
 use super::plan::Plan;
-use super::scene::Scene;
+use super::scene::{frame_messages, ChunkedScene, Share, ShareContext};
 use crate::cli::RenderArgs;
 
 /// How long a sorter waits for rank 0's next frame (rank 0 composites and writes between).
@@ -27,7 +26,7 @@ pub fn run_sorter(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -
 }
 
 fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
-    let Scene::Chunked(mut scene) = Scene::load(&args.model, args.tile_coding.into(), args)? else {
+    let Some(mut scene) = ChunkedScene::open(&args.model, args.tile_coding.into(), args)? else {
         bail!("{}: --sorters shares the sort of a chunked .bft model", args.model.display());
     };
     t.send(0, &ToMaster::Ready(Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }).encode());
