@@ -17,7 +17,7 @@ use crate::cli::RenderArgs;
 pub fn run(args: &RenderArgs) -> Result<()> {
     let plan = crate::render::plan(args)?;
     if !transport::launched_by_mpirun() {
-        return crate::render::run_alone(args, &plan);
+        return crate::render::run_alone(&plan);
     }
     let mpi = Mpi::init()
         .context("MPI is already initialized, or cannot serialize calls from two threads (MPI_THREAD_SERIALIZED)")?;
@@ -36,9 +36,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let workers = mpi.size() - sorters - displays;
     let result = if mpi.rank() >= mpi.size() - displays {
         let index = mpi.rank() - (mpi.size() - displays);
-        crate::render::run_display(&mpi, args, &plan, index)
+        crate::render::run_display(&mpi, &plan, index)
     } else if mpi.rank() > workers {
-        crate::render::run_sorter(&mpi, args, &plan, mpi.rank() - workers)
+        crate::render::run_sorter(&mpi, &plan, mpi.rank() - workers)
     } else if mpi.rank() > 0 {
         let direct = plan
             .wall
@@ -48,7 +48,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let route = direct.map(|d| Box::new(move |rect: [u32; 4]| d.route(rect)) as Box<worker::node::Route>);
         worker::node::run_routed(&mpi, route.as_deref()).map_err(anyhow::Error::msg)
     } else {
-        return crate::render::run_master(&mpi, args, &plan);
+        return crate::render::run_master(&mpi, &plan);
     };
     match result {
         Ok(()) => Ok(()),

@@ -15,7 +15,7 @@ use protocol::{unix_ms, DisplayFrameJob, DisplayReady, Pixels, Ready, Swap, ToDi
 use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};
-use crate::cli::{RenderArgs, StereoOutput};
+use crate::cli::StereoOutput;
 use crate::composite::{intersection, Image};
 use crate::wall::Wall;
 
@@ -91,13 +91,13 @@ struct View {
 
 /// A display rank (`render --display-ranks D`, the `index`-th of them): assembles, reports
 /// and, at each swap, writes its displays.
-pub fn run_display(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Result<()> {
-    super::link::report_failure(t, &format!("display rank {index}: "), serve(t, args, plan, index))
+pub fn run_display(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
+    super::link::report_failure(t, &format!("display rank {index}: "), serve(t, plan, index))
 }
 
-fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Result<()> {
+fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
     let wall = plan.wall.as_ref().context("--display-ranks needs --wall")?;
-    let layout = DirectSend::new(wall, t.size(), args.display_ranks as usize);
+    let layout = DirectSend::new(wall, t.size(), plan.display_ranks as usize);
     let mine: Vec<usize> = (0..wall.displays.len()).filter(|&i| layout.owner(i) == t.rank()).collect();
     t.send(
         0,
@@ -138,7 +138,7 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
                     }
                     let job = v.job.expect("reported views have their job");
                     for (&i, image) in mine.iter().zip(&v.images) {
-                        image.save_png(&display_file(args, plan, &job, &wall.displays[i].name))?;
+                        image.save_png(&display_file(plan, &job, &wall.displays[i].name))?;
                     }
                     continue;
                 }
@@ -192,8 +192,8 @@ fn serve(t: &dyn Transport, args: &RenderArgs, plan: &Plan, index: usize) -> Res
 }
 
 /// The file of display `name` for a view.
-fn display_file(args: &RenderArgs, plan: &Plan, job: &DisplayFrameJob, name: &str) -> PathBuf {
-    let path = frame_path(&args.out, job.frame, args.frames);
+fn display_file(plan: &Plan, job: &DisplayFrameJob, name: &str) -> PathBuf {
+    let path = frame_path(&plan.out, job.frame, plan.frames);
     let path = match (job.eye, plan.stereo) {
         (1, Some(StereoOutput::Separate)) => eye_path(&path, "left"),
         (2, Some(StereoOutput::Separate)) => eye_path(&path, "right"),

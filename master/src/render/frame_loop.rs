@@ -16,7 +16,7 @@ use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Ea
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{FrameContext, FrameJobs, Scene};
 use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
-use crate::cli::{RenderArgs, StereoOutput};
+use crate::cli::StereoOutput;
 use crate::composite::Image;
 use crate::output::{Identity, LineLog};
 
@@ -58,48 +58,48 @@ struct Written {
 /// order, so every frame's pixels, and so its image, are those of the unpipelined loop.
 /// `--balance` sorts each frame from the costs of the frame before, so it keeps one frame
 /// in flight.
-pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<()> {
+pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
     // The origin of the stats' timelines.
     let epoch = unix_ms();
     // Opened first, so that an unwritable path fails before any work.
-    let stats = args.stats.as_deref().map(LineLog::create).transpose()?;
-    let mut scene = super::scene::load(&args.model, args.tile_coding.into(), args)?;
+    let stats = plan.stats.as_deref().map(LineLog::create).transpose()?;
+    let mut scene = super::scene::load(plan)?;
     let grid = &plan.grid;
-    let cam = scene.camera(&args.camera, grid)?;
-    check_cameras(scene.as_ref(), args, plan, &cam)?;
+    let cam = scene.camera(&plan.camera, grid)?;
+    check_cameras(scene.as_ref(), plan, &cam)?;
     // Ranks 1..=workers render; with --sorters K the last K-1 ranks help rank 0 sort.
-    let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
-    let adapters = handshake(t, args.timeout, grid)?;
+    let workers = t.size() - plan.sorters as usize - plan.display_ranks as usize;
+    let adapters = handshake(t, plan.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
     // The kinds whose workers hold the model whole get it once, before the first frame.
     if let Some(model) = scene.model_message() {
-        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), args.timeout)?;
+        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
     }
-    let movie = if crate::movie::is_movie(&args.out) {
+    let movie = if crate::movie::is_movie(&plan.out) {
         let width = if plan.stereo.is_some() { grid.width * 2 } else { grid.width };
-        Some(crate::movie::Movie::start(&args.out, width, grid.height, args.fps, args.timeout)?)
+        Some(crate::movie::Movie::start(&plan.out, width, grid.height, plan.fps, plan.timeout)?)
     } else {
         None
     };
     // Sorter ranks send the workers their shares of one frame at a time (the protocol has no
     // frame in flight beside another), so with --sorters a frame waits for the one before.
-    let depth = if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize };
+    let depth = plan.depth;
     let budget_slots = scene.budget_slots();
-    let writer = Writer::start(args, plan, movie, stats, depth, epoch, budget_slots);
+    let writer = Writer::start(plan, movie, stats, depth, epoch, budget_slots);
 
     let direct =
-        plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), args.display_ranks as usize));
+        plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), plan.display_ranks as usize));
     let direct = direct.as_ref();
     let mut inbox = Inbox {
         costs: vec![0.0; grid.tiles()],
-        silence: Silence::new(workers, args.timeout),
+        silence: Silence::new(workers, plan.timeout),
         early: Early::default(),
         epoch,
     };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
+    let mut frames = FixedFrames { plan, cam, next: 0 };
     let result = (|| -> Result<()> {
-        for k in 0..args.frames {
-            let views = frame_views(scene.as_ref(), args, plan, &cam, k)?;
+        while let Some((k, views)) = frames.next_frame(scene.as_ref())? {
             let n = views.len() as u32;
             for (j, spec) in views.into_iter().enumerate() {
                 let ViewSpec { camera, eye, display, grid } = spec;
@@ -107,8 +107,8 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 let view = k * n + j as u32;
                 let start = Instant::now();
                 let sort_start = unix_ms();
-                let ctx = FrameContext { frame: view, camera, grid, workers, args, costs: &inbox.costs };
-                send_all(t, scene.announce(&ctx), args.timeout)?;
+                let ctx = FrameContext { frame: view, camera, grid, workers, plan, costs: &inbox.costs };
+                send_all(t, scene.announce(&ctx), plan.timeout)?;
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
                 if let Some(d) = direct {
                     let indices: Vec<u32> = tiles.iter().map(|s| s.index).collect();
@@ -117,12 +117,12 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                         Some(Eye::Left) => 1,
                         Some(Eye::Right) => 2,
                     };
-                    send_all(t, d.frame_messages(view, k, code, &indices, grid), args.timeout)?;
+                    send_all(t, d.frame_messages(view, k, code, &indices, grid), plan.timeout)?;
                 }
                 let answering: Vec<usize> = msgs.iter().map(|(w, _)| *w).collect();
                 let sort_ms = ms(start);
                 let (start, send_start) = (Instant::now(), unix_ms());
-                send_all(t, msgs, args.timeout)?;
+                send_all(t, msgs, plan.timeout)?;
                 let send_ms = ms(start);
                 let timeline = vec![
                     Span::between("sort", sort_start, send_start, epoch),
@@ -135,13 +135,13 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
                 flight.push_back(f);
                 if flight.len() >= depth {
                     let f = flight.pop_front().expect("a frame in flight");
-                    let done = complete(t, f, args, plan, direct, &mut inbox)?;
+                    let done = complete(t, f, plan, direct, &mut inbox)?;
                     writer.send(done)?;
                 }
             }
         }
         while let Some(f) = flight.pop_front() {
-            let done = complete(t, f, args, plan, direct, &mut inbox)?;
+            let done = complete(t, f, plan, direct, &mut inbox)?;
             writer.send(done)?;
         }
         Ok(())
@@ -149,7 +149,7 @@ pub(super) fn run(t: &dyn Transport, args: &RenderArgs, plan: &Plan) -> Result<(
     let shutdown = ToWorker::Shutdown.encode();
     // Small enough for MPI to buffer at once; a rank that takes nothing within a moment is
     // already the run's error, which the result below reports.
-    let shutdown_wait = args.timeout.min(std::time::Duration::from_secs(2));
+    let shutdown_wait = plan.timeout.min(std::time::Duration::from_secs(2));
     let _ = t.send_many((1..t.size()).map(|r| (r, shutdown.clone())).collect(), shutdown_wait);
     // The writer's own error (a full disk, ffmpeg) is the cause when sending to it failed.
     let written = writer.finish();
@@ -174,7 +174,6 @@ struct Inbox {
 fn complete(
     t: &dyn Transport,
     f: InFlight,
-    args: &RenderArgs,
     plan: &Plan,
     direct: Option<&DirectSend>,
     inbox: &mut Inbox,
@@ -223,7 +222,7 @@ fn complete(
                 ready.extend(r.displays);
             }
             let swap = ToDisplay::Swap(Swap { view }).encode();
-            send_all(t, d.display_ranks().map(|r| (r, swap.clone())).collect(), args.timeout)?;
+            send_all(t, d.display_ranks().map(|r| (r, swap.clone())).collect(), plan.timeout)?;
             let swap_ms = unix_ms();
             timeline.push(Span::between("swap", receive_end, swap_ms, epoch));
             let (first, last) =
@@ -238,7 +237,7 @@ fn complete(
         }
         None => None,
     };
-    for p in frame_outputs(&args.out, k, args.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
+    for p in frame_outputs(&plan.out, k, plan.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
         if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
             bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
         }
@@ -275,7 +274,6 @@ struct Writer {
 
 impl Writer {
     fn start(
-        args: &RenderArgs,
         plan: &Plan,
         mut movie: Option<crate::movie::Movie>,
         mut stats: Option<LineLog>,
@@ -284,7 +282,7 @@ impl Writer {
         budget_slots: Option<u32>,
     ) -> Writer {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
-        let (out, frames, wall, stereo) = (args.out.clone(), args.frames, plan.wall.clone(), plan.stereo);
+        let (out, frames, wall, stereo) = (plan.out.clone(), plan.frames, plan.wall.clone(), plan.stereo);
         // With display ranks, they write the displays and rank 0 writes no image.
         let images = !plan.direct;
         let eyes = if plan.stereo.is_some() { 2 } else { 1 };
@@ -420,6 +418,31 @@ fn write_image(
     }
 }
 
+/// Where the frame loop's frames come from: frame `k` and its views, until there are no
+/// more. The loop asks for one frame at a time and knows no frame count, so a source driven
+/// by events (a window, a control port) can take the place of [`FixedFrames`].
+trait FrameSource {
+    fn next_frame(&mut self, scene: &dyn Scene) -> Result<Option<(u32, Vec<ViewSpec>)>>;
+}
+
+/// `--frames` frames, orbiting, zooming or following `--eye-path` from the first camera.
+struct FixedFrames<'a> {
+    plan: &'a Plan,
+    cam: Camera,
+    next: u32,
+}
+
+impl FrameSource for FixedFrames<'_> {
+    fn next_frame(&mut self, scene: &dyn Scene) -> Result<Option<(u32, Vec<ViewSpec>)>> {
+        if self.next >= self.plan.frames {
+            return Ok(None);
+        }
+        let k = self.next;
+        self.next += 1;
+        Ok(Some((k, frame_views(scene, self.plan, &self.cam, k)?)))
+    }
+}
+
 /// One view of a frame: its camera, its eye (stereo) and, on a wall whose displays each
 /// have a frame, the display, with the grid of the view's frame.
 struct ViewSpec {
@@ -433,9 +456,10 @@ struct ViewSpec {
 /// whose displays have their corners one per display (per eye). A wall placed in the world
 /// gives each eye (from the wall file or `--eye-path`) the off-axis frustum through it, or
 /// through each display; otherwise the frame's camera orbits and zooms from `cam`, and
-/// stereo eyes converge on the plane through its target.
-fn frame_views(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
-    let half = args.stereo.map(|s| s * 0.5);
+/// stereo eyes converge on the plane through its target. Their cameras were checked once, before
+/// the first frame ([`check_cameras`]).
+fn frame_views(scene: &dyn Scene, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
+    let half = plan.separation.map(|s| s * 0.5);
     let eye_of = |e: usize| half.map(|_| if e == 0 { Eye::Left } else { Eye::Right });
     if let Some(wall) = plan.wall.as_ref().filter(|w| w.placed()) {
         let eye = match &plan.eyes {
@@ -450,23 +474,19 @@ fn frame_views(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, 
         let mut views = Vec::new();
         for (e, &at) in eyes.iter().enumerate() {
             if !wall.per_display() {
-                let camera = scene.camera(&wall.camera_args(&args.camera, at)?, &plan.grid)?;
-                crate::cli::check_precision(&camera, plan.grid.height)?;
+                let camera = scene.camera(&wall.camera_args(&plan.camera, at)?, &plan.grid)?;
                 views.push(ViewSpec { camera, eye: eye_of(e), display: None, grid: plan.grid });
                 continue;
             }
-            for (i, d) in wall.displays.iter().enumerate() {
-                let [x0, y0, x1, y1] = d.rect;
-                let grid = TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)?;
-                let camera = scene.camera(&wall.display_camera_args(i, &args.camera, at)?, &grid)?;
-                crate::cli::check_precision(&camera, grid.height)?;
+            for (i, &grid) in plan.display_grids.iter().enumerate() {
+                let camera = scene.camera(&wall.display_camera_args(i, &plan.camera, at)?, &grid)?;
                 views.push(ViewSpec { camera, eye: eye_of(e), display: Some(i), grid });
             }
         }
         return Ok(views);
     }
-    let cam_k = if args.orbit { orbit_by(cam, k, args.frames, args.orbit_degrees) } else { *cam };
-    let cam_k = zoom_by(&cam_k, k, args.frames, args.zoom);
+    let cam_k = if plan.orbit { orbit_by(cam, k, plan.frames, plan.orbit_degrees) } else { *cam };
+    let cam_k = zoom_by(&cam_k, k, plan.frames, plan.zoom);
     let cameras = match half {
         Some(h) => {
             let (focus, aspect) = (cam_k.eye.distance(cam_k.target), plan.grid.aspect());
@@ -485,14 +505,14 @@ fn frame_views(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera, 
 /// printing its warnings once: each view (eye, display) of the first and the last frame,
 /// which bound a zoom (an orbit changes no depth range, field of view or shift), and of
 /// every frame when `--eye-path` moves the eye.
-fn check_cameras(scene: &dyn Scene, args: &RenderArgs, plan: &Plan, cam: &Camera) -> Result<()> {
-    let last = args.frames.saturating_sub(1);
-    let mut frames: Vec<u32> = if plan.eyes.is_some() { (0..args.frames).collect() } else { vec![0, last] };
+fn check_cameras(scene: &dyn Scene, plan: &Plan, cam: &Camera) -> Result<()> {
+    let last = plan.frames.saturating_sub(1);
+    let mut frames: Vec<u32> = if plan.eyes.is_some() { (0..plan.frames).collect() } else { vec![0, last] };
     // One frame: its first is its last.
     frames.dedup();
     let mut warned = std::collections::HashSet::new();
     for k in frames {
-        for v in frame_views(scene, args, plan, cam, k).with_context(|| format!("frame {}", k + 1))? {
+        for v in frame_views(scene, plan, cam, k).with_context(|| format!("frame {}", k + 1))? {
             let eye = match v.eye {
                 Some(Eye::Left) => ", left eye",
                 Some(Eye::Right) => ", right eye",

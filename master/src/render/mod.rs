@@ -42,15 +42,13 @@ pub use plan::{frame_path, plan, Plan};
 pub use schedule::assign;
 pub use sorter::run_sorter;
 
-use crate::cli::RenderArgs;
-
 /// Rank 0 of an mpirun job: the frame loop. Any error ends every rank (`MPI_Abort`) rather
 /// than leave the workers waiting.
-pub fn run_master(mpi: &transport::Mpi, args: &RenderArgs, plan: &Plan) -> Result<()> {
+pub fn run_master(mpi: &transport::Mpi, plan: &Plan) -> Result<()> {
     if mpi.size() < 2 {
         anyhow::bail!("run with at least 2 ranks: rank 0 sorts and composites, ranks 1.. render");
     }
-    if let Err(e) = frame_loop::run(mpi, args, plan) {
+    if let Err(e) = frame_loop::run(mpi, plan) {
         eprintln!("error: {}", crate::output::one_line(&e));
         mpi.abort(1);
     }
@@ -58,19 +56,19 @@ pub fn run_master(mpi: &transport::Mpi, args: &RenderArgs, plan: &Plan) -> Resul
 }
 
 /// Without mpirun: the frame loop, and one worker on a thread of this process, over channels.
-pub fn run_alone(args: &RenderArgs, plan: &Plan) -> Result<()> {
-    if args.display_ranks > 0 {
-        anyhow::bail!("--display-ranks {} needs mpirun: the display ranks are ranks of their own", args.display_ranks);
+pub fn run_alone(plan: &Plan) -> Result<()> {
+    if plan.display_ranks > 0 {
+        anyhow::bail!("--display-ranks {} needs mpirun: the display ranks are ranks of their own", plan.display_ranks);
     }
-    if args.sorters > 1 {
-        anyhow::bail!("--sorters {} needs mpirun: the sorters are ranks of their own", args.sorters);
+    if plan.sorters > 1 {
+        anyhow::bail!("--sorters {} needs mpirun: the sorters are ranks of their own", plan.sorters);
     }
     let mut ranks = transport::local_ranks(2);
     let worker_end = ranks.pop().expect("two ranks");
     let handle = std::thread::spawn(move || worker::node::run(&worker_end));
     // On an error the worker thread may be stuck (that may be the error): return at once,
     // and the process's exit ends it, so that --timeout bounds the run.
-    frame_loop::run(&ranks[0] as &dyn Transport, args, plan)?;
+    frame_loop::run(&ranks[0] as &dyn Transport, plan)?;
     drop(ranks);
     let worker_result = handle.join().map_err(|_| anyhow::anyhow!("the worker thread panicked"))?;
     worker_result.map_err(anyhow::Error::msg)

@@ -7,14 +7,52 @@ use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
 use glam::Vec3;
 
-use crate::cli::{RenderArgs, StereoOutput};
+use crate::cli::{CameraArgs, RenderArgs, StereoOutput};
 use crate::composite::Image;
 use crate::output::{check_distinct, check_extension, Identity};
 use crate::wall::Wall;
 
-/// Everything checked before any rank talks to another.
+/// The run, resolved from the flags once and checked before any rank talks to another:
+/// what the frame loop, the scenes, and the sorter and display ranks read (never the flags).
 pub struct Plan {
+    /// The model file.
+    pub model: PathBuf,
+    /// How rank 0 codes a BFT model's tiles.
+    pub coding: codec::bft::Coding,
+    /// The camera flags; what they leave out frames the model.
+    pub camera: CameraArgs,
+    /// Frames to render.
+    pub frames: u32,
+    /// `--orbit` and its degrees a frame (0: a full turn over the frames), and `--zoom`.
+    pub orbit: bool,
+    pub orbit_degrees: f32,
+    pub zoom: f32,
+    /// `--stereo`: the eyes' separation.
+    pub separation: Option<f32>,
+    pub out: PathBuf,
+    pub fps: f32,
+    pub stats: Option<PathBuf>,
+    /// Frames in flight: one with `--balance` (it sorts from the frame before's costs) or
+    /// with sorters (they send one frame at a time), else `--frames-in-flight`.
+    pub depth: usize,
+    /// How long a silent rank may stay silent before it counts as dead.
+    pub timeout: std::time::Duration,
+    pub balance: bool,
+    pub decode_only: bool,
+    /// The ranks that share the sort (`--sorters`, rank 0 included) and own the wall's
+    /// displays (`--display-ranks`).
+    pub sorters: u8,
+    pub display_ranks: u32,
+    /// Bytes of rank 0's chunk cache (`--cache-mb`) and of each worker's (`--worker-cache-mb`).
+    pub cache_bytes: usize,
+    pub worker_cache_bytes: u64,
+    /// A progressive mesh's and an `.nsp` model's view: the screen error in pixels, and the
+    /// progressive mesh's adaptation settings.
+    pub error_px: f32,
+    pub pm: PmSettings,
     pub grid: TileGrid,
+    /// On a wall whose displays each have a frame, each display's grid.
+    pub display_grids: Vec<TileGrid>,
     pub wall: Option<Wall>,
     /// `--eye-path`: the eye of every frame.
     pub eyes: Option<Vec<Vec3>>,
@@ -25,6 +63,20 @@ pub struct Plan {
     /// The inputs' identities, which no output may be.
     pub inputs: Vec<Identity>,
 }
+/// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
+/// sizes).
+#[derive(Clone, Copy, Debug)]
+pub struct PmSettings {
+    pub normal_weight: f32,
+    pub c_lod: f32,
+    pub max_passes: u32,
+    /// Graphics memory each worker's adaptation may take, and of it the node pool's (out of
+    /// core), in bytes.
+    pub gpu_budget: u64,
+    pub gpu_nodes: Option<u64>,
+    pub occlusion: bool,
+}
+
 /// Above this many output files the up-front identity check looks only at the first and
 /// last frames' names (each frame is checked again as it is written), so that start-up does
 /// not grow with `--frames`: frames' names differ in their numbers, so only an input can
@@ -58,11 +110,13 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
             bail!("a wall placed in the world needs an eye: `eye = [x, y, z]` in the wall file, or --eye-path");
         }
     }
+    let mut display_grids = Vec::new();
     if let Some(w) = wall.as_ref().filter(|w| w.per_display()) {
         for d in &w.displays {
             let [x0, y0, x1, y1] = d.rect;
-            TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)
+            let grid = TileGrid::new(x1 - x0, y1 - y0, args.tiles.0, args.tiles.1)
                 .with_context(|| format!("display {} has its own frame, cut into --tiles", d.name))?;
+            display_grids.push(grid);
         }
         if args.balance {
             bail!("--balance and a wall whose displays each have a frame do not go together yet");
@@ -144,7 +198,44 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     let outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     check_distinct(&inputs, &outputs)?;
     let inputs = inputs.iter().filter_map(|p| Identity::of(p).ok()).collect();
-    Ok(Plan { grid, wall, eyes, stereo, direct, inputs })
+    const MB: f64 = (1 << 20) as f64;
+    Ok(Plan {
+        model: args.model.clone(),
+        coding: args.tile_coding.into(),
+        camera: args.camera.clone(),
+        frames: args.frames,
+        orbit: args.orbit,
+        orbit_degrees: args.orbit_degrees,
+        zoom: args.zoom,
+        separation: args.stereo,
+        out: args.out.clone(),
+        fps: args.fps,
+        stats: args.stats.clone(),
+        depth: if args.balance || args.sorters > 1 { 1 } else { args.frames_in_flight as usize },
+        timeout: args.timeout,
+        balance: args.balance,
+        decode_only: args.decode_only,
+        sorters: args.sorters,
+        display_ranks: args.display_ranks,
+        cache_bytes: args.cache_mb as usize * (1 << 20),
+        worker_cache_bytes: args.worker_cache_mb * (1 << 20),
+        error_px: args.error_px,
+        pm: PmSettings {
+            normal_weight: args.normal_weight,
+            c_lod: args.c_lod,
+            max_passes: args.max_passes,
+            gpu_budget: (args.gpu_budget_mb as f64 * MB) as u64,
+            gpu_nodes: args.gpu_nodes_mb.map(|mb| (mb as f64 * MB) as u64),
+            occlusion: args.occlusion,
+        },
+        grid,
+        display_grids,
+        wall,
+        eyes,
+        stereo,
+        direct,
+        inputs,
+    })
 }
 
 /// The eyes of `--eye-path` with their line numbers: one `x y z` (or `x,y,z`) line per

@@ -14,23 +14,22 @@ use worker::transport::{RecvError, Transport};
 
 use super::plan::Plan;
 use super::scene::{frame_messages, ChunkedScene, Share, ShareContext};
-use crate::cli::RenderArgs;
 
 /// How long a sorter waits for rank 0's next frame (rank 0 composites and writes between).
 const MASTER_SILENCE: Duration = Duration::from_secs(3600);
 
 /// Sorter `s` (of `--sorters K`, rank 0 being sorter 0) until rank 0 shuts the job down. A
 /// failure is reported to rank 0, which ends the job with it.
-pub fn run_sorter(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
-    super::link::report_failure(t, "", sort_frames(t, args, plan, s))
+pub fn run_sorter(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
+    super::link::report_failure(t, "", sort_frames(t, plan, s))
 }
 
-fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> Result<()> {
-    let Some(mut scene) = ChunkedScene::open(&args.model, args.tile_coding.into(), args)? else {
-        bail!("{}: --sorters shares the sort of a chunked .bft model", args.model.display());
+fn sort_frames(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
+    let Some(mut scene) = ChunkedScene::open(plan)? else {
+        bail!("{}: --sorters shares the sort of a chunked .bft model", plan.model.display());
     };
     t.send(0, &ToMaster::Ready(Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }).encode());
-    let workers = t.size() - args.sorters as usize - args.display_ranks as usize;
+    let workers = t.size() - plan.sorters as usize - plan.display_ranks as usize;
     loop {
         let (from, bytes) = match t.recv(MASTER_SILENCE) {
             Ok(m) => m,
@@ -48,8 +47,8 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
                     grid: &plan.grid,
                     view_proj: Mat4::from_cols_array(&job.view_proj),
                     workers,
-                    sorters: args.sorters as usize,
-                    decode_only: args.decode_only,
+                    sorters: plan.sorters as usize,
+                    decode_only: plan.decode_only,
                 };
                 if job.owners.len() != plan.grid.tiles() || job.owners.iter().any(|&w| w == 0 || w as usize > workers) {
                     bail!("rank 0 assigned tiles to ranks outside 1..={workers}");
@@ -57,7 +56,7 @@ fn sort_frames(t: &dyn Transport, args: &RenderArgs, plan: &Plan, s: usize) -> R
                 let owners = &job.owners;
                 let Share { jobs, .. } =
                     scene.share_jobs(&ctx, s, |tiles| tiles.iter().map(|&i| owners[i] as usize).collect())?;
-                super::link::send_all(t, frame_messages(jobs), args.timeout)?;
+                super::link::send_all(t, frame_messages(jobs), plan.timeout)?;
             }
         }
     }

@@ -3,8 +3,6 @@
 //! K`, each a contiguous share of the chunks), and mirrors every worker's chunk cache so that
 //! a chunk a worker keeps is named, not sent again.
 
-use std::path::Path;
-
 use anyhow::Result;
 use codec::bft::chunked::sort::{share, PieceKind};
 use codec::view::{Camera, TileGrid};
@@ -12,9 +10,10 @@ use protocol::{FrameJob, SortJob, StreamSource, TileJob, TileStream};
 use worker::chunk_cache::ChunkCache;
 use worker::node::kept_cost;
 
-use super::{empty_jobs, frame_messages, FrameContext, FrameJobs, Scene, MB};
-use crate::cli::{CameraArgs, RenderArgs};
+use super::{empty_jobs, frame_messages, FrameContext, FrameJobs, Scene};
+use crate::cli::CameraArgs;
 use crate::model::{chunked_camera, open_chunked, Chunked};
+use crate::render::plan::Plan;
 use crate::render::stats::{ChunkStats, TileStats};
 
 /// A chunked BFT model, memory-mapped, and rank 0's mirror of every worker's chunk cache
@@ -52,19 +51,15 @@ pub(in crate::render) struct Share {
 }
 
 impl ChunkedScene {
-    /// A chunked `.bft` at `path`, or `None` for any other kind of file.
-    pub(in crate::render) fn open(
-        path: &Path,
-        coding: codec::bft::Coding,
-        args: &RenderArgs,
-    ) -> Result<Option<ChunkedScene>> {
-        let Some(model) = open_chunked(path, args.cache_mb as usize * MB)? else { return Ok(None) };
+    /// The plan's model if it is a chunked `.bft`, or `None` for any other kind of file.
+    pub(in crate::render) fn open(plan: &Plan) -> Result<Option<ChunkedScene>> {
+        let Some(model) = open_chunked(&plan.model, plan.cache_bytes)? else { return Ok(None) };
         Ok(Some(ChunkedScene {
             model,
-            coding,
+            coding: plan.coding,
             mirrors: Vec::new(),
-            worker_cache: args.worker_cache_mb * MB as u64,
-            sorters: args.sorters as usize,
+            worker_cache: plan.worker_cache_bytes,
+            sorters: plan.sorters as usize,
             owners: Vec::new(),
         }))
     }
@@ -172,7 +167,7 @@ impl Scene for ChunkedScene {
             view_proj: ctx.camera.view_proj(ctx.grid.aspect()),
             workers: ctx.workers,
             sorters: self.sorters,
-            decode_only: ctx.args.decode_only,
+            decode_only: ctx.plan.decode_only,
         };
         let owners = std::mem::take(&mut self.owners);
         let result = self.share_jobs(&share, 0, |tiles| {

@@ -11,20 +11,17 @@ mod chunked;
 mod nsp;
 mod pm;
 
-use std::path::Path;
-
 use anyhow::{bail, Result};
 use codec::kind::ModelKind;
 use codec::view::{Camera, TileGrid};
 use protocol::{FrameJob, ToWorker};
 
+use super::plan::Plan;
 use super::schedule::assign;
 use super::stats::{ChunkStats, NspStats, TileStats};
-use crate::cli::{CameraArgs, RenderArgs};
+use crate::cli::CameraArgs;
 
 pub(super) use chunked::{ChunkedScene, Share, ShareContext};
-
-const MB: usize = 1 << 20;
 
 /// The model rank 0 renders, of one kind.
 pub(super) trait Scene {
@@ -52,13 +49,13 @@ pub(super) trait Scene {
     fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs>;
 }
 
-/// Loads the model at `path`, of the kind its magic bytes say; BFT tiles will be coded with
-/// `coding`.
-pub(super) fn load(path: &Path, coding: codec::bft::Coding, args: &RenderArgs) -> Result<Box<dyn Scene>> {
-    if let Some(scene) = ChunkedScene::open(path, coding, args)? {
+/// Loads the plan's model, of the kind its magic bytes say (BFT tiles coded as the plan says).
+pub(super) fn load(plan: &Plan) -> Result<Box<dyn Scene>> {
+    let (path, coding) = (plan.model.as_path(), plan.coding);
+    if let Some(scene) = ChunkedScene::open(plan)? {
         return Ok(Box::new(scene));
     }
-    if args.sorters > 1 {
+    if plan.sorters > 1 {
         bail!(
             "{}: --sorters shares the sort of a chunked .bft model (tessera encode writes one above --chunk-triangles)",
             path.display()
@@ -66,7 +63,7 @@ pub(super) fn load(path: &Path, coding: codec::bft::Coding, args: &RenderArgs) -
     }
     Ok(match ModelKind::of(path) {
         ModelKind::Nsp => Box::new(nsp::NspScene::open(path)?),
-        ModelKind::Dpm => Box::new(pm::PmScene::open(path, args)?),
+        ModelKind::Dpm => Box::new(pm::PmScene::open(path, plan)?),
         _ => Box::new(bft::BftScene::open(path, coding)?),
     })
 }
@@ -79,7 +76,7 @@ pub(super) struct FrameContext<'a> {
     pub grid: &'a TileGrid,
     /// Workers are ranks `1..=workers`.
     pub workers: usize,
-    pub args: &'a RenderArgs,
+    pub plan: &'a Plan,
     /// Each tile's cost the frame before (ms), for `--balance`.
     pub costs: &'a [f64],
 }
@@ -87,7 +84,7 @@ pub(super) struct FrameContext<'a> {
 impl FrameContext<'_> {
     /// The worker of each of `tiles`.
     fn owners(&self, tiles: &[usize]) -> Vec<usize> {
-        assign(tiles, self.workers, self.args.balance.then_some(self.costs))
+        assign(tiles, self.workers, self.plan.balance.then_some(self.costs))
     }
 }
 
@@ -125,7 +122,7 @@ impl FrameContext<'_> {
             view_proj: vp,
             workers: self.workers,
             sorters: 1,
-            decode_only: self.args.decode_only,
+            decode_only: self.plan.decode_only,
         };
         empty_jobs(&share, 0, chunk_cache)
     }

@@ -7,9 +7,10 @@ use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
 use protocol::{DpmFile, PmFrameJob, PmModel, ToWorker};
 
-use super::{FrameContext, FrameJobs, Scene, MB};
-use crate::cli::{CameraArgs, RenderArgs};
+use super::{FrameContext, FrameJobs, Scene};
+use crate::cli::CameraArgs;
 use crate::model::{dpm_file_bbox, pm_bbox, read_input};
+use crate::render::plan::Plan;
 use crate::render::stats::TileStats;
 
 /// A progressive mesh: rank 0 keeps its file for the workers (or, out of core, its path:
@@ -34,11 +35,11 @@ impl PmScene {
     /// A `.dpm` at `path`: out of core when its file says so (the workers read its nodes
     /// themselves), else its bytes, decoded here once so that a corrupt file fails before
     /// any worker sees it.
-    pub(super) fn open(path: &Path, args: &RenderArgs) -> Result<PmScene> {
+    pub(super) fn open(path: &Path, plan: &Plan) -> Result<PmScene> {
         let named = || format!("{}", path.display());
-        let gpu_budget = (args.gpu_budget_mb as f64 * MB as f64) as u64;
+        let gpu_budget = plan.pm.gpu_budget;
         if let Some(file) = codec::pm::format::NodeFile::open_out_of_core(path).with_context(named)? {
-            let nodes = args.gpu_nodes_mb.map(|mb| (mb as f64 * MB as f64) as u64);
+            let nodes = plan.pm.gpu_nodes;
             return PmScene::out_of_core(path, &file, gpu_budget, nodes);
         }
         let bytes = read_input(path)?;
@@ -108,8 +109,8 @@ impl Scene for PmScene {
     /// the camera; nothing of the mesh is sent. The tiles' triangle counts come back with the
     /// pixels.
     fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
-        let (grid, args, (lo, hi)) = (ctx.grid, ctx.args, self.bbox);
-        let view = codec::pm::Viewpoint::new(&ctx.camera, grid.width, grid.height, args.error_px);
+        let (grid, plan, (lo, hi)) = (ctx.grid, ctx.plan, self.bbox);
+        let view = codec::pm::Viewpoint::new(&ctx.camera, grid.width, grid.height, plan.error_px);
         let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
         // Only tiles the model's bounding box can reach: every vertex a progressive mesh can
         // activate lies in it, so the other tiles stay transparent and cost the workers nothing.
@@ -123,7 +124,7 @@ impl Scene for PmScene {
         // Each worker adapts one mesh to its tiles' bounding rectangle: contiguous runs of
         // tiles keep it to the worker's share of the frame (with --balance, the balancer's
         // assignment, whose rectangles may be larger).
-        let owner = if args.balance {
+        let owner = if plan.balance {
             ctx.owners(&indices)
         } else {
             crate::render::schedule::contiguous(indices.len(), ctx.workers)
@@ -137,10 +138,10 @@ impl Scene for PmScene {
                 eye: view.eye.to_array(),
                 pixels_per_unit: view.pixels_per_unit,
                 error_px: view.error_px,
-                c_lod: args.c_lod,
-                attribute_scale: args.normal_weight * diagonal,
-                max_passes: args.max_passes,
-                occlusion: args.occlusion,
+                c_lod: plan.pm.c_lod,
+                attribute_scale: plan.pm.normal_weight * diagonal,
+                max_passes: plan.pm.max_passes,
+                occlusion: plan.pm.occlusion,
                 tiles: vec![],
             })
             .collect();
