@@ -21,6 +21,14 @@ const COUNT: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { l
 const COUNT_PASS: wgpu::ComputePassDescriptor =
     wgpu::ComputePassDescriptor { label: Some("pm: count"), timestamp_writes: None };
 
+/// What the count of a pass found, within the budget: the totals read back, whether the
+/// pass refines all levels, and whether the budget held splits back.
+struct Count {
+    totals: [u32; 12],
+    all: bool,
+    held: bool,
+}
+
 impl GpuAdapter {
     pub(super) fn pass(&mut self, view: Option<&Viewpoint>) -> Result<PassStats, AdaptError> {
         let gpu = self.gpu.clone();
@@ -38,8 +46,79 @@ impl GpuAdapter {
         if n == 0 {
             return Ok(unchanged);
         }
+        self.reserve_temporaries(n);
+        self.prepare_scan(n as u64 + 1);
+        if let Some(v) = view {
+            self.note_view(v);
+        }
+        // A full refinement goes one level a pass, as the CPU reference's `refine_step`.
+        let all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
+        let mut params = self.pass_params(view, all);
+        let Some(Count { totals, all, held }) = self.count_within_budget(&mut params, view, all, pass_start)? else {
+            return Ok(PassStats { held: true, ..unchanged });
+        };
+        self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
+        let (n_new, f_add) = (totals[0], totals[1]);
+        let counters = &totals[2..10];
+        let (collapses, cancelled, removed) =
+            (counters[STAT_COLLAPSES], counters[STAT_CANCELLED], counters[STAT_REMOVED_FACES]);
+        let splits = (n_new + collapses).checked_sub(n).ok_or(AdaptError::InconsistentTotals {
+            vertices: n,
+            after: n_new,
+            collapses,
+        })?;
+        self.note_descents(all, splits, collapses);
+        // The threads of the split stages: one per splitting vertex.
+        let split_vertices = if all { counters[STAT_SPLIT_VERTICES] } else { splits };
+        if splits == 0 && collapses == 0 {
+            // Converged at a raised error with room to spare: the next passes try a finer one,
+            // not below the error that last overflowed for this view.
+            let finer = view.is_some() && self.error_scale > self.floor && self.fits_finer();
+            if finer {
+                self.error_scale = (self.error_scale / SCALE_STEP).max(self.floor);
+            }
+            return Ok(PassStats { cancelled: cancelled as usize, held: held || finer, ..unchanged });
+        }
+        let m_new = m - removed + f_add;
+        let dst = self.reserve_apply(n_new, f_add, removed)?;
+        params.n_new = n_new;
+        params.f_add = f_add;
+        params.m_new = m_new;
+        params.splits = split_vertices;
+        // `descend` pauses after half the count's steps: its steps also write what they find.
+        params.round_steps = self.descend_steps();
+        params.rounds = self.rounds_for(self.steps, self.most, params.round_steps);
+        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.apply(&params, all, dst, splits);
+        if self.profile {
+            self.gpu.wait_for(self.gpu.queue().submit([]))?;
+            self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
+        }
+        if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
+            self.resize_faces(m_new as u64 + self.n_alloc as u64, m_new as u64);
+        }
+        self.cur = dst;
+        if all {
+            // Room for what this count kept, for the next passes (this one's buffers stay
+            // alive until its submission ran).
+            self.grow_scratch(self.sc_kept);
+        }
+        self.n = n_new;
+        self.m = m_new;
+        Ok(PassStats {
+            splits: splits as usize,
+            collapses: collapses as usize,
+            cancelled: cancelled as usize,
+            vertices: n_new as usize,
+            faces: m_new as usize,
+            held,
+        })
+    }
+
+    /// Stage 0: the temporaries (vertex and face counts, split list, marks) hold `n + 1`
+    /// counts (the last one the scan's total).
+    fn reserve_temporaries(&mut self, n: u32) {
         let na = self.n_alloc as u64;
-        // Temporaries hold n + 1 counts (the last one the scan's total).
         if needs_resize(self.vcnt.cap, n as u64 + 1, self.n_alloc) {
             let cap = n as u64 + 1 + na;
             self.vcnt = storage(self.gpu.device(), "pm: vertex counts", cap, 4, VERTEX_USAGE);
@@ -48,18 +127,22 @@ impl GpuAdapter {
             self.marks = MARKS.map(|name| storage(self.gpu.device(), name, cap, 4, VERTEX_USAGE));
             self.reallocations += 1;
         }
-        self.prepare_scan(n as u64 + 1);
-        // A full refinement goes one level a pass, as the CPU reference's `refine_step`.
-        if let Some(v) = view {
-            // A new view may refine finer than the error that overflowed for the last one,
-            // and starts with all levels again.
-            if self.last_view != Some(*v) {
-                self.last_view = Some(*v);
-                self.floor = 1.0;
-                (self.deep, self.deep_passes, self.deep_tree) = (false, 0, false);
-            }
+    }
+
+    /// A new view may refine finer than the error that overflowed for the last one, and
+    /// starts with all levels again.
+    fn note_view(&mut self, v: &Viewpoint) {
+        if self.last_view != Some(*v) {
+            self.last_view = Some(*v);
+            self.floor = 1.0;
+            (self.deep, self.deep_passes, self.deep_tree) = (false, 0, false);
         }
-        let mut all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
+    }
+
+    /// The pass's parameters before the count: the view (none: a full refinement), and one
+    /// level or `all`.
+    fn pass_params(&self, view: Option<&Viewpoint>, all: bool) -> Params {
+        let (n, m) = (self.n, self.m);
         let mut params = Params {
             n,
             m,
@@ -82,7 +165,20 @@ impl GpuAdapter {
                 (params.occ_vp, params.occ_rect, params.occ_size) = o.params();
             }
         }
-        let mut totals = self.classify(&mut params, pass_start)?;
+        params
+    }
+
+    /// Stage 1, submission 1 within the budget: the count ([`Self::classify`]) for
+    /// `params`; `None` when a full refinement must stop because its splits do not fit.
+    fn count_within_budget(
+        &mut self,
+        params: &mut Params,
+        view: Option<&Viewpoint>,
+        mut all: bool,
+        pass_start: std::time::Instant,
+    ) -> Result<Option<Count>, AdaptError> {
+        let (n, m) = (self.n, self.m);
+        let mut totals = self.classify(params, pass_start)?;
         let mut held = false;
         let over = |a: &GpuAdapter, t: &[u32; 12]| a.exceeds((t[0] as u64).max(n as u64), m as u64 + t[1] as u64);
         // An all-levels pass whose splits would take the mesh past the budget or the binding
@@ -91,7 +187,7 @@ impl GpuAdapter {
         if all && totals[0] > n && over(self, &totals) {
             all = false;
             params.levels = 0;
-            totals = self.classify(&mut params, pass_start)?;
+            totals = self.classify(params, pass_start)?;
         }
         // A pass whose splits would take the mesh past the budget or the binding limit splits
         // nothing: with a view it collapses what the view lets go and raises the error the
@@ -100,26 +196,22 @@ impl GpuAdapter {
         if totals[0] > n && over(self, &totals) {
             held = true;
             match view {
-                None => return Ok(PassStats { held, ..unchanged }),
+                None => return Ok(None),
                 Some(v) => {
                     self.error_scale = (self.error_scale * SCALE_STEP).min(MAX_SCALE);
                     self.floor = self.error_scale;
                     params.mode = 2;
                     params.error_px = v.error_px * self.error_scale;
-                    totals = self.classify(&mut params, pass_start)?;
+                    totals = self.classify(params, pass_start)?;
                 }
             }
         }
-        self.times[0] = pass_start.elapsed().as_secs_f64() * 1e3;
-        let (n_new, f_add) = (totals[0], totals[1]);
-        let counters = &totals[2..10];
-        let (collapses, cancelled, removed) =
-            (counters[STAT_COLLAPSES], counters[STAT_CANCELLED], counters[STAT_REMOVED_FACES]);
-        let splits = (n_new + collapses).checked_sub(n).ok_or(AdaptError::InconsistentTotals {
-            vertices: n,
-            after: n_new,
-            collapses,
-        })?;
+        Ok(Some(Count { totals, all, held }))
+    }
+
+    /// The deep-descent bookkeeping of a mixed file's all-levels passes (see
+    /// [`DEEP_DESCENT`]).
+    fn note_descents(&mut self, all: bool, splits: u32, collapses: u32) {
         if all && self.mixed && !self.deep_tree && splits > DEEP_DESCENT.saturating_mul(self.descents) {
             self.deep = true;
         }
@@ -129,18 +221,12 @@ impl GpuAdapter {
                 (self.deep, self.deep_tree) = (false, true);
             }
         }
-        // The threads of the split stages: one per splitting vertex.
-        let split_vertices = if all { counters[STAT_SPLIT_VERTICES] } else { splits };
-        if splits == 0 && collapses == 0 {
-            // Converged at a raised error with room to spare: the next passes try a finer one,
-            // not below the error that last overflowed for this view.
-            if view.is_some() && self.error_scale > self.floor && self.fits_finer() {
-                self.error_scale = (self.error_scale / SCALE_STEP).max(self.floor);
-                held = true;
-            }
-            return Ok(PassStats { cancelled: cancelled as usize, held, ..unchanged });
-        }
-        let m_new = m - removed + f_add;
+    }
+
+    /// Stage 2: checks the pass's buffers against the device's binding limit and makes room
+    /// for its result; returns the vertex set that receives it.
+    fn reserve_apply(&mut self, n_new: u32, f_add: u32, removed: u32) -> Result<usize, AdaptError> {
+        let (m, na) = (self.m, self.n_alloc as u64);
         // Every buffer of the pass is bound whole: past the device's binding limit the pass
         // would fail validation ([`GpuAdapter::exceeds`] holds splits back before that, so
         // this fails only for a base mesh beyond it).
@@ -169,16 +255,14 @@ impl GpuAdapter {
             self.hole = storage(self.gpu.device(), "pm: face holes", removed as u64 + na, 4, VERTEX_USAGE);
             self.reallocations += 1;
         }
-        params.n_new = n_new;
-        params.f_add = f_add;
-        params.m_new = m_new;
-        params.splits = split_vertices;
-        // `descend` pauses after half the count's steps: its steps also write what they find.
-        params.round_steps = self.descend_steps();
-        params.rounds = self.rounds_for(self.steps, self.most, params.round_steps);
-        self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        Ok(dst)
+    }
 
-        // Submission 2: reorganisation, splits, index update, face compaction.
+    /// Stage 3, submission 2: reorganisation, splits, index update, face compaction, into
+    /// vertex set `dst`.
+    fn apply(&mut self, params: &Params, all: bool, dst: usize, splits: u32) {
+        let (n, m) = (self.n, self.m);
+        let (f_add, m_new, split_vertices) = (params.f_add, params.m_new, params.splits);
         let mut enc = self.gpu.device().create_command_encoder(&APPLY);
         {
             let (src, dstset) = (&self.sets[self.cur], &self.sets[dst]);
@@ -320,29 +404,6 @@ impl GpuAdapter {
             self.dispatch(&mut pass, &p.fill, &fill, m + f_add - m_new);
         }
         self.gpu.queue().submit([enc.finish()]);
-        if self.profile {
-            self.gpu.wait_for(self.gpu.queue().submit([]))?;
-            self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
-        }
-        if needs_resize(self.faces.idx.cap, m_new as u64, self.n_alloc) {
-            self.resize_faces(m_new as u64 + na, m_new as u64);
-        }
-        self.cur = dst;
-        if all {
-            // Room for what this count kept, for the next passes (this one's buffers stay
-            // alive until its submission ran).
-            self.grow_scratch(self.sc_kept);
-        }
-        self.n = n_new;
-        self.m = m_new;
-        Ok(PassStats {
-            splits: splits as usize,
-            collapses: collapses as usize,
-            cancelled: cancelled as usize,
-            vertices: n_new as usize,
-            faces: m_new as usize,
-            held,
-        })
     }
 
     /// Submission 1 (state update, collapses, scans) for `params`, and its totals read back:
