@@ -30,7 +30,7 @@
 //!    compaction, splits with binary search (Algorithm 4), index update (Algorithm 5) and the
 //!    in-place face compaction (section 5.6).
 //!
-//! An all-levels pass ([`Levels::All`], the default on hardware; see `codec::pm::Adapter::pass_all_levels`)
+//! An all-levels pass ([`Levels::All`](codec::pm::Levels::All), the default on hardware; see `codec::pm::Adapter::pass_all_levels`)
 //! replaces the state update and collapses by `mark` (the undone splits' ranges, the
 //! vertices that split, listed), a read-back of their number, `count` (each listed vertex's
 //! leaves and faces down its subtree, `descent.wgsl`), the scan of the ranges and `regions`
@@ -67,30 +67,34 @@
 //!   face order of the adapted mesh is free), so the triangle *set*, not the face order, is
 //!   what equals the CPU reference.
 
+mod budget;
 pub(crate) mod buffers;
 pub mod decoder;
 mod nodes;
 pub mod occlusion;
 mod pass;
 pub(crate) mod pipelines;
+mod tuning;
 
 use std::sync::Arc;
 
 use codec::pm::format::{Dpm, NodeFile, OpContext, NODE_BYTES};
-use codec::pm::{CacheStats, Levels, NodeCache, PassStats, Viewpoint, DESCENT_BUDGET, LEVELS_PER_PASS, NONE};
+use codec::pm::{CacheStats, NodeCache, PassStats, Viewpoint, LEVELS_PER_PASS, NONE};
 use thiserror::Error;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::render::{AdaptedMesh, PmPoint};
+use budget::MemoryBudget;
 use buffers::{
     init, needs_resize, pack_pn, storage, unpack_position, FaceSet, GpuVState, Params, ScanLevel, Sized, VertexSet,
-    ERRORS_BYTES, PENDING, POINT_BYTES, QUEUE_BYTES, READBACK_BYTES, SC_FACE_BYTES, SC_LEAF_BYTES, SC_SPLIT_BYTES,
-    STATE_BYTES, STATS_BYTES, VERTEX_USAGE,
+    ERRORS_BYTES, PENDING, QUEUE_BYTES, READBACK_BYTES, SC_FACE_BYTES, SC_LEAF_BYTES, SC_SPLIT_BYTES, STATE_BYTES,
+    STATS_BYTES, VERTEX_USAGE,
 };
 use decoder::{decoder_data, slot_bytes, slots_within, DecodeFailure};
 use nodes::NodePool;
 use occlusion::Occluder;
 use pipelines::Pipelines;
+use tuning::Tuning;
 
 /// The most steps a descent slot runs in one dispatch on a software adapter (lavapipe), a
 /// step being one vertex visited (its operation's head decoded, and the rest where it
@@ -299,12 +303,8 @@ pub struct GpuAdapter {
     hole: Sized,
     /// An all-levels pass's marks (`state.wgsl`): `diff`, `reach`, `up`, `root`.
     marks: [Sized; 4],
-    /// How far a pass for a view moves a vertex in the split tree ([`Self::set_levels`]), and
-    /// an all-levels pass's descent budget ([`Self::set_descent_budget`]).
-    levels: Levels,
-    descent_budget: u32,
-    /// The most steps of a descent slot in one dispatch ([`Self::set_round_steps`]).
-    round_steps: u32,
+    /// How passes are run: levels, descent budget, rounds, limits, profiling.
+    tuning: Tuning,
     /// An all-levels pass's descent stacks (`descent.wgsl`): [`STACK_WORDS`] words an entry,
     /// min([`LEVELS_PER_PASS`], descent budget) entries a slot, one slot a descent running;
     /// grown to the descents of a pass (on a software adapter to [`SOFTWARE_DESCENT_SLOTS`])
@@ -326,18 +326,12 @@ pub struct GpuAdapter {
     sc_faces: Sized,
     sc_cap: [u32; 3],
     sc_kept: [u32; 3],
-    /// The most bytes the scratch area may take without a budget ([`Self::set_scratch_limit`]).
-    scratch_limit: u64,
-    /// The most bytes the stacks may take without a budget ([`Self::set_stack_limit`]), and
-    /// the vertices that descended in the last pass ([`Self::last_descents`]).
-    stack_limit: u64,
+    /// The vertices that descended in the last pass ([`Self::last_descents`]).
     descents: u32,
-    /// Whether the kind of pass is the default's ([`Self::set_levels`] not called): all
-    /// levels, and one level for the rest of a view once an all-levels pass for it descended
-    /// deep (`deep`, [`DEEP_DESCENT`]), unless the view then took [`DEEP_PASSES`] one-level
-    /// passes that changed the mesh (`deep_passes`; `deep_tree`: all levels for the rest of
-    /// the view).
-    mixed: bool,
+    /// With the default kind of pass ([`Tuning::mixed`]): one level for the rest of a view
+    /// once an all-levels pass for it descended deep (`deep`, [`DEEP_DESCENT`]), unless the
+    /// view then took [`DEEP_PASSES`] one-level passes that changed the mesh (`deep_passes`;
+    /// `deep_tree`: all levels for the rest of the view).
     deep: bool,
     deep_passes: u32,
     deep_tree: bool,
@@ -347,8 +341,6 @@ pub struct GpuAdapter {
     n: u32,
     m: u32,
     reallocations: u64,
-    /// Wait for each pass's second submission and time it ([`GpuAdapter::set_profiling`]).
-    profile: bool,
     /// Milliseconds of the last pass: classification (to the totals read back), application.
     times: [f64; 3],
     /// Out of core: the resident nodes.
@@ -358,14 +350,8 @@ pub struct GpuAdapter {
     /// whose test ranks hidden nodes last out of core.
     occ: Sized,
     occluder: Option<Occluder>,
-    /// Bytes of graphics memory the adapter may take in all ([`Self::set_budget`]).
-    budget: Option<u64>,
-    /// The factor on the view's pixel error that keeps the mesh within the budget (1 when
-    /// it fits), the lowest it may go back to for the current view (the scale that last
-    /// overflowed, 1 after a new view), and that view.
-    error_scale: f32,
-    floor: f32,
-    last_view: Option<Viewpoint>,
+    /// The graphics memory budget and the error scale that keeps the mesh within it.
+    memory: MemoryBudget,
 }
 
 /// What adapters of the same progressive mesh share: the pipelines, the static buffers (the
@@ -488,30 +474,21 @@ impl GpuAdapter {
             sc_faces,
             sc_cap: [0; 3],
             sc_kept: [0; 3],
-            scratch_limit: MAX_SCRATCH_BYTES,
             queue: storage(d, "pm: descent queues", QUEUE_BYTES / 4, 4, VERTEX_USAGE).buffer,
-            stack_limit: MAX_STACK_BYTES,
             descents: 0,
-            mixed: true,
             deep: false,
             deep_passes: 0,
             deep_tree: false,
-            levels: Levels::All,
-            descent_budget: DESCENT_BUDGET,
-            round_steps: if gpu.is_software() { SOFTWARE_ROUND_STEPS } else { u32::MAX },
+            tuning: Tuning::for_adapter(gpu.is_software()),
             scan_levels: Vec::new(),
             n: 0,
             m: 0,
             reallocations: 0,
-            profile: false,
             times: [0.0; 3],
             resident,
             occ: storage(d, "pm: occlusion pyramid", 4, 4, VERTEX_USAGE),
             occluder: None,
-            budget: None,
-            error_scale: 1.0,
-            floor: 1.0,
-            last_view: None,
+            memory: MemoryBudget::default(),
             gpu,
         };
         adapter.reset();
@@ -556,81 +533,6 @@ impl GpuAdapter {
         (self.n, self.m)
     }
 
-    /// How far a pass for a view moves a vertex in the split tree: every level the view asks
-    /// for ([`Levels::All`]: one pass reaches the converged mesh where the descent budget
-    /// allows), or one (the paper's passes). The passes are those of [`codec::pm::Adapter`]
-    /// with the same setting. A full refinement ([`Self::refine_step`]) goes one level a pass
-    /// either way. Setting it makes every pass for a view of that kind (the CPU references'
-    /// passes, pass for pass). By default a pass for a new view runs all levels, and the
-    /// later passes for the same view one level if it descended more than [`DEEP_DESCENT`]
-    /// splits a descent on average (a view far from the mesh, as from the base mesh: a
-    /// descent is serial work in one thread, and one-level passes spread it over threads).
-    pub fn set_levels(&mut self, levels: Levels) {
-        self.levels = levels;
-        self.mixed = false;
-    }
-
-    /// Sets the most splits one vertex's descent performs in an all-levels pass (at least 1):
-    /// one thread's serial work. By default [`codec::pm::DESCENT_BUDGET`]. The CPU references
-    /// take the same setting ([`codec::pm::Adapter::set_descent_budget`]).
-    pub fn set_descent_budget(&mut self, splits: u32) {
-        self.descent_budget = splits.max(1);
-    }
-
-    /// Sets the most steps (operations decoded) a descent slot runs in one dispatch before its
-    /// descent pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`] on a
-    /// software adapter ([`Gpu::is_software`]), whose compiler ends an invocation's loops
-    /// after 65535 iterations in all; none on hardware.
-    pub fn set_round_steps(&mut self, steps: u32) {
-        self.round_steps = steps.max(1);
-    }
-
-    /// The steps a descent slot runs in one dispatch now ([`Self::set_round_steps`]; halved
-    /// where a software adapter's count reached its loop limit).
-    pub fn round_steps(&self) -> u32 {
-        self.round_steps
-    }
-
-    /// The most steps of one descent: one of `b` splits visits at most `2 b + 1` vertices,
-    /// a step each.
-    fn descent_steps(&self) -> u64 {
-        2 * self.descent_budget as u64 + 1
-    }
-
-    /// The dispatches (rounds) of `count` or `descend` that finish descents of `steps` steps
-    /// in all, the longest `most`, in the pass's slots of `round` steps a round: while the
-    /// queue is not empty every slot runs its round's steps in full, and once it is, each
-    /// slot's last descent needs at most `most` more. One on hardware (no pause).
-    fn rounds_for(&self, steps: u64, most: u64, round: u32) -> u32 {
-        if round == u32::MAX {
-            return 1;
-        }
-        let per_round = self.slots.max(1) as u64 * round as u64;
-        (steps / per_round + 1 + most.div_ceil(round as u64)).min(u32::MAX as u64) as u32
-    }
-
-    /// The steps a slot of `descend` runs in a round: half the count's on a software adapter
-    /// (a step of `descend` also writes the faces' owners and the leaves), none paused on
-    /// hardware.
-    fn descend_steps(&self) -> u32 {
-        if self.round_steps == u32::MAX {
-            u32::MAX
-        } else {
-            (self.round_steps / 2).max(1)
-        }
-    }
-
-    /// The descent budget ([`Self::set_descent_budget`]).
-    pub fn descent_budget(&self) -> u32 {
-        self.descent_budget
-    }
-
-    /// With `true`, every pass waits until its second submission has run, so that
-    /// [`Self::last_pass_ms`] can time it (a renderer would rather let it overlap).
-    pub fn set_profiling(&mut self, on: bool) {
-        self.profile = on;
-    }
-
     /// Milliseconds of the last pass: state update, collapses and scans up to the totals read
     /// back; then (when profiling) reorganisation, splits, index update and face compaction;
     /// and (when profiling) the state update and collapses alone, part of the first figure.
@@ -645,70 +547,9 @@ impl GpuAdapter {
         (self.descents, self.slots)
     }
 
-    /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`] by default;
-    /// with a budget also by a 64th of it), at least one descent's; the adapter goes
-    /// back to the base mesh.
-    pub fn set_stack_limit(&mut self, bytes: u64) {
-        self.stack_limit = bytes;
-        self.stack = storage(self.gpu.device(), "pm: descent stacks", 0, 4, VERTEX_USAGE);
-        self.reset();
-    }
-
-    /// Bounds the count's scratch area (all levels) by `bytes` ([`MAX_SCRATCH_BYTES`] by
-    /// default; with a budget also by a 64th of it): a pass whose count keeps more than it
-    /// holds walks its descents again (0: every pass does).
-    pub fn set_scratch_limit(&mut self, bytes: u64) {
-        self.scratch_limit = bytes;
-        (self.scratch, self.sc_faces) = scratch_buffers(self.gpu.device(), 0);
-        self.sc_cap = [0; 3];
-    }
-
     /// How many times a buffer was reallocated by the `n_alloc` policy so far.
     pub fn reallocations(&self) -> u64 {
         self.reallocations
-    }
-
-    /// Bytes of GPU memory the dynamic (per adapted mesh) buffers take now, at their capacities.
-    pub fn dynamic_bytes(&self) -> u64 {
-        let sets: u64 = self.sets.iter().map(VertexSet::bytes).sum();
-        let faces = self.faces.idx.buffer.size() + self.faces.fvid.buffer.size() + self.faces.owner.buffer.size();
-        let tmp = self.vcnt.buffer.size() + self.fcnt.buffer.size() + self.list.buffer.size() + self.hole.buffer.size();
-        let marks: u64 = self.marks.iter().map(|b| b.buffer.size()).sum();
-        let levels: u64 = self.scan_levels.iter().map(|l| l.sums.buffer.size() + l.uniform.size()).sum();
-        sets + faces + tmp + marks + levels
-    }
-
-    /// Bytes of GPU memory the adapter takes besides the adapted mesh: the static buffers,
-    /// the occlusion pyramid, the per-pass records and the descents' stacks.
-    fn fixed_bytes(&self) -> u64 {
-        self.fixed_bytes_within(self.budget)
-    }
-
-    /// [`Self::fixed_bytes`] under `budget`: with a budget, an all-levels adapter counts its
-    /// descent stacks at the most they may grow to.
-    fn fixed_bytes_within(&self, budget: Option<u64>) -> u64 {
-        let records =
-            self.params.size() + self.stats.size() + self.errors.size() + self.readback.size() + self.queue.size();
-        let reserve = match (budget, self.levels) {
-            (Some(_), Levels::All) => self.stack_max_bytes(budget),
-            _ => 0,
-        };
-        let scratch = self.scratch.buffer.size() + self.sc_faces.buffer.size();
-        let scratch_reserve = match (budget, self.levels) {
-            (Some(_), Levels::All) => self.scratch_max_bytes(budget),
-            _ => 0,
-        };
-        self.static_bytes()
-            + self.occ.buffer.size()
-            + records
-            + self.stack.buffer.size().max(reserve)
-            + scratch.max(scratch_reserve)
-    }
-
-    /// The most bytes the count's scratch area may take under `budget`: the scratch limit
-    /// ([`Self::set_scratch_limit`]), at most a 64th of the budget.
-    fn scratch_max_bytes(&self, budget: Option<u64>) -> u64 {
-        budget.map_or(self.scratch_limit, |b| (b / 64).min(self.scratch_limit))
     }
 
     /// Grows the count's scratch area to hold `kept` (leaves, splits, faces) with a quarter
@@ -728,7 +569,7 @@ impl GpuAdapter {
         if kept.iter().zip(&self.sc_cap).all(|(k, c)| k <= c) {
             return None;
         }
-        let max = self.scratch_max_bytes(self.budget);
+        let max = self.scratch_max_bytes(self.memory.bytes);
         let per_leaf = SC_LEAF_BYTES + SC_SPLIT_BYTES + 3 * SC_FACE_BYTES;
         // A leaf each split and descent, three faces a split: sized by the leaves, the most
         // numerous, or what the faces need.
@@ -740,7 +581,7 @@ impl GpuAdapter {
     /// Bytes of one descent's slot: its stack, min(LEVELS_PER_PASS, descent budget) entries
     /// (a descent pushes one per split, at most one per level), and its resume record.
     fn stack_slot_bytes(&self) -> u64 {
-        LEVELS_PER_PASS.min(self.descent_budget) as u64 * STACK_WORDS * 4 + RESUME_VECS * 16
+        LEVELS_PER_PASS.min(self.tuning.descent_budget) as u64 * STACK_WORDS * 4 + RESUME_VECS * 16
     }
 
     /// Where the resume records of the pass's slots start in the stacks' buffer, and their
@@ -754,7 +595,7 @@ impl GpuAdapter {
     /// The most bytes the descent stacks may take under `budget`: the stack limit
     /// ([`Self::set_stack_limit`]), at most a 64th of the budget, at least one slot.
     fn stack_max_bytes(&self, budget: Option<u64>) -> u64 {
-        let cap = budget.map_or(self.stack_limit, |b| (b / 64).min(self.stack_limit));
+        let cap = budget.map_or(self.tuning.stack_limit, |b| (b / 64).min(self.tuning.stack_limit));
         let slot = self.stack_slot_bytes();
         (cap / slot).max(1) * slot
     }
@@ -762,82 +603,6 @@ impl GpuAdapter {
     /// Descents the stacks hold at once now (at least the pass's slots).
     fn stack_slots(&self) -> u32 {
         (self.stack.cap * 4 / self.stack_slot_bytes()) as u32
-    }
-
-    /// Bytes of GPU memory the adapter takes now: [`Self::static_bytes`], the adapted mesh's
-    /// buffers at their capacities ([`Self::dynamic_bytes`]), the occlusion pyramid, the
-    /// per-pass records and the descents' stacks. With a budget ([`Self::set_budget`]) it
-    /// stays within it.
-    pub fn gpu_bytes(&self) -> u64 {
-        self.fixed_bytes() + self.dynamic_bytes()
-    }
-
-    /// At most how many bytes the adapted mesh's buffers take with `v` active vertices (in
-    /// either of the two sets) and `f` faces, by the `n_alloc` policy (a buffer holds at most
-    /// its need and `2 n_alloc` elements more): per vertex its FVID, state and point in both
-    /// sets, the three per-pass counts and the four all-levels marks, per face its indices,
-    /// FVIDs, owner and a hole slot, per scan block 8 bytes, and a few levels' records.
-    fn mesh_bytes(&self, v: u64, f: u64) -> u64 {
-        const VERTEX: u64 = 2 * (4 + STATE_BYTES + POINT_BYTES) + 7 * 4 + 1;
-        const FACE: u64 = 12 + 12 + 4 + 4;
-        let slack = 2 * self.n_alloc as u64;
-        (v + 1 + slack) * VERTEX + (f + slack) * FACE + 4096
-    }
-
-    /// Whether a mesh of `v` vertices and `f` faces (with the `n_alloc` slack) would take the
-    /// adapter past its budget or one of its buffers past the device's binding limit.
-    fn exceeds(&self, v: u64, f: u64) -> bool {
-        let na = self.n_alloc as u64;
-        let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
-        let bound = (v + na) * STATE_BYTES > limit || (f + na) * 12 > limit;
-        bound || self.budget.is_some_and(|b| self.fixed_bytes() + self.mesh_bytes(v, f) > b)
-    }
-
-    /// Whether the mesh takes at most half the room the budget leaves it and half the
-    /// binding limit (so that one [`SCALE_STEP`] finer may fit: if it does not, the pass
-    /// that overflows raises the error back and stops it there for the view).
-    fn fits_finer(&self) -> bool {
-        let (v, f) = (self.n as u64, self.m as u64);
-        let room = self.budget.map_or(u64::MAX, |b| b.saturating_sub(self.fixed_bytes()));
-        let limit = self.gpu.device().limits().max_storage_buffer_binding_size;
-        self.mesh_bytes(v, f).saturating_mul(2) <= room && (v * STATE_BYTES).saturating_mul(2) <= limit
-    }
-
-    /// Bounds the adapter's graphics memory ([`Self::gpu_bytes`]) by `bytes` (`None`: only
-    /// by the device's binding limit), and goes back to the base mesh. A pass whose splits
-    /// would take the mesh past it splits nothing and raises the error the passes after it
-    /// adapt to ([`Self::error_scale`]); once converged with room to spare, the error comes
-    /// back down. The `n_alloc` slack shrinks to at most an eighth of the room the budget
-    /// leaves the mesh. Fails if the budget does not hold the static buffers and the base
-    /// mesh.
-    pub fn set_budget(&mut self, bytes: Option<u64>) -> Result<(), AdaptError> {
-        if let Some(b) = bytes {
-            let per_element = self.mesh_bytes(1, 1) - self.mesh_bytes(0, 0);
-            let room = b.saturating_sub(self.fixed_bytes_within(bytes));
-            self.n_alloc = self.n_alloc.min((room / 16 / per_element).max(1) as u32);
-            let base = &self.shared.base;
-            let need =
-                self.fixed_bytes_within(bytes) + self.mesh_bytes(base.fvid.len() as u64, base.face_idx.len() as u64);
-            if need > b {
-                return Err(AdaptError::MeshBudget { budget: b, need });
-            }
-        }
-        self.budget = bytes;
-        (self.error_scale, self.floor, self.last_view) = (1.0, 1.0, None);
-        self.reset();
-        Ok(())
-    }
-
-    /// The factor on the view's pixel error the mesh is adapted to now: 1 unless the budget
-    /// ([`Self::set_budget`]) or the binding limit held splits back.
-    pub fn error_scale(&self) -> f32 {
-        self.error_scale
-    }
-
-    /// Bytes of the static (per progressive mesh) buffers: the compressed operations, the
-    /// decoding tables and parameters.
-    pub fn static_bytes(&self) -> u64 {
-        self.shared.ops.size() + self.shared.tables.size() + self.shared.decode.size()
     }
 
     /// Fails if an operation did not decode in the last pass (a pass checks the one before
@@ -858,7 +623,7 @@ impl GpuAdapter {
     pub fn set_occluder(&mut self, occluder: Option<Occluder>) {
         if let Some(o) = &occluder {
             let n = o.words.len() as u64;
-            if let Some(b) = self.budget {
+            if let Some(b) = self.memory.bytes {
                 let grow = (n * 2 * 4).saturating_sub(self.occ.buffer.size());
                 if self.occ.cap < n && self.gpu_bytes() + grow > b {
                     self.occluder = None;
@@ -879,7 +644,7 @@ impl GpuAdapter {
     /// arrived. Call it once per frame. `None` in core.
     pub fn schedule(&mut self, view: &Viewpoint) -> Result<Option<CacheStats>, AdaptError> {
         // The nodes of the error the passes adapt to.
-        let view = &Viewpoint { error_px: view.error_px * self.error_scale, ..*view };
+        let view = &Viewpoint { error_px: view.error_px * self.memory.error_scale, ..*view };
         match &mut self.resident {
             None => Ok(None),
             Some(r) => Ok(Some(match &self.occluder {

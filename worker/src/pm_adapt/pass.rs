@@ -52,7 +52,7 @@ impl GpuAdapter {
             self.note_view(v);
         }
         // A full refinement goes one level a pass, as the CPU reference's `refine_step`.
-        let all = view.is_some() && self.levels == Levels::All && !(self.mixed && self.deep);
+        let all = view.is_some() && self.tuning.levels == Levels::All && !(self.tuning.mixed && self.deep);
         let mut params = self.pass_params(view, all);
         let Some(Count { totals, all, held }) = self.count_within_budget(&mut params, view, all, pass_start)? else {
             return Ok(PassStats { held: true, ..unchanged });
@@ -73,9 +73,9 @@ impl GpuAdapter {
         if splits == 0 && collapses == 0 {
             // Converged at a raised error with room to spare: the next passes try a finer one,
             // not below the error that last overflowed for this view.
-            let finer = view.is_some() && self.error_scale > self.floor && self.fits_finer();
+            let finer = view.is_some() && self.memory.error_scale > self.memory.floor && self.fits_finer();
             if finer {
-                self.error_scale = (self.error_scale / SCALE_STEP).max(self.floor);
+                self.memory.error_scale = (self.memory.error_scale / SCALE_STEP).max(self.memory.floor);
             }
             return Ok(PassStats { cancelled: cancelled as usize, held: held || finer, ..unchanged });
         }
@@ -90,7 +90,7 @@ impl GpuAdapter {
         params.rounds = self.rounds_for(self.steps, self.most, params.round_steps);
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         self.apply(&params, all, dst, splits);
-        if self.profile {
+        if self.tuning.profile {
             self.gpu.wait_for(self.gpu.queue().submit([]))?;
             self.times[1] = pass_start.elapsed().as_secs_f64() * 1e3 - self.times[0];
         }
@@ -132,9 +132,9 @@ impl GpuAdapter {
     /// A new view may refine finer than the error that overflowed for the last one, and
     /// starts with all levels again.
     fn note_view(&mut self, v: &Viewpoint) {
-        if self.last_view != Some(*v) {
-            self.last_view = Some(*v);
-            self.floor = 1.0;
+        if self.memory.last_view != Some(*v) {
+            self.memory.last_view = Some(*v);
+            self.memory.floor = 1.0;
             (self.deep, self.deep_passes, self.deep_tree) = (false, 0, false);
         }
     }
@@ -148,9 +148,9 @@ impl GpuAdapter {
             m,
             mode: 1,
             levels: all as u32,
-            budget: self.descent_budget,
+            budget: self.tuning.descent_budget,
             loop_probe: 2,
-            round_steps: self.round_steps,
+            round_steps: self.tuning.round_steps,
             ..Default::default()
         };
         if let Some(v) = view {
@@ -158,7 +158,7 @@ impl GpuAdapter {
             params.planes = v.planes().map(|p| p.to_array());
             params.eye = [v.eye.x, v.eye.y, v.eye.z, 1.0];
             params.pixels_per_unit = v.pixels_per_unit;
-            params.error_px = v.error_px * self.error_scale;
+            params.error_px = v.error_px * self.memory.error_scale;
             params.c_lod = v.c_lod;
             params.attribute_scale = v.attribute_scale;
             if let Some(o) = &self.occluder {
@@ -198,10 +198,10 @@ impl GpuAdapter {
             match view {
                 None => return Ok(None),
                 Some(v) => {
-                    self.error_scale = (self.error_scale * SCALE_STEP).min(MAX_SCALE);
-                    self.floor = self.error_scale;
+                    self.memory.error_scale = (self.memory.error_scale * SCALE_STEP).min(MAX_SCALE);
+                    self.memory.floor = self.memory.error_scale;
                     params.mode = 2;
-                    params.error_px = v.error_px * self.error_scale;
+                    params.error_px = v.error_px * self.memory.error_scale;
                     totals = self.classify(params, pass_start)?;
                 }
             }
@@ -212,7 +212,7 @@ impl GpuAdapter {
     /// The deep-descent bookkeeping of a mixed file's all-levels passes (see
     /// [`DEEP_DESCENT`]).
     fn note_descents(&mut self, all: bool, splits: u32, collapses: u32) {
-        if all && self.mixed && !self.deep_tree && splits > DEEP_DESCENT.saturating_mul(self.descents) {
+        if all && self.tuning.mixed && !self.deep_tree && splits > DEEP_DESCENT.saturating_mul(self.descents) {
             self.deep = true;
         }
         if self.deep && !all && splits + collapses > 0 {
@@ -416,10 +416,10 @@ impl GpuAdapter {
         loop {
             match self.classify_once(params, pass_start) {
                 Err(AdaptError::LoopLimit { .. })
-                    if self.count_ran && self.round_steps != u32::MAX && self.round_steps > 1 =>
+                    if self.count_ran && self.tuning.round_steps != u32::MAX && self.tuning.round_steps > 1 =>
                 {
-                    self.round_steps /= 2;
-                    params.round_steps = self.round_steps;
+                    self.tuning.round_steps /= 2;
+                    params.round_steps = self.tuning.round_steps;
                     let mut enc = self.gpu.device().create_command_encoder(&COUNT);
                     enc.clear_buffer(&self.errors, 0, None);
                     self.gpu.queue().submit([enc.finish()]);
@@ -536,8 +536,8 @@ impl GpuAdapter {
                 }
                 let descents = totals[2 + STAT_DESCENTS];
                 self.descents = descents;
-                let (slots, max) = (self.stack_slots(), self.stack_max_bytes(self.budget));
-                let cap = if self.round_steps == u32::MAX { u32::MAX } else { SOFTWARE_DESCENT_SLOTS };
+                let (slots, max) = (self.stack_slots(), self.stack_max_bytes(self.memory.bytes));
+                let cap = if self.tuning.round_steps == u32::MAX { u32::MAX } else { SOFTWARE_DESCENT_SLOTS };
                 let want = (descents.min(cap) as u64).min(max / self.stack_slot_bytes());
                 if (slots as u64) < want {
                     // Grown to the descents (at least double), within the most it may take.
@@ -566,7 +566,7 @@ impl GpuAdapter {
                 self.dispatch(&mut pass, &p.collapse, &collapse, n);
             }
         }
-        if self.profile {
+        if self.tuning.profile {
             // Time the state update and collapses apart from the scans.
             self.gpu.wait_for(self.gpu.queue().submit([enc.finish()]))?;
             self.times[2] = pass_start.elapsed().as_secs_f64() * 1e3;
@@ -613,8 +613,12 @@ impl GpuAdapter {
         // of rounds finishes the descents that a round of every slot can hold, and the
         // longest then.
         let most = self.descent_steps();
-        let bound = self.rounds_for(total as u64 * most, most, self.round_steps);
-        let batch = if self.round_steps == u32::MAX { 1 } else { (most.div_ceil(self.round_steps as u64) + 1) as u32 };
+        let bound = self.rounds_for(total as u64 * most, most, self.tuning.round_steps);
+        let batch = if self.tuning.round_steps == u32::MAX {
+            1
+        } else {
+            (most.div_ceil(self.tuning.round_steps as u64) + 1) as u32
+        };
         params.rounds = bound;
         self.gpu.queue().write_buffer(&self.params, 0, bytemuck::bytes_of(params));
         let mut run = 0;
