@@ -78,6 +78,10 @@ pub struct SortSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chunks: Option<ChunkSummary>,
     pub per_tile: Vec<TileSummary>,
+    /// In a dump's `summary.json` only: the files the dump wrote ([`DUMP_FILES`]), the only
+    /// ones a later dump into the folder removes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dump_files: Option<Vec<String>>,
 }
 
 impl SortSummary {
@@ -99,6 +103,7 @@ impl SortSummary {
             totals,
             chunks: None,
             per_tile,
+            dump_files: None,
         }
     }
 }
@@ -310,7 +315,7 @@ pub fn run(
         prepare_dump(dir, path)?;
     }
     let name = path.display().to_string();
-    let (summary, tiles) = if let Some(model) = open_chunked(path, 1 << 30)? {
+    let (mut summary, tiles) = if let Some(model) = open_chunked(path, 1 << 30)? {
         let cam = chunked_camera(&model, camera, &grid)?;
         crate::cli::check_camera(&cam, grid.height)?;
         sort_chunked_frame(&model, &name, &cam, &grid, coding)?
@@ -325,10 +330,12 @@ pub fn run(
         clear_dump(dir)?;
         // The summary, written first, records the files the dump writes, so that a later dump
         // removes exactly those, even after this one was interrupted.
-        let mut record = serde_json::to_value(&summary)?;
+        // Written from the summary itself, so that its fields keep their order and its `f32`
+        // values their shortest form.
         let files: Vec<String> = tiles.iter().map(|(index, _)| format!("tile-{index}.ply")).collect();
-        record[DUMP_FILES] = serde_json::json!(files);
-        write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&record)?.as_bytes())?;
+        summary.dump_files = Some(files);
+        write_bytes(&dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+        summary.dump_files = None;
         for (index, streams) in &tiles {
             let mut mesh = codec::Mesh::default();
             for s in streams {
