@@ -16,7 +16,7 @@
 //! in 3x2 tiles, the moved viewport gave the same coverage but 32 of 266,459 covered pixels
 //! one level off in color; the sub-frustum also flipped the coverage of some pixels.
 //!
-//! The shading is `shaders/render.wgsl`: a light grey, two-sided Lambert plus ambient under a
+//! The shading is `worker/src/render.wgsl`: a light grey, two-sided Lambert plus ambient under a
 //! headlight, on a transparent background; there is no culling, as meshes may be
 //! inconsistently oriented.
 
@@ -31,7 +31,7 @@ use crate::RenderMesh;
 
 /// A mesh that is already on the device, in the layout of the GPU progressive-mesh
 /// adaptation (`crate::pm_adapt`), drawn by vertex pulling (`vs_pulled` in
-/// `shaders/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
+/// `worker/src/render.wgsl`): the index buffer holds active-vertex indices, and each vertex reads
 /// its position and normal.
 #[derive(Clone, Copy)]
 pub struct AdaptedMesh<'a> {
@@ -60,8 +60,14 @@ enum Source<'a> {
     Pm(AdaptedMesh<'a>),
 }
 
-/// The renderer's shaders (see `shaders/README.md`).
-pub(crate) const SHADER: &str = include_str!("../../shaders/render.wgsl");
+/// The renderer's shaders (`render.wgsl`, beside this file): two pipelines drawn under the
+/// tile's scissor rect into a frame-sized target, `clear_vs`/`clear_fs` (resets the tile to
+/// transparent black and the far depth) and `vs_main`/`fs_main` (the mesh), with the uniform
+/// block `Frame { view_proj, eye }` at group 0, binding 0, and positions and normals at vertex
+/// locations 0 and 1; `vs_pulled` draws a progressive mesh adapted on the GPU straight from
+/// its buffers (the vertex's FVID at group 1, binding 0; that FVID's position and normal at
+/// binding 1).
+pub(crate) const SHADER: &str = include_str!("render.wgsl");
 
 /// Bind group 0 of the mesh pipelines: the frame uniform, read by both shader stages.
 pub(crate) const FRAME_GROUP: u32 = 0;
@@ -78,7 +84,7 @@ const VEC3_BYTES: u64 = std::mem::size_of::<[f32; 3]>() as u64;
 const POSITION_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
 const NORMAL_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 => Float32x3];
 /// Vertex colours, RGBA8 read as 0..1; alpha 0 marks a mesh without colours (see
-/// `shaders/render.wgsl`).
+/// `worker/src/render.wgsl`).
 const COLOR_ATTRIBUTE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![2 => Unorm8x4];
 
 /// Why the renderer could not start or render.

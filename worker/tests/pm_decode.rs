@@ -1,4 +1,4 @@
-//! The WGSL `.dpm` decoder (`shaders/pm/decode.wgsl`) against the CPU decoder
+//! The WGSL `.dpm` decoder (`worker/src/pm_adapt/shaders/decode.wgsl`) against the CPU decoder
 //! (`Dpm::decode_op`): every operation of real meshes decoded on the GPU from its address and
 //! context gives the CPU's operation bit for bit (criteria values included), and damaged
 //! operations are refused by the GPU exactly where the CPU refuses them, with no read out of

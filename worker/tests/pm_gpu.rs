@@ -1,4 +1,4 @@
-//! The GPU adaptation (worker::pm_adapt, shaders/pm/*.wgsl) against the CPU reference
+//! The GPU adaptation (worker::pm_adapt, worker/src/pm_adapt/shaders/*.wgsl) against the CPU reference
 //! (codec::pm::Adapter): after every pass of a camera path, the same active vertices, the
 //! same per-pass statistics and the same triangle set (as FVID triples, orientation kept).
 //! Needs a wgpu adapter; without a GPU that is Mesa's lavapipe.

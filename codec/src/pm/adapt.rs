@@ -157,7 +157,7 @@ impl Eval {
     }
 
     /// The test, written as plain scalar arithmetic in a fixed order (no transcendental
-    /// functions, no fused multiply-adds, no SIMD dot products) so that `shaders/pm/common.wgsl`,
+    /// functions, no fused multiply-adds, no SIMD dot products) so that `worker/src/pm_adapt/shaders/common.wgsl`,
     /// which repeats it operation for operation, reaches the same decision.
     pub(super) fn needs(&self, c: &Cached) -> bool {
         needs_split(&self.view, &self.planes, c.center.to_array(), c.normal.to_array(), &c.crit)

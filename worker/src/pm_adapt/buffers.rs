@@ -4,7 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-/// `VState` of `shaders/pm/common.wgsl`: an active vertex's operation and its creator's.
+/// `VState` of `worker/src/pm_adapt/shaders/common.wgsl`: an active vertex's operation and its creator's.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default, Debug)]
 pub(super) struct GpuVState {
@@ -25,7 +25,7 @@ pub(super) struct GpuVState {
     pub(super) c_crit: [f32; 4],
 }
 
-/// `pack_pn` of `shaders/pm/common.wgsl`: a quantized position (at most 24 bits a
+/// `pack_pn` of `worker/src/pm_adapt/shaders/common.wgsl`: a quantized position (at most 24 bits a
 /// coordinate) and an octahedral normal (at most 17 bits a component) in four words.
 pub(super) fn pack_pn(pos: [u32; 3], nrm: [u32; 2]) -> [u32; 4] {
     [pos[0] | (nrm[0] >> 16) << 24, pos[1] | (nrm[1] >> 16) << 24, pos[2], (nrm[0] & 0xffff) | nrm[1] << 16]
@@ -36,10 +36,10 @@ pub(super) fn unpack_position(pn: [u32; 4]) -> [u32; 3] {
     [pn[0] & 0xff_ffff, pn[1] & 0xff_ffff, pn[2]]
 }
 
-/// `PENDING` of `shaders/pm/common.wgsl`: the vertex's operation waits for its node.
+/// `PENDING` of `worker/src/pm_adapt/shaders/common.wgsl`: the vertex's operation waits for its node.
 pub(crate) const PENDING: u32 = 1;
 
-/// `Params` of `shaders/pm/common.wgsl`.
+/// `Params` of `worker/src/pm_adapt/shaders/common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
 pub(super) struct Params {
@@ -83,7 +83,7 @@ pub(super) struct Params {
     pub(super) occ_size: [f32; 4],
 }
 
-/// `Level` of `shaders/pm/scan.wgsl`: the element count of one level of the scan.
+/// `Level` of `worker/src/pm_adapt/shaders/scan.wgsl`: the element count of one level of the scan.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(super) struct LevelUniform {

@@ -1,4 +1,4 @@
-//! `.dpm` operations decoded on the GPU (`shaders/pm/decode.wgsl`): what a worker keeps of a
+//! `.dpm` operations decoded on the GPU (`worker/src/pm_adapt/shaders/decode.wgsl`): what a worker keeps of a
 //! progressive mesh in graphics memory is its compressed operations, the probability tables
 //! and a few hundred values, and any operation decodes from its address and context, as
 //! section 4.2 of the paper has it. [`GpuOpDecoder`] uploads those and decodes batches of
@@ -86,12 +86,12 @@ pub(crate) fn decoder_prelude() -> String {
 /// The decoder's source: the prelude and `decode.wgsl`, for a shader that declares its
 /// bindings (see the top of `decode.wgsl`) after it.
 pub(crate) fn decoder_wgsl() -> String {
-    format!("{}\n{}", decoder_prelude(), include_str!("../../../shaders/pm/decode.wgsl"))
+    format!("{}\n{}", decoder_prelude(), include_str!("shaders/decode.wgsl"))
 }
 
 /// The batch shader: the decoder and `decode_batch.wgsl`.
 pub(crate) fn batch_wgsl() -> String {
-    format!("{}\n{}", decoder_wgsl(), include_str!("../../../shaders/pm/decode_batch.wgsl"))
+    format!("{}\n{}", decoder_wgsl(), include_str!("shaders/decode_batch.wgsl"))
 }
 
 /// Bytes per slot of the node pool of an out-of-core `dpm`: its longest node, in words.

@@ -1,7 +1,7 @@
 //! View-dependent adaptation of a dependency-free progressive mesh on the GPU, straight from
 //! the `.dpm`'s compressed operations: the stages of Algorithms 1 to 5 of E. Derzapf and M. Guthe,
 //! "Dependency-Free Parallel Progressive Meshes", Computer Graphics Forum 31(8), 2012, as
-//! WGSL compute pipelines (`shaders/pm/*.wgsl`, one file per stage, `common.wgsl` prepended to
+//! WGSL compute pipelines (`worker/src/pm_adapt/shaders/*.wgsl`, one file per stage, `common.wgsl` prepended to
 //! each but the generic scan, the operation decoder `decode.wgsl` to the reorganisation),
 //! driven pass by pass from here. It keeps the state of [`codec::pm::DpmAdapter`] and reaches
 //! the states of the CPU reference [`codec::pm::Adapter`]: same decisions, same triangle set
@@ -41,7 +41,7 @@
 //!
 //! The adapted mesh stays on the GPU between passes (temporal coherence). It is drawn straight
 //! from these buffers: the face index buffer is the draw's index buffer, and the vertex shader
-//! pulls each active vertex's position and normal (see `vs_pulled` in `shaders/render.wgsl`),
+//! pulls each active vertex's position and normal (see `vs_pulled` in `worker/src/render.wgsl`),
 //! so rendering reads nothing back.
 //!
 //! Where this differs from the paper:

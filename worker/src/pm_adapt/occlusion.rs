@@ -1,7 +1,7 @@
 //! Occlusion culling one frame late (the paper's section 5.7 culls occluded nodes with the
 //! depth of the frame before): a depth pyramid of the last frame's drawing, built here on the
 //! host from the depth buffer the renderer read back, and tested against every refining
-//! vertex's bounding sphere in the state update (`occluded` in `shaders/pm/state.wgsl`). A
+//! vertex's bounding sphere in the state update (`occluded` in `worker/src/pm_adapt/shaders/state.wgsl`). A
 //! vertex whose sphere was hidden does not split, and a creator whose sphere was hidden lets
 //! its vertices collapse, so hidden parts coarsen to what the frame before showed of them.
 //! Spheres, not nodes: every vertex's sphere bounds all it refines into, so the test is the

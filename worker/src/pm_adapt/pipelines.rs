@@ -1,4 +1,4 @@
-//! The adaptation's stages, one compute pipeline per entry point of `shaders/pm/*.wgsl`, in
+//! The adaptation's stages, one compute pipeline per entry point of `worker/src/pm_adapt/shaders/*.wgsl`, in
 //! the order a pass runs them. Each [`StageDef`] is the Rust half of the stage's contract with
 //! its WGSL: the bind group layout and every bind group of the stage are built from its
 //! binding table, and `wgsl_contract` checks the table against the shader (slot, name,
@@ -17,12 +17,12 @@ pub(crate) const WG: u32 = 256;
 pub(crate) const SCAN_BLOCK: u32 = 2048;
 
 /// Types, `Params`, and the refinement test every stage but the scan shares.
-const COMMON: &str = include_str!("../../../shaders/pm/common.wgsl");
+const COMMON: &str = include_str!("shaders/common.wgsl");
 /// What the stages that decode share after the decoder: error reports, a vertex's split cache.
-const VERTEX_OP: &str = include_str!("../../../shaders/pm/vertex_op.wgsl");
+const VERTEX_OP: &str = include_str!("shaders/vertex_op.wgsl");
 /// What the state update and the split decoding share after `vertex_op.wgsl`: the view test
 /// with occlusion, and the descent of an all-levels pass.
-const DESCENT: &str = include_str!("../../../shaders/pm/descent.wgsl");
+const DESCENT: &str = include_str!("shaders/descent.wgsl");
 
 /// One WGSL file of the adaptation, compiled as one shader module.
 pub(crate) struct ShaderDef {
@@ -67,42 +67,39 @@ const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
 
 const NODES_WGSL: ShaderDef = ShaderDef {
     label: "pm: node check",
-    source: include_str!("../../../shaders/pm/nodes.wgsl"),
+    source: include_str!("shaders/nodes.wgsl"),
     common: true,
     decoder: true,
     descent: false,
 };
 const STATE_WGSL: ShaderDef = ShaderDef {
     label: "pm: state update",
-    source: include_str!("../../../shaders/pm/state.wgsl"),
+    source: include_str!("shaders/state.wgsl"),
     common: true,
     decoder: true,
     descent: true,
 };
-const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("../../../shaders/pm/collapse.wgsl"));
+const COLLAPSE_WGSL: ShaderDef = with_common("pm: collapse", include_str!("shaders/collapse.wgsl"));
 const SCAN_WGSL: ShaderDef = ShaderDef {
     label: "pm: scan",
-    source: include_str!("../../../shaders/pm/scan.wgsl"),
+    source: include_str!("shaders/scan.wgsl"),
     common: false,
     decoder: false,
     descent: false,
 };
-const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("../../../shaders/pm/reorganise.wgsl"));
+const REORGANISE_WGSL: ShaderDef = with_common("pm: reorganise", include_str!("shaders/reorganise.wgsl"));
 const SPLIT_DECODE_WGSL: ShaderDef = ShaderDef {
     label: "pm: split decode",
-    source: include_str!("../../../shaders/pm/split_decode.wgsl"),
+    source: include_str!("shaders/split_decode.wgsl"),
     common: true,
     decoder: true,
     descent: true,
 };
-const PLACE_WGSL: ShaderDef = with_common("pm: place", include_str!("../../../shaders/pm/place.wgsl"));
-const COMPACT_SPLITS_WGSL: ShaderDef =
-    with_common("pm: compact splits", include_str!("../../../shaders/pm/compact_splits.wgsl"));
-const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("../../../shaders/pm/split.wgsl"));
-const INDEX_UPDATE_WGSL: ShaderDef =
-    with_common("pm: index update", include_str!("../../../shaders/pm/index_update.wgsl"));
-const FACE_COMPACT_WGSL: ShaderDef =
-    with_common("pm: face compaction", include_str!("../../../shaders/pm/face_compact.wgsl"));
+const PLACE_WGSL: ShaderDef = with_common("pm: place", include_str!("shaders/place.wgsl"));
+const COMPACT_SPLITS_WGSL: ShaderDef = with_common("pm: compact splits", include_str!("shaders/compact_splits.wgsl"));
+const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("shaders/split.wgsl"));
+const INDEX_UPDATE_WGSL: ShaderDef = with_common("pm: index update", include_str!("shaders/index_update.wgsl"));
+const FACE_COMPACT_WGSL: ShaderDef = with_common("pm: face compaction", include_str!("shaders/face_compact.wgsl"));
 
 /// `P`, the parameters every stage of `common.wgsl` binds first.
 const PARAMS: Binding = Binding::read::<Params>(0, "P");

@@ -104,7 +104,7 @@
 //!    in 6 classes by the bit length of `m` (groups).
 //!
 //! **Integer-exact decoding (version 3).** Decoding an operation takes integer steps only, so a
-//! GPU decodes it bit for bit as the CPU does (`shaders/pm/decode.wgsl`, tested against
+//! GPU decodes it bit for bit as the CPU does (`worker/src/pm_adapt/shaders/decode.wgsl`, tested against
 //! [`Dpm::decode_op`]): every coded value fits in 32 bits (decoders refuse wider ones; the
 //! encoder refuses 2^31 vertices or a 2 GiB operations section, which keep them there); the
 //! log codes step by `2^(1/35)`, so a code `k` decodes as the entry `(k-1) % 35` of a per-file
