@@ -340,7 +340,7 @@ fn a_non_finite_model_box_names_the_file() {
     ok(&tessera(&["encode", &mesh("classic/woody.obj"), "-o", s(&bft)]));
     let mut b = std::fs::read(&bft).unwrap();
     // The header's bbox_max.x, then its checksum made valid again: only the box is wrong.
-    // Layout in codec/src/bft/format.rs: the 72-byte header at 12, its CRC-32 at 84.
+    // Layout in codec/bft/src/format.rs: the 72-byte header at 12, its CRC-32 at 84.
     b[12 + 60..12 + 64].copy_from_slice(&f32::NAN.to_le_bytes());
     let crc = crc32fast::hash(&b[12..84]);
     b[84..88].copy_from_slice(&crc.to_le_bytes());

@@ -1,5 +1,6 @@
 //! Tessera's codec, everything about meshes and their files that needs no MPI and no GPU, so
-//! that it builds and tests fast and its decoders can be fuzzed (`fuzz/`):
+//! that it builds and tests fast and its decoders can be fuzzed (`fuzz/`). It is the face of
+//! a crate per paper and the two they build on (`codec/*/`), whose modules it re-exports:
 //! - the mesh type, its loaders and writers ([`load`], [`save`]), bounded reads and model-kind
 //!   detection ([`input`], [`kind`]), quantization and bounding boxes ([`mesh`]);
 //! - entropy coding: the adaptive binary range coder ([`rangecoder`]) and canonical Huffman
@@ -26,22 +27,17 @@
 //! assert_eq!(decoded.triangles.len(), 2);
 //! ```
 
-pub mod bft;
-mod container;
-mod csr;
-pub mod fuzzing;
-pub mod huffman;
-pub mod input;
-pub mod kind;
-pub mod load;
-pub mod mesh;
-pub mod nsp;
-pub mod pm;
-pub mod rangecoder;
-pub mod save;
-pub mod tri_sort;
-pub mod view;
+// The codecs, a crate per paper, and what they build on, re-exported so that the paths
+// users and tests write (`codec::bft::encode`, `codec::Mesh`) are the crate's.
+pub use tessera_bft as bft;
+pub use tessera_bft::tri_sort;
+pub use tessera_entropy::{huffman, rangecoder};
+pub use tessera_mesh::{input, kind, load, mesh, save, view};
+pub use tessera_nsp as nsp;
+pub use tessera_pm as pm;
 
-pub use container::{Format, FormatError};
-pub use load::{load_path, LoadError};
-pub use mesh::{Mesh, MeshError, Quantization};
+pub mod fuzzing;
+
+pub use tessera_entropy::{Format, FormatError};
+pub use tessera_mesh::{load_path, LoadError};
+pub use tessera_mesh::{Mesh, MeshError, Quantization};

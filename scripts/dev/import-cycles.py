@@ -146,8 +146,13 @@ def scc(graph):
 
 
 def main():
+    # Every crate of the workspace, the codec's nested ones (codec/*/) included.
+    crates = [d for d in os.listdir(ROOT) if os.path.isfile(os.path.join(ROOT, d, "Cargo.toml"))]
+    crates += [os.path.join("codec", d) for d in os.listdir(os.path.join(ROOT, "codec"))]
     srcs = sys.argv[1:] or sorted(
-        os.path.join(ROOT, d, "src") for d in os.listdir(ROOT) if os.path.isfile(os.path.join(ROOT, d, "Cargo.toml")) and os.path.isdir(os.path.join(ROOT, d, "src"))
+        os.path.join(ROOT, d, "src")
+        for d in crates
+        if os.path.isfile(os.path.join(ROOT, d, "Cargo.toml")) and os.path.isdir(os.path.join(ROOT, d, "src"))
     )
     cycles = 0
     for src in srcs:

@@ -78,7 +78,7 @@ pub struct SortSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chunks: Option<ChunkSummary>,
     pub per_tile: Vec<TileSummary>,
-    /// In a dump's `summary.json` only: the files the dump wrote ([`DUMP_FILES`]), the only
+    /// In a dump's `summary.json` only: the files the dump wrote (`dump_files`), the only
     /// ones a later dump into the folder removes.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dump_files: Option<Vec<String>>,

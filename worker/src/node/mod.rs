@@ -15,7 +15,8 @@
 //! | file | what |
 //! |---|---|
 //! | `rank.rs` | the loop: start the GPU, say ready, take messages, answer with pixels; heartbeats and test faults |
-//! | `model.rs` | the [`Model`] a kind implements, and which kind a message sets up |
+//! | `model.rs` | the [`Model`] a kind implements |
+//! | `kinds.rs` | which kind a message sets up |
 //! | `bft.rs` | `.bft` models, single-stream and chunked: tiles' streams decoded and drawn, chunks kept between frames, a frame's shares from several sorters joined |
 //! | `pm.rs` | a progressive mesh (`.dpm`), in core or out of core, adapted on the GPU |
 //! | `nsp.rs` | an `.nsp` model: cells received, refined to the frame's selection and drawn |
@@ -24,6 +25,7 @@
 
 mod bft;
 mod error;
+mod kinds;
 mod model;
 mod nsp;
 mod pm;

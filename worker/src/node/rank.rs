@@ -10,7 +10,8 @@ use std::time::Duration;
 
 use protocol::{unix_ms, Failed, FrameSpan, Pixels, PmMemory, Ready, TilePixels, ToMaster, ToWorker};
 
-use super::model::{self, Loaded, Model, Rendered};
+use super::kinds::{self, Loaded};
+use super::model::{Model, Rendered};
 use super::{RankError, WorkerError};
 use crate::gpu::Gpu;
 use crate::render::Renderer;
@@ -151,7 +152,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
             Ok(msg) => msg,
             Err(e) => return fail(WorkerError::BadMessage(e)),
         };
-        let frame = match model::load(&gpu, msg) {
+        let frame = match kinds::load(&gpu, msg) {
             Ok(Loaded::Model(m)) => {
                 model = Some(m);
                 continue;
@@ -174,7 +175,7 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         }
         let model = match &mut model {
             Some(m) => m,
-            None => match model::for_first_frame(&frame) {
+            None => match kinds::for_first_frame(&frame) {
                 Ok(m) => model.insert(m),
                 Err(e) => return fail(e),
             },
