@@ -67,6 +67,7 @@ use std::convert::Infallible;
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
+use super::one_level;
 use super::{Criteria, ProgressiveMesh, SplitTree, NONE};
 use crate::view::Camera;
 
@@ -604,106 +605,28 @@ impl<'a> Adapter<'a> {
         self.face_idx.par_iter().map(|t| t.map(|i| self.fvid[i as usize])).collect()
     }
 
-    /// The collapse target FVID of a node, if it is a right child.
-    fn target_of(&self, node: u32) -> u32 {
-        if node != NONE && node & 1 == 1 {
-            self.pm.splits[(node >> 1) as usize].v
-        } else {
-            NONE
-        }
-    }
-
+    /// One pass of one level ([`one_level::pass`] over the decoded mesh).
     fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
-        let pm = self.pm;
-        let n = self.fvid.len();
-
-        // Algorithm 1: vertex state update.
-        let state: Vec<u32> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                if self.next[i] != NONE && need(&self.split_cache[i]) {
-                    return 2;
-                }
-                let target = self.target_of(self.node[i]);
-                if target != NONE
-                    && !need(&self.collapse_cache[i])
-                    && i > 0
-                    && self.fvid[i - 1] == target
-                    && (i + 1 == n || self.target_of(self.node[i + 1]) != self.fvid[i])
-                {
-                    return 0;
-                }
-                1
-            })
-            .collect();
-        // Algorithm 2: collapses whose target splits are cancelled.
-        let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
-        if splits == 0 && collapses == 0 {
-            return PassStats { splits, collapses, cancelled, vertices: n, faces: self.face_idx.len(), held: false };
+        let form = Decoded {
+            pm: self.pm,
+            tree: &self.tree,
+            fvid: &self.fvid,
+            next: &self.next,
+            node: &self.node,
+            split_cache: &self.split_cache,
+            collapse_cache: &self.collapse_cache,
+            creator: &self.creator,
+        };
+        let faces =
+            one_level::Faces { idx: &mut self.face_idx, fvid: &mut self.face_fvid, owner: &mut self.face_owner };
+        let done = match one_level::pass(&form, faces, need) {
+            Ok(done) => done,
+            Err(never) => match never {},
+        };
+        if let Some(m) = done.moved {
+            self.store(m.fvid, &m.vertices);
         }
-
-        // Algorithm 3: memory management.
-        let face_cnt: Vec<u32> = (0..n)
-            .into_par_iter()
-            .map(|i| if cnt[i] == 2 { pm.splits[self.next[i] as usize].faces.len() as u32 } else { 0 })
-            .collect();
-        let face_sum = exclusive_scan(&face_cnt);
-        let vertex_sum = exclusive_scan(&cnt);
-        let tree = &self.tree;
-        let vertices: Vec<Slot> = (0..n)
-            .into_par_iter()
-            .flat_map_iter(|i| {
-                let old = self.slot(i);
-                let out: [Option<Slot>; 2] = match cnt[i] {
-                    0 => [None, None],
-                    1 if i + 1 < n && cnt[i + 1] == 0 => {
-                        // Algorithm 2's collapse: the target takes the collapse's node and
-                        // keeps its creator.
-                        let p = self.node[i + 1] >> 1;
-                        let node = tree.parent[p as usize];
-                        [Some(Slot { next: p, node, split_cache: self.collapse_cache[i + 1], ..old }), None]
-                    }
-                    1 => [Some(old), None],
-                    _ => {
-                        // Algorithm 4: the split writes v and v_u.
-                        let [v, u] = self.split_children(&old);
-                        [Some(v), Some(u)]
-                    }
-                };
-                out.into_iter().flatten()
-            })
-            .collect();
-        debug_assert_eq!(vertices.len(), vertex_sum[n] as usize);
-        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.fvid).collect();
-        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-
-        // Algorithm 4: the new faces of the compacted splits.
-        let split_list: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| cnt[i as usize] == 2).collect();
-        let new_fvid_ref = &new_fvid;
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = split_list
-            .par_iter()
-            .flat_map_iter(|&i| {
-                let s = self.next[i as usize];
-                let split = &pm.splits[s as usize];
-                let j = vertex_sum[i as usize];
-                split.faces.iter().map(move |&t| (split_face_indices(t, split.v, split.v_u, j, new_fvid_ref), t, s))
-            })
-            .collect();
-        debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
-
-        // Algorithm 5: index update and compaction of the old faces.
-        let node = &self.node;
-        let faces = update_faces(
-            [&mut self.face_idx, &mut self.face_fvid],
-            &mut self.face_owner,
-            &cnt,
-            &vertex_sum,
-            &new_fvid,
-            &|i| node[i] >> 1,
-            new_faces,
-        );
-        self.store(new_fvid, &vertices);
-        PassStats { splits, collapses, cancelled, vertices: self.fvid.len(), faces, held: false }
+        done.stats
     }
 
     /// Active vertex `i`'s state.
@@ -718,21 +641,9 @@ impl<'a> Adapter<'a> {
         }
     }
 
-    /// The two children of a vertex whose next split is done: `v` keeps the FVID and the
-    /// creator, `v_u` gets the split as its creator (and collapse).
+    /// The two children of a vertex whose next split is done (see [`split_children`]).
     fn split_children(&self, old: &Slot) -> [Slot; 2] {
-        let (pm, s) = (self.pm, old.next);
-        let [l, r] = self.tree.children[s as usize];
-        let v = Slot { next: l, node: 2 * s, split_cache: Cached::of(pm, l), ..*old };
-        let u = Slot {
-            fvid: pm.splits[s as usize].v_u,
-            next: r,
-            node: 2 * s + 1,
-            split_cache: Cached::of(pm, r),
-            collapse_cache: old.split_cache,
-            creator: s,
-        };
-        [v, u]
+        split_children(self.pm, &self.tree, old)
     }
 
     /// Replaces the vertex state by `vertices` (sorted by FVID, `new_fvid` their FVIDs).
@@ -869,6 +780,118 @@ struct Slot {
     split_cache: Cached,
     collapse_cache: Cached,
     creator: u32,
+}
+
+/// The two children of a vertex whose next split is done: `v` keeps the FVID and the
+/// creator, `v_u` gets the split as its creator (and collapse).
+fn split_children(pm: &ProgressiveMesh, tree: &SplitTree, old: &Slot) -> [Slot; 2] {
+    let s = old.next;
+    let [l, r] = tree.children[s as usize];
+    let v = Slot { next: l, node: 2 * s, split_cache: Cached::of(pm, l), ..*old };
+    let u = Slot {
+        fvid: pm.splits[s as usize].v_u,
+        next: r,
+        node: 2 * s + 1,
+        split_cache: Cached::of(pm, r),
+        collapse_cache: old.split_cache,
+        creator: s,
+    };
+    [v, u]
+}
+
+/// The decoded mesh's state, borrowed for a pass of one level ([`one_level::Form`]): a
+/// splitting vertex's operation is its next split's record, and a face's owner is the split
+/// that made it.
+struct Decoded<'s> {
+    pm: &'s ProgressiveMesh,
+    tree: &'s SplitTree,
+    fvid: &'s [u32],
+    next: &'s [u32],
+    node: &'s [u32],
+    split_cache: &'s [Cached],
+    collapse_cache: &'s [Cached],
+    creator: &'s [u32],
+}
+
+impl Decoded<'_> {
+    /// The collapse target FVID of a node, if it is a right child.
+    fn target_of(&self, node: u32) -> u32 {
+        if node != NONE && node & 1 == 1 {
+            self.pm.splits[(node >> 1) as usize].v
+        } else {
+            NONE
+        }
+    }
+
+    fn slot(&self, i: usize) -> Slot {
+        Slot {
+            fvid: self.fvid[i],
+            next: self.next[i],
+            node: self.node[i],
+            split_cache: self.split_cache[i],
+            collapse_cache: self.collapse_cache[i],
+            creator: self.creator[i],
+        }
+    }
+}
+
+impl one_level::Form for Decoded<'_> {
+    type Vertex = Slot;
+    /// The split's index.
+    type Op = u32;
+    type Error = Infallible;
+
+    fn len(&self) -> usize {
+        self.fvid.len()
+    }
+
+    fn fvid(&self, i: usize) -> u32 {
+        self.fvid[i]
+    }
+
+    fn target(&self, i: usize) -> u32 {
+        self.target_of(self.node[i])
+    }
+
+    fn splits(&self, i: usize, need: one_level::Need) -> bool {
+        self.next[i] != NONE && need(&self.split_cache[i])
+    }
+
+    fn collapse_cache(&self, i: usize) -> &Cached {
+        &self.collapse_cache[i]
+    }
+
+    fn op(&self, i: usize) -> Result<u32, Self::Error> {
+        Ok(self.next[i])
+    }
+
+    fn split<'a>(&'a self, op: &'a u32) -> (&'a [[u32; 3]], u32, u32, u32) {
+        let split = &self.pm.splits[*op as usize];
+        (&split.faces[..], split.v, split.v_u, *op)
+    }
+
+    fn owner(&self, i: usize) -> u32 {
+        self.node[i] >> 1
+    }
+
+    fn kept(&self, i: usize) -> Slot {
+        self.slot(i)
+    }
+
+    fn collapsed_into(&self, i: usize) -> Slot {
+        // The target takes the collapse's node and keeps its creator.
+        let p = self.node[i + 1] >> 1;
+        let node = self.tree.parent[p as usize];
+        Slot { next: p, node, split_cache: self.collapse_cache[i + 1], ..self.slot(i) }
+    }
+
+    fn children(&self, i: usize, _op: &u32) -> Result<[Slot; 2], Self::Error> {
+        Ok(split_children(self.pm, self.tree, &self.slot(i)))
+    }
+
+    fn fvid_of(v: &Slot) -> u32 {
+        v.fvid
+    }
 }
 
 /// Per split: the end of its vertex's FVID range (roots end at the next base vertex, a left

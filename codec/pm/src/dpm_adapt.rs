@@ -32,10 +32,11 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::adapt::{
-    active_of, cancel_collapses, exclusive_scan, expand_chunks, outermost, split_face_indices, update_faces,
-    update_faces_all_levels, Cached, Corner, Eval, Levels, DESCENT_BUDGET, LEVELS_PER_PASS,
+    active_of, exclusive_scan, expand_chunks, outermost, update_faces_all_levels, Cached, Corner, Eval, Levels,
+    DESCENT_BUDGET, LEVELS_PER_PASS,
 };
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
+use super::one_level;
 use super::ooc::NodeCache;
 use super::{PassStats, Viewpoint, NONE};
 
@@ -61,6 +62,72 @@ impl Source<'_> {
             Source::InCore => true,
             Source::Nodes(cache) => cache.get(Dpm::node_of(addr as usize)).is_some(),
         }
+    }
+}
+
+/// The compressed operations' state, borrowed for a pass of one level ([`one_level::Form`]): a
+/// splitting vertex decodes its operation from its address and context, and a face's owner is
+/// its split's `v_u`.
+struct Compressed<'s> {
+    dpm: &'s Dpm<'s>,
+    src: Source<'s>,
+    vertices: &'s [Vertex],
+}
+
+impl one_level::Form for Compressed<'_> {
+    type Vertex = Vertex;
+    type Op = DecodedOp;
+    type Error = DpmError;
+
+    fn len(&self) -> usize {
+        self.vertices.len()
+    }
+
+    fn fvid(&self, i: usize) -> u32 {
+        self.vertices[i].fvid()
+    }
+
+    fn target(&self, i: usize) -> u32 {
+        self.vertices[i].target()
+    }
+
+    fn splits(&self, i: usize, need: one_level::Need) -> bool {
+        DpmAdapter::splits(&self.vertices[i], need, self.src)
+    }
+
+    fn collapse_cache(&self, i: usize) -> &Cached {
+        &self.vertices[i].creator.cache
+    }
+
+    fn op(&self, i: usize) -> Result<DecodedOp, DpmError> {
+        let v = &self.vertices[i];
+        // A splitting vertex's operation is resident (`DpmAdapter::splits`).
+        Ok(self.src.decode(self.dpm, v.own.addr, &v.own.ctx)?.expect("a splitting vertex's node is resident"))
+    }
+
+    fn split<'a>(&'a self, op: &'a DecodedOp) -> (&'a [[u32; 3]], u32, u32, u32) {
+        (&op.split.faces[..], op.split.v, op.split.v_u, op.split.v_u)
+    }
+
+    fn owner(&self, i: usize) -> u32 {
+        self.vertices[i].fvid()
+    }
+
+    fn kept(&self, i: usize) -> Vertex {
+        self.vertices[i]
+    }
+
+    fn collapsed_into(&self, i: usize) -> Vertex {
+        // The target becomes its creator's vertex again and keeps its own creator.
+        Vertex { own: self.vertices[i + 1].creator, creator: self.vertices[i].creator }
+    }
+
+    fn children(&self, i: usize, op: &DecodedOp) -> Result<[Vertex; 2], DpmError> {
+        DpmAdapter::children(self.dpm, self.src, &self.vertices[i], op)
+    }
+
+    fn fvid_of(v: &Vertex) -> u32 {
+        v.fvid()
     }
 }
 
@@ -258,114 +325,17 @@ impl<'a> DpmAdapter<'a> {
         ])
     }
 
+    /// One pass of one level ([`one_level::pass`] over the compressed operations).
     fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
-        let dpm = self.dpm;
         self.refresh_pending(src)?;
-        let vs = &self.vertices;
-        let n = vs.len();
-
-        // Algorithm 1: vertex state update.
-        let state: Vec<u32> = (0..n)
-            .into_par_iter()
-            .map(|i| {
-                let v = &vs[i];
-                if Self::splits(v, need, src) {
-                    return 2;
-                }
-                let target = v.target();
-                if target != NONE
-                    && !need(&v.creator.cache)
-                    && i > 0
-                    && vs[i - 1].fvid() == target
-                    && (i + 1 == n || vs[i + 1].target() != v.fvid())
-                {
-                    return 0;
-                }
-                1
-            })
-            .collect();
-        // Algorithm 2: collapses whose target splits are cancelled.
-        let (cnt, splits, collapses, cancelled) = cancel_collapses(&state);
-        if splits == 0 && collapses == 0 {
-            return Ok(PassStats {
-                splits,
-                collapses,
-                cancelled,
-                vertices: n,
-                faces: self.face_idx.len(),
-                held: false,
-            });
+        let form = Compressed { dpm: self.dpm, src, vertices: &self.vertices };
+        let faces =
+            one_level::Faces { idx: &mut self.face_idx, fvid: &mut self.face_fvid, owner: &mut self.face_owner };
+        let done = one_level::pass(&form, faces, need)?;
+        if let Some(m) = done.moved {
+            self.vertices = m.vertices;
         }
-
-        // The operations of the splitting vertices, decoded once for the pass.
-        let decoded: Vec<Option<DecodedOp>> = (0..n)
-            .into_par_iter()
-            .map(|i| match cnt[i] {
-                2 => src.decode(dpm, vs[i].own.addr, &vs[i].own.ctx),
-                _ => Ok(None),
-            })
-            .collect::<Result<_, _>>()?;
-
-        // Algorithm 3: memory management.
-        let face_cnt: Vec<u32> =
-            (0..n).into_par_iter().map(|i| decoded[i].as_ref().map_or(0, |d| d.split.faces.len() as u32)).collect();
-        let face_sum = exclusive_scan(&face_cnt);
-        let vertex_sum = exclusive_scan(&cnt);
-        let new: Vec<Vertex> = (0..n)
-            .into_par_iter()
-            .map(|i| -> Result<[Option<Vertex>; 2], DpmError> {
-                let v = vs[i];
-                Ok(match cnt[i] {
-                    0 => [None, None],
-                    1 if i + 1 < n && cnt[i + 1] == 0 => {
-                        // Algorithm 2's collapse: the target becomes its creator's vertex
-                        // again and keeps its own creator.
-                        let c = vs[i + 1].creator;
-                        [Some(Vertex { own: c, creator: v.creator }), None]
-                    }
-                    1 => [Some(v), None],
-                    _ => {
-                        // Algorithm 4: the split writes v and v_u.
-                        let [l, u] = Self::children(dpm, src, &v, decoded[i].as_ref().expect("decoded above"))?;
-                        [Some(l), Some(u)]
-                    }
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?
-            .into_iter()
-            .flatten()
-            .flatten()
-            .collect();
-        debug_assert_eq!(new.len(), vertex_sum[n] as usize);
-        let new_fvid: Vec<u32> = new.iter().map(Vertex::fvid).collect();
-        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-
-        // Algorithm 4: the new faces of the splits.
-        let new_fvid_ref = &new_fvid;
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = (0..n)
-            .into_par_iter()
-            .filter(|&i| cnt[i] == 2)
-            .flat_map_iter(|i| {
-                let d = decoded[i].as_ref().expect("decoded above");
-                let (v, v_u) = (d.split.v, d.split.v_u);
-                let j = vertex_sum[i];
-                d.split.faces.iter().map(move |&t| (split_face_indices(t, v, v_u, j, new_fvid_ref), t, v_u))
-            })
-            .collect();
-        debug_assert_eq!(new_faces.len(), face_sum[n] as usize);
-
-        // Algorithm 5: index update and compaction of the old faces.
-        let faces = update_faces(
-            [&mut self.face_idx, &mut self.face_fvid],
-            &mut self.face_owner,
-            &cnt,
-            &vertex_sum,
-            &new_fvid,
-            &|i| vs[i].fvid(),
-            new_faces,
-        );
-        self.vertices = new;
-        Ok(PassStats { splits, collapses, cancelled, vertices: self.vertices.len(), faces, held: false })
+        Ok(done.stats)
     }
 
     /// One pass of [`Levels::All`], as [`super::Adapter`]'s: every done split is the creator of

@@ -49,6 +49,7 @@ pub mod adapt;
 pub mod build;
 pub mod dpm_adapt;
 pub mod format;
+mod one_level;
 pub mod ooc;
 mod order;
 pub mod refine;
