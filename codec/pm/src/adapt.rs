@@ -62,12 +62,13 @@
 //! * Prefix sums are chunked parallel scans; the scatters of Algorithms 3 and 4 are
 //!   order-preserving parallel collects whose positions equal those prefix sums.
 
+use std::borrow::Cow;
 use std::convert::Infallible;
 
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
-use super::one_level;
+use super::{all_levels, one_level};
 use super::{Criteria, ProgressiveMesh, SplitTree, NONE};
 use crate::view::Camera;
 
@@ -605,8 +606,9 @@ impl<'a> Adapter<'a> {
         self.face_idx.par_iter().map(|t| t.map(|i| self.fvid[i as usize])).collect()
     }
 
-    /// One pass of one level ([`one_level::pass`] over the decoded mesh).
-    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
+    /// The state as a [`one_level::Form`] (and an [`all_levels::Form`]), and the face buffers
+    /// a pass rebuilds.
+    fn parts(&mut self) -> (Decoded<'_>, one_level::Faces<'_>) {
         let form = Decoded {
             pm: self.pm,
             tree: &self.tree,
@@ -616,9 +618,17 @@ impl<'a> Adapter<'a> {
             split_cache: &self.split_cache,
             collapse_cache: &self.collapse_cache,
             creator: &self.creator,
+            end: &self.end,
+            descent_budget: self.descent_budget,
         };
         let faces =
             one_level::Faces { idx: &mut self.face_idx, fvid: &mut self.face_fvid, owner: &mut self.face_owner };
+        (form, faces)
+    }
+
+    /// One pass of one level ([`one_level::pass`] over the decoded mesh).
+    fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
+        let (form, faces) = self.parts();
         let done = match one_level::pass(&form, faces, need) {
             Ok(done) => done,
             Err(never) => match never {},
@@ -627,23 +637,6 @@ impl<'a> Adapter<'a> {
             self.store(m.fvid, &m.vertices);
         }
         done.stats
-    }
-
-    /// Active vertex `i`'s state.
-    fn slot(&self, i: usize) -> Slot {
-        Slot {
-            fvid: self.fvid[i],
-            next: self.next[i],
-            node: self.node[i],
-            split_cache: self.split_cache[i],
-            collapse_cache: self.collapse_cache[i],
-            creator: self.creator[i],
-        }
-    }
-
-    /// The two children of a vertex whose next split is done (see [`split_children`]).
-    fn split_children(&self, old: &Slot) -> [Slot; 2] {
-        split_children(self.pm, &self.tree, old)
     }
 
     /// Replaces the vertex state by `vertices` (sorted by FVID, `new_fvid` their FVIDs).
@@ -678,96 +671,15 @@ impl<'a> Adapter<'a> {
     /// tree (the builder makes them so): an undone region's descendants are not asked for
     /// either, so no split of a vertex in a region is lost, and a collapse never waits for one.
     fn pass_all_levels(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync)) -> PassStats {
-        let pm = self.pm;
-        let n = self.fvid.len();
-        let fvid = &self.fvid;
-
-        // 1. Undone splits as ranges of positions in the sorted buffer, and their outermost ones.
-        let undone: Vec<(u32, u32, u32)> = (0..n)
-            .into_par_iter()
-            .filter_map(|i| {
-                let c = self.creator[i];
-                if c == NONE || need(&self.collapse_cache[i]) {
-                    return None;
-                }
-                let p = fvid.partition_point(|&x| x < pm.splits[c as usize].v);
-                let q = fvid.partition_point(|&x| x < self.end[c as usize]);
-                Some((p as u32, q as u32, c))
-            })
-            .collect();
-        let (regions, region, collapses) = outermost(undone, n);
-
-        // 2. The new vertices, in chunks of the sorted buffer, with the splits done.
-        let expand = |i: usize, out: &mut Vec<Slot>, done: &mut Vec<u32>| -> Result<(), Infallible> {
-            let r = region[i];
-            if r != NONE {
-                let (p, _, s) = regions[r as usize];
-                if p as usize == i {
-                    let node = self.tree.parent[s as usize];
-                    out.push(Slot { next: s, node, split_cache: Cached::of(pm, s), ..self.slot(i) });
-                }
-            } else if self.next[i] != NONE && need(&self.split_cache[i]) {
-                // Down the subtree while the view asks (left before right: FVID order).
-                let mut stack = vec![(self.slot(i), 0)];
-                let mut budget = self.descent_budget;
-                while let Some((v, depth)) = stack.pop() {
-                    if budget > 0 && depth < LEVELS_PER_PASS && v.next != NONE && need(&v.split_cache) {
-                        budget -= 1;
-                        done.push(v.next);
-                        let [l, u] = self.split_children(&v);
-                        stack.push((u, depth + 1));
-                        stack.push((l, depth + 1));
-                    } else {
-                        out.push(v);
-                    }
-                }
-            } else {
-                out.push(self.slot(i));
-            }
-            Ok(())
+        let (form, faces) = self.parts();
+        let done = match all_levels::pass(&form, faces, need) {
+            Ok(done) => done,
+            Err(never) => match never {},
         };
-        let Ok((vertices, cnt, done)) = expand_chunks(n, expand);
-        let splits: usize = done.iter().map(Vec::len).sum();
-        if splits == 0 && collapses == 0 {
-            return PassStats { splits, collapses, cancelled: 0, vertices: n, faces: self.face_idx.len(), held: false };
+        if let Some(m) = done.moved {
+            self.store(m.fvid, &m.vertices);
         }
-        let vertex_sum = exclusive_scan(&cnt);
-        let new_fvid: Vec<u32> = vertices.par_iter().map(|v| v.fvid).collect();
-        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-
-        // 3. Faces: the old ones moved or dropped, then those of the splits done.
-        let new_ref = &new_fvid;
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = done
-            .par_iter()
-            .flat_map_iter(|d| d.iter())
-            .flat_map_iter(|&s| {
-                pm.splits[s as usize].faces.iter().map(move |&t| (t.map(|f| active_of(new_ref, f)), t, s))
-            })
-            .collect();
-        let end = &self.end;
-        let corner = |i: usize, owner: u32| match region[i] {
-            NONE => Corner::Free,
-            r => {
-                let (p, _, s) = regions[r as usize];
-                let o = owner as usize;
-                if owner != NONE && pm.splits[o].v >= fvid[p as usize] && end[o] <= end[s as usize] {
-                    Corner::Undone
-                } else {
-                    Corner::Region(p as usize)
-                }
-            }
-        };
-        let faces = update_faces_all_levels(
-            [&mut self.face_idx, &mut self.face_fvid],
-            &mut self.face_owner,
-            &cnt,
-            &vertex_sum,
-            &new_fvid,
-            &corner,
-            new_faces,
-        );
-        self.store(new_fvid, &vertices);
-        PassStats { splits, collapses, cancelled: 0, vertices: self.fvid.len(), faces, held: false }
+        done.stats
     }
 }
 
@@ -811,6 +723,8 @@ struct Decoded<'s> {
     split_cache: &'s [Cached],
     collapse_cache: &'s [Cached],
     creator: &'s [u32],
+    end: &'s [u32],
+    descent_budget: u32,
 }
 
 impl Decoded<'_> {
@@ -885,12 +799,51 @@ impl one_level::Form for Decoded<'_> {
         Slot { next: p, node, split_cache: self.collapse_cache[i + 1], ..self.slot(i) }
     }
 
-    fn children(&self, i: usize, _op: &u32) -> Result<[Slot; 2], Self::Error> {
-        Ok(split_children(self.pm, self.tree, &self.slot(i)))
+    fn children(&self, v: &Slot, _op: &u32) -> Result<[Slot; 2], Self::Error> {
+        Ok(split_children(self.pm, self.tree, v))
     }
 
     fn fvid_of(v: &Slot) -> u32 {
         v.fvid
+    }
+}
+
+impl all_levels::Form for Decoded<'_> {
+    fn fvids(&self) -> Cow<'_, [u32]> {
+        Cow::Borrowed(self.fvid)
+    }
+
+    fn descent_budget(&self) -> u32 {
+        self.descent_budget
+    }
+
+    /// Tagged by the split's index.
+    fn undone(&self, i: usize, need: one_level::Need) -> Option<(u32, u32, u32)> {
+        let c = self.creator[i];
+        if c == NONE || need(&self.collapse_cache[i]) {
+            return None;
+        }
+        Some((self.pm.splits[c as usize].v, self.end[c as usize], c))
+    }
+
+    fn region_vertex(&self, i: usize, s: u32) -> Slot {
+        let node = self.tree.parent[s as usize];
+        Slot { next: s, node, split_cache: Cached::of(self.pm, s), ..self.slot(i) }
+    }
+
+    fn descends(&self, v: &Slot, need: one_level::Need) -> bool {
+        v.next != NONE && need(&v.split_cache)
+    }
+
+    fn descend(&self, v: &Slot) -> Result<u32, Infallible> {
+        Ok(v.next)
+    }
+
+    /// A face owned by split `owner` goes when that split's FVID range lies inside the
+    /// region's.
+    fn undoes(&self, owner: u32, start: u32, s: u32) -> bool {
+        let o = owner as usize;
+        owner != NONE && self.pm.splits[o].v >= start && self.end[o] <= self.end[s as usize]
     }
 }
 

@@ -28,16 +28,15 @@
 //! owner is its split's `v_u` (unique per split, and the FVID of the split's creator vertex,
 //! so a collapsing vertex recognises its split's faces by its own FVID).
 
+use std::borrow::Cow;
+
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{
-    active_of, exclusive_scan, expand_chunks, outermost, update_faces_all_levels, Cached, Corner, Eval, Levels,
-    DESCENT_BUDGET, LEVELS_PER_PASS,
-};
+use super::adapt::{active_of, Cached, Eval, Levels, DESCENT_BUDGET};
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
-use super::one_level;
 use super::ooc::NodeCache;
+use super::{all_levels, one_level};
 use super::{PassStats, Viewpoint, NONE};
 
 /// Where the operations are: the file in memory, or the resident nodes of an out-of-core one.
@@ -72,6 +71,7 @@ struct Compressed<'s> {
     dpm: &'s Dpm<'s>,
     src: Source<'s>,
     vertices: &'s [Vertex],
+    descent_budget: u32,
 }
 
 impl one_level::Form for Compressed<'_> {
@@ -122,12 +122,51 @@ impl one_level::Form for Compressed<'_> {
         Vertex { own: self.vertices[i + 1].creator, creator: self.vertices[i].creator }
     }
 
-    fn children(&self, i: usize, op: &DecodedOp) -> Result<[Vertex; 2], DpmError> {
-        DpmAdapter::children(self.dpm, self.src, &self.vertices[i], op)
+    fn children(&self, v: &Vertex, op: &DecodedOp) -> Result<[Vertex; 2], DpmError> {
+        DpmAdapter::children(self.dpm, self.src, v, op)
     }
 
     fn fvid_of(v: &Vertex) -> u32 {
         v.fvid()
+    }
+}
+
+impl all_levels::Form for Compressed<'_> {
+    fn fvids(&self) -> Cow<'_, [u32]> {
+        Cow::Owned(self.vertices.par_iter().map(Vertex::fvid).collect())
+    }
+
+    fn descent_budget(&self) -> u32 {
+        self.descent_budget
+    }
+
+    /// Tagged by the vertex that carries the split as its creator.
+    fn undone(&self, i: usize, need: one_level::Need) -> Option<(u32, u32, u32)> {
+        let c = &self.vertices[i].creator;
+        if c.addr == NONE || need(&c.cache) {
+            return None;
+        }
+        Some((c.ctx.v, c.ctx.v_end, i as u32))
+    }
+
+    fn region_vertex(&self, i: usize, j: u32) -> Vertex {
+        // The region's split, carried by vertex `j` as its creator, done again; the first
+        // vertex keeps its own creator.
+        Vertex { own: self.vertices[j as usize].creator, creator: self.vertices[i].creator }
+    }
+
+    fn descends(&self, v: &Vertex, need: one_level::Need) -> bool {
+        DpmAdapter::splits(v, need, self.src)
+    }
+
+    fn descend(&self, v: &Vertex) -> Result<DecodedOp, DpmError> {
+        Ok(self.src.decode(self.dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked"))
+    }
+
+    /// A face is owned by its split's `v_u`, which lies strictly inside the region's FVID
+    /// range exactly when the split is undone.
+    fn undoes(&self, owner: u32, start: u32, j: u32) -> bool {
+        start < owner && owner < self.vertices[j as usize].creator.ctx.v_end
     }
 }
 
@@ -328,7 +367,7 @@ impl<'a> DpmAdapter<'a> {
     /// One pass of one level ([`one_level::pass`] over the compressed operations).
     fn pass(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
         self.refresh_pending(src)?;
-        let form = Compressed { dpm: self.dpm, src, vertices: &self.vertices };
+        let form = Compressed { dpm: self.dpm, src, vertices: &self.vertices, descent_budget: self.descent_budget };
         let faces =
             one_level::Faces { idx: &mut self.face_idx, fvid: &mut self.face_fvid, owner: &mut self.face_owner };
         let done = one_level::pass(&form, faces, need)?;
@@ -346,102 +385,15 @@ impl<'a> DpmAdapter<'a> {
     /// operations are resident. A face's owner is its split's `v_u`, which lies strictly inside
     /// a region's FVID range exactly when the split is undone.
     fn pass_all_levels(&mut self, need: &(dyn Fn(&Cached) -> bool + Sync), src: Source) -> Result<PassStats, DpmError> {
-        let dpm = self.dpm;
         self.refresh_pending(src)?;
-        let vs = &self.vertices;
-        let n = vs.len();
-        let fvid: Vec<u32> = vs.par_iter().map(Vertex::fvid).collect();
-
-        // Undone splits as ranges of positions, with the vertex carrying each; the outermost.
-        let undone: Vec<(u32, u32, u32)> = (0..n)
-            .into_par_iter()
-            .filter_map(|i| {
-                let c = &vs[i].creator;
-                if c.addr == NONE || need(&c.cache) {
-                    return None;
-                }
-                let p = fvid.partition_point(|&x| x < c.ctx.v);
-                let q = fvid.partition_point(|&x| x < c.ctx.v_end);
-                Some((p as u32, q as u32, i as u32))
-            })
-            .collect();
-        let (regions, region, collapses) = outermost(undone, n);
-
-        // The new vertices, chunk by chunk, with the faces of the splits done (owner: `v_u`)
-        // and their number.
-        type Done = (Vec<([u32; 3], u32)>, usize);
-        let expand = |i: usize, out: &mut Vec<Vertex>, (faces, splits): &mut Done| -> Result<(), DpmError> {
-            let r = region[i];
-            if r != NONE {
-                let (p, _, j) = regions[r as usize];
-                if p as usize == i {
-                    out.push(Vertex { own: vs[j as usize].creator, creator: vs[i].creator });
-                }
-            } else if Self::splits(&vs[i], need, src) {
-                let mut stack = vec![(vs[i], 0)];
-                let mut budget = self.descent_budget;
-                while let Some((v, depth)) = stack.pop() {
-                    if budget == 0 || depth == LEVELS_PER_PASS || !Self::splits(&v, need, src) {
-                        out.push(v);
-                        continue;
-                    }
-                    budget -= 1;
-                    let d = src.decode(dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked");
-                    *splits += 1;
-                    faces.extend(d.split.faces.iter().map(|&t| (t, d.split.v_u)));
-                    let [l, u] = Self::children(dpm, src, &v, &d)?;
-                    stack.push((u, depth + 1));
-                    stack.push((l, depth + 1));
-                }
-            } else {
-                out.push(vs[i]);
-            }
-            Ok(())
-        };
-        let (new, cnt, done) = expand_chunks(n, expand)?;
-        let splits: usize = done.iter().map(|d| d.1).sum();
-        if splits == 0 && collapses == 0 {
-            return Ok(PassStats {
-                splits,
-                collapses,
-                cancelled: 0,
-                vertices: n,
-                faces: self.face_idx.len(),
-                held: false,
-            });
+        let form = Compressed { dpm: self.dpm, src, vertices: &self.vertices, descent_budget: self.descent_budget };
+        let faces =
+            one_level::Faces { idx: &mut self.face_idx, fvid: &mut self.face_fvid, owner: &mut self.face_owner };
+        let done = all_levels::pass(&form, faces, need)?;
+        if let Some(m) = done.moved {
+            self.vertices = m.vertices;
         }
-        let vertex_sum = exclusive_scan(&cnt);
-        let new_fvid: Vec<u32> = new.par_iter().map(Vertex::fvid).collect();
-        debug_assert!(new_fvid.windows(2).all(|w| w[0] < w[1]));
-        let new_faces: Vec<([u32; 3], [u32; 3], u32)> = done
-            .par_iter()
-            .flat_map_iter(|d| d.0.iter())
-            .map(|&(t, owner)| (t.map(|f| active_of(&new_fvid, f)), t, owner))
-            .collect();
-
-        // Old faces: moved, or dropped where their split is undone.
-        let corner = |i: usize, owner: u32| match region[i] {
-            NONE => Corner::Free,
-            r => {
-                let (p, _, j) = regions[r as usize];
-                if fvid[p as usize] < owner && owner < vs[j as usize].creator.ctx.v_end {
-                    Corner::Undone
-                } else {
-                    Corner::Region(p as usize)
-                }
-            }
-        };
-        let faces = update_faces_all_levels(
-            [&mut self.face_idx, &mut self.face_fvid],
-            &mut self.face_owner,
-            &cnt,
-            &vertex_sum,
-            &new_fvid,
-            &corner,
-            new_faces,
-        );
-        self.vertices = new;
-        Ok(PassStats { splits, collapses, cancelled: 0, vertices: self.vertices.len(), faces, held: false })
+        Ok(done.stats)
     }
 }
 

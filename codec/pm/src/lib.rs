@@ -46,6 +46,7 @@ pub(crate) use tessera_entropy::{container, huffman, rangecoder, Format, FormatE
 pub(crate) use tessera_mesh::{csr, input, kind, load, mesh, view, LoadError, Mesh, MeshError, Quantization};
 
 pub mod adapt;
+mod all_levels;
 pub mod build;
 pub mod dpm_adapt;
 pub mod format;
