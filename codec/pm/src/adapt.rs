@@ -68,7 +68,8 @@ use std::convert::Infallible;
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
-use super::{all_levels, one_level};
+use super::all_levels;
+use super::one_level::{self, active_of, Cached};
 use super::{Criteria, ProgressiveMesh, SplitTree, NONE};
 use crate::view::Camera;
 
@@ -210,29 +211,6 @@ pub fn needs_split(view: &Viewpoint, planes: &[Vec4; 6], center: [f32; 3], norma
     err * view.pixels_per_unit > view.error_px * d
 }
 
-/// One entry of the split/collapse cache: what a vertex needs to evaluate an operation without
-/// touching the split records.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub(super) struct Cached {
-    pub(super) center: Vec3,
-    pub(super) normal: Vec3,
-    pub(super) crit: Criteria,
-}
-
-impl Cached {
-    fn of(pm: &ProgressiveMesh, s: u32) -> Self {
-        if s == NONE {
-            return Cached::default();
-        }
-        let v = pm.splits[s as usize].v as usize;
-        Cached {
-            center: Vec3::from(pm.positions[v]),
-            normal: Vec3::from(pm.normals.get(v).copied().unwrap_or_default()),
-            crit: pm.criteria.get(s as usize).copied().unwrap_or_default(),
-        }
-    }
-}
-
 /// What one pass did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PassStats {
@@ -253,175 +231,6 @@ impl PassStats {
     pub fn converged(&self) -> bool {
         self.splits == 0 && self.collapses == 0 && !self.held
     }
-}
-
-/// Algorithm 2's cancellations, for both adapters: a collapse (state 0) whose target (the
-/// vertex before it) splits (state 2) keeps its vertex (1). Returns the vertex counts and the
-/// splits, collapses and cancelled collapses they make.
-pub(super) fn cancel_collapses(state: &[u32]) -> (Vec<u32>, usize, usize, usize) {
-    let cnt: Vec<u32> = (0..state.len())
-        .into_par_iter()
-        .map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] })
-        .collect();
-    let splits = cnt.par_iter().filter(|&&c| c == 2).count();
-    let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
-    let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
-    (cnt, splits, collapses, cancelled)
-}
-
-/// Algorithm 4's indices of a new face `t` of the split of `v` into `v` (new slot `j`) and
-/// `v_u` (slot `j + 1`), for both adapters: a corner in `[v, v_u)` is `v`, one in `v_u`'s range
-/// (up to the FVID of slot `j + 2`) is `v_u`, any other the active vertex with the greatest
-/// FVID `<=` the corner's, by binary search in the new sorted FVIDs.
-pub(super) fn split_face_indices(t: [u32; 3], v: u32, v_u: u32, j: u32, new_fvid: &[u32]) -> [u32; 3] {
-    let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
-    t.map(|f| match f {
-        f if f >= v && f < v_u => j,
-        f if f >= v_u && f < end => j + 1,
-        f => active_of(new_fvid, f),
-    })
-}
-
-/// What [`expand_chunks`] returns: the new vertices, each old vertex's count, each chunk's extra.
-pub(super) type Expanded<V, X> = (Vec<V>, Vec<u32>, Vec<X>);
-
-/// The vertices that replace the `n` of the sorted buffer in an all-levels pass, for both
-/// adapters, made in parallel chunks: `expand(i, out, extra)` pushes old vertex `i`'s (none
-/// inside a region but its first, itself, or its descent's leaves) onto `out`. Returns them in
-/// order, each old vertex's count of them, and each chunk's `extra`.
-pub(super) fn expand_chunks<V: Send, X: Default + Send, E: Send>(
-    n: usize,
-    expand: impl Fn(usize, &mut Vec<V>, &mut X) -> Result<(), E> + Sync,
-) -> Result<Expanded<V, X>, E> {
-    const CHUNK: usize = 1 << 12;
-    let parts: Vec<(Vec<V>, Vec<u32>, X)> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let (mut out, mut cnt, mut extra) = (Vec::new(), Vec::with_capacity(CHUNK), X::default());
-            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                let before = out.len();
-                expand(i, &mut out, &mut extra)?;
-                cnt.push((out.len() - before) as u32);
-            }
-            Ok((out, cnt, extra))
-        })
-        .collect::<Result<_, E>>()?;
-    let (mut vertices, mut cnt, mut extras) =
-        (Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum()), Vec::with_capacity(n), Vec::new());
-    for (v, c, x) in parts {
-        vertices.extend(v);
-        cnt.extend(c);
-        extras.push(x);
-    }
-    Ok((vertices, cnt, extras))
-}
-
-/// The index of the active vertex a finest FVID `f` stands for, in the sorted active FVIDs:
-/// the one with the greatest FVID `<= f` (0 if none).
-pub(super) fn active_of(sorted: &[u32], f: u32) -> u32 {
-    sorted.partition_point(|&x| x <= f).saturating_sub(1) as u32
-}
-
-/// Algorithm 5 and the rebuild of the face buffers, for both adapters: every old corner moves to
-/// its vertex's new position, a collapsed vertex's to its target (the previous one), a split
-/// vertex's to `v_u` (the next one) when the corner's FVID reaches `v_u`; the faces whose owner
-/// is the split a collapsing vertex undoes (`collapsed(i)`) are dropped, order kept, and
-/// `new_faces` appended. `faces` are the index and FVID buffers, `owner` the owners; returns
-/// the face count.
-pub(super) fn update_faces(
-    faces: [&mut Vec<[u32; 3]>; 2],
-    owner: &mut Vec<u32>,
-    cnt: &[u32],
-    vertex_sum: &[u32],
-    new_fvid: &[u32],
-    collapsed: &(dyn Fn(usize) -> u32 + Sync),
-    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
-) -> usize {
-    // A collapsing vertex's corner goes to its target, the vertex before it, which stays (a
-    // target never collapses); a split vertex's two slots are searched as a descent's leaves.
-    let corner = |i: usize, owner: u32| match cnt[i] {
-        0 if owner != NONE && collapsed(i) == owner => Corner::Undone,
-        0 => Corner::Region(i - 1),
-        _ => Corner::Free,
-    };
-    update_faces_all_levels(faces, owner, cnt, vertex_sum, new_fvid, &corner, new_faces)
-}
-
-/// Where an old face's corner at an active vertex goes in an all-levels pass.
-pub(super) enum Corner {
-    /// The vertex is in no collapsing region: it stays or splits.
-    Free,
-    /// It is in a region that undoes the face's split: the face goes.
-    Undone,
-    /// It is in a region whose vertex is old vertex `p`.
-    Region(usize),
-}
-
-/// The outermost of the `undone` ranges of positions `(p, q, tag)` (nested or disjoint), each
-/// a collapsing region of an all-levels pass, for both adapters: the regions sorted, each
-/// position's region ([`NONE`]: none) and the vertices the collapses remove.
-pub(super) fn outermost(mut undone: Vec<(u32, u32, u32)>, n: usize) -> (Vec<(u32, u32, u32)>, Vec<u32>, usize) {
-    undone.par_sort_unstable_by_key(|&(p, q, _)| (p, std::cmp::Reverse(q)));
-    let mut regions: Vec<(u32, u32, u32)> = Vec::new();
-    for r in undone {
-        if regions.last().is_none_or(|last| r.0 >= last.1) {
-            regions.push(r);
-        }
-    }
-    let mut region = vec![NONE; n];
-    for (k, &(p, q, _)) in regions.iter().enumerate() {
-        region[p as usize..q as usize].fill(k as u32);
-    }
-    let collapses = regions.iter().map(|&(p, q, _)| (q - p - 1) as usize).sum();
-    (regions, region, collapses)
-}
-
-/// The face update of an all-levels pass, for both adapters: a corner in a region moves to the
-/// region's vertex (or the face goes, [`Corner::Undone`]), a corner of a kept vertex to its new
-/// position, one of a split vertex to the leaf whose range holds its FVID (binary search among
-/// that vertex's leaves, `new_fvid[vertex_sum[i]..vertex_sum[i + 1]]`); then `new_faces` are
-/// appended. Returns the face count.
-pub(super) fn update_faces_all_levels(
-    faces: [&mut Vec<[u32; 3]>; 2],
-    owner: &mut Vec<u32>,
-    cnt: &[u32],
-    vertex_sum: &[u32],
-    new_fvid: &[u32],
-    corner: &(dyn Fn(usize, u32) -> Corner + Sync),
-    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
-) -> usize {
-    let [face_idx, face_fvid] = faces;
-    let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..face_idx.len())
-        .into_par_iter()
-        .filter_map(|k| {
-            let (old, fv, owner) = (face_idx[k], face_fvid[k], owner[k]);
-            let mut idx = [0u32; 3];
-            for c in 0..3 {
-                let i = old[c] as usize;
-                idx[c] = match corner(i, owner) {
-                    Corner::Undone => return None,
-                    Corner::Region(p) => vertex_sum[p],
-                    Corner::Free if cnt[i] == 1 => vertex_sum[i],
-                    Corner::Free => {
-                        let (a, b) = (vertex_sum[i] as usize, vertex_sum[i + 1] as usize);
-                        (a + new_fvid[a..b].partition_point(|&x| x <= fv[c]) - 1) as u32
-                    }
-                };
-            }
-            Some((idx, fv, owner))
-        })
-        .collect();
-    let total = kept.len() + new_faces.len();
-    let (mut fi, mut ff, mut fo) = (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
-    for (a, b, c) in kept.into_iter().chain(new_faces) {
-        fi.push(a);
-        ff.push(b);
-        fo.push(c);
-    }
-    *face_idx = fi;
-    *face_fvid = ff;
-    *owner = fo;
-    total
 }
 
 /// The most levels an all-levels pass splits below one vertex ([`Levels::All`]): the depth of
@@ -473,27 +282,6 @@ pub struct Adapter<'a> {
     face_idx: Vec<[u32; 3]>,
     face_fvid: Vec<[u32; 3]>,
     face_owner: Vec<u32>,
-}
-
-/// Exclusive prefix sum in parallel chunks; `out.len() == v.len() + 1`, the last entry the total.
-pub(super) fn exclusive_scan(v: &[u32]) -> Vec<u32> {
-    const CHUNK: usize = 1 << 14;
-    let sums: Vec<u32> = v.par_chunks(CHUNK).map(|c| c.iter().sum()).collect();
-    let mut offsets = Vec::with_capacity(sums.len());
-    let mut acc = 0u32;
-    for s in sums {
-        offsets.push(acc);
-        acc += s;
-    }
-    let mut out = vec![0u32; v.len() + 1];
-    out[..v.len()].par_chunks_mut(CHUNK).zip(v.par_chunks(CHUNK)).zip(offsets).for_each(|((o, c), mut a)| {
-        for (x, &y) in o.iter_mut().zip(c) {
-            *x = a;
-            a += y;
-        }
-    });
-    out[v.len()] = acc;
-    out
 }
 
 impl<'a> Adapter<'a> {

@@ -7,8 +7,7 @@ use std::borrow::Cow;
 
 use rayon::prelude::*;
 
-use super::adapt::{active_of, exclusive_scan, expand_chunks, outermost, update_faces_all_levels, Corner};
-use super::one_level::{self, Faces, Moved, Need, Outcome};
+use super::one_level::{self, active_of, exclusive_scan, update_faces_all_levels, Corner, Faces, Moved, Need, Outcome};
 use super::{PassStats, NONE};
 
 /// What an all-levels pass needs of a form beyond a one-level pass's.
@@ -114,4 +113,57 @@ pub(super) fn pass<F: Form>(form: &F, faces: Faces, need: Need) -> Result<Outcom
     let faces = update_faces_all_levels([idx, face_fvid], owner, &cnt, &vertex_sum, &new_fvid, &corner, new_faces);
     let stats = PassStats { vertices: vertices.len(), faces, ..unchanged };
     Ok(Outcome { stats, moved: Some(Moved { vertices, fvid: new_fvid }) })
+}
+
+/// What [`expand_chunks`] returns: the new vertices, each old vertex's count, each chunk's extra.
+pub(super) type Expanded<V, X> = (Vec<V>, Vec<u32>, Vec<X>);
+
+/// The vertices that replace the `n` of the sorted buffer in an all-levels pass, for both
+/// adapters, made in parallel chunks: `expand(i, out, extra)` pushes old vertex `i`'s (none
+/// inside a region but its first, itself, or its descent's leaves) onto `out`. Returns them in
+/// order, each old vertex's count of them, and each chunk's `extra`.
+pub(super) fn expand_chunks<V: Send, X: Default + Send, E: Send>(
+    n: usize,
+    expand: impl Fn(usize, &mut Vec<V>, &mut X) -> Result<(), E> + Sync,
+) -> Result<Expanded<V, X>, E> {
+    const CHUNK: usize = 1 << 12;
+    let parts: Vec<(Vec<V>, Vec<u32>, X)> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let (mut out, mut cnt, mut extra) = (Vec::new(), Vec::with_capacity(CHUNK), X::default());
+            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                let before = out.len();
+                expand(i, &mut out, &mut extra)?;
+                cnt.push((out.len() - before) as u32);
+            }
+            Ok((out, cnt, extra))
+        })
+        .collect::<Result<_, E>>()?;
+    let (mut vertices, mut cnt, mut extras) =
+        (Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum()), Vec::with_capacity(n), Vec::new());
+    for (v, c, x) in parts {
+        vertices.extend(v);
+        cnt.extend(c);
+        extras.push(x);
+    }
+    Ok((vertices, cnt, extras))
+}
+
+/// The outermost of the `undone` ranges of positions `(p, q, tag)` (nested or disjoint), each
+/// a collapsing region of an all-levels pass, for both adapters: the regions sorted, each
+/// position's region ([`NONE`]: none) and the vertices the collapses remove.
+pub(super) fn outermost(mut undone: Vec<(u32, u32, u32)>, n: usize) -> (Vec<(u32, u32, u32)>, Vec<u32>, usize) {
+    undone.par_sort_unstable_by_key(|&(p, q, _)| (p, std::cmp::Reverse(q)));
+    let mut regions: Vec<(u32, u32, u32)> = Vec::new();
+    for r in undone {
+        if regions.last().is_none_or(|last| r.0 >= last.1) {
+            regions.push(r);
+        }
+    }
+    let mut region = vec![NONE; n];
+    for (k, &(p, q, _)) in regions.iter().enumerate() {
+        region[p as usize..q as usize].fill(k as u32);
+    }
+    let collapses = regions.iter().map(|&(p, q, _)| (q - p - 1) as usize).sum();
+    (regions, region, collapses)
 }

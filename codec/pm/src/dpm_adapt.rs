@@ -33,8 +33,9 @@ use std::borrow::Cow;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{active_of, Cached, Eval, Levels, DESCENT_BUDGET};
+use super::adapt::{Eval, Levels, DESCENT_BUDGET};
 use super::format::{DecodedOp, Dpm, DpmError, OpContext};
+use super::one_level::{active_of, Cached};
 use super::ooc::NodeCache;
 use super::{all_levels, one_level};
 use super::{PassStats, Viewpoint, NONE};

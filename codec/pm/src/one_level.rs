@@ -3,12 +3,13 @@
 //! ([`super::DpmAdapter`]). A form says what a vertex is, where a splitting vertex's
 //! operation comes from (a split record, or an operation decoded from its address), and how a
 //! split, a collapse and a kept vertex move; the steps, their order and the face buffers are
-//! here.
+//! here, with what the all-levels pass (`all_levels.rs`) shares: the operation cache, the
+//! scans, the face update and the FVID search.
 
+use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adapt::{cancel_collapses, exclusive_scan, split_face_indices, update_faces, Cached};
-use super::{PassStats, NONE};
+use super::{Criteria, PassStats, ProgressiveMesh, NONE};
 
 /// Whether the view asks for an operation, from its cache.
 pub(super) type Need<'n> = &'n (dyn Fn(&Cached) -> bool + Sync);
@@ -148,4 +149,164 @@ pub(super) fn pass<F: Form>(form: &F, faces: Faces, need: Need) -> Result<Outcom
     let faces = update_faces([idx, fvid], owner, &cnt, &vertex_sum, &new_fvid, &|i| form.owner(i), new_faces);
     let stats = PassStats { vertices: vertices.len(), faces, ..unchanged };
     Ok(Outcome { stats, moved: Some(Moved { vertices, fvid: new_fvid }) })
+}
+
+/// One entry of the split/collapse cache: what a vertex needs to evaluate an operation without
+/// touching the split records.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Cached {
+    pub(super) center: Vec3,
+    pub(super) normal: Vec3,
+    pub(super) crit: Criteria,
+}
+
+impl Cached {
+    pub(super) fn of(pm: &ProgressiveMesh, s: u32) -> Self {
+        if s == NONE {
+            return Cached::default();
+        }
+        let v = pm.splits[s as usize].v as usize;
+        Cached {
+            center: Vec3::from(pm.positions[v]),
+            normal: Vec3::from(pm.normals.get(v).copied().unwrap_or_default()),
+            crit: pm.criteria.get(s as usize).copied().unwrap_or_default(),
+        }
+    }
+}
+
+/// Algorithm 2's cancellations, for both adapters: a collapse (state 0) whose target (the
+/// vertex before it) splits (state 2) keeps its vertex (1). Returns the vertex counts and the
+/// splits, collapses and cancelled collapses they make.
+pub(super) fn cancel_collapses(state: &[u32]) -> (Vec<u32>, usize, usize, usize) {
+    let cnt: Vec<u32> = (0..state.len())
+        .into_par_iter()
+        .map(|i| if state[i] == 0 && state[i - 1] == 2 { 1 } else { state[i] })
+        .collect();
+    let splits = cnt.par_iter().filter(|&&c| c == 2).count();
+    let collapses = cnt.par_iter().filter(|&&c| c == 0).count();
+    let cancelled = state.par_iter().filter(|&&c| c == 0).count() - collapses;
+    (cnt, splits, collapses, cancelled)
+}
+
+/// Algorithm 4's indices of a new face `t` of the split of `v` into `v` (new slot `j`) and
+/// `v_u` (slot `j + 1`), for both adapters: a corner in `[v, v_u)` is `v`, one in `v_u`'s range
+/// (up to the FVID of slot `j + 2`) is `v_u`, any other the active vertex with the greatest
+/// FVID `<=` the corner's, by binary search in the new sorted FVIDs.
+pub(super) fn split_face_indices(t: [u32; 3], v: u32, v_u: u32, j: u32, new_fvid: &[u32]) -> [u32; 3] {
+    let end = new_fvid.get(j as usize + 2).copied().unwrap_or(NONE);
+    t.map(|f| match f {
+        f if f >= v && f < v_u => j,
+        f if f >= v_u && f < end => j + 1,
+        f => active_of(new_fvid, f),
+    })
+}
+
+/// Exclusive prefix sum in parallel chunks; `out.len() == v.len() + 1`, the last entry the total.
+pub(super) fn exclusive_scan(v: &[u32]) -> Vec<u32> {
+    const CHUNK: usize = 1 << 14;
+    let sums: Vec<u32> = v.par_chunks(CHUNK).map(|c| c.iter().sum()).collect();
+    let mut offsets = Vec::with_capacity(sums.len());
+    let mut acc = 0u32;
+    for s in sums {
+        offsets.push(acc);
+        acc += s;
+    }
+    let mut out = vec![0u32; v.len() + 1];
+    out[..v.len()].par_chunks_mut(CHUNK).zip(v.par_chunks(CHUNK)).zip(offsets).for_each(|((o, c), mut a)| {
+        for (x, &y) in o.iter_mut().zip(c) {
+            *x = a;
+            a += y;
+        }
+    });
+    out[v.len()] = acc;
+    out
+}
+
+/// Algorithm 5 and the rebuild of the face buffers, for both adapters: every old corner moves to
+/// its vertex's new position, a collapsed vertex's to its target (the previous one), a split
+/// vertex's to `v_u` (the next one) when the corner's FVID reaches `v_u`; the faces whose owner
+/// is the split a collapsing vertex undoes (`collapsed(i)`) are dropped, order kept, and
+/// `new_faces` appended. `faces` are the index and FVID buffers, `owner` the owners; returns
+/// the face count.
+pub(super) fn update_faces(
+    faces: [&mut Vec<[u32; 3]>; 2],
+    owner: &mut Vec<u32>,
+    cnt: &[u32],
+    vertex_sum: &[u32],
+    new_fvid: &[u32],
+    collapsed: &(dyn Fn(usize) -> u32 + Sync),
+    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
+) -> usize {
+    // A collapsing vertex's corner goes to its target, the vertex before it, which stays (a
+    // target never collapses); a split vertex's two slots are searched as a descent's leaves.
+    let corner = |i: usize, owner: u32| match cnt[i] {
+        0 if owner != NONE && collapsed(i) == owner => Corner::Undone,
+        0 => Corner::Region(i - 1),
+        _ => Corner::Free,
+    };
+    update_faces_all_levels(faces, owner, cnt, vertex_sum, new_fvid, &corner, new_faces)
+}
+
+/// Where an old face's corner at an active vertex goes in an all-levels pass.
+pub(super) enum Corner {
+    /// The vertex is in no collapsing region: it stays or splits.
+    Free,
+    /// It is in a region that undoes the face's split: the face goes.
+    Undone,
+    /// It is in a region whose vertex is old vertex `p`.
+    Region(usize),
+}
+
+/// The face update of an all-levels pass, for both adapters: a corner in a region moves to the
+/// region's vertex (or the face goes, [`Corner::Undone`]), a corner of a kept vertex to its new
+/// position, one of a split vertex to the leaf whose range holds its FVID (binary search among
+/// that vertex's leaves, `new_fvid[vertex_sum[i]..vertex_sum[i + 1]]`); then `new_faces` are
+/// appended. Returns the face count.
+pub(super) fn update_faces_all_levels(
+    faces: [&mut Vec<[u32; 3]>; 2],
+    owner: &mut Vec<u32>,
+    cnt: &[u32],
+    vertex_sum: &[u32],
+    new_fvid: &[u32],
+    corner: &(dyn Fn(usize, u32) -> Corner + Sync),
+    new_faces: Vec<([u32; 3], [u32; 3], u32)>,
+) -> usize {
+    let [face_idx, face_fvid] = faces;
+    let kept: Vec<([u32; 3], [u32; 3], u32)> = (0..face_idx.len())
+        .into_par_iter()
+        .filter_map(|k| {
+            let (old, fv, owner) = (face_idx[k], face_fvid[k], owner[k]);
+            let mut idx = [0u32; 3];
+            for c in 0..3 {
+                let i = old[c] as usize;
+                idx[c] = match corner(i, owner) {
+                    Corner::Undone => return None,
+                    Corner::Region(p) => vertex_sum[p],
+                    Corner::Free if cnt[i] == 1 => vertex_sum[i],
+                    Corner::Free => {
+                        let (a, b) = (vertex_sum[i] as usize, vertex_sum[i + 1] as usize);
+                        (a + new_fvid[a..b].partition_point(|&x| x <= fv[c]) - 1) as u32
+                    }
+                };
+            }
+            Some((idx, fv, owner))
+        })
+        .collect();
+    let total = kept.len() + new_faces.len();
+    let (mut fi, mut ff, mut fo) = (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
+    for (a, b, c) in kept.into_iter().chain(new_faces) {
+        fi.push(a);
+        ff.push(b);
+        fo.push(c);
+    }
+    *face_idx = fi;
+    *face_fvid = ff;
+    *owner = fo;
+    total
+}
+
+/// The index of the active vertex a finest FVID `f` stands for, in the sorted active FVIDs:
+/// the one with the greatest FVID `<= f` (0 if none).
+pub(super) fn active_of(sorted: &[u32], f: u32) -> u32 {
+    sorted.partition_point(|&x| x <= f).saturating_sub(1) as u32
 }
