@@ -11,11 +11,13 @@ import os
 import re
 import sys
 
-args = [a for a in sys.argv[1:] if not a.startswith("--")]
-root = os.path.abspath(args[0] if args else os.path.join(os.path.dirname(__file__), "..", ".."))
-over = int(sys.argv[sys.argv.index("--over") + 1]) if "--over" in sys.argv else 150
-if str(over) in args:
-    args.remove(str(over))
+argv = sys.argv[1:]
+over = 150
+if "--over" in argv:
+    k = argv.index("--over")
+    over = int(argv[k + 1])
+    del argv[k : k + 2]
+root = os.path.abspath(argv[0] if argv else os.path.join(os.path.dirname(__file__), "..", ".."))
 
 
 def rust_files():
