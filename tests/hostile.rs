@@ -7,6 +7,7 @@
 mod common;
 
 use std::io::Read;
+use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -455,7 +456,17 @@ fn signals_are_taken_by_one_thread_and_end_the_run_cleanly() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("s.jsonl");
     for round in 0..3 {
-        let child = cmd()
+        let mut command = cmd();
+        // SIGHUP as a terminal's run has it, whatever this test inherited: under nohup (a CI
+        // started in the background) it arrives ignored, and tessera keeps it so.
+        // Safety: signal() is async-signal-safe, and the closure touches nothing else.
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_DFL);
+                Ok(())
+            })
+        };
+        let child = command
             .env("TESSERA_FAULT", "slow-write:400")
             .args(["render", &mesh("classic/woody.obj"), "--size", "32x24", "--frames", "1000", "--orbit"])
             .args(["--out", s(&dir.path().join("f.png")), "--stats", s(&stats)])
