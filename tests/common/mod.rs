@@ -7,8 +7,7 @@
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
+use std::sync::mpsc;
 use std::time::Duration;
 
 use testkit::stderr;
@@ -41,23 +40,23 @@ pub fn output_within(cmd: &mut Command, limit: Duration) -> Output {
         .unwrap_or_else(|e| panic!("cannot start {:?}: {e}", cmd.get_program()));
     let group = child.id() as i32;
     let (done, finished) = mpsc::channel::<()>();
-    let timed_out = Arc::new(AtomicBool::new(false));
-    let flag = timed_out.clone();
+    // Returns whether it had to end the command.
     let watchdog = std::thread::spawn(move || {
-        if finished.recv_timeout(limit) == Err(mpsc::RecvTimeoutError::Timeout) {
-            flag.store(true, Ordering::SeqCst);
-            // Safety: signals to the command's own process group.
-            unsafe { libc::kill(-group, libc::SIGTERM) };
-            if finished.recv_timeout(Duration::from_secs(5)) == Err(mpsc::RecvTimeoutError::Timeout) {
-                unsafe { libc::kill(-group, libc::SIGKILL) };
-            }
+        if finished.recv_timeout(limit) != Err(mpsc::RecvTimeoutError::Timeout) {
+            return false;
         }
+        // Safety: signals to the command's own process group.
+        unsafe { libc::kill(-group, libc::SIGTERM) };
+        if finished.recv_timeout(Duration::from_secs(5)) == Err(mpsc::RecvTimeoutError::Timeout) {
+            unsafe { libc::kill(-group, libc::SIGKILL) };
+        }
+        true
     });
     let out = child.wait_with_output().expect("waits for the command");
     drop(done);
-    watchdog.join().unwrap();
+    let timed_out = watchdog.join().unwrap();
     assert!(
-        !timed_out.load(Ordering::SeqCst),
+        !timed_out,
         "{:?} {:?} ran past {} s and was ended\nstdout: {}\nstderr: {}",
         cmd.get_program(),
         cmd.get_args().collect::<Vec<_>>(),
