@@ -563,8 +563,8 @@ impl one_level::Form for Decoded<'_> {
         &self.collapse_cache[i]
     }
 
-    fn op(&self, i: usize) -> Result<u32, Self::Error> {
-        Ok(self.next[i])
+    fn op(&self, v: &Slot) -> Result<u32, Self::Error> {
+        Ok(v.next)
     }
 
     fn split<'a>(&'a self, op: &'a u32) -> (&'a [[u32; 3]], u32, u32, u32) {
@@ -621,10 +621,6 @@ impl all_levels::Form for Decoded<'_> {
 
     fn descends(&self, v: &Slot, need: one_level::Need) -> bool {
         v.next != NONE && need(&v.split_cache)
-    }
-
-    fn descend(&self, v: &Slot) -> Result<u32, Infallible> {
-        Ok(v.next)
     }
 
     /// A face owned by split `owner` goes when that split's FVID range lies inside the

@@ -24,8 +24,6 @@ pub(super) trait Form: one_level::Form {
     fn region_vertex(&self, i: usize, tag: u32) -> Self::Vertex;
     /// Whether a vertex of a descent splits now.
     fn descends(&self, v: &Self::Vertex, need: Need) -> bool;
-    /// A descending vertex's operation.
-    fn descend(&self, v: &Self::Vertex) -> Result<Self::Op, Self::Error>;
     /// Whether an old face owned by `owner`, with a corner in the region that starts at FVID
     /// `start` and undoes the split tagged `tag`, goes with the region.
     fn undoes(&self, owner: u32, start: u32, tag: u32) -> bool;
@@ -67,7 +65,7 @@ pub(super) fn pass<F: Form>(form: &F, faces: Faces, need: Need) -> Result<Outcom
                     continue;
                 }
                 budget -= 1;
-                let op = form.descend(&v)?;
+                let op = form.op(&v)?;
                 let [l, u] = form.children(&v, &op)?;
                 done.push(op);
                 stack.push((u, depth + 1));

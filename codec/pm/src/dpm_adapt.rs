@@ -100,8 +100,7 @@ impl one_level::Form for Compressed<'_> {
         &self.vertices[i].creator.cache
     }
 
-    fn op(&self, i: usize) -> Result<DecodedOp, DpmError> {
-        let v = &self.vertices[i];
+    fn op(&self, v: &Vertex) -> Result<DecodedOp, DpmError> {
         // A splitting vertex's operation is resident (`DpmAdapter::splits`).
         Ok(self.src.decode(self.dpm, v.own.addr, &v.own.ctx)?.expect("a splitting vertex's node is resident"))
     }
@@ -158,10 +157,6 @@ impl all_levels::Form for Compressed<'_> {
 
     fn descends(&self, v: &Vertex, need: one_level::Need) -> bool {
         DpmAdapter::splits(v, need, self.src)
-    }
-
-    fn descend(&self, v: &Vertex) -> Result<DecodedOp, DpmError> {
-        Ok(self.src.decode(self.dpm, v.own.addr, &v.own.ctx)?.expect("resident: checked"))
     }
 
     /// A face is owned by its split's `v_u`, which lies strictly inside the region's FVID

@@ -32,8 +32,8 @@ pub(super) trait Form: Sync {
     fn splits(&self, i: usize, need: Need) -> bool;
     /// The cache of the split that made vertex `i` (its collapse).
     fn collapse_cache(&self, i: usize) -> &Cached;
-    /// The operation of splitting vertex `i`.
-    fn op(&self, i: usize) -> Result<Self::Op, Self::Error>;
+    /// The operation of a vertex that splits (in a one-level pass, or down a descent).
+    fn op(&self, v: &Self::Vertex) -> Result<Self::Op, Self::Error>;
     /// An operation's split: the faces it adds, its `v` and `v_u`, and the owner its faces
     /// get.
     fn split<'a>(&'a self, op: &'a Self::Op) -> (&'a [[u32; 3]], u32, u32, u32);
@@ -100,7 +100,7 @@ pub(super) fn pass<F: Form>(form: &F, faces: Faces, need: Need) -> Result<Outcom
     // The operations of the splitting vertices, fetched once for the pass.
     let ops: Vec<Option<F::Op>> = (0..n)
         .into_par_iter()
-        .map(|i| if cnt[i] == 2 { form.op(i).map(Some) } else { Ok(None) })
+        .map(|i| if cnt[i] == 2 { form.op(&form.kept(i)).map(Some) } else { Ok(None) })
         .collect::<Result<_, _>>()?;
 
     // Algorithm 3: memory management.
