@@ -11,7 +11,7 @@ use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{basis_position, command_context, predict, Prediction, RangeSource, SymbolSource};
 use super::prefix::PrefixSource;
-use super::Command;
+use crate::command::Command;
 use crate::mesh::{Mesh, Quantization};
 
 /// A decoded `.bft` file, at slot level: quantized positions per slot, triangles over

@@ -12,7 +12,7 @@ use super::attributes::{self, oct_encode, DEFAULT_NORMAL_BITS};
 use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{command_context, predict, CommandModel, GeometryModel, Prediction};
-use super::Command;
+use crate::command::Command;
 use crate::csr::Csr;
 use crate::mesh::{Mesh, MeshError, Quantization};
 use crate::rangecoder::Encoder;

@@ -2,7 +2,7 @@
 //! context is computed one way only.
 
 use super::frontier::NONE;
-use super::Command;
+use crate::command::Command;
 use crate::rangecoder::{BitTree, Decoder, Encoder, UIntCoder, PROB_INIT};
 
 /// Visited degrees above this share a context.

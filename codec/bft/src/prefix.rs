@@ -23,7 +23,7 @@
 
 use super::format::{corrupt, BftError};
 use super::model::{Prediction, SymbolSink, SymbolSource};
-use super::Command;
+use crate::command::Command;
 use crate::huffman::{BitReader, BitWriter, Table};
 
 /// Longest code: lengths are stored in 4 bits.

@@ -36,7 +36,7 @@ use super::frontier::Frontier;
 use super::model::{RangeSink, SymbolSink};
 use super::prefix::PrefixSink;
 use super::tile_writer::TileWriter;
-use super::Command;
+use crate::command::Command;
 use crate::csr::Csr;
 use crate::view::{triangle_tile_boxes_into, ClipVertex, TileBox, TileGrid};
 

@@ -10,7 +10,7 @@ use super::attributes::{self, SlotAttributes};
 use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
 use super::model::{basis_position, command_context, predict, Prediction, SymbolSink};
-use super::Command;
+use crate::command::Command;
 
 pub(crate) struct TileWriter<S> {
     pub f: Frontier,

@@ -70,7 +70,8 @@ use rayon::prelude::*;
 
 use super::all_levels;
 use super::one_level::{self, active_of, Cached};
-use super::{Criteria, ProgressiveMesh, SplitTree, NONE};
+use crate::pass_stats::PassStats;
+use crate::progressive::{Criteria, ProgressiveMesh, SplitTree, NONE};
 use crate::view::Camera;
 
 /// A view for [`Adapter::adapt`].
@@ -209,28 +210,6 @@ pub fn needs_split(view: &Viewpoint, planes: &[Vec4; 6], center: [f32; 3], norma
     }
     let d = (dist - r).max(0.0) + view.c_lod * outside;
     err * view.pixels_per_unit > view.error_px * d
-}
-
-/// What one pass did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PassStats {
-    pub splits: usize,
-    pub collapses: usize,
-    /// Collapses cancelled because their target split (Algorithm 2).
-    pub cancelled: usize,
-    /// Active vertices and faces after the pass.
-    pub vertices: usize,
-    pub faces: usize,
-    /// The pass kept its splits back, or changed the error it adapts to, to stay within a
-    /// memory budget (the GPU adapter's `set_budget`; never the CPU's): not converged.
-    pub held: bool,
-}
-
-impl PassStats {
-    /// No split, no collapse and nothing held back: the state is converged for this view.
-    pub fn converged(&self) -> bool {
-        self.splits == 0 && self.collapses == 0 && !self.held
-    }
 }
 
 /// The most levels an all-levels pass splits below one vertex ([`Levels::All`]): the depth of

@@ -8,7 +8,8 @@ use std::borrow::Cow;
 use rayon::prelude::*;
 
 use super::one_level::{self, active_of, exclusive_scan, update_faces_all_levels, Corner, Faces, Moved, Need, Outcome};
-use super::{PassStats, NONE};
+use crate::pass_stats::PassStats;
+use crate::progressive::NONE;
 
 /// What an all-levels pass needs of a form beyond a one-level pass's.
 pub(super) trait Form: one_level::Form {

@@ -38,7 +38,9 @@ use super::format::{DecodedOp, Dpm, DpmError, OpContext};
 use super::one_level::{active_of, Cached};
 use super::ooc::NodeCache;
 use super::{all_levels, one_level};
-use super::{PassStats, Viewpoint, NONE};
+use crate::adapt::Viewpoint;
+use crate::pass_stats::PassStats;
+use crate::progressive::NONE;
 
 /// Where the operations are: the file in memory, or the resident nodes of an out-of-core one.
 #[derive(Clone, Copy)]

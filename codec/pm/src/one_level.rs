@@ -9,7 +9,8 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{Criteria, PassStats, ProgressiveMesh, NONE};
+use crate::pass_stats::PassStats;
+use crate::progressive::{Criteria, ProgressiveMesh, NONE};
 
 /// Whether the view asks for an operation, from its cache.
 pub(super) type Need<'n> = &'n (dyn Fn(&Cached) -> bool + Sync);

@@ -4,7 +4,7 @@
 //! pre-order as a sort ([`preorder`]), and moving arrays into an order in place
 //! ([`permute_in_place`], [`place`]).
 
-use super::Split;
+use crate::progressive::Split;
 
 /// The splits in the pre-order of their tree (each split before its left then its right
 /// subtree, the roots in FVID order), as split indices: the splits sorted by their vertex's
@@ -179,7 +179,7 @@ pub(crate) fn place<A>(a: &mut [A], dest: &mut [u32], first: u32) {
 #[cfg(test)]
 mod tests {
     use super::{permute_in_place, preorder, sort_in_place_by_key};
-    use crate::pm::Split;
+    use crate::progressive::Split;
 
     /// Every permutation of five elements (cycles of every length) moves both slices as a
     /// gather through the order would.

@@ -9,7 +9,7 @@
 
 use std::collections::BTreeSet;
 
-use super::ProgressiveMesh;
+use crate::progressive::ProgressiveMesh;
 
 /// Applies the splits of a progressive mesh one at a time, from the base mesh up.
 ///

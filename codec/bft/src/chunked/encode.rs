@@ -26,7 +26,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 use thiserror::Error;
 
-use super::{oct_decode, oct_encode, write_head, Border, ChunkEntry, ChunkedHeader, DEFAULT_CHUNK_TRIANGLES};
+use super::border::{oct_decode, oct_encode, Border};
+use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader};
+use super::DEFAULT_CHUNK_TRIANGLES;
 use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
 use crate::bft::normals::{face_normal_sums, unit};
@@ -458,7 +460,7 @@ pub fn encode_chunked(
             border.to_bytes()
         })
         .collect();
-    let mut offset = super::head_len(chunks);
+    let mut offset = head_len(chunks);
     for (e, t) in entries.iter_mut().zip(&tables) {
         e.offset = offset;
         e.border_len = t.len() as u32;

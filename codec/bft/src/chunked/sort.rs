@@ -23,7 +23,8 @@ use std::sync::{Arc, Mutex};
 use glam::{Mat4, Vec4};
 use rayon::prelude::*;
 
-use super::{ChunkSource, ChunkedFile};
+use super::file::ChunkedFile;
+use super::source::ChunkSource;
 use crate::bft::format::Coding;
 use crate::bft::normals::BorderNormals;
 use crate::bft::tile_sort::{boxes_into, Boxes, SortError, Sorter, TileModel};
@@ -213,7 +214,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
             }
         }
         let model = TileModel::from_bytes(&self.file.chunk_bft(i)?).map_err(|e| match e {
-            SortError::Bft(e) => super::in_chunk(i, e),
+            SortError::Bft(e) => super::error::in_chunk(i, e),
             other => FormatError::Corrupt(Format::Bft, format!("chunk {i}: {other}")),
         })?;
         self.file.check_chunk(i, &model.decoded.header, &model.decoded.positions)?;

@@ -50,7 +50,8 @@ use glam::{DMat3, DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::{Mode, Semantic};
 
-use super::{err, LoadError, Loaded};
+use super::error::{err, no_triangles, LoadError};
+use super::loaded::Loaded;
 
 /// Extensions this reader implements (removed from `extensionsRequired` before the crate
 /// validates the document, which refuses required extensions it does not know).
@@ -128,7 +129,7 @@ pub(super) fn load(path: &Path, bytes: &[u8]) -> Result<Loaded, LoadError> {
         stack.extend(node.children().collect::<Vec<_>>().into_iter().rev().map(|c| (c, world)));
     }
     if out.mesh.triangles.is_empty() {
-        return Err(err(path, super::no_triangles(out.ignored)));
+        return Err(err(path, no_triangles(out.ignored)));
     }
     // Normals only when every primitive has them (a renderer computes them otherwise);
     // colours when some primitive has them, white elsewhere (what COLOR_0's absence means).

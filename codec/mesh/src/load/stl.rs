@@ -22,7 +22,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::{err, LoadError};
+use super::error::{err, LoadError};
 use crate::mesh::Mesh;
 
 /// Reads an STL file's bytes (already decompressed).

@@ -4,7 +4,7 @@
 use super::simplify::distinct_corners;
 use super::vec3::{angle, cross, norm, sub};
 use crate::pm::order::{permute_in_place, place, preorder, sort_in_place_by_key};
-use crate::pm::{Criteria, ProgressiveMesh};
+use crate::progressive::{Criteria, ProgressiveMesh};
 
 /// Relative slack of the nesting bounds (radius, cone angle) per level.
 const SLACK: f64 = 1e-5;

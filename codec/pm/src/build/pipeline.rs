@@ -11,7 +11,7 @@ use super::simplify::{distinct_corners, run, Ids, Log, Simplifier, VertexErrors}
 use super::vec3::sub;
 use crate::mesh::Mesh;
 use crate::pm::format::MAX_OP_FACES;
-use crate::pm::ProgressiveMesh;
+use crate::progressive::ProgressiveMesh;
 
 /// Refuses, before any work, a mesh with an edge of more than [`MAX_OP_FACES`] faces: the
 /// collapse of such an edge (unless its faces went with other collapses first) makes an

@@ -18,7 +18,7 @@ use super::quantize::{dequantize_position, oct_decode, valid_oct};
 use super::tables::read_tables;
 use super::DpmError;
 use crate::huffman::Table;
-use crate::pm::ProgressiveMesh;
+use crate::progressive::ProgressiveMesh;
 
 /// A LEB128 number of the base mesh section that must fit in 32 bits.
 fn get_u32(b: &[u8], pos: &mut usize, what: &'static str) -> Result<u32, DpmError> {

@@ -32,7 +32,7 @@ use crate::container::put_varint;
 use crate::csr::Csr;
 use crate::huffman::Table;
 use crate::pm::order::{permute_in_place, preorder};
-use crate::pm::{ProgressiveMesh, Split, NONE};
+use crate::progressive::{ProgressiveMesh, Split, NONE};
 use thiserror::Error;
 
 /// Encoder settings.

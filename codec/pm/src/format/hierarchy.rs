@@ -49,7 +49,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use crate::pm::NONE;
+use crate::progressive::NONE;
 
 /// Halvings of an inner node's remaining subtrees into its children (2^SPLITS children).
 const SPLITS: usize = 2;

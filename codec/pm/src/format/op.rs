@@ -20,7 +20,7 @@ use super::quantize::{dequantize_criteria, valid_oct, MAX_K};
 use super::symbols::{unzigzag, zigzag, OpReader, OpWriter};
 use super::DpmError;
 use crate::huffman::Table;
-use crate::pm::{Criteria, Split};
+use crate::progressive::{Criteria, Split};
 
 /// What a single operation needs besides its bytes: all of it the runtime has when it is about
 /// to perform the split (the vertex, the end of its FVID range, its parent's criteria and its

@@ -8,7 +8,7 @@
 
 use super::header::{max_q, Header, MAX_OP_FACES};
 use super::{EncodeError, EncodeOptions};
-use crate::pm::{Criteria, ProgressiveMesh};
+use crate::progressive::{Criteria, ProgressiveMesh};
 
 /// The largest log code (also the code of NaN); codes above are corrupt.
 pub const MAX_K: u32 = 1 << 20;

@@ -22,8 +22,9 @@
 use std::collections::HashMap;
 use std::str::SplitWhitespace;
 
-use super::{Emitter, Input, Source};
-use crate::load::{err, LoadError};
+use super::emitter::Emitter;
+use super::source::{Input, Source};
+use crate::load::error::{err, LoadError};
 use crate::Mesh;
 
 /// "No slot": a file vertex no object has used yet.

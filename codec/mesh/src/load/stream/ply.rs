@@ -23,8 +23,9 @@
 use std::fmt;
 use std::path::Path;
 
-use super::{Emitter, Input, Source};
-use crate::load::{err, LoadError};
+use super::emitter::Emitter;
+use super::source::{Input, Source};
+use crate::load::error::{err, LoadError};
 use crate::Mesh;
 
 /// The longest header line read. ply-rs has no limit, but a header line is a keyword and a
