@@ -52,7 +52,7 @@ fn vec3(v: glam::Vec3) -> String {
 
 /// The camera flags of an off-axis frustum built by the wall (eye, target, up, field of
 /// view, shift), for a mono render of it.
-fn frustum_flags(a: &master::cli::CameraArgs) -> Vec<String> {
+fn frustum_flags(a: &master::camera::CameraSpec) -> Vec<String> {
     let [sx, sy] = a.shift.unwrap();
     vec![
         "--eye".into(),

@@ -23,7 +23,7 @@ use plotters::prelude::*;
 use codec::bft::chunked::sort::{ChunkedModel, PieceKind};
 use codec::bft::chunked::{encode_mesh_chunked, ChunkOptions, ChunkedFile};
 use codec::view::Camera;
-use master::cli::CameraArgs;
+use master::camera::CameraSpec;
 use master::commands::sort::{sort_frame, SortSummary};
 use master::model::{load_model, Model};
 use master::output::write_bytes;
@@ -234,7 +234,7 @@ impl Subject {
     fn measure(&self, grid: &TileGrid) -> Result<Row> {
         let tiles = &self.model.tiles;
         let bits = tiles.decoded.header.quant_bits;
-        let cam = self.model.camera(&CameraArgs::default(), grid)?;
+        let cam = self.model.camera(&CameraSpec::default(), grid)?;
         let (mut sorter, mut prefix_sorter) = (Sorter::new(Coding::Range), Sorter::new(Coding::Prefix));
         let (mut runs, mut prefix_runs) = (Vec::new(), Vec::new());
         let (mut boxes, mut prefix_boxes) = (Boxes::default(), Boxes::default());

@@ -5,7 +5,7 @@ use std::process::{Command, Output};
 use codec::bft::tile_sort::{Boxes, Sorter};
 use codec::bft::{Coding, EncodeOptions};
 use codec::view::TileGrid;
-use master::cli::CameraArgs;
+use master::camera::CameraSpec;
 use master::commands::sort::sort_frame;
 use master::model::load_model;
 use testkit::{arg as s, mesh_path as mesh, stderr};
@@ -91,7 +91,7 @@ fn writes_the_figure_8_table_and_plot() {
     let model = load_model(&cow, EncodeOptions { quant_bits: 14, ..Default::default() }).unwrap();
     for row in &rows {
         let grid = TileGrid::new(1920, 1080, n(row, "cols") as u32, n(row, "rows") as u32).unwrap();
-        let cam = model.camera(&CameraArgs::default(), &grid).unwrap();
+        let cam = model.camera(&CameraSpec::default(), &grid).unwrap();
         let (mut sorter, mut boxes) = (Sorter::new(Coding::Range), Boxes::default());
         let t = sort_frame(&model, "cow", &cam, &grid, &mut sorter, &mut boxes).unwrap().0.totals;
         let tiles = format!("{}x{}", row["cols"], row["rows"]);

@@ -1,4 +1,5 @@
-//! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]), one
+//! Tessera's master side, the commands behind the `tessera` binary: every flag ([`cli`]),
+//! the camera a command asks for and its precision checks ([`camera`]), one
 //! file per subcommand ([`commands`]: encode, decode, stats, sort, render, pm, nsp, plot),
 //! opening any model kind and its bounds ([`model`]), rank 0 of `render` and the other ranks'
 //! roles ([`render`]: the frame loop, tile scheduling, the workers' handshake and silence,
@@ -18,6 +19,7 @@ macro_rules! outln {
     }};
 }
 
+pub mod camera;
 pub mod cli;
 pub mod commands;
 pub mod composite;

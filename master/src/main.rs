@@ -25,9 +25,7 @@ fn main() -> ExitCode {
         Command::Decode { input, output } => commands::decode::run(input, output),
         Command::Stats { input, json } => commands::stats::run(input, *json),
         Command::Render(args) => commands::render::run(args),
-        Command::Sort { model, grid, camera, dump, json, tile_coding } => {
-            commands::sort::run(model, grid, camera, dump.as_ref(), *json, (*tile_coding).into())
-        }
+        Command::Sort(args) => commands::sort::run(args),
         Command::Pm { pm } => commands::pm::run(pm),
         Command::Nsp { nsp } => commands::nsp::run(nsp),
         Command::Plot { input, output, frames, width } => commands::plot::run(input, output, *frames, *width),

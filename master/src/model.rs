@@ -12,7 +12,7 @@ use codec::kind::ModelKind;
 use codec::view::{Camera, TileGrid};
 use codec::Mesh;
 
-use crate::cli::CameraArgs;
+use crate::camera::CameraSpec;
 use crate::progress;
 
 /// The kind of the file at `path` by its content alone: a Tessera model by its magic number,
@@ -153,17 +153,17 @@ fn truncate_hook(path: &Path, head: u64) {
 }
 
 /// The camera of a chunked model: the flags given, the rest framing its bounding box.
-pub fn chunked_camera(model: &Chunked, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+pub fn chunked_camera(model: &Chunked, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
     let h = model.file.header;
     args.camera(h.bbox_min, h.bbox_max, grid.aspect())
 }
 
 impl Model {
-    pub fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    pub fn camera(&self, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
         let d = &self.tiles.decoded;
         let h = d.header;
         // The three-quarter view fits the vertices (dequantized: the box's own scale).
-        let points: Option<Vec<[f32; 3]>> = (args.view == crate::cli::ViewPreset::ThreeQuarter).then(|| {
+        let points: Option<Vec<[f32; 3]>> = (args.view == crate::camera::ViewPreset::ThreeQuarter).then(|| {
             let q = d.quantization();
             d.positions.iter().map(|&p| q.dequantize(p)).collect()
         });

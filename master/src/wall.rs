@@ -230,7 +230,7 @@ impl Wall {
     /// of `base` (whose clip planes, if given, stay; else they follow the model as for any
     /// eye given on the command line). An error when the wall has no plane or the eye is not
     /// in front of it.
-    pub fn camera_args(&self, base: &crate::cli::CameraArgs, eye: glam::Vec3) -> Result<crate::cli::CameraArgs> {
+    pub fn camera_args(&self, base: &crate::camera::CameraSpec, eye: glam::Vec3) -> Result<crate::camera::CameraSpec> {
         let plane = self.plane.context("the wall has no plane to look through")?;
         let frustum = kooima(plane, (self.width, self.height), eye).context("the wall's plane")?;
         Ok(frustum.args(base, eye))
@@ -240,9 +240,9 @@ impl Wall {
     pub fn display_camera_args(
         &self,
         i: usize,
-        base: &crate::cli::CameraArgs,
+        base: &crate::camera::CameraSpec,
         eye: glam::Vec3,
-    ) -> Result<crate::cli::CameraArgs> {
+    ) -> Result<crate::camera::CameraSpec> {
         let d = &self.displays[i];
         let corners = d.corners.with_context(|| format!("display {} has no corners", d.name))?;
         let [x0, y0, x1, y1] = d.rect;
@@ -362,9 +362,9 @@ struct Frustum {
 }
 
 impl Frustum {
-    fn args(&self, base: &crate::cli::CameraArgs, eye: glam::Vec3) -> crate::cli::CameraArgs {
-        crate::cli::CameraArgs {
-            view: crate::cli::ViewPreset::Front,
+    fn args(&self, base: &crate::camera::CameraSpec, eye: glam::Vec3) -> crate::camera::CameraSpec {
+        crate::camera::CameraSpec {
+            view: crate::camera::ViewPreset::Front,
             eye: Some(eye),
             target: Some(self.target),
             up: Some(self.up),
@@ -533,7 +533,7 @@ mod tests {
     }
 
     /// The camera of a wall's camera flags, with clip planes 0.1 and 100.
-    fn camera_of(a: &crate::cli::CameraArgs) -> codec::view::Camera {
+    fn camera_of(a: &crate::camera::CameraSpec) -> codec::view::Camera {
         codec::view::Camera {
             eye: a.eye.unwrap(),
             target: a.target.unwrap(),

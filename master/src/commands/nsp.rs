@@ -8,7 +8,8 @@ use anyhow::{Context, Result};
 use codec::nsp::{self, view, Canonical, NspFile, Params};
 use serde::Serialize;
 
-use crate::cli::{CameraArgs, Nsp};
+use crate::camera::CameraSpec;
+use crate::cli::Nsp;
 use crate::model::{expect_kind, load_mesh, nsp_bbox};
 use crate::output::{
     check_distinct, check_extension, mesh_output, summary, temp_dir_in_flight, unregister_in_flight, write_atomic,
@@ -244,7 +245,7 @@ pub fn stats(input: &Path, json: bool) -> Result<()> {
 /// `tessera nsp adapt X.nsp [camera] --size WxH --error-px E -o OUT.ply [--full]`.
 pub fn adapt(
     input: &Path,
-    camera: &CameraArgs,
+    camera: &CameraSpec,
     size: (u32, u32),
     error_px: f32,
     full: bool,
@@ -262,7 +263,7 @@ pub fn adapt(
     } else {
         let (lo, hi) = nsp_bbox(&file);
         let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
-        crate::cli::check_camera(&cam, size.1)?;
+        crate::camera::check_camera(&cam, size.1)?;
         let v = view::View { camera: cam, width: size.0, height: size.1, error_px };
         let selection = view::select(&file, &v);
         let mut nav = view::Navigator::default();
@@ -305,7 +306,7 @@ pub fn run(nsp: &Nsp) -> Result<()> {
         }
         Nsp::Stats { input, json } => stats(input, *json),
         Nsp::Adapt { input, view, error_px, output, full } => {
-            adapt(input, &view.camera, view.size, *error_px, *full, output)
+            adapt(input, &view.camera.spec(), view.size, *error_px, *full, output)
         }
     }
 }

@@ -9,7 +9,8 @@ use codec::pm::{Adapter, Viewpoint};
 use codec::Mesh;
 use serde::Serialize;
 
-use crate::cli::{CameraArgs, Pm};
+use crate::camera::CameraSpec;
+use crate::cli::Pm;
 use crate::model::{dpm_file_bbox, expect_kind, load_mesh_streamed, pm_bbox, read_input};
 use crate::output::{check_distinct, check_extension, mesh_output, summary, write_atomic};
 use crate::progress;
@@ -378,7 +379,7 @@ pub struct AdaptOptions {
 /// all of them), never decoded whole: its memory follows the view. Its default camera frames
 /// [`dpm_file_bbox`], as `render`'s does. `--full` on the CPU decodes the file (the mesh is
 /// the model).
-pub fn adapt(input: &Path, camera: &CameraArgs, opts: &AdaptOptions, output: &Path) -> Result<()> {
+pub fn adapt(input: &Path, camera: &CameraSpec, opts: &AdaptOptions, output: &Path) -> Result<()> {
     let writer = mesh_output(input, output, "the output of pm adapt")?;
     expect_kind(input, ModelKind::Dpm, "pm adapt", "adapt")?;
     let at = || format!("{}", input.display());
@@ -433,10 +434,10 @@ impl NodesRead {
 }
 
 /// The view `pm adapt` adapts to, for a model in the box `lo`-`hi`.
-fn adapt_view(camera: &CameraArgs, opts: &AdaptOptions, (lo, hi): ([f32; 3], [f32; 3])) -> Result<Viewpoint> {
+fn adapt_view(camera: &CameraSpec, opts: &AdaptOptions, (lo, hi): ([f32; 3], [f32; 3])) -> Result<Viewpoint> {
     let size = opts.size;
     let cam = camera.camera(lo, hi, size.0 as f32 / size.1 as f32)?;
-    crate::cli::check_camera(&cam, size.1)?;
+    crate::camera::check_camera(&cam, size.1)?;
     let mut view = Viewpoint::new(&cam, size.0, size.1, opts.error_px);
     view.attribute_scale = opts.normal_weight * glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
     Ok(view)
@@ -479,7 +480,7 @@ fn run_gpu(
 }
 
 /// `pm adapt` of an in-core file (or `--full` on the CPU): decoded whole.
-fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Result<Adapted> {
+fn adapt_in_core(input: &Path, camera: &CameraSpec, opts: &AdaptOptions) -> Result<Adapted> {
     let bytes = read_input(input)?;
     let pb = progress::spinner(format!("decoding {}", input.display()));
     let decoded = format::decode(&bytes).with_context(|| format!("{}", input.display()));
@@ -510,7 +511,7 @@ fn adapt_in_core(input: &Path, camera: &CameraArgs, opts: &AdaptOptions) -> Resu
 fn adapt_out_of_core(
     input: &Path,
     file: std::sync::Arc<format::NodeFile>,
-    camera: &CameraArgs,
+    camera: &CameraSpec,
     opts: &AdaptOptions,
 ) -> Result<Adapted> {
     let at = || format!("{}", input.display());
@@ -615,7 +616,7 @@ pub fn run(pm: &Pm) -> Result<()> {
                 gpu_nodes: gpu_nodes_mb.map(mb),
                 levels: one_level.then_some(codec::pm::Levels::One),
             };
-            adapt(input, &view.camera, &opts, output)
+            adapt(input, &view.camera.spec(), &opts, output)
         }
     }
 }

@@ -1,7 +1,7 @@
 //! `tessera sort`: one frame of the compression-domain tile sort, with a per-tile report,
 //! the Tiled Tri baseline beside it, and optionally every tile's decoded submesh on disk.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -11,7 +11,7 @@ use codec::tri_sort;
 use codec::view::{Camera, TileGrid};
 use serde::Serialize;
 
-use crate::cli::{CameraArgs, GridArgs};
+use crate::cli::SortArgs;
 use crate::model::{chunked_camera, load_model, open_chunked, Chunked, Model};
 use crate::output::{write_atomic, write_bytes};
 
@@ -302,27 +302,22 @@ fn clear_dump(dir: &Path) -> Result<()> {
 }
 
 /// `tessera sort MODEL --size WxH --tiles CxR [camera] [--dump DIR] [--json]`.
-pub fn run(
-    path: &Path,
-    grid: &GridArgs,
-    camera: &CameraArgs,
-    dump: Option<&PathBuf>,
-    json: bool,
-    coding: bft::Coding,
-) -> Result<()> {
-    let grid = grid.grid()?;
+pub fn run(args: &SortArgs) -> Result<()> {
+    let (path, camera, dump, json) = (args.model.as_path(), &args.camera.spec(), args.dump.as_ref(), args.json);
+    let coding: bft::Coding = args.tile_coding.into();
+    let grid = args.grid.grid()?;
     if let Some(dir) = dump {
         prepare_dump(dir, path)?;
     }
     let name = path.display().to_string();
     let (mut summary, tiles) = if let Some(model) = open_chunked(path, 1 << 30)? {
         let cam = chunked_camera(&model, camera, &grid)?;
-        crate::cli::check_camera(&cam, grid.height)?;
+        crate::camera::check_camera(&cam, grid.height)?;
         sort_chunked_frame(&model, &name, &cam, &grid, coding)?
     } else {
         let model = load_model(path, EncodeOptions::default())?;
         let cam = model.camera(camera, &grid)?;
-        crate::cli::check_camera(&cam, grid.height)?;
+        crate::camera::check_camera(&cam, grid.height)?;
         let (summary, tiles) = sort_frame(&model, &name, &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
         (summary, tiles.into_iter().map(|t| (t.index, vec![t.bytes])).collect())
     };

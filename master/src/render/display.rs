@@ -15,7 +15,7 @@ use protocol::{unix_ms, DisplayFrameJob, DisplayReady, Pixels, Ready, Swap, ToDi
 use worker::transport::{RecvError, Transport};
 
 use super::plan::{display_path, eye_path, frame_path, Plan};
-use crate::cli::StereoOutput;
+use crate::camera::StereoOutput;
 use crate::composite::{intersection, Image};
 use crate::wall::Wall;
 

@@ -16,7 +16,7 @@ use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Ea
 use super::plan::{eye_path, frame_outputs, frame_path, save_wall, Plan};
 use super::scene::{FrameContext, FrameJobs, Scene};
 use super::stats::{worker_stats, ChunkStats, DisplayStats, MasterStats, NspStats, Span, TileStats, WorkerStats};
-use crate::cli::StereoOutput;
+use crate::camera::StereoOutput;
 use crate::composite::Image;
 use crate::output::{Identity, LineLog};
 
@@ -501,7 +501,7 @@ fn frame_views(scene: &dyn Scene, plan: &Plan, cam: &Camera, k: u32) -> Result<V
         .collect())
 }
 
-/// Checks every camera the run will use before any work ([`crate::cli::check_precision`]),
+/// Checks every camera the run will use before any work ([`crate::camera::check_precision`]),
 /// printing its warnings once: each view (eye, display) of the first and the last frame,
 /// which bound a zoom (an orbit changes no depth range, field of view or shift), and of
 /// every frame when `--eye-path` moves the eye.
@@ -523,7 +523,7 @@ fn check_cameras(scene: &dyn Scene, plan: &Plan, cam: &Camera) -> Result<()> {
                 _ => String::new(),
             };
             let what = format!("frame {}{eye}{display}", k + 1);
-            for w in crate::cli::check_precision(&v.camera, v.grid.height).with_context(|| what.clone())? {
+            for w in crate::camera::check_precision(&v.camera, v.grid.height).with_context(|| what.clone())? {
                 if warned.insert(w.clone()) {
                     eprintln!("warning: {w}");
                 }

@@ -7,7 +7,8 @@ use anyhow::{bail, Context, Result};
 use codec::view::TileGrid;
 use glam::Vec3;
 
-use crate::cli::{CameraArgs, RenderArgs, StereoOutput};
+use crate::camera::{CameraSpec, StereoOutput};
+use crate::cli::RenderArgs;
 use crate::composite::Image;
 use crate::output::{check_distinct, check_extension, Identity};
 use crate::wall::Wall;
@@ -19,8 +20,8 @@ pub struct Plan {
     pub model: PathBuf,
     /// How rank 0 codes a BFT model's tiles.
     pub coding: codec::bft::Coding,
-    /// The camera flags; what they leave out frames the model.
-    pub camera: CameraArgs,
+    /// The camera asked for; what it leaves out frames the model.
+    pub camera: CameraSpec,
     /// Frames to render.
     pub frames: u32,
     /// `--orbit` and its degrees a frame (0: a full turn over the frames), and `--zoom`.
@@ -202,7 +203,7 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     Ok(Plan {
         model: args.model.clone(),
         coding: args.tile_coding.into(),
-        camera: args.camera.clone(),
+        camera: args.camera.spec(),
         frames: args.frames,
         orbit: args.orbit,
         orbit_degrees: args.orbit_degrees,

@@ -9,8 +9,8 @@ use codec::bft::tile_sort::{self, Boxes, Sorter};
 use codec::view::{Camera, TileGrid};
 use protocol::{StreamSource, TileJob, TileStream};
 
-use super::{frame_messages, FrameContext, FrameJobs, Scene};
-use crate::cli::CameraArgs;
+use super::contract::{frame_messages, FrameContext, FrameJobs, Scene};
+use crate::camera::CameraSpec;
 use crate::model::{load_model, Model};
 use crate::render::stats::TileStats;
 
@@ -33,7 +33,7 @@ impl BftScene {
 }
 
 impl Scene for BftScene {
-    fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    fn camera(&self, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
         self.model.camera(args, grid)
     }
 

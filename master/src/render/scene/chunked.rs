@@ -10,8 +10,8 @@ use protocol::{FrameJob, SortJob, StreamSource, TileJob, TileStream};
 use worker::chunk_cache::ChunkCache;
 use worker::node::kept_cost;
 
-use super::{empty_jobs, frame_messages, FrameContext, FrameJobs, Scene};
-use crate::cli::CameraArgs;
+use super::contract::{empty_jobs, frame_messages, FrameContext, FrameJobs, Scene, ShareContext};
+use crate::camera::CameraSpec;
 use crate::model::{chunked_camera, open_chunked, Chunked};
 use crate::render::plan::Plan;
 use crate::render::stats::{ChunkStats, TileStats};
@@ -29,17 +29,6 @@ pub(in crate::render) struct ChunkedScene {
     /// grid when there are several (rank 0 decides it and tells the others).
     sorters: usize,
     owners: Vec<usize>,
-}
-
-/// What one sorter's share of a chunked frame is made from.
-pub(in crate::render) struct ShareContext<'a> {
-    pub frame: u32,
-    pub grid: &'a TileGrid,
-    pub view_proj: glam::Mat4,
-    /// Workers are ranks `1..=workers`.
-    pub workers: usize,
-    pub sorters: usize,
-    pub decode_only: bool,
 }
 
 /// One sorter's share of a chunked frame: its jobs for every worker, their tile lines, and
@@ -136,7 +125,7 @@ impl ChunkedScene {
 }
 
 impl Scene for ChunkedScene {
-    fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    fn camera(&self, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
         chunked_camera(&self.model, args, grid)
     }
 

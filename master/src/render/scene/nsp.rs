@@ -8,8 +8,8 @@ use anyhow::{Context, Result};
 use codec::view::{Camera, TileGrid};
 use protocol::{NspFrameJob, NspModel, ToWorker};
 
-use super::{FrameContext, FrameJobs, Scene};
-use crate::cli::CameraArgs;
+use super::contract::{FrameContext, FrameJobs, Scene};
+use crate::camera::CameraSpec;
 use crate::model::nsp_bbox;
 use crate::render::stats::{NspStats, TileStats};
 
@@ -31,7 +31,7 @@ impl NspScene {
 }
 
 impl Scene for NspScene {
-    fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    fn camera(&self, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
         let (lo, hi) = nsp_bbox(&self.file);
         args.camera(lo, hi, grid.aspect())
     }

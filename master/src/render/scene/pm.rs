@@ -7,8 +7,8 @@ use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
 use protocol::{DpmFile, PmFrameJob, PmModel, ToWorker};
 
-use super::{FrameContext, FrameJobs, Scene};
-use crate::cli::CameraArgs;
+use super::contract::{FrameContext, FrameJobs, Scene};
+use crate::camera::CameraSpec;
 use crate::model::{dpm_file_bbox, pm_bbox, read_input};
 use crate::render::plan::Plan;
 use crate::render::stats::TileStats;
@@ -81,7 +81,7 @@ impl PmScene {
 }
 
 impl Scene for PmScene {
-    fn camera(&self, args: &CameraArgs, grid: &TileGrid) -> Result<Camera> {
+    fn camera(&self, args: &CameraSpec, grid: &TileGrid) -> Result<Camera> {
         let (lo, hi) = self.bbox;
         args.camera(lo, hi, grid.aspect())
     }
