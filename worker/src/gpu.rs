@@ -3,10 +3,9 @@
 //! out-of-memory errors into values (wgpu's default handler panics), waits for submissions,
 //! and buffer read-backs.
 //!
-//! It also holds the Rust half of the contract with the WGSL: a `Binding` row names one
-//! buffer binding of a shader (slot, variable name, access, byte size), bind group layouts and
-//! bind groups are built from tables of them, and `wgsl_contract` (a test that parses every
-//! shader with naga, no GPU needed) checks each table against the shader's declarations.
+//! Bind group layouts and bind groups are built from `Binding`s, each one buffer binding of
+//! a shader (slot, variable name, access, byte size) as the WGSL declares it: `reflect` reads
+//! them from the shader, so a binding list is written once, in the WGSL.
 
 use std::sync::{mpsc, Arc};
 
@@ -32,6 +31,10 @@ pub enum GpuError {
     /// A buffer could not be mapped for reading.
     #[error("GPU error: {0}")]
     Map(wgpu::BufferAsyncError),
+    /// One of Tessera's shaders did not parse or validate, or binds something other than a
+    /// buffer (a bug of the build, caught before any pipeline is made).
+    #[error("GPU error: shader {0}")]
+    Shader(String),
     #[error("GPU error: readback map callback never ran")]
     MapCallbackLost,
     /// The mapped range of a buffer could not be viewed.
@@ -201,13 +204,14 @@ impl Gpu {
         self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
     }
 
-    /// A bind group of `layout` (made from `bindings`) that binds each buffer of `buffers`,
-    /// whole, to the binding of its name.
+    /// A bind group of `layout` (made from `bindings`) that binds, whole, the buffer of
+    /// `buffers` named as each binding's variable; `buffers` may name more (a caller hands
+    /// every stage of a submission the same list).
     ///
     /// # Panics
     ///
-    /// Unless `buffers` names every binding of the table exactly once: a mismatch is a bug in
-    /// the caller, not a condition of the input.
+    /// Unless `buffers` names every binding: a missing buffer is a bug in the caller, not a
+    /// condition of the input.
     pub(crate) fn bind_group(
         &self,
         label: &str,
@@ -215,7 +219,6 @@ impl Gpu {
         bindings: &[Binding],
         buffers: &[(&str, &wgpu::Buffer)],
     ) -> wgpu::BindGroup {
-        assert_eq!(buffers.len(), bindings.len(), "{label}: {} buffers for {} bindings", buffers.len(), bindings.len());
         let entries: Vec<wgpu::BindGroupEntry> = bindings
             .iter()
             .map(|b| {
@@ -230,6 +233,64 @@ impl Gpu {
     }
 }
 
+/// A compute pipeline laid out from its shader's own binding lists, one per bind group (as
+/// `reflect` reads them from the WGSL), with their layouts. The layouts are made once and
+/// kept: `get_bind_group_layout` would register a new layout handle on every call, and
+/// calling it for every bind group of every pass grew a worker's memory by megabytes a frame
+/// (measured on lavapipe).
+pub(crate) struct Compute {
+    label: String,
+    pipeline: wgpu::ComputePipeline,
+    groups: Vec<(wgpu::BindGroupLayout, Vec<Binding>)>,
+}
+
+impl Compute {
+    /// The pipeline of `entry` of `module`, whose bind group `g` holds `groups[g]`.
+    pub(crate) fn new(
+        gpu: &Gpu,
+        label: &str,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        groups: Vec<Vec<Binding>>,
+    ) -> Compute {
+        let groups: Vec<(wgpu::BindGroupLayout, Vec<Binding>)> = groups
+            .into_iter()
+            .enumerate()
+            .map(|(g, b)| (gpu.bind_group_layout(&format!("{label} layout {g}"), wgpu::ShaderStages::COMPUTE, &b), b))
+            .collect();
+        let layouts: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(|(l, _)| Some(l)).collect();
+        let pipeline_layout = gpu.device().create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&format!("{label} pipeline layout")),
+            bind_group_layouts: &layouts,
+            immediate_size: 0,
+        });
+        let pipeline = gpu.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Compute { label: label.to_string(), pipeline, groups }
+    }
+
+    /// The bind groups of this pipeline: each binding bound to the buffer of `buffers` named
+    /// as its WGSL variable (`buffers` may name more: a submission hands all its stages one
+    /// list).
+    pub(crate) fn bind(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> Vec<wgpu::BindGroup> {
+        self.groups.iter().map(|(layout, bindings)| gpu.bind_group(&self.label, layout, bindings, buffers)).collect()
+    }
+
+    /// Sets this pipeline and its bind groups (from [`Self::bind`]) on `pass`.
+    pub(crate) fn set(&self, pass: &mut wgpu::ComputePass<'_>, groups: &[wgpu::BindGroup]) {
+        pass.set_pipeline(&self.pipeline);
+        for (g, group) in groups.iter().enumerate() {
+            pass.set_bind_group(g as u32, group, &[]);
+        }
+    }
+}
+
 /// How a shader declares a buffer binding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Access {
@@ -241,34 +302,19 @@ pub(crate) enum Access {
     ReadWrite,
 }
 
-/// One buffer binding of a bind group, `@binding(slot) var<access> name: T`, as the Rust
-/// side lays out and binds it.
-#[derive(Clone, Copy, Debug)]
+/// One buffer binding of a bind group, `@binding(slot) var<access> name: T`, as the WGSL
+/// declares it (read by [`crate::reflect`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct Binding {
     pub slot: u32,
     /// The WGSL variable's name; [`Gpu::bind_group`] takes buffers by it.
-    pub name: &'static str,
+    pub name: String,
     pub access: Access,
-    /// Bytes of the Rust twin of `T`: the whole of `T` when it is sized (a uniform block, a
-    /// fixed-size array), one element when `T` is a runtime-sized array.
+    /// Bytes of `T`: the whole of `T` when it is sized (a uniform block, a fixed-size array),
+    /// one element when `T` is a runtime-sized array.
     pub bytes: u64,
-}
-
-impl Binding {
-    /// A `var<uniform>` whose block is a `T`.
-    pub(crate) const fn uniform<T>(slot: u32, name: &'static str) -> Binding {
-        Binding { slot, name, access: Access::Uniform, bytes: std::mem::size_of::<T>() as u64 }
-    }
-
-    /// A `var<storage, read>` of `T`s (or a `T`).
-    pub(crate) const fn read<T>(slot: u32, name: &'static str) -> Binding {
-        Binding { slot, name, access: Access::Read, bytes: std::mem::size_of::<T>() as u64 }
-    }
-
-    /// A `var<storage, read_write>` of `T`s (or a `T`).
-    pub(crate) const fn read_write<T>(slot: u32, name: &'static str) -> Binding {
-        Binding { slot, name, access: Access::ReadWrite, bytes: std::mem::size_of::<T>() as u64 }
-    }
+    /// The name of `T` (or of its element), for messages.
+    pub ty: String,
 }
 
 /// What a caught GPU error says: its kind, and for a validation or internal error wgpu's

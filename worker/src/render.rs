@@ -20,6 +20,7 @@
 //! headlight, on a transparent background; there is no culling, as meshes may be
 //! inconsistently oriented.
 
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
@@ -27,6 +28,7 @@ use glam::{Mat4, Vec4};
 use thiserror::Error;
 
 use crate::gpu::{Binding, Gpu, GpuError};
+use crate::reflect::Reflected;
 use crate::RenderMesh;
 
 /// A mesh that is already on the device, in the layout of the GPU progressive-mesh
@@ -71,10 +73,25 @@ pub(crate) const SHADER: &str = include_str!("render.wgsl");
 
 /// Bind group 0 of the mesh pipelines: the frame uniform, read by both shader stages.
 pub(crate) const FRAME_GROUP: u32 = 0;
-pub(crate) const FRAME_BINDINGS: &[Binding] = &[Binding::uniform::<FrameUniform>(0, "frame")];
 /// Bind group 1 of the pulled pipeline: the adapted mesh's buffers, read by `vs_pulled`.
 pub(crate) const PULLED_GROUP: u32 = 1;
-pub(crate) const PULLED_BINDINGS: &[Binding] = &[Binding::read::<PmPoint>(0, "pm_points")];
+
+/// The bindings of [`FRAME_GROUP`], then of [`PULLED_GROUP`].
+type GroupBindings = (Vec<Binding>, Vec<Binding>);
+
+/// The bindings of [`FRAME_GROUP`] and [`PULLED_GROUP`], as [`SHADER`] declares them, read
+/// once per process.
+fn shader_bindings() -> Result<&'static GroupBindings, GpuError> {
+    static BINDINGS: OnceLock<Result<GroupBindings, String>> = OnceLock::new();
+    let read = || {
+        let shader = Reflected::parse("render.wgsl", SHADER)?;
+        Ok((
+            shader.bindings(&["vs_main", "vs_pulled", "fs_main"], FRAME_GROUP)?,
+            shader.bindings(&["vs_pulled"], PULLED_GROUP)?,
+        ))
+    };
+    BINDINGS.get_or_init(read).as_ref().map_err(|e| GpuError::Shader(e.clone()))
+}
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -220,6 +237,8 @@ pub struct Renderer {
     /// The mesh pipeline with vertices pulled from an [`AdaptedMesh`]'s buffers (`vs_pulled`).
     pulled_pipeline: wgpu::RenderPipeline,
     pulled_layout: wgpu::BindGroupLayout,
+    /// `pulled_layout`'s bindings.
+    pulled_bindings: &'static [Binding],
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     positions: GrowBuffer,
@@ -235,14 +254,15 @@ pub struct Renderer {
 
 impl Renderer {
     /// Creates the tile pipelines on `gpu`'s device.
-    pub fn new(gpu: &Gpu) -> Renderer {
+    pub fn new(gpu: &Gpu) -> Result<Renderer, GpuError> {
+        let (frame_bindings, pulled_bindings) = shader_bindings()?;
         let device = gpu.device();
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("render: shader"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
         let bind_group_layout =
-            gpu.bind_group_layout("render: frame uniform layout", wgpu::ShaderStages::VERTEX_FRAGMENT, FRAME_BINDINGS);
+            gpu.bind_group_layout("render: frame uniform layout", wgpu::ShaderStages::VERTEX_FRAGMENT, frame_bindings);
         let depth_stencil = |depth_compare| wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
@@ -331,7 +351,7 @@ impl Renderer {
             ],
         );
         let pulled_layout =
-            gpu.bind_group_layout("render: pulled vertices layout", wgpu::ShaderStages::VERTEX, PULLED_BINDINGS);
+            gpu.bind_group_layout("render: pulled vertices layout", wgpu::ShaderStages::VERTEX, pulled_bindings);
         // Indexed by group: FRAME_GROUP, PULLED_GROUP.
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("render: pulled pipeline layout"),
@@ -346,13 +366,14 @@ impl Renderer {
             mapped_at_creation: false,
         });
         let bind_group =
-            gpu.bind_group("render: frame uniform", &bind_group_layout, FRAME_BINDINGS, &[("frame", &uniform)]);
-        Renderer {
+            gpu.bind_group("render: frame uniform", &bind_group_layout, frame_bindings, &[("frame", &uniform)]);
+        Ok(Renderer {
             gpu: gpu.clone(),
             clear_pipeline,
             mesh_pipeline,
             pulled_pipeline,
             pulled_layout,
+            pulled_bindings,
             uniform,
             bind_group,
             positions: GrowBuffer::new("upload: positions", wgpu::BufferUsages::VERTEX),
@@ -362,7 +383,7 @@ impl Renderer {
             indices: GrowBuffer::new("upload: indices", wgpu::BufferUsages::INDEX),
             frame_target: None,
             readback: None,
-        }
+        })
     }
 
     /// The GPU this renderer draws on.
@@ -462,7 +483,7 @@ impl Renderer {
             Source::Pm(pm) => Some(self.gpu.bind_group(
                 "render: pulled vertices",
                 &self.pulled_layout,
-                PULLED_BINDINGS,
+                self.pulled_bindings,
                 &[("pm_points", pm.points)],
             )),
         };

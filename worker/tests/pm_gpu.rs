@@ -334,7 +334,7 @@ fn pm_speed() {
     let dpm = Dpm::parse(&bytes).unwrap();
     let (_one_at_a_time, device) = device();
     eprintln!("adapter: {}", device.adapter_name());
-    let mut renderer = Renderer::new(&device);
+    let mut renderer = Renderer::new(&device).unwrap();
     let (w, h) = (1920u32, 1080u32);
     let rect = [0, 0, w, h];
 
@@ -530,7 +530,7 @@ fn occlusion_on(rel: &str, min_saving: f64) {
     let (bytes, pm) = dpm_of(rel);
     let dpm = Dpm::parse(&bytes).unwrap();
     let (_one_at_a_time, device) = device();
-    let mut renderer = Renderer::new(&device);
+    let mut renderer = Renderer::new(&device).unwrap();
     let (w, h) = (960u32, 540u32);
     let rect = [0, 0, w, h];
     let (lo, hi) = bbox(&pm);

@@ -34,7 +34,7 @@ fn framing(mesh: &RenderMesh, (w, h): (u32, u32)) -> Mat4 {
 fn renderer() -> Renderer {
     let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
     eprintln!("adapter: {}", gpu.adapter_name());
-    Renderer::new(&gpu)
+    Renderer::new(&gpu).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn alphas(pixels: &[u8]) -> impl Iterator<Item = u8> + '_ {

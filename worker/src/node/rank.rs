@@ -121,7 +121,10 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         Ok(g) => g,
         Err(e) => return fail(e.into()),
     };
-    let mut renderer = Renderer::new(&gpu);
+    let mut renderer = match Renderer::new(&gpu) {
+        Ok(r) => r,
+        Err(e) => return fail(e.into()),
+    };
     let max_texture_side = match fault(rank) {
         Some(Fault::Texture(n)) => n,
         _ => gpu.limits().max_texture_dimension_2d,

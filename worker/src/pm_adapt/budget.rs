@@ -1,29 +1,12 @@
-//! The graphics memory an adapter takes ([`MemoryBudget`]): the budget, the error scale that
+//! The graphics memory an adapter takes (its `MemoryBudget`): the budget, the error scale that
 //! keeps the mesh within it, and the byte arithmetic of its buffers ("Memory budget" in
 //! docs/design.md).
 
-use codec::pm::{Levels, Viewpoint};
+use codec::pm::Levels;
 
+use super::adapter::GpuAdapter;
 use super::buffers::{VertexSet, POINT_BYTES, STATE_BYTES};
-use super::{AdaptError, GpuAdapter};
-
-/// The budget and what keeps a view's mesh within it.
-pub(super) struct MemoryBudget {
-    /// Bytes of graphics memory the adapter may take in all ([`GpuAdapter::set_budget`]).
-    pub(super) bytes: Option<u64>,
-    /// The factor on the view's pixel error that keeps the mesh within the budget (1 when
-    /// it fits), the lowest it may go back to for the current view (the scale that last
-    /// overflowed, 1 after a new view), and that view.
-    pub(super) error_scale: f32,
-    pub(super) floor: f32,
-    pub(super) last_view: Option<Viewpoint>,
-}
-
-impl Default for MemoryBudget {
-    fn default() -> Self {
-        MemoryBudget { bytes: None, error_scale: 1.0, floor: 1.0, last_view: None }
-    }
-}
+use super::error::AdaptError;
 
 impl GpuAdapter {
     /// Bytes of GPU memory the dynamic (per adapted mesh) buffers take now, at their capacities.

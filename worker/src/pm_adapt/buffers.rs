@@ -7,7 +7,7 @@ use wgpu::util::DeviceExt;
 /// `VState` of `worker/src/pm_adapt/shaders/common.wgsl`: an active vertex's operation and its creator's.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default, Debug)]
-pub(super) struct GpuVState {
+pub(crate) struct GpuVState {
     pub(super) v_end: u32,
     pub(super) addr: u32,
     pub(super) faces: u32,
@@ -42,7 +42,7 @@ pub(crate) const PENDING: u32 = 1;
 /// `Params` of `worker/src/pm_adapt/shaders/common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
-pub(super) struct Params {
+pub(crate) struct Params {
     pub(super) planes: [[f32; 4]; 6],
     pub(super) eye: [f32; 4],
     pub(super) pixels_per_unit: f32,
@@ -86,14 +86,14 @@ pub(super) struct Params {
 /// `Level` of `worker/src/pm_adapt/shaders/scan.wgsl`: the element count of one level of the scan.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-pub(super) struct LevelUniform {
+pub(crate) struct LevelUniform {
     pub(super) count: u32,
     pub(super) pad: [u32; 3],
 }
 
 /// The counters the stages accumulate with atomics (`stats`), read back once per pass; the
 /// indices are the `STAT_*` constants of `common.wgsl`.
-pub(super) type Stats = [u32; 8];
+pub(crate) type Stats = [u32; 8];
 pub(crate) const STAT_COLLAPSES: usize = 0;
 pub(crate) const STAT_CANCELLED: usize = 1;
 pub(crate) const STAT_REMOVED_FACES: usize = 2;
@@ -105,7 +105,7 @@ pub(super) const STATS_BYTES: u64 = std::mem::size_of::<Stats>() as u64;
 /// The queues of the descents of `count` (words 0-7) and `descend` (8-15), `Q_*` of
 /// `descent.wgsl`: per stage the next descent to take, the descents paused, and of the
 /// finished ones the steps in all (64 bits) and the most steps of one.
-pub(super) type Queue = [u32; 16];
+pub(crate) type Queue = [u32; 16];
 /// The `Q_*` words of `common.wgsl` the host reads or clears: where `descend`'s queue starts,
 /// and in `count`'s the next descent to take, the descents paused, the steps in all (two
 /// words), the most of one, and the leaves its scratch area was asked to keep (then the
@@ -124,7 +124,7 @@ pub(super) const SC_FACE_BYTES: u64 = 12;
 pub(super) const QUEUE_BYTES: u64 = std::mem::size_of::<Queue>() as u64;
 /// The first operation a pass failed to decode: its `DEC_*` status (0: none) and address,
 /// never cleared by a pass (`report` of `reorganise.wgsl`).
-pub(super) type Errors = [u32; 2];
+pub(crate) type Errors = [u32; 2];
 pub(super) const ERRORS_BYTES: u64 = std::mem::size_of::<Errors>() as u64;
 /// Readback: vertex total, face total, the 8 counters, then the errors.
 pub(super) const READBACK_BYTES: u64 = 8 + STATS_BYTES + ERRORS_BYTES;

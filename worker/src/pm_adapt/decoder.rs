@@ -8,12 +8,13 @@
 
 use bytemuck::{Pod, Zeroable};
 use codec::huffman::MAX_LEN;
-use codec::pm::format::{log_table, Dpm, OpContext, LOG_STEPS, MAX_K, TABLES, TABLE_BASE};
+use codec::pm::format::{log_table, Dpm, OpContext, LOG_STEPS, MAX_K, NODE_BYTES, TABLES, TABLE_BASE};
 
 use super::buffers::init;
+use super::error::AdaptError;
 use super::nodes::NodePool;
-use super::AdaptError;
-use crate::gpu::{Binding, Gpu, GpuError};
+use crate::gpu::{Compute, Gpu, GpuError};
+use crate::reflect::Reflected;
 
 /// Words per probability table on the GPU: per code length 0 to `MAX_LEN` the first code, the
 /// count and the offset, the longest length, the 256 symbols by code, four per word, then the
@@ -83,10 +84,15 @@ pub(crate) fn decoder_prelude() -> String {
     s
 }
 
-/// The decoder's source: the prelude and `decode.wgsl`, for a shader that declares its
-/// bindings (see the top of `decode.wgsl`) after it.
+/// The decoder's source: the prelude, `decode.wgsl` and its buffers (bind group 1,
+/// `decode_bindings.wgsl`), for a shader to follow.
 pub(crate) fn decoder_wgsl() -> String {
-    format!("{}\n{}", decoder_prelude(), include_str!("shaders/decode.wgsl"))
+    format!(
+        "{}\n{}\n{}",
+        decoder_prelude(),
+        include_str!("shaders/decode.wgsl"),
+        include_str!("shaders/decode_bindings.wgsl")
+    )
 }
 
 /// The batch shader: the decoder and `decode_batch.wgsl`.
@@ -213,16 +219,6 @@ pub(crate) struct RawDecoded {
     normal: [u32; 4],
 }
 
-/// The batch entry point's bindings (checked against the WGSL by `wgsl_contract`).
-pub(crate) const BATCH_BINDINGS: &[Binding] = &[
-    Binding::read::<DecodeParams>(0, "D"),
-    Binding::read::<u32>(1, "ops"),
-    Binding::read::<u32>(2, "tables"),
-    Binding::read::<Job>(3, "jobs"),
-    Binding::read_write::<RawDecoded>(4, "decoded"),
-    Binding::read_write::<u32>(5, "dec_faces"),
-];
-
 /// Why the GPU refused an operation: the check of `read_op` that failed (`DEC_*` of
 /// `decode.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -308,8 +304,8 @@ pub struct GpuDecodedOp {
 /// A `.dpm`'s operations on the GPU, and the pipeline that decodes batches of them.
 pub struct GpuOpDecoder {
     gpu: Gpu,
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    /// The batch entry point, laid out from `decode_batch.wgsl`'s bindings.
+    compute: Compute,
     params: DecodeParams,
     ops: wgpu::Buffer,
     tables: wgpu::Buffer,
@@ -347,24 +343,13 @@ impl GpuOpDecoder {
                 label: Some("pm: decode batch"),
                 source: wgpu::ShaderSource::Wgsl(batch_wgsl().into()),
             });
-            let layout = gpu.bind_group_layout("pm: decode layout", wgpu::ShaderStages::COMPUTE, BATCH_BINDINGS);
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("pm: decode pipeline layout"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("pm: decode batch"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+            let groups = Reflected::parse("pm: decode batch", &batch_wgsl())
+                .and_then(|shader| shader.groups("main"))
+                .map_err(|e| AdaptError::Gpu(GpuError::Shader(e)))?;
+            let compute = Compute::new(gpu, "pm: decode batch", &module, "main", groups);
             Ok(GpuOpDecoder {
                 gpu: gpu.clone(),
-                pipeline,
-                layout,
+                compute,
                 params,
                 ops,
                 tables,
@@ -434,10 +419,8 @@ impl GpuOpDecoder {
             };
             let decoded = make("pm decode: decoded", decoded_bytes);
             let dec_faces = make("pm decode: faces", face_bytes);
-            let bg = gpu.bind_group(
-                "pm: decode batch",
-                &self.layout,
-                BATCH_BINDINGS,
+            let bg = self.compute.bind(
+                gpu,
                 &[
                     ("D", &uniform),
                     ("ops", &self.ops),
@@ -458,8 +441,7 @@ impl GpuOpDecoder {
                 let groups = (jobs.len() as u32).div_ceil(DECODE_WG);
                 if groups > 0 {
                     let x = groups.min(self.max_groups);
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, &bg, &[]);
+                    self.compute.set(&mut pass, &bg);
                     pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
                 }
             }
@@ -497,5 +479,21 @@ impl GpuOpDecoder {
             })
             .collect();
         Ok((out, seconds))
+    }
+}
+
+impl AdaptError {
+    /// The error of a `DEC_*` status of `decode.wgsl` for the operation at `addr` (out of
+    /// core: a node and a local address).
+    pub(crate) fn corrupt(status: u32, addr: u32, out_of_core: bool) -> AdaptError {
+        let at = if out_of_core {
+            format!("node {}: operation at byte {}", addr as usize / NODE_BYTES, addr as usize % NODE_BYTES)
+        } else {
+            format!("operation at byte {addr}")
+        };
+        match DecodeFailure::of(status) {
+            DecodeFailure::LoopLimit => AdaptError::LoopLimit { at },
+            failure => AdaptError::Corrupt { at, failure: failure.to_string() },
+        }
     }
 }

@@ -10,7 +10,7 @@ use std::collections::{HashMap, HashSet};
 use codec::pm::NONE;
 
 use super::buffers::VERTEX_USAGE;
-use super::AdaptError;
+use super::error::AdaptError;
 
 pub(crate) struct NodePool {
     /// The slots, `slots * slot_bytes` bytes: the decoder's `ops`.

@@ -5,13 +5,15 @@ use codec::pm::{PassStats, Viewpoint};
 
 use codec::pm::Levels;
 
+use super::adapter::{GpuAdapter, Shared, MARKS};
 use super::buffers::{
     needs_resize, storage, FaceSet, LevelUniform, Params, ScanLevel, VertexSet, ERRORS_BYTES, Q_DESCEND, Q_MOST,
     Q_NEXT, Q_PAUSED, Q_SC_LEAVES, Q_STEPS, READBACK_BYTES, STATE_BYTES, STATS_BYTES, STAT_CANCELLED, STAT_COLLAPSES,
     STAT_DESCENTS, STAT_REMOVED_FACES, STAT_SPLIT_VERTICES, VERTEX_USAGE,
 };
+use super::error::AdaptError;
+use super::limits::{DEEP_DESCENT, DEEP_PASSES, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
 use super::pipelines::{Stage, SCAN_BLOCK, WG};
-use super::{AdaptError, GpuAdapter, DEEP_DESCENT, DEEP_PASSES, MARKS, MAX_SCALE, SCALE_STEP, SOFTWARE_DESCENT_SLOTS};
 use crate::gpu::GpuError;
 
 const APPLY: wgpu::CommandEncoderDescriptor = wgpu::CommandEncoderDescriptor { label: Some("pm: apply") };
@@ -258,6 +260,23 @@ impl GpuAdapter {
         Ok(dst)
     }
 
+    /// The operation decoder's buffers, by their WGSL names (`decode.wgsl`): its parameters,
+    /// the operations, the tables, the faces it decodes to and its error report. (Of the
+    /// fields, not `&self`: the caller goes on changing other fields.)
+    fn decoder_buffers<'a>(
+        shared: &'a Shared,
+        faces: &'a FaceSet,
+        errors: &'a wgpu::Buffer,
+    ) -> [(&'static str, &'a wgpu::Buffer); 5] {
+        [
+            ("D", &shared.decode),
+            ("ops", &shared.ops),
+            ("tables", &shared.tables),
+            ("dec_faces", &faces.fvid.buffer),
+            ("errors", errors),
+        ]
+    }
+
     /// Stage 3, submission 2: reorganisation, splits, index update, face compaction, into
     /// vertex set `dst`.
     fn apply(&mut self, params: &Params, all: bool, dst: usize, splits: u32) {
@@ -269,99 +288,39 @@ impl GpuAdapter {
             let (p, f) = (&self.shared.pipelines, &self.faces);
             // The vertex and face counts were scanned in place: from here on they are the
             // prefix sums `vsum` and `fsum`.
-            let reorganise = p.reorganise.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &src.fvid.buffer),
-                    ("vstate", &src.state.buffer),
-                    ("vpoint", &src.point.buffer),
-                    ("vsum", &self.vcnt.buffer),
-                    ("dfvid", &dstset.fvid.buffer),
-                    ("dstate", &dstset.state.buffer),
-                    ("dpoint", &dstset.point.buffer),
-                    ("root", &self.marks[3].buffer),
-                ],
-            );
-            let split_decode = (if all { &p.descend } else { &p.split_decode }).bind_named(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &src.fvid.buffer),
-                    ("vstate", &src.state.buffer),
-                    ("vpoint", &src.point.buffer),
-                    ("vsum", &self.vcnt.buffer),
-                    ("fsum", &self.fcnt.buffer),
-                    ("list", &self.list.buffer),
-                    ("dfvid", &dstset.fvid.buffer),
-                    ("dstate", &dstset.state.buffer),
-                    ("dpoint", &dstset.point.buffer),
-                    ("D", &self.shared.decode),
-                    ("ops", &self.shared.ops),
-                    ("tables", &self.shared.tables),
-                    ("dec_faces", &f.fvid.buffer),
-                    ("errors", &self.errors),
-                    ("occ", &self.occ.buffer),
-                    ("face_owner", &f.owner.buffer),
-                    ("dstack", &self.stack.buffer),
-                    ("queue", &self.queue),
-                ],
-            );
-            let compact = p.compact_splits.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vsum", &self.vcnt.buffer),
-                    ("list", &self.list.buffer),
-                    ("stats", &self.stats),
-                ],
-            );
-            let split = (if all { &p.index_new } else { &p.split }).bind_named(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &src.fvid.buffer),
-                    ("vsum", &self.vcnt.buffer),
-                    ("fsum", &self.fcnt.buffer),
-                    ("list", &self.list.buffer),
-                    ("dfvid", &dstset.fvid.buffer),
-                    ("face_idx", &f.idx.buffer),
-                    ("face_fvid", &f.fvid.buffer),
-                    ("face_owner", &f.owner.buffer),
-                ],
-            );
-            let index = p.index_update.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &src.fvid.buffer),
-                    ("vsum", &self.vcnt.buffer),
-                    ("dfvid", &dstset.fvid.buffer),
-                    ("face_idx", &f.idx.buffer),
-                    ("face_fvid", &f.fvid.buffer),
-                    ("face_owner", &f.owner.buffer),
-                ],
-            );
-            let holes = p.holes.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("face_owner", &f.owner.buffer),
-                    ("hole", &self.hole.buffer),
-                    ("stats", &self.stats),
-                ],
-            );
-            let fill = p.fill.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("face_idx", &f.idx.buffer),
-                    ("face_fvid", &f.fvid.buffer),
-                    ("face_owner", &f.owner.buffer),
-                    ("hole", &self.hole.buffer),
-                    ("stats", &self.stats),
-                ],
-            );
+            // Every buffer of the submission by its WGSL name; each stage binds those its
+            // shader declares.
+            let mut buffers = vec![
+                ("P", &self.params),
+                ("vfvid", &src.fvid.buffer),
+                ("vstate", &src.state.buffer),
+                ("vpoint", &src.point.buffer),
+                ("vsum", &self.vcnt.buffer),
+                ("fsum", &self.fcnt.buffer),
+                ("list", &self.list.buffer),
+                ("dfvid", &dstset.fvid.buffer),
+                ("dstate", &dstset.state.buffer),
+                ("dpoint", &dstset.point.buffer),
+                ("occ", &self.occ.buffer),
+                ("root", &self.marks[3].buffer),
+                ("face_idx", &f.idx.buffer),
+                ("face_fvid", &f.fvid.buffer),
+                ("face_owner", &f.owner.buffer),
+                ("hole", &self.hole.buffer),
+                ("stats", &self.stats),
+                ("dstack", &self.stack.buffer),
+                ("queue", &self.queue),
+                ("scratch", &self.scratch.buffer),
+                ("sc_faces", &self.sc_faces.buffer),
+            ];
+            buffers.extend(Self::decoder_buffers(&self.shared, &self.faces, &self.errors));
+            let reorganise = p.reorganise.bind(&self.gpu, &buffers);
+            let split_decode = (if all { &p.descend } else { &p.split_decode }).bind(&self.gpu, &buffers);
+            let compact = p.compact_splits.bind(&self.gpu, &buffers);
+            let split = (if all { &p.index_new } else { &p.split }).bind(&self.gpu, &buffers);
+            let index = p.index_update.bind(&self.gpu, &buffers);
+            let holes = p.holes.bind(&self.gpu, &buffers);
+            let fill = p.fill.bind(&self.gpu, &buffers);
             let mut pass = enc.begin_compute_pass(&APPLY_PASS);
             self.dispatch(&mut pass, &p.compact_splits, &compact, n);
             if all {
@@ -374,21 +333,8 @@ impl GpuAdapter {
                 }
                 pass = enc.begin_compute_pass(&APPLY_PASS);
                 if split_vertices > 0 && kept {
-                    let place = [
-                        ("P", &self.params),
-                        ("vsum", &self.vcnt.buffer),
-                        ("fsum", &self.fcnt.buffer),
-                        ("dfvid", &dstset.fvid.buffer),
-                        ("dstate", &dstset.state.buffer),
-                        ("dpoint", &dstset.point.buffer),
-                        ("dec_faces", &f.fvid.buffer),
-                        ("face_owner", &f.owner.buffer),
-                        ("scratch", &self.scratch.buffer),
-                        ("sc_faces", &self.sc_faces.buffer),
-                        ("queue", &self.queue),
-                    ];
-                    let leaves = p.place_leaves.bind_named(&self.gpu, &place);
-                    let splits = p.place_splits.bind_named(&self.gpu, &place);
+                    let leaves = p.place_leaves.bind(&self.gpu, &buffers);
+                    let splits = p.place_splits.bind(&self.gpu, &buffers);
                     self.dispatch(&mut pass, &p.place_leaves, &leaves, self.sc_kept[0]);
                     self.dispatch(&mut pass, &p.place_splits, &splits, self.sc_kept[1]);
                 }
@@ -449,42 +395,28 @@ impl GpuAdapter {
         {
             let set = &self.sets[self.cur];
             let p = &self.shared.pipelines;
-            let state = p.state.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vfvid", &set.fvid.buffer),
-                    ("vstate", &set.state.buffer),
-                    ("vpoint", &set.point.buffer),
-                    ("vcnt", &self.vcnt.buffer),
-                    ("fcnt", &self.fcnt.buffer),
-                    ("occ", &self.occ.buffer),
-                ],
-            );
-            let node_check = self.resident.as_ref().map(|_| {
-                p.node_check.bind(
-                    &self.gpu,
-                    &[
-                        ("P", &self.params),
-                        ("vfvid", &set.fvid.buffer),
-                        ("vstate", &set.state.buffer),
-                        ("D", &self.shared.decode),
-                        ("ops", &self.shared.ops),
-                        ("tables", &self.shared.tables),
-                        ("dec_faces", &self.faces.fvid.buffer),
-                        ("errors", &self.errors),
-                    ],
-                )
-            });
-            let collapse = p.collapse.bind(
-                &self.gpu,
-                &[
-                    ("P", &self.params),
-                    ("vstate", &set.state.buffer),
-                    ("vcnt", &self.vcnt.buffer),
-                    ("stats", &self.stats),
-                ],
-            );
+            // Every buffer of the submission by its WGSL name; each stage binds those its
+            // shader declares.
+            let [diff, reach, up, root] = &self.marks;
+            let mut buffers = vec![
+                ("P", &self.params),
+                ("vfvid", &set.fvid.buffer),
+                ("vstate", &set.state.buffer),
+                ("vpoint", &set.point.buffer),
+                ("vcnt", &self.vcnt.buffer),
+                ("fcnt", &self.fcnt.buffer),
+                ("occ", &self.occ.buffer),
+                ("stats", &self.stats),
+                ("diff", &diff.buffer),
+                ("reach", &reach.buffer),
+                ("up", &up.buffer),
+                ("root", &root.buffer),
+                ("list", &self.list.buffer),
+            ];
+            buffers.extend(Self::decoder_buffers(&self.shared, &self.faces, &self.errors));
+            let state = p.state.bind(&self.gpu, &buffers);
+            let node_check = self.resident.as_ref().map(|_| p.node_check.bind(&self.gpu, &buffers));
+            let collapse = p.collapse.bind(&self.gpu, &buffers);
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("pm: classify"),
                 timestamp_writes: None,
@@ -493,32 +425,8 @@ impl GpuAdapter {
                 self.dispatch(&mut pass, &p.node_check, bg, n);
             }
             if all {
-                let decode = [
-                    ("D", &self.shared.decode),
-                    ("ops", &self.shared.ops),
-                    ("tables", &self.shared.tables),
-                    ("dec_faces", &self.faces.fvid.buffer),
-                    ("errors", &self.errors),
-                ];
-                let [diff, reach, up, root] = &self.marks;
-                let buffers = [
-                    ("P", &self.params),
-                    ("vfvid", &set.fvid.buffer),
-                    ("vstate", &set.state.buffer),
-                    ("vpoint", &set.point.buffer),
-                    ("vcnt", &self.vcnt.buffer),
-                    ("fcnt", &self.fcnt.buffer),
-                    ("occ", &self.occ.buffer),
-                    ("diff", &diff.buffer),
-                    ("reach", &reach.buffer),
-                    ("up", &up.buffer),
-                    ("root", &root.buffer),
-                    ("stats", &self.stats),
-                    ("list", &self.list.buffer),
-                ];
-                let mut buffers: Vec<_> = buffers.into_iter().chain(decode).collect();
-                let mark = p.mark.bind_named(&self.gpu, &buffers);
-                let regions = p.regions.bind_named(&self.gpu, &buffers);
+                let mark = p.mark.bind(&self.gpu, &buffers);
+                let regions = p.regions.bind(&self.gpu, &buffers);
                 self.dispatch(&mut pass, &p.mark, &mark, n + 1);
                 self.scan(&mut pass, &diff.buffer);
                 drop(pass);
@@ -555,7 +463,7 @@ impl GpuAdapter {
                 for b in buffers.iter_mut().filter(|(name, _)| *name == "dec_faces") {
                     b.1 = &self.sc_faces.buffer;
                 }
-                let count = p.count.bind_named(&self.gpu, &buffers);
+                let count = p.count.bind(&self.gpu, &buffers);
                 enc = self.gpu.device().create_command_encoder(&COUNT);
                 self.count_ran = true;
                 (self.steps, self.most, self.sc_kept) = self.count_descents(&mut enc, params, &count, descents)?;
@@ -602,7 +510,7 @@ impl GpuAdapter {
         &self,
         enc: &mut wgpu::CommandEncoder,
         params: &mut Params,
-        bg: &wgpu::BindGroup,
+        bg: &[wgpu::BindGroup],
         total: u32,
     ) -> Result<(u64, u64, [u32; 3]), AdaptError> {
         if total == 0 {
@@ -645,7 +553,7 @@ impl GpuAdapter {
         &self,
         enc: &mut wgpu::CommandEncoder,
         stage: &Stage,
-        bg: &wgpu::BindGroup,
+        bg: &[wgpu::BindGroup],
         rounds: u32,
         fresh: Option<u64>,
     ) {
@@ -727,19 +635,18 @@ impl GpuAdapter {
     }
 
     /// Dispatches one thread per element, `threads` in all (nothing for zero).
-    fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, threads: u32) {
+    fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &[wgpu::BindGroup], threads: u32) {
         self.dispatch_groups(pass, stage, bg, threads.div_ceil(WG));
     }
 
     /// Dispatches `groups` workgroups, in two dimensions beyond the per-dimension limit.
-    fn dispatch_groups(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &wgpu::BindGroup, groups: u32) {
+    fn dispatch_groups(&self, pass: &mut wgpu::ComputePass<'_>, stage: &Stage, bg: &[wgpu::BindGroup], groups: u32) {
         if groups == 0 {
             return;
         }
         let x = groups.min(self.shared.max_groups);
         let y = groups.div_ceil(x);
-        pass.set_pipeline(&stage.pipeline);
-        pass.set_bind_group(0, bg, &[]);
+        stage.compute.set(pass, bg);
         pass.dispatch_workgroups(x, y, 1);
     }
 

@@ -1,15 +1,15 @@
 //! The adaptation's stages, one compute pipeline per entry point of `worker/src/pm_adapt/shaders/*.wgsl`, in
-//! the order a pass runs them. Each [`StageDef`] is the Rust half of the stage's contract with
-//! its WGSL: the bind group layout and every bind group of the stage are built from its
-//! binding table, and `wgsl_contract` checks the table against the shader (slot, name,
-//! access, and the size of the Rust record behind each binding).
+//! the order a pass runs them. A [`StageDef`] names the stage's shader and entry point; its
+//! binding list is the WGSL's, read once per process (`crate::reflect`), and the stage's
+//! bind group layout and bind groups are built from it. `wgsl_contract` checks the Rust
+//! record behind every binding's name.
 
 use std::borrow::Cow;
+use std::sync::OnceLock;
 
-use super::buffers::{Errors, GpuVState, LevelUniform, Params, Queue, Stats};
-use super::decoder::{decoder_wgsl, DecodeParams};
-use crate::gpu::{Access, Binding, Gpu};
-use crate::render::PmPoint;
+use super::decoder::decoder_wgsl;
+use crate::gpu::{Access, Binding, Compute, Gpu, GpuError};
+use crate::reflect::Reflected;
 
 /// Threads per workgroup of every stage (`WG` of `common.wgsl`, `@workgroup_size`).
 pub(crate) const WG: u32 = 256;
@@ -52,13 +52,12 @@ impl ShaderDef {
     }
 }
 
-/// One stage: an entry point of a shader and its bind group 0.
+/// One stage: an entry point of a shader.
 pub(crate) struct StageDef {
     /// Names the pipeline, its layouts and its bind groups.
     pub label: &'static str,
     pub shader: &'static ShaderDef,
     pub entry: &'static str,
-    pub bindings: &'static [Binding],
 }
 
 const fn with_common(label: &'static str, source: &'static str) -> ShaderDef {
@@ -101,336 +100,71 @@ const SPLIT_WGSL: ShaderDef = with_common("pm: split", include_str!("shaders/spl
 const INDEX_UPDATE_WGSL: ShaderDef = with_common("pm: index update", include_str!("shaders/index_update.wgsl"));
 const FACE_COMPACT_WGSL: ShaderDef = with_common("pm: face compaction", include_str!("shaders/face_compact.wgsl"));
 
-/// `P`, the parameters every stage of `common.wgsl` binds first.
-const PARAMS: Binding = Binding::read::<Params>(0, "P");
-
 /// Out of core, first in a pass: which vertices' nodes are resident, and the pending
 /// operations whose nodes came in decoded.
-pub(crate) const NODE_CHECK: StageDef = StageDef {
-    label: "pm: node check",
-    shader: &NODES_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read_write::<GpuVState>(2, "vstate"),
-        Binding::read::<DecodeParams>(3, "D"),
-        Binding::read::<u32>(4, "ops"),
-        Binding::read::<u32>(5, "tables"),
-        Binding::read_write::<u32>(6, "dec_faces"),
-        Binding::read_write::<Errors>(7, "errors"),
-    ],
-};
+pub(crate) const NODE_CHECK: StageDef = StageDef { label: "pm: node check", shader: &NODES_WGSL, entry: "main" };
 
 /// Algorithm 1.
-pub(crate) const STATE: StageDef = StageDef {
-    label: "pm: state update",
-    shader: &STATE_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read_write::<u32>(4, "vcnt"),
-        Binding::read_write::<u32>(5, "fcnt"),
-        Binding::read::<u32>(6, "occ"),
-    ],
-};
-
-/// The decoder's bindings in `state.wgsl`.
-const STATE_DECODER: [Binding; 5] = [
-    Binding::read::<DecodeParams>(7, "D"),
-    Binding::read::<u32>(8, "ops"),
-    Binding::read::<u32>(9, "tables"),
-    Binding::read_write::<u32>(10, "dec_faces"),
-    Binding::read_write::<Errors>(11, "errors"),
-];
+pub(crate) const STATE: StageDef = StageDef { label: "pm: state update", shader: &STATE_WGSL, entry: "main" };
 
 /// An all-levels pass: the undone splits marked, the vertices that split listed.
-pub(crate) const MARK: StageDef = StageDef {
-    label: "pm: mark",
-    shader: &STATE_WGSL,
-    entry: "mark",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read_write::<u32>(4, "vcnt"),
-        Binding::read_write::<u32>(5, "fcnt"),
-        Binding::read::<u32>(6, "occ"),
-        Binding::read_write::<u32>(12, "diff"),
-        Binding::read_write::<u32>(13, "reach"),
-        Binding::read_write::<u32>(14, "up"),
-        Binding::read_write::<Stats>(16, "stats"),
-        Binding::read_write::<u32>(17, "list"),
-    ],
-};
+pub(crate) const MARK: StageDef = StageDef { label: "pm: mark", shader: &STATE_WGSL, entry: "mark" };
 
 /// An all-levels pass: each listed vertex's leaves and faces counted down its subtree.
-pub(crate) const COUNT: StageDef = StageDef {
-    label: "pm: count",
-    shader: &STATE_WGSL,
-    entry: "count",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read_write::<u32>(4, "vcnt"),
-        Binding::read_write::<u32>(5, "fcnt"),
-        Binding::read::<u32>(6, "occ"),
-        STATE_DECODER[0],
-        STATE_DECODER[1],
-        STATE_DECODER[2],
-        STATE_DECODER[3],
-        STATE_DECODER[4],
-        Binding::read_write::<Stats>(16, "stats"),
-        Binding::read_write::<u32>(17, "list"),
-        Binding::read_write::<[u32; 4]>(18, "dstack"),
-        Binding::read_write::<Queue>(19, "queue"),
-        Binding::read_write::<[u32; 4]>(20, "scratch"),
-    ],
-};
+pub(crate) const COUNT: StageDef = StageDef { label: "pm: count", shader: &STATE_WGSL, entry: "count" };
 
 /// An all-levels pass: the collapsing regions, and the vertices carrying their operations.
-pub(crate) const REGIONS: StageDef = StageDef {
-    label: "pm: regions",
-    shader: &STATE_WGSL,
-    entry: "regions",
-    bindings: &[
-        PARAMS,
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read_write::<u32>(4, "vcnt"),
-        Binding::read_write::<u32>(5, "fcnt"),
-        Binding::read_write::<u32>(12, "diff"),
-        Binding::read_write::<u32>(13, "reach"),
-        Binding::read_write::<u32>(14, "up"),
-        Binding::read_write::<u32>(15, "root"),
-        Binding::read_write::<Stats>(16, "stats"),
-    ],
-};
+pub(crate) const REGIONS: StageDef = StageDef { label: "pm: regions", shader: &STATE_WGSL, entry: "regions" };
 
 /// Algorithm 2.
-pub(crate) const COLLAPSE: StageDef = StageDef {
-    label: "pm: collapse",
-    shader: &COLLAPSE_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read_write::<GpuVState>(1, "vstate"),
-        Binding::read_write::<u32>(2, "vcnt"),
-        Binding::read_write::<Stats>(3, "stats"),
-    ],
-};
-
-/// The scan's bindings, the same for both of its entry points.
-const SCAN_BINDINGS: &[Binding] = &[
-    Binding::read::<LevelUniform>(0, "L"),
-    Binding::read_write::<u32>(1, "data"),
-    Binding::read_write::<u32>(2, "sums"),
-];
+pub(crate) const COLLAPSE: StageDef = StageDef { label: "pm: collapse", shader: &COLLAPSE_WGSL, entry: "main" };
 
 /// The scan, down: each block scanned, its total to `sums`.
 pub(crate) const SCAN_BLOCKS: StageDef =
-    StageDef { label: "pm: scan blocks", shader: &SCAN_WGSL, entry: "scan_blocks", bindings: SCAN_BINDINGS };
+    StageDef { label: "pm: scan blocks", shader: &SCAN_WGSL, entry: "scan_blocks" };
 
 /// The scan, up: the scanned block totals added back.
-pub(crate) const ADD_BLOCKS: StageDef =
-    StageDef { label: "pm: scan add", shader: &SCAN_WGSL, entry: "add_blocks", bindings: SCAN_BINDINGS };
+pub(crate) const ADD_BLOCKS: StageDef = StageDef { label: "pm: scan add", shader: &SCAN_WGSL, entry: "add_blocks" };
 
 /// Algorithm 3.
-pub(crate) const REORGANISE: StageDef = StageDef {
-    label: "pm: reorganise",
-    shader: &REORGANISE_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read::<u32>(4, "vsum"),
-        Binding::read_write::<u32>(5, "dfvid"),
-        Binding::read_write::<GpuVState>(6, "dstate"),
-        Binding::read_write::<PmPoint>(7, "dpoint"),
-        Binding::read::<u32>(8, "root"),
-    ],
-};
+pub(crate) const REORGANISE: StageDef = StageDef { label: "pm: reorganise", shader: &REORGANISE_WGSL, entry: "main" };
 
 /// Algorithm 3's splits: the operations decoded, the children written.
-pub(crate) const SPLIT_DECODE: StageDef = StageDef {
-    label: "pm: split decode",
-    shader: &SPLIT_DECODE_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read::<u32>(4, "vsum"),
-        Binding::read::<u32>(5, "fsum"),
-        Binding::read::<u32>(6, "list"),
-        Binding::read_write::<u32>(7, "dfvid"),
-        Binding::read_write::<GpuVState>(8, "dstate"),
-        Binding::read_write::<PmPoint>(9, "dpoint"),
-        Binding::read::<DecodeParams>(10, "D"),
-        Binding::read::<u32>(11, "ops"),
-        Binding::read::<u32>(12, "tables"),
-        Binding::read_write::<u32>(13, "dec_faces"),
-        Binding::read_write::<Errors>(14, "errors"),
-    ],
-};
+pub(crate) const SPLIT_DECODE: StageDef =
+    StageDef { label: "pm: split decode", shader: &SPLIT_DECODE_WGSL, entry: "main" };
 
 /// An all-levels pass's splits: every splitting vertex's leaves and faces written.
-pub(crate) const DESCEND: StageDef = StageDef {
-    label: "pm: descend",
-    shader: &SPLIT_DECODE_WGSL,
-    entry: "descend",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<GpuVState>(2, "vstate"),
-        Binding::read::<PmPoint>(3, "vpoint"),
-        Binding::read::<u32>(4, "vsum"),
-        Binding::read::<u32>(5, "fsum"),
-        Binding::read::<u32>(6, "list"),
-        Binding::read_write::<u32>(7, "dfvid"),
-        Binding::read_write::<GpuVState>(8, "dstate"),
-        Binding::read_write::<PmPoint>(9, "dpoint"),
-        Binding::read::<DecodeParams>(10, "D"),
-        Binding::read::<u32>(11, "ops"),
-        Binding::read::<u32>(12, "tables"),
-        Binding::read_write::<u32>(13, "dec_faces"),
-        Binding::read_write::<Errors>(14, "errors"),
-        Binding::read::<u32>(15, "occ"),
-        Binding::read_write::<u32>(16, "face_owner"),
-        Binding::read_write::<[u32; 4]>(17, "dstack"),
-        Binding::read_write::<Queue>(18, "queue"),
-    ],
-};
+pub(crate) const DESCEND: StageDef = StageDef { label: "pm: descend", shader: &SPLIT_DECODE_WGSL, entry: "descend" };
 
 /// An all-levels pass: the leaves the count kept, to their slots (`place.wgsl`).
-pub(crate) const PLACE_LEAVES: StageDef = StageDef {
-    label: "pm: place leaves",
-    shader: &PLACE_WGSL,
-    entry: "place_leaves",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vsum"),
-        Binding::read_write::<u32>(3, "dfvid"),
-        Binding::read_write::<GpuVState>(4, "dstate"),
-        Binding::read_write::<PmPoint>(5, "dpoint"),
-        Binding::read::<[u32; 4]>(8, "scratch"),
-        Binding::read::<Queue>(10, "queue"),
-    ],
-};
+pub(crate) const PLACE_LEAVES: StageDef =
+    StageDef { label: "pm: place leaves", shader: &PLACE_WGSL, entry: "place_leaves" };
 
 /// An all-levels pass: the faces of the splits the count kept, to their slots (`place.wgsl`).
-pub(crate) const PLACE_SPLITS: StageDef = StageDef {
-    label: "pm: place splits",
-    shader: &PLACE_WGSL,
-    entry: "place_splits",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vsum"),
-        Binding::read::<u32>(2, "fsum"),
-        Binding::read_write::<u32>(6, "dec_faces"),
-        Binding::read_write::<u32>(7, "face_owner"),
-        Binding::read::<[u32; 4]>(8, "scratch"),
-        Binding::read::<u32>(9, "sc_faces"),
-        Binding::read::<Queue>(10, "queue"),
-    ],
-};
+pub(crate) const PLACE_SPLITS: StageDef =
+    StageDef { label: "pm: place splits", shader: &PLACE_WGSL, entry: "place_splits" };
 
 /// Algorithm 4's first step.
-pub(crate) const COMPACT_SPLITS: StageDef = StageDef {
-    label: "pm: compact splits",
-    shader: &COMPACT_SPLITS_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vsum"),
-        Binding::read_write::<u32>(2, "list"),
-        Binding::read_write::<Stats>(3, "stats"),
-    ],
-};
+pub(crate) const COMPACT_SPLITS: StageDef =
+    StageDef { label: "pm: compact splits", shader: &COMPACT_SPLITS_WGSL, entry: "main" };
 
 /// Algorithm 4.
-pub(crate) const SPLIT: StageDef = StageDef {
-    label: "pm: split",
-    shader: &SPLIT_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<u32>(3, "vsum"),
-        Binding::read::<u32>(4, "fsum"),
-        Binding::read::<u32>(5, "list"),
-        Binding::read::<u32>(6, "dfvid"),
-        Binding::read_write::<u32>(7, "face_idx"),
-        Binding::read::<u32>(8, "face_fvid"),
-        Binding::read_write::<u32>(9, "face_owner"),
-    ],
-};
+pub(crate) const SPLIT: StageDef = StageDef { label: "pm: split", shader: &SPLIT_WGSL, entry: "main" };
 
 /// An all-levels pass's Algorithm 4: the new faces indexed, one thread each.
-pub(crate) const INDEX_NEW: StageDef = StageDef {
-    label: "pm: index new faces",
-    shader: &SPLIT_WGSL,
-    entry: "index_new",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(6, "dfvid"),
-        Binding::read_write::<u32>(7, "face_idx"),
-        Binding::read::<u32>(8, "face_fvid"),
-    ],
-};
+pub(crate) const INDEX_NEW: StageDef =
+    StageDef { label: "pm: index new faces", shader: &SPLIT_WGSL, entry: "index_new" };
 
 /// Algorithm 5.
-pub(crate) const INDEX_UPDATE: StageDef = StageDef {
-    label: "pm: index update",
-    shader: &INDEX_UPDATE_WGSL,
-    entry: "main",
-    bindings: &[
-        PARAMS,
-        Binding::read::<u32>(1, "vfvid"),
-        Binding::read::<u32>(2, "vsum"),
-        Binding::read::<u32>(3, "dfvid"),
-        Binding::read_write::<u32>(4, "face_idx"),
-        Binding::read::<u32>(5, "face_fvid"),
-        Binding::read_write::<u32>(6, "face_owner"),
-    ],
-};
+pub(crate) const INDEX_UPDATE: StageDef =
+    StageDef { label: "pm: index update", shader: &INDEX_UPDATE_WGSL, entry: "main" };
 
 /// Section 5.6, first half: the dead slots below `m_new` listed. It uses only some of the
 /// file's bindings, and its layout holds only those.
-pub(crate) const HOLES: StageDef = StageDef {
-    label: "pm: face holes",
-    shader: &FACE_COMPACT_WGSL,
-    entry: "holes",
-    bindings: &[
-        PARAMS,
-        Binding::read_write::<u32>(3, "face_owner"),
-        Binding::read_write::<u32>(4, "hole"),
-        Binding::read_write::<Stats>(5, "stats"),
-    ],
-};
+pub(crate) const HOLES: StageDef = StageDef { label: "pm: face holes", shader: &FACE_COMPACT_WGSL, entry: "holes" };
 
 /// Section 5.6, second half: the live faces above `m_new` moved into the holes.
-pub(crate) const FILL: StageDef = StageDef {
-    label: "pm: face fill",
-    shader: &FACE_COMPACT_WGSL,
-    entry: "fill",
-    bindings: &[
-        PARAMS,
-        Binding::read_write::<u32>(1, "face_idx"),
-        Binding::read_write::<u32>(2, "face_fvid"),
-        Binding::read_write::<u32>(3, "face_owner"),
-        Binding::read_write::<u32>(4, "hole"),
-        Binding::read_write::<Stats>(5, "stats"),
-    ],
-};
+pub(crate) const FILL: StageDef = StageDef { label: "pm: face fill", shader: &FACE_COMPACT_WGSL, entry: "fill" };
 
 /// Every stage, in pass order.
 pub(crate) const STAGES: [&StageDef; 19] = [
@@ -455,51 +189,62 @@ pub(crate) const STAGES: [&StageDef; 19] = [
     &FILL,
 ];
 
-/// The most storage buffers one stage binds: what the device must allow per shader stage.
-pub(super) fn storage_buffers_per_stage() -> u32 {
-    let storage = |s: &StageDef| s.bindings.iter().filter(|b| b.access != Access::Uniform).count();
-    STAGES.iter().map(|s| storage(s)).max().unwrap_or(0) as u32
+/// Every stage's bindings, one list per bind group, read from its WGSL once per process, in
+/// [`STAGES`] order (each shader file parsed once for all of its entry points).
+fn stage_bindings() -> Result<&'static [Vec<Vec<Binding>>], GpuError> {
+    static BINDINGS: OnceLock<Result<Vec<Vec<Vec<Binding>>>, String>> = OnceLock::new();
+    let read = || {
+        let mut parsed: Vec<(&str, Reflected)> = Vec::new();
+        let mut out = Vec::with_capacity(STAGES.len());
+        for stage in STAGES {
+            let shader = stage.shader;
+            let i = match parsed.iter().position(|(label, _)| *label == shader.label) {
+                Some(i) => i,
+                None => {
+                    parsed.push((shader.label, Reflected::parse(shader.label, &shader.wgsl())?));
+                    parsed.len() - 1
+                }
+            };
+            out.push(parsed[i].1.groups(stage.entry)?);
+        }
+        Ok(out)
+    };
+    BINDINGS.get_or_init(read).as_deref().map_err(|e| GpuError::Shader(e.clone()))
 }
 
-/// A compute pipeline, its bind group layout, and the stage it runs. The layout is made from
-/// the stage's table and kept: `get_bind_group_layout` would register a new layout handle on
-/// every call, and calling it for every bind group of every pass grew a worker's memory by
-/// megabytes a frame (measured on lavapipe).
+impl StageDef {
+    /// The stage's bindings, one list per bind group, as its WGSL declares those its entry
+    /// point uses.
+    pub(crate) fn bindings(&self) -> Result<&'static [Vec<Binding>], GpuError> {
+        // By label: a `const` has no one address to compare.
+        let i = STAGES.iter().position(|s| s.label == self.label).expect("every StageDef is in STAGES");
+        Ok(&stage_bindings()?[i])
+    }
+}
+
+/// The most storage buffers one stage binds, over all its groups: what the device must allow
+/// per shader stage.
+pub(super) fn storage_buffers_per_stage() -> Result<u32, GpuError> {
+    let storage = |groups: &Vec<Vec<Binding>>| groups.iter().flatten().filter(|b| b.access != Access::Uniform).count();
+    Ok(stage_bindings()?.iter().map(storage).max().unwrap_or(0) as u32)
+}
+
+/// A stage's compute pipeline, laid out from its WGSL's bindings.
 pub(super) struct Stage {
-    pub(super) def: &'static StageDef,
-    pub(super) pipeline: wgpu::ComputePipeline,
-    pub(super) layout: wgpu::BindGroupLayout,
+    pub(super) compute: Compute,
 }
 
 impl Stage {
-    fn new(gpu: &Gpu, module: &wgpu::ShaderModule, def: &'static StageDef) -> Stage {
-        let layout = gpu.bind_group_layout(&format!("{} layout", def.label), wgpu::ShaderStages::COMPUTE, def.bindings);
-        let pipeline_layout = gpu.device().create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(&format!("{} pipeline layout", def.label)),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(def.label),
-            layout: Some(&pipeline_layout),
-            module,
-            entry_point: Some(def.entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Stage { def, pipeline, layout }
+    fn new(gpu: &Gpu, module: &wgpu::ShaderModule, def: &'static StageDef) -> Result<Stage, GpuError> {
+        let compute = Compute::new(gpu, def.label, module, def.entry, def.bindings()?.to_vec());
+        Ok(Stage { compute })
     }
 
-    /// A bind group of this stage, each buffer bound to the WGSL variable it is named after.
-    pub(super) fn bind(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
-        gpu.bind_group(self.def.label, &self.layout, self.def.bindings, buffers)
-    }
-
-    /// As [`Self::bind`], from the buffers of several stages: those its table names.
-    pub(super) fn bind_named(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
-        let used: Vec<_> =
-            buffers.iter().copied().filter(|(name, _)| self.def.bindings.iter().any(|b| b.name == *name)).collect();
-        self.bind(gpu, &used)
+    /// The bind groups of this stage: each of its bindings bound to the buffer of `buffers`
+    /// named as its WGSL variable (`buffers` may name more: a submission hands all its
+    /// stages one list).
+    pub(super) fn bind(&self, gpu: &Gpu, buffers: &[(&str, &wgpu::Buffer)]) -> Vec<wgpu::BindGroup> {
+        self.compute.bind(gpu, buffers)
     }
 }
 
@@ -526,7 +271,7 @@ pub(super) struct Pipelines {
 }
 
 impl Pipelines {
-    pub(super) fn new(gpu: &Gpu) -> Pipelines {
+    pub(super) fn new(gpu: &Gpu) -> Result<Pipelines, GpuError> {
         let module = |shader: &ShaderDef| {
             gpu.device().create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(shader.label),
@@ -542,26 +287,26 @@ impl Pipelines {
         let split = module(&SPLIT_WGSL);
         let place = module(&PLACE_WGSL);
         let single = |def: &'static StageDef| Stage::new(gpu, &module(def.shader), def);
-        Pipelines {
-            node_check: single(&NODE_CHECK),
-            state: Stage::new(gpu, &state, &STATE),
-            collapse: single(&COLLAPSE),
-            scan_blocks: Stage::new(gpu, &scan, &SCAN_BLOCKS),
-            add_blocks: Stage::new(gpu, &scan, &ADD_BLOCKS),
-            reorganise: single(&REORGANISE),
-            compact_splits: single(&COMPACT_SPLITS),
-            split_decode: Stage::new(gpu, &split_decode, &SPLIT_DECODE),
-            split: Stage::new(gpu, &split, &SPLIT),
-            mark: Stage::new(gpu, &state, &MARK),
-            count: Stage::new(gpu, &state, &COUNT),
-            regions: Stage::new(gpu, &state, &REGIONS),
-            descend: Stage::new(gpu, &split_decode, &DESCEND),
-            place_leaves: Stage::new(gpu, &place, &PLACE_LEAVES),
-            place_splits: Stage::new(gpu, &place, &PLACE_SPLITS),
-            index_new: Stage::new(gpu, &split, &INDEX_NEW),
-            index_update: single(&INDEX_UPDATE),
-            holes: Stage::new(gpu, &compact, &HOLES),
-            fill: Stage::new(gpu, &compact, &FILL),
-        }
+        Ok(Pipelines {
+            node_check: single(&NODE_CHECK)?,
+            state: Stage::new(gpu, &state, &STATE)?,
+            collapse: single(&COLLAPSE)?,
+            scan_blocks: Stage::new(gpu, &scan, &SCAN_BLOCKS)?,
+            add_blocks: Stage::new(gpu, &scan, &ADD_BLOCKS)?,
+            reorganise: single(&REORGANISE)?,
+            compact_splits: single(&COMPACT_SPLITS)?,
+            split_decode: Stage::new(gpu, &split_decode, &SPLIT_DECODE)?,
+            split: Stage::new(gpu, &split, &SPLIT)?,
+            mark: Stage::new(gpu, &state, &MARK)?,
+            count: Stage::new(gpu, &state, &COUNT)?,
+            regions: Stage::new(gpu, &state, &REGIONS)?,
+            descend: Stage::new(gpu, &split_decode, &DESCEND)?,
+            place_leaves: Stage::new(gpu, &place, &PLACE_LEAVES)?,
+            place_splits: Stage::new(gpu, &place, &PLACE_SPLITS)?,
+            index_new: Stage::new(gpu, &split, &INDEX_NEW)?,
+            index_update: single(&INDEX_UPDATE)?,
+            holes: Stage::new(gpu, &compact, &HOLES)?,
+            fill: Stage::new(gpu, &compact, &FILL)?,
+        })
     }
 }

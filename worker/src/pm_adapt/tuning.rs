@@ -1,45 +1,11 @@
-//! How an adapter runs its passes ([`Tuning`]): which levels a pass moves, the descents'
+//! How an adapter runs its passes (its `Tuning`): which levels a pass moves, the descents'
 //! budget and rounds, the limits on the stacks and the scratch area without a budget, and
 //! profiling; with the setters the tools and tests use.
 
-use codec::pm::{Levels, DESCENT_BUDGET};
+use codec::pm::Levels;
 
+use super::adapter::{scratch_buffers, GpuAdapter};
 use super::buffers::{storage, VERTEX_USAGE};
-use super::{scratch_buffers, GpuAdapter, MAX_SCRATCH_BYTES, MAX_STACK_BYTES, SOFTWARE_ROUND_STEPS};
-
-/// How an adapter runs its passes; the defaults suit the device.
-pub(super) struct Tuning {
-    /// How far a pass for a view moves a vertex in the split tree ([`GpuAdapter::set_levels`]).
-    pub(super) levels: Levels,
-    /// Whether the kind of pass is the default's ([`GpuAdapter::set_levels`] not called): all
-    /// levels, and one level for the rest of a view once an all-levels pass descended deep.
-    pub(super) mixed: bool,
-    /// An all-levels pass's descent budget ([`GpuAdapter::set_descent_budget`]).
-    pub(super) descent_budget: u32,
-    /// The most steps of a descent slot in one dispatch ([`GpuAdapter::set_round_steps`]).
-    pub(super) round_steps: u32,
-    /// The most bytes the scratch area and the stacks may take without a budget
-    /// ([`GpuAdapter::set_scratch_limit`], [`GpuAdapter::set_stack_limit`]).
-    pub(super) scratch_limit: u64,
-    pub(super) stack_limit: u64,
-    /// Wait for each pass's second submission and time it ([`GpuAdapter::set_profiling`]).
-    pub(super) profile: bool,
-}
-
-impl Tuning {
-    /// The defaults, with rounds bounded on a software adapter ([`SOFTWARE_ROUND_STEPS`]).
-    pub(super) fn for_adapter(software: bool) -> Tuning {
-        Tuning {
-            levels: Levels::All,
-            mixed: true,
-            descent_budget: DESCENT_BUDGET,
-            round_steps: if software { SOFTWARE_ROUND_STEPS } else { u32::MAX },
-            scratch_limit: MAX_SCRATCH_BYTES,
-            stack_limit: MAX_STACK_BYTES,
-            profile: false,
-        }
-    }
-}
 
 impl GpuAdapter {
     /// How far a pass for a view moves a vertex in the split tree: every level the view asks
@@ -64,7 +30,7 @@ impl GpuAdapter {
     }
 
     /// Sets the most steps (operations decoded) a descent slot runs in one dispatch before its
-    /// descent pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`] on a
+    /// descent pauses for the next (`u32::MAX`: no pause): [`SOFTWARE_ROUND_STEPS`](super::SOFTWARE_ROUND_STEPS) on a
     /// software adapter ([`Gpu::is_software`](crate::gpu::Gpu::is_software)), whose compiler ends an invocation's loops
     /// after 65535 iterations in all; none on hardware.
     pub fn set_round_steps(&mut self, steps: u32) {
@@ -117,7 +83,7 @@ impl GpuAdapter {
         self.tuning.profile = on;
     }
 
-    /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`] by default;
+    /// Bounds the descents' stacks (all levels) by `bytes` ([`MAX_STACK_BYTES`](super::MAX_STACK_BYTES) by default;
     /// with a budget also by a 64th of it), at least one descent's; the adapter goes
     /// back to the base mesh.
     pub fn set_stack_limit(&mut self, bytes: u64) {
@@ -126,7 +92,7 @@ impl GpuAdapter {
         self.reset();
     }
 
-    /// Bounds the count's scratch area (all levels) by `bytes` ([`MAX_SCRATCH_BYTES`] by
+    /// Bounds the count's scratch area (all levels) by `bytes` ([`MAX_SCRATCH_BYTES`](super::MAX_SCRATCH_BYTES) by
     /// default; with a budget also by a 64th of it): a pass whose count keeps more than it
     /// holds walks its descents again (0: every pass does).
     pub fn set_scratch_limit(&mut self, bytes: u64) {

@@ -6,7 +6,8 @@
 // documentation, "Integer-exact decoding").
 //
 // A shader that decodes prepends the generated constants (the table layout of the format's
-// fields, `decoder_prelude` in worker/src/pm_adapt/decoder.rs) and this file, and declares:
+// fields, `decoder_prelude` in worker/src/pm_adapt/decoder.rs), this file and the decoder's
+// buffers, bind group 1 (decode_bindings.wgsl):
 //   D:         the DecodeParams uniform,
 //   ops:       array<u32>, the operations section, four bytes per word, little-endian; out of
 //              core (D.nodes > 0) a pool of slots of D.slot_bytes each, holding resident nodes,

@@ -14,12 +14,8 @@ struct Job {
     normal: vec4<u32>,   // xy
 }
 
-@group(0) @binding(0) var<storage, read> D: DecodeParams;
-@group(0) @binding(1) var<storage, read> ops: array<u32>;
-@group(0) @binding(2) var<storage, read> tables: array<u32>;
-@group(0) @binding(3) var<storage, read> jobs: array<Job>;
-@group(0) @binding(4) var<storage, read_write> decoded: array<DecodedOp>;
-@group(0) @binding(5) var<storage, read_write> dec_faces: array<u32>;
+@group(0) @binding(0) var<storage, read> jobs: array<Job>;
+@group(0) @binding(1) var<storage, read_write> decoded: array<DecodedOp>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {

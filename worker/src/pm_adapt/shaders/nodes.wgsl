@@ -6,11 +6,6 @@
 
 @group(0) @binding(1) var<storage, read> vfvid: array<u32>;
 @group(0) @binding(2) var<storage, read_write> vstate: array<VState>;
-@group(0) @binding(3) var<storage, read> D: DecodeParams;
-@group(0) @binding(4) var<storage, read> ops: array<u32>;
-@group(0) @binding(5) var<storage, read> tables: array<u32>;
-@group(0) @binding(6) var<storage, read_write> dec_faces: array<u32>;
-@group(0) @binding(7) var<storage, read_write> errors: array<atomic<u32>, 2>;
 
 fn resident(addr: u32) -> bool {
     let node = addr >> 16u;

@@ -17,11 +17,6 @@
 @group(0) @binding(7) var<storage, read_write> dfvid: array<u32>;
 @group(0) @binding(8) var<storage, read_write> dstate: array<VState>;
 @group(0) @binding(9) var<storage, read_write> dpoint: array<Point>;
-@group(0) @binding(10) var<storage, read> D: DecodeParams;
-@group(0) @binding(11) var<storage, read> ops: array<u32>;
-@group(0) @binding(12) var<storage, read> tables: array<u32>;
-@group(0) @binding(13) var<storage, read_write> dec_faces: array<u32>;
-@group(0) @binding(14) var<storage, read_write> errors: array<atomic<u32>, 2>;
 // An all-levels pass (`descend`): the view's occlusion test, and the new faces' owners.
 @group(0) @binding(15) var<storage, read> occ: array<u32>;
 @group(0) @binding(16) var<storage, read_write> face_owner: array<u32>;

@@ -23,12 +23,7 @@
 // The depth pyramid of occlusion culling: the number of levels, per level its width, height
 // and first word, then the levels' cells, the farthest depth (f32 bits) in each.
 @group(0) @binding(6) var<storage, read> occ: array<u32>;
-// The decoder's (the descent decodes operations).
-@group(0) @binding(7) var<storage, read> D: DecodeParams;
-@group(0) @binding(8) var<storage, read> ops: array<u32>;
-@group(0) @binding(9) var<storage, read> tables: array<u32>;
-@group(0) @binding(10) var<storage, read_write> dec_faces: array<u32>;
-@group(0) @binding(11) var<storage, read_write> errors: array<atomic<u32>, 2>;
+// The decoder's buffers are bind group 1 (decode_bindings.wgsl); the descent decodes.
 // The all-levels marks (see above), and the counters.
 @group(0) @binding(12) var<storage, read_write> diff: array<atomic<u32>>;
 @group(0) @binding(13) var<storage, read_write> reach: array<atomic<u32>>;

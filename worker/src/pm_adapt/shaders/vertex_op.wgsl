@@ -1,6 +1,6 @@
 // What the stages that decode share (prepended after common.wgsl and the decoder): the first
-// decoding failure recorded for the host, and a vertex's split cache decoded. A stage that
-// includes this declares `errors: array<atomic<u32>, 2>`, read_write.
+// decoding failure recorded for the host (in `errors` of decode_bindings.wgsl), and a vertex's
+// split cache decoded.
 
 // Records the first operation that failed to decode: its status, then its address.
 fn report(status: u32, addr: u32) {
