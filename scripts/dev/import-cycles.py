@@ -2,7 +2,9 @@
 """Lists the import cycles between the files of each crate: which file's `use` (and
 `crate::`/`super::`/`self::` paths) names an item of which other file, and every strongly
 connected group of files that import each other, directly or around a circle. Also lists
-child files that import an item their parent `mod.rs` (or `lib.rs`) defines.
+child files that import an item their parent `mod.rs` (or `lib.rs`) defines itself, as
+opposed to one it re-exports: a face declares modules and re-exports, and defines at most
+constants.
 
     python3 scripts/dev/import-cycles.py [CRATE_SRC ...]   (default: every crate's src/)
 
@@ -113,6 +115,15 @@ def resolve(path, here, mods):
     return None
 
 
+DEFINED = re.compile(r"^\s*(?:pub(?:\([^)]*\))?\s+)?(?:struct|enum|trait|fn|type|static|union|macro_rules!)\s+(\w+)", re.M)
+
+
+def defined_in(text):
+    """The names of the structs, enums, traits, functions, types and statics a file defines
+    at its top level (constants are allowed in a face)."""
+    return {m.group(1) for m in DEFINED.finditer(text) if not m.group(0).startswith((" ", "\t"))}
+
+
 def scc(graph):
     index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
 
@@ -158,6 +169,7 @@ def main():
     for src in srcs:
         mods = modules(src)
         graph, parent_imports = {}, []
+        defs = {mod: defined_in(test_free(strip_comments(open(f).read()))) for mod, f in mods.items()}
         for mod, f in mods.items():
             text = test_free(strip_comments(open(f).read()))
             for p in paths_in(text):
@@ -168,16 +180,16 @@ def main():
                 if len(target) == len(mod) + 1 and target[:-1] == mod and len(p) <= 2:
                     continue
                 graph.setdefault(mod, set()).add(target)
-                if len(mod) >= 1 and target == mod[:-1]:
-                    parent_imports.append((mod, target))
+                if len(mod) >= 1 and target == mod[:-1] and p[-1] in defs[target]:
+                    parent_imports.append((mod, p[-1]))
         name = os.path.relpath(src, ROOT)
         comps = scc(graph)
         for comp in comps:
             cycles += 1
             files = sorted("/".join(c) or "lib" for c in comp)
             print(f"{name}: cycle among {', '.join(files)}")
-        if parent_imports:
-            print(f"{name}: {len(parent_imports)} files import from their parent module's face")
+        for mod, item in sorted(set(parent_imports)):
+            print(f"{name}: {'/'.join(mod)} imports {item}, which its parent's face defines")
     print(f"{cycles} import cycles")
     sys.exit(1 if cycles else 0)
 
