@@ -7,11 +7,14 @@
 //! the states of the CPU reference [`codec::pm::Adapter`]: same decisions, same triangle set
 //! after every pass (tested in `worker/tests/pm_gpu.rs`).
 //!
-//! It runs on a [`Gpu`](crate::gpu::Gpu) and hands the renderer the adapted mesh as an [`AdaptedMesh`](crate::render::AdaptedMesh)
-//! ([`GpuAdapter::mesh`]); it knows nothing else of the renderer. `buffers` holds the records
-//! it shares with the WGSL (the structs' twins) and its `n_alloc`-sized buffers, `pipelines`
-//! the stages with their binding tables, `decoder` the operation decoder's tables, and `pass`
-//! one adaptation pass.
+//! It runs on a [`Gpu`](crate::gpu::Gpu) and hands the renderer the adapted mesh as an
+//! [`AdaptedMesh`](crate::render::AdaptedMesh) ([`GpuAdapter::mesh`]); it knows nothing else
+//! of the renderer. `adapter` holds the [`GpuAdapter`] and its frame-level calls, `buffers`
+//! the records it shares with the WGSL (the structs' twins) and its `n_alloc`-sized buffers,
+//! `pipelines` the stages (each laid out from its WGSL's own bindings), `decoder` the
+//! operation decoder's tables, `pass` one adaptation pass, `budget` and `tuning` the
+//! adapter's memory arithmetic and setters over its `settings`, `limits` the fixed limits and
+//! defaults, and `error` the [`AdaptError`].
 //!
 //! What stays in graphics memory for a model is its compressed operations (the OPER section
 //! as it is in the file), the distinct Huffman tables, 326 values and a few parameters: 1.01x
