@@ -174,7 +174,7 @@ pub enum Command {
     Sort(SortArgs),
     /// Render a model sort-first: rank 0 sorts it into compressed tiles, ranks 1.. render them.
     /// Run under mpirun for a cluster; alone, it runs the master and one worker in-process.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Print sizes and rates of a .bft file.
     Stats {
         input: PathBuf,
@@ -424,6 +424,19 @@ pub struct RenderArgs {
     /// (.mp4, .mkv, .mov, .webm, .avi): every frame piped to ffmpeg, one file.
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
+    /// A live run: serve a control port at HOST:PORT (rank 0) whose newline-delimited JSON
+    /// commands set or orbit the camera, write snapshots, stream stats and quit
+    /// (docs/guide.md, "Control port"; `scripts/tessera_control.py` is a client). The run
+    /// goes on until `quit` or a signal; a frame is sorted only when a command changes the
+    /// view, and no frame file is written but snapshots. Loopback only, unless
+    /// --control-token-file.
+    #[arg(long)]
+    pub control: Option<std::net::SocketAddr>,
+    /// A file whose first line (at least 16 characters) is the token every control client
+    /// must present as its first line, `{"token":"..."}`; needed to bind --control to an
+    /// address other than loopback.
+    #[arg(long)]
+    pub control_token_file: Option<PathBuf>,
     /// Frames rank 0 sorts and sends ahead of the one it composites (1: no pipelining).
     /// `--balance` keeps 1, as it sorts each frame from the costs of the one before, and so
     /// does `--sorters` above 1.

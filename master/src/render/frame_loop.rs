@@ -10,6 +10,7 @@ use glam::Quat;
 use protocol::{unix_ms, Swap, ToDisplay, ToWorker};
 use worker::transport::Transport;
 
+use super::control::{steer, Client, Command, Control, Publisher};
 use super::display::DirectSend;
 use super::eye::Eye;
 use super::link::{handshake, receive_pixels, receive_ready, send_all, Answer, Early, Silence};
@@ -63,6 +64,8 @@ pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
     let epoch = unix_ms();
     // Opened first, so that an unwritable path fails before any work.
     let stats = plan.stats.as_deref().map(LineLog::create).transpose()?;
+    // Bound before the model loads, so that a taken port fails before any work.
+    let control = plan.control.as_ref().map(|(addr, token)| Control::bind(*addr, token.clone())).transpose()?;
     let mut scene = super::scene::load(plan)?;
     let grid = &plan.grid;
     let cam = scene.camera(&plan.camera, grid)?;
@@ -85,7 +88,8 @@ pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
     // frame in flight beside another), so with --sorters a frame waits for the one before.
     let depth = plan.depth;
     let budget_slots = scene.budget_slots();
-    let writer = Writer::start(plan, movie, stats, depth, epoch, budget_slots);
+    let writer =
+        Writer::start(plan, movie, stats, depth, epoch, budget_slots, control.as_ref().map(Control::publisher));
 
     let direct =
         plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), plan.display_ranks as usize));
@@ -97,9 +101,31 @@ pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
         epoch,
     };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
-    let mut frames = FixedFrames { plan, cam, next: 0 };
+    let mut frames: Box<dyn FrameSource> = match &control {
+        Some(control) => Box::new(Controlled { plan, spec: plan.camera.clone(), cam, next: 0, control, pending: None }),
+        None => Box::new(FixedFrames { plan, cam, next: 0 }),
+    };
     let result = (|| -> Result<()> {
-        while let Some((k, views)) = frames.next_frame(scene.as_ref())? {
+        loop {
+            // A source that would wait first sees every frame in flight written.
+            if !frames.ready() {
+                while let Some(f) = flight.pop_front() {
+                    let done = complete(t, f, plan, direct, &mut inbox)?;
+                    writer.send(done)?;
+                }
+            }
+            let (k, views) = match frames.next_step(scene.as_ref())? {
+                Step::End => break,
+                Step::Snapshot(path, client) => {
+                    while let Some(f) = flight.pop_front() {
+                        let done = complete(t, f, plan, direct, &mut inbox)?;
+                        writer.send(done)?;
+                    }
+                    writer.snapshot(path, client)?;
+                    continue;
+                }
+                Step::Frame(k, views) => (k, views),
+            };
             let n = views.len() as u32;
             for (j, spec) in views.into_iter().enumerate() {
                 let ViewSpec { camera, eye, display, grid } = spec;
@@ -265,10 +291,19 @@ fn complete(
     Ok(Written { frame, display, stats, workers: worker_lines })
 }
 
+/// What the writer thread is handed, in order: a frame's view, or (a live run) a snapshot of
+/// the last frame written, to a file, answered to the control client that asked.
+enum WriterJob {
+    View(Box<Written>),
+    Snapshot(std::path::PathBuf, Client),
+}
+
 /// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
-/// 0's critical path; at most `depth` frames wait for it.
+/// 0's critical path; at most `depth` frames wait for it. In a live run (`--control`) it
+/// writes no frame file: it keeps the last frame for snapshots and sends every stats line to
+/// the control port's subscribers.
 struct Writer {
-    tx: Option<std::sync::mpsc::SyncSender<Written>>,
+    tx: Option<std::sync::mpsc::SyncSender<WriterJob>>,
     thread: Option<std::thread::JoinHandle<Result<()>>>,
 }
 
@@ -280,11 +315,14 @@ impl Writer {
         depth: usize,
         epoch: f64,
         budget_slots: Option<u32>,
+        publisher: Option<Publisher>,
     ) -> Writer {
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Written>(depth);
+        let (tx, rx) = std::sync::mpsc::sync_channel::<WriterJob>(depth);
         let (out, frames, wall, stereo) = (plan.out.clone(), plan.frames, plan.wall.clone(), plan.stereo);
-        // With display ranks, they write the displays and rank 0 writes no image.
+        // With display ranks, they write the displays and rank 0 writes no image; a live run
+        // writes snapshots only.
         let images = !plan.direct;
+        let live = publisher.is_some();
         let eyes = if plan.stereo.is_some() { 2 } else { 1 };
         let per_frame = eyes * plan.wall.as_ref().filter(|w| w.per_display()).map_or(1, |w| w.displays.len());
         let thread = std::thread::spawn(move || -> Result<()> {
@@ -296,7 +334,20 @@ impl Writer {
             let mut coarsened = std::collections::HashSet::new();
             // A frame's views (eyes, displays with frames of their own) wait for the last.
             let mut views: Vec<Written> = Vec::with_capacity(per_frame);
-            for w in rx {
+            // A live run's last frame, for snapshots.
+            let mut shown: Option<Image> = None;
+            for job in rx {
+                let w = match job {
+                    WriterJob::View(w) => *w,
+                    WriterJob::Snapshot(path, client) => {
+                        match shown.as_ref().map(|f| f.save_png(&path)) {
+                            Some(Ok(())) => client.send(&serde_json::json!({ "ok": "snapshot", "path": path })),
+                            Some(Err(e)) => client.error(format!("snapshot: {}", crate::output::one_line(&e))),
+                            None => client.error("snapshot: no frame has been shown yet"),
+                        }
+                        continue;
+                    }
+                };
                 views.push(w);
                 if views.len() < per_frame {
                     continue;
@@ -325,6 +376,7 @@ impl Writer {
                     .collect::<Result<_>>()?;
                 match (&images_by_eye[..], stereo) {
                     _ if !images => {}
+                    ([frame], _) if live => shown = Some(frame.clone()),
                     ([l, r], Some(StereoOutput::Separate)) => {
                         write_image(l, &eye_path(&path, "left"), wall.as_ref(), None, None)?;
                         write_image(r, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
@@ -343,7 +395,7 @@ impl Writer {
                     k + 1,
                     views.iter().map(|v| v.stats.tiles.len()).sum::<usize>(),
                     views.iter().map(|v| v.stats.sort_ms).sum::<f64>(),
-                    path.display()
+                    if live { "shown".into() } else { path.display().to_string() }
                 );
                 let write = Span::between("write", write_start, unix_ms(), epoch);
                 for Written { workers, .. } in &views {
@@ -364,6 +416,9 @@ impl Writer {
                 for Written { stats: mut line, workers, .. } in views {
                     (line.write_ms, line.frame_ms) = (write_ms, frame_ms);
                     line.timeline.push(write.clone());
+                    if let Some(p) = &publisher {
+                        p.publish(&serde_json::to_value(&line)?);
+                    }
                     if let Some(log) = stats.as_mut() {
                         log.line(&serde_json::to_string(&line)?)?;
                         for l in workers {
@@ -383,7 +438,17 @@ impl Writer {
     /// Hands a frame to the writer (waiting while `depth` frames wait already); an error if
     /// the writer stopped, which [`Writer::finish`] reports.
     fn send(&self, w: Written) -> Result<()> {
-        match self.tx.as_ref().map(|tx| tx.send(w).is_ok()) {
+        self.job(WriterJob::View(Box::new(w)))
+    }
+
+    /// Writes the last frame written to `path` once the frames before it are written, and
+    /// answers `client`.
+    fn snapshot(&self, path: std::path::PathBuf, client: Client) -> Result<()> {
+        self.job(WriterJob::Snapshot(path, client))
+    }
+
+    fn job(&self, job: WriterJob) -> Result<()> {
+        match self.tx.as_ref().map(|tx| tx.send(job).is_ok()) {
             Some(true) => Ok(()),
             _ => bail!("the image writer stopped"),
         }
@@ -418,11 +483,25 @@ fn write_image(
     }
 }
 
-/// Where the frame loop's frames come from: frame `k` and its views, until there are no
-/// more. The loop asks for one frame at a time and knows no frame count, so a source driven
-/// by events (a window, a control port) can take the place of [`FixedFrames`].
+/// What the frame loop does next: sort frame `k`'s views, write a snapshot of the last frame
+/// (a live run), or end.
+enum Step {
+    Frame(u32, Vec<ViewSpec>),
+    Snapshot(std::path::PathBuf, Client),
+    End,
+}
+
+/// Where the frame loop's frames come from, one step at a time: a fixed count
+/// ([`FixedFrames`]), or a live run's commands ([`Controlled`]), whose still view costs no
+/// frame.
 trait FrameSource {
-    fn next_frame(&mut self, scene: &dyn Scene) -> Result<Option<(u32, Vec<ViewSpec>)>>;
+    /// Whether the next step is there without waiting; before a source waits, the loop
+    /// finishes the frames in flight, so that what was asked for is shown.
+    fn ready(&mut self) -> bool {
+        true
+    }
+
+    fn next_step(&mut self, scene: &dyn Scene) -> Result<Step>;
 }
 
 /// `--frames` frames, orbiting, zooming or following `--eye-path` from the first camera.
@@ -433,13 +512,99 @@ struct FixedFrames<'a> {
 }
 
 impl FrameSource for FixedFrames<'_> {
-    fn next_frame(&mut self, scene: &dyn Scene) -> Result<Option<(u32, Vec<ViewSpec>)>> {
+    fn next_step(&mut self, scene: &dyn Scene) -> Result<Step> {
         if self.next >= self.plan.frames {
-            return Ok(None);
+            return Ok(Step::End);
         }
         let k = self.next;
         self.next += 1;
-        Ok(Some((k, frame_views(scene, self.plan, &self.cam, k)?)))
+        Ok(Step::Frame(k, frame_views(scene, self.plan, &self.cam, k)?))
+    }
+}
+
+/// A live run's frames (`--control`): the first from the flags, then one for each command
+/// that changes the view, until `quit`. Between them rank 0 waits: a still view costs no
+/// sort, no message and no render.
+struct Controlled<'a> {
+    plan: &'a Plan,
+    /// The camera flags of the view shown, and the camera they give.
+    spec: crate::camera::CameraSpec,
+    cam: Camera,
+    next: u32,
+    control: &'a Control,
+    /// A request taken by [`FrameSource::ready`] and not yet handled.
+    pending: Option<super::control::Request>,
+}
+
+impl FrameSource for Controlled<'_> {
+    fn ready(&mut self) -> bool {
+        if self.next == 0 || self.pending.is_some() {
+            return true;
+        }
+        self.pending = self.control.requests.try_recv().ok();
+        self.pending.is_some()
+    }
+
+    fn next_step(&mut self, scene: &dyn Scene) -> Result<Step> {
+        if self.next == 0 {
+            self.next = 1;
+            return Ok(Step::Frame(0, frame_views(scene, self.plan, &self.cam, 0)?));
+        }
+        loop {
+            let request = match self.pending.take() {
+                Some(r) => r,
+                // Every connection's thread holds a sender, and the listener's thread too.
+                None => match self.control.requests.recv() {
+                    Ok(r) => r,
+                    Err(_) => return Ok(Step::End),
+                },
+            };
+            let client = request.client;
+            match request.command {
+                Command::Quit {} => {
+                    client.send(&serde_json::json!({ "ok": "quit" }));
+                    return Ok(Step::End);
+                }
+                Command::Snapshot { path } => return Ok(Step::Snapshot(path, client)),
+                Command::Subscribe {} => {
+                    self.control.subscribe(client.clone());
+                    client.send(&serde_json::json!({ "ok": "subscribe" }));
+                }
+                Command::Status {} => client.send(&serde_json::json!({
+                    "ok": "status",
+                    "frames": self.next,
+                    "eye": self.cam.eye.to_array(),
+                    "target": self.cam.target.to_array(),
+                    "up": self.cam.up.to_array(),
+                    "fovy": self.cam.fovy,
+                })),
+                ref command @ (Command::Camera { .. } | Command::Orbit { .. }) => {
+                    let what = if matches!(command, Command::Orbit { .. }) { "orbit" } else { "camera" };
+                    let spec = steer(&self.spec, &self.cam, command).expect("a camera command");
+                    let checked = scene.camera(&spec, &self.plan.grid).and_then(|cam| {
+                        crate::camera::check_precision(&cam, self.plan.grid.height)?;
+                        Ok(cam)
+                    });
+                    let cam = match checked {
+                        Ok(cam) => cam,
+                        Err(e) => {
+                            client.error(format!("{what}: {}", crate::output::one_line(&e)));
+                            continue;
+                        }
+                    };
+                    if cam == self.cam {
+                        // The same view: nothing to sort or show.
+                        client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 }));
+                        continue;
+                    }
+                    (self.spec, self.cam) = (spec, cam);
+                    let k = self.next;
+                    self.next += 1;
+                    client.send(&serde_json::json!({ "ok": what, "frame": k }));
+                    return Ok(Step::Frame(k, frame_views(scene, self.plan, &self.cam, 0)?));
+                }
+            }
+        }
     }
 }
 

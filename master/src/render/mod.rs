@@ -15,6 +15,7 @@
 //! | file | what |
 //! |---|---|
 //! | `run.rs` | rank 0 under mpirun, or alone with a worker thread |
+//! | `control.rs` | a live run's control port: JSON commands that steer the frames |
 //! | `plan.rs` | what is checked before any rank talks to another, and the output files' names |
 //! | `scene/` | the model rank 0 holds, a file per kind (`.bft`, chunked `.bft`, `.dpm`, `.nsp`), and each frame's messages to the workers |
 //! | `frame_loop.rs` | the frame loop |
@@ -24,6 +25,7 @@
 //! | `display.rs` | direct send: display ranks that assemble and write a wall's displays at a swap barrier |
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
 
+mod control;
 mod display;
 mod eye;
 mod frame_loop;

@@ -63,6 +63,9 @@ pub struct Plan {
     pub direct: bool,
     /// The inputs' identities, which no output may be.
     pub inputs: Vec<Identity>,
+    /// `--control`: a live run served on this address, with the token clients must present
+    /// (`--control-token-file`).
+    pub control: Option<(std::net::SocketAddr, Option<String>)>,
 }
 /// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
 /// sizes).
@@ -94,6 +97,26 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     let movie = crate::movie::is_movie(&args.out);
     let stereo = args.stereo.map(|_| args.stereo_output);
     let placed = wall.as_ref().is_some_and(Wall::placed);
+    let control = match args.control {
+        Some(addr) => {
+            let live = [
+                (args.frames > 1, "--frames"),
+                (args.orbit, "--orbit"),
+                (args.zoom != 1.0, "--zoom"),
+                (args.eye_path.is_some(), "--eye-path"),
+                (movie, "a movie --out"),
+                (args.stereo.is_some(), "--stereo"),
+                (wall.is_some(), "--wall"),
+            ];
+            if let Some((_, flag)) = live.iter().find(|(given, _)| *given) {
+                bail!("--control takes the frames from its commands: leave out {flag}");
+            }
+            let token = args.control_token_file.as_deref().map(super::control::read_token).transpose()?;
+            Some((addr, token))
+        }
+        None if args.control_token_file.is_some() => bail!("--control-token-file needs --control"),
+        None => None,
+    };
     if args.eye_path.is_some() && !placed {
         bail!("--eye-path needs a --wall placed in the world (a plane, or its displays' corners)");
     }
@@ -236,6 +259,7 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
         stereo,
         direct,
         inputs,
+        control,
     })
 }
 

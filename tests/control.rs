@@ -1,0 +1,250 @@
+//! End-to-end tests of a live run's control port (`render --control`), as a program steering
+//! it would use it: snapshots equal to `render`'s PNG for the same camera flags, cameras and
+//! orbits, several clients with stats subscriptions, malformed lines answered while the run
+//! goes on, the token rule, a still view that costs no frame and no CPU, and quit.
+
+mod common;
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpStream;
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{alone, bin, differing, mpi_env, ok, refused_one_line};
+use serde_json::Value;
+use testkit::mesh_arg as mesh;
+
+const SIZE: &str = "320x240";
+
+/// A live run alone (rank 0 and one worker thread), killed with its process group if the
+/// test ends without `quit`.
+struct Live {
+    child: Child,
+    addr: String,
+}
+
+impl Live {
+    fn start(model: &str, extra: &[&str]) -> Live {
+        let mut cmd = Command::new(bin());
+        mpi_env(&mut cmd)
+            .args(["render", model, "--size", SIZE, "--tiles", "2x2", "--control", "127.0.0.1:0"])
+            .args(extra)
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        let mut child = cmd.spawn().unwrap();
+        let mut err = BufReader::new(child.stderr.take().unwrap());
+        let mut line = String::new();
+        let deadline = Instant::now() + Duration::from_secs(120);
+        let addr = loop {
+            line.clear();
+            assert!(Instant::now() < deadline, "no control port announced");
+            assert!(err.read_line(&mut line).unwrap() > 0, "the run ended before its control port opened");
+            if let Some(a) = line.trim().strip_prefix("tessera: control port on ") {
+                break a.to_string();
+            }
+        };
+        // The rest of stderr is drained, so that the run never blocks on a full pipe.
+        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+        Live { child, addr }
+    }
+
+    fn client(&self) -> Client {
+        let stream = TcpStream::connect(&self.addr).unwrap();
+        stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        Client { reader: BufReader::new(stream.try_clone().unwrap()), stream }
+    }
+
+    /// Waits for the run to end by itself; its exit status.
+    fn wait(mut self) -> std::process::ExitStatus {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return status;
+            }
+            assert!(Instant::now() < deadline, "the run did not end after quit");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// CPU seconds the run's process has used (user and system, from /proc).
+    fn cpu_seconds(&self) -> f64 {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap();
+        let rest = stat.rsplit_once(')').unwrap().1;
+        let fields: Vec<&str> = rest.split_whitespace().collect();
+        // utime and stime are fields 14 and 15 of the line, 12 and 13 after the command.
+        let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+        ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            // Safety: signals the run's own process group.
+            unsafe { libc::kill(-(self.child.id() as i32), libc::SIGKILL) };
+            let _ = self.child.wait();
+        }
+    }
+}
+
+struct Client {
+    stream: TcpStream,
+    reader: BufReader<TcpStream>,
+}
+
+impl Client {
+    fn send(&mut self, line: &str) {
+        self.stream.write_all(format!("{line}\n").as_bytes()).unwrap();
+    }
+
+    fn read(&mut self) -> Value {
+        let mut line = String::new();
+        assert!(self.reader.read_line(&mut line).unwrap() > 0, "the control port closed");
+        serde_json::from_str(&line).unwrap_or_else(|e| panic!("not a JSON line: {line:?}: {e}"))
+    }
+
+    /// Sends one command and reads its answer.
+    fn ask(&mut self, line: &str) -> Value {
+        self.send(line);
+        self.read()
+    }
+
+    /// Whether the port closed this connection (EOF).
+    fn closed(&mut self) -> bool {
+        let mut line = String::new();
+        matches!(self.reader.read_line(&mut line), Ok(0))
+    }
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// `render`'s PNG of `model` with these camera flags, for comparison.
+fn rendered(model: &str, flags: &[&str], out: &Path) {
+    let mut args = vec!["render", model, "--size", SIZE, "--tiles", "1x1", "--out", s(out)];
+    args.extend(flags);
+    ok(&alone(&args));
+}
+
+#[test]
+fn snapshots_equal_render_for_the_same_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let live = Live::start(&model, &[]);
+    let mut c = live.client();
+    let first = dir.path().join("first.png");
+    let answer = c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&first)));
+    assert_eq!(answer["ok"], "snapshot", "{answer}");
+    rendered(&model, &[], &dir.path().join("r0.png"));
+    assert_eq!(differing(&first, &dir.path().join("r0.png")), 0, "the first frame is render's");
+
+    let answer = c.ask(r#"{"cmd":"camera","eye":[0.1,0.25,0.4],"target":[-0.02,0.1,0.0]}"#);
+    assert_eq!((answer["ok"].as_str(), answer["frame"].as_u64()), (Some("camera"), Some(1)), "{answer}");
+    let moved = dir.path().join("moved.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&moved)))["ok"], "snapshot");
+    rendered(&model, &["--eye", "0.1,0.25,0.4", "--target", "-0.02,0.1,0"], &dir.path().join("r1.png"));
+    assert_eq!(
+        differing(&moved, &dir.path().join("r1.png")),
+        0,
+        "a camera command's frame is render's with those flags"
+    );
+    assert!(differing(&moved, &first) > 100, "the view moved");
+
+    let answer = c.ask(r#"{"cmd":"orbit","degrees":90}"#);
+    assert_eq!(answer["frame"], 2, "{answer}");
+    let status = c.ask(r#"{"cmd":"status"}"#);
+    assert_eq!(status["frames"], 3, "{status}");
+    let (eye, target): (Vec<f64>, Vec<f64>) = (
+        status["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect(),
+        status["target"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect(),
+    );
+    let d = |a: &[f64], b: &[f64]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let before = d(&[0.1, 0.25, 0.4], &[-0.02, 0.1, 0.0]);
+    assert!((d(&eye, &target) - before).abs() < 1e-4, "an orbit keeps the distance: {status}");
+
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success(), "quit ends the run cleanly");
+}
+
+#[test]
+fn clients_share_the_run_and_bad_lines_are_answered() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let live = Live::start(&model, &[]);
+    let (mut a, mut b) = (live.client(), live.client());
+    for (line, says) in [
+        ("{", "not JSON"),
+        (r#"{"cmd":"fly"}"#, "fly"),
+        (r#"{"cmd":"camera","fovy":500}"#, "fovy"),
+        (r#"[1,2,3]"#, "\"cmd\""),
+        (r#"{"cmd":"camera","eye":[0,0,0],"target":[0,0,0]}"#, "camera"),
+        (&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&dir.path().join("no/such/dir/x.png"))), "snapshot"),
+    ] {
+        let answer = a.ask(line);
+        let error = answer["error"].as_str().unwrap_or_else(|| panic!("{line}: {answer}"));
+        assert!(error.contains(says) && !error.contains('\n'), "{line}: {error}");
+    }
+    assert_eq!(b.ask(r#"{"cmd":"subscribe"}"#)["ok"], "subscribe");
+    assert_eq!(a.ask(r#"{"cmd":"orbit","degrees":30}"#)["frame"], 1);
+    // The subscriber gets the stats line of the frame a's command made.
+    let line = b.read();
+    assert_eq!(line["frame"], 1, "{line}");
+    assert!(line["tiles"].as_array().is_some_and(|t| !t.is_empty()), "{line}");
+    // The same view again costs no frame.
+    let status = b.ask(r#"{"cmd":"status"}"#);
+    let eye = status["eye"].to_string();
+    let answer = a.ask(&format!(r#"{{"cmd":"camera","eye":{eye}}}"#));
+    assert_eq!(answer["frame"], 1, "an unchanged view makes no frame: {answer}");
+    assert_eq!(b.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
+
+#[test]
+fn a_still_view_costs_no_cpu() {
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let live = Live::start(&model, &[]);
+    let mut c = live.client();
+    // The first frame is done once a snapshot of it is.
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&dir.path().join("a.png"))))["ok"], "snapshot");
+    let before = live.cpu_seconds();
+    std::thread::sleep(Duration::from_secs(5));
+    let idle = live.cpu_seconds() - before;
+    eprintln!("CPU over 5 idle seconds: {idle:.3} s");
+    assert!(idle < 0.25, "a still view used {idle:.3} s of CPU in 5 s");
+    assert_eq!(c.ask(r#"{"cmd":"status"}"#)["frames"], 1, "no frame while still");
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
+
+#[test]
+fn a_port_beyond_loopback_needs_a_token_every_client_presents() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    refused_one_line(&alone(&["render", &model, "--size", SIZE, "--control", "0.0.0.0:0"]), "--control-token-file");
+    let token = dir.path().join("token");
+    std::fs::write(&token, "short\n").unwrap();
+    refused_one_line(
+        &alone(&["render", &model, "--size", SIZE, "--control", "0.0.0.0:0", "--control-token-file", s(&token)]),
+        "at least 16",
+    );
+    refused_one_line(&alone(&["render", &model, "--control", "127.0.0.1:0", "--frames", "3"]), "--frames");
+    std::fs::write(&token, "0123456789abcdef-secret\n").unwrap();
+    let live = Live::start(&model, &["--control-token-file", s(&token)]);
+    let mut stranger = live.client();
+    let answer = stranger.ask(r#"{"cmd":"status"}"#);
+    assert!(answer["error"].as_str().is_some_and(|e| e.contains("token")), "{answer}");
+    assert!(stranger.closed(), "a client without the token is disconnected");
+    let mut wrong = live.client();
+    assert!(wrong.ask(r#"{"token":"0123456789abcdef-guess"}"#)["error"].is_string());
+    let mut friend = live.client();
+    assert_eq!(friend.ask(r#"{"token":"0123456789abcdef-secret"}"#)["ok"], "token");
+    assert_eq!(friend.ask(r#"{"cmd":"status"}"#)["ok"], "status");
+    assert_eq!(friend.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
