@@ -3,7 +3,10 @@
 #   Open MPI (mpirun + headers) for the cluster path, libclang for the `mpi` crate's bindgen,
 #   Mesa's Vulkan drivers (lavapipe) so wgpu runs headless without a GPU, and GNU time
 #   (/usr/bin/time), with which a test and the scale scripts measure peak memory, and ffmpeg
-#   (with ffprobe), to which `render --out movie.mp4` pipes its frames.
+#   (with ffprobe), to which `render --out movie.mp4` pipes its frames; the X libraries
+#   `tessera view` loads at run time (it opens them itself, so none is needed to build), and
+#   Xvfb with xdotool and xwd (x11-apps), with which its tests open, drive and read back a
+#   window without a screen.
 # Safe to run again: packages already present are skipped and nothing is reinstalled.
 set -euo pipefail
 
@@ -14,6 +17,8 @@ PACKAGES=(
   mesa-vulkan-drivers libvulkan1 vulkan-tools
   time
   ffmpeg
+  libx11-6 libx11-xcb1 libxcb1 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0
+  xvfb xdotool x11-apps
 )
 
 missing=()

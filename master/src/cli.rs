@@ -175,6 +175,11 @@ pub enum Command {
     /// Render a model sort-first: rank 0 sorts it into compressed tiles, ranks 1.. render them.
     /// Run under mpirun for a cluster; alone, it runs the master and one worker in-process.
     Render(Box<RenderArgs>),
+    /// Show a model in a window, sort-first through the same tiles as `render` (one process):
+    /// drag to orbit, right-drag to pan, wheel to zoom, W/A/S/D to fly, P for a screenshot,
+    /// G for the tile grid by cost, H for the heads-up line, Q to quit. Takes `render`'s
+    /// flags; `--control` steers it from programs too.
+    View(Box<RenderArgs>),
     /// Print sizes and rates of a .bft file.
     Stats {
         input: PathBuf,

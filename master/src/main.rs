@@ -25,6 +25,7 @@ fn main() -> ExitCode {
         Command::Decode { input, output } => commands::decode::run(input, output),
         Command::Stats { input, json } => commands::stats::run(input, *json),
         Command::Render(args) => commands::render::run(args),
+        Command::View(args) => commands::view::run(args),
         Command::Sort(args) => commands::sort::run(args),
         Command::Pm { pm } => commands::pm::run(pm),
         Command::Nsp { nsp } => commands::nsp::run(nsp),

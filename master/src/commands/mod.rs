@@ -10,3 +10,4 @@ pub mod pm;
 pub mod render;
 pub mod sort;
 pub mod stats;
+pub mod view;

@@ -4,7 +4,10 @@
 //! | command | what it does | answer |
 //! |---|---|---|
 //! | `{"cmd":"camera","eye":[x,y,z],"target":[..],"up":[..],"fovy":deg}` | sets what it names of the camera; the next frame is sorted from it | `{"ok":"camera","frame":k}` |
-//! | `{"cmd":"orbit","degrees":d}` | turns the eye about the target's vertical axis | `{"ok":"orbit","frame":k}` |
+//! | `{"cmd":"orbit","degrees":d,"pitch":p}` | turns the eye about the target: `degrees` about the up axis, `pitch` (optional) about the view's right axis | `{"ok":"orbit","frame":k}` |
+//! | `{"cmd":"zoom","factor":f}` | moves the eye toward the target to `f` times its distance | `{"ok":"zoom","frame":k}` |
+//! | `{"cmd":"move","right":r,"up":u,"forward":f}` | moves eye and target together (fly, pan), each in units of their distance (all optional) | `{"ok":"move","frame":k}` |
+//! | `{"cmd":"reset"}` | back to the flags' camera | `{"ok":"reset","frame":k}` |
 //! | `{"cmd":"snapshot","path":"x.png"}` | writes the last frame shown, whole, as a PNG (atomically) | `{"ok":"snapshot","path":..}` |
 //! | `{"cmd":"subscribe"}` | streams every frame's rank 0 stats line to this client | `{"ok":"subscribe"}`, then a line a frame |
 //! | `{"cmd":"status"}` | the frame count and the camera | `{"ok":"status","frames":n,"eye":..}` |
@@ -38,10 +41,35 @@ const MAX_LINE: u64 = 64 * 1024;
 /// A command of the control port (the module's table).
 #[derive(Debug, Deserialize, PartialEq)]
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
-pub(super) enum Command {
-    Camera { eye: Option<[f32; 3]>, target: Option<[f32; 3]>, up: Option<[f32; 3]>, fovy: Option<f32> },
-    Orbit { degrees: f32 },
-    Snapshot { path: PathBuf },
+pub enum Command {
+    Camera {
+        eye: Option<[f32; 3]>,
+        target: Option<[f32; 3]>,
+        up: Option<[f32; 3]>,
+        fovy: Option<f32>,
+    },
+    Orbit {
+        degrees: f32,
+        pitch: Option<f32>,
+    },
+    Zoom {
+        factor: f32,
+    },
+    Move {
+        right: Option<f32>,
+        up: Option<f32>,
+        forward: Option<f32>,
+    },
+    Reset {},
+    /// The window's new size (`tessera view`): the frame is re-planned at it, with the same
+    /// tile grid.
+    Resize {
+        width: u32,
+        height: u32,
+    },
+    Snapshot {
+        path: PathBuf,
+    },
     // Braces, so that a field they do not take is refused as for the others.
     Subscribe {},
     Status {},
@@ -51,17 +79,29 @@ pub(super) enum Command {
 /// One client's connection, for answers and stats lines. Writes are whole lines under the
 /// lock, so that two writers never interleave within a line.
 #[derive(Clone)]
-pub(super) struct Client {
+pub struct Client {
     id: usize,
-    stream: Arc<Mutex<TcpStream>>,
+    /// `None`: the window of `tessera view`, whose errors are printed instead.
+    stream: Option<Arc<Mutex<TcpStream>>>,
 }
 
 impl Client {
+    /// The window's own requests: answers are dropped, errors printed.
+    pub fn local() -> Client {
+        Client { id: usize::MAX, stream: None }
+    }
+
     /// Sends one JSON line; a client that went away is only logged (the run goes on).
     pub(super) fn send(&self, value: &Value) {
+        let Some(stream) = &self.stream else {
+            if let Some(e) = value.get("error") {
+                eprintln!("tessera: {}", e.as_str().unwrap_or_default());
+            }
+            return;
+        };
         let mut line = value.to_string();
         line.push('\n');
-        let Ok(mut s) = self.stream.lock() else { return };
+        let Ok(mut s) = stream.lock() else { return };
         if let Err(e) = s.write_all(line.as_bytes()) {
             eprintln!("tessera: control client {}: {e}", self.id);
         }
@@ -73,22 +113,43 @@ impl Client {
 }
 
 /// A command from a client, with the client to answer.
-pub(super) struct Request {
+pub struct Request {
     pub client: Client,
     pub command: Command,
 }
 
-/// The serving side: requests come in on a channel from the connections' threads, and the
-/// clients that subscribed get every frame's stats line.
-pub(super) struct Control {
-    pub requests: Receiver<Request>,
+/// The serving side: requests come in on a channel from the connections' threads (and from
+/// a window), and the clients that subscribed get every frame's stats line.
+pub struct Control {
+    pub(super) requests: Receiver<Request>,
+    sender: Sender<Request>,
     subscribers: Arc<Mutex<Vec<Client>>>,
 }
 
+impl Default for Control {
+    fn default() -> Self {
+        let (sender, requests) = channel();
+        Control { requests, sender, subscribers: Arc::new(Mutex::new(Vec::new())) }
+    }
+}
+
 impl Control {
-    /// Binds `addr` and serves it on threads of its own. A non-loopback address needs a
+    /// A control served on `addr` (threads of its own). A non-loopback address needs a
     /// `token`.
     pub(super) fn bind(addr: SocketAddr, token: Option<String>) -> Result<Control> {
+        let control = Control::default();
+        control.listen(addr, token)?;
+        Ok(control)
+    }
+
+    /// Where a window sends its requests.
+    pub fn sender(&self) -> Sender<Request> {
+        self.sender.clone()
+    }
+
+    /// Serves `addr` on threads of its own, beside whatever else sends requests. A
+    /// non-loopback address needs a `token`.
+    pub fn listen(&self, addr: SocketAddr, token: Option<String>) -> Result<()> {
         if !addr.ip().is_loopback() && token.is_none() {
             bail!(
                 "--control {addr} is not a loopback address: give --control-token-file, whose token every client must present"
@@ -96,7 +157,7 @@ impl Control {
         }
         let listener = TcpListener::bind(addr).with_context(|| format!("--control {addr}"))?;
         let addr = listener.local_addr()?;
-        let (tx, requests) = channel();
+        let tx = self.sender.clone();
         let token = token.map(Arc::new);
         std::thread::spawn(move || {
             for (id, stream) in listener.incoming().enumerate() {
@@ -106,7 +167,7 @@ impl Control {
             }
         });
         eprintln!("tessera: control port on {addr}");
-        Ok(Control { requests, subscribers: Arc::new(Mutex::new(Vec::new())) })
+        Ok(())
     }
 
     /// Adds `client` to those that get every frame's stats line.
@@ -142,7 +203,7 @@ impl Publisher {
 /// it fails to present it).
 fn serve(id: usize, stream: TcpStream, tx: Sender<Request>, token: Option<Arc<String>>) {
     let Ok(reader) = stream.try_clone() else { return };
-    let client = Client { id, stream: Arc::new(Mutex::new(stream)) };
+    let client = Client { id, stream: Some(Arc::new(Mutex::new(stream))) };
     let mut lines = BufReader::new(reader).take(MAX_LINE);
     let mut authorised = token.is_none();
     let mut line = String::new();
@@ -188,7 +249,7 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
     let value: Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
     let Some(cmd) = value.get("cmd").and_then(Value::as_str).map(String::from) else {
         return Err(
-            "a command is a JSON object with a \"cmd\" (camera, orbit, snapshot, subscribe, status, quit)".into()
+            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, snapshot, subscribe, status, quit)".into()
         );
     };
     let command: Command = serde_json::from_value(value).map_err(|e| format!("{cmd}: {e}"))?;
@@ -202,18 +263,35 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
                 return Err("camera: fovy must be above 0 and below 180 degrees".into());
             }
         }
-        Command::Orbit { degrees } if !degrees.is_finite() => return Err("orbit: degrees must be finite".into()),
+        Command::Orbit { degrees, pitch } if !degrees.is_finite() || pitch.is_some_and(|p| !p.is_finite()) => {
+            return Err("orbit: degrees and pitch must be finite".into())
+        }
+        Command::Zoom { factor } if !(factor.is_finite() && *factor > 0.0) => {
+            return Err("zoom: factor must be a positive number".into())
+        }
+        Command::Move { right, up, forward }
+            if [right, up, forward].iter().any(|v| v.is_some_and(|v| !v.is_finite())) =>
+        {
+            return Err("move: right, up and forward must be finite".into())
+        }
+        Command::Resize { width, height } => {
+            crate::cli::check_frame_size(*width as u64, *height as u64).map_err(|e| format!("resize: {e}"))?
+        }
         _ => {}
     }
     Ok(command)
 }
 
-/// The camera flags after `command` (a camera or orbit command; `None` for the others),
-/// from `spec`, the flags so far, and `cam`, the camera they gave. The result is what
-/// `render` would take as flags for that view (an orbit sets the eye and the target), so that
-/// the frame is the one `render` draws with them.
-pub(super) fn steer(spec: &CameraSpec, cam: &Camera, command: &Command) -> Option<CameraSpec> {
+/// The camera flags after `command` (one that moves the camera; `None` for the others),
+/// from `spec`, the flags so far, `cam`, the camera they gave, and `initial`, the flags the
+/// run started with. The result is what `render` would take as flags for that view (a move
+/// sets the eye and the target), so that the frame is the one `render` draws with them.
+pub(super) fn steer(spec: &CameraSpec, cam: &Camera, initial: &CameraSpec, command: &Command) -> Option<CameraSpec> {
     let mut s = spec.clone();
+    let (eye, target) = (cam.eye, cam.target);
+    let back = eye - target;
+    let up = cam.up.normalize_or(Vec3::Y);
+    let right = back.cross(up).normalize_or(Vec3::X) * -1.0;
     match command {
         Command::Camera { eye, target, up, fovy } => {
             s.eye = eye.map(Vec3::from).or(s.eye);
@@ -221,11 +299,28 @@ pub(super) fn steer(spec: &CameraSpec, cam: &Camera, command: &Command) -> Optio
             s.up = up.map(Vec3::from).or(s.up);
             s.fovy = fovy.or(s.fovy);
         }
-        Command::Orbit { degrees } => {
-            let q = glam::Quat::from_axis_angle(cam.up.normalize_or(Vec3::Y), degrees.to_radians());
-            s.eye = Some(cam.target + q * (cam.eye - cam.target));
-            s.target = Some(cam.target);
+        Command::Orbit { degrees, pitch } => {
+            let yaw = glam::Quat::from_axis_angle(up, degrees.to_radians());
+            let turned = yaw * back;
+            // Pitch about the view's right axis, stopped short of the poles (the up vector).
+            let right = yaw * right;
+            let pitched = glam::Quat::from_axis_angle(right, -pitch.unwrap_or(0.0).to_radians()) * turned;
+            let keep = pitched.normalize_or_zero().dot(up).abs() < 0.995;
+            s.eye = Some(target + if keep { pitched } else { turned });
+            s.target = Some(target);
         }
+        Command::Zoom { factor } => {
+            s.eye = Some(target + back * *factor);
+            s.target = Some(target);
+        }
+        Command::Move { right: r, up: u, forward: f } => {
+            let d = back.length();
+            let forward = -back.normalize_or(Vec3::NEG_Z);
+            let by = (right * r.unwrap_or(0.0) + up * u.unwrap_or(0.0) + forward * f.unwrap_or(0.0)) * d;
+            s.eye = Some(eye + by);
+            s.target = Some(target + by);
+        }
+        Command::Reset {} => s = initial.clone(),
         _ => return None,
     }
     Some(s)
@@ -251,7 +346,7 @@ mod tests {
     #[test]
     fn commands_parse_and_bad_ones_say_why() {
         assert_eq!(parse(r#"{"cmd":"quit"}"#), Ok(Command::Quit {}));
-        assert_eq!(parse(r#"{"cmd":"orbit","degrees":10}"#), Ok(Command::Orbit { degrees: 10.0 }));
+        assert_eq!(parse(r#"{"cmd":"orbit","degrees":10}"#), Ok(Command::Orbit { degrees: 10.0, pitch: None }));
         assert_eq!(
             parse(r#"{"cmd":"camera","eye":[1,2,3]}"#),
             Ok(Command::Camera { eye: Some([1.0, 2.0, 3.0]), target: None, up: None, fovy: None })
@@ -274,7 +369,7 @@ mod tests {
     fn orbit_turns_about_the_target() {
         let spec = CameraSpec::default();
         let cam = spec.camera([-1.0; 3], [1.0; 3], 1.0).unwrap();
-        let s = steer(&spec, &cam, &Command::Orbit { degrees: 90.0 }).unwrap();
+        let s = steer(&spec, &cam, &spec, &Command::Orbit { degrees: 90.0, pitch: None }).unwrap();
         let c = s.camera([-1.0; 3], [1.0; 3], 1.0).unwrap();
         assert_eq!(c.target, cam.target);
         assert!(((c.eye - c.target).length() - (cam.eye - cam.target).length()).abs() < 1e-4);

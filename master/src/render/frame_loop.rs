@@ -60,12 +60,30 @@ struct Written {
 /// `--balance` sorts each frame from the costs of the frame before, so it keeps one frame
 /// in flight.
 pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
+    run_live(t, plan, None)
+}
+
+/// What a window hands the frame loop: its control (the window's input, and `--control`'s
+/// port if given, on one channel), and what shows each frame.
+pub struct Window {
+    pub control: Control,
+    pub present: Present,
+}
+
+/// Shows a frame: its image, rank 0's stats line and the workers' (as `--stats` writes them).
+pub type Present = Box<dyn FnMut(&Image, &serde_json::Value, &[serde_json::Value]) + Send>;
+
+/// [`run`], live in a window when `window` is given.
+pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -> Result<()> {
     // The origin of the stats' timelines.
     let epoch = unix_ms();
     // Opened first, so that an unwritable path fails before any work.
     let stats = plan.stats.as_deref().map(LineLog::create).transpose()?;
     // Bound before the model loads, so that a taken port fails before any work.
-    let control = plan.control.as_ref().map(|(addr, token)| Control::bind(*addr, token.clone())).transpose()?;
+    let (control, present) = match window {
+        Some(w) => (Some(w.control), Some(w.present)),
+        None => (plan.control.as_ref().map(|(addr, token)| Control::bind(*addr, token.clone())).transpose()?, None),
+    };
     let mut scene = super::scene::load(plan)?;
     let grid = &plan.grid;
     let cam = scene.camera(&plan.camera, grid)?;
@@ -88,8 +106,15 @@ pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
     // frame in flight beside another), so with --sorters a frame waits for the one before.
     let depth = plan.depth;
     let budget_slots = scene.budget_slots();
-    let writer =
-        Writer::start(plan, movie, stats, depth, epoch, budget_slots, control.as_ref().map(Control::publisher));
+    let writer = Writer::start(
+        plan,
+        movie,
+        stats,
+        depth,
+        epoch,
+        budget_slots,
+        Shows { publisher: control.as_ref().map(Control::publisher), present },
+    );
 
     let direct =
         plan.wall.as_ref().filter(|_| plan.direct).map(|w| DirectSend::new(w, t.size(), plan.display_ranks as usize));
@@ -102,20 +127,30 @@ pub(super) fn run(t: &dyn Transport, plan: &Plan) -> Result<()> {
     };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let mut frames: Box<dyn FrameSource> = match &control {
-        Some(control) => Box::new(Controlled { plan, spec: plan.camera.clone(), cam, next: 0, control, pending: None }),
+        Some(control) => Box::new(Controlled {
+            plan,
+            spec: plan.camera.clone(),
+            cam,
+            grid: plan.grid,
+            next: 0,
+            control,
+            pending: None,
+        }),
         None => Box::new(FixedFrames { plan, cam, next: 0 }),
     };
     let result = (|| -> Result<()> {
         loop {
-            // A source that would wait first sees every frame in flight written.
-            if !frames.ready() {
-                while let Some(f) = flight.pop_front() {
-                    let done = complete(t, f, plan, direct, &mut inbox)?;
-                    writer.send(done)?;
-                }
-            }
             let (k, views) = match frames.next_step(scene.as_ref())? {
                 Step::End => break,
+                // Nothing to do until an event: every frame in flight is shown first.
+                Step::Idle => {
+                    while let Some(f) = flight.pop_front() {
+                        let done = complete(t, f, plan, direct, &mut inbox)?;
+                        writer.send(done)?;
+                    }
+                    frames.wait();
+                    continue;
+                }
                 Step::Snapshot(path, client) => {
                     while let Some(f) = flight.pop_front() {
                         let done = complete(t, f, plan, direct, &mut inbox)?;
@@ -291,6 +326,13 @@ fn complete(
     Ok(Written { frame, display, stats, workers: worker_lines })
 }
 
+/// Where a live run's frames go besides snapshots: the control port's subscribers (stats
+/// lines) and a window.
+struct Shows {
+    publisher: Option<Publisher>,
+    present: Option<Present>,
+}
+
 /// What the writer thread is handed, in order: a frame's view, or (a live run) a snapshot of
 /// the last frame written, to a file, answered to the control client that asked.
 enum WriterJob {
@@ -315,8 +357,9 @@ impl Writer {
         depth: usize,
         epoch: f64,
         budget_slots: Option<u32>,
-        publisher: Option<Publisher>,
+        shows: Shows,
     ) -> Writer {
+        let Shows { publisher, mut present } = shows;
         let (tx, rx) = std::sync::mpsc::sync_channel::<WriterJob>(depth);
         let (out, frames, wall, stereo) = (plan.out.clone(), plan.frames, plan.wall.clone(), plan.stereo);
         // With display ranks, they write the displays and rank 0 writes no image; a live run
@@ -419,6 +462,11 @@ impl Writer {
                     if let Some(p) = &publisher {
                         p.publish(&serde_json::to_value(&line)?);
                     }
+                    if let (Some(show), Some(frame)) = (present.as_mut(), shown.as_ref()) {
+                        let lines: Vec<serde_json::Value> =
+                            workers.iter().map(serde_json::to_value).collect::<Result<_, _>>()?;
+                        show(frame, &serde_json::to_value(&line)?, &lines);
+                    }
                     if let Some(log) = stats.as_mut() {
                         log.line(&serde_json::to_string(&line)?)?;
                         for l in workers {
@@ -484,10 +532,11 @@ fn write_image(
 }
 
 /// What the frame loop does next: sort frame `k`'s views, write a snapshot of the last frame
-/// (a live run), or end.
+/// (a live run), wait for an event (a live run), or end.
 enum Step {
     Frame(u32, Vec<ViewSpec>),
     Snapshot(std::path::PathBuf, Client),
+    Idle,
     End,
 }
 
@@ -495,13 +544,12 @@ enum Step {
 /// ([`FixedFrames`]), or a live run's commands ([`Controlled`]), whose still view costs no
 /// frame.
 trait FrameSource {
-    /// Whether the next step is there without waiting; before a source waits, the loop
-    /// finishes the frames in flight, so that what was asked for is shown.
-    fn ready(&mut self) -> bool {
-        true
-    }
-
+    /// The next step, without waiting: [`Step::Idle`] when there is none yet.
     fn next_step(&mut self, scene: &dyn Scene) -> Result<Step>;
+
+    /// Waits for the next event, after an idle step (the loop has shown every frame in
+    /// flight by then, so that what was asked for is on screen while nothing happens).
+    fn wait(&mut self) {}
 }
 
 /// `--frames` frames, orbiting, zooming or following `--eye-path` from the first camera.
@@ -530,34 +578,34 @@ struct Controlled<'a> {
     /// The camera flags of the view shown, and the camera they give.
     spec: crate::camera::CameraSpec,
     cam: Camera,
+    /// The frame's grid: the plan's, or at a window's size (the same tiles).
+    grid: TileGrid,
     next: u32,
     control: &'a Control,
-    /// A request taken by [`FrameSource::ready`] and not yet handled.
+    /// A request taken by [`FrameSource::wait`] (or left by the steering that joins a
+    /// frame) and not yet handled.
     pending: Option<super::control::Request>,
 }
 
 impl FrameSource for Controlled<'_> {
-    fn ready(&mut self) -> bool {
-        if self.next == 0 || self.pending.is_some() {
-            return true;
+    fn wait(&mut self) {
+        if self.pending.is_none() {
+            // Every connection's thread holds a sender, and the listener's thread too (a
+            // window's is its own): the channel stays open while the run does.
+            self.pending = self.control.requests.recv().ok();
         }
-        self.pending = self.control.requests.try_recv().ok();
-        self.pending.is_some()
     }
 
     fn next_step(&mut self, scene: &dyn Scene) -> Result<Step> {
         if self.next == 0 {
             self.next = 1;
-            return Ok(Step::Frame(0, frame_views(scene, self.plan, &self.cam, 0)?));
+            return Ok(Step::Frame(0, self.views()));
         }
         loop {
-            let request = match self.pending.take() {
-                Some(r) => r,
-                // Every connection's thread holds a sender, and the listener's thread too.
-                None => match self.control.requests.recv() {
-                    Ok(r) => r,
-                    Err(_) => return Ok(Step::End),
-                },
+            let request = match self.pending.take().map(Ok).unwrap_or_else(|| self.control.requests.try_recv()) {
+                Ok(r) => r,
+                Err(std::sync::mpsc::TryRecvError::Empty) => return Ok(Step::Idle),
+                Err(std::sync::mpsc::TryRecvError::Disconnected) => return Ok(Step::End),
             };
             let client = request.client;
             match request.command {
@@ -578,33 +626,111 @@ impl FrameSource for Controlled<'_> {
                     "up": self.cam.up.to_array(),
                     "fovy": self.cam.fovy,
                 })),
-                ref command @ (Command::Camera { .. } | Command::Orbit { .. }) => {
-                    let what = if matches!(command, Command::Orbit { .. }) { "orbit" } else { "camera" };
-                    let spec = steer(&self.spec, &self.cam, command).expect("a camera command");
-                    let checked = scene.camera(&spec, &self.plan.grid).and_then(|cam| {
-                        crate::camera::check_precision(&cam, self.plan.grid.height)?;
-                        Ok(cam)
-                    });
-                    let cam = match checked {
-                        Ok(cam) => cam,
-                        Err(e) => {
-                            client.error(format!("{what}: {}", crate::output::one_line(&e)));
-                            continue;
+                Command::Resize { width, height } => {
+                    let resized = TileGrid::new(width, height, self.grid.cols, self.grid.rows)
+                        .map_err(anyhow::Error::from)
+                        .and_then(|grid| Ok((scene.camera(&self.spec, &grid)?, grid)));
+                    match resized {
+                        Ok((cam, grid)) if grid != self.grid => {
+                            (self.cam, self.grid) = (cam, grid);
+                            return Ok(self.frame(&client, "resize"));
                         }
-                    };
-                    if cam == self.cam {
-                        // The same view: nothing to sort or show.
-                        client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 }));
-                        continue;
+                        Ok(_) => client.send(&serde_json::json!({ "ok": "resize", "frame": self.next - 1 })),
+                        Err(e) => client.error(format!("resize: {}", crate::output::one_line(&e))),
                     }
-                    (self.spec, self.cam) = (spec, cam);
-                    let k = self.next;
-                    self.next += 1;
-                    client.send(&serde_json::json!({ "ok": what, "frame": k }));
-                    return Ok(Step::Frame(k, frame_views(scene, self.plan, &self.cam, 0)?));
+                }
+                command => {
+                    let what = command_name(&command);
+                    match self.steer(scene, &command) {
+                        Ok(Some((spec, cam))) => {
+                            (self.spec, self.cam) = (spec, cam);
+                            // Steering that came meanwhile (a drag's many moves) joins this
+                            // frame: a still view waits, a moving one shows where it is now.
+                            let mut answer = vec![(client, what)];
+                            while let Ok(next) = self.control.requests.try_recv() {
+                                let what = command_name(&next.command);
+                                match self.steer(scene, &next.command) {
+                                    Ok(Some((spec, cam))) => {
+                                        (self.spec, self.cam) = (spec, cam);
+                                        answer.push((next.client, what));
+                                    }
+                                    Ok(None) => answer.push((next.client, what)),
+                                    Err(None) => {
+                                        self.pending = Some(next);
+                                        break;
+                                    }
+                                    Err(Some(e)) => {
+                                        next.client.error(format!("{what}: {}", crate::output::one_line(&e)))
+                                    }
+                                }
+                            }
+                            let k = self.next;
+                            self.next += 1;
+                            for (client, what) in answer {
+                                client.send(&serde_json::json!({ "ok": what, "frame": k }));
+                            }
+                            return Ok(Step::Frame(k, self.views()));
+                        }
+                        // The same view: nothing to sort or show.
+                        Ok(None) => client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 })),
+                        Err(e) => {
+                            let e = e.map_or_else(
+                                || "not a command of a live run".to_string(),
+                                |e| crate::output::one_line(&e),
+                            );
+                            client.error(format!("{what}: {e}"));
+                        }
+                    }
                 }
             }
         }
+    }
+}
+
+impl Controlled<'_> {
+    /// The camera flags and camera after a steering `command`: `Ok(None)` if the view stays
+    /// the same, `Err(None)` if it is no steering command, `Err(Some(why))` if the camera
+    /// it asks for cannot be rendered.
+    fn steer(
+        &self,
+        scene: &dyn Scene,
+        command: &Command,
+    ) -> Result<Option<(crate::camera::CameraSpec, Camera)>, Option<anyhow::Error>> {
+        let spec = steer(&self.spec, &self.cam, &self.plan.camera, command).ok_or(None)?;
+        let cam = scene.camera(&spec, &self.grid).map_err(Some)?;
+        crate::camera::check_precision(&cam, self.grid.height).map_err(Some)?;
+        Ok((cam != self.cam).then_some((spec, cam)))
+    }
+}
+
+impl Controlled<'_> {
+    /// The view of the camera and grid now (a live run has no stereo, wall or eye path).
+    fn views(&self) -> Vec<ViewSpec> {
+        vec![ViewSpec { camera: self.cam, eye: None, display: None, grid: self.grid }]
+    }
+
+    /// The next frame, answered to `client` with its number.
+    fn frame(&mut self, client: &Client, what: &str) -> Step {
+        let k = self.next;
+        self.next += 1;
+        client.send(&serde_json::json!({ "ok": what, "frame": k }));
+        Step::Frame(k, self.views())
+    }
+}
+
+/// A command's name, as its JSON `cmd` says it.
+fn command_name(command: &Command) -> &'static str {
+    match command {
+        Command::Camera { .. } => "camera",
+        Command::Orbit { .. } => "orbit",
+        Command::Zoom { .. } => "zoom",
+        Command::Move { .. } => "move",
+        Command::Reset {} => "reset",
+        Command::Resize { .. } => "resize",
+        Command::Snapshot { .. } => "snapshot",
+        Command::Subscribe {} => "subscribe",
+        Command::Status {} => "status",
+        Command::Quit {} => "quit",
     }
 }
 

@@ -25,7 +25,7 @@
 //! | `display.rs` | direct send: display ranks that assemble and write a wall's displays at a swap barrier |
 //! | `stats.rs` | the `--stats` JSON lines of rank 0 and of the workers |
 
-mod control;
+pub mod control;
 mod display;
 mod eye;
 mod frame_loop;
@@ -38,8 +38,8 @@ mod sorter;
 pub mod stats;
 
 pub use display::{run_display, DirectSend};
-pub use frame_loop::{orbit, orbit_by};
-pub use plan::{frame_path, plan, Plan};
-pub use run::{run_alone, run_master};
+pub use frame_loop::{orbit, orbit_by, Present, Window};
+pub use plan::{frame_path, plan, plan_view, Plan};
+pub use run::{run_alone, run_alone_live, run_master};
 pub use schedule::assign;
 pub use sorter::run_sorter;

@@ -90,6 +90,15 @@ const CHECKED_OUTPUTS: u64 = 1_000;
 /// Checks the flags that need more than their own value (the wall, the grid against the
 /// frame, outputs against inputs); every rank runs it before MPI starts.
 pub fn plan(args: &RenderArgs) -> Result<Plan> {
+    plan_with(args, false)
+}
+
+/// [`plan`] for `tessera view`: a live run in a window.
+pub fn plan_view(args: &RenderArgs) -> Result<Plan> {
+    plan_with(args, true)
+}
+
+fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
     let wall = args.wall.as_deref().map(Wall::load).transpose()?;
     let (w, h) = wall.as_ref().map_or(args.size, Wall::frame_size);
     crate::cli::check_frame_size(w as u64, h as u64)?;
@@ -97,20 +106,27 @@ pub fn plan(args: &RenderArgs) -> Result<Plan> {
     let movie = crate::movie::is_movie(&args.out);
     let stereo = args.stereo.map(|_| args.stereo_output);
     let placed = wall.as_ref().is_some_and(Wall::placed);
+    let live = match (window, args.control) {
+        (true, _) => Some("tessera view"),
+        (false, Some(_)) => Some("--control"),
+        (false, None) => None,
+    };
+    if let Some(who) = live {
+        let given = [
+            (args.frames > 1, "--frames"),
+            (args.orbit, "--orbit"),
+            (args.zoom != 1.0, "--zoom"),
+            (args.eye_path.is_some(), "--eye-path"),
+            (movie, "a movie --out"),
+            (args.stereo.is_some(), "--stereo"),
+            (wall.is_some(), "--wall"),
+        ];
+        if let Some((_, flag)) = given.iter().find(|(given, _)| *given) {
+            bail!("{who} takes the frames from its commands: leave out {flag}");
+        }
+    }
     let control = match args.control {
         Some(addr) => {
-            let live = [
-                (args.frames > 1, "--frames"),
-                (args.orbit, "--orbit"),
-                (args.zoom != 1.0, "--zoom"),
-                (args.eye_path.is_some(), "--eye-path"),
-                (movie, "a movie --out"),
-                (args.stereo.is_some(), "--stereo"),
-                (wall.is_some(), "--wall"),
-            ];
-            if let Some((_, flag)) = live.iter().find(|(given, _)| *given) {
-                bail!("--control takes the frames from its commands: leave out {flag}");
-            }
             let token = args.control_token_file.as_deref().map(super::control::read_token).transpose()?;
             Some((addr, token))
         }

@@ -25,6 +25,11 @@ const WORKER_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Without mpirun: the frame loop, and one worker on a thread of this process, over channels.
 pub fn run_alone(plan: &Plan) -> Result<()> {
+    run_alone_live(plan, None)
+}
+
+/// [`run_alone`], live in a window when `window` is given (`tessera view`).
+pub fn run_alone_live(plan: &Plan, window: Option<frame_loop::Window>) -> Result<()> {
     if plan.display_ranks > 0 {
         anyhow::bail!("--display-ranks {} needs mpirun: the display ranks are ranks of their own", plan.display_ranks);
     }
@@ -39,7 +44,7 @@ pub fn run_alone(plan: &Plan) -> Result<()> {
         drop(finished);
         result
     });
-    if let Err(e) = frame_loop::run(&ranks[0] as &dyn Transport, plan) {
+    if let Err(e) = frame_loop::run_live(&ranks[0] as &dyn Transport, plan, window) {
         // The worker leaves the GPU before the process exits: exiting while it draws runs the
         // driver's exit-time destructors under it (SIGSEGV or "corrupted double-linked list"
         // in 2 of 100 loaded runs of a chunked model cut while in use). Closing its channel

@@ -1,0 +1,277 @@
+//! End-to-end tests of `tessera view`, as a person uses it, on an X server without a screen
+//! (Xvfb, which `scripts/setup.sh` installs): the window's pixels, read back from the server
+//! with `xwd`, equal `render`'s PNG of the same frame; a drag and keys sent with `xdotool`
+//! move the camera as the guide says, take a screenshot equal to `render`'s and quit; an idle
+//! window costs no CPU; without `DISPLAY` the command fails with one line naming it.
+
+mod common;
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpStream;
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{alone, bin, mpi_env, ok, pixels, refused_one_line};
+use serde_json::Value;
+use testkit::mesh_arg as mesh;
+
+const SIZE: (u32, u32) = (320, 240);
+
+/// An X server of our own on a free display number, ended with the test.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    fn start() -> Xvfb {
+        for n in (100 + std::process::id() % 400..).take(50) {
+            if Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+                continue;
+            }
+            let display = format!(":{n}");
+            let child = Command::new("Xvfb")
+                .args([&display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("Xvfb (scripts/setup.sh installs it)");
+            let mut x = Xvfb { child, display };
+            let deadline = Instant::now() + Duration::from_secs(20);
+            while Instant::now() < deadline {
+                if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                    return x;
+                }
+                if x.child.try_wait().unwrap().is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = x.child.kill();
+        }
+        panic!("no Xvfb display could be started");
+    }
+
+    fn xdotool(&self, args: &[&str]) -> String {
+        let out = Command::new("xdotool").env("DISPLAY", &self.display).args(args).output().expect("xdotool");
+        assert!(out.status.success(), "xdotool {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    }
+
+    /// The window's pixels as the X server holds them, `0x00RRGGBB` rows top first, read with
+    /// `xwd` (its format: a big-endian header, a colour map, then the pixels).
+    fn pixels_of(&self, window: &str) -> (u32, u32, Vec<u32>) {
+        let out = Command::new("xwd")
+            .env("DISPLAY", &self.display)
+            .args(["-silent", "-id", window])
+            .output()
+            .expect("xwd (x11-apps)");
+        assert!(out.status.success(), "xwd: {}", String::from_utf8_lossy(&out.stderr));
+        let d = out.stdout;
+        let field = |i: usize| u32::from_be_bytes(d[i * 4..i * 4 + 4].try_into().unwrap());
+        let (header, width, height, lsb, bpp, bpl, colors) =
+            (field(0), field(4), field(5), field(7) == 0, field(11), field(12), field(19));
+        assert_eq!(bpp, 32, "a 24-bit screen stores 32 bits a pixel");
+        let start = (header + colors * 12) as usize;
+        let mut px = Vec::with_capacity((width * height) as usize);
+        for y in 0..height as usize {
+            for x in 0..width as usize {
+                let b: [u8; 4] = d[start + y * bpl as usize + x * 4..][..4].try_into().unwrap();
+                px.push(if lsb { u32::from_le_bytes(b) } else { u32::from_be_bytes(b) } & 0xff_ffff);
+            }
+        }
+        (width, height, px)
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `tessera view` on `x`, with a control port to read its state from.
+struct View {
+    child: Child,
+    addr: String,
+}
+
+impl View {
+    fn start(x: &Xvfb, model: &str, out: &Path) -> View {
+        let mut cmd = Command::new(bin());
+        mpi_env(&mut cmd)
+            .env("DISPLAY", &x.display)
+            .args(["view", model, "--size", &format!("{}x{}", SIZE.0, SIZE.1), "--tiles", "2x2"])
+            .args(["--out", out.to_str().unwrap(), "--control", "127.0.0.1:0"])
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        let mut child = cmd.spawn().unwrap();
+        let mut err = BufReader::new(child.stderr.take().unwrap());
+        let mut line = String::new();
+        let addr = loop {
+            line.clear();
+            assert!(err.read_line(&mut line).unwrap() > 0, "the view ended before its control port opened");
+            if let Some(a) = line.trim().strip_prefix("tessera: control port on ") {
+                break a.to_string();
+            }
+        };
+        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::stderr()));
+        View { child, addr }
+    }
+
+    fn ask(&self, line: &str) -> Value {
+        let mut s = TcpStream::connect(&self.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        s.write_all(format!("{line}\n").as_bytes()).unwrap();
+        let mut answer = String::new();
+        BufReader::new(s).read_line(&mut answer).unwrap();
+        serde_json::from_str(&answer).unwrap()
+    }
+
+    /// Waits until the run has shown `frames` frames (its status), then a moment for the
+    /// window to draw the last.
+    fn wait_frames(&self, frames: u64) -> Value {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        loop {
+            let status = self.ask(r#"{"cmd":"status"}"#);
+            if status["frames"].as_u64() >= Some(frames) {
+                return status;
+            }
+            assert!(Instant::now() < deadline, "{status}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    fn cpu_seconds(&self) -> f64 {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap();
+        let fields: Vec<&str> = stat.rsplit_once(')').unwrap().1.split_whitespace().collect();
+        let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+        ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
+    }
+
+    fn wait(mut self) -> std::process::ExitStatus {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                return s;
+            }
+            assert!(Instant::now() < deadline, "the view did not end");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for View {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            // Safety: signals the view's own process group.
+            unsafe { libc::kill(-(self.child.id() as i32), libc::SIGKILL) };
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// `render`'s frame as the window shows it: RGB where drawn, black where not.
+fn as_shown(png: &Path) -> Vec<u32> {
+    let (_, _, rgba) = pixels(png);
+    rgba.chunks(4).map(|p| if p[3] == 0 { 0 } else { (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32 }).collect()
+}
+
+/// The eye's direction from the target, in degrees about +Y.
+fn yaw(status: &Value) -> f64 {
+    let v = |k: &str, i: usize| status[k][i].as_f64().unwrap();
+    (v("eye", 0) - v("target", 0)).atan2(v("eye", 2) - v("target", 2)).to_degrees()
+}
+
+#[test]
+fn the_window_shows_render_s_frame_and_input_steers_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let x = Xvfb::start();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let view = View::start(&x, &model, &dir.path().join("shot.png"));
+    let first = view.wait_frames(1);
+    let window = x.xdotool(&["search", "--sync", "--name", "^Tessera: bunny_zipper_c3d"]);
+    let window = window.lines().next().unwrap().to_string();
+    x.xdotool(&["windowfocus", "--sync", &window]);
+
+    // Idle: the frame is shown and nothing changes.
+    std::thread::sleep(Duration::from_millis(500));
+    let before = view.cpu_seconds();
+    std::thread::sleep(Duration::from_secs(5));
+    let idle = view.cpu_seconds() - before;
+    eprintln!("view: CPU over 5 idle seconds: {idle:.3} s");
+    assert!(idle < 0.25, "an idle window used {idle:.3} s of CPU in 5 s");
+
+    // The heads-up line off (H), the window's pixels are render's frame.
+    let reference = dir.path().join("reference.png");
+    let size = format!("{}x{}", SIZE.0, SIZE.1);
+    ok(&alone(&["render", &model, "--size", &size, "--tiles", "1x1", "--out", reference.to_str().unwrap()]));
+    let expected = as_shown(&reference);
+    x.xdotool(&["key", "h"]);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let (w, h, shown) = x.pixels_of(&window);
+        assert_eq!((w, h), SIZE, "the window has the frame's size");
+        let differing = shown.iter().zip(&expected).filter(|(a, b)| a != b).count();
+        if differing == 0 {
+            break;
+        }
+        if Instant::now() >= deadline {
+            let rows: Vec<usize> = (0..SIZE.1 as usize)
+                .filter(|y| {
+                    (0..SIZE.0 as usize).any(|x| shown[y * SIZE.0 as usize + x] != expected[y * SIZE.0 as usize + x])
+                })
+                .collect();
+            panic!(
+                "{differing} of the window's pixels differ from render's frame, in rows {:?} to {:?}; {}",
+                rows.first(),
+                rows.last(),
+                view.ask(r#"{"cmd":"status"}"#)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+
+    // P: a screenshot, equal to render's PNG.
+    x.xdotool(&["key", "p"]);
+    let shot = dir.path().join("shot-0001.png");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !shot.exists() {
+        assert!(Instant::now() < deadline, "no screenshot");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_eq!(pixels(&shot), pixels(&reference), "the screenshot is render's frame");
+
+    // A drag of 60 pixels to the right orbits the eye by 18 degrees (0.3 a pixel), one frame.
+    let (cx, cy) = (SIZE.0 / 2, SIZE.1 / 2);
+    let at = |dx: u32| [(cx + dx).to_string(), cy.to_string()];
+    let [x0, y0] = at(0);
+    x.xdotool(&["mousemove", "--window", &window, &x0, &y0, "mousedown", "1"]);
+    for dx in [20, 40, 60] {
+        let [x1, y1] = at(dx);
+        x.xdotool(&["mousemove", "--window", &window, &x1, &y1]);
+    }
+    x.xdotool(&["mouseup", "1"]);
+    let moved = view.wait_frames(2);
+    let turned = yaw(&moved) - yaw(&first);
+    assert!((turned.abs() - 18.0).abs() < 0.01, "turned {turned} degrees: {first} -> {moved}");
+    let (_, _, after) = x.pixels_of(&window);
+    assert!(after.iter().zip(&expected).filter(|(a, b)| a != b).count() > 100, "the window shows the new view");
+
+    // Q quits, cleanly.
+    x.xdotool(&["key", "q"]);
+    assert!(view.wait().success(), "Q ends the view cleanly");
+}
+
+#[test]
+fn without_a_display_the_view_fails_naming_it() {
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let out = common::output(mpi_env(&mut Command::new(bin())).env_remove("DISPLAY").args(["view", &model]));
+    refused_one_line(&out, "DISPLAY");
+    refused_one_line(&alone(&["view", &model, "--frames", "2"]), "--frames");
+}
