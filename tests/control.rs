@@ -191,8 +191,14 @@ fn clients_share_the_run_and_bad_lines_are_answered() {
     }
     assert_eq!(b.ask(r#"{"cmd":"subscribe"}"#)["ok"], "subscribe");
     assert_eq!(a.ask(r#"{"cmd":"orbit","degrees":30}"#)["frame"], 1);
-    // The subscriber gets the stats line of the frame a's command made.
-    let line = b.read();
+    // The subscriber gets the stats line of the frame a's command made (after the first
+    // frame's, which may still have been in flight when it subscribed).
+    let line = loop {
+        let line = b.read();
+        if line["frame"] != 0 {
+            break line;
+        }
+    };
     assert_eq!(line["frame"], 1, "{line}");
     assert!(line["tiles"].as_array().is_some_and(|t| !t.is_empty()), "{line}");
     // The same view again costs no frame.
@@ -246,5 +252,52 @@ fn a_port_beyond_loopback_needs_a_token_every_client_presents() {
     assert_eq!(friend.ask(r#"{"token":"0123456789abcdef-secret"}"#)["ok"], "token");
     assert_eq!(friend.ask(r#"{"cmd":"status"}"#)["ok"], "status");
     assert_eq!(friend.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
+
+#[test]
+fn the_grid_the_error_and_balancing_change_live() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let dpm = dir.path().join("bunny.dpm");
+    ok(&alone(&["pm", "build", &bunny, "-o", s(&dpm)]));
+    let live = Live::start(s(&dpm), &[]);
+    let (mut c, mut stats) = (live.client(), live.client());
+    assert_eq!(stats.ask(r#"{"cmd":"subscribe"}"#)["ok"], "subscribe");
+    // The subscriber's line of frame `k` (the first frame's may come before it).
+    let mut line_of = |k: u64| loop {
+        let line = stats.read();
+        if line["frame"].as_u64() == Some(k) {
+            break line;
+        }
+    };
+    // A 3x2 grid: the same picture (tiles are exact), cut into six tiles.
+    assert_eq!(c.ask(r#"{"cmd":"tiles","cols":3,"rows":2}"#)["frame"], 1);
+    let line = line_of(1);
+    assert!(line["tiles"].as_array().unwrap().iter().all(|t| t["index"].as_u64() < Some(6)), "{line}");
+    let tiled = dir.path().join("tiled.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&tiled)))["ok"], "snapshot");
+    rendered(s(&dpm), &[], &dir.path().join("r0.png"));
+    assert_eq!(differing(&tiled, &dir.path().join("r0.png")), 0, "a regridded frame is render's");
+    // A coarser error: the frame render draws with --error-px 8.
+    assert_eq!(c.ask(r#"{"cmd":"error_px","value":8}"#)["frame"], 2);
+    let coarse = dir.path().join("coarse.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&coarse)))["ok"], "snapshot");
+    rendered(s(&dpm), &["--error-px", "8"], &dir.path().join("r8.png"));
+    assert_eq!(differing(&coarse, &dir.path().join("r8.png")), 0, "error_px 8 is render's --error-px 8");
+    assert!(differing(&coarse, &tiled) > 0, "a coarser mesh looks different");
+    // Balancing on makes a frame; asking again makes none.
+    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 3);
+    assert_eq!(line_of(3)["frame"], 3);
+    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 3);
+    for (line, says) in [
+        (r#"{"cmd":"tiles","cols":0,"rows":2}"#, "tiles"),
+        (r#"{"cmd":"error_px","value":-1}"#, "error_px"),
+        (r#"{"cmd":"balance"}"#, "on"),
+    ] {
+        let answer = c.ask(line);
+        assert!(answer["error"].as_str().is_some_and(|e| e.contains(says)), "{line}: {answer}");
+    }
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     assert!(live.wait().success());
 }

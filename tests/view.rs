@@ -257,11 +257,27 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
         x.xdotool(&["mousemove", "--window", &window, &x1, &y1]);
     }
     x.xdotool(&["mouseup", "1"]);
-    let moved = view.wait_frames(2);
-    let turned = yaw(&moved) - yaw(&first);
-    assert!((turned.abs() - 18.0).abs() < 0.01, "turned {turned} degrees: {first} -> {moved}");
-    let (_, _, after) = x.pixels_of(&window);
-    assert!(after.iter().zip(&expected).filter(|(a, b)| a != b).count() > 100, "the window shows the new view");
+    // The drag's moves join frames as they come (one frame, or a few): the eye ends 18
+    // degrees around, and the window shows it.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let moved = view.wait_frames(2);
+        let turned = yaw(&moved) - yaw(&first);
+        if (turned.abs() - 18.0).abs() < 0.01 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "turned {turned} degrees: {first} -> {moved}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let (_, _, after) = x.pixels_of(&window);
+        if after.iter().zip(&expected).filter(|(a, b)| a != b).count() > 100 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the window does not show the new view");
+        std::thread::sleep(Duration::from_millis(100));
+    }
 
     // Q quits, cleanly.
     x.xdotool(&["key", "q"]);

@@ -8,6 +8,9 @@
 //! | `{"cmd":"zoom","factor":f}` | moves the eye toward the target to `f` times its distance | `{"ok":"zoom","frame":k}` |
 //! | `{"cmd":"move","right":r,"up":u,"forward":f}` | moves eye and target together (fly, pan), each in units of their distance (all optional) | `{"ok":"move","frame":k}` |
 //! | `{"cmd":"reset"}` | back to the flags' camera | `{"ok":"reset","frame":k}` |
+//! | `{"cmd":"tiles","cols":c,"rows":r}` | re-plans the frame in a `c` x `r` tile grid | `{"ok":"tiles","frame":k}` |
+//! | `{"cmd":"error_px","value":e}` | the screen error `.dpm` and `.nsp` models adapt to | `{"ok":"error_px","frame":k}` |
+//! | `{"cmd":"balance","on":b}` | tiles go to workers by their last costs, or round robin | `{"ok":"balance","frame":k}` |
 //! | `{"cmd":"snapshot","path":"x.png"}` | writes the last frame shown, whole, as a PNG (atomically) | `{"ok":"snapshot","path":..}` |
 //! | `{"cmd":"subscribe"}` | streams every frame's rank 0 stats line to this client | `{"ok":"subscribe"}`, then a line a frame |
 //! | `{"cmd":"status"}` | the frame count and the camera | `{"ok":"status","frames":n,"eye":..}` |
@@ -66,6 +69,18 @@ pub enum Command {
     Resize {
         width: u32,
         height: u32,
+    },
+    /// A new tile grid, at the frame's size.
+    Tiles {
+        cols: u32,
+        rows: u32,
+    },
+    /// The screen error `.dpm` and `.nsp` models adapt to.
+    ErrorPx {
+        value: f32,
+    },
+    Balance {
+        on: bool,
     },
     Snapshot {
         path: PathBuf,
@@ -249,7 +264,7 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
     let value: Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
     let Some(cmd) = value.get("cmd").and_then(Value::as_str).map(String::from) else {
         return Err(
-            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, snapshot, subscribe, status, quit)".into()
+            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, tiles, error_px, balance, snapshot, subscribe, status, quit)".into()
         );
     };
     let command: Command = serde_json::from_value(value).map_err(|e| format!("{cmd}: {e}"))?;
@@ -276,6 +291,9 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
         }
         Command::Resize { width, height } => {
             crate::cli::check_frame_size(*width as u64, *height as u64).map_err(|e| format!("resize: {e}"))?
+        }
+        Command::ErrorPx { value } if !(value.is_finite() && *value > 0.0) => {
+            return Err("error_px: value must be a positive number".into())
         }
         _ => {}
     }

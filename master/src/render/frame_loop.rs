@@ -132,6 +132,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
             spec: plan.camera.clone(),
             cam,
             grid: plan.grid,
+            settings: Settings { error_px: plan.error_px, balance: plan.balance },
             next: 0,
             control,
             pending: None,
@@ -168,7 +169,14 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                 let view = k * n + j as u32;
                 let start = Instant::now();
                 let sort_start = unix_ms();
-                let ctx = FrameContext { frame: view, camera, grid, workers, plan, costs: &inbox.costs };
+                // A live run's grid may change (the window's size, a command): a new grid's
+                // tiles have no costs yet.
+                if inbox.costs.len() != grid.tiles() {
+                    inbox.costs = vec![0.0; grid.tiles()];
+                }
+                let Settings { error_px, balance } = frames.settings();
+                let ctx =
+                    FrameContext { frame: view, camera, grid, workers, plan, costs: &inbox.costs, error_px, balance };
                 send_all(t, scene.announce(&ctx), plan.timeout)?;
                 let FrameJobs { messages: msgs, tiles, chunks, nsp } = scene.jobs(&ctx)?;
                 if let Some(d) = direct {
@@ -547,9 +555,20 @@ trait FrameSource {
     /// The next step, without waiting: [`Step::Idle`] when there is none yet.
     fn next_step(&mut self, scene: &dyn Scene) -> Result<Step>;
 
+    /// The error threshold and balancing of the frames it gives.
+    fn settings(&self) -> Settings;
+
     /// Waits for the next event, after an idle step (the loop has shown every frame in
     /// flight by then, so that what was asked for is on screen while nothing happens).
     fn wait(&mut self) {}
+}
+
+/// What a frame is sorted with besides its views: the screen error of `.dpm` and `.nsp`
+/// models, and whether tiles go to workers by cost.
+#[derive(Clone, Copy)]
+struct Settings {
+    error_px: f32,
+    balance: bool,
 }
 
 /// `--frames` frames, orbiting, zooming or following `--eye-path` from the first camera.
@@ -560,6 +579,10 @@ struct FixedFrames<'a> {
 }
 
 impl FrameSource for FixedFrames<'_> {
+    fn settings(&self) -> Settings {
+        Settings { error_px: self.plan.error_px, balance: self.plan.balance }
+    }
+
     fn next_step(&mut self, scene: &dyn Scene) -> Result<Step> {
         if self.next >= self.plan.frames {
             return Ok(Step::End);
@@ -578,8 +601,10 @@ struct Controlled<'a> {
     /// The camera flags of the view shown, and the camera they give.
     spec: crate::camera::CameraSpec,
     cam: Camera,
-    /// The frame's grid: the plan's, or at a window's size (the same tiles).
+    /// The frame's grid: the plan's, or as the window's size and commands made it.
     grid: TileGrid,
+    /// The error threshold and balancing, the plan's until a command changes them.
+    settings: Settings,
     next: u32,
     control: &'a Control,
     /// A request taken by [`FrameSource::wait`] (or left by the steering that joins a
@@ -588,6 +613,10 @@ struct Controlled<'a> {
 }
 
 impl FrameSource for Controlled<'_> {
+    fn settings(&self) -> Settings {
+        self.settings
+    }
+
     fn wait(&mut self) {
         if self.pending.is_none() {
             // Every connection's thread holds a sender, and the listener's thread too (a
@@ -627,17 +656,32 @@ impl FrameSource for Controlled<'_> {
                     "fovy": self.cam.fovy,
                 })),
                 Command::Resize { width, height } => {
-                    let resized = TileGrid::new(width, height, self.grid.cols, self.grid.rows)
-                        .map_err(anyhow::Error::from)
-                        .and_then(|grid| Ok((scene.camera(&self.spec, &grid)?, grid)));
-                    match resized {
-                        Ok((cam, grid)) if grid != self.grid => {
-                            (self.cam, self.grid) = (cam, grid);
-                            return Ok(self.frame(&client, "resize"));
-                        }
-                        Ok(_) => client.send(&serde_json::json!({ "ok": "resize", "frame": self.next - 1 })),
-                        Err(e) => client.error(format!("resize: {}", crate::output::one_line(&e))),
+                    if let Some(step) =
+                        self.regrid(scene, &client, "resize", (width, height), (self.grid.cols, self.grid.rows))
+                    {
+                        return Ok(step);
                     }
+                }
+                Command::Tiles { cols, rows } => {
+                    if self.plan.sorters > 1 || self.plan.display_ranks > 0 {
+                        client.error("tiles: sorter and display ranks keep the grid of the flags");
+                    } else if let Some(step) =
+                        self.regrid(scene, &client, "tiles", (self.grid.width, self.grid.height), (cols, rows))
+                    {
+                        return Ok(step);
+                    }
+                }
+                Command::ErrorPx { value } if value != self.settings.error_px => {
+                    self.settings.error_px = value;
+                    return Ok(self.frame(&client, "error_px"));
+                }
+                Command::Balance { on } if on != self.settings.balance => {
+                    self.settings.balance = on;
+                    return Ok(self.frame(&client, "balance"));
+                }
+                // The same setting: nothing to sort or show.
+                command @ (Command::ErrorPx { .. } | Command::Balance { .. }) => {
+                    client.send(&serde_json::json!({ "ok": command_name(&command), "frame": self.next - 1 }))
                 }
                 command => {
                     let what = command_name(&command);
@@ -704,6 +748,30 @@ impl Controlled<'_> {
 }
 
 impl Controlled<'_> {
+    /// The frame re-planned at `size` in `tiles` (`what` names the command), or `None` when
+    /// that is the grid already or cannot be (answered to `client`).
+    fn regrid(
+        &mut self,
+        scene: &dyn Scene,
+        client: &Client,
+        what: &str,
+        (width, height): (u32, u32),
+        (cols, rows): (u32, u32),
+    ) -> Option<Step> {
+        let regridded = TileGrid::new(width, height, cols, rows)
+            .map_err(anyhow::Error::from)
+            .and_then(|grid| Ok((scene.camera(&self.spec, &grid)?, grid)));
+        match regridded {
+            Ok((cam, grid)) if grid != self.grid => {
+                (self.cam, self.grid) = (cam, grid);
+                return Some(self.frame(client, what));
+            }
+            Ok(_) => client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 })),
+            Err(e) => client.error(format!("{what}: {}", crate::output::one_line(&e))),
+        }
+        None
+    }
+
     /// The view of the camera and grid now (a live run has no stereo, wall or eye path).
     fn views(&self) -> Vec<ViewSpec> {
         vec![ViewSpec { camera: self.cam, eye: None, display: None, grid: self.grid }]
@@ -727,6 +795,9 @@ fn command_name(command: &Command) -> &'static str {
         Command::Move { .. } => "move",
         Command::Reset {} => "reset",
         Command::Resize { .. } => "resize",
+        Command::Tiles { .. } => "tiles",
+        Command::ErrorPx { .. } => "error_px",
+        Command::Balance { .. } => "balance",
         Command::Snapshot { .. } => "snapshot",
         Command::Subscribe {} => "subscribe",
         Command::Status {} => "status",

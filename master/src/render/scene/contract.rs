@@ -47,12 +47,16 @@ pub(crate) struct FrameContext<'a> {
     pub plan: &'a Plan,
     /// Each tile's cost the frame before (ms), for `--balance`.
     pub costs: &'a [f64],
+    /// The screen error of `.dpm` and `.nsp` models (`--error-px`), and whether tiles go to
+    /// workers by their costs (`--balance`): the plan's, or what a live run set since.
+    pub error_px: f32,
+    pub balance: bool,
 }
 
 impl FrameContext<'_> {
     /// The worker of each of `tiles`.
     pub(super) fn owners(&self, tiles: &[usize]) -> Vec<usize> {
-        assign(tiles, self.workers, self.plan.balance.then_some(self.costs))
+        assign(tiles, self.workers, self.balance.then_some(self.costs))
     }
 }
 

@@ -48,7 +48,7 @@ impl Scene for NspScene {
         use codec::nsp::view;
         let (grid, file) = (ctx.grid, &self.file);
         let vp = ctx.camera.view_proj(grid.aspect());
-        let v = view::View { camera: ctx.camera, width: grid.width, height: grid.height, error_px: ctx.plan.error_px };
+        let v = view::View { camera: ctx.camera, width: grid.width, height: grid.height, error_px: ctx.error_px };
         let selection = view::select(file, &v);
         let reach: Vec<Option<[u32; 4]>> = selection
             .iter()

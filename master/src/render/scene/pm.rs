@@ -110,7 +110,7 @@ impl Scene for PmScene {
     /// pixels.
     fn jobs(&mut self, ctx: &FrameContext) -> Result<FrameJobs> {
         let (grid, plan, (lo, hi)) = (ctx.grid, ctx.plan, self.bbox);
-        let view = codec::pm::Viewpoint::new(&ctx.camera, grid.width, grid.height, plan.error_px);
+        let view = codec::pm::Viewpoint::new(&ctx.camera, grid.width, grid.height, ctx.error_px);
         let diagonal = glam::Vec3::from(hi).distance(glam::Vec3::from(lo));
         // Only tiles the model's bounding box can reach: every vertex a progressive mesh can
         // activate lies in it, so the other tiles stay transparent and cost the workers nothing.
@@ -124,7 +124,7 @@ impl Scene for PmScene {
         // Each worker adapts one mesh to its tiles' bounding rectangle: contiguous runs of
         // tiles keep it to the worker's share of the frame (with --balance, the balancer's
         // assignment, whose rectangles may be larger).
-        let owner = if plan.balance {
+        let owner = if ctx.balance {
             ctx.owners(&indices)
         } else {
             crate::render::schedule::contiguous(indices.len(), ctx.workers)
