@@ -286,10 +286,21 @@ fn the_grid_the_error_and_balancing_change_live() {
     rendered(s(&dpm), &["--error-px", "8"], &dir.path().join("r8.png"));
     assert_eq!(differing(&coarse, &dir.path().join("r8.png")), 0, "error_px 8 is render's --error-px 8");
     assert!(differing(&coarse, &tiled) > 0, "a coarser mesh looks different");
+    // A grid change while a frame of the old grid is in flight (its tiles have no costs in
+    // the new one).
+    c.send(r#"{"cmd":"orbit","degrees":5}"#);
+    c.send(r#"{"cmd":"tiles","cols":1,"rows":1}"#);
+    c.send(r#"{"cmd":"tiles","cols":4,"rows":4}"#);
+    for _ in 0..3 {
+        assert!(c.read()["ok"].is_string());
+    }
+    c.send(r#"{"cmd":"tiles","cols":3,"rows":2}"#);
+    assert!(c.read()["ok"].is_string());
+    assert_eq!(c.ask(r#"{"cmd":"status"}"#)["frames"], 7);
     // Balancing on makes a frame; asking again makes none.
-    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 3);
-    assert_eq!(line_of(3)["frame"], 3);
-    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 3);
+    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 7);
+    assert_eq!(line_of(7)["frame"], 7);
+    assert_eq!(c.ask(r#"{"cmd":"balance","on":true}"#)["frame"], 7);
     for (line, says) in [
         (r#"{"cmd":"tiles","cols":0,"rows":2}"#, "tiles"),
         (r#"{"cmd":"error_px","value":-1}"#, "error_px"),
@@ -298,6 +309,37 @@ fn the_grid_the_error_and_balancing_change_live() {
         let answer = c.ask(line);
         assert!(answer["error"].as_str().is_some_and(|e| e.contains(says)), "{line}: {answer}");
     }
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
+
+#[test]
+fn another_model_of_any_kind_loads_without_a_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let (bft, dpm) = (dir.path().join("bunny.bft"), dir.path().join("bunny.dpm"));
+    ok(&alone(&["encode", &bunny, "-o", s(&bft)]));
+    ok(&alone(&["pm", "build", &bunny, "-o", s(&dpm)]));
+    let cow = mesh("classic/cow.obj");
+    let live = Live::start(s(&bft), &[]);
+    let mut c = live.client();
+    // .bft to .dpm, to a mesh file, and back to the .bft: each frame is render's of that
+    // model with the flags' camera.
+    for (k, model) in [(1, s(&dpm)), (2, cow.as_str()), (3, s(&bft))] {
+        let answer = c.ask(&format!(r#"{{"cmd":"load","path":"{model}"}}"#));
+        assert_eq!((answer["ok"].as_str(), answer["frame"].as_u64()), (Some("load"), Some(k)), "{model}: {answer}");
+        let shot = dir.path().join(format!("shot-{k}.png"));
+        assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+        let reference = dir.path().join(format!("ref-{k}.png"));
+        rendered(model, &[], &reference);
+        assert_eq!(differing(&shot, &reference), 0, "{model}: the loaded model's frame is render's");
+    }
+    // A file that is no model is refused, and the run goes on with the one it has.
+    let junk = dir.path().join("junk.bft");
+    std::fs::write(&junk, b"not a model").unwrap();
+    let answer = c.ask(&format!(r#"{{"cmd":"load","path":"{}"}}"#, s(&junk)));
+    assert!(answer["error"].as_str().is_some_and(|e| e.starts_with("load: ") && !e.contains('\n')), "{answer}");
+    assert_eq!(c.ask(r#"{"cmd":"orbit","degrees":10}"#)["frame"], 4);
     assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     assert!(live.wait().success());
 }

@@ -20,7 +20,9 @@
 //! | a sorter ([`ToSorter`]) | 9 | `Sort` | [`SortJob`] |
 //! | a display rank ([`ToDisplay`]) | 12 | `DisplayFrame` | [`DisplayFrameJob`] |
 //! | | 13 | `Swap` | [`Swap`] |
+//! | | 16 | `Unload` | nothing: drop the model and every cache, another follows (a live run's `load`) |
 //! | any of the three | 2 | `Shutdown` | nothing |
+//! | a worker or a sorter | 17 | `KeepAlive` | nothing: a live run is idle, rank 0 is there |
 //! | rank 0 ([`ToMaster`]) | 3 | `Ready` | [`Ready`] |
 //! | | 8 | `Heartbeat` | nothing: alive and working |
 //! | | 4 | `Pixels` | [`Pixels`] (workers send them to display ranks too) |
@@ -59,13 +61,17 @@ pub use to_worker::ToWorker;
 /// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the
 /// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`,
 /// 7 the GPU budget of `Model` and `DpmFile`, the node pool of `DpmFile` and the error scale
-/// of `Pixels`; version 1 messages had no version byte, so they read as version = their kind
-/// byte and are refused.
-pub const VERSION: u8 = 7;
+/// of `Pixels`, 8 `Unload` and `KeepAlive`; version 1 messages had no version byte, so they
+/// read as version = their kind byte and are refused.
+pub const VERSION: u8 = 8;
 
 /// The kind of `Shutdown`, the same to workers, sorters and display ranks: rank 0 sends one
 /// message to every rank.
 const SHUTDOWN: u8 = 2;
+
+/// The kind of `KeepAlive`, the same to workers and sorters: an idle live run's rank 0 sends
+/// it now and then, so that their silence limit measures rank 0's life, not the user's pause.
+const KEEP_ALIVE: u8 = 17;
 
 /// Now, in milliseconds since the Unix epoch (the clock of [`FrameSpan`] and of rank 0's
 /// timeline).

@@ -2,7 +2,7 @@
 //! end of the run.
 
 use crate::wire::{Body, Reader, Writer};
-use crate::{ProtocolError, SHUTDOWN};
+use crate::{ProtocolError, KEEP_ALIVE, SHUTDOWN};
 
 /// A message from rank 0 to a sorter rank.
 #[derive(Clone, Debug, PartialEq)]
@@ -11,6 +11,8 @@ pub enum ToSorter {
     Sort(SortJob),
     /// Kind 2: the run is over.
     Shutdown,
+    /// Kind 17: nothing to do yet; rank 0 is there (an idle live run).
+    KeepAlive,
 }
 
 /// The kind byte of [`ToSorter::Sort`].
@@ -51,6 +53,7 @@ impl ToSorter {
         match self {
             ToSorter::Sort(_) => "a sort job",
             ToSorter::Shutdown => "a shutdown",
+            ToSorter::KeepAlive => "a keep-alive",
         }
     }
 
@@ -58,6 +61,7 @@ impl ToSorter {
         match self {
             ToSorter::Sort(j) => Writer::message(SORT, j),
             ToSorter::Shutdown => Writer::new(SHUTDOWN).finish(),
+            ToSorter::KeepAlive => Writer::new(KEEP_ALIVE).finish(),
         }
     }
 
@@ -68,6 +72,10 @@ impl ToSorter {
             SHUTDOWN => {
                 r.body::<()>()?;
                 ToSorter::Shutdown
+            }
+            KEEP_ALIVE => {
+                r.body::<()>()?;
+                ToSorter::KeepAlive
             }
             k => return Err(ProtocolError::UnknownKind(k)),
         })

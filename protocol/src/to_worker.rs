@@ -6,7 +6,7 @@ use crate::frame::FrameJob;
 use crate::nsp::{NspFrameJob, NspModel};
 use crate::pm::{DpmFile, PmFrameJob, PmModel};
 use crate::wire::{Reader, Writer};
-use crate::{ProtocolError, SHUTDOWN};
+use crate::{ProtocolError, KEEP_ALIVE, SHUTDOWN};
 
 /// A message to a worker.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,6 +25,10 @@ pub enum ToWorker {
     NspModel(NspModel),
     /// Kind 11.
     NspFrame(NspFrameJob),
+    /// Kind 16: drop the model and every cache; another model follows (a live run's `load`).
+    Unload,
+    /// Kind 17: nothing to do yet; rank 0 is there (an idle live run).
+    KeepAlive,
 }
 
 const FRAME: u8 = 1;
@@ -33,6 +37,7 @@ const PM_FRAME: u8 = 7;
 const NSP_MODEL: u8 = 10;
 const NSP_FRAME: u8 = 11;
 const DPM_FILE: u8 = 15;
+const UNLOAD: u8 = 16;
 
 impl ToWorker {
     /// The message's kind, for errors that name one without dumping its contents.
@@ -45,6 +50,8 @@ impl ToWorker {
             ToWorker::PmFrame(_) => "a progressive-mesh frame",
             ToWorker::NspModel(_) => "an nSP-tree model",
             ToWorker::NspFrame(_) => "an nSP-tree frame",
+            ToWorker::Unload => "an unload",
+            ToWorker::KeepAlive => "a keep-alive",
         }
     }
 
@@ -57,6 +64,8 @@ impl ToWorker {
             ToWorker::PmFrame(m) => Writer::message(PM_FRAME, m),
             ToWorker::NspModel(m) => Writer::message(NSP_MODEL, m),
             ToWorker::NspFrame(m) => Writer::message(NSP_FRAME, m),
+            ToWorker::Unload => Writer::new(UNLOAD).finish(),
+            ToWorker::KeepAlive => Writer::new(KEEP_ALIVE).finish(),
         }
     }
 
@@ -73,6 +82,14 @@ impl ToWorker {
             PM_FRAME => ToWorker::PmFrame(r.body()?),
             NSP_MODEL => ToWorker::NspModel(r.body()?),
             NSP_FRAME => ToWorker::NspFrame(r.body()?),
+            UNLOAD => {
+                r.body::<()>()?;
+                ToWorker::Unload
+            }
+            KEEP_ALIVE => {
+                r.body::<()>()?;
+                ToWorker::KeepAlive
+            }
             k => return Err(ProtocolError::UnknownKind(k)),
         })
     }

@@ -11,6 +11,7 @@
 //! | `{"cmd":"tiles","cols":c,"rows":r}` | re-plans the frame in a `c` x `r` tile grid | `{"ok":"tiles","frame":k}` |
 //! | `{"cmd":"error_px","value":e}` | the screen error `.dpm` and `.nsp` models adapt to | `{"ok":"error_px","frame":k}` |
 //! | `{"cmd":"balance","on":b}` | tiles go to workers by their last costs, or round robin | `{"ok":"balance","frame":k}` |
+//! | `{"cmd":"load","path":"model"}` | another model, any kind, in place of this one (the workers free the old one); the flags' camera frames it | `{"ok":"load","frame":k}` |
 //! | `{"cmd":"snapshot","path":"x.png"}` | writes the last frame shown, whole, as a PNG (atomically) | `{"ok":"snapshot","path":..}` |
 //! | `{"cmd":"subscribe"}` | streams every frame's rank 0 stats line to this client | `{"ok":"subscribe"}`, then a line a frame |
 //! | `{"cmd":"status"}` | the frame count and the camera | `{"ok":"status","frames":n,"eye":..}` |
@@ -83,6 +84,9 @@ pub enum Command {
         on: bool,
     },
     Snapshot {
+        path: PathBuf,
+    },
+    Load {
         path: PathBuf,
     },
     // Braces, so that a field they do not take is refused as for the others.
@@ -264,7 +268,7 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
     let value: Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
     let Some(cmd) = value.get("cmd").and_then(Value::as_str).map(String::from) else {
         return Err(
-            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, tiles, error_px, balance, snapshot, subscribe, status, quit)".into()
+            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, tiles, error_px, balance, load, snapshot, subscribe, status, quit)".into()
         );
     };
     let command: Command = serde_json::from_value(value).map_err(|e| format!("{cmd}: {e}"))?;

@@ -149,8 +149,36 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                         let done = complete(t, f, plan, direct, &mut inbox)?;
                         writer.send(done)?;
                     }
-                    frames.wait();
+                    if frames.wait() {
+                        let alive = ToWorker::KeepAlive.encode();
+                        send_all(t, (1..t.size()).map(|r| (r, alive.clone())).collect(), plan.timeout)?;
+                    }
                     continue;
+                }
+                Step::Load(path, client) => {
+                    while let Some(f) = flight.pop_front() {
+                        let done = complete(t, f, plan, direct, &mut inbox)?;
+                        writer.send(done)?;
+                    }
+                    let step = match super::scene::load_path(plan, &path) {
+                        Ok(next) => {
+                            // The workers free the old model and caches, then get the new
+                            // one's model message if its kind has one.
+                            let unload = ToWorker::Unload.encode();
+                            send_all(t, (1..=workers).map(|w| (w, unload.clone())).collect(), plan.timeout)?;
+                            if let Some(model) = next.model_message() {
+                                send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
+                            }
+                            scene = next;
+                            inbox.costs.iter_mut().for_each(|c| *c = 0.0);
+                            frames.loaded(scene.as_ref(), client, None)?
+                        }
+                        Err(e) => frames.loaded(scene.as_ref(), client, Some(e))?,
+                    };
+                    match step {
+                        Step::Frame(k, views) => (k, views),
+                        _ => continue,
+                    }
                 }
                 Step::Snapshot(path, client) => {
                     while let Some(f) = flight.pop_front() {
@@ -266,7 +294,10 @@ fn complete(
             } else if !p.rgba.is_empty() {
                 bail!("rank {rank} sent tile {}'s pixels to rank 0, which display ranks should have", p.index);
             }
-            costs[p.index as usize] = p.times.total_ms();
+            // A frame of a grid a live run has left since has no place among the costs.
+            if let Some(cost) = costs.get_mut(p.index as usize) {
+                *cost = p.times.total_ms();
+            }
             if let Some(s) = tiles.iter_mut().find(|s| s.index == p.index) {
                 s.triangles = p.triangles;
             }
@@ -544,6 +575,8 @@ fn write_image(
 enum Step {
     Frame(u32, Vec<ViewSpec>),
     Snapshot(std::path::PathBuf, Client),
+    /// Another model in place of this one (a live run).
+    Load(std::path::PathBuf, Client),
     Idle,
     End,
 }
@@ -559,9 +592,25 @@ trait FrameSource {
     fn settings(&self) -> Settings;
 
     /// Waits for the next event, after an idle step (the loop has shown every frame in
-    /// flight by then, so that what was asked for is on screen while nothing happens).
-    fn wait(&mut self) {}
+    /// flight by then, so that what was asked for is on screen while nothing happens); true
+    /// if none came within [`KEEP_ALIVE`], for the loop to tell the other ranks it is there.
+    fn wait(&mut self) -> bool {
+        false
+    }
+
+    /// After [`Step::Load`]: `scene` is the new model (or the old one, with `failed`); the
+    /// step that answers `client`.
+    fn loaded(&mut self, _scene: &dyn Scene, client: Client, failed: Option<anyhow::Error>) -> Result<Step> {
+        if let Some(e) = failed {
+            client.error(format!("load: {}", crate::output::one_line(&e)));
+        }
+        Ok(Step::Idle)
+    }
 }
+
+/// How long an idle live run waits before it tells its workers and sorters it is there: well
+/// within their silence limit of an hour.
+const KEEP_ALIVE: std::time::Duration = std::time::Duration::from_secs(600);
 
 /// What a frame is sorted with besides its views: the screen error of `.dpm` and `.nsp`
 /// models, and whether tiles go to workers by cost.
@@ -617,11 +666,40 @@ impl FrameSource for Controlled<'_> {
         self.settings
     }
 
-    fn wait(&mut self) {
-        if self.pending.is_none() {
-            // Every connection's thread holds a sender, and the listener's thread too (a
-            // window's is its own): the channel stays open while the run does.
-            self.pending = self.control.requests.recv().ok();
+    fn wait(&mut self) -> bool {
+        if self.pending.is_some() {
+            return false;
+        }
+        // The control keeps a sender of its own: the channel stays open while the run does.
+        match self.control.requests.recv_timeout(KEEP_ALIVE) {
+            Ok(r) => {
+                self.pending = Some(r);
+                false
+            }
+            Err(_) => true,
+        }
+    }
+
+    fn loaded(&mut self, scene: &dyn Scene, client: Client, failed: Option<anyhow::Error>) -> Result<Step> {
+        if let Some(e) = failed {
+            client.error(format!("load: {}", crate::output::one_line(&e)));
+            return Ok(Step::Idle);
+        }
+        // The new model is framed as the flags frame a model.
+        let framed = scene.camera(&self.plan.camera, &self.grid).and_then(|cam| {
+            crate::camera::check_precision(&cam, self.grid.height)?;
+            Ok(cam)
+        });
+        match framed {
+            Ok(cam) => {
+                (self.spec, self.cam) = (self.plan.camera.clone(), cam);
+                Ok(self.frame(&client, "load"))
+            }
+            // Loaded, but the flags' camera cannot frame it: a camera command can.
+            Err(e) => {
+                client.error(format!("load: {}", crate::output::one_line(&e)));
+                Ok(Step::Idle)
+            }
         }
     }
 
@@ -643,6 +721,13 @@ impl FrameSource for Controlled<'_> {
                     return Ok(Step::End);
                 }
                 Command::Snapshot { path } => return Ok(Step::Snapshot(path, client)),
+                Command::Load { path } => {
+                    if self.plan.sorters > 1 || self.plan.display_ranks > 0 {
+                        client.error("load: sorter and display ranks keep the model of the flags");
+                        continue;
+                    }
+                    return Ok(Step::Load(path, client));
+                }
                 Command::Subscribe {} => {
                     self.control.subscribe(client.clone());
                     client.send(&serde_json::json!({ "ok": "subscribe" }));
@@ -799,6 +884,7 @@ fn command_name(command: &Command) -> &'static str {
         Command::ErrorPx { .. } => "error_px",
         Command::Balance { .. } => "balance",
         Command::Snapshot { .. } => "snapshot",
+        Command::Load { .. } => "load",
         Command::Subscribe {} => "subscribe",
         Command::Status {} => "status",
         Command::Quit {} => "quit",

@@ -25,7 +25,7 @@ pub fn run_sorter(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
 }
 
 fn sort_frames(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
-    let Some(mut scene) = ChunkedScene::open(plan)? else {
+    let Some(mut scene) = ChunkedScene::open(plan, &plan.model)? else {
         bail!("{}: --sorters shares the sort of a chunked .bft model", plan.model.display());
     };
     t.send(0, &ToMaster::Ready(Ready { adapter: format!("sorter {s}"), max_texture_side: u32::MAX }).encode());
@@ -41,6 +41,7 @@ fn sort_frames(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
         }
         match ToSorter::decode(&bytes).context("bad message from rank 0")? {
             ToSorter::Shutdown => return Ok(()),
+            ToSorter::KeepAlive => continue,
             ToSorter::Sort(job) => {
                 let ctx = ShareContext {
                     frame: job.frame,

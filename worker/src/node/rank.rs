@@ -152,6 +152,12 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         }
         let msg = match msg {
             Ok(ToWorker::Shutdown) => return Ok(()),
+            Ok(ToWorker::KeepAlive) => continue,
+            // Another model follows: this one, its GPU buffers and its caches are freed now.
+            Ok(ToWorker::Unload) => {
+                model = None;
+                continue;
+            }
             Ok(msg) => msg,
             Err(e) => return fail(WorkerError::BadMessage(e)),
         };

@@ -40,9 +40,9 @@ pub(in crate::render) struct Share {
 }
 
 impl ChunkedScene {
-    /// The plan's model if it is a chunked `.bft`, or `None` for any other kind of file.
-    pub(in crate::render) fn open(plan: &Plan) -> Result<Option<ChunkedScene>> {
-        let Some(model) = open_chunked(&plan.model, plan.cache_bytes)? else { return Ok(None) };
+    /// The model at `path` if it is a chunked `.bft`, or `None` for any other kind of file.
+    pub(in crate::render) fn open(plan: &Plan, path: &std::path::Path) -> Result<Option<ChunkedScene>> {
+        let Some(model) = open_chunked(path, plan.cache_bytes)? else { return Ok(None) };
         Ok(Some(ChunkedScene {
             model,
             coding: plan.coding,

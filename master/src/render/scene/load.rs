@@ -10,8 +10,13 @@ use crate::render::plan::Plan;
 
 /// Loads the plan's model, of the kind its magic bytes say (BFT tiles coded as the plan says).
 pub(crate) fn load(plan: &Plan) -> Result<Box<dyn Scene>> {
-    let (path, coding) = (plan.model.as_path(), plan.coding);
-    if let Some(scene) = ChunkedScene::open(plan)? {
+    load_path(plan, &plan.model)
+}
+
+/// Loads the model at `path` with the plan's settings (a live run's `load`).
+pub(crate) fn load_path(plan: &Plan, path: &std::path::Path) -> Result<Box<dyn Scene>> {
+    let coding = plan.coding;
+    if let Some(scene) = ChunkedScene::open(plan, path)? {
         return Ok(Box::new(scene));
     }
     if plan.sorters > 1 {

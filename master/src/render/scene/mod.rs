@@ -15,4 +15,4 @@ mod pm;
 
 pub(super) use chunked::{ChunkedScene, Share};
 pub(super) use contract::{frame_messages, FrameContext, FrameJobs, Scene, ShareContext};
-pub(super) use load::load;
+pub(super) use load::{load, load_path};
