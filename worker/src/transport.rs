@@ -178,7 +178,7 @@ impl Transport for Mpi {
         if let Some(m) = self.stash.lock().unwrap_or_else(|e| e.into_inner()).pop_front() {
             return Ok(m);
         }
-        let mut spins = 0u32;
+        let (start, mut spins) = (Instant::now(), 0u32);
         loop {
             {
                 let _calls = mpi_lock();
@@ -186,12 +186,18 @@ impl Transport for Mpi {
                     return Ok(m);
                 }
             }
-            if Instant::now() >= deadline {
+            let now = Instant::now();
+            if now >= deadline {
                 return Err(RecvError::Timeout);
             }
             spins += 1;
             if spins > 1000 {
-                std::thread::sleep(Duration::from_micros(200));
+                // The longer the wait, the longer the nap: at most 5% of the time waited so far
+                // is added to it (from 200 us, up to 5 ms), so that an idle rank (a still live
+                // view) probes 200 times a second, not 5,000 (0.80 CPU s over 5 idle s for
+                // mpirun -np 3, measured, with 200 us naps).
+                let nap = ((now - start) / 20).clamp(Duration::from_micros(200), Duration::from_millis(5));
+                std::thread::sleep(nap);
             }
         }
     }
