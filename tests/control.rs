@@ -27,12 +27,16 @@ struct Live {
 
 impl Live {
     fn start(model: &str, extra: &[&str]) -> Live {
+        Live::start_with(model, extra, Stdio::null())
+    }
+
+    fn start_with(model: &str, extra: &[&str], stdin: Stdio) -> Live {
         let mut cmd = Command::new(bin());
         mpi_env(&mut cmd)
             .args(["render", model, "--size", SIZE, "--tiles", "2x2", "--control", "127.0.0.1:0"])
             .args(extra)
             .process_group(0)
-            .stdin(Stdio::null())
+            .stdin(stdin)
             .stdout(Stdio::null())
             .stderr(Stdio::piped());
         let mut child = cmd.spawn().unwrap();
@@ -342,4 +346,81 @@ fn another_model_of_any_kind_loads_without_a_restart() {
     assert_eq!(c.ask(r#"{"cmd":"orbit","degrees":10}"#)["frame"], 4);
     assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     assert!(live.wait().success());
+}
+
+/// Waits until the run has made `frames` frames (its status).
+fn wait_frames(c: &mut Client, frames: u64) {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while c.ask(r#"{"cmd":"status"}"#)["frames"].as_u64() < Some(frames) {
+        assert!(Instant::now() < deadline, "no frame {frames}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(
+        &wall,
+        "eye = [0.0, 0.0, 2.5]\n\
+         [plane]\nbottom_left = [-0.9, -0.6, 0.6]\nbottom_right = [0.9, -0.6, 0.6]\ntop_left = [-0.9, 0.6, 0.6]\n\
+         [[display]]\nname = \"left\"\nx = 6\ny = 10\nwidth = 48\nheight = 64\nbezel = 4\n\
+         [[display]]\nname = \"right\"\nx = 66\ny = 4\nwidth = 48\nheight = 40\nbezel = [4, 4, 6, 36]\n",
+    )
+    .unwrap();
+    // render's files for each tracked eye: the overview and each display.
+    let reference = |eye: &str, name: &str| {
+        let eyes = dir.path().join(format!("{name}.txt"));
+        std::fs::write(&eyes, format!("{eye}\n")).unwrap();
+        let out = dir.path().join(format!("{name}.png"));
+        ok(&alone(&["render", &model, "--wall", s(&wall), "--tiles", "2x2", "--eye-path", s(&eyes), "--out", s(&out)]));
+        out
+    };
+    let same = |a: &Path, b: &Path| {
+        for suffix in ["", "-display-left", "-display-right"] {
+            let with = |p: &Path| p.with_file_name(format!("{}{suffix}.png", p.file_stem().unwrap().to_str().unwrap()));
+            assert_eq!(differing(&with(a), &with(b)), 0, "{} against {}", with(a).display(), with(b).display());
+        }
+    };
+    // From standard input: two positions written at once make one frame, of the last.
+    let mut live = Live::start_with(&model, &["--wall", s(&wall), "--eye-stream", "-"], Stdio::piped());
+    let mut c = live.client();
+    let mut stdin = live.child.stdin.take().unwrap();
+    stdin.write_all(b"0.3 0.1 2.2\nnot an eye\n0.7,0.5,2.0\n").unwrap();
+    stdin.flush().unwrap();
+    wait_frames(&mut c, 2);
+    let shot = dir.path().join("stdin.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    same(&shot, &reference("0.7 0.5 2.0", "ref-stdin"));
+    // The control port's eye command does the same.
+    assert_eq!(c.ask(r#"{"cmd":"eye","position":[-0.5,0.2,1.8]}"#)["ok"], "eye");
+    let shot = dir.path().join("cmd.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    same(&shot, &reference("-0.5 0.2 1.8", "ref-cmd"));
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    drop(stdin);
+    assert!(live.wait().success());
+
+    // From UDP datagrams, on loopback.
+    let port = std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let stream = format!("udp:127.0.0.1:{port}");
+    let live = Live::start(&model, &["--wall", s(&wall), "--eye-stream", &stream]);
+    let mut c = live.client();
+    let tracker = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    tracker.send_to(b"0.2 -0.3 2.4", ("127.0.0.1", port)).unwrap();
+    wait_frames(&mut c, 2);
+    // The same position again makes no frame.
+    tracker.send_to(b"0.2,-0.3,2.4", ("127.0.0.1", port)).unwrap();
+    let shot = dir.path().join("udp.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    same(&shot, &reference("0.2 -0.3 2.4", "ref-udp"));
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+    // Beyond loopback without a token: refused.
+    refused_one_line(
+        &alone(&["render", &model, "--wall", s(&wall), "--control", "127.0.0.1:0", "--eye-stream", "udp:0.0.0.0:0"]),
+        "--control-token-file",
+    );
 }

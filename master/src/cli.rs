@@ -442,6 +442,12 @@ pub struct RenderArgs {
     /// address other than loopback.
     #[arg(long)]
     pub control_token_file: Option<PathBuf>,
+    /// Head tracking in a live run: eye positions, `x y z` a line, from standard input (`-`)
+    /// or from UDP datagrams (`udp:HOST:PORT`, loopback unless --control-token-file, whose
+    /// token each datagram then starts with); each moves the eye of a --wall placed in the
+    /// world (without one, the camera's eye) for the next frame.
+    #[arg(long, value_parser = crate::render::control::parse_eye_stream)]
+    pub eye_stream: Option<crate::render::control::EyeStream>,
     /// Frames rank 0 sorts and sends ahead of the one it composites (1: no pipelining).
     /// `--balance` keeps 1, as it sorts each frame from the costs of the one before, and so
     /// does `--sorters` above 1.

@@ -11,6 +11,7 @@
 //! | `{"cmd":"tiles","cols":c,"rows":r}` | re-plans the frame in a `c` x `r` tile grid | `{"ok":"tiles","frame":k}` |
 //! | `{"cmd":"error_px","value":e}` | the screen error `.dpm` and `.nsp` models adapt to | `{"ok":"error_px","frame":k}` |
 //! | `{"cmd":"balance","on":b}` | tiles go to workers by their last costs, or round robin | `{"ok":"balance","frame":k}` |
+//! | `{"cmd":"eye","position":[x,y,z]}` | head tracking: the eye of a wall placed in the world (`--wall` with a plane); without one, the camera's eye | `{"ok":"eye","frame":k}` |
 //! | `{"cmd":"load","path":"model"}` | another model, any kind, in place of this one (the workers free the old one); the flags' camera frames it | `{"ok":"load","frame":k}` |
 //! | `{"cmd":"snapshot","path":"x.png"}` | writes the last frame shown, whole, as a PNG (atomically) | `{"ok":"snapshot","path":..}` |
 //! | `{"cmd":"subscribe"}` | streams every frame's rank 0 stats line to this client | `{"ok":"subscribe"}`, then a line a frame |
@@ -89,6 +90,9 @@ pub enum Command {
     Load {
         path: PathBuf,
     },
+    Eye {
+        position: [f32; 3],
+    },
     // Braces, so that a field they do not take is refused as for the others.
     Subscribe {},
     Status {},
@@ -153,14 +157,6 @@ impl Default for Control {
 }
 
 impl Control {
-    /// A control served on `addr` (threads of its own). A non-loopback address needs a
-    /// `token`.
-    pub(super) fn bind(addr: SocketAddr, token: Option<String>) -> Result<Control> {
-        let control = Control::default();
-        control.listen(addr, token)?;
-        Ok(control)
-    }
-
     /// Where a window sends its requests.
     pub fn sender(&self) -> Sender<Request> {
         self.sender.clone()
@@ -268,7 +264,7 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
     let value: Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
     let Some(cmd) = value.get("cmd").and_then(Value::as_str).map(String::from) else {
         return Err(
-            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, tiles, error_px, balance, load, snapshot, subscribe, status, quit)".into()
+            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, eye, tiles, error_px, balance, load, snapshot, subscribe, status, quit)".into()
         );
     };
     let command: Command = serde_json::from_value(value).map_err(|e| format!("{cmd}: {e}"))?;
@@ -295,6 +291,9 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
         }
         Command::Resize { width, height } => {
             crate::cli::check_frame_size(*width as u64, *height as u64).map_err(|e| format!("resize: {e}"))?
+        }
+        Command::Eye { position } if !position.iter().all(|v| v.is_finite()) => {
+            return Err("eye: every coordinate must be a finite number".into())
         }
         Command::ErrorPx { value } if !(value.is_finite() && *value > 0.0) => {
             return Err("error_px: value must be a positive number".into())
@@ -346,6 +345,83 @@ pub(super) fn steer(spec: &CameraSpec, cam: &Camera, initial: &CameraSpec, comma
         _ => return None,
     }
     Some(s)
+}
+
+/// Where a live run's eye positions come from (`--eye-stream`): standard input, or UDP
+/// datagrams on an address, each a line `x y z` (or `x,y,z`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum EyeStream {
+    Stdin,
+    Udp(SocketAddr),
+}
+
+/// Parses `--eye-stream`: `-` or `udp:HOST:PORT`.
+pub fn parse_eye_stream(s: &str) -> Result<EyeStream, String> {
+    match s {
+        "-" => Ok(EyeStream::Stdin),
+        _ => match s.strip_prefix("udp:").map(str::parse::<SocketAddr>) {
+            Some(Ok(addr)) => Ok(EyeStream::Udp(addr)),
+            _ => Err(format!("'{s}': expected - (standard input) or udp:HOST:PORT")),
+        },
+    }
+}
+
+/// An eye position of the stream: `x y z` or `x,y,z`, after the token where one is needed.
+fn eye_line(line: &str, token: Option<&str>) -> Result<[f32; 3], String> {
+    let mut words = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|w| !w.is_empty());
+    if let Some(token) = token {
+        if words.next() != Some(token) {
+            return Err("no token: a datagram from beyond loopback starts with the control token".into());
+        }
+    }
+    let joined: Vec<&str> = words.collect();
+    let eye = crate::cli::parse_vec3(&joined.join(","))?;
+    Ok(eye.to_array())
+}
+
+/// Reads `stream` on a thread of its own, each eye position an `eye` request on `requests`
+/// (what cannot be read is said on standard error, and the stream goes on). UDP binds to
+/// loopback unless a `token` is given, which each datagram must then start with.
+pub fn start_eye_stream(stream: &EyeStream, token: Option<String>, requests: Sender<Request>) -> Result<()> {
+    let send = move |line: &str, token: Option<&str>| match eye_line(line, token) {
+        Ok(position) => requests.send(Request { client: Client::local(), command: Command::Eye { position } }).is_ok(),
+        Err(e) => {
+            eprintln!("tessera: --eye-stream: {e}");
+            true
+        }
+    };
+    match stream {
+        EyeStream::Stdin => {
+            std::thread::spawn(move || {
+                for line in std::io::stdin().lock().lines() {
+                    let Ok(line) = line else { return };
+                    let line = line.split('#').next().unwrap_or("").trim().to_string();
+                    if !line.is_empty() && !send(&line, None) {
+                        return;
+                    }
+                }
+            });
+        }
+        EyeStream::Udp(addr) => {
+            if !addr.ip().is_loopback() && token.is_none() {
+                bail!(
+                    "--eye-stream udp:{addr} is not a loopback address: give --control-token-file, whose token each datagram must start with"
+                );
+            }
+            let socket = std::net::UdpSocket::bind(addr).with_context(|| format!("--eye-stream udp:{addr}"))?;
+            eprintln!("tessera: eye stream on udp:{}", socket.local_addr()?);
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 512];
+                while let Ok(n) = socket.recv(&mut buf) {
+                    let text = String::from_utf8_lossy(&buf[..n]).trim().to_string();
+                    if !send(&text, token.as_deref()) {
+                        return;
+                    }
+                }
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Reads the token of `--control-token-file`: its first line, trimmed, at least 16 bytes.
@@ -400,7 +476,7 @@ mod tests {
 
     #[test]
     fn a_public_address_needs_a_token() {
-        let e = Control::bind("0.0.0.0:0".parse().unwrap(), None).err().unwrap().to_string();
+        let e = Control::default().listen("0.0.0.0:0".parse().unwrap(), None).err().unwrap().to_string();
         assert!(e.contains("token"), "{e}");
     }
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use codec::view::{Camera, TileGrid};
-use glam::Quat;
+use glam::{Quat, Vec3};
 use protocol::{unix_ms, Swap, ToDisplay, ToWorker};
 use worker::transport::Transport;
 
@@ -82,8 +82,18 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     // Bound before the model loads, so that a taken port fails before any work.
     let (control, present) = match window {
         Some(w) => (Some(w.control), Some(w.present)),
-        None => (plan.control.as_ref().map(|(addr, token)| Control::bind(*addr, token.clone())).transpose()?, None),
+        None => (plan.control.as_ref().map(|_| Control::default()), None),
     };
+    if let Some(control) = &control {
+        let token = plan.control.as_ref().and_then(|(_, token)| token.clone());
+        // The eye stream first: once the port is announced, the stream is there too.
+        if let Some(stream) = &plan.eye_stream {
+            super::control::start_eye_stream(stream, token.clone(), control.sender())?;
+        }
+        if let (None, Some((addr, _))) = (&present, &plan.control) {
+            control.listen(*addr, token)?;
+        }
+    }
     let mut scene = super::scene::load(plan)?;
     let grid = &plan.grid;
     let cam = scene.camera(&plan.camera, grid)?;
@@ -133,6 +143,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
             cam,
             grid: plan.grid,
             settings: Settings { error_px: plan.error_px, balance: plan.balance },
+            tracked: None,
             next: 0,
             control,
             pending: None,
@@ -422,7 +433,12 @@ impl Writer {
                 let w = match job {
                     WriterJob::View(w) => *w,
                     WriterJob::Snapshot(path, client) => {
-                        match shown.as_ref().map(|f| f.save_png(&path)) {
+                        // A wall's snapshot is what render writes: each display and the overview.
+                        let save = |f: &Image| match &wall {
+                            Some(wall) => save_wall(wall, f, None, &path),
+                            None => f.save_png(&path),
+                        };
+                        match shown.as_ref().map(save) {
                             Some(Ok(())) => client.send(&serde_json::json!({ "ok": "snapshot", "path": path })),
                             Some(Err(e)) => client.error(format!("snapshot: {}", crate::output::one_line(&e))),
                             None => client.error("snapshot: no frame has been shown yet"),
@@ -654,6 +670,8 @@ struct Controlled<'a> {
     grid: TileGrid,
     /// The error threshold and balancing, the plan's until a command changes them.
     settings: Settings,
+    /// The eye a head tracker last gave (a wall placed in the world).
+    tracked: Option<Vec3>,
     next: u32,
     control: &'a Control,
     /// A request taken by [`FrameSource::wait`] (or left by the steering that joins a
@@ -693,7 +711,7 @@ impl FrameSource for Controlled<'_> {
         match framed {
             Ok(cam) => {
                 (self.spec, self.cam) = (self.plan.camera.clone(), cam);
-                Ok(self.frame(&client, "load"))
+                self.frame(scene, &client, "load")
             }
             // Loaded, but the flags' camera cannot frame it: a camera command can.
             Err(e) => {
@@ -706,7 +724,7 @@ impl FrameSource for Controlled<'_> {
     fn next_step(&mut self, scene: &dyn Scene) -> Result<Step> {
         if self.next == 0 {
             self.next = 1;
-            return Ok(Step::Frame(0, self.views()));
+            return Ok(Step::Frame(0, self.views(scene)?));
         }
         loop {
             let request = match self.pending.take().map(Ok).unwrap_or_else(|| self.control.requests.try_recv()) {
@@ -721,6 +739,43 @@ impl FrameSource for Controlled<'_> {
                     return Ok(Step::End);
                 }
                 Command::Snapshot { path } => return Ok(Step::Snapshot(path, client)),
+                Command::Eye { position } if self.plan.wall.as_ref().is_some_and(|w| w.placed()) => {
+                    // A tracker's positions that came meanwhile: the last is where the head is.
+                    let mut eye = Vec3::from(position);
+                    let mut answer = vec![client];
+                    while let Ok(next) = self.control.requests.try_recv() {
+                        match next.command {
+                            Command::Eye { position } => {
+                                eye = Vec3::from(position);
+                                answer.push(next.client);
+                            }
+                            _ => {
+                                self.pending = Some(next);
+                                break;
+                            }
+                        }
+                    }
+                    if self.tracked == Some(eye) {
+                        answer.iter().for_each(|c| c.send(&serde_json::json!({ "ok": "eye", "frame": self.next - 1 })));
+                        continue;
+                    }
+                    let checked =
+                        self.plan.wall.as_ref().map(|w| w.camera_args(&self.plan.camera, eye)).transpose().and_then(
+                            |spec| {
+                                let cam = scene.camera(&spec.unwrap_or_default(), &self.grid)?;
+                                crate::camera::check_precision(&cam, self.grid.height)
+                            },
+                        );
+                    if let Err(e) = checked {
+                        answer.iter().for_each(|c| c.error(format!("eye: {}", crate::output::one_line(&e))));
+                        continue;
+                    }
+                    self.tracked = Some(eye);
+                    let step = self.frame(scene, &answer[0], "eye")?;
+                    let k = self.next - 1;
+                    answer[1..].iter().for_each(|c| c.send(&serde_json::json!({ "ok": "eye", "frame": k })));
+                    return Ok(step);
+                }
                 Command::Load { path } => {
                     if self.plan.sorters > 1 || self.plan.display_ranks > 0 {
                         client.error("load: sorter and display ranks keep the model of the flags");
@@ -742,27 +797,27 @@ impl FrameSource for Controlled<'_> {
                 })),
                 Command::Resize { width, height } => {
                     if let Some(step) =
-                        self.regrid(scene, &client, "resize", (width, height), (self.grid.cols, self.grid.rows))
+                        self.regrid(scene, &client, "resize", (width, height), (self.grid.cols, self.grid.rows))?
                     {
                         return Ok(step);
                     }
                 }
                 Command::Tiles { cols, rows } => {
-                    if self.plan.sorters > 1 || self.plan.display_ranks > 0 {
-                        client.error("tiles: sorter and display ranks keep the grid of the flags");
+                    if self.plan.sorters > 1 || self.plan.display_ranks > 0 || self.plan.wall.is_some() {
+                        client.error("tiles: sorter ranks and walls keep the grid of the flags");
                     } else if let Some(step) =
-                        self.regrid(scene, &client, "tiles", (self.grid.width, self.grid.height), (cols, rows))
+                        self.regrid(scene, &client, "tiles", (self.grid.width, self.grid.height), (cols, rows))?
                     {
                         return Ok(step);
                     }
                 }
                 Command::ErrorPx { value } if value != self.settings.error_px => {
                     self.settings.error_px = value;
-                    return Ok(self.frame(&client, "error_px"));
+                    return self.frame(scene, &client, "error_px");
                 }
                 Command::Balance { on } if on != self.settings.balance => {
                     self.settings.balance = on;
-                    return Ok(self.frame(&client, "balance"));
+                    return self.frame(scene, &client, "balance");
                 }
                 // The same setting: nothing to sort or show.
                 command @ (Command::ErrorPx { .. } | Command::Balance { .. }) => {
@@ -798,7 +853,7 @@ impl FrameSource for Controlled<'_> {
                             for (client, what) in answer {
                                 client.send(&serde_json::json!({ "ok": what, "frame": k }));
                             }
-                            return Ok(Step::Frame(k, self.views()));
+                            return Ok(Step::Frame(k, self.views(scene)?));
                         }
                         // The same view: nothing to sort or show.
                         Ok(None) => client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 })),
@@ -842,32 +897,36 @@ impl Controlled<'_> {
         what: &str,
         (width, height): (u32, u32),
         (cols, rows): (u32, u32),
-    ) -> Option<Step> {
+    ) -> Result<Option<Step>> {
         let regridded = TileGrid::new(width, height, cols, rows)
             .map_err(anyhow::Error::from)
             .and_then(|grid| Ok((scene.camera(&self.spec, &grid)?, grid)));
         match regridded {
             Ok((cam, grid)) if grid != self.grid => {
                 (self.cam, self.grid) = (cam, grid);
-                return Some(self.frame(client, what));
+                return self.frame(scene, client, what).map(Some);
             }
             Ok(_) => client.send(&serde_json::json!({ "ok": what, "frame": self.next - 1 })),
             Err(e) => client.error(format!("{what}: {}", crate::output::one_line(&e))),
         }
-        None
+        Ok(None)
     }
 
-    /// The view of the camera and grid now (a live run has no stereo, wall or eye path).
-    fn views(&self) -> Vec<ViewSpec> {
-        vec![ViewSpec { camera: self.cam, eye: None, display: None, grid: self.grid }]
+    /// The views of the camera and grid now: one, or a wall's (a live run has no stereo).
+    fn views(&self, scene: &dyn Scene) -> Result<Vec<ViewSpec>> {
+        if self.plan.wall.is_some() {
+            return views_from(scene, self.plan, &self.cam, 0, self.tracked);
+        }
+        Ok(vec![ViewSpec { camera: self.cam, eye: None, display: None, grid: self.grid }])
     }
 
     /// The next frame, answered to `client` with its number.
-    fn frame(&mut self, client: &Client, what: &str) -> Step {
+    fn frame(&mut self, scene: &dyn Scene, client: &Client, what: &str) -> Result<Step> {
+        let views = self.views(scene)?;
         let k = self.next;
         self.next += 1;
         client.send(&serde_json::json!({ "ok": what, "frame": k }));
-        Step::Frame(k, self.views())
+        Ok(Step::Frame(k, views))
     }
 }
 
@@ -885,6 +944,7 @@ fn command_name(command: &Command) -> &'static str {
         Command::Balance { .. } => "balance",
         Command::Snapshot { .. } => "snapshot",
         Command::Load { .. } => "load",
+        Command::Eye { .. } => "eye",
         Command::Subscribe {} => "subscribe",
         Command::Status {} => "status",
         Command::Quit {} => "quit",
@@ -907,12 +967,19 @@ struct ViewSpec {
 /// stereo eyes converge on the plane through its target. Their cameras were checked once, before
 /// the first frame ([`check_cameras`]).
 fn frame_views(scene: &dyn Scene, plan: &Plan, cam: &Camera, k: u32) -> Result<Vec<ViewSpec>> {
+    views_from(scene, plan, cam, k, None)
+}
+
+/// [`frame_views`], with a live run's tracked eye in place of `--eye-path`'s or the wall
+/// file's.
+fn views_from(scene: &dyn Scene, plan: &Plan, cam: &Camera, k: u32, tracked: Option<Vec3>) -> Result<Vec<ViewSpec>> {
     let half = plan.separation.map(|s| s * 0.5);
     let eye_of = |e: usize| half.map(|_| if e == 0 { Eye::Left } else { Eye::Right });
     if let Some(wall) = plan.wall.as_ref().filter(|w| w.placed()) {
-        let eye = match &plan.eyes {
-            Some(eyes) => eyes[k as usize],
-            None => wall.eye.context("a wall placed in the world needs an eye")?,
+        let eye = match (tracked, &plan.eyes) {
+            (Some(eye), _) => eye,
+            (None, Some(eyes)) => eyes[k as usize],
+            (None, None) => wall.eye.context("a wall placed in the world needs an eye")?,
         };
         let right = wall.right().context("a wall placed in the world")?;
         let eyes = match half {

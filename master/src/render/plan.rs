@@ -66,6 +66,8 @@ pub struct Plan {
     /// `--control`: a live run served on this address, with the token clients must present
     /// (`--control-token-file`).
     pub control: Option<(std::net::SocketAddr, Option<String>)>,
+    /// `--eye-stream`: where a live run's eye positions come from.
+    pub eye_stream: Option<super::control::EyeStream>,
 }
 /// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
 /// sizes).
@@ -119,7 +121,8 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
             (args.eye_path.is_some(), "--eye-path"),
             (movie, "a movie --out"),
             (args.stereo.is_some(), "--stereo"),
-            (wall.is_some(), "--wall"),
+            (window && wall.is_some(), "--wall"),
+            (args.display_ranks > 0, "--display-ranks"),
         ];
         if let Some((_, flag)) = given.iter().find(|(given, _)| *given) {
             bail!("{who} takes the frames from its commands: leave out {flag}");
@@ -133,6 +136,16 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
         None if args.control_token_file.is_some() => bail!("--control-token-file needs --control"),
         None => None,
     };
+    if args.eye_stream.is_some() && live.is_none() {
+        bail!("--eye-stream steers a live run: give --control (or use tessera view)");
+    }
+    if let Some(super::control::EyeStream::Udp(addr)) = &args.eye_stream {
+        if !addr.ip().is_loopback() && control.as_ref().is_none_or(|(_, token)| token.is_none()) {
+            bail!(
+                "--eye-stream udp:{addr} is not a loopback address: give --control-token-file, whose token each datagram must start with"
+            );
+        }
+    }
     if args.eye_path.is_some() && !placed {
         bail!("--eye-path needs a --wall placed in the world (a plane, or its displays' corners)");
     }
@@ -276,6 +289,7 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
         direct,
         inputs,
         control,
+        eye_stream: args.eye_stream.clone(),
     })
 }
 
