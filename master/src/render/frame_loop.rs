@@ -136,30 +136,14 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
         epoch,
     };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
-    let mut frames: Box<dyn FrameSource> = match &control {
-        Some(control) => Box::new(Controlled {
-            plan,
-            spec: plan.camera.clone(),
-            cam,
-            grid: plan.grid,
-            settings: Settings { error_px: plan.error_px, balance: plan.balance },
-            tracked: None,
-            next: 0,
-            control,
-            pending: None,
-        }),
-        None => Box::new(FixedFrames { plan, cam, next: 0 }),
-    };
+    let mut frames = frame_source(plan, cam, control.as_ref());
     let result = (|| -> Result<()> {
         loop {
             let (k, views) = match frames.next_step(scene.as_ref())? {
                 Step::End => break,
                 // Nothing to do until an event: every frame in flight is shown first.
                 Step::Idle => {
-                    while let Some(f) = flight.pop_front() {
-                        let done = complete(t, f, plan, direct, &mut inbox)?;
-                        writer.send(done)?;
-                    }
+                    finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
                     if frames.wait() {
                         let alive = ToWorker::KeepAlive.encode();
                         send_all(t, (1..t.size()).map(|r| (r, alive.clone())).collect(), plan.timeout)?;
@@ -167,19 +151,9 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                     continue;
                 }
                 Step::Load(path, client) => {
-                    while let Some(f) = flight.pop_front() {
-                        let done = complete(t, f, plan, direct, &mut inbox)?;
-                        writer.send(done)?;
-                    }
-                    let step = match super::scene::load_path(plan, &path) {
+                    finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
+                    let step = match swap_model(t, plan, workers, &path)? {
                         Ok(next) => {
-                            // The workers free the old model and caches, then get the new
-                            // one's model message if its kind has one.
-                            let unload = ToWorker::Unload.encode();
-                            send_all(t, (1..=workers).map(|w| (w, unload.clone())).collect(), plan.timeout)?;
-                            if let Some(model) = next.model_message() {
-                                send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
-                            }
                             scene = next;
                             inbox.costs.iter_mut().for_each(|c| *c = 0.0);
                             frames.loaded(scene.as_ref(), client, None)?
@@ -192,10 +166,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                     }
                 }
                 Step::Snapshot(path, client) => {
-                    while let Some(f) = flight.pop_front() {
-                        let done = complete(t, f, plan, direct, &mut inbox)?;
-                        writer.send(done)?;
-                    }
+                    finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
                     writer.snapshot(path, client)?;
                     continue;
                 }
@@ -248,10 +219,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                 }
             }
         }
-        while let Some(f) = flight.pop_front() {
-            let done = complete(t, f, plan, direct, &mut inbox)?;
-            writer.send(done)?;
-        }
+        finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
         Ok(())
     })();
     let shutdown = ToWorker::Shutdown.encode();
@@ -266,6 +234,42 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
         (Err(_), Err(w)) => Err(w),
         (r, w) => r.and(w),
     }
+}
+
+/// Composites every frame in flight and hands it to the writer, in order.
+fn finish_all(
+    t: &dyn Transport,
+    flight: &mut VecDeque<InFlight>,
+    plan: &Plan,
+    direct: Option<&DirectSend>,
+    inbox: &mut Inbox,
+    writer: &Writer,
+) -> Result<()> {
+    while let Some(f) = flight.pop_front() {
+        writer.send(complete(t, f, plan, direct, inbox)?)?;
+    }
+    Ok(())
+}
+
+/// A live run's `load`: the model at `path` opened with the plan's settings, then the workers
+/// told to free theirs and its caches, and sent the new one's model message if its kind has
+/// one. The inner error is the model's (the run keeps its own); the outer, the transport's.
+fn swap_model(
+    t: &dyn Transport,
+    plan: &Plan,
+    workers: usize,
+    path: &std::path::Path,
+) -> Result<Result<Box<dyn Scene>>> {
+    let next = match super::scene::load_path(plan, path) {
+        Ok(next) => next,
+        Err(e) => return Ok(Err(e)),
+    };
+    let unload = ToWorker::Unload.encode();
+    send_all(t, (1..=workers).map(|w| (w, unload.clone())).collect(), plan.timeout)?;
+    if let Some(model) = next.model_message() {
+        send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
+    }
+    Ok(Ok(next))
 }
 
 /// What rank 0 keeps from one receive to the next: when each rank was last heard from,
@@ -634,6 +638,24 @@ const KEEP_ALIVE: std::time::Duration = std::time::Duration::from_secs(600);
 struct Settings {
     error_px: f32,
     balance: bool,
+}
+
+/// The frames of a run from camera `cam`: a live run's (`control`), or `--frames`.
+fn frame_source<'a>(plan: &'a Plan, cam: Camera, control: Option<&'a Control>) -> Box<dyn FrameSource + 'a> {
+    match control {
+        Some(control) => Box::new(Controlled {
+            plan,
+            spec: plan.camera.clone(),
+            cam,
+            grid: plan.grid,
+            settings: Settings { error_px: plan.error_px, balance: plan.balance },
+            tracked: None,
+            next: 0,
+            control,
+            pending: None,
+        }),
+        None => Box::new(FixedFrames { plan, cam, next: 0 }),
+    }
 }
 
 /// `--frames` frames, orbiting, zooming or following `--eye-path` from the first camera.

@@ -108,44 +108,7 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
     let movie = crate::movie::is_movie(&args.out);
     let stereo = args.stereo.map(|_| args.stereo_output);
     let placed = wall.as_ref().is_some_and(Wall::placed);
-    let live = match (window, args.control) {
-        (true, _) => Some("tessera view"),
-        (false, Some(_)) => Some("--control"),
-        (false, None) => None,
-    };
-    if let Some(who) = live {
-        let given = [
-            (args.frames > 1, "--frames"),
-            (args.orbit, "--orbit"),
-            (args.zoom != 1.0, "--zoom"),
-            (args.eye_path.is_some(), "--eye-path"),
-            (movie, "a movie --out"),
-            (args.stereo.is_some(), "--stereo"),
-            (window && wall.is_some(), "--wall"),
-            (args.display_ranks > 0, "--display-ranks"),
-        ];
-        if let Some((_, flag)) = given.iter().find(|(given, _)| *given) {
-            bail!("{who} takes the frames from its commands: leave out {flag}");
-        }
-    }
-    let control = match args.control {
-        Some(addr) => {
-            let token = args.control_token_file.as_deref().map(super::control::read_token).transpose()?;
-            Some((addr, token))
-        }
-        None if args.control_token_file.is_some() => bail!("--control-token-file needs --control"),
-        None => None,
-    };
-    if args.eye_stream.is_some() && live.is_none() {
-        bail!("--eye-stream steers a live run: give --control (or use tessera view)");
-    }
-    if let Some(super::control::EyeStream::Udp(addr)) = &args.eye_stream {
-        if !addr.ip().is_loopback() && control.as_ref().is_none_or(|(_, token)| token.is_none()) {
-            bail!(
-                "--eye-stream udp:{addr} is not a loopback address: give --control-token-file, whose token each datagram must start with"
-            );
-        }
-    }
+    let control = live_run(args, window, movie, wall.as_ref())?;
     if args.eye_path.is_some() && !placed {
         bail!("--eye-path needs a --wall placed in the world (a plane, or its displays' corners)");
     }
@@ -377,6 +340,56 @@ pub(super) fn save_wall(wall: &Wall, frame: &Image, right: Option<&Image>, out: 
         image.save_png(&display_path(out, &d.name))?;
     }
     overview.save_png(out)
+}
+
+/// A live run's checks (`--control`, or `tessera view` with `window`): it takes its frames
+/// from its commands, so it refuses the flags that make frames of their own; and its control
+/// port's address with the token clients must present.
+fn live_run(
+    args: &RenderArgs,
+    window: bool,
+    movie: bool,
+    wall: Option<&Wall>,
+) -> Result<Option<(std::net::SocketAddr, Option<String>)>> {
+    let live = match (window, args.control) {
+        (true, _) => Some("tessera view"),
+        (false, Some(_)) => Some("--control"),
+        (false, None) => None,
+    };
+    if let Some(who) = live {
+        let given = [
+            (args.frames > 1, "--frames"),
+            (args.orbit, "--orbit"),
+            (args.zoom != 1.0, "--zoom"),
+            (args.eye_path.is_some(), "--eye-path"),
+            (movie, "a movie --out"),
+            (args.stereo.is_some(), "--stereo"),
+            (window && wall.is_some(), "--wall"),
+            (args.display_ranks > 0, "--display-ranks"),
+        ];
+        if let Some((_, flag)) = given.iter().find(|(given, _)| *given) {
+            bail!("{who} takes the frames from its commands: leave out {flag}");
+        }
+    }
+    let control = match args.control {
+        Some(addr) => {
+            let token = args.control_token_file.as_deref().map(super::control::read_token).transpose()?;
+            Some((addr, token))
+        }
+        None if args.control_token_file.is_some() => bail!("--control-token-file needs --control"),
+        None => None,
+    };
+    if args.eye_stream.is_some() && live.is_none() {
+        bail!("--eye-stream steers a live run: give --control (or use tessera view)");
+    }
+    if let Some(super::control::EyeStream::Udp(addr)) = &args.eye_stream {
+        if !addr.ip().is_loopback() && control.as_ref().is_none_or(|(_, token)| token.is_none()) {
+            bail!(
+                "--eye-stream udp:{addr} is not a loopback address: give --control-token-file, whose token each datagram must start with"
+            );
+        }
+    }
+    Ok(control)
 }
 
 #[cfg(test)]
