@@ -2,6 +2,7 @@
 //! validate each flag once, as it is parsed (sizes, numbers, camera vectors), so that the
 //! commands receive values that are already in range.
 
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -133,6 +134,25 @@ fn parse_floats<const N: usize>(s: &str, shape: &str) -> Result<[f32; N], String
 /// Parses `x,y,z`.
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     parse_floats::<3>(s, "x,y,z").map(Vec3::from)
+}
+
+/// Where a live run's eye positions come from (`--eye-stream`): standard input, or UDP
+/// datagrams on an address, each a line `x y z` (or `x,y,z`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum EyeStream {
+    Stdin,
+    Udp(SocketAddr),
+}
+
+/// Parses `--eye-stream`: `-` or `udp:HOST:PORT`.
+pub fn parse_eye_stream(s: &str) -> Result<EyeStream, String> {
+    match s {
+        "-" => Ok(EyeStream::Stdin),
+        _ => match s.strip_prefix("udp:").map(str::parse::<SocketAddr>) {
+            Some(Ok(addr)) => Ok(EyeStream::Udp(addr)),
+            _ => Err(format!("'{s}': expected - (standard input) or udp:HOST:PORT")),
+        },
+    }
 }
 
 /// Parses `x,y`.
@@ -446,8 +466,8 @@ pub struct RenderArgs {
     /// or from UDP datagrams (`udp:HOST:PORT`, loopback unless --control-token-file, whose
     /// token each datagram then starts with); each moves the eye of a --wall placed in the
     /// world (without one, the camera's eye) for the next frame.
-    #[arg(long, value_parser = crate::render::control::parse_eye_stream)]
-    pub eye_stream: Option<crate::render::control::EyeStream>,
+    #[arg(long, value_parser = parse_eye_stream)]
+    pub eye_stream: Option<EyeStream>,
     /// Frames rank 0 sorts and sends ahead of the one it composites (1: no pipelining).
     /// `--balance` keeps 1, as it sorts each frame from the costs of the one before, and so
     /// does `--sorters` above 1.

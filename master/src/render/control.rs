@@ -37,6 +37,7 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 
 use crate::camera::CameraSpec;
+use crate::cli::EyeStream;
 use codec::view::Camera;
 
 /// The longest command line a client may send; a longer one ends its connection (a client
@@ -345,25 +346,6 @@ pub(super) fn steer(spec: &CameraSpec, cam: &Camera, initial: &CameraSpec, comma
         _ => return None,
     }
     Some(s)
-}
-
-/// Where a live run's eye positions come from (`--eye-stream`): standard input, or UDP
-/// datagrams on an address, each a line `x y z` (or `x,y,z`).
-#[derive(Clone, Debug, PartialEq)]
-pub enum EyeStream {
-    Stdin,
-    Udp(SocketAddr),
-}
-
-/// Parses `--eye-stream`: `-` or `udp:HOST:PORT`.
-pub fn parse_eye_stream(s: &str) -> Result<EyeStream, String> {
-    match s {
-        "-" => Ok(EyeStream::Stdin),
-        _ => match s.strip_prefix("udp:").map(str::parse::<SocketAddr>) {
-            Some(Ok(addr)) => Ok(EyeStream::Udp(addr)),
-            _ => Err(format!("'{s}': expected - (standard input) or udp:HOST:PORT")),
-        },
-    }
 }
 
 /// An eye position of the stream: `x y z` or `x,y,z`, after the token where one is needed.

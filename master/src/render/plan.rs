@@ -67,7 +67,7 @@ pub struct Plan {
     /// (`--control-token-file`).
     pub control: Option<(std::net::SocketAddr, Option<String>)>,
     /// `--eye-stream`: where a live run's eye positions come from.
-    pub eye_stream: Option<super::control::EyeStream>,
+    pub eye_stream: Option<crate::cli::EyeStream>,
 }
 /// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
 /// sizes).
@@ -382,7 +382,7 @@ fn live_run(
     if args.eye_stream.is_some() && live.is_none() {
         bail!("--eye-stream steers a live run: give --control (or use tessera view)");
     }
-    if let Some(super::control::EyeStream::Udp(addr)) = &args.eye_stream {
+    if let Some(crate::cli::EyeStream::Udp(addr)) = &args.eye_stream {
         if !addr.ip().is_loopback() && control.as_ref().is_none_or(|(_, token)| token.is_none()) {
             bail!(
                 "--eye-stream udp:{addr} is not a loopback address: give --control-token-file, whose token each datagram must start with"
