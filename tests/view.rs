@@ -279,6 +279,53 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
         std::thread::sleep(Duration::from_millis(100));
     }
 
+    // A larger window re-plans the frame at its size: render's frame of that camera there.
+    x.xdotool(&["windowsize", "--sync", &window, "400", "300"]);
+    let resized = view.wait_frames(3);
+    let v = |k: &str| {
+        let a: Vec<String> = (0..3).map(|i| resized[k][i].as_f64().unwrap().to_string()).collect();
+        a.join(",")
+    };
+    let big = dir.path().join("big.png");
+    ok(&alone(&[
+        "render",
+        &model,
+        "--size",
+        "400x300",
+        "--tiles",
+        "1x1",
+        "--eye",
+        &v("eye"),
+        "--target",
+        &v("target"),
+        "--out",
+        big.to_str().unwrap(),
+    ]));
+    let expected = as_shown(&big);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let (w, h, shown) = x.pixels_of(&window);
+        if (w, h) == (400, 300) && shown == expected {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the resized window does not show render's 400x300 frame");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // G: the tile grid over the frame, its 2x2 tiles outlined in their cost's tint.
+    x.xdotool(&["key", "g"]);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let (_, _, shown) = x.pixels_of(&window);
+        // The left edge of the tile at the top right, at x = 200: a pure red-to-green tint.
+        let edge = shown[150 * 400 + 200];
+        let (r, g, b) = (edge >> 16, (edge >> 8) & 255, edge & 255);
+        if b == 0 && r + g >= 254 && r + g <= 256 && shown != expected {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no tile grid: {edge:06x}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+
     // Q quits, cleanly.
     x.xdotool(&["key", "q"]);
     assert!(view.wait().success(), "Q ends the view cleanly");
