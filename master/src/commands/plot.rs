@@ -235,10 +235,14 @@ impl Timeline {
 }
 
 /// Registers the embedded font as plotters' `sans-serif` (it has no system fonts here): for
-/// every figure drawn with plotters.
+/// every figure drawn with plotters. The font is parsed once per process (a window's
+/// heads-up line calls this on every redraw).
 pub fn register_font() -> Result<()> {
-    plotters::style::register_font("sans-serif", FontStyle::Normal, ttf_noto_sans::REGULAR)
-        .map_err(|_| anyhow!("the embedded font does not load"))
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, ttf_noto_sans::REGULAR).is_ok()
+    });
+    ok.then_some(()).ok_or_else(|| anyhow!("the embedded font does not load"))
 }
 
 /// A drawn timeline: RGB pixels, rows top first, and the pixel at the middle of each bar.

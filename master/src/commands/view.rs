@@ -95,9 +95,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// What the writer thread calls with each frame: the image, and the heads-up line and tile
 /// costs made from its stats lines, sent to the window's event loop.
 fn presenter(proxy: EventLoopProxy<Shown>) -> Present {
-    Box::new(move |image: &Image, master: &Value, workers: &[Value]| {
+    Box::new(move |image: &Arc<Image>, master: &Value, workers: &[Value]| {
         let (hud, costs) = heads_up(master, workers);
-        let _ = proxy.send_event(Shown::Frame { image: Arc::new(image.clone()), hud, costs });
+        let _ = proxy.send_event(Shown::Frame { image: image.clone(), hud, costs });
     })
 }
 

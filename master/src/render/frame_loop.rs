@@ -71,7 +71,7 @@ pub struct Window {
 }
 
 /// Shows a frame: its image, rank 0's stats line and the workers' (as `--stats` writes them).
-pub type Present = Box<dyn FnMut(&Image, &serde_json::Value, &[serde_json::Value]) + Send>;
+pub type Present = Box<dyn FnMut(&std::sync::Arc<Image>, &serde_json::Value, &[serde_json::Value]) + Send>;
 
 /// [`run`], live in a window when `window` is given.
 pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -> Result<()> {
@@ -432,7 +432,8 @@ impl Writer {
             // A frame's views (eyes, displays with frames of their own) wait for the last.
             let mut views: Vec<Written> = Vec::with_capacity(per_frame);
             // A live run's last frame, for snapshots.
-            let mut shown: Option<Image> = None;
+            // Shared with a window without a copy.
+            let mut shown: Option<std::sync::Arc<Image>> = None;
             for job in rx {
                 let w = match job {
                     WriterJob::View(w) => *w,
@@ -442,7 +443,7 @@ impl Writer {
                             Some(wall) => save_wall(wall, f, None, &path),
                             None => f.save_png(&path),
                         };
-                        match shown.as_ref().map(save) {
+                        match shown.as_deref().map(save) {
                             Some(Ok(())) => client.send(&serde_json::json!({ "ok": "snapshot", "path": path })),
                             Some(Err(e)) => client.error(format!("snapshot: {}", crate::output::one_line(&e))),
                             None => client.error("snapshot: no frame has been shown yet"),
@@ -461,7 +462,7 @@ impl Writer {
                 // One image per eye: a display's own frame goes to its place on the wall.
                 let per_eye = if views[0].display.is_some() { per_frame / eyes } else { 1 };
                 // The frames move out of the views (whose stats lines are written below).
-                let images_by_eye: Vec<Image> = views
+                let mut images_by_eye: Vec<Image> = views
                     .chunks_mut(per_eye)
                     .filter(|_| images)
                     .map(|group| match (&wall, group[0].display) {
@@ -476,9 +477,12 @@ impl Writer {
                         _ => Ok(std::mem::replace(&mut group[0].frame, Image::new(0, 0))),
                     })
                     .collect::<Result<_>>()?;
+                if live && images_by_eye.len() == 1 {
+                    // Kept for snapshots and the window, not written.
+                    shown = images_by_eye.pop().map(std::sync::Arc::new);
+                }
                 match (&images_by_eye[..], stereo) {
-                    _ if !images => {}
-                    ([frame], _) if live => shown = Some(frame.clone()),
+                    _ if !images || live => {}
                     ([l, r], Some(StereoOutput::Separate)) => {
                         write_image(l, &eye_path(&path, "left"), wall.as_ref(), None, None)?;
                         write_image(r, &eye_path(&path, "right"), wall.as_ref(), None, None)?;
