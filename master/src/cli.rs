@@ -155,6 +155,13 @@ pub fn parse_eye_stream(s: &str) -> Result<EyeStream, String> {
     }
 }
 
+/// Parses a position written `x y z` or `x,y,z` (any mix of commas and blanks): a line of
+/// an eye file or of an eye stream.
+pub fn parse_point(line: &str) -> Result<Vec3, String> {
+    let words: Vec<&str> = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|w| !w.is_empty()).collect();
+    parse_vec3(&words.join(","))
+}
+
 /// Parses `x,y`.
 pub fn parse_vec2(s: &str) -> Result<[f32; 2], String> {
     parse_floats(s, "x,y")

@@ -350,15 +350,15 @@ pub(super) fn steer(spec: &CameraSpec, cam: &Camera, initial: &CameraSpec, comma
 
 /// An eye position of the stream: `x y z` or `x,y,z`, after the token where one is needed.
 fn eye_line(line: &str, token: Option<&str>) -> Result<[f32; 3], String> {
-    let mut words = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|w| !w.is_empty());
-    if let Some(token) = token {
-        if words.next() != Some(token) {
-            return Err("no token: a datagram from beyond loopback starts with the control token".into());
-        }
-    }
-    let joined: Vec<&str> = words.collect();
-    let eye = crate::cli::parse_vec3(&joined.join(","))?;
-    Ok(eye.to_array())
+    let line = line.trim_start();
+    let point = match token {
+        Some(token) => match line.strip_prefix(token) {
+            Some(rest) if rest.starts_with(|c: char| c == ',' || c.is_whitespace()) => rest,
+            _ => return Err("no token: a datagram from beyond loopback starts with the control token".into()),
+        },
+        None => line,
+    };
+    Ok(crate::cli::parse_point(point)?.to_array())
 }
 
 /// Reads `stream` on a thread of its own, each eye position an `eye` request on `requests`

@@ -267,9 +267,8 @@ fn read_eyes(path: &Path, frames: u32) -> Result<Vec<(usize, Vec3)>> {
         if line.is_empty() {
             continue;
         }
-        let joined = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|c| !c.is_empty()).collect::<Vec<_>>();
-        let eye = crate::cli::parse_vec3(&joined.join(","))
-            .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), i + 1))?;
+        let eye =
+            crate::cli::parse_point(line).map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), i + 1))?;
         eyes.push((i + 1, eye));
     }
     if eyes.len() < frames as usize {
