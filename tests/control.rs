@@ -7,92 +7,32 @@ mod common;
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;
-use std::os::unix::process::CommandExt;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{alone, bin, differing, mpi_env, ok, refused_one_line};
+use common::{alone, bin, differing, mpi_env, ok, refused_one_line, LiveRun};
 use serde_json::Value;
 use testkit::mesh_arg as mesh;
 
 const SIZE: &str = "320x240";
 
-/// A live run alone (rank 0 and one worker thread), killed with its process group if the
-/// test ends without `quit`.
-struct Live {
-    child: Child,
-    addr: String,
+/// A live run alone (rank 0 and one worker thread) of `model` in 2x2 tiles, with `extra`.
+fn start_live(model: &str, extra: &[&str]) -> LiveRun {
+    start_live_with(model, extra, Stdio::null())
 }
 
-impl Live {
-    fn start(model: &str, extra: &[&str]) -> Live {
-        Live::start_with(model, extra, Stdio::null())
-    }
-
-    fn start_with(model: &str, extra: &[&str], stdin: Stdio) -> Live {
-        let mut cmd = Command::new(bin());
-        mpi_env(&mut cmd)
-            .args(["render", model, "--size", SIZE, "--tiles", "2x2", "--control", "127.0.0.1:0"])
-            .args(extra)
-            .process_group(0)
-            .stdin(stdin)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped());
-        let mut child = cmd.spawn().unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap());
-        let mut line = String::new();
-        let deadline = Instant::now() + Duration::from_secs(120);
-        let addr = loop {
-            line.clear();
-            assert!(Instant::now() < deadline, "no control port announced");
-            assert!(err.read_line(&mut line).unwrap() > 0, "the run ended before its control port opened");
-            if let Some(a) = line.trim().strip_prefix("tessera: control port on ") {
-                break a.to_string();
-            }
-        };
-        // The rest of stderr is drained, so that the run never blocks on a full pipe.
-        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
-        Live { child, addr }
-    }
-
-    fn client(&self) -> Client {
-        let stream = TcpStream::connect(&self.addr).unwrap();
-        stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-        Client { reader: BufReader::new(stream.try_clone().unwrap()), stream }
-    }
-
-    /// Waits for the run to end by itself; its exit status.
-    fn wait(mut self) -> std::process::ExitStatus {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                return status;
-            }
-            assert!(Instant::now() < deadline, "the run did not end after quit");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    }
-
-    /// CPU seconds the run's process has used (user and system, from /proc).
-    fn cpu_seconds(&self) -> f64 {
-        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap();
-        let rest = stat.rsplit_once(')').unwrap().1;
-        let fields: Vec<&str> = rest.split_whitespace().collect();
-        // utime and stime are fields 14 and 15 of the line, 12 and 13 after the command.
-        let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
-        ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
-    }
+fn start_live_with(model: &str, extra: &[&str], stdin: Stdio) -> LiveRun {
+    let mut cmd = Command::new(bin());
+    mpi_env(&mut cmd).args(["render", model, "--size", SIZE, "--tiles", "2x2", "--control", "127.0.0.1:0"]).args(extra);
+    LiveRun::start(&mut cmd, stdin, false)
 }
 
-impl Drop for Live {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            // Safety: signals the run's own process group.
-            unsafe { libc::kill(-(self.child.id() as i32), libc::SIGKILL) };
-            let _ = self.child.wait();
-        }
-    }
+/// A connection to `run`'s control port.
+fn client(run: &LiveRun) -> Client {
+    let stream = TcpStream::connect(&run.addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    Client { reader: BufReader::new(stream.try_clone().unwrap()), stream }
 }
 
 struct Client {
@@ -139,8 +79,8 @@ fn rendered(model: &str, flags: &[&str], out: &Path) {
 fn snapshots_equal_render_for_the_same_camera() {
     let dir = tempfile::tempdir().unwrap();
     let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
-    let live = Live::start(&model, &[]);
-    let mut c = live.client();
+    let live = start_live(&model, &[]);
+    let mut c = client(&live);
     let first = dir.path().join("first.png");
     let answer = c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&first)));
     assert_eq!(answer["ok"], "snapshot", "{answer}");
@@ -179,8 +119,8 @@ fn snapshots_equal_render_for_the_same_camera() {
 fn clients_share_the_run_and_bad_lines_are_answered() {
     let dir = tempfile::tempdir().unwrap();
     let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
-    let live = Live::start(&model, &[]);
-    let (mut a, mut b) = (live.client(), live.client());
+    let live = start_live(&model, &[]);
+    let (mut a, mut b) = (client(&live), client(&live));
     for (line, says) in [
         ("{", "not JSON"),
         (r#"{"cmd":"fly"}"#, "fly"),
@@ -217,8 +157,8 @@ fn clients_share_the_run_and_bad_lines_are_answered() {
 #[test]
 fn a_still_view_costs_no_cpu() {
     let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
-    let live = Live::start(&model, &[]);
-    let mut c = live.client();
+    let live = start_live(&model, &[]);
+    let mut c = client(&live);
     // The first frame is done once a snapshot of it is.
     let dir = tempfile::tempdir().unwrap();
     assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&dir.path().join("a.png"))))["ok"], "snapshot");
@@ -245,14 +185,14 @@ fn a_port_beyond_loopback_needs_a_token_every_client_presents() {
     );
     refused_one_line(&alone(&["render", &model, "--control", "127.0.0.1:0", "--frames", "3"]), "--frames");
     std::fs::write(&token, "0123456789abcdef-secret\n").unwrap();
-    let live = Live::start(&model, &["--control-token-file", s(&token)]);
-    let mut stranger = live.client();
+    let live = start_live(&model, &["--control-token-file", s(&token)]);
+    let mut stranger = client(&live);
     let answer = stranger.ask(r#"{"cmd":"status"}"#);
     assert!(answer["error"].as_str().is_some_and(|e| e.contains("token")), "{answer}");
     assert!(stranger.closed(), "a client without the token is disconnected");
-    let mut wrong = live.client();
+    let mut wrong = client(&live);
     assert!(wrong.ask(r#"{"token":"0123456789abcdef-guess"}"#)["error"].is_string());
-    let mut friend = live.client();
+    let mut friend = client(&live);
     assert_eq!(friend.ask(r#"{"token":"0123456789abcdef-secret"}"#)["ok"], "token");
     assert_eq!(friend.ask(r#"{"cmd":"status"}"#)["ok"], "status");
     assert_eq!(friend.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
@@ -265,8 +205,8 @@ fn the_grid_the_error_and_balancing_change_live() {
     let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
     let dpm = dir.path().join("bunny.dpm");
     ok(&alone(&["pm", "build", &bunny, "-o", s(&dpm)]));
-    let live = Live::start(s(&dpm), &[]);
-    let (mut c, mut stats) = (live.client(), live.client());
+    let live = start_live(s(&dpm), &[]);
+    let (mut c, mut stats) = (client(&live), client(&live));
     assert_eq!(stats.ask(r#"{"cmd":"subscribe"}"#)["ok"], "subscribe");
     // The subscriber's line of frame `k` (the first frame's may come before it).
     let mut line_of = |k: u64| loop {
@@ -325,8 +265,8 @@ fn another_model_of_any_kind_loads_without_a_restart() {
     ok(&alone(&["encode", &bunny, "-o", s(&bft)]));
     ok(&alone(&["pm", "build", &bunny, "-o", s(&dpm)]));
     let cow = mesh("classic/cow.obj");
-    let live = Live::start(s(&bft), &[]);
-    let mut c = live.client();
+    let live = start_live(s(&bft), &[]);
+    let mut c = client(&live);
     // .bft to .dpm, to a mesh file, and back to the .bft: each frame is render's of that
     // model with the flags' camera.
     for (k, model) in [(1, s(&dpm)), (2, cow.as_str()), (3, s(&bft))] {
@@ -385,8 +325,8 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
         }
     };
     // From standard input: two positions written at once make one frame, of the last.
-    let mut live = Live::start_with(&model, &["--wall", s(&wall), "--eye-stream", "-"], Stdio::piped());
-    let mut c = live.client();
+    let mut live = start_live_with(&model, &["--wall", s(&wall), "--eye-stream", "-"], Stdio::piped());
+    let mut c = client(&live);
     let mut stdin = live.child.stdin.take().unwrap();
     stdin.write_all(b"0.3 0.1 2.2\nnot an eye\n0.7,0.5,2.0\n").unwrap();
     stdin.flush().unwrap();
@@ -406,8 +346,8 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
     // From UDP datagrams, on loopback.
     let port = std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let stream = format!("udp:127.0.0.1:{port}");
-    let live = Live::start(&model, &["--wall", s(&wall), "--eye-stream", &stream]);
-    let mut c = live.client();
+    let live = start_live(&model, &["--wall", s(&wall), "--eye-stream", &stream]);
+    let mut c = client(&live);
     let tracker = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     tracker.send_to(b"0.2 -0.3 2.4", ("127.0.0.1", port)).unwrap();
     wait_frames(&mut c, 2);

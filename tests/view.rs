@@ -8,12 +8,11 @@ mod common;
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;
-use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{alone, bin, mpi_env, ok, pixels, refused_one_line};
+use common::{alone, bin, mpi_env, ok, pixels, refused_one_line, LiveRun};
 use serde_json::Value;
 use testkit::mesh_arg as mesh;
 
@@ -94,10 +93,7 @@ impl Drop for Xvfb {
 }
 
 /// `tessera view` on `x`, with a control port to read its state from.
-struct View {
-    child: Child,
-    addr: String,
-}
+struct View(LiveRun);
 
 impl View {
     fn start(x: &Xvfb, model: &str, out: &Path) -> View {
@@ -105,27 +101,12 @@ impl View {
         mpi_env(&mut cmd)
             .env("DISPLAY", &x.display)
             .args(["view", model, "--size", &format!("{}x{}", SIZE.0, SIZE.1), "--tiles", "2x2"])
-            .args(["--out", out.to_str().unwrap(), "--control", "127.0.0.1:0"])
-            .process_group(0)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped());
-        let mut child = cmd.spawn().unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap());
-        let mut line = String::new();
-        let addr = loop {
-            line.clear();
-            assert!(err.read_line(&mut line).unwrap() > 0, "the view ended before its control port opened");
-            if let Some(a) = line.trim().strip_prefix("tessera: control port on ") {
-                break a.to_string();
-            }
-        };
-        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::stderr()));
-        View { child, addr }
+            .args(["--out", out.to_str().unwrap(), "--control", "127.0.0.1:0"]);
+        View(LiveRun::start(&mut cmd, Stdio::null(), true))
     }
 
     fn ask(&self, line: &str) -> Value {
-        let mut s = TcpStream::connect(&self.addr).unwrap();
+        let mut s = TcpStream::connect(&self.0.addr).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
         s.write_all(format!("{line}\n").as_bytes()).unwrap();
         let mut answer = String::new();
@@ -144,34 +125,6 @@ impl View {
             }
             assert!(Instant::now() < deadline, "{status}");
             std::thread::sleep(Duration::from_millis(100));
-        }
-    }
-
-    fn cpu_seconds(&self) -> f64 {
-        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap();
-        let fields: Vec<&str> = stat.rsplit_once(')').unwrap().1.split_whitespace().collect();
-        let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
-        ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
-    }
-
-    fn wait(mut self) -> std::process::ExitStatus {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            if let Some(s) = self.child.try_wait().unwrap() {
-                return s;
-            }
-            assert!(Instant::now() < deadline, "the view did not end");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    }
-}
-
-impl Drop for View {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            // Safety: signals the view's own process group.
-            unsafe { libc::kill(-(self.child.id() as i32), libc::SIGKILL) };
-            let _ = self.child.wait();
         }
     }
 }
@@ -201,9 +154,9 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
 
     // Idle: the frame is shown and nothing changes.
     std::thread::sleep(Duration::from_millis(500));
-    let before = view.cpu_seconds();
+    let before = view.0.cpu_seconds();
     std::thread::sleep(Duration::from_secs(5));
-    let idle = view.cpu_seconds() - before;
+    let idle = view.0.cpu_seconds() - before;
     eprintln!("view: CPU over 5 idle seconds: {idle:.3} s");
     assert!(idle < 0.25, "an idle window used {idle:.3} s of CPU in 5 s");
 
@@ -328,7 +281,7 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
 
     // Q quits, cleanly.
     x.xdotool(&["key", "q"]);
-    assert!(view.wait().success(), "Q ends the view cleanly");
+    assert!(view.0.wait().success(), "Q ends the view cleanly");
 }
 
 #[test]

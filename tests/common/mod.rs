@@ -4,11 +4,12 @@
 //! file uses part of it.
 #![allow(dead_code)]
 
+use std::io::BufRead;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::sync::mpsc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use testkit::stderr;
 
@@ -211,4 +212,68 @@ pub fn reference(model: &str, size: &str, dir: &Path) -> PathBuf {
     let out = dir.join("reference.png");
     ok(&alone(&["render", model, "--size", size, "--tiles", "1x1", "--out", out.to_str().unwrap()]));
     out
+}
+
+/// A live run (`render --control`, `view`) in a process group of its own, with the address
+/// its control port announced; killed with its group if the test ends before it does.
+pub struct LiveRun {
+    pub child: Child,
+    pub addr: String,
+}
+
+impl LiveRun {
+    /// Starts `cmd` with `stdin`, reads its standard error up to the control port's line,
+    /// and copies the rest to the test's standard error (`echo`) or drops it, so that the
+    /// run never blocks on a full pipe.
+    pub fn start(cmd: &mut Command, stdin: Stdio, echo: bool) -> LiveRun {
+        cmd.process_group(0).stdin(stdin).stdout(Stdio::null()).stderr(Stdio::piped());
+        let mut child = cmd.spawn().unwrap();
+        let mut err = std::io::BufReader::new(child.stderr.take().unwrap());
+        let mut line = String::new();
+        let deadline = Instant::now() + Duration::from_secs(120);
+        let addr = loop {
+            line.clear();
+            assert!(Instant::now() < deadline, "no control port announced");
+            assert!(err.read_line(&mut line).unwrap() > 0, "the run ended before its control port opened");
+            if let Some(a) = line.trim().strip_prefix("tessera: control port on ") {
+                break a.to_string();
+            }
+        };
+        std::thread::spawn(move || match echo {
+            true => std::io::copy(&mut err, &mut std::io::stderr()),
+            false => std::io::copy(&mut err, &mut std::io::sink()),
+        });
+        LiveRun { child, addr }
+    }
+
+    /// Waits up to a minute for the run to end by itself; its exit status.
+    pub fn wait(mut self) -> ExitStatus {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return status;
+            }
+            assert!(Instant::now() < deadline, "the run did not end");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// CPU seconds the run's process has used (user and system, from /proc).
+    pub fn cpu_seconds(&self) -> f64 {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap();
+        let fields: Vec<&str> = stat.rsplit_once(')').unwrap().1.split_whitespace().collect();
+        // utime and stime are fields 14 and 15 of the line, 12 and 13 after the command.
+        let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+        ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
+    }
+}
+
+impl Drop for LiveRun {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            // Safety: signals the run's own process group.
+            unsafe { libc::kill(-(self.child.id() as i32), libc::SIGKILL) };
+            let _ = self.child.wait();
+        }
+    }
 }
