@@ -464,6 +464,12 @@ pub struct RenderArgs {
     /// --control-token-file.
     #[arg(long)]
     pub control: Option<std::net::SocketAddr>,
+    /// A live run shown in windows: one per display of --wall (opened by the display ranks
+    /// with --display-ranks, else by rank 0; the wall file places them), or one for the
+    /// frame. Steered from the first window's mouse and keys (docs/guide.md, "Live walls")
+    /// and from --control; runs until Q, a closed window, `quit` or a signal.
+    #[arg(long)]
+    pub present: bool,
     /// A file whose first line (at least 16 characters) is the token every control client
     /// must present as its first line, `{"token":"..."}`; needed to bind --control to an
     /// address other than loopback.

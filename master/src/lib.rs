@@ -4,7 +4,7 @@
 //! opening any model kind and its bounds ([`model`]), rank 0 of `render` and the other ranks'
 //! roles ([`render`]: the frame loop, tile scheduling, the workers' handshake and silence,
 //! sorters, display ranks, stats), the compositor ([`composite`]), tile walls and their frusta
-//! ([`wall`]), output files that are never left half-written ([`output`]), movies
+//! ([`wall`]), the windows of live runs ([`window`]), output files that are never left half-written ([`output`]), movies
 //! ([`movie`]), progress bars ([`progress`]) and the spilling allocator of `pm build`
 //! ([`spill`]). `main.rs` parses the flags and calls the command.
 
@@ -30,3 +30,4 @@ pub mod progress;
 pub mod render;
 pub mod spill;
 pub mod wall;
+pub mod window;

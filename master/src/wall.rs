@@ -58,6 +58,26 @@ use crate::composite::{intersection, Image};
 /// bottom_right = [1.6, -0.5, 0.0]
 /// top_left = [-1.6, 1.3, 0.0]
 /// ```
+/// Live runs (`render --present`) show each display in a window of its own, pixel for
+/// pixel, on the X display of the rank that owns it (`DISPLAY` in its environment: mpirun's
+/// `-x DISPLAY=...` per rank). A `[window]` table places the wall's windows, and a listed
+/// display's own `window` table places its window (its keys win over the wall's):
+///
+/// ```toml
+/// [window]
+/// x = 0                  # the wall's pixel (0, 0) goes here on the X screen, so that each
+/// y = 0                  # window sits at its display's place on the wall (bezels as gaps)
+/// [[display]]
+/// x = 40
+/// # ...
+/// window = { x = 0, y = 0, monitor = "HDMI-1", fullscreen = true }
+/// ```
+/// A display's own `x` and `y` are its window's position; `monitor` (a name, or an index
+/// from 0 in the X server's order) makes them relative to that monitor's top-left corner;
+/// `fullscreen = true` makes the window borderless and fullscreen on that monitor (or the
+/// one it opens on), the picture at its top-left. Without any, the window manager places
+/// the windows.
+///
 /// All displays lie in that one plane, so one frustum serves them all: it is each display's
 /// own off-axis frustum, cut to the display. Displays that stand at angles to each other (a
 /// CAVE) give their own corners instead, and each gets a frame and a frustum of its own:
@@ -103,6 +123,8 @@ pub struct Display {
     /// display placed so, each gets its own frame and off-axis frustum from the eye, so
     /// displays may stand at angles to each other (a CAVE, a curved wall).
     pub corners: Option<WallPlane>,
+    /// Where its window opens in a live run.
+    pub window: WindowPlace,
 }
 
 /// The wall file as written (either form; [`Wall::load`] checks which).
@@ -119,6 +141,7 @@ struct WallFile {
     display: Vec<DisplayFile>,
     plane: Option<WallPlane>,
     eye: Option<[f32; 3]>,
+    window: Option<WindowPlace>,
 }
 
 #[derive(Deserialize)]
@@ -132,6 +155,55 @@ struct DisplayFile {
     #[serde(default)]
     bezel: Bezel,
     corners: Option<WallPlane>,
+    window: Option<WindowPlace>,
+}
+
+/// Where a display's window opens in a live run (`render --present`); see [`Wall`].
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WindowPlace {
+    /// The window's top-left corner on the X screen (or on `monitor`).
+    pub x: Option<i32>,
+    pub y: Option<i32>,
+    pub monitor: Option<Monitor>,
+    /// Borderless fullscreen.
+    pub fullscreen: Option<bool>,
+}
+
+/// A monitor of the X screen, by its name (`xrandr`'s output name) or its index from 0.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum Monitor {
+    Index(u32),
+    Name(String),
+}
+
+impl WindowPlace {
+    /// Display `rect`'s window: `own` (the display's table) over `wall` (the wall's, whose
+    /// position is that of the wall's pixel (0, 0)).
+    fn resolve(wall: Option<&WindowPlace>, own: Option<&WindowPlace>, rect: [u32; 4]) -> Result<WindowPlace> {
+        for p in [wall, own].into_iter().flatten() {
+            if p.x.is_some() != p.y.is_some() {
+                bail!("a window's position needs both x and y");
+            }
+        }
+        let offset = |at: Option<i32>, by: u32| {
+            at.map(|a| {
+                i32::try_from(by).ok().and_then(|b| a.checked_add(b)).context("a window's position is too large")
+            })
+            .transpose()
+        };
+        let wall = wall.cloned().unwrap_or_default();
+        let mut place = WindowPlace { x: offset(wall.x, rect[0])?, y: offset(wall.y, rect[1])?, ..wall };
+        if let Some(own) = own {
+            if own.x.is_some() {
+                (place.x, place.y) = (own.x, own.y);
+            }
+            place.monitor = own.monitor.clone().or(place.monitor);
+            place.fullscreen = own.fullscreen.or(place.fullscreen);
+        }
+        Ok(place)
+    }
 }
 
 #[derive(Deserialize)]
@@ -161,7 +233,7 @@ impl Wall {
 
     /// A wall from the text of a wall file, checked.
     pub fn parse(text: &str) -> Result<Wall> {
-        let file: WallFile = toml::from_str(text).map_err(|e: toml::de::Error| {
+        let mut file: WallFile = toml::from_str(text).map_err(|e: toml::de::Error| {
             // toml's own message spans several lines (a snippet and a caret): one line here.
             let at = e.span().map_or(String::new(), |span| {
                 let before = &text[..span.start.min(text.len())];
@@ -173,6 +245,8 @@ impl Wall {
             anyhow::anyhow!("not a valid wall description{at}: {}", message.join("; "))
         })?;
         let grid = [file.columns, file.rows, file.display_width, file.display_height];
+        // Each listed display's own window table (none on a grid).
+        let owns: Vec<Option<WindowPlace>> = file.display.iter_mut().map(|d| d.window.take()).collect();
         let (plane, eye) = (file.plane, file.eye.map(glam::Vec3::from));
         let mut wall = if file.display.is_empty() {
             let [Some(columns), Some(rows), Some(w), Some(h)] = grid else {
@@ -185,6 +259,11 @@ impl Wall {
             }
             Wall::listed(file.display)?
         };
+        for (i, d) in wall.displays.iter_mut().enumerate() {
+            let own = owns.get(i).and_then(Option::as_ref);
+            d.window = WindowPlace::resolve(file.window.as_ref(), own, d.rect)
+                .with_context(|| format!("display {}", d.name))?;
+        }
         (wall.plane, wall.eye) = (plane, eye);
         wall.validate()?;
         let placed = wall.displays.iter().filter(|d| d.corners.is_some()).count();
@@ -281,7 +360,13 @@ impl Wall {
                     if c + 1 < columns { bx / 2 } else { 0 },
                     if r + 1 < rows { by / 2 } else { 0 },
                 ];
-                Display { name: format!("{c}-{r}"), rect: [x0, y0, x0 + w, y0 + h], bezel, corners: None }
+                Display {
+                    name: format!("{c}-{r}"),
+                    rect: [x0, y0, x0 + w, y0 + h],
+                    bezel,
+                    corners: None,
+                    window: WindowPlace::default(),
+                }
             })
             .collect();
         Ok(Wall { width: fw as u32, height: fh as u32, displays, plane: None, eye: None })
@@ -317,7 +402,7 @@ impl Wall {
             height = height.max(y1 + bezel[3] as u64);
             crate::cli::check_frame_size(width, height).with_context(|| format!("{what}: the wall is too large"))?;
             let rect = [d.x, d.y, x1 as u32, y1 as u32];
-            displays.push(Display { name, rect, bezel, corners: d.corners });
+            displays.push(Display { name, rect, bezel, corners: d.corners, window: WindowPlace::default() });
         }
         Ok(Wall { width: width as u32, height: height as u32, displays, plane: None, eye: None })
     }
@@ -491,9 +576,21 @@ mod tests {
         // The frame reaches the right edge of the second display's bezel (12 + 3) and the
         // bottom of the first's (8 + 2).
         assert_eq!(wall.frame_size(), (15, 10));
-        let portrait = Display { name: "portrait".into(), rect: [2, 3, 5, 8], bezel: [2; 4], corners: None };
+        let portrait = Display {
+            name: "portrait".into(),
+            rect: [2, 3, 5, 8],
+            bezel: [2; 4],
+            corners: None,
+            window: Default::default(),
+        };
         assert_eq!(wall.displays[0], portrait);
-        let second = Display { name: "1".into(), rect: [8, 1, 12, 3], bezel: [1, 1, 3, 0], corners: None };
+        let second = Display {
+            name: "1".into(),
+            rect: [8, 1, 12, 3],
+            bezel: [1, 1, 3, 0],
+            corners: None,
+            window: Default::default(),
+        };
         assert_eq!(wall.displays[1], second);
         let mut frame = Image::new(15, 10);
         for (i, px) in frame.rgba.chunks_mut(4).enumerate() {
@@ -510,6 +607,42 @@ mod tests {
         for (x, y) in [(1, 3), (5, 5), (7, 1), (12, 1), (14, 9), (0, 0)] {
             assert_eq!(px(x, y), [0, 0, 0, 255], "({x}, {y})");
         }
+    }
+
+    #[test]
+    fn windows_are_placed_by_the_wall_and_by_each_display() {
+        // The wall's [window] puts its pixel (0, 0) at (100, 50): each window at its display's place.
+        let grid = Wall::parse(
+            "columns = 2\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\nbezel_x = 4\n[window]\nx = 100\ny = 50\n",
+        )
+        .unwrap();
+        let at = |w: &Wall, i: usize| (w.displays[i].window.x, w.displays[i].window.y);
+        assert_eq!((at(&grid, 0), at(&grid, 1)), ((Some(100), Some(50)), (Some(114), Some(50))));
+        // A display's own table wins; the wall's fullscreen and monitor are kept where it is silent.
+        let listed = Wall::parse(&format!(
+            "[window]\nfullscreen = true\nmonitor = 1\n{LISTED}window = {{ x = 7, y = 8, monitor = \"DP-2\" }}\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            listed.displays[0].window,
+            WindowPlace { fullscreen: Some(true), monitor: Some(Monitor::Index(1)), ..Default::default() }
+        );
+        assert_eq!(
+            listed.displays[1].window,
+            WindowPlace { x: Some(7), y: Some(8), monitor: Some(Monitor::Name("DP-2".into())), fullscreen: Some(true) }
+        );
+        // Without a [window] table the window manager places them.
+        assert_eq!(Wall::parse(LISTED).unwrap().displays[0].window, WindowPlace::default());
+        let err = |text: &str| format!("{:#}", Wall::parse(text).unwrap_err());
+        assert!(err(&format!("{LISTED}window = {{ x = 3 }}\n"))
+            .contains("display 1: a window's position needs both x and y"));
+        assert!(err("columns = 1\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\n[window]\nx = 2147483647\ny = 0\n[display]\n").contains("not a valid"));
+        assert!(err(
+            "columns = 2\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\n[window]\nx = 2147483647\ny = 0\n"
+        )
+        .contains("too large"));
+        assert!(err("columns = 1\nrows = 1\ndisplay_width = 10\ndisplay_height = 10\n[window]\nsize = 3\n")
+            .contains("unknown field"));
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! [`crate::ToMaster::DisplayReady`].)
 
 use crate::wire::{Body, Reader, Writer};
-use crate::{ProtocolError, SHUTDOWN};
+use crate::{ProtocolError, KEEP_ALIVE, SHUTDOWN};
 
 /// A message from rank 0 to a display rank.
 #[derive(Clone, Debug, PartialEq)]
@@ -15,6 +15,8 @@ pub enum ToDisplay {
     Swap(Swap),
     /// Kind 2: the run is over.
     Shutdown,
+    /// Kind 17: an idle live run's rank 0 is still there.
+    KeepAlive,
 }
 
 const DISPLAY_FRAME: u8 = 12;
@@ -82,6 +84,7 @@ impl ToDisplay {
             ToDisplay::DisplayFrame(_) => "a display frame",
             ToDisplay::Swap(_) => "a swap",
             ToDisplay::Shutdown => "a shutdown",
+            ToDisplay::KeepAlive => "a keep-alive",
         }
     }
 
@@ -90,6 +93,7 @@ impl ToDisplay {
             ToDisplay::DisplayFrame(f) => Writer::message(DISPLAY_FRAME, f),
             ToDisplay::Swap(s) => Writer::message(SWAP, s),
             ToDisplay::Shutdown => Writer::new(SHUTDOWN).finish(),
+            ToDisplay::KeepAlive => Writer::new(KEEP_ALIVE).finish(),
         }
     }
 
@@ -101,6 +105,10 @@ impl ToDisplay {
             SHUTDOWN => {
                 r.body::<()>()?;
                 ToDisplay::Shutdown
+            }
+            KEEP_ALIVE => {
+                r.body::<()>()?;
+                ToDisplay::KeepAlive
             }
             k => return Err(ProtocolError::UnknownKind(k)),
         })

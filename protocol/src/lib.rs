@@ -54,22 +54,23 @@ pub use frame::{FrameJob, StreamSource, TileJob, TileStream};
 pub use nsp::{NspFrameJob, NspModel};
 pub use pm::{DpmFile, PmFrameJob, PmModel};
 pub use sorter::{SortJob, ToSorter};
-pub use to_master::{DisplayReady, Failed, FrameSpan, Pixels, PmMemory, Ready, TilePixels, TileTimes, ToMaster};
+pub use to_master::{DisplayReady, Failed, FrameSpan, Input, Pixels, PmMemory, Ready, TilePixels, TileTimes, ToMaster};
 pub use to_worker::ToWorker;
 
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of
 /// a tile and the chunk cache, 4 the `.nsp` messages, 5 the frame span of `Pixels` and the
 /// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`,
 /// 7 the GPU budget of `Model` and `DpmFile`, the node pool of `DpmFile` and the error scale
-/// of `Pixels`, 8 `Unload` and `KeepAlive`; version 1 messages had no version byte, so they
+/// of `Pixels`, 8 `Unload` and `KeepAlive`, 9 a window's `Input` and the pixel codec of
+/// `Pixels`; version 1 messages had no version byte, so they
 /// read as version = their kind byte and are refused.
-pub const VERSION: u8 = 8;
+pub const VERSION: u8 = 9;
 
 /// The kind of `Shutdown`, the same to workers, sorters and display ranks: rank 0 sends one
 /// message to every rank.
 const SHUTDOWN: u8 = 2;
 
-/// The kind of `KeepAlive`, the same to workers and sorters: an idle live run's rank 0 sends
+/// The kind of `KeepAlive`, the same to workers, sorters and display ranks: an idle live run's rank 0 sends
 /// it now and then, so that their silence limit measures rank 0's life, not the user's pause.
 const KEEP_ALIVE: u8 = 17;
 

@@ -19,6 +19,9 @@ pub enum ToMaster {
     Failed(Failed),
     /// Kind 14: from a display rank, its displays of a view are assembled.
     DisplayReady(DisplayReady),
+    /// Kind 18: from a display rank, what a person did in its steering window, as a control
+    /// command (a JSON line of the control port's), for rank 0 to apply to the next frame.
+    Input(Input),
 }
 
 const READY: u8 = 3;
@@ -26,6 +29,26 @@ const PIXELS: u8 = 4;
 const FAILED: u8 = 5;
 const HEARTBEAT: u8 = 8;
 const DISPLAY_READY: u8 = 14;
+const INPUT: u8 = 18;
+
+/// A control command from a display rank's window.
+///
+/// ```text
+/// JSON length u32 + UTF-8 bytes
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct Input {
+    pub json: String,
+}
+
+impl Body for Input {
+    fn write(&self, w: &mut Writer) {
+        w.bytes(self.json.as_bytes());
+    }
+    fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
+        Ok(Input { json: r.string("input")? })
+    }
+}
 
 /// The worker's adapter, and the largest frame side it can render (its largest 2D texture
 /// side).
@@ -248,6 +271,7 @@ impl ToMaster {
             ToMaster::Pixels(_) => "pixels",
             ToMaster::Failed(_) => "a failure",
             ToMaster::DisplayReady(_) => "a display's readiness",
+            ToMaster::Input(_) => "a window's input",
         }
     }
 
@@ -258,6 +282,7 @@ impl ToMaster {
             ToMaster::Pixels(m) => Writer::message(PIXELS, m),
             ToMaster::Failed(m) => Writer::message(FAILED, m),
             ToMaster::DisplayReady(m) => Writer::message(DISPLAY_READY, m),
+            ToMaster::Input(m) => Writer::message(INPUT, m),
         }
     }
 
@@ -272,6 +297,7 @@ impl ToMaster {
             PIXELS => ToMaster::Pixels(r.body()?),
             FAILED => ToMaster::Failed(r.body()?),
             DISPLAY_READY => ToMaster::DisplayReady(r.body()?),
+            INPUT => ToMaster::Input(r.body()?),
             k => return Err(ProtocolError::UnknownKind(k)),
         })
     }

@@ -13,6 +13,8 @@ use std::time::{Duration, Instant};
 
 use testkit::stderr;
 
+pub mod xvfb;
+
 /// The `tessera` binary cargo built for these tests.
 pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_tessera")

@@ -33,7 +33,7 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use crate::camera::CameraSpec;
@@ -45,7 +45,7 @@ use codec::view::Camera;
 const MAX_LINE: u64 = 64 * 1024;
 
 /// A command of the control port (the module's table).
-#[derive(Debug, Deserialize, PartialEq)]
+#[derive(Debug, Deserialize, Serialize, PartialEq)]
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Command {
     Camera {
@@ -161,6 +161,17 @@ impl Control {
     /// Where a window sends its requests.
     pub fn sender(&self) -> Sender<Request> {
         self.sender.clone()
+    }
+
+    /// A command a display rank's window sent (JSON), as the window's own request; one that
+    /// does not parse is printed and dropped (the run goes on).
+    pub(super) fn relay(&self, json: &str) {
+        match serde_json::from_str::<Command>(json) {
+            Ok(command) => {
+                let _ = self.sender.send(Request { client: Client::local(), command });
+            }
+            Err(e) => eprintln!("tessera: a display window's input is not a command: {e}"),
+        }
     }
 
     /// Serves `addr` on threads of its own, beside whatever else sends requests. A

@@ -5,6 +5,16 @@
 //! displays of a view, tells rank 0 when each is complete, and writes them when rank 0's
 //! swap says every display has the view: the swap barrier, so no display shows frame k+1
 //! before every display has frame k.
+//!
+//! With `--present` a display rank shows its displays in windows instead of writing them. It
+//! opens them before it says it is ready, sending heartbeats while the X server takes its
+//! time, so the start-up cannot deadlock: rank 0 waits for every rank's `Ready` (silence
+//! past `--timeout` ends the run, a failure to open names itself) and sends nothing to a
+//! display rank before. At a swap every window is drawn before the rank takes its next
+//! message, and it reports view k+1 complete only after that; rank 0 swaps view k+1 only
+//! when every display rank has, so every display shows frame k before any shows k+1. The
+//! window of the wall's first display steers the run: its input goes to rank 0 as control
+//! commands (`ToMaster::Input`).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -18,6 +28,7 @@ use super::plan::{display_path, eye_path, frame_path, Plan};
 use crate::camera::StereoOutput;
 use crate::composite::{intersection, Image};
 use crate::wall::Wall;
+use crate::window::{Behaviour, Input, WindowSpec, Windows};
 
 /// Which display rank owns which display, and so which ranks a tile's pixels go to.
 #[derive(Clone, Debug)]
@@ -99,6 +110,7 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
     let wall = plan.wall.as_ref().context("--display-ranks needs --wall")?;
     let layout = DirectSend::new(wall, t.size(), plan.display_ranks as usize);
     let mine: Vec<usize> = (0..wall.displays.len()).filter(|&i| layout.owner(i) == t.rank()).collect();
+    let windows = if plan.present { Some(open_windows(t, plan, wall, &mine)?) } else { None };
     t.send(
         0,
         &ToMaster::Ready(Ready { adapter: format!("display rank {index}"), max_texture_side: u32::MAX }).encode(),
@@ -137,11 +149,17 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
                         bail!("a swap of view {view} before its displays were complete");
                     }
                     let job = v.job.expect("reported views have their job");
-                    for (&i, image) in mine.iter().zip(&v.images) {
-                        image.save_png(&display_file(plan, &job, &wall.displays[i].name))?;
+                    match &windows {
+                        Some(w) => w.show_each(v.images, plan.timeout)?,
+                        None => {
+                            for (&i, image) in mine.iter().zip(&v.images) {
+                                image.save_png(&display_file(plan, &job, &wall.displays[i].name))?;
+                            }
+                        }
                     }
                     continue;
                 }
+                ToDisplay::KeepAlive => continue,
             }
         } else {
             match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {from}"))? {
@@ -189,6 +207,59 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
             t.send(0, &ToMaster::DisplayReady(DisplayReady { view, ready }).encode());
         }
     }
+}
+
+/// This rank's windows (`--present`), one per display it owns, placed as the wall file says;
+/// the wall's first display's window steers, its input sent to rank 0. Heartbeats go to rank
+/// 0 while the windows open.
+fn open_windows(t: &dyn Transport, plan: &Plan, wall: &Wall, mine: &[usize]) -> Result<Windows> {
+    let model = plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let specs = mine
+        .iter()
+        .map(|&i| {
+            let d = &wall.displays[i];
+            let [x0, y0, x1, y1] = d.rect;
+            WindowSpec {
+                title: format!("Tessera: {model}, display {}", d.name),
+                size: (x1 - x0, y1 - y0),
+                place: d.window.clone(),
+                crop: None,
+            }
+        })
+        .collect();
+    let behaviour = Behaviour {
+        steer: mine.first() == Some(&0),
+        resize: false,
+        hud: false,
+        out: plan.out.clone(),
+        tiles: (plan.grid.cols, plan.grid.rows),
+    };
+    let send = t.sender(0);
+    let input: Input = Box::new(move |command| match serde_json::to_string(&command) {
+        Ok(json) => send(&ToMaster::Input(protocol::Input { json }).encode()),
+        Err(e) => eprintln!("tessera: a window's command: {e}"),
+    });
+    let beat = t.sender(0);
+    let heartbeat = ToMaster::Heartbeat.encode();
+    if let Some(delay) = slow_window_fault(t.rank()) {
+        let start = std::time::Instant::now();
+        while start.elapsed() < delay {
+            beat(&heartbeat);
+            std::thread::sleep(worker::node::HEARTBEAT.min(delay - start.elapsed().min(delay)));
+        }
+    }
+    Windows::open(specs, behaviour, input, worker::node::HEARTBEAT, &mut || beat(&heartbeat))
+}
+
+/// A test hook, unset in normal runs: `TESSERA_FAULT=window:R:MS` makes display rank R take
+/// MS milliseconds longer to open its windows (a slow X server), heartbeats going on.
+fn slow_window_fault(rank: usize) -> Option<std::time::Duration> {
+    let v = std::env::var("TESSERA_FAULT").ok()?;
+    let mut parts = v.split(':');
+    if parts.next()? != "window" || parts.next()?.parse::<usize>().ok()? != rank {
+        return None;
+    }
+    Some(std::time::Duration::from_millis(parts.next()?.parse().ok()?))
 }
 
 /// The file of display `name` for a view.

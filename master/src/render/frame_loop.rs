@@ -90,7 +90,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
         if let Some(stream) = &plan.eye_stream {
             super::control::start_eye_stream(stream, token.clone(), control.sender())?;
         }
-        if let (None, Some((addr, _))) = (&present, &plan.control) {
+        if let Some((addr, _)) = &plan.control {
             control.listen(*addr, token)?;
         }
     }
@@ -137,6 +137,8 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     };
     let mut flight: VecDeque<InFlight> = VecDeque::new();
     let mut frames = frame_source(plan, cam, control.as_ref());
+    // Display ranks with windows send what a person does in the first of them.
+    let windowed_displays = plan.present && direct.is_some();
     let result = (|| -> Result<()> {
         loop {
             let (k, views) = match frames.next_step(scene.as_ref())? {
@@ -144,7 +146,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                 // Nothing to do until an event: every frame in flight is shown first.
                 Step::Idle => {
                     finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
-                    if frames.wait() {
+                    if idle(t, frames.as_mut(), control.as_ref(), windowed_displays, &mut inbox)? {
                         let alive = ToWorker::KeepAlive.encode();
                         send_all(t, (1..t.size()).map(|r| (r, alive.clone())).collect(), plan.timeout)?;
                     }
@@ -233,6 +235,36 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
         // The loop stopped because the writer did: the writer's error says why.
         (Err(_), Err(w)) => Err(w),
         (r, w) => r.and(w),
+    }
+}
+
+/// How often an idle rank 0 looks for input from display ranks' windows (which comes over
+/// MPI, not on the control channel it sleeps on): a person's key or drag waits at most this.
+const INPUT_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+
+/// An idle live run's wait for the next event: a command on the control channel, or (with
+/// `windowed_displays`) a display rank's input, which goes onto that channel. True if none
+/// came within [`KEEP_ALIVE`], for the loop to tell the other ranks it is there.
+fn idle(
+    t: &dyn Transport,
+    frames: &mut dyn FrameSource,
+    control: Option<&Control>,
+    windowed_displays: bool,
+    inbox: &mut Inbox,
+) -> Result<bool> {
+    let (Some(control), true) = (control, windowed_displays) else { return Ok(frames.wait(KEEP_ALIVE)) };
+    let start = Instant::now();
+    loop {
+        for json in inbox.early.inputs.drain(..) {
+            control.relay(&json);
+        }
+        if !frames.wait(INPUT_POLL) {
+            return Ok(false);
+        }
+        if start.elapsed() >= KEEP_ALIVE {
+            return Ok(true);
+        }
+        super::link::receive_inputs(t, &mut inbox.early)?;
     }
 }
 
@@ -617,8 +649,8 @@ trait FrameSource {
 
     /// Waits for the next event, after an idle step (the loop has shown every frame in
     /// flight by then, so that what was asked for is on screen while nothing happens); true
-    /// if none came within [`KEEP_ALIVE`], for the loop to tell the other ranks it is there.
-    fn wait(&mut self) -> bool {
+    /// if none came within `timeout`.
+    fn wait(&mut self, _timeout: std::time::Duration) -> bool {
         false
     }
 
@@ -710,12 +742,12 @@ impl FrameSource for Controlled<'_> {
         self.settings
     }
 
-    fn wait(&mut self) -> bool {
+    fn wait(&mut self, timeout: std::time::Duration) -> bool {
         if self.pending.is_some() {
             return false;
         }
         // The control keeps a sender of its own: the channel stays open while the run does.
-        match self.control.requests.recv_timeout(KEEP_ALIVE) {
+        match self.control.requests.recv_timeout(timeout) {
             Ok(r) => {
                 self.pending = Some(r);
                 false
@@ -763,6 +795,9 @@ impl FrameSource for Controlled<'_> {
                 Command::Quit {} => {
                     client.send(&serde_json::json!({ "ok": "quit" }));
                     return Ok(Step::End);
+                }
+                Command::Snapshot { .. } if self.plan.direct => {
+                    client.error("snapshot: with --display-ranks the display ranks hold the frames, rank 0 none")
                 }
                 Command::Snapshot { path } => return Ok(Step::Snapshot(path, client)),
                 Command::Eye { position } if self.plan.wall.as_ref().is_some_and(|w| w.placed()) => {

@@ -115,6 +115,8 @@ pub(super) fn handshake(t: &dyn Transport, timeout: Duration, grid: &TileGrid) -
                 adapters[rank] = format!("rank {rank}: {adapter}");
             }
             ToMaster::Failed(protocol::Failed { reason }) => bail!("rank {rank} failed: {reason}"),
+            // A window's input before the first frame: nothing to steer yet.
+            ToMaster::Input(_) => {}
             other => bail!("rank {rank} sent {} before it was ready", other.name()),
         }
     }
@@ -133,6 +135,8 @@ fn missing(flags: &[bool]) -> String {
 pub(super) struct Early {
     pixels: std::collections::BTreeMap<u32, Vec<Answer>>,
     ready: std::collections::BTreeMap<u32, Vec<Ready>>,
+    /// Control commands from display ranks' windows (JSON), for the control channel.
+    pub inputs: Vec<String>,
 }
 
 /// A display rank's readiness for a view: its displays and when each was assembled (Unix ms).
@@ -226,6 +230,21 @@ fn receive_until(t: &dyn Transport, view: u32, want: Want, silence: &mut Silence
             },
             ToMaster::Failed(protocol::Failed { reason }) => bail!("rank {rank} failed: {reason}"),
             ToMaster::Ready(_) => bail!("rank {rank} sent Ready twice"),
+            ToMaster::Input(protocol::Input { json }) => early.inputs.push(json),
         }
     }
+}
+
+/// What came while rank 0 was idle (a live run between commands), without waiting: display
+/// ranks' window input, kept in `early`; heartbeats; a failure ends the run.
+pub(super) fn receive_inputs(t: &dyn Transport, early: &mut Early) -> Result<()> {
+    while let Ok((rank, bytes)) = t.recv(Duration::ZERO) {
+        match ToMaster::decode(&bytes).with_context(|| format!("bad message from rank {rank}"))? {
+            ToMaster::Input(protocol::Input { json }) => early.inputs.push(json),
+            ToMaster::Heartbeat => {}
+            ToMaster::Failed(protocol::Failed { reason }) => bail!("rank {rank} failed: {reason}"),
+            other => bail!("rank {rank} sent {} with no frame in flight", other.name()),
+        }
+    }
+    Ok(())
 }

@@ -40,6 +40,6 @@ pub mod stats;
 pub use display::{run_display, DirectSend};
 pub use frame_loop::{orbit, orbit_by, Present, Window};
 pub use plan::{frame_path, plan, plan_view, Plan};
-pub use run::{run_alone, run_alone_live, run_master};
+pub use run::{run_alone, run_alone_live, run_master, run_windowed};
 pub use schedule::assign;
 pub use sorter::run_sorter;

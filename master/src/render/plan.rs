@@ -68,6 +68,8 @@ pub struct Plan {
     pub control: Option<(std::net::SocketAddr, Option<String>)>,
     /// `--eye-stream`: where a live run's eye positions come from.
     pub eye_stream: Option<crate::cli::EyeStream>,
+    /// `--present`: a live run shown in windows.
+    pub present: bool,
 }
 /// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
 /// sizes).
@@ -253,6 +255,7 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
         inputs,
         control,
         eye_stream: args.eye_stream.clone(),
+        present: args.present,
     })
 }
 
@@ -350,10 +353,11 @@ fn live_run(
     movie: bool,
     wall: Option<&Wall>,
 ) -> Result<Option<(std::net::SocketAddr, Option<String>)>> {
-    let live = match (window, args.control) {
-        (true, _) => Some("tessera view"),
-        (false, Some(_)) => Some("--control"),
-        (false, None) => None,
+    let live = match (window, args.present, args.control) {
+        (true, _, _) => Some("tessera view"),
+        (false, true, _) => Some("--present"),
+        (false, false, Some(_)) => Some("--control"),
+        (false, false, None) => None,
     };
     if let Some(who) = live {
         let given = [
@@ -364,7 +368,9 @@ fn live_run(
             (movie, "a movie --out"),
             (args.stereo.is_some(), "--stereo"),
             (window && wall.is_some(), "--wall"),
-            (args.display_ranks > 0, "--display-ranks"),
+            (window && args.present, "--present"),
+            // Display ranks show their displays in windows, or write them (not a live run).
+            (args.display_ranks > 0 && !args.present, "--display-ranks"),
         ];
         if let Some((_, flag)) = given.iter().find(|(given, _)| *given) {
             bail!("{who} takes the frames from its commands: leave out {flag}");
@@ -379,7 +385,7 @@ fn live_run(
         None => None,
     };
     if args.eye_stream.is_some() && live.is_none() {
-        bail!("--eye-stream steers a live run: give --control (or use tessera view)");
+        bail!("--eye-stream steers a live run: give --control or --present (or use tessera view)");
     }
     if let Some(crate::cli::EyeStream::Udp(addr)) = &args.eye_stream {
         if !addr.ip().is_loopback() && control.as_ref().is_none_or(|(_, token)| token.is_none()) {

@@ -5,15 +5,24 @@ use std::sync::mpsc::RecvTimeoutError;
 use anyhow::Result;
 use worker::transport::{self, Transport};
 
+use super::control::{Client, Control, Request};
 use super::{frame_loop, Plan};
+use crate::window::{Behaviour, Input, WindowSpec, Windows};
 
-/// Rank 0 of an mpirun job: the frame loop. Any error ends every rank (`MPI_Abort`) rather
-/// than leave the workers waiting.
+/// Rank 0 of an mpirun job: the frame loop, shown in rank 0's windows with `--present` and
+/// no display ranks. Any error ends every rank (`MPI_Abort`) rather than leave the workers
+/// waiting.
 pub fn run_master(mpi: &transport::Mpi, plan: &Plan) -> Result<()> {
     if mpi.size() < 2 {
         anyhow::bail!("run with at least 2 ranks: rank 0 sorts and composites, ranks 1.. render");
     }
-    if let Err(e) = frame_loop::run(mpi, plan) {
+    let result = if plan.present && plan.display_ranks == 0 {
+        let (specs, behaviour) = rank0_windows(plan);
+        run_windowed(plan, specs, behaviour, |plan, window| frame_loop::run_live(mpi, plan, window))
+    } else {
+        frame_loop::run(mpi, plan)
+    };
+    if let Err(e) = result {
         eprintln!("error: {}", crate::output::one_line(&e));
         mpi.abort(1);
     }
@@ -23,9 +32,68 @@ pub fn run_master(mpi: &transport::Mpi, plan: &Plan) -> Result<()> {
 /// How long a run alone that failed waits for its worker thread to stop.
 const WORKER_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
 
-/// Without mpirun: the frame loop, and one worker on a thread of this process, over channels.
+/// Without mpirun: the frame loop, and one worker on a thread of this process, over channels
+/// (shown in windows with `--present`).
 pub fn run_alone(plan: &Plan) -> Result<()> {
+    if plan.present {
+        let (specs, behaviour) = rank0_windows(plan);
+        return run_windowed(plan, specs, behaviour, run_alone_live);
+    }
     run_alone_live(plan, None)
+}
+
+/// Rank 0's windows with `--present`: one per display of the wall, each showing its part of
+/// the frame where the wall file places it, or one for the frame; the first steers.
+fn rank0_windows(plan: &Plan) -> (Vec<WindowSpec>, Behaviour) {
+    let model = plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let specs = match &plan.wall {
+        Some(wall) => wall
+            .displays
+            .iter()
+            .map(|d| {
+                let [x0, y0, x1, y1] = d.rect;
+                WindowSpec {
+                    title: format!("Tessera: {model}, display {}", d.name),
+                    size: (x1 - x0, y1 - y0),
+                    place: d.window.clone(),
+                    crop: Some(d.rect),
+                }
+            })
+            .collect(),
+        None => vec![WindowSpec {
+            title: format!("Tessera: {model}"),
+            size: (plan.grid.width, plan.grid.height),
+            place: Default::default(),
+            crop: None,
+        }],
+    };
+    let behaviour = Behaviour {
+        steer: true,
+        resize: plan.wall.is_none(),
+        hud: false,
+        out: plan.out.clone(),
+        tiles: (plan.grid.cols, plan.grid.rows),
+    };
+    (specs, behaviour)
+}
+
+/// Runs `run` (a live frame loop) with its frames shown in windows opened from `specs`, whose
+/// input goes onto the loop's control channel; closes them when it ends.
+pub fn run_windowed(
+    plan: &Plan,
+    specs: Vec<WindowSpec>,
+    behaviour: Behaviour,
+    run: impl FnOnce(&Plan, Option<frame_loop::Window>) -> Result<()>,
+) -> Result<()> {
+    let control = Control::default();
+    let sender = control.sender();
+    let input: Input = Box::new(move |command| {
+        let _ = sender.send(Request { client: Client::local(), command });
+    });
+    let windows = Windows::open(specs, behaviour, input, std::time::Duration::from_secs(3600), &mut || {})?;
+    let result = run(plan, Some(frame_loop::Window { control, present: windows.presenter() }));
+    let closed = windows.close();
+    result.and(closed)
 }
 
 /// [`run_alone`], live in a window when `window` is given (`tessera view`).
