@@ -383,3 +383,74 @@ fn displays_at_an_angle_each_get_their_own_frustum() {
         }
     }
 }
+
+/// Every display's pixels of one frame of `out` (`OUT-display-NAME.png`), RGBA.
+fn display_pixels(out: &Path, names: &[&str]) -> Vec<Vec<u8>> {
+    let stem = out.file_stem().unwrap().to_str().unwrap();
+    names.iter().map(|n| pixels(&out.with_file_name(format!("{stem}-display-{n}.png"))).2).collect()
+}
+
+#[test]
+fn pixel_codecs_keep_the_frames_and_say_their_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    let wall = dir.path().join("wall.toml");
+    std::fs::write(
+        &wall,
+        "[[display]]\nname = \"a\"\nx = 0\ny = 0\nwidth = 96\nheight = 80\nbezel = [0, 0, 4, 0]\n\
+         [[display]]\nname = \"b\"\nx = 104\ny = 0\nwidth = 96\nheight = 80\nbezel = [4, 0, 0, 0]\n",
+    )
+    .unwrap();
+    let names = ["a", "b"];
+    // One frame with `codec`, under mpirun with `np` ranks (and two display ranks when 5):
+    // rank 0's stats line, and the lines of its workers.
+    let run = |np: usize, codec: &str| {
+        let out = dir.path().join(format!("{}-{np}.png", codec.replace(':', "-")));
+        let stats = out.with_extension("jsonl");
+        let mut args = vec!["render", model.as_str(), "--wall", wall.to_str().unwrap(), "--tiles", "4x2"];
+        args.extend(["--pixel-codec", codec, "--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
+        if np == 5 {
+            args.extend(["--display-ranks", "2"]);
+        }
+        ok(&mpirun(np, &[], &args));
+        let lines: Vec<serde_json::Value> =
+            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (display_pixels(&out, &names), lines)
+    };
+    let (raw, raw_stats) = run(3, "raw");
+    let (lz4, lz4_stats) = run(3, "lz4");
+    let (jpeg, jpeg_stats) = run(3, "jpeg:75");
+    let (direct, direct_stats) = run(5, "lz4");
+    // Lossless: the same displays, composited by rank 0 or by display ranks.
+    assert_eq!(lz4, raw, "LZ4 keeps every pixel");
+    assert_eq!(direct, raw, "LZ4 to display ranks keeps every pixel");
+    // JPEG: the coverage exact, the colour close.
+    for (j, r) in jpeg.iter().zip(&raw) {
+        let mut error = 0u64;
+        for (a, b) in j.chunks_exact(4).zip(r.chunks_exact(4)) {
+            assert_eq!(a[3], b[3], "JPEG keeps the alpha plane");
+            error += (0..3).map(|k| (a[k] as i64 - b[k] as i64).unsigned_abs()).sum::<u64>();
+        }
+        let mean = error as f64 / (j.len() / 4 * 3) as f64;
+        assert!(mean < 4.0, "mean colour error {mean}");
+    }
+    // Stats: bytes as sent and raw, encode and decode ms.
+    let master = |lines: &[serde_json::Value]| lines.iter().find(|l| l["rank"] == 0).unwrap().clone();
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+    let (r, l, j, d) = (master(&raw_stats), master(&lz4_stats), master(&jpeg_stats), master(&direct_stats));
+    assert_eq!(r["pixel_codec"], "raw");
+    assert_eq!(j["pixel_codec"], "jpeg:75");
+    assert_eq!(f(&r, "pixel_coded_bytes"), f(&r, "pixel_raw_bytes"), "{r}");
+    assert_eq!(f(&l, "pixel_raw_bytes"), f(&r, "pixel_raw_bytes"));
+    assert!(f(&l, "pixel_coded_bytes") < f(&r, "pixel_coded_bytes") / 2.0, "{l}");
+    assert!(f(&j, "pixel_coded_bytes") < f(&r, "pixel_coded_bytes"), "{j}");
+    assert!(f(&l, "pixel_decode_ms") > 0.0 && f(&l, "pixel_bytes") == f(&l, "pixel_coded_bytes"), "{l}");
+    let encode: f64 = lz4_stats.iter().filter(|w| w["rank"] != 0).map(|w| f(w, "encode_ms")).sum();
+    assert!(encode > 0.0, "workers time their coding");
+    // With display ranks: rank 0 gets no pixels, but counts what went to the displays.
+    assert_eq!(f(&d, "pixel_bytes"), 0.0);
+    assert!(f(&d, "pixel_coded_bytes") > 0.0 && d["displays"]["pixel_decode_ms"].as_f64().unwrap() > 0.0, "{d}");
+    // A codec that is none of the three is refused by name.
+    let o = alone(&["render", &model, "--pixel-codec", "jpeg:0"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("1 to 100"));
+}

@@ -1,17 +1,23 @@
 #!/usr/bin/env python3
 """Latency and frame rate of a live run, steered through its control port.
 
-    bench/scripts/live-latency.py [--view] [--mpirun N] [--size 1280x720] [--tiles 4x4]
-                                  [--steps 40] MODEL
+    bench/scripts/live-latency.py [--view | --present WALL [--display-ranks D]] [--mpirun N]
+                                  [--pixel-codec C] [--window-name REGEX] [--size 1280x720]
+                                  [--tiles 4x4] [--steps 40] MODEL
 
 Starts `tessera render MODEL --control` (or `tessera view`, under an Xvfb of its own, with
---view; under `mpirun -np N` with --mpirun N), then:
-  * latency: sends one `orbit` command at a time and times it until the run's stats line of
-    that frame comes back to a subscriber, which the writer sends as the frame is shown
-    (in a window: as it is handed to the window). Reports the median and the 95th percentile.
+--view; `render --present --wall WALL` with --present, its windows on that Xvfb, opened by
+D display ranks with --display-ranks D; under `mpirun -np N` with --mpirun N), then:
+  * latency: with windows, presses a key in the steering window with xdotool (A and D,
+    flying left and right), else sends one `orbit` command at a time, and times it until the
+    run's stats line of that frame comes back to a subscriber, which the writer sends as the
+    frame is shown (in a window: as it is handed to the window; with display ranks: as rank 0
+    sends the swap, after which each display rank draws its windows). Reports the median
+    and the 95th percentile.
   * throughput: sends `orbit` commands as fast as the run takes them for 10 s (a drag's
     stream of moves, which the run joins into frames) and counts the frames shown a second.
   * idle: CPU seconds the run used over 5 s with nothing asked.
+  * pixels: the tile pixels' bytes a frame as the workers sent them (`--pixel-codec`), and raw.
 Uses the release binary (cargo build --release -p tessera).
 """
 import argparse
@@ -72,6 +78,10 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("model")
     ap.add_argument("--view", action="store_true")
+    ap.add_argument("--present", metavar="WALL")
+    ap.add_argument("--display-ranks", type=int, default=0)
+    ap.add_argument("--pixel-codec", default="raw")
+    ap.add_argument("--window-name", default="^Tessera", help="the steering window's title (a regex)")
     ap.add_argument("--mpirun", type=int, default=0)
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--tiles", default="4x4")
@@ -80,16 +90,21 @@ def main():
     env = dict(os.environ, XDG_RUNTIME_DIR=os.environ.get("XDG_RUNTIME_DIR", "/tmp/tessera-xdg"))
     env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     xvfb = None
-    if a.view:
+    windowed = a.view or a.present
+    if windowed:
         display = f":{200 + os.getpid() % 300}"
         xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(1)
         env["DISPLAY"] = display
     cmd = [BIN, "view" if a.view else "render", a.model, "--size", a.size, "--tiles", a.tiles,
-           "--control", "127.0.0.1:0"]
+           "--control", "127.0.0.1:0", "--pixel-codec", a.pixel_codec]
+    if a.present:
+        cmd += ["--present", "--wall", a.present]
+        if a.display_ranks:
+            cmd += ["--display-ranks", str(a.display_ranks)]
     if a.mpirun:
-        cmd = ["mpirun", "--oversubscribe", "--bind-to", "none", "-np", str(a.mpirun)] + cmd
+        cmd = ["mpirun", "--oversubscribe", "--bind-to", "none", "-np", str(a.mpirun), "-x", "DISPLAY"] + cmd
     run = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
     addr = None
     for line in run.stderr:
@@ -110,12 +125,24 @@ def main():
     # The first frame, shown.
     while c.ask({"cmd": "status"})["frames"] < 1:
         time.sleep(0.05)
-    shown(0)
+    pixels = [shown(0)]
+    window = None
+    if windowed:
+        x = lambda *args: subprocess.run(["xdotool", *args], env=env, check=True, capture_output=True,
+                                          text=True).stdout.split()
+        window = x("search", "--sync", "--name", a.window_name)[0]
+        x("windowfocus", "--sync", window)
     latencies = []
-    for _ in range(a.steps):
+    for i in range(a.steps):
         t0 = time.perf_counter()
-        k = c.ask({"cmd": "orbit", "degrees": 3})["frame"]
-        shown(k)
+        if window:
+            frames = c.ask({"cmd": "status"})["frames"]
+            t0 = time.perf_counter()
+            x("key", "--window", window, "a" if i % 2 else "d")
+            pixels.append(shown(frames))
+        else:
+            k = c.ask({"cmd": "orbit", "degrees": 3})["frame"]
+            pixels.append(shown(k))
         latencies.append((time.perf_counter() - t0) * 1e3)
     latencies.sort()
     p95 = latencies[min(len(latencies) - 1, int(round(0.95 * (len(latencies) - 1))))]
@@ -137,12 +164,19 @@ def main():
     run.wait(timeout=60)
     if xvfb:
         xvfb.kill()
-    what = ("view" if a.view else "render --control") + (f" under mpirun -np {a.mpirun}" if a.mpirun else " alone")
+    what = "view" if a.view else "render --present" if a.present else "render --control"
+    what += f" --display-ranks {a.display_ranks}" if a.display_ranks else ""
+    what += f" under mpirun -np {a.mpirun}" if a.mpirun else " alone"
+    coded = statistics.median(p.get("pixel_coded_bytes", 0) for p in pixels)
+    raw = statistics.median(p.get("pixel_raw_bytes", 0) for p in pixels)
     print(f"{what}, {os.path.basename(a.model)}, {a.size}, {a.tiles} tiles:")
-    print(f"  command to frame shown: median {statistics.median(latencies):.0f} ms, 95th percentile {p95:.0f} ms "
-          f"({a.steps} orbits)")
+    how = "key press in the window" if window else "command"
+    print(f"  {how} to frame shown: median {statistics.median(latencies):.0f} ms, 95th percentile {p95:.0f} ms "
+          f"({a.steps} steps)")
     print(f"  steered continuously: {fps:.1f} frames shown a second")
     print(f"  idle: {idle:.2f} CPU s over 5 s")
+    print(f"  pixels ({a.pixel_codec}): {coded / 1e3:.0f} kB a frame sent, {raw / 1e3:.0f} kB raw "
+          f"({raw / max(coded, 1):.1f}x)")
 
 
 if __name__ == "__main__":

@@ -144,6 +144,21 @@ pub enum EyeStream {
     Udp(SocketAddr),
 }
 
+/// Parses `--pixel-codec`: `raw`, `lz4`, `jpeg` or `jpeg:QUALITY` (1-100).
+pub fn parse_pixel_codec(s: &str) -> Result<protocol::PixelCodec, String> {
+    use protocol::PixelCodec;
+    match s.split_once(':') {
+        None if s == "raw" => Ok(PixelCodec::Raw),
+        None if s == "lz4" => Ok(PixelCodec::Lz4),
+        None if s == "jpeg" => Ok(PixelCodec::Jpeg { quality: 90 }),
+        Some(("jpeg", q)) => match q.parse::<u8>() {
+            Ok(quality @ 1..=100) => Ok(PixelCodec::Jpeg { quality }),
+            _ => Err(format!("a JPEG quality is 1 to 100, not {q}")),
+        },
+        _ => Err(format!("{s} is not raw, lz4, jpeg or jpeg:QUALITY")),
+    }
+}
+
 /// Parses `--eye-stream`: `-` or `udp:HOST:PORT`.
 pub fn parse_eye_stream(s: &str) -> Result<EyeStream, String> {
     match s {
@@ -500,6 +515,11 @@ pub struct RenderArgs {
     /// of `.bft` files) sends about 5% fewer bytes.
     #[arg(long, value_enum, default_value_t = TileCoding::Prefix)]
     pub tile_coding: TileCoding,
+    /// How workers code the tile pixels they send to rank 0 or the display ranks: `raw`,
+    /// `lz4` (lossless) or `jpeg[:QUALITY]` (lossy colour, 1-100, default 90; the alpha
+    /// plane kept exact). A tile whose coding is not smaller goes raw.
+    #[arg(long, value_parser = parse_pixel_codec, default_value = "raw")]
+    pub pixel_codec: protocol::PixelCodec,
     /// A tile wall description (TOML): one PNG per display plus an overview.
     #[arg(long)]
     pub wall: Option<PathBuf>,

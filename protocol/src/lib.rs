@@ -54,7 +54,9 @@ pub use frame::{FrameJob, StreamSource, TileJob, TileStream};
 pub use nsp::{NspFrameJob, NspModel};
 pub use pm::{DpmFile, PmFrameJob, PmModel};
 pub use sorter::{SortJob, ToSorter};
-pub use to_master::{DisplayReady, Failed, FrameSpan, Input, Pixels, PmMemory, Ready, TilePixels, TileTimes, ToMaster};
+pub use to_master::{
+    DisplayReady, Failed, FrameSpan, Input, PixelCodec, Pixels, PmMemory, Ready, TilePixels, TileTimes, ToMaster,
+};
 pub use to_worker::ToWorker;
 
 /// The protocol version this build speaks. 2 added the `Frame` flags byte, 3 the streams of

@@ -35,9 +35,18 @@ fn pixels() -> ToMaster {
         tiles: vec![TilePixels {
             index: 3,
             rect: [0, 0, 2, 1],
-            times: TileTimes { decode_ms: 1.0, adapt_ms: 5.0, upload_ms: 2.0, render_ms: 3.0, readback_ms: 4.0 },
+            times: TileTimes {
+                decode_ms: 1.0,
+                adapt_ms: 5.0,
+                upload_ms: 2.0,
+                render_ms: 3.0,
+                readback_ms: 4.0,
+                encode_ms: 0.5,
+            },
             triangles: 12,
-            rgba: vec![9; 8],
+            codec: PixelCodec::Lz4,
+            coded_bytes: 7,
+            pixels: vec![9; 7],
         }],
         span: FrameSpan { start_ms: 1.5, prepared_ms: 2.5, end_ms: 4.0 },
         pm: PmMemory {
@@ -100,6 +109,10 @@ fn messages_round_trip() {
     assert_eq!(ToSorter::decode(&ToSorter::Shutdown.encode()), Ok(ToSorter::Shutdown));
     assert_eq!(ToWorker::decode(&ToWorker::Unload.encode()), Ok(ToWorker::Unload));
     assert_eq!(ToWorker::decode(&ToWorker::KeepAlive.encode()), Ok(ToWorker::KeepAlive));
+    for codec in [PixelCodec::Raw, PixelCodec::Lz4, PixelCodec::Jpeg { quality: 1 }, PixelCodec::Jpeg { quality: 100 }]
+    {
+        assert_eq!(ToWorker::decode(&ToWorker::PixelCodec(codec).encode()), Ok(ToWorker::PixelCodec(codec)));
+    }
     assert_eq!(ToSorter::decode(&ToSorter::KeepAlive.encode()), Ok(ToSorter::KeepAlive));
     let p = pixels();
     assert_eq!(ToMaster::decode(&p.encode()), Ok(p));
@@ -116,7 +129,7 @@ fn messages_round_trip() {
         ToMaster::Ready(Ready { adapter: "llvmpipe".into(), max_texture_side: 16384 }),
         ToMaster::Failed(Failed { reason: "no adapter".into() }),
         ToMaster::Heartbeat,
-        ToMaster::DisplayReady(DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)] }),
+        ToMaster::DisplayReady(DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)], decode_ms: 0.25 }),
     ] {
         assert_eq!(ToMaster::decode(&m.encode()), Ok(m));
     }
@@ -160,12 +173,26 @@ fn bad_messages_are_errors() {
             rect: [0, 0, 2, 2],
             times: TileTimes::default(),
             triangles: 0,
-            rgba: vec![0; 3],
+            codec: PixelCodec::Raw,
+            coded_bytes: 3,
+            pixels: vec![0; 3],
         }],
         span: FrameSpan::default(),
         pm: PmMemory::default(),
     });
     assert!(matches!(ToMaster::decode(&wrong_size.encode()), Err(ProtocolError::Invalid(_))));
+    // Coded pixels are at most the raw size (a worker sends raw what does not shrink), and
+    // a codec is one of three.
+    let coded = |codec: PixelCodec, n: usize| {
+        let ToMaster::Pixels(mut p) = pixels() else { unreachable!() };
+        p.tiles[0].codec = codec;
+        p.tiles[0].pixels = vec![1; n];
+        ToMaster::decode(&ToMaster::Pixels(p).encode())
+    };
+    assert!(coded(PixelCodec::Jpeg { quality: 90 }, 8).is_ok());
+    assert!(matches!(coded(PixelCodec::Jpeg { quality: 90 }, 9), Err(ProtocolError::Invalid(_))));
+    assert!(matches!(coded(PixelCodec::Jpeg { quality: 0 }, 4), Err(ProtocolError::Invalid(_))));
+    assert!(matches!(coded(PixelCodec::Raw, 7), Err(ProtocolError::Invalid(_))));
 }
 
 /// Every message's bytes as this protocol version has them, so that moving the code cannot
@@ -199,12 +226,16 @@ fn the_wire_bytes_of_every_message() {
         ("heartbeat", p(ToMaster::Heartbeat)),
         ("pixels", p(pixels())),
         ("failed", p(ToMaster::Failed(Failed { reason: "no adapter".into() }))),
-        ("display_ready", p(ToMaster::DisplayReady(DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)] }))),
+        (
+            "display_ready",
+            p(ToMaster::DisplayReady(DisplayReady { view: 3, ready: vec![(0, 1.5), (4, 2.5)], decode_ms: 0.25 })),
+        ),
         ("unload", ToWorker::Unload.encode()),
         ("keep_alive", ToWorker::KeepAlive.encode()),
         ("input", p(ToMaster::Input(Input { json: r#"{"cmd":"quit"}"#.into() }))),
+        ("pixel_codec", ToWorker::PixelCodec(PixelCodec::Jpeg { quality: 85 }).encode()),
     ];
-    let golden: [(&str, &str); 18] = [
+    let golden: [(&str, &str); 19] = [
         ("frame", "5453524d09010700000080020000e0010000000000000000003f0000803f0000c03f0000004000002040000040400000604000008040000090400000a0400000b0400000c0400000d0400000e0400000f040010102000000000001000002000000030000000000000000000000500000003c0000000300000000030000000102030100000005000000000000000000803f00000000010700000002000000040501000000000000000000803f000000000000000002020000000000000009000000500000003c000000a00000007800000000000000"),
         ("shutdown", "5453524d0902"),
         ("model", "5453524d090603000000040506000000c000000000"),
@@ -217,12 +248,13 @@ fn the_wire_bytes_of_every_message() {
         ("swap", "5453524d090d05000000"),
         ("ready", "5453524d0903080000006c6c766d7069706500400000"),
         ("heartbeat", "5453524d0908"),
-        ("pixels", "5453524d090407000000010000000300000000000000000000000200000001000000000000000000f03f00000000000014400000000000000040000000000000084000000000000010400c000000080000000909090909090909000000000000f83f000000000000044000000000000010400000000002000000000001000000000007000000090000000800000000001040"),
+        ("pixels", "5453524d090407000000010000000300000000000000000000000200000001000000000000000000f03f0000000000001440000000000000004000000000000008400000000000001040000000000000e03f0c0000000100070000000700000009090909090909000000000000f83f000000000000044000000000000010400000000002000000000001000000000007000000090000000800000000001040"),
         ("failed", "5453524d09050a0000006e6f2061646170746572"),
-        ("display_ready", "5453524d090e030000000200000000000000000000000000f83f040000000000000000000440"),
+        ("display_ready", "5453524d090e030000000200000000000000000000000000f83f040000000000000000000440000000000000d03f"),
         ("unload", "5453524d0910"),
         ("keep_alive", "5453524d0911"),
         ("input", "5453524d09120e0000007b22636d64223a2271756974227d"),
+        ("pixel_codec", "5453524d09130255"),
     ];
     for ((name, bytes), (gname, hex)) in encoded.iter().zip(golden) {
         assert_eq!(*name, gname);

@@ -92,15 +92,17 @@ impl Body for Failed {
 }
 
 /// A display rank's displays of `view` are assembled, each at the time given (Unix ms), and
-/// wait for the swap.
+/// wait for the swap; it took `decode_ms` to decode their coded pixels.
 ///
 /// ```text
-/// view u32, display count u32, then per display: index u32, ready time f64 (Unix ms)
+/// view u32, display count u32, then per display: index u32, ready time f64 (Unix ms);
+/// then decode ms f64
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct DisplayReady {
     pub view: u32,
     pub ready: Vec<(u32, f64)>,
+    pub decode_ms: f64,
 }
 
 impl Body for DisplayReady {
@@ -111,13 +113,14 @@ impl Body for DisplayReady {
             w.u32(d);
             w.f64(t);
         }
+        w.f64(self.decode_ms);
     }
     fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
         let view = r.u32("view")?;
         let n = r.count(12, "displays")?;
         let ready =
             (0..n).map(|_| Ok::<_, ProtocolError>((r.u32("display")?, r.f64("ready")?))).collect::<Result<_, _>>()?;
-        Ok(DisplayReady { view, ready })
+        Ok(DisplayReady { view, ready, decode_ms: r.f64("decode ms")? })
     }
 }
 
@@ -125,8 +128,9 @@ impl Body for DisplayReady {
 ///
 /// ```text
 /// frame u32, tile count u32, then per tile:
-///   index u32, rect 4 x u32, decode/adapt/upload/render/readback ms 5 x f64,
-///   triangles u32, rgba length u32 + bytes ((x1-x0)*(y1-y0)*4);
+///   index u32, rect 4 x u32, decode/adapt/upload/render/readback/encode ms 6 x f64,
+///   triangles u32, codec (PixelCodec, 2 bytes), coded bytes u32, pixels length u32 +
+///   bytes (raw: (x1-x0)*(y1-y0)*4; coded: at most that);
 /// then the frame's span on the worker's clock (ms since the Unix epoch): start, prepared,
 /// end 3 x f64 (FrameSpan); then what a progressive mesh's adaptation held (PmMemory, zeros
 /// otherwise): GPU bytes u64, node bytes loaded this frame u64, resident nodes u32, required
@@ -140,14 +144,56 @@ pub struct Pixels {
     pub pm: PmMemory,
 }
 
-/// One tile's pixels (RGBA8, rows top first) and what it cost.
+/// One tile's pixels (RGBA8, rows top first, coded by `codec`) and what it cost.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TilePixels {
     pub index: u32,
     pub rect: [u32; 4],
     pub times: TileTimes,
     pub triangles: u32,
-    pub rgba: Vec<u8>,
+    pub codec: PixelCodec,
+    /// The coded pixels' size as the worker sent them (the same as `pixels.len()`, except in
+    /// rank 0's copy of a tile whose pixels went to display ranks, which has none).
+    pub coded_bytes: u32,
+    pub pixels: Vec<u8>,
+}
+
+/// How tile pixels are coded on their way to rank 0 or the display ranks (`render
+/// --pixel-codec`): as they are, with LZ4 (lossless), or as a JPEG of quality 1-100 with the
+/// alpha plane beside it in LZ4 (lossy colour, exact coverage). A worker sends a tile raw
+/// where its coding would not be smaller.
+///
+/// ```text
+/// kind u8 (0 raw, 1 lz4, 2 jpeg), quality u8 (0 unless jpeg)
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PixelCodec {
+    #[default]
+    Raw,
+    Lz4,
+    Jpeg {
+        quality: u8,
+    },
+}
+
+impl Body for PixelCodec {
+    fn write(&self, w: &mut Writer) {
+        let (kind, quality) = match *self {
+            PixelCodec::Raw => (0, 0),
+            PixelCodec::Lz4 => (1, 0),
+            PixelCodec::Jpeg { quality } => (2, quality),
+        };
+        w.u8(kind);
+        w.u8(quality);
+    }
+    fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
+        match (r.u8("pixel codec")?, r.u8("quality")?) {
+            (0, 0) => Ok(PixelCodec::Raw),
+            (1, 0) => Ok(PixelCodec::Lz4),
+            (2, quality @ 1..=100) => Ok(PixelCodec::Jpeg { quality }),
+            (kind, quality) => Err(ProtocolError::Invalid(format!("pixel codec {kind} of quality {quality}"))),
+        }
+    }
 }
 
 /// Stage times of one tile on a worker, in milliseconds.
@@ -159,11 +205,13 @@ pub struct TileTimes {
     pub upload_ms: f64,
     pub render_ms: f64,
     pub readback_ms: f64,
+    /// Coding the pixels for the wire (`--pixel-codec`).
+    pub encode_ms: f64,
 }
 
 impl TileTimes {
     pub fn total_ms(&self) -> f64 {
-        self.decode_ms + self.adapt_ms + self.upload_ms + self.render_ms + self.readback_ms
+        self.decode_ms + self.adapt_ms + self.upload_ms + self.render_ms + self.readback_ms + self.encode_ms
     }
 }
 
@@ -206,11 +254,15 @@ impl Body for Pixels {
             w.u32(t.index);
             w.rect(&t.rect);
             let times = &t.times;
-            for v in [times.decode_ms, times.adapt_ms, times.upload_ms, times.render_ms, times.readback_ms] {
+            for v in
+                [times.decode_ms, times.adapt_ms, times.upload_ms, times.render_ms, times.readback_ms, times.encode_ms]
+            {
                 w.f64(v);
             }
             w.u32(t.triangles);
-            w.bytes(&t.rgba);
+            t.codec.write(w);
+            w.u32(t.coded_bytes);
+            w.bytes(&t.pixels);
         }
         let (span, pm) = (&self.span, &self.pm);
         [span.start_ms, span.prepared_ms, span.end_ms].into_iter().for_each(|v| w.f64(v));
@@ -223,7 +275,7 @@ impl Body for Pixels {
     }
     fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
         let frame = r.u32("frame")?;
-        let n = r.count(68, "tiles")?;
+        let n = r.count(82, "tiles")?;
         let mut tiles = Vec::with_capacity(n);
         for _ in 0..n {
             let index = r.u32("tile index")?;
@@ -234,20 +286,28 @@ impl Body for Pixels {
                 upload_ms: r.f64("times")?,
                 render_ms: r.f64("times")?,
                 readback_ms: r.f64("times")?,
+                encode_ms: r.f64("times")?,
             };
             let triangles = r.u32("triangles")?;
-            let rgba = r.bytes("pixels")?.to_vec();
+            let codec = PixelCodec::read(r)?;
+            let coded_bytes = r.u32("coded bytes")?;
+            let pixels = r.bytes("pixels")?.to_vec();
             // In u64 and checked: a forged rect's area times 4 overflows even 64 bits (found
             // by the decode_protocol fuzz target).
             let expected = ((rect[2] - rect[0]) as u64 * (rect[3] - rect[1]) as u64).checked_mul(4);
-            if expected != Some(rgba.len() as u64) {
+            let fits = match codec {
+                PixelCodec::Raw => expected == Some(pixels.len() as u64),
+                _ => expected.is_some_and(|e| pixels.len() as u64 <= e),
+            };
+            if !fits {
                 return Err(ProtocolError::Invalid(format!(
-                    "tile {index} has {} bytes of pixels, its rectangle {rect:?} needs {}",
-                    rgba.len(),
+                    "tile {index} has {} bytes of pixels, its rectangle {rect:?} needs {}{}",
+                    pixels.len(),
+                    if codec == PixelCodec::Raw { "" } else { "at most " },
                     expected.map_or("more than 2^64".into(), |e| e.to_string())
                 )));
             }
-            tiles.push(TilePixels { index, rect, times, triangles, rgba });
+            tiles.push(TilePixels { index, rect, times, triangles, codec, coded_bytes, pixels });
         }
         let span = FrameSpan { start_ms: r.f64("span")?, prepared_ms: r.f64("span")?, end_ms: r.f64("span")? };
         let pm = PmMemory {

@@ -5,6 +5,7 @@
 use crate::frame::FrameJob;
 use crate::nsp::{NspFrameJob, NspModel};
 use crate::pm::{DpmFile, PmFrameJob, PmModel};
+use crate::to_master::PixelCodec;
 use crate::wire::{Reader, Writer};
 use crate::{ProtocolError, KEEP_ALIVE, SHUTDOWN};
 
@@ -29,6 +30,8 @@ pub enum ToWorker {
     Unload,
     /// Kind 17: nothing to do yet; rank 0 is there (an idle live run).
     KeepAlive,
+    /// Kind 19: how to code the pixels of the frames that follow (`--pixel-codec`).
+    PixelCodec(PixelCodec),
 }
 
 const FRAME: u8 = 1;
@@ -38,6 +41,7 @@ const NSP_MODEL: u8 = 10;
 const NSP_FRAME: u8 = 11;
 const DPM_FILE: u8 = 15;
 const UNLOAD: u8 = 16;
+const PIXEL_CODEC: u8 = 19;
 
 impl ToWorker {
     /// The message's kind, for errors that name one without dumping its contents.
@@ -52,6 +56,7 @@ impl ToWorker {
             ToWorker::NspFrame(_) => "an nSP-tree frame",
             ToWorker::Unload => "an unload",
             ToWorker::KeepAlive => "a keep-alive",
+            ToWorker::PixelCodec(_) => "a pixel codec",
         }
     }
 
@@ -66,6 +71,7 @@ impl ToWorker {
             ToWorker::NspFrame(m) => Writer::message(NSP_FRAME, m),
             ToWorker::Unload => Writer::new(UNLOAD).finish(),
             ToWorker::KeepAlive => Writer::new(KEEP_ALIVE).finish(),
+            ToWorker::PixelCodec(c) => Writer::message(PIXEL_CODEC, c),
         }
     }
 
@@ -90,6 +96,7 @@ impl ToWorker {
                 r.body::<()>()?;
                 ToWorker::KeepAlive
             }
+            PIXEL_CODEC => ToWorker::PixelCodec(r.body()?),
             k => return Err(ProtocolError::UnknownKind(k)),
         })
     }

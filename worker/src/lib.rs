@@ -15,11 +15,13 @@
 //!    `tessera-protocol` crate it receives over a [`transport`], and whose errors are a
 //!    [`node::WorkerError`].
 //!
-//! `transport` and [`chunk_cache`] need no GPU; the master uses them too.
+//! `transport`, [`chunk_cache`] and [`pixels`] (tile pixels coded for the wire) need no
+//! GPU; the master and the display ranks use them too.
 
 pub mod chunk_cache;
 pub mod gpu;
 pub mod node;
+pub mod pixels;
 pub mod pm_adapt;
 mod reflect;
 pub mod render;

@@ -97,6 +97,8 @@ struct View {
     images: Vec<Image>,
     /// When each display had every tile it expects (Unix ms).
     ready: Vec<Option<f64>>,
+    /// Time spent decoding its coded pixels.
+    decode_ms: f64,
     reported: bool,
 }
 
@@ -167,7 +169,10 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
                     let v = views.entry(frame).or_insert_with(new_view);
                     for tile in tiles {
                         let [x0, y0, x1, y1] = tile.rect;
-                        let pixels = Image { width: x1 - x0, height: y1 - y0, rgba: tile.rgba };
+                        let start = std::time::Instant::now();
+                        let rgba = worker::pixels::decode(&tile).with_context(|| format!("rank {from}"))?;
+                        v.decode_ms += start.elapsed().as_secs_f64() * 1e3;
+                        let pixels = Image { width: x1 - x0, height: y1 - y0, rgba };
                         for (&i, image) in mine.iter().zip(v.images.iter_mut()) {
                             let d = wall.displays[i].rect;
                             if let Some(r) = intersection(d, tile.rect) {
@@ -204,7 +209,7 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
         if v.ready.iter().all(Option::is_some) {
             v.reported = true;
             let ready = mine.iter().zip(&v.ready).map(|(&i, r)| (i as u32, r.expect("all ready"))).collect();
-            t.send(0, &ToMaster::DisplayReady(DisplayReady { view, ready }).encode());
+            t.send(0, &ToMaster::DisplayReady(DisplayReady { view, ready, decode_ms: v.decode_ms }).encode());
         }
     }
 }

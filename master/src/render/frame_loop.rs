@@ -29,8 +29,8 @@ struct InFlight {
     eye: Option<Eye>,
     /// The display whose own frame this is (a wall whose displays have their corners).
     display: Option<usize>,
-    /// The view's frame size.
-    size: (u32, u32),
+    /// The view's tile grid (its frame size).
+    grid: TileGrid,
     answering: Vec<usize>,
     tiles: Vec<TileStats>,
     chunks: Option<ChunkStats>,
@@ -102,6 +102,10 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     let workers = t.size() - plan.sorters as usize - plan.display_ranks as usize;
     let adapters = handshake(t, plan.timeout, grid)?;
     eprintln!("tessera: {} worker(s) ready ({})", workers, adapters.join(", "));
+    if plan.pixel_codec != protocol::PixelCodec::Raw {
+        let codec = ToWorker::PixelCodec(plan.pixel_codec).encode();
+        send_all(t, (1..=workers).map(|w| (w, codec.clone())).collect(), plan.timeout)?;
+    }
     // The kinds whose workers hold the model whole get it once, before the first frame.
     if let Some(model) = scene.model_message() {
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
@@ -210,9 +214,20 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                     Span::between("send", send_start, unix_ms(), epoch),
                 ];
                 inbox.silence.expect(&answering);
-                let size = (grid.width, grid.height);
-                let f =
-                    InFlight { k, view, eye, display, size, answering, tiles, chunks, nsp, sort_ms, send_ms, timeline };
+                let f = InFlight {
+                    k,
+                    view,
+                    eye,
+                    display,
+                    grid: *grid,
+                    answering,
+                    tiles,
+                    chunks,
+                    nsp,
+                    sort_ms,
+                    send_ms,
+                    timeline,
+                };
                 flight.push_back(f);
                 if flight.len() >= depth {
                     let f = flight.pop_front().expect("a frame in flight");
@@ -324,21 +339,35 @@ fn complete(
 ) -> Result<Written> {
     let Inbox { costs, silence, early, epoch } = inbox;
     let epoch = *epoch;
-    let InFlight { k, view, eye, display, size, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
+    let InFlight { k, view, eye, display, grid, answering, mut tiles, chunks, nsp, sort_ms, send_ms, mut timeline } = f;
+    let size = (grid.width, grid.height);
     let (start, receive_start) = (Instant::now(), unix_ms());
     // With display ranks the pixels go to them: rank 0 holds no frame.
     let mut frame = if direct.is_some() { Image::new(0, 0) } else { Image::new(size.0, size.1) };
     let mut composite_ms = 0.0;
-    let mut pixel_bytes = 0u64;
+    let (mut pixel_bytes, mut coded_bytes, mut raw_bytes, mut pixel_decode_ms) = (0u64, 0u64, 0u64, 0.0);
     let mut worker_lines = Vec::new();
     for _ in 0..answering.len() {
         let Answer { rank, tiles: pixels, span, pm } = receive_pixels(t, view, silence, early)?;
         let c = Instant::now();
-        pixel_bytes += pixels.iter().map(|p| p.rgba.len() as u64).sum::<u64>();
+        pixel_bytes += pixels.iter().map(|p| p.pixels.len() as u64).sum::<u64>();
+        coded_bytes += pixels.iter().map(|p| p.coded_bytes as u64).sum::<u64>();
+        // What the tiles are uncoded (a display rank's tiles come to rank 0 without pixels).
+        raw_bytes += pixels
+            .iter()
+            .filter(|p| (p.index as usize) < grid.tiles())
+            .map(|p| {
+                let [x0, y0, x1, y1] = grid.tile_rect(p.index as usize);
+                (x1 - x0) as u64 * (y1 - y0) as u64 * 4
+            })
+            .sum::<u64>();
         for p in &pixels {
             if direct.is_none() {
-                frame.blit(p.rect, &p.rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
-            } else if !p.rgba.is_empty() {
+                let d = Instant::now();
+                let rgba = worker::pixels::decode(p).with_context(|| format!("rank {rank}"))?;
+                pixel_decode_ms += ms(d);
+                frame.blit(p.rect, &rgba).with_context(|| format!("rank {rank}, tile {}", p.index))?;
+            } else if !p.pixels.is_empty() {
                 bail!("rank {rank} sent tile {}'s pixels to rank 0, which display ranks should have", p.index);
             }
             // A frame of a grid a live run has left since has no place among the costs.
@@ -360,6 +389,7 @@ fn complete(
         Some(d) => {
             let mut ready = Vec::new();
             let mut heard = Vec::new();
+            let mut decode_ms = 0.0f64;
             for _ in d.display_ranks() {
                 let r = receive_ready(t, view, silence, early)?;
                 if heard.contains(&r.rank) {
@@ -367,6 +397,7 @@ fn complete(
                 }
                 heard.push(r.rank);
                 ready.extend(r.displays);
+                decode_ms = decode_ms.max(r.decode_ms);
             }
             let swap = ToDisplay::Swap(Swap { view }).encode();
             send_all(t, d.display_ranks().map(|r| (r, swap.clone())).collect(), plan.timeout)?;
@@ -376,6 +407,7 @@ fn complete(
                 ready.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, t)| (a.min(t), b.max(t)));
             Some(DisplayStats {
                 displays: ready.len() as u32,
+                pixel_decode_ms: decode_ms,
                 first_ready_ms: first - epoch,
                 last_ready_ms: last - epoch,
                 spread_ms: last - first,
@@ -405,7 +437,11 @@ fn complete(
         chunks,
         nsp,
         tiles,
+        pixel_codec: codec_name(plan.pixel_codec),
         pixel_bytes,
+        pixel_coded_bytes: coded_bytes,
+        pixel_raw_bytes: raw_bytes,
+        pixel_decode_ms,
         displays,
         timeline,
     };
@@ -988,6 +1024,15 @@ impl Controlled<'_> {
         self.next += 1;
         client.send(&serde_json::json!({ "ok": what, "frame": k }));
         Ok(Step::Frame(k, views))
+    }
+}
+
+/// `--pixel-codec` as the stats say it.
+fn codec_name(codec: protocol::PixelCodec) -> String {
+    match codec {
+        protocol::PixelCodec::Raw => "raw".into(),
+        protocol::PixelCodec::Lz4 => "lz4".into(),
+        protocol::PixelCodec::Jpeg { quality } => format!("jpeg:{quality}"),
     }
 }
 

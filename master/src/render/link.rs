@@ -143,6 +143,8 @@ pub(super) struct Early {
 pub(super) struct Ready {
     pub rank: usize,
     pub displays: Vec<(u32, f64)>,
+    /// Its time decoding the view's coded pixels.
+    pub decode_ms: f64,
 }
 
 /// A worker's answer to a frame: its rank, its tiles' pixels and when it worked on them.
@@ -221,8 +223,8 @@ fn receive_until(t: &dyn Transport, view: u32, want: Want, silence: &mut Silence
                 silence.answered(rank);
                 early.pixels.entry(f).or_default().insert(0, Answer { rank, tiles, span, pm });
             }
-            ToMaster::DisplayReady(protocol::DisplayReady { view: v, ready }) => {
-                early.ready.entry(v).or_default().push(Ready { rank, displays: ready })
+            ToMaster::DisplayReady(protocol::DisplayReady { view: v, ready, decode_ms }) => {
+                early.ready.entry(v).or_default().push(Ready { rank, displays: ready, decode_ms })
             }
             ToMaster::Pixels(Pixels { frame: f, .. }) => match want {
                 Want::Pixels => bail!("rank {rank} answered frame {f} during frame {view}"),

@@ -20,6 +20,8 @@ pub struct Plan {
     pub model: PathBuf,
     /// How rank 0 codes a BFT model's tiles.
     pub coding: codec::bft::Coding,
+    /// `--pixel-codec`: how workers code the tiles' pixels they send.
+    pub pixel_codec: protocol::PixelCodec,
     /// The camera asked for; what it leaves out frames the model.
     pub camera: CameraSpec,
     /// Frames to render.
@@ -220,6 +222,7 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
     Ok(Plan {
         model: args.model.clone(),
         coding: args.tile_coding.into(),
+        pixel_codec: args.pixel_codec,
         camera: args.camera.spec(),
         frames: args.frames,
         orbit: args.orbit,

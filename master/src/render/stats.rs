@@ -52,8 +52,16 @@ pub(super) struct MasterStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nsp: Option<NspStats>,
     pub tiles: Vec<TileStats>,
+    /// `--pixel-codec`.
+    pub pixel_codec: String,
     /// Bytes of tile pixels rank 0 received (0 with display ranks: the pixels go to them).
     pub pixel_bytes: u64,
+    /// Bytes of the tiles' coded pixels as the workers sent them (to rank 0, or to the display
+    /// ranks, where a tile on two display ranks' displays goes to each), and their raw size.
+    pub pixel_coded_bytes: u64,
+    pub pixel_raw_bytes: u64,
+    /// Rank 0's time decoding them (0 with display ranks: theirs is in `displays`).
+    pub pixel_decode_ms: f64,
     /// With display ranks: when the view's displays were complete, and the swap.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub displays: Option<DisplayStats>,
@@ -69,6 +77,8 @@ pub(super) struct MasterStats {
 #[derive(Serialize, Clone, Copy, Debug, Default)]
 pub(super) struct DisplayStats {
     pub displays: u32,
+    /// The longest any display rank took to decode the view's coded pixels.
+    pub pixel_decode_ms: f64,
     pub first_ready_ms: f64,
     pub last_ready_ms: f64,
     pub spread_ms: f64,
@@ -127,6 +137,8 @@ pub(super) struct WorkerStats {
     upload_ms: f64,
     render_ms: f64,
     readback_ms: f64,
+    /// Coding the pixels for the wire (`--pixel-codec`).
+    encode_ms: f64,
     tiles: Vec<WorkerTileStats>,
     /// A progressive mesh's memory: graphics memory of the adaptation (static and dynamic
     /// buffers), and out of core the node bytes loaded this frame, the nodes resident, the
@@ -158,6 +170,9 @@ struct WorkerTileStats {
     upload_ms: f64,
     render_ms: f64,
     readback_ms: f64,
+    encode_ms: f64,
+    /// Coded bytes of its pixels.
+    pixel_bytes: u32,
 }
 
 impl WorkerStats {
@@ -194,6 +209,7 @@ pub(super) fn worker_stats(
         upload_ms: sum(|t| t.upload_ms),
         render_ms: sum(|t| t.render_ms),
         readback_ms: sum(|t| t.readback_ms),
+        encode_ms: sum(|t| t.encode_ms),
         tiles: pixels
             .iter()
             .map(|p| WorkerTileStats {
@@ -204,6 +220,8 @@ pub(super) fn worker_stats(
                 upload_ms: p.times.upload_ms,
                 render_ms: p.times.render_ms,
                 readback_ms: p.times.readback_ms,
+                encode_ms: p.times.encode_ms,
+                pixel_bytes: p.coded_bytes,
             })
             .collect(),
         pm: (pm.gpu_bytes > 0).then_some(PmMemoryStats {

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Mat4;
-use protocol::{unix_ms, FrameJob, PmMemory, ProtocolError, StreamSource, TilePixels, TileTimes, ToWorker};
+use protocol::{unix_ms, FrameJob, PixelCodec, PmMemory, ProtocolError, StreamSource, TilePixels, TileTimes, ToWorker};
 use rayon::prelude::*;
 
 use super::model::{wrong_kind, Model, Rendered};
@@ -196,8 +196,11 @@ fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) ->
             upload_ms: times.upload_ms,
             render_ms: times.render_ms,
             readback_ms: times.readback_ms,
+            encode_ms: 0.0,
         },
         triangles: *triangles,
-        rgba,
+        codec: PixelCodec::Raw,
+        coded_bytes: rgba.len() as u32,
+        pixels: rgba,
     })
 }

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Mat4;
-use protocol::{NspFrameJob, PmMemory, TilePixels, TileTimes, ToWorker};
+use protocol::{NspFrameJob, PixelCodec, PmMemory, TilePixels, TileTimes, ToWorker};
 
 use super::model::{wrong_kind, Model, Rendered};
 use super::tiles::{crop, tile_groups};
@@ -78,9 +78,12 @@ impl NspView {
                         upload_ms: times.upload_ms * part,
                         render_ms: times.render_ms * part,
                         readback_ms: times.readback_ms * part,
+                        encode_ms: 0.0,
                     },
                     triangles: drawn.len() as u32,
-                    rgba: crop(&rgba, group.rect, rect),
+                    codec: PixelCodec::Raw,
+                    coded_bytes: 0,
+                    pixels: crop(&rgba, group.rect, rect),
                 });
             }
         }

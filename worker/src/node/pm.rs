@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use codec::pm::Viewpoint;
 use glam::{Mat4, Vec3};
-use protocol::{PmFrameJob, PmMemory, TilePixels, TileTimes, ToWorker};
+use protocol::{PixelCodec, PmFrameJob, PmMemory, TilePixels, TileTimes, ToWorker};
 
 use super::model::{wrong_kind, Model, Rendered};
 use super::tiles::{crop, tile_groups, TileGroup};
@@ -152,9 +152,12 @@ impl PmTiles {
                         upload_ms: group_times.upload_ms * share,
                         render_ms: group_times.render_ms * share,
                         readback_ms: group_times.readback_ms * share,
+                        encode_ms: 0.0,
                     },
                     triangles,
-                    rgba: crop(&group_rgba, group.rect, rect),
+                    codec: PixelCodec::Raw,
+                    coded_bytes: 0,
+                    pixels: crop(&group_rgba, group.rect, rect),
                 });
             }
         }

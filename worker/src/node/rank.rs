@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use protocol::{unix_ms, Failed, FrameSpan, Pixels, PmMemory, Ready, TilePixels, ToMaster, ToWorker};
+use protocol::{unix_ms, Failed, FrameSpan, PixelCodec, Pixels, PmMemory, Ready, TilePixels, ToMaster, ToWorker};
 
 use super::kinds::{self, Loaded};
 use super::model::{Model, Rendered};
@@ -135,6 +135,8 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
     // by the first frame of a `.bft` model, which needs none.
     let mut model: Option<Box<dyn Model>> = None;
     let mut first_frame = true;
+    // How the pixels go on the wire, as rank 0 says (raw until it does).
+    let mut codec = PixelCodec::Raw;
     loop {
         heartbeat.busy(false);
         let (from, bytes) = match t.recv(MASTER_SILENCE) {
@@ -153,6 +155,10 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
         let msg = match msg {
             Ok(ToWorker::Shutdown) => return Ok(()),
             Ok(ToWorker::KeepAlive) => continue,
+            Ok(ToWorker::PixelCodec(c)) => {
+                codec = c;
+                continue;
+            }
             // Another model follows: this one, its GPU buffers and its caches are freed now.
             Ok(ToWorker::Unload) => {
                 model = None;
@@ -195,12 +201,32 @@ pub fn run_routed(t: &dyn Transport, route: Option<&Route>) -> Result<(), RankEr
                     Some(prepared_ms) => FrameSpan { start_ms, prepared_ms, end_ms: unix_ms() },
                     None => phased_span(start_ms, &tiles),
                 };
-                answer(t, route, frame, tiles, span, memory);
+                answer(t, route, frame, coded(codec, tiles), span, memory);
             }
             Ok(None) => {}
             Err(e) => return fail(e),
         }
     }
+}
+
+/// `tiles` with their pixels coded by `codec` (in parallel; each tile's time in its
+/// `encode_ms`), and each one's coded size.
+fn coded(codec: PixelCodec, tiles: Vec<TilePixels>) -> Vec<TilePixels> {
+    use rayon::prelude::*;
+    tiles
+        .into_par_iter()
+        .map(|mut tile| {
+            let start = std::time::Instant::now();
+            let [x0, y0, x1, y1] = tile.rect;
+            let (used, pixels) = if codec == PixelCodec::Raw {
+                (codec, std::mem::take(&mut tile.pixels))
+            } else {
+                crate::pixels::encode(codec, &tile.pixels, x1 - x0, y1 - y0)
+            };
+            tile.times.encode_ms = start.elapsed().as_secs_f64() * 1e3;
+            TilePixels { codec: used, coded_bytes: pixels.len() as u32, pixels, ..tile }
+        })
+        .collect()
 }
 
 /// Sends a frame's pixels to rank 0, or with a `route` to the display ranks (each the tiles
@@ -221,7 +247,12 @@ fn answer(t: &dyn Transport, route: Option<&Route>, frame: u32, tiles: Vec<TileP
         to.into_iter().map(|(r, tiles)| (r, ToMaster::Pixels(Pixels { frame, tiles, span, pm }).encode())).collect();
     let stripped = tiles
         .into_iter()
-        .map(|p| TilePixels { rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]], rgba: Vec::new(), ..p })
+        .map(|p| TilePixels {
+            rect: [p.rect[0], p.rect[1], p.rect[0], p.rect[1]],
+            codec: PixelCodec::Raw,
+            pixels: Vec::new(),
+            ..p
+        })
         .collect();
     msgs.push((0, ToMaster::Pixels(Pixels { frame, tiles: stripped, span, pm }).encode()));
     // Rank 0 and the display ranks wait for these; a rank that died ends the job from there.
