@@ -364,3 +364,68 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
         "--control-token-file",
     );
 }
+
+/// The status once a timed move has ended.
+fn wait_still(c: &mut Client) -> Value {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let status = c.ask(r#"{"cmd":"status"}"#);
+        if status["animating"] == false {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "the move did not end: {status}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_timed_move_shows_frames_along_the_way_and_ends_where_it_was_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let live = start_live(&model, &[]);
+    let mut c = client(&live);
+    let v = |s: &Value, k: &str| -> Vec<f64> { s[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let yaw = |s: &Value| {
+        let (e, t) = (v(s, "eye"), v(s, "target"));
+        (e[0] - t[0]).atan2(e[2] - t[2]).to_degrees()
+    };
+    let first = c.ask(r#"{"cmd":"status"}"#);
+    // An orbit of 60 degrees over 1.5 s: several frames on the way, and it ends 60 degrees round.
+    let answer = c.ask(r#"{"cmd":"animate","seconds":1.5,"degrees":60}"#);
+    assert_eq!((answer["ok"].as_str(), answer["frame"].as_u64()), (Some("animate"), Some(1)), "{answer}");
+    let end = wait_still(&mut c);
+    let frames = end["frames"].as_u64().unwrap();
+    assert!(frames >= 3, "frames along the way: {end}");
+    let turned = (yaw(&end) - yaw(&first) + 540.0) % 360.0 - 180.0;
+    assert!((turned.abs() - 60.0).abs() < 0.01, "turned {turned}: {first} -> {end}");
+    // The last frame is render's with the camera it ended at.
+    let last = dir.path().join("last.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&last)))["ok"], "snapshot");
+    let flag = |k: &str| v(&end, k).iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+    rendered(&model, &["--eye", &flag("eye"), "--target", &flag("target")], &dir.path().join("r.png"));
+    assert_eq!(differing(&last, &dir.path().join("r.png")), 0, "the move's last frame is render's");
+    // A flight to an eye and target ends there.
+    assert_eq!(
+        c.ask(r#"{"cmd":"animate","seconds":0.5,"eye":[0.1,0.25,0.4],"target":[-0.02,0.1,0.0]}"#)["ok"],
+        "animate"
+    );
+    let there = wait_still(&mut c);
+    let close = |a: Vec<f64>, b: [f64; 3]| (0..3).all(|i| (a[i] - b[i]).abs() < 1e-5);
+    assert!(close(v(&there, "eye"), [0.1, 0.25, 0.4]) && close(v(&there, "target"), [-0.02, 0.1, 0.0]), "{there}");
+    // A steering command takes over from a move in progress.
+    assert_eq!(c.ask(r#"{"cmd":"animate","seconds":60,"degrees":360}"#)["ok"], "animate");
+    assert_eq!(c.ask(r#"{"cmd":"zoom","factor":0.9}"#)["ok"], "zoom");
+    assert_eq!(c.ask(r#"{"cmd":"status"}"#)["animating"], false);
+    // Malformed moves are answered with an error, the run goes on.
+    for bad in [
+        r#"{"cmd":"animate","seconds":0,"degrees":10}"#,
+        r#"{"cmd":"animate","seconds":1}"#,
+        r#"{"cmd":"animate","seconds":1,"degrees":10,"eye":[0,0,1]}"#,
+        r#"{"cmd":"animate","seconds":1e39,"degrees":10}"#,
+    ] {
+        let e = c.ask(bad);
+        assert!(e["error"].as_str().is_some_and(|e| e.starts_with("animate")), "{bad}: {e}");
+    }
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}

@@ -1,13 +1,14 @@
 #!/usr/bin/env python3
 """Latency and frame rate of a live run, steered through its control port.
 
-    bench/scripts/live-latency.py [--view | --present WALL [--display-ranks D]] [--mpirun N]
-                                  [--pixel-codec C] [--window-name REGEX] [--size 1280x720]
-                                  [--tiles 4x4] [--steps 40] MODEL
+    bench/scripts/live-latency.py [--view | --present] [--wall WALL [--display-ranks D]]
+                                  [--mpirun N] [--pixel-codec C] [--window-name REGEX]
+                                  [--size 1280x720] [--tiles 4x4] [--steps 40] MODEL
 
 Starts `tessera render MODEL --control` (or `tessera view`, under an Xvfb of its own, with
---view; `render --present --wall WALL` with --present, its windows on that Xvfb, opened by
-D display ranks with --display-ranks D; under `mpirun -np N` with --mpirun N), then:
+--view; `render --present` with --present, its windows on that Xvfb, one per display of
+--wall, opened by D display ranks with --display-ranks D; under `mpirun -np N` with
+--mpirun N), then:
   * latency: with windows, presses a key in the steering window with xdotool (A and D,
     flying left and right), else sends one `orbit` command at a time, and times it until the
     run's stats line of that frame comes back to a subscriber, which the writer sends as the
@@ -78,7 +79,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("model")
     ap.add_argument("--view", action="store_true")
-    ap.add_argument("--present", metavar="WALL")
+    ap.add_argument("--present", action="store_true")
+    ap.add_argument("--wall")
     ap.add_argument("--display-ranks", type=int, default=0)
     ap.add_argument("--pixel-codec", default="raw")
     ap.add_argument("--window-name", default="^Tessera", help="the steering window's title (a regex)")
@@ -100,9 +102,11 @@ def main():
     cmd = [BIN, "view" if a.view else "render", a.model, "--size", a.size, "--tiles", a.tiles,
            "--control", "127.0.0.1:0", "--pixel-codec", a.pixel_codec]
     if a.present:
-        cmd += ["--present", "--wall", a.present]
-        if a.display_ranks:
-            cmd += ["--display-ranks", str(a.display_ranks)]
+        cmd += ["--present"]
+    if a.wall:
+        cmd += ["--wall", a.wall]
+    if a.display_ranks:
+        cmd += ["--display-ranks", str(a.display_ranks)]
     if a.mpirun:
         cmd = ["mpirun", "--oversubscribe", "--bind-to", "none", "-np", str(a.mpirun), "-x", "DISPLAY"] + cmd
     run = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
@@ -165,10 +169,14 @@ def main():
     if xvfb:
         xvfb.kill()
     what = "view" if a.view else "render --present" if a.present else "render --control"
+    what += f" --wall {os.path.basename(a.wall)}" if a.wall else ""
     what += f" --display-ranks {a.display_ranks}" if a.display_ranks else ""
     what += f" under mpirun -np {a.mpirun}" if a.mpirun else " alone"
     coded = statistics.median(p.get("pixel_coded_bytes", 0) for p in pixels)
     raw = statistics.median(p.get("pixel_raw_bytes", 0) for p in pixels)
+    encode = statistics.median(p.get("pixel_encode_ms", 0) for p in pixels)
+    decode = statistics.median(p.get("pixel_decode_ms", 0) + (p.get("displays") or {}).get("pixel_decode_ms", 0)
+                               for p in pixels)
     print(f"{what}, {os.path.basename(a.model)}, {a.size}, {a.tiles} tiles:")
     how = "key press in the window" if window else "command"
     print(f"  {how} to frame shown: median {statistics.median(latencies):.0f} ms, 95th percentile {p95:.0f} ms "
@@ -176,7 +184,8 @@ def main():
     print(f"  steered continuously: {fps:.1f} frames shown a second")
     print(f"  idle: {idle:.2f} CPU s over 5 s")
     print(f"  pixels ({a.pixel_codec}): {coded / 1e3:.0f} kB a frame sent, {raw / 1e3:.0f} kB raw "
-          f"({raw / max(coded, 1):.1f}x)")
+          f"({raw / max(coded, 1):.1f}x); coded in {encode:.1f} ms (the workers' tiles summed), decoded in "
+          f"{decode:.1f} ms")
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@
 //! | `{"cmd":"zoom","factor":f}` | moves the eye toward the target to `f` times its distance | `{"ok":"zoom","frame":k}` |
 //! | `{"cmd":"move","right":r,"up":u,"forward":f}` | moves eye and target together (fly, pan), each in units of their distance (all optional) | `{"ok":"move","frame":k}` |
 //! | `{"cmd":"reset"}` | back to the flags' camera | `{"ok":"reset","frame":k}` |
+//! | `{"cmd":"animate","seconds":s,"degrees":d,"pitch":p}` or `{"cmd":"animate","seconds":s,"eye":[..],"target":[..]}` | a timed move: orbits `d` degrees (and pitches `p`), or flies eye and target in a straight line to those given, over `s` seconds; frames follow the clock (each shows where the move is when it is sorted, so a slow frame skips ahead), and any other steering command ends it | `{"ok":"animate","frame":k}` |
 //! | `{"cmd":"tiles","cols":c,"rows":r}` | re-plans the frame in a `c` x `r` tile grid | `{"ok":"tiles","frame":k}` |
 //! | `{"cmd":"error_px","value":e}` | the screen error `.dpm` and `.nsp` models adapt to | `{"ok":"error_px","frame":k}` |
 //! | `{"cmd":"balance","on":b}` | tiles go to workers by their last costs, or round robin | `{"ok":"balance","frame":k}` |
@@ -67,6 +68,15 @@ pub enum Command {
         forward: Option<f32>,
     },
     Reset {},
+    /// A timed camera move: `degrees` (and `pitch`) of orbit, or to `eye` and `target`, over
+    /// `seconds`; each frame shows where the move is when it is sorted.
+    Animate {
+        seconds: f32,
+        degrees: Option<f32>,
+        pitch: Option<f32>,
+        eye: Option<[f32; 3]>,
+        target: Option<[f32; 3]>,
+    },
     /// The window's new size (`tessera view`): the frame is re-planned at it, with the same
     /// tile grid.
     Resize {
@@ -276,7 +286,7 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
     let value: Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
     let Some(cmd) = value.get("cmd").and_then(Value::as_str).map(String::from) else {
         return Err(
-            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, eye, tiles, error_px, balance, load, snapshot, subscribe, status, quit)".into()
+            "a command is a JSON object with a \"cmd\" (camera, orbit, zoom, move, reset, animate, eye, tiles, error_px, balance, load, snapshot, subscribe, status, quit)".into()
         );
     };
     let command: Command = serde_json::from_value(value).map_err(|e| format!("{cmd}: {e}"))?;
@@ -292,6 +302,18 @@ pub(super) fn parse(text: &str) -> Result<Command, String> {
         }
         Command::Orbit { degrees, pitch } if !degrees.is_finite() || pitch.is_some_and(|p| !p.is_finite()) => {
             return Err("orbit: degrees and pitch must be finite".into())
+        }
+        Command::Animate { seconds, degrees, pitch, eye, target } => {
+            if !(seconds.is_finite() && *seconds > 0.0 && *seconds <= 86_400.0) {
+                return Err("animate: seconds must be above 0 and at most a day".into());
+            }
+            let orbit = degrees.is_some() || pitch.is_some();
+            if orbit == (eye.is_some() || target.is_some()) {
+                return Err("animate: give degrees (and pitch) to orbit, or eye and target to fly to".into());
+            }
+            if [degrees, pitch].iter().any(|v| v.is_some_and(|v| !v.is_finite())) || !(finite(eye) && finite(target)) {
+                return Err("animate: every number must be finite".into());
+            }
         }
         Command::Zoom { factor } if !(factor.is_finite() && *factor > 0.0) => {
             return Err("zoom: factor must be a positive number".into())

@@ -345,13 +345,15 @@ fn complete(
     // With display ranks the pixels go to them: rank 0 holds no frame.
     let mut frame = if direct.is_some() { Image::new(0, 0) } else { Image::new(size.0, size.1) };
     let mut composite_ms = 0.0;
-    let (mut pixel_bytes, mut coded_bytes, mut raw_bytes, mut pixel_decode_ms) = (0u64, 0u64, 0u64, 0.0);
+    let (mut pixel_bytes, mut coded_bytes, mut raw_bytes) = (0u64, 0u64, 0u64);
+    let (mut pixel_encode_ms, mut pixel_decode_ms) = (0.0, 0.0);
     let mut worker_lines = Vec::new();
     for _ in 0..answering.len() {
         let Answer { rank, tiles: pixels, span, pm } = receive_pixels(t, view, silence, early)?;
         let c = Instant::now();
         pixel_bytes += pixels.iter().map(|p| p.pixels.len() as u64).sum::<u64>();
         coded_bytes += pixels.iter().map(|p| p.coded_bytes as u64).sum::<u64>();
+        pixel_encode_ms += pixels.iter().map(|p| p.times.encode_ms).sum::<f64>();
         // What the tiles are uncoded (a display rank's tiles come to rank 0 without pixels).
         raw_bytes += pixels
             .iter()
@@ -441,6 +443,7 @@ fn complete(
         pixel_bytes,
         pixel_coded_bytes: coded_bytes,
         pixel_raw_bytes: raw_bytes,
+        pixel_encode_ms,
         pixel_decode_ms,
         displays,
         timeline,
@@ -725,6 +728,7 @@ fn frame_source<'a>(plan: &'a Plan, cam: Camera, control: Option<&'a Control>) -
             next: 0,
             control,
             pending: None,
+            animation: None,
         }),
         None => Box::new(FixedFrames { plan, cam, next: 0 }),
     }
@@ -771,7 +775,42 @@ struct Controlled<'a> {
     /// A request taken by [`FrameSource::wait`] (or left by the steering that joins a
     /// frame) and not yet handled.
     pending: Option<super::control::Request>,
+    /// A timed camera move in progress (`animate`).
+    animation: Option<Animation>,
 }
+
+/// A timed camera move (`animate`): from the camera flags and camera it began at, by an
+/// orbit or to an eye and target, over `seconds`.
+struct Animation {
+    start: Instant,
+    seconds: f32,
+    spec: crate::camera::CameraSpec,
+    cam: Camera,
+    /// The move at its end: an `orbit`, or a `camera` with the eye and target.
+    end: Command,
+    client: Client,
+}
+
+impl Animation {
+    /// How far the move is now (0 to 1), and the steering command from its start to there.
+    fn now(&self) -> (f32, Command) {
+        let t = (self.start.elapsed().as_secs_f32() / self.seconds).min(1.0);
+        let command = match &self.end {
+            Command::Orbit { degrees, pitch } => Command::Orbit { degrees: degrees * t, pitch: pitch.map(|p| p * t) },
+            Command::Camera { eye, target, .. } => Command::Camera {
+                eye: eye.map(|e| self.cam.eye.lerp(Vec3::from(e), t).to_array()),
+                target: target.map(|e| self.cam.target.lerp(Vec3::from(e), t).to_array()),
+                up: None,
+                fovy: None,
+            },
+            _ => Command::Reset {},
+        };
+        (t, command)
+    }
+}
+
+/// How often a running animation looks for commands while its view stays the same.
+const ANIMATION_TICK: std::time::Duration = std::time::Duration::from_millis(16);
 
 impl FrameSource for Controlled<'_> {
     fn settings(&self) -> Settings {
@@ -782,13 +821,15 @@ impl FrameSource for Controlled<'_> {
         if self.pending.is_some() {
             return false;
         }
+        let timeout = if self.animation.is_some() { timeout.min(ANIMATION_TICK) } else { timeout };
         // The control keeps a sender of its own: the channel stays open while the run does.
         match self.control.requests.recv_timeout(timeout) {
             Ok(r) => {
                 self.pending = Some(r);
                 false
             }
-            Err(_) => true,
+            // A running animation's tick is no silence: its frames go on.
+            Err(_) => self.animation.is_none(),
         }
     }
 
@@ -823,7 +864,10 @@ impl FrameSource for Controlled<'_> {
         loop {
             let request = match self.pending.take().map(Ok).unwrap_or_else(|| self.control.requests.try_recv()) {
                 Ok(r) => r,
-                Err(std::sync::mpsc::TryRecvError::Empty) => return Ok(Step::Idle),
+                Err(std::sync::mpsc::TryRecvError::Empty) => match self.animation.take() {
+                    Some(animation) => return self.animate(scene, animation),
+                    None => return Ok(Step::Idle),
+                },
                 Err(std::sync::mpsc::TryRecvError::Disconnected) => return Ok(Step::End),
             };
             let client = request.client;
@@ -836,7 +880,23 @@ impl FrameSource for Controlled<'_> {
                     client.error("snapshot: with --display-ranks the display ranks hold the frames, rank 0 none")
                 }
                 Command::Snapshot { path } => return Ok(Step::Snapshot(path, client)),
+                Command::Animate { seconds, degrees, pitch, eye, target } => {
+                    let end = match degrees.or(pitch) {
+                        Some(_) => Command::Orbit { degrees: degrees.unwrap_or(0.0), pitch },
+                        None => Command::Camera { eye, target, up: None, fovy: None },
+                    };
+                    client.send(&serde_json::json!({ "ok": "animate", "frame": self.next }));
+                    self.animation = Some(Animation {
+                        start: Instant::now(),
+                        seconds,
+                        spec: self.spec.clone(),
+                        cam: self.cam,
+                        end,
+                        client,
+                    });
+                }
                 Command::Eye { position } if self.plan.wall.as_ref().is_some_and(|w| w.placed()) => {
+                    self.animation = None;
                     // A tracker's positions that came meanwhile: the last is where the head is.
                     let mut eye = Vec3::from(position);
                     let mut answer = vec![client];
@@ -878,6 +938,7 @@ impl FrameSource for Controlled<'_> {
                         client.error("load: sorter and display ranks keep the model of the flags");
                         continue;
                     }
+                    self.animation = None;
                     return Ok(Step::Load(path, client));
                 }
                 Command::Subscribe {} => {
@@ -891,6 +952,7 @@ impl FrameSource for Controlled<'_> {
                     "target": self.cam.target.to_array(),
                     "up": self.cam.up.to_array(),
                     "fovy": self.cam.fovy,
+                    "animating": self.animation.is_some(),
                 })),
                 Command::Resize { width, height } => {
                     if let Some(step) =
@@ -921,6 +983,8 @@ impl FrameSource for Controlled<'_> {
                     client.send(&serde_json::json!({ "ok": command_name(&command), "frame": self.next - 1 }))
                 }
                 command => {
+                    // A person or program steering takes over from a timed move.
+                    self.animation = None;
                     let what = command_name(&command);
                     match self.steer(scene, &command) {
                         Ok(Some((spec, cam))) => {
@@ -977,10 +1041,47 @@ impl Controlled<'_> {
         scene: &dyn Scene,
         command: &Command,
     ) -> Result<Option<(crate::camera::CameraSpec, Camera)>, Option<anyhow::Error>> {
-        let spec = steer(&self.spec, &self.cam, &self.plan.camera, command).ok_or(None)?;
+        self.steer_from(scene, &self.spec, &self.cam, command)
+    }
+
+    /// [`Controlled::steer`] from the camera flags `spec` and the camera `cam` they gave.
+    fn steer_from(
+        &self,
+        scene: &dyn Scene,
+        spec: &crate::camera::CameraSpec,
+        cam: &Camera,
+        command: &Command,
+    ) -> Result<Option<(crate::camera::CameraSpec, Camera)>, Option<anyhow::Error>> {
+        let spec = steer(spec, cam, &self.plan.camera, command).ok_or(None)?;
         let cam = scene.camera(&spec, &self.grid).map_err(Some)?;
         crate::camera::check_precision(&cam, self.grid.height).map_err(Some)?;
         Ok((cam != self.cam).then_some((spec, cam)))
+    }
+
+    /// The next frame of a timed move: where it is now (the move kept until its end); an
+    /// idle step while its view stays the same; its error, to the client that started it,
+    /// ends it.
+    fn animate(&mut self, scene: &dyn Scene, animation: Animation) -> Result<Step> {
+        let (t, command) = animation.now();
+        let steered = self.steer_from(scene, &animation.spec, &animation.cam, &command);
+        let step = match steered {
+            Ok(Some((spec, cam))) => {
+                (self.spec, self.cam) = (spec, cam);
+                let k = self.next;
+                self.next += 1;
+                Step::Frame(k, self.views(scene)?)
+            }
+            Ok(None) => Step::Idle,
+            Err(e) => {
+                let e = e.map_or_else(|| "not a move".to_string(), |e| crate::output::one_line(&e));
+                animation.client.error(format!("animate: {e}"));
+                return Ok(Step::Idle);
+            }
+        };
+        if t < 1.0 {
+            self.animation = Some(animation);
+        }
+        Ok(step)
     }
 }
 
@@ -1044,6 +1145,7 @@ fn command_name(command: &Command) -> &'static str {
         Command::Zoom { .. } => "zoom",
         Command::Move { .. } => "move",
         Command::Reset {} => "reset",
+        Command::Animate { .. } => "animate",
         Command::Resize { .. } => "resize",
         Command::Tiles { .. } => "tiles",
         Command::ErrorPx { .. } => "error_px",

@@ -60,6 +60,9 @@ pub(super) struct MasterStats {
     /// ranks, where a tile on two display ranks' displays goes to each), and their raw size.
     pub pixel_coded_bytes: u64,
     pub pixel_raw_bytes: u64,
+    /// The workers' time coding them, summed over the tiles (each worker codes its tiles in
+    /// parallel, so a frame waits for less).
+    pub pixel_encode_ms: f64,
     /// Rank 0's time decoding them (0 with display ranks: theirs is in `displays`).
     pub pixel_decode_ms: f64,
     /// With display ranks: when the view's displays were complete, and the swap.
