@@ -268,3 +268,52 @@ fn without_a_display_present_fails_naming_it() {
         "--display-ranks",
     );
 }
+
+#[test]
+fn a_window_opens_on_the_monitor_the_wall_file_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let x = Xvfb::start();
+    let wall = |window: &str| {
+        let path = dir.path().join("wall.toml");
+        std::fs::write(
+            &path,
+            format!("[[display]]\nname = \"only\"\nx = 0\ny = 0\nwidth = 320\nheight = 240\n{window}\n"),
+        )
+        .unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    // Xvfb's one monitor, by index: the window at (30, 40) from its top-left corner.
+    let w = wall("window = { monitor = 0, x = 30, y = 40 }");
+    let mut cmd = Command::new(bin());
+    mpi_env(&mut cmd).env("DISPLAY", &x.display).args([
+        "render",
+        &model,
+        "--wall",
+        &w,
+        "--present",
+        "--control",
+        "127.0.0.1:0",
+        "--tiles",
+        "2x2",
+    ]);
+    let run = LiveRun::start(&mut cmd, Stdio::null(), false);
+    wait_frames(&run, 1);
+    let (_, at) = window(&x, "only");
+    assert!(at.contains("Position: 30,40") && at.contains("Geometry: 320x240"), "{at}");
+    assert_eq!(ask(&run, r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(run.wait().success());
+    // A monitor the X display does not have: one line naming the monitors it has.
+    let w = wall("window = { monitor = \"no-such\", fullscreen = true }");
+    let out = common::output(mpi_env(&mut Command::new(bin())).env("DISPLAY", &x.display).args([
+        "render",
+        &model,
+        "--wall",
+        &w,
+        "--present",
+    ]));
+    refused_one_line(
+        &out,
+        "the window of Tessera: bunny_zipper_c3d.obj.gz, display only: no monitor no-such on this X display (it has ",
+    );
+}

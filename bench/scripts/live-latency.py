@@ -177,7 +177,8 @@ def main():
     encode = statistics.median(p.get("pixel_encode_ms", 0) for p in pixels)
     decode = statistics.median(p.get("pixel_decode_ms", 0) + (p.get("displays") or {}).get("pixel_decode_ms", 0)
                                for p in pixels)
-    print(f"{what}, {os.path.basename(a.model)}, {a.size}, {a.tiles} tiles:")
+    size = "the wall's frame" if a.wall else a.size
+    print(f"{what}, {os.path.basename(a.model)}, {size}, {a.tiles} tiles:")
     how = "key press in the window" if window else "command"
     print(f"  {how} to frame shown: median {statistics.median(latencies):.0f} ms, 95th percentile {p95:.0f} ms "
           f"({a.steps} steps)")

@@ -396,7 +396,7 @@ impl App {
             let place = &spec.place;
             let monitor = match &place.monitor {
                 None => None,
-                Some(m) => Some(find_monitor(&monitors, m)?),
+                Some(m) => Some(find_monitor(&monitors, m).with_context(|| format!("the window of {}", spec.title))?),
             };
             let mut attributes = Window::default_attributes()
                 .with_title(&spec.title)

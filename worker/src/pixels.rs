@@ -1,6 +1,7 @@
 //! Tile pixels coded for the wire (`render --pixel-codec`): a worker codes each tile it
 //! sends, rank 0 or a display rank decodes it before compositing. LZ4 is lossless; JPEG
-//! codes the colour (lossy, quality 1-100) and keeps the alpha plane exact beside it in LZ4,
+//! codes the colour (lossy, quality 1-100; `jpeg-encoder` encodes, the `image` crate
+//! decodes) and keeps the alpha plane exact beside it in LZ4,
 //! since coverage is what tells drawn pixels from the transparent background in a PNG, and
 //! an all-opaque or all-transparent plane costs a few bytes. A tile whose coding is not
 //! smaller than its raw pixels goes raw.
@@ -34,9 +35,11 @@ fn jpeg(rgba: &[u8], width: u32, height: u32, quality: u8) -> Option<Vec<u8>> {
     let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
     let alpha: Vec<u8> = rgba.chunks_exact(4).map(|p| p[3]).collect();
     let mut out = vec![0u8; 4];
-    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality)
-        .encode(&rgb, width, height, image::ExtendedColorType::Rgb8)
-        .ok()?;
+    // jpeg-encoder, not the image crate's encoder: 8.5 ms against 22.3 ms for a 1455x555
+    // frame at quality 90 on this machine (65,806 against 65,743 bytes), 4.8 against 28.4 ms
+    // at 75 (29,861 against 40,138 bytes); the image crate decodes.
+    let (w, h) = (u16::try_from(width).ok()?, u16::try_from(height).ok()?);
+    jpeg_encoder::Encoder::new(&mut out, quality).encode(&rgb, w, h, jpeg_encoder::ColorType::Rgb).ok()?;
     let jpeg_len = (out.len() - 4) as u32;
     out[..4].copy_from_slice(&jpeg_len.to_le_bytes());
     out.extend_from_slice(&lz4_flex::block::compress(&alpha));
