@@ -598,3 +598,27 @@ fn decode_writes_colours_and_normals_back() {
         assert!(stats.contains(if expect.contains("red") { "colours" } else { "normals" }), "{stats}");
     }
 }
+
+/// `encode`'s default fits the model: every shared mesh (at most 871k triangles, below the
+/// 4M-triangle threshold) is the single-stream file, byte for byte what `--chunk-triangles 0`
+/// writes; asking for chunks still gets them.
+#[test]
+fn encode_s_default_is_one_stream_for_every_shared_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    for path in testkit::all_shared_meshes() {
+        let (a, b) = (dir.path().join("default.bft"), dir.path().join("single.bft"));
+        let o = tessera(&["encode", s(&path), "-o", s(&a)]);
+        if !o.status.success() {
+            // Meshes the encoder refuses (the degenerate ones it names) are refused either way.
+            assert!(!tessera(&["encode", s(&path), "-o", s(&b), "--chunk-triangles", "0"]).status.success());
+            continue;
+        }
+        ok(&tessera(&["encode", s(&path), "-o", s(&b), "--chunk-triangles", "0"]));
+        assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "{}", path.display());
+    }
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let chunked = dir.path().join("chunked.bft");
+    ok(&tessera(&["encode", s(&bunny), "-o", s(&chunked), "--chunk-triangles", "4096"]));
+    let o = tessera(&["stats", s(&chunked)]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("chunk"), "{}", String::from_utf8_lossy(&o.stdout));
+}

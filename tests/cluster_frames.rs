@@ -369,3 +369,53 @@ fn timelines_order_the_stages_and_plot_draws_them() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("line 1") && err.lines().count() == 1, "{err}");
 }
+
+/// A `--frames` run whose camera stands still reuses the frame before: rank 0 neither sorts
+/// nor sends, the workers render nothing, and each later frame's files are the first's, byte
+/// for byte; a moving camera's frames are made as before.
+#[test]
+fn a_still_camera_reuses_the_frame_before() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = mesh("classic/spot.obj");
+    for (np, wall) in [(1, false), (2, false), (2, true)] {
+        let out = dir.path().join(format!("still-{np}-{wall}.png"));
+        let stats = out.with_extension("jsonl");
+        let wall_file = dir.path().join("wall.toml");
+        std::fs::write(&wall_file, "columns = 2\nrows = 1\ndisplay_width = 80\ndisplay_height = 60\nbezel_x = 8\n")
+            .unwrap();
+        let mut args = vec!["render", model.as_str(), "--size", "160x120", "--tiles", "2x2", "--frames", "4"];
+        args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
+        if wall {
+            args.extend(["--wall", wall_file.to_str().unwrap()]);
+        }
+        ok(&if np == 1 { alone(&args) } else { mpirun(np, &[], &args) });
+        let lines: Vec<serde_json::Value> =
+            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let master: Vec<&serde_json::Value> = lines.iter().filter(|l| l["rank"] == 0).collect();
+        assert_eq!(master.len(), 4);
+        assert!(master[0].get("reused").is_none() && !master[0]["tiles"].as_array().unwrap().is_empty());
+        for l in &master[1..] {
+            assert_eq!(l["reused"], true, "{l}");
+            assert_eq!((l["sort_ms"].as_f64(), l["tiles"].as_array().map(Vec::len)), (Some(0.0), Some(0)), "{l}");
+        }
+        assert!(lines.iter().filter(|l| l["rank"] != 0).all(|l| l["frame"] == 0), "workers render frame 1 only");
+        let stem = out.file_stem().unwrap().to_str().unwrap().to_string();
+        let files = |k: u32| -> Vec<Vec<u8>> {
+            let base = format!("{stem}-{k:04}");
+            let mut names = vec![format!("{base}.png")];
+            if wall {
+                names.extend(["0-0", "1-0"].map(|d| format!("{base}-display-{d}.png")));
+            }
+            names.iter().map(|n| std::fs::read(dir.path().join(n)).unwrap()).collect()
+        };
+        for k in 2..=4 {
+            assert!(files(k) == files(1), "frame {k}'s files are frame 1's");
+        }
+    }
+    // An orbit makes every frame.
+    let stats = dir.path().join("orbit.jsonl");
+    let out = dir.path().join("orbit.png");
+    let args = ["render", &model, "--size", "160x120", "--frames", "3", "--orbit", "--orbit-degrees", "30"];
+    ok(&alone(&[&args[..], &["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]].concat()));
+    assert!(!std::fs::read_to_string(&stats).unwrap().contains("reused"));
+}

@@ -262,7 +262,8 @@ fn another_model_of_any_kind_loads_without_a_restart() {
     let dir = tempfile::tempdir().unwrap();
     let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
     let (bft, dpm) = (dir.path().join("bunny.bft"), dir.path().join("bunny.dpm"));
-    ok(&alone(&["encode", &bunny, "-o", s(&bft)]));
+    // A chunked .bft (the bunny is one stream by default).
+    ok(&alone(&["encode", &bunny, "-o", s(&bft), "--chunk-triangles", "4096"]));
     ok(&alone(&["pm", "build", &bunny, "-o", s(&dpm)]));
     let cow = mesh("classic/cow.obj");
     let live = start_live(s(&bft), &[]);

@@ -97,6 +97,23 @@ fn a_one_chunk_model_is_the_single_stream_file() {
     }
 }
 
+/// `tessera encode`'s default: a model at most `one_stream_up_to` triangles is the single-
+/// stream file whatever the chunk size; one above it is chunked.
+#[test]
+fn a_model_small_enough_for_one_stream_is_one_stream() {
+    let mesh = testkit::load_mesh("stanford/bunny_zipper_c3d.obj.gz");
+    let single = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
+    let t = mesh.triangles.len() as u64;
+    let opts = |up_to: u64| ChunkOptions { chunk_triangles: 4096, one_stream_up_to: up_to, ..Default::default() };
+    let (bytes, enc) = encode_mesh_chunked(&mesh, &opts(t)).unwrap();
+    assert!(bytes == single.bytes, "at the threshold: the single-stream file");
+    assert_eq!(enc.header.chunks, 1);
+    let (bytes, enc) = encode_mesh_chunked(&mesh, &opts(t - 1)).unwrap();
+    assert!(enc.header.chunks > 1 && bytes != single.bytes, "above it: chunks");
+    assert_eq!(bytes, chunked(&mesh, 4096).0, "the chunked file of 4096-triangle chunks");
+    assert_eq!(codec::bft::chunked::ONE_STREAM_MAX_TRIANGLES, 4 << 20);
+}
+
 /// The pieces of a chunked frame decode with the ordinary decoder to exactly the triangles
 /// whose `[t]` holds each tile; returns (verbatim, straddling, culled) chunk counts.
 fn check_frame(model: &ChunkedModel<Vec<u8>>, whole: &bft::Decoded, cam: &Camera, grid: &TileGrid) -> [u32; 3] {

@@ -412,11 +412,13 @@ pub struct EncodeArgs {
     /// Bits per quantized coordinate (8 to 24).
     #[arg(long, default_value_t = codec::Quantization::DEFAULT_BITS, value_parser = clap::value_parser!(u8).range(8..=24))]
     pub quant_bits: u8,
-    /// Triangles per chunk at most: a model with more is written as a chunked file,
-    /// whose frames skip, forward and sort chunk by chunk (0: always one stream). Smaller
-    /// chunks forward more of a frame untouched and cost more bytes at their borders.
-    #[arg(long, default_value_t = codec::bft::chunked::DEFAULT_CHUNK_TRIANGLES)]
-    pub chunk_triangles: u32,
+    /// Triangles per chunk at most: a model with more is written as a chunked file, whose
+    /// frames skip, forward and sort chunk by chunk (0: always one stream). Smaller chunks
+    /// forward more of a frame untouched and cost more bytes at their borders. Without it, a
+    /// model of at most 4,194,304 triangles (and 4M vertices) is one stream, and a larger
+    /// one chunked at 4096 triangles a chunk.
+    #[arg(long)]
+    pub chunk_triangles: Option<u32>,
     /// Where the chunked encoder's temporary files go (the system's temporary folder by
     /// default).
     #[arg(long)]

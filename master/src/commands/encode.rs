@@ -15,18 +15,26 @@ use crate::progress;
 
 /// `tessera encode IN -o OUT.bft [--quant-bits N] [--chunk-triangles N] [--temp-dir DIR]`.
 ///
-/// A model of more than `chunk_triangles` triangles becomes a chunked file
+/// A model of more than `--chunk-triangles` triangles becomes a chunked file
 /// (`codec::bft::chunked`), encoded out of core: the positions are read in one pass, the
 /// triangles in another, and partitioned through temporary files, so memory follows the
-/// vertex count, not the file. Fewer triangles give today's single-stream file, byte for
-/// byte what `bft::encode` writes. The output is written to a temporary file and renamed.
+/// vertex count, not the file. Fewer triangles give the single-stream file, byte for byte
+/// what `bft::encode` writes; so does, without the flag, a model of at most
+/// `ONE_STREAM_MAX_TRIANGLES`. The output is written to a temporary file and renamed.
 pub fn run(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
     check_extension(output, &["bft"], "the output of encode")?;
     check_distinct(&[input], &[output])?;
     let start = Instant::now();
+    // Without --chunk-triangles, chunks only for a model too large for one stream.
+    let (chunk_triangles, one_stream_up_to) = match options.chunk_triangles {
+        None => (bft::chunked::DEFAULT_CHUNK_TRIANGLES, bft::chunked::ONE_STREAM_MAX_TRIANGLES),
+        Some(0) => (u32::MAX, 0),
+        Some(n) => (n, 0),
+    };
     let opts = ChunkOptions {
         quant_bits: options.quant_bits,
-        chunk_triangles: if options.chunk_triangles == 0 { u32::MAX } else { options.chunk_triangles },
+        chunk_triangles,
+        one_stream_up_to,
         temp_dir: options.temp_dir.clone(),
         stream: bft::EncodeOptions {
             quant_bits: options.quant_bits,

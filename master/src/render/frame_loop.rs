@@ -110,7 +110,8 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     if let Some(model) = scene.model_message() {
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
     }
-    let movie = if crate::movie::is_movie(&plan.out) {
+    let movie_out = crate::movie::is_movie(&plan.out).then_some(());
+    let movie = if movie_out.is_some() {
         let width = if plan.stereo.is_some() { grid.width * 2 } else { grid.width };
         Some(crate::movie::Movie::start(&plan.out, width, grid.height, plan.fps, plan.timeout)?)
     } else {
@@ -143,6 +144,12 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     let mut frames = frame_source(plan, cam, control.as_ref());
     // Display ranks with windows send what a person does in the first of them.
     let windowed_displays = plan.present && direct.is_some();
+    // A `--frames` run whose frame is the one before (a still camera, a repeated eye
+    // position) reuses it: rank 0 neither sorts nor sends, the workers do nothing, and the
+    // writer copies the frame before's files. Not for movies, nor with display ranks (which
+    // write the displays themselves); a live run makes no frame that did not change.
+    let reuse = control.is_none() && !plan.direct && movie_out.is_none();
+    let mut last_views: Option<Vec<ViewSpec>> = None;
     let result = (|| -> Result<()> {
         loop {
             let (k, views) = match frames.next_step(scene.as_ref())? {
@@ -178,6 +185,17 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
                 }
                 Step::Frame(k, views) => (k, views),
             };
+            if reuse && last_views.as_ref() == Some(&views) {
+                finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
+                for p in frame_outputs(&plan.out, k, plan.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
+                    if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
+                        bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+                    }
+                }
+                writer.repeat(k)?;
+                continue;
+            }
+            last_views = reuse.then(|| views.clone());
             let n = views.len() as u32;
             for (j, spec) in views.into_iter().enumerate() {
                 let ViewSpec { camera, eye, display, grid } = spec;
@@ -429,6 +447,7 @@ fn complete(
         eye,
         display: display.map(|i| plan.wall.as_ref().expect("a wall").displays[i].name.clone()),
         rank: 0,
+        reused: false,
         sort_ms,
         send_ms,
         wait_ms,
@@ -463,6 +482,8 @@ struct Shows {
 enum WriterJob {
     View(Box<Written>),
     Snapshot(std::path::PathBuf, Client),
+    /// Frame `k` is the frame before, again: its files are copied.
+    Repeat(u32),
 }
 
 /// The writer thread: images (or movie frames) and stats lines, in frame order, off rank
@@ -487,6 +508,7 @@ impl Writer {
         let Shows { publisher, mut present } = shows;
         let (tx, rx) = std::sync::mpsc::sync_channel::<WriterJob>(depth);
         let (out, frames, wall, stereo) = (plan.out.clone(), plan.frames, plan.wall.clone(), plan.stereo);
+        let (direct, codec_name) = (plan.direct, codec_name(plan.pixel_codec));
         // With display ranks, they write the displays and rank 0 writes no image; a live run
         // writes snapshots only.
         let images = !plan.direct;
@@ -518,6 +540,34 @@ impl Writer {
                             Some(Ok(())) => client.send(&serde_json::json!({ "ok": "snapshot", "path": path })),
                             Some(Err(e)) => client.error(format!("snapshot: {}", crate::output::one_line(&e))),
                             None => client.error("snapshot: no frame has been shown yet"),
+                        }
+                        continue;
+                    }
+                    WriterJob::Repeat(k) => {
+                        let (start, write_start) = (Instant::now(), unix_ms());
+                        let before = frame_outputs(&out, k.saturating_sub(1), frames, wall.as_ref(), stereo, direct);
+                        let now = frame_outputs(&out, k, frames, wall.as_ref(), stereo, direct);
+                        for (from, to) in before.iter().zip(&now).filter(|_| images && !live) {
+                            let bytes =
+                                std::fs::read(from).with_context(|| format!("cannot read {}", from.display()))?;
+                            crate::output::write_atomic(to, |w| std::io::Write::write_all(w, &bytes))?;
+                        }
+                        let write_ms = ms(start);
+                        let now_t = Instant::now();
+                        let frame_ms = (now_t - last).as_secs_f64() * 1e3;
+                        last = now_t;
+                        eprintln!("frame {}: the frame before, still ({write_ms:.1} ms)", k + 1);
+                        let line = MasterStats {
+                            frame: k,
+                            reused: true,
+                            write_ms,
+                            frame_ms,
+                            rss_mb: resident_mb(),
+                            timeline: vec![Span::between("write", write_start, unix_ms(), epoch)],
+                            ..MasterStats::new(codec_name.clone())
+                        };
+                        if let Some(log) = stats.as_mut() {
+                            log.line(&serde_json::to_string(&line)?)?;
                         }
                         continue;
                     }
@@ -621,6 +671,11 @@ impl Writer {
     /// the writer stopped, which [`Writer::finish`] reports.
     fn send(&self, w: Written) -> Result<()> {
         self.job(WriterJob::View(Box::new(w)))
+    }
+
+    /// Frame `k` is the frame before: its files are that frame's, copied.
+    fn repeat(&self, k: u32) -> Result<()> {
+        self.job(WriterJob::Repeat(k))
     }
 
     /// Writes the last frame written to `path` once the frames before it are written, and
@@ -1161,6 +1216,7 @@ fn command_name(command: &Command) -> &'static str {
 
 /// One view of a frame: its camera, its eye (stereo) and, on a wall whose displays each
 /// have a frame, the display, with the grid of the view's frame.
+#[derive(Clone, PartialEq)]
 struct ViewSpec {
     camera: Camera,
     eye: Option<Eye>,

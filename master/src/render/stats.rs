@@ -34,6 +34,10 @@ pub(super) struct MasterStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub display: Option<String>,
     pub rank: usize,
+    /// The frame is the frame before, reused (a still camera of a `--frames` run): nothing
+    /// was sorted, sent or rendered, and its files are the frame before's.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub reused: bool,
     pub sort_ms: f64,
     pub send_ms: f64,
     pub wait_ms: f64,
@@ -72,6 +76,37 @@ pub(super) struct MasterStats {
     /// for and compositing the workers' pixels), `swap` (with display ranks: waiting for
     /// every display to be complete) and `write` (on the writer thread).
     pub timeline: Vec<Span>,
+}
+
+impl MasterStats {
+    /// A line of nothing done yet, for frame 0.
+    pub fn new(pixel_codec: String) -> MasterStats {
+        MasterStats {
+            frame: 0,
+            eye: None,
+            display: None,
+            rank: 0,
+            reused: false,
+            sort_ms: 0.0,
+            send_ms: 0.0,
+            wait_ms: 0.0,
+            composite_ms: 0.0,
+            write_ms: 0.0,
+            frame_ms: 0.0,
+            rss_mb: None,
+            chunks: None,
+            nsp: None,
+            tiles: Vec::new(),
+            pixel_codec,
+            pixel_bytes: 0,
+            pixel_coded_bytes: 0,
+            pixel_raw_bytes: 0,
+            pixel_encode_ms: 0.0,
+            pixel_decode_ms: 0.0,
+            displays: None,
+            timeline: Vec::new(),
+        }
+    }
 }
 
 /// The swap barrier of a view on a wall with display ranks: how many displays, when the

@@ -43,6 +43,9 @@ pub struct ChunkOptions {
     /// Triangles per chunk at most. Smaller chunks let a frame skip and forward more of the
     /// model untouched, and cost more bytes at their borders (see the README's figures).
     pub chunk_triangles: u32,
+    /// A model of at most this many triangles whose vertices fit one partition bucket (at
+    /// most 4M) is written as one stream whatever `chunk_triangles` says (0: never).
+    pub one_stream_up_to: u64,
     /// Where temporary files go (the system's temporary folder if `None`).
     pub temp_dir: Option<PathBuf>,
     /// Return the input vertex of every slot ([`ChunkedEncoded::slot_vertex`]), for tests.
@@ -59,6 +62,7 @@ impl Default for ChunkOptions {
         ChunkOptions {
             quant_bits: Quantization::DEFAULT_BITS,
             chunk_triangles: DEFAULT_CHUNK_TRIANGLES,
+            one_stream_up_to: 0,
             temp_dir: None,
             keep_slot_vertex: false,
             one_chunk_as_stream: true,
@@ -333,6 +337,8 @@ pub fn encode_chunked(
     let quant = Quantization::fit(positions, Some(&used), options.quant_bits)?;
     let unique_vertices = used.iter().filter(|&&u| u).count() as u32;
     drop(used);
+    // A model small enough for one stream is one chunk: the single-stream file, byte for byte.
+    let target = if total <= options.one_stream_up_to && cells == 1 { usize::MAX } else { target };
 
     //    Buckets into chunks; chunk-ordered triangles into one spill, noting which vertices
     //    several chunks use.
@@ -384,7 +390,7 @@ pub fn encode_chunked(
     let mut normal_sums: HashMap<u32, Vec3> = HashMap::new();
     let mut slot_vertex = Vec::new();
     let (mut slots, mut tris_done, mut commands) = (0u64, 0u64, 0u64);
-    let batch_triangles = (rayon::current_num_threads() * 8 * target).max(1 << 20);
+    let batch_triangles = rayon::current_num_threads().saturating_mul(8).saturating_mul(target).max(1 << 20);
     let mut next = 0;
     while next < chunks {
         let mut end = next;

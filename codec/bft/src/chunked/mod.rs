@@ -78,3 +78,11 @@ pub use source::{ChunkSource, FileSource};
 pub const VERSION: u16 = super::format::CHUNKED_VERSION;
 /// The default number of triangles per chunk (see `ChunkOptions::chunk_triangles`).
 pub const DEFAULT_CHUNK_TRIANGLES: u32 = 4096;
+/// `tessera encode`'s default: a model of at most this many triangles (and at most 4M
+/// vertices, one partition bucket) is one stream, and only a larger one is chunked
+/// (`ChunkOptions::one_stream_up_to`). Chunks cost bytes (the dragon 1.41x at 4096 triangles
+/// a chunk) and buy culling: rank 0 sorts a single stream whole every frame, 43-47 ns a
+/// triangle alone (the dragon's 871k in 37.6-40.9 ms) and 138-182 ms for the dragon beside a
+/// worker on 2 cores, so at this size 0.18-0.8 s a frame whatever the view shows, where a
+/// chunked file sorts what is in view (docs/results.md, "Chunked models and scale").
+pub const ONE_STREAM_MAX_TRIANGLES: u64 = 4 << 20;
