@@ -22,6 +22,7 @@
 
 use std::num::NonZeroU32;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Sender, SyncSender};
 use std::sync::Arc;
 use std::time::Duration;
@@ -90,6 +91,9 @@ enum Shown {
 pub struct Windows {
     proxy: EventLoopProxy<Shown>,
     thread: Option<std::thread::JoinHandle<Result<()>>>,
+    /// A person closed them (Q, Escape, a closed window): the quit is on its way to rank 0,
+    /// and frames that come meanwhile are not drawn.
+    quit: Arc<AtomicBool>,
 }
 
 impl Windows {
@@ -108,6 +112,8 @@ impl Windows {
             _ => bail!("the windows need an X display, and DISPLAY is not set (run on one, or under Xvfb)"),
         };
         let (opened, open) = std::sync::mpsc::channel::<Result<EventLoopProxy<Shown>>>();
+        let quit = Arc::new(AtomicBool::new(false));
+        let quit_set = quit.clone();
         let thread = std::thread::Builder::new()
             .name("windows".into())
             .spawn(move || -> Result<()> {
@@ -120,7 +126,7 @@ impl Windows {
                     }
                 };
                 event_loop.set_control_flow(ControlFlow::Wait);
-                let mut app = App::new(specs, behaviour, input, opened, event_loop.create_proxy());
+                let mut app = App::new(specs, behaviour, input, opened, event_loop.create_proxy(), quit_set);
                 let ran = event_loop.run_app(&mut app);
                 if let Some(e) = app.error.take() {
                     return Err(e);
@@ -130,7 +136,7 @@ impl Windows {
             .context("cannot start the windows' thread")?;
         loop {
             match open.recv_timeout(beat) {
-                Ok(Ok(proxy)) => return Ok(Windows { proxy, thread: Some(thread) }),
+                Ok(Ok(proxy)) => return Ok(Windows { proxy, thread: Some(thread), quit }),
                 Ok(Err(e)) => {
                     let _ = thread.join();
                     return Err(e);
@@ -160,15 +166,20 @@ impl Windows {
     /// the windows closed, or took longer than `timeout`.
     pub fn show_each(&self, images: Vec<Image>, timeout: Duration) -> Result<()> {
         let (drawn, done) = std::sync::mpsc::sync_channel(1);
+        let closed = || match self.quit.load(Ordering::Relaxed) {
+            // Quit by a person: the run ends once rank 0 has the quit.
+            true => Ok(()),
+            false => bail!("the windows are closed"),
+        };
         if self.proxy.send_event(Shown::Each { images, drawn }).is_err() {
-            bail!("the windows are closed");
+            return closed();
         }
         match done.recv_timeout(timeout) {
             Ok(()) => Ok(()),
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
                 bail!("the windows did not draw a frame within {:.0} s", timeout.as_secs_f64())
             }
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => bail!("the windows are closed"),
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => closed(),
         }
     }
 
@@ -257,6 +268,8 @@ struct App {
     screenshots: u32,
     /// Why the windows failed, for the thread to return.
     error: Option<anyhow::Error>,
+    /// Set when a person quits.
+    quit: Arc<AtomicBool>,
 }
 
 impl App {
@@ -266,8 +279,10 @@ impl App {
         input: Input,
         opened: Sender<Result<EventLoopProxy<Shown>>>,
         proxy: EventLoopProxy<Shown>,
+        quit: Arc<AtomicBool>,
     ) -> App {
         App {
+            quit,
             size: specs.first().map_or((0, 0), |s| s.size),
             specs,
             behaviour,
@@ -334,6 +349,7 @@ impl App {
     }
 
     fn quit(&mut self, event_loop: &ActiveEventLoop) {
+        self.quit.store(true, Ordering::Relaxed);
         self.send(Command::Quit {});
         event_loop.exit();
     }
@@ -425,6 +441,8 @@ impl App {
         Ok(())
     }
 
+    /// The windows failed: why, for whoever opened them or for the thread to return; the run
+    /// is told to quit (not as a person's quit: the failure is the run's error).
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: anyhow::Error) {
         match self.opened.take() {
             Some(opened) => {
@@ -432,7 +450,8 @@ impl App {
             }
             None => self.error = Some(e),
         }
-        self.quit(event_loop);
+        self.send(Command::Quit {});
+        event_loop.exit();
     }
 }
 

@@ -130,14 +130,16 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
     };
     let mut views: BTreeMap<u32, View> = BTreeMap::new();
     loop {
+        // The end of the run: the windows close, saying why if they failed.
+        let end = |windows: Option<Windows>| windows.map_or(Ok(()), Windows::close);
         let (from, bytes) = match t.recv(std::time::Duration::from_secs(3600)) {
             Ok(m) => m,
             Err(RecvError::Timeout) => bail!("no message for an hour"),
-            Err(RecvError::Disconnected) => return Ok(()),
+            Err(RecvError::Disconnected) => return end(windows),
         };
         let view = if from == 0 {
             match ToDisplay::decode(&bytes).context("bad message from rank 0")? {
-                ToDisplay::Shutdown => return Ok(()),
+                ToDisplay::Shutdown => return end(windows),
                 ToDisplay::DisplayFrame(job) => {
                     let v = job.view;
                     views.entry(v).or_insert_with(new_view).job = Some(job);
