@@ -71,6 +71,8 @@ fn a_silent_worker_ends_the_run_at_any_frames_in_flight() {
             "2x2",
             "--frames",
             "4",
+            // Moving: a still frame would be reused, not sent.
+            "--orbit",
             "--frames-in-flight",
             depth,
             "--timeout",

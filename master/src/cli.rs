@@ -512,6 +512,11 @@ pub struct RenderArgs {
     /// Reassign tiles every frame from the costs measured the frame before.
     #[arg(long)]
     pub balance: bool,
+    /// Make every frame, even one whose view is the frame before's (which is otherwise
+    /// reused: no sort, no send, no render, its files copied). For measuring what a still
+    /// view would cost, and for tests of what changes between frames.
+    #[arg(long)]
+    pub no_frame_reuse: bool,
     /// How the tiles sent to the workers are entropy-coded: `prefix` (static Huffman codes
     /// per tile) sorts and decodes several times faster; `range` (the adaptive range coder
     /// of `.bft` files) sends about 5% fewer bytes.
@@ -567,7 +572,10 @@ pub struct RenderArgs {
     pub cache_mb: u64,
     /// Chunked models: each worker's cache of the chunks it was sent whole, in MB (kept
     /// compressed, with their border normals); rank 0 sends a chunk again only when the
-    /// worker no longer holds it.
+    /// worker no longer holds it. `.bft` models: it bounds too the meshes a worker keeps
+    /// from the frame before, so that a stream byte-identical to one it decoded then (a
+    /// verbatim chunk still in view, a tile whose submesh did not change) is not decoded
+    /// again (0 keeps none).
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
     pub worker_cache_mb: u64,
     /// Progressive meshes: the screen-space error bound in pixels.

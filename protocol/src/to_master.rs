@@ -129,7 +129,8 @@ impl Body for DisplayReady {
 /// ```text
 /// frame u32, tile count u32, then per tile:
 ///   index u32, rect 4 x u32, decode/adapt/upload/render/readback/encode ms 6 x f64,
-///   triangles u32, codec (PixelCodec, 2 bytes), coded bytes u32, pixels length u32 +
+///   triangles u32, reused triangles u32, codec (PixelCodec, 2 bytes), coded bytes u32,
+///   pixels length u32 +
 ///   bytes (raw: (x1-x0)*(y1-y0)*4; coded: at most that);
 /// then the frame's span on the worker's clock (ms since the Unix epoch): start, prepared,
 /// end 3 x f64 (FrameSpan); then what a progressive mesh's adaptation held (PmMemory, zeros
@@ -151,6 +152,9 @@ pub struct TilePixels {
     pub rect: [u32; 4],
     pub times: TileTimes,
     pub triangles: u32,
+    /// Of `triangles`, those the worker did not decode again: streams byte-identical to ones
+    /// it decoded the frame before.
+    pub reused: u32,
     pub codec: PixelCodec,
     /// The coded pixels' size as the worker sent them (the same as `pixels.len()`, except in
     /// rank 0's copy of a tile whose pixels went to display ranks, which has none).
@@ -260,6 +264,7 @@ impl Body for Pixels {
                 w.f64(v);
             }
             w.u32(t.triangles);
+            w.u32(t.reused);
             t.codec.write(w);
             w.u32(t.coded_bytes);
             w.bytes(&t.pixels);
@@ -275,7 +280,7 @@ impl Body for Pixels {
     }
     fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
         let frame = r.u32("frame")?;
-        let n = r.count(82, "tiles")?;
+        let n = r.count(86, "tiles")?;
         let mut tiles = Vec::with_capacity(n);
         for _ in 0..n {
             let index = r.u32("tile index")?;
@@ -289,6 +294,7 @@ impl Body for Pixels {
                 encode_ms: r.f64("times")?,
             };
             let triangles = r.u32("triangles")?;
+            let reused = r.u32("reused triangles")?;
             let codec = PixelCodec::read(r)?;
             let coded_bytes = r.u32("coded bytes")?;
             let pixels = r.bytes("pixels")?.to_vec();
@@ -307,7 +313,7 @@ impl Body for Pixels {
                     expected.map_or("more than 2^64".into(), |e| e.to_string())
                 )));
             }
-            tiles.push(TilePixels { index, rect, times, triangles, codec, coded_bytes, pixels });
+            tiles.push(TilePixels { index, rect, times, triangles, reused, codec, coded_bytes, pixels });
         }
         let span = FrameSpan { start_ms: r.f64("span")?, prepared_ms: r.f64("span")?, end_ms: r.f64("span")? };
         let pm = PmMemory {

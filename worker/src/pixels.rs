@@ -128,6 +128,7 @@ mod tests {
             rect: [10, 20, 10 + w, 20 + h],
             times: Default::default(),
             triangles: 0,
+            reused: 0,
             codec,
             coded_bytes: pixels.len() as u32,
             pixels,

@@ -60,10 +60,11 @@ impl RenderMesh {
     }
 
     /// The meshes one after the other, as one (a tile's streams).
-    pub fn concat(parts: &[RenderMesh]) -> RenderMesh {
+    pub fn concat<M: std::borrow::Borrow<RenderMesh>>(parts: &[M]) -> RenderMesh {
         let mut out = RenderMesh::default();
-        let colored = parts.iter().any(|p| !p.colors.is_empty());
+        let colored = parts.iter().any(|p| !p.borrow().colors.is_empty());
         for p in parts {
+            let p = p.borrow();
             let base = out.positions.len() as u32;
             out.positions.extend_from_slice(&p.positions);
             out.normals.extend_from_slice(&p.normals);

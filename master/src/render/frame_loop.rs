@@ -148,7 +148,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     // position) reuses it: rank 0 neither sorts nor sends, the workers do nothing, and the
     // writer copies the frame before's files. Not for movies, nor with display ranks (which
     // write the displays themselves); a live run makes no frame that did not change.
-    let reuse = control.is_none() && !plan.direct && movie_out.is_none();
+    let reuse = control.is_none() && !plan.direct && movie_out.is_none() && !plan.no_frame_reuse;
     let mut last_views: Option<Vec<ViewSpec>> = None;
     let result = (|| -> Result<()> {
         loop {

@@ -72,6 +72,8 @@ pub struct Plan {
     pub eye_stream: Option<crate::cli::EyeStream>,
     /// `--present`: a live run shown in windows.
     pub present: bool,
+    /// `--no-frame-reuse`: a frame whose views are the frame before's is made again.
+    pub no_frame_reuse: bool,
 }
 /// How the workers adapt a progressive mesh (`render`'s PM flags, in bytes where they are
 /// sizes).
@@ -259,6 +261,7 @@ fn plan_with(args: &RenderArgs, window: bool) -> Result<Plan> {
         control,
         eye_stream: args.eye_stream.clone(),
         present: args.present,
+        no_frame_reuse: args.no_frame_reuse,
     })
 }
 

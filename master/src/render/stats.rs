@@ -177,6 +177,10 @@ pub(super) struct WorkerStats {
     readback_ms: f64,
     /// Coding the pixels for the wire (`--pixel-codec`).
     encode_ms: f64,
+    /// Triangles decoded this frame, and taken instead from the frame before's meshes
+    /// (streams byte-identical to ones decoded then).
+    decoded_triangles: u64,
+    reused_triangles: u64,
     tiles: Vec<WorkerTileStats>,
     /// A progressive mesh's memory: graphics memory of the adaptation (static and dynamic
     /// buffers), and out of core the node bytes loaded this frame, the nodes resident, the
@@ -203,6 +207,7 @@ struct PmMemoryStats {
 struct WorkerTileStats {
     index: u32,
     triangles: u32,
+    reused_triangles: u32,
     decode_ms: f64,
     adapt_ms: f64,
     upload_ms: f64,
@@ -248,11 +253,14 @@ pub(super) fn worker_stats(
         render_ms: sum(|t| t.render_ms),
         readback_ms: sum(|t| t.readback_ms),
         encode_ms: sum(|t| t.encode_ms),
+        decoded_triangles: pixels.iter().map(|p| (p.triangles - p.reused.min(p.triangles)) as u64).sum(),
+        reused_triangles: pixels.iter().map(|p| p.reused as u64).sum(),
         tiles: pixels
             .iter()
             .map(|p| WorkerTileStats {
                 index: p.index,
                 triangles: p.triangles,
+                reused_triangles: p.reused,
                 decode_ms: p.times.decode_ms,
                 adapt_ms: p.times.adapt_ms,
                 upload_ms: p.times.upload_ms,

@@ -24,6 +24,47 @@ use crate::RenderMesh;
 pub(super) struct BftTiles {
     chunks: Vec<ChunkCache<KeptChunk>>,
     shares: Vec<Option<FrameJob>>,
+    decoded: DecodedCache,
+}
+
+/// The meshes the worker decoded the frame before, by their stream: a stream byte-identical
+/// to one of them (a verbatim chunk still in view, a tile whose submesh did not change) is
+/// not decoded again. It keeps only the last frame's meshes, within `--worker-cache-mb`
+/// (the bound of the kept chunks, given to each cache alike). Frames are the same with it or
+/// without: the same bytes decode to the same mesh.
+#[derive(Default)]
+struct DecodedCache {
+    entries: HashMap<u64, Decoded>,
+}
+
+/// A stream's bytes and border normals (compared in full on a hit: the hash only finds the
+/// candidate), and its mesh.
+struct Decoded {
+    bft: Vec<u8>,
+    normals: Vec<(u32, [f32; 3])>,
+    mesh: Arc<RenderMesh>,
+}
+
+impl DecodedCache {
+    fn key(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        bft.hash(&mut h);
+        for (slot, n) in normals {
+            slot.hash(&mut h);
+            n.map(f32::to_bits).hash(&mut h);
+        }
+        h.finish()
+    }
+
+    fn get(&self, key: u64, bft: &[u8], normals: &[(u32, [f32; 3])]) -> Option<Arc<RenderMesh>> {
+        self.entries.get(&key).filter(|d| d.bft == bft && d.normals == normals).map(|d| d.mesh.clone())
+    }
+}
+
+/// Bytes a decoded mesh holds.
+fn mesh_bytes(m: &RenderMesh) -> u64 {
+    (m.positions.len() * 24 + m.colors.len() * 4 + m.indices.len() * 4) as u64
 }
 
 impl Model for BftTiles {
@@ -50,7 +91,7 @@ impl Model for BftTiles {
         let jobs: Vec<FrameJob> = self.shares.iter_mut().map(|s| s.take().expect("every share")).collect();
         self.chunks.resize_with(n, ChunkCache::default);
         // The first tile in order that fails is the one reported.
-        let meshes = tile_meshes(&jobs, &mut self.chunks).map_err(|(index, e)| e.at(index))?;
+        let meshes = tile_meshes(&jobs, &mut self.chunks, &mut self.decoded).map_err(|(index, e)| e.at(index))?;
         let prepared_ms = unix_ms();
         let mut tiles = Vec::with_capacity(meshes.len());
         for mesh in meshes {
@@ -77,7 +118,11 @@ pub fn kept_cost(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
 /// mirror of its cache in `chunks` follows), chunks to keep go into the cache and chunks kept
 /// before come out of it; then every stream decodes in parallel, and each tile's streams are
 /// joined in order.
-fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Result<Vec<TileMesh>, (u32, TileError)> {
+fn tile_meshes(
+    jobs: &[FrameJob],
+    chunks: &mut [ChunkCache<KeptChunk>],
+    cache: &mut DecodedCache,
+) -> Result<Vec<TileMesh>, (u32, TileError)> {
     let mut tiles: Vec<(u32, [u32; 4])> = Vec::new();
     let mut slot_of: HashMap<u32, usize> = HashMap::new();
     // (tile slot, chunk, stream), tile by tile in the order of first appearance.
@@ -112,13 +157,38 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
         }
     }
     let decode_only = jobs[0].decode_only;
-    // With --decode-only a stream's mesh is dropped as soon as it is counted: nothing is
-    // drawn, and a whole large model's meshes need not be held at once.
-    type Decoded = Result<(RenderMesh, usize, f64), (u32, TileError)>;
-    let decoded: Vec<Decoded> = streams
+    let bytes_of = |source: &Source| -> (Vec<u8>, Vec<(u32, [f32; 3])>) {
+        match source {
+            Source::Sent(b, n) => (b.to_vec(), n.to_vec()),
+            Source::Kept(k) => (k.0.clone(), k.1.clone()),
+        }
+    };
+    // Streams the frame before decoded are taken from the cache; the rest decode in
+    // parallel.
+    let keys: Vec<u64> = streams
         .par_iter()
-        .map(|(slot, chunk, source)| {
+        .map(|(_, _, source)| match source {
+            Source::Sent(b, n) => DecodedCache::key(b, n),
+            Source::Kept(k) => DecodedCache::key(&k.0, &k.1),
+        })
+        .collect();
+    let hits: Vec<Option<Arc<RenderMesh>>> = streams
+        .iter()
+        .zip(&keys)
+        .map(|((_, _, source), &key)| match source {
+            Source::Sent(b, n) => cache.get(key, b, n),
+            Source::Kept(k) => cache.get(key, &k.0, &k.1),
+        })
+        .collect();
+    type Decoded1 = Result<(Arc<RenderMesh>, usize, f64, bool), (u32, TileError)>;
+    let decoded: Vec<Decoded1> = streams
+        .par_iter()
+        .zip(&hits)
+        .map(|((slot, chunk, source), hit)| {
             let index = tiles[*slot].0;
+            if let Some(mesh) = hit {
+                return Ok((mesh.clone(), mesh.triangle_count(), 0.0, true));
+            }
             let (bft, normals) = match source {
                 Source::Sent(b, n) => (*b, *n),
                 Source::Kept(k) => (&k.0[..], &k.1[..]),
@@ -128,22 +198,48 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
                 (e, _) => (index, e),
             })?;
             let triangles = mesh.triangle_count();
-            Ok((if decode_only { RenderMesh::default() } else { mesh }, triangles, ms))
+            Ok((Arc::new(mesh), triangles, ms, false))
         })
         .collect();
-    let mut parts: Vec<Vec<RenderMesh>> = (0..tiles.len()).map(|_| Vec::new()).collect();
+    // The cache keeps this frame's meshes (reused or new) within the bound, in stream
+    // order, and forgets the rest.
+    let limit = jobs.iter().map(|j| j.chunk_cache).max().unwrap_or(0);
+    let mut next = DecodedCache::default();
+    let mut held = 0u64;
+    for (((_, _, source), &key), d) in streams.iter().zip(&keys).zip(&decoded) {
+        let Ok((mesh, ..)) = d else { continue };
+        let size = mesh_bytes(mesh);
+        if held + size > limit || next.entries.contains_key(&key) {
+            continue;
+        }
+        held += size;
+        let (bft, normals) = bytes_of(source);
+        next.entries.insert(key, Decoded { bft, normals, mesh: mesh.clone() });
+    }
+    *cache = next;
+    let mut parts: Vec<Vec<Arc<RenderMesh>>> = (0..tiles.len()).map(|_| Vec::new()).collect();
     let mut out: Vec<TileMesh> = tiles
         .iter()
-        .map(|&(index, rect)| TileMesh { index, rect, mesh: RenderMesh::default(), triangles: 0, decode_ms: 0.0 })
+        .map(|&(index, rect)| TileMesh { index, rect, mesh: Arc::default(), triangles: 0, reused: 0, decode_ms: 0.0 })
         .collect();
     for ((slot, _, _), d) in streams.iter().zip(decoded) {
-        let (mesh, n, ms) = d?;
+        let (mesh, n, ms, reused) = d?;
         out[*slot].decode_ms += ms;
         out[*slot].triangles += n as u32;
-        parts[*slot].push(mesh);
+        if reused {
+            out[*slot].reused += n as u32;
+        }
+        // With --decode-only nothing is drawn: the tile holds no mesh.
+        if !decode_only {
+            parts[*slot].push(mesh);
+        }
     }
     for (t, mut p) in out.iter_mut().zip(parts) {
-        t.mesh = if p.len() == 1 { p.pop().expect("one part") } else { RenderMesh::concat(&p) };
+        t.mesh = match p.len() {
+            0 => Arc::default(),
+            1 => p.pop().expect("one part"),
+            _ => Arc::new(RenderMesh::concat(&p.iter().map(|m| m.as_ref()).collect::<Vec<&RenderMesh>>())),
+        };
     }
     Ok(out)
 }
@@ -153,8 +249,10 @@ fn tile_meshes(jobs: &[FrameJob], chunks: &mut [ChunkCache<KeptChunk>]) -> Resul
 struct TileMesh {
     index: u32,
     rect: [u32; 4],
-    mesh: RenderMesh,
+    mesh: Arc<RenderMesh>,
     triangles: u32,
+    /// Of them, those taken from the frame before's meshes.
+    reused: u32,
     decode_ms: f64,
 }
 
@@ -179,7 +277,7 @@ fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh,
 
 /// Renders one decoded tile of `job`; with `job.decode_only`, answers transparent pixels.
 fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) -> Result<TilePixels, TileError> {
-    let TileMesh { index, rect, mesh, triangles, decode_ms } = tile_mesh;
+    let TileMesh { index, rect, mesh, triangles, reused, decode_ms } = tile_mesh;
     let (index, rect, decode_ms) = (*index, *rect, *decode_ms);
     let (rgba, times) = if job.decode_only {
         let [x0, y0, x1, y1] = rect.map(|v| v as usize);
@@ -199,6 +297,7 @@ fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) ->
             encode_ms: 0.0,
         },
         triangles: *triangles,
+        reused: *reused,
         codec: PixelCodec::Raw,
         coded_bytes: rgba.len() as u32,
         pixels: rgba,

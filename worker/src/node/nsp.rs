@@ -81,6 +81,7 @@ impl NspView {
                         encode_ms: 0.0,
                     },
                     triangles: drawn.len() as u32,
+                    reused: 0,
                     codec: PixelCodec::Raw,
                     coded_bytes: 0,
                     pixels: crop(&rgba, group.rect, rect),

@@ -155,6 +155,7 @@ impl PmTiles {
                         encode_ms: 0.0,
                     },
                     triangles,
+                    reused: 0,
                     codec: PixelCodec::Raw,
                     coded_bytes: 0,
                     pixels: crop(&group_rgba, group.rect, rect),

@@ -48,7 +48,9 @@ impl Scene for BftScene {
         let borders = self.normals.for_tiles(model, &self.boxes, &tiles, grid);
         let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
         let owner = ctx.owners(&indices);
-        let mut jobs = ctx.frame_jobs(vp, 0);
+        // No chunks to keep; the bound is that of the meshes each worker keeps from the frame
+        // before (a tile whose stream is the same is not decoded again).
+        let mut jobs = ctx.frame_jobs(vp, ctx.plan.worker_cache_bytes);
         let mut tile_stats = Vec::with_capacity(tiles.len());
         for ((tile, normals), &w) in tiles.into_iter().zip(borders).zip(&owner) {
             tile_stats.push(TileStats {
