@@ -6,7 +6,8 @@
 Prints one line per frame (rank 0's sort, send and composite; the workers' decode, upload,
 render and readback, summed over workers) and then the ranges and the overhead: sort + send +
 composite against the workers' render time, per frame and over the whole run (not for a
-`--decode-only` run, which renders nothing).
+`--decode-only` run, which renders nothing). Frames reused from the frame before (a still
+camera: `"reused": true`, nothing sorted or rendered) are counted apart.
 """
 import json
 import sys
@@ -22,7 +23,10 @@ def main(path):
         else:
             f["workers"].append(d)
     rows = []
+    reused = [k for k in frames if frames[k]["master"].get("reused")]
     for k in sorted(frames):
+        if k in reused:
+            continue
         m, ws = frames[k]["master"], frames[k]["workers"]
         row = {s: m[s] for s in ("sort_ms", "send_ms", "composite_ms")}
         for s in ("decode_ms", "upload_ms", "render_ms", "readback_ms"):
@@ -39,6 +43,8 @@ def main(path):
         )
     if not rows:
         sys.exit(f"{path}: no frames")
+    if reused:
+        print(f"{len(reused)} of {len(frames)} frames reused from the frame before (a still view)")
     for s in ("sort_ms", "send_ms", "composite_ms", "decode_ms", "upload_ms", "render_ms", "readback_ms"):
         v = [r[s] for r in rows]
         print(f"{s[:-3]:>10}: {min(v):.1f}-{max(v):.1f} ms")

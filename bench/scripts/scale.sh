@@ -5,7 +5,7 @@
 # (--decode-only), so that rank 0's sort, memory and traffic are measured apart from
 # lavapipe:
 #   1. encode: time, triangles/s, peak memory (/usr/bin/time -v);
-#   2. a full view, 3 frames: sort time per frame, rank 0's resident memory;
+#   2. a full view, 3 frames (each made: --no-frame-reuse): sort time per frame, rank 0's resident memory;
 #   3. a close-up that sees a few percent of the model, 3 frames;
 #   4. a slow orbit (1 degree a frame, 6 frames): the bytes each frame sends against the first.
 # Usage: bench/scripts/scale.sh [MIN_TRIANGLES] [TMPDIR]   (e.g. bench/scripts/scale.sh 20M for a quick run)
@@ -49,7 +49,7 @@ EOF
 
 read -r LO HI < <($T stats "$BFT" --json | python3 -c 'import json,sys; s=json.load(sys.stdin); print(",".join(map(str,s["bbox_min"])), ",".join(map(str,s["bbox_max"])))')
 echo "== full view, 1920x1080, 8x8 tiles, 3 frames"
-"${MPI[@]}" $T render "$BFT" --size 1920x1080 --tiles 8x8 --frames 3 --decode-only --out "$DIR/full.png" --stats "$DIR/full.jsonl" > /dev/null 2>&1
+"${MPI[@]}" $T render "$BFT" --size 1920x1080 --tiles 8x8 --frames 3 --no-frame-reuse --decode-only --out "$DIR/full.png" --stats "$DIR/full.jsonl" > /dev/null 2>&1
 report "$DIR/full.jsonl"
 
 # A close-up: from near the model's box, looking at a point of the surface side, narrow.
@@ -58,7 +58,7 @@ lo=[float(v) for v in '$LO'.split(',')]; hi=[float(v) for v in '$HI'.split(',')]
 c=[(a+b)/2 for a,b in zip(lo,hi)]; s=max(b-a for a,b in zip(lo,hi))
 print(f'--target {c[0]},{c[1]},{c[2]} --eye {c[0]},{c[1]},{hi[2]+0.3*s} --fovy 12 --near {0.01*s} --far {4*s}')")
 echo "== close-up ($CLOSE), 3 frames"
-"${MPI[@]}" $T render "$BFT" --size 1920x1080 --tiles 8x8 --frames 3 --decode-only $CLOSE --out "$DIR/close.png" --stats "$DIR/close.jsonl" > /dev/null 2>&1
+"${MPI[@]}" $T render "$BFT" --size 1920x1080 --tiles 8x8 --frames 3 --no-frame-reuse --decode-only $CLOSE --out "$DIR/close.png" --stats "$DIR/close.jsonl" > /dev/null 2>&1
 report "$DIR/close.jsonl"
 
 echo "== slow orbit, 1 degree a frame, 6 frames"
