@@ -225,27 +225,24 @@ fn without_display_ranks_rank_0_opens_the_wall_s_windows() {
     let (wall, model) = (wall.to_str().unwrap(), mesh("stanford/bunny_zipper_c3d.obj.gz"));
     let reference = dir.path().join("reference.png");
     ok(&alone(&["render", &model, "--wall", wall, "--tiles", "4x2", "--out", reference.to_str().unwrap()]));
-    let x = Xvfb::start();
-    let mut cmd = Command::new(bin());
-    mpi_env(&mut cmd).env("DISPLAY", &x.display).args([
-        "render",
-        &model,
-        "--wall",
-        wall,
-        "--present",
-        "--control",
-        "127.0.0.1:0",
-        "--tiles",
-        "4x2",
-    ]);
-    let run = LiveRun::start(&mut cmd, Stdio::null(), true);
-    wait_frames(&run, 1);
-    let (left, left_at) = window(&x, "left");
-    let (right, right_at) = window(&x, "right");
-    assert!(left_at.contains("Position: 10,20") && right_at.contains("Position: 350,20"), "{left_at} {right_at}");
-    wait_shown(&x, &[("left", &left), ("right", &right)], &reference, "rank 0's windows");
-    assert_eq!(ask(&run, r#"{"cmd":"quit"}"#)["ok"], "quit");
-    assert!(run.wait().success(), "quit ends the run cleanly");
+    // Alone (rank 0 and a worker thread), then under mpirun with one worker rank.
+    for np in [0, 2] {
+        let x = Xvfb::start();
+        let mut cmd = Command::new(if np == 0 { bin() } else { "mpirun" });
+        mpi_env(&mut cmd);
+        if np > 0 {
+            cmd.args(["--oversubscribe", "-np", "2", "-x", &format!("DISPLAY={}", x.display), bin()]);
+        }
+        cmd.env("DISPLAY", &x.display).args(["render", &model, "--wall", wall, "--present"]);
+        let run = LiveRun::start(cmd.args(["--control", "127.0.0.1:0", "--tiles", "4x2"]), Stdio::null(), true);
+        wait_frames(&run, 1);
+        let (left, left_at) = window(&x, "left");
+        let (right, right_at) = window(&x, "right");
+        assert!(left_at.contains("Position: 10,20") && right_at.contains("Position: 350,20"), "{left_at} {right_at}");
+        wait_shown(&x, &[("left", &left), ("right", &right)], &reference, "rank 0's windows");
+        assert_eq!(ask(&run, r#"{"cmd":"quit"}"#)["ok"], "quit");
+        assert!(run.wait().success(), "quit ends the run cleanly (np {np})");
+    }
 }
 
 #[test]
