@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{alone, covered, differing, identical, mpirun, ok, pixels, reference};
+use common::{alone, covered, differing, identical, json_lines, mpirun, ok, pixels, reference};
 use testkit::mesh_arg as mesh;
 
 #[test]
@@ -117,8 +117,7 @@ fn chunked_models_render_the_same_frames_everywhere() {
         }
     }
     // The 8x6 run: chunks of every kind, and the worker kept chunks from frame to frame.
-    let lines: Vec<serde_json::Value> =
-        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines = json_lines(&stats);
     let chunks: Vec<&serde_json::Value> = lines.iter().filter(|l| l["rank"] == 0).map(|l| &l["chunks"]).collect();
     assert_eq!(chunks.len(), 3);
     assert!(chunks.iter().all(|c| c["verbatim"].as_u64() > Some(0) && c["straddling"].as_u64() > Some(0)));
@@ -132,8 +131,7 @@ fn chunked_models_render_the_same_frames_everywhere() {
         &["render", &chunked, "--size", size, "--tiles", "8x6", "--frames", "2", "--out", &out, "--stats", &still],
     ));
     assert!(identical(&frame("still", 2), &frame("ref", 1)));
-    let lines: Vec<serde_json::Value> =
-        std::fs::read_to_string(&still).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines = json_lines(&still);
     // A still view is the frame before, reused: nothing sorted or sent.
     assert_eq!(lines.iter().filter(|l| l["rank"] == 0).nth(1).unwrap()["reused"], true);
     // A view that moves a little: the second frame names most verbatim chunks the worker kept.
@@ -141,8 +139,7 @@ fn chunked_models_render_the_same_frames_everywhere() {
     let args =
         ["render", &chunked, "--size", size, "--tiles", "8x6", "--frames", "2", "--orbit", "--orbit-degrees", "0.2"];
     ok(&mpirun(2, &[], &[&args[..], &["--out", &p("nudged.png"), "--stats", &nudged]].concat()));
-    let lines: Vec<serde_json::Value> =
-        std::fs::read_to_string(&nudged).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines = json_lines(&nudged);
     let second = &lines.iter().filter(|l| l["rank"] == 0).nth(1).unwrap()["chunks"];
     assert!(second["kept"].as_u64() > second["sent"].as_u64(), "{second}");
 }
@@ -225,8 +222,7 @@ fn alone_more_workers_than_tiles_and_orbit() {
     assert!(frames.iter().all(|f| f.exists()));
     assert!(differing(&frames[0], &frames[1]) > 0, "the camera moved");
     // One line per frame per rank, with every stage time.
-    let lines: Vec<serde_json::Value> =
-        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines = json_lines(&stats);
     assert_eq!(lines.len(), 6);
     for l in &lines {
         let keys: &[&str] = if l["rank"] == 0 {
@@ -258,8 +254,7 @@ fn decode_only_measures_the_distribution_without_rasterizing() {
         args.extend(extra);
         args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
         ok(&alone(&args));
-        let lines: Vec<serde_json::Value> =
-            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&stats);
         (out, lines)
     };
     let (drawn, drawn_stats) = run("drawn", &[]);
@@ -355,8 +350,7 @@ fn timelines_order_the_stages_and_plot_draws_them() {
         stats.to_str().unwrap(),
     ];
     ok(&mpirun(3, &[], &args));
-    let lines: Vec<serde_json::Value> =
-        std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines = json_lines(&stats);
     let span = |line: &serde_json::Value, stage: &str| -> (f64, f64) {
         let s = line["timeline"].as_array().unwrap().iter().find(|s| s["stage"] == stage);
         let s = s.unwrap_or_else(|| panic!("no {stage} in {line}"));
@@ -413,8 +407,7 @@ fn a_still_camera_reuses_the_frame_before() {
             args.extend(["--wall", wall_file.to_str().unwrap()]);
         }
         ok(&if np == 1 { alone(&args) } else { mpirun(np, &[], &args) });
-        let lines: Vec<serde_json::Value> =
-            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&stats);
         let master: Vec<&serde_json::Value> = lines.iter().filter(|l| l["rank"] == 0).collect();
         assert_eq!(master.len(), 4);
         assert!(master[0].get("reused").is_none() && !master[0]["tiles"].as_array().unwrap().is_empty());
@@ -476,8 +469,7 @@ fn workers_reuse_what_they_decoded_the_frame_before() {
             stats.to_str().unwrap(),
         ];
         ok(&mpirun(3, &[], &args));
-        let lines: Vec<serde_json::Value> =
-            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&stats);
         lines.into_iter().filter(|l| l["rank"] != 0).collect::<Vec<_>>()
     };
     let kept = run("kept", "64");

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{alone, covered, identical, mpirun, ok, pixels, reference};
+use common::{alone, covered, identical, json_lines, mpirun, ok, pixels, reference};
 use testkit::mesh_arg as mesh;
 
 #[test]
@@ -269,8 +269,7 @@ fn display_ranks_write_the_same_displays_behind_a_swap_barrier() {
         args.extend(extra);
         args.extend(["--out", out.to_str().unwrap(), "--stats", stats.to_str().unwrap()]);
         ok(&mpirun(np, &[], &args));
-        let lines: Vec<serde_json::Value> =
-            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&stats);
         lines.into_iter().filter(|l| l["rank"] == 0).collect::<Vec<_>>()
     };
     let frames = ["--frames", "3", "--orbit"];
@@ -413,8 +412,7 @@ fn pixel_codecs_keep_the_frames_and_say_their_bytes() {
             args.extend(["--display-ranks", "2"]);
         }
         ok(&mpirun(np, &[], &args));
-        let lines: Vec<serde_json::Value> =
-            std::fs::read_to_string(&stats).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&stats);
         (display_pixels(&out, &names), lines)
     };
     let (raw, raw_stats) = run(3, "raw");

@@ -289,13 +289,22 @@ fn another_model_of_any_kind_loads_without_a_restart() {
     assert!(live.wait().success());
 }
 
-/// Waits until the run has made `frames` frames (its status).
-fn wait_frames(c: &mut Client, frames: u64) {
+/// The run's status once `done` holds of it (`what` says what was awaited).
+fn wait_status(c: &mut Client, what: &str, done: impl Fn(&Value) -> bool) -> Value {
     let deadline = Instant::now() + Duration::from_secs(120);
-    while c.ask(r#"{"cmd":"status"}"#)["frames"].as_u64() < Some(frames) {
-        assert!(Instant::now() < deadline, "no frame {frames}");
+    loop {
+        let status = c.ask(r#"{"cmd":"status"}"#);
+        if done(&status) {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "{what}: {status}");
         std::thread::sleep(Duration::from_millis(50));
     }
+}
+
+/// Waits until the run has made `frames` frames (its status).
+fn wait_frames(c: &mut Client, frames: u64) {
+    wait_status(c, &format!("no frame {frames}"), |s| s["frames"].as_u64() >= Some(frames));
 }
 
 #[test]
@@ -368,15 +377,7 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
 
 /// The status once a timed move has ended.
 fn wait_still(c: &mut Client) -> Value {
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let status = c.ask(r#"{"cmd":"status"}"#);
-        if status["animating"] == false {
-            return status;
-        }
-        assert!(Instant::now() < deadline, "the move did not end: {status}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_status(c, "the move did not end", |s| s["animating"] == false)
 }
 
 #[test]

@@ -7,8 +7,6 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader, Write};
-use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -24,26 +22,13 @@ const WALL: &str = "[window]\nx = 10\ny = 20\n\
                     [[display]]\nname = \"left\"\nx = 0\ny = 0\nwidth = 320\nheight = 240\nbezel = [0, 0, 10, 0]\n\
                     [[display]]\nname = \"right\"\nx = 340\ny = 0\nwidth = 320\nheight = 240\nbezel = [10, 0, 0, 0]\n";
 
-fn ask(run: &LiveRun, line: &str) -> Value {
-    let mut s = TcpStream::connect(&run.addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-    s.write_all(format!("{line}\n").as_bytes()).unwrap();
-    let mut answer = String::new();
-    BufReader::new(s).read_line(&mut answer).unwrap();
-    serde_json::from_str(&answer).unwrap()
-}
-
-/// The status once the run has shown `frames` frames.
-fn wait_frames(run: &LiveRun, frames: u64) -> Value {
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let status = ask(run, r#"{"cmd":"status"}"#);
-        if status["frames"].as_u64() >= Some(frames) {
-            return status;
-        }
-        assert!(Instant::now() < deadline, "{status}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+/// `render`'s frame of `model` on `wall` (4x2 tiles) with the camera of a run's `status`,
+/// as `out` and its `-display-NAME.png` files.
+fn render_at(model: &str, wall: &str, status: &Value, out: &Path) {
+    let v = |k: &str| (0..3).map(|i| status[k][i].as_f64().unwrap().to_string()).collect::<Vec<_>>().join(",");
+    let (eye, target) = (v("eye"), v("target"));
+    let args = ["render", model, "--wall", wall, "--tiles", "4x2", "--eye", &eye, "--target", &target];
+    ok(&alone(&[&args[..], &["--out", out.to_str().unwrap()]].concat()));
 }
 
 /// The window whose title ends with `display NAME`, with its position and size.
@@ -129,7 +114,7 @@ fn a_wall_under_mpirun_shows_each_display_in_its_window_in_lockstep() {
         .args(["-x", "TESSERA_FAULT=window:3:5000", bin(), "render", &model, "--wall", wall])
         .args(["--display-ranks", "2", "--present", "--control", "127.0.0.1:0", "--tiles", "4x2", "--timeout", "3"]);
     let run = LiveRun::start(&mut cmd, Stdio::null(), true);
-    let first = wait_frames(&run, 1);
+    let first = run.wait_frames(1);
 
     // Two windows, at their places on the wall, each showing its display of render's frame.
     let (left, left_at) = window(&x, "left");
@@ -148,25 +133,11 @@ fn a_wall_under_mpirun_shows_each_display_in_its_window_in_lockstep() {
     assert!(idle < 0.5, "an idle wall used {idle:.3} s of CPU in 5 s");
 
     // A program steers: both displays show render's frame of the new camera.
-    let turned = ask(&run, r#"{"cmd":"orbit","degrees":30}"#);
+    let turned = run.ask(r#"{"cmd":"orbit","degrees":30}"#);
     assert_eq!(turned["ok"], "orbit", "{turned}");
-    let status = wait_frames(&run, 2);
-    let v = |s: &Value, k: &str| (0..3).map(|i| s[k][i].as_f64().unwrap().to_string()).collect::<Vec<_>>().join(",");
+    let status = run.wait_frames(2);
     let orbited = dir.path().join("orbited.png");
-    ok(&alone(&[
-        "render",
-        &model,
-        "--wall",
-        wall,
-        "--tiles",
-        "4x2",
-        "--eye",
-        &v(&status, "eye"),
-        "--target",
-        &v(&status, "target"),
-        "--out",
-        orbited.to_str().unwrap(),
-    ]));
+    render_at(&model, wall, &status, &orbited);
     wait_shown(&x, &windows, &orbited, "after an orbit command");
 
     // A person steers from the first display's window: a drag of 60 pixels orbits the eye
@@ -183,7 +154,7 @@ fn a_wall_under_mpirun_shows_each_display_in_its_window_in_lockstep() {
     };
     let deadline = Instant::now() + Duration::from_secs(60);
     let dragged = loop {
-        let now = wait_frames(&run, 3);
+        let now = run.wait_frames(3);
         if ((yaw(&now) - yaw(&status)).abs() - 18.0).abs() < 0.01 {
             break now;
         }
@@ -191,24 +162,11 @@ fn a_wall_under_mpirun_shows_each_display_in_its_window_in_lockstep() {
         std::thread::sleep(Duration::from_millis(100));
     };
     let after = dir.path().join("dragged.png");
-    ok(&alone(&[
-        "render",
-        &model,
-        "--wall",
-        wall,
-        "--tiles",
-        "4x2",
-        "--eye",
-        &v(&dragged, "eye"),
-        "--target",
-        &v(&dragged, "target"),
-        "--out",
-        after.to_str().unwrap(),
-    ]));
+    render_at(&model, wall, &dragged, &after);
     wait_shown(&x, &windows, &after, "after a drag in the first display's window");
 
     // Snapshots need rank 0's frame, which display ranks never send it: refused, the run goes on.
-    let snap = ask(&run, &format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, dir.path().join("s.png").display()));
+    let snap = run.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, dir.path().join("s.png").display()));
     assert!(snap["error"].as_str().unwrap().contains("display ranks hold the frames"), "{snap}");
 
     // Q in the other display's window ends every rank, cleanly.
@@ -235,12 +193,12 @@ fn without_display_ranks_rank_0_opens_the_wall_s_windows() {
         }
         cmd.env("DISPLAY", &x.display).args(["render", &model, "--wall", wall, "--present"]);
         let run = LiveRun::start(cmd.args(["--control", "127.0.0.1:0", "--tiles", "4x2"]), Stdio::null(), true);
-        wait_frames(&run, 1);
+        run.wait_frames(1);
         let (left, left_at) = window(&x, "left");
         let (right, right_at) = window(&x, "right");
         assert!(left_at.contains("Position: 10,20") && right_at.contains("Position: 350,20"), "{left_at} {right_at}");
         wait_shown(&x, &[("left", &left), ("right", &right)], &reference, "rank 0's windows");
-        assert_eq!(ask(&run, r#"{"cmd":"quit"}"#)["ok"], "quit");
+        assert_eq!(run.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
         assert!(run.wait().success(), "quit ends the run cleanly (np {np})");
     }
 }
@@ -295,10 +253,10 @@ fn a_window_opens_on_the_monitor_the_wall_file_names() {
         "2x2",
     ]);
     let run = LiveRun::start(&mut cmd, Stdio::null(), false);
-    wait_frames(&run, 1);
+    run.wait_frames(1);
     let (_, at) = window(&x, "only");
     assert!(at.contains("Position: 30,40") && at.contains("Geometry: 320x240"), "{at}");
-    assert_eq!(ask(&run, r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert_eq!(run.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     assert!(run.wait().success());
     // A monitor the X display does not have: one line naming the monitors it has.
     let w = wall("window = { monitor = \"no-such\", fullscreen = true }");

@@ -6,8 +6,6 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader, Write};
-use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -20,40 +18,13 @@ use testkit::mesh_arg as mesh;
 const SIZE: (u32, u32) = (320, 240);
 
 /// `tessera view` on `x`, with a control port to read its state from.
-struct View(LiveRun);
-
-impl View {
-    fn start(x: &Xvfb, model: &str, out: &Path) -> View {
-        let mut cmd = Command::new(bin());
-        mpi_env(&mut cmd)
-            .env("DISPLAY", &x.display)
-            .args(["view", model, "--size", &format!("{}x{}", SIZE.0, SIZE.1), "--tiles", "2x2"])
-            .args(["--out", out.to_str().unwrap(), "--control", "127.0.0.1:0"]);
-        View(LiveRun::start(&mut cmd, Stdio::null(), true))
-    }
-
-    fn ask(&self, line: &str) -> Value {
-        let mut s = TcpStream::connect(&self.0.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-        s.write_all(format!("{line}\n").as_bytes()).unwrap();
-        let mut answer = String::new();
-        BufReader::new(s).read_line(&mut answer).unwrap();
-        serde_json::from_str(&answer).unwrap()
-    }
-
-    /// Waits until the run has shown `frames` frames (its status), then a moment for the
-    /// window to draw the last.
-    fn wait_frames(&self, frames: u64) -> Value {
-        let deadline = Instant::now() + Duration::from_secs(120);
-        loop {
-            let status = self.ask(r#"{"cmd":"status"}"#);
-            if status["frames"].as_u64() >= Some(frames) {
-                return status;
-            }
-            assert!(Instant::now() < deadline, "{status}");
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    }
+fn start_view(x: &Xvfb, model: &str, out: &Path) -> LiveRun {
+    let mut cmd = Command::new(bin());
+    mpi_env(&mut cmd)
+        .env("DISPLAY", &x.display)
+        .args(["view", model, "--size", &format!("{}x{}", SIZE.0, SIZE.1), "--tiles", "2x2"])
+        .args(["--out", out.to_str().unwrap(), "--control", "127.0.0.1:0"]);
+    LiveRun::start(&mut cmd, Stdio::null(), true)
 }
 
 /// The eye's direction from the target, in degrees about +Y.
@@ -67,7 +38,7 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
     let dir = tempfile::tempdir().unwrap();
     let x = Xvfb::start();
     let model = mesh("stanford/bunny_zipper_c3d.obj.gz");
-    let view = View::start(&x, &model, &dir.path().join("shot.png"));
+    let view = start_view(&x, &model, &dir.path().join("shot.png"));
     let first = view.wait_frames(1);
     let window = x.xdotool(&["search", "--sync", "--name", "^Tessera: bunny_zipper_c3d"]);
     let window = window.lines().next().unwrap().to_string();
@@ -75,9 +46,9 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
 
     // Idle: the frame is shown and nothing changes.
     std::thread::sleep(Duration::from_millis(500));
-    let before = view.0.cpu_seconds();
+    let before = view.cpu_seconds();
     std::thread::sleep(Duration::from_secs(5));
-    let idle = view.0.cpu_seconds() - before;
+    let idle = view.cpu_seconds() - before;
     eprintln!("view: CPU over 5 idle seconds: {idle:.3} s");
     assert!(idle < 0.25, "an idle window used {idle:.3} s of CPU in 5 s");
 
@@ -202,7 +173,7 @@ fn the_window_shows_render_s_frame_and_input_steers_it() {
 
     // Q quits, cleanly.
     x.xdotool(&["key", "q"]);
-    assert!(view.0.wait().success(), "Q ends the view cleanly");
+    assert!(view.wait().success(), "Q ends the view cleanly");
 }
 
 #[test]

@@ -129,6 +129,11 @@ pub fn mpirun(n: usize, extra_env: &[(&str, &str)], args: &[&str]) -> Output {
     output(cmd.arg(bin()).args(args))
 }
 
+/// The JSON lines of a file (`--stats`).
+pub fn json_lines(path: impl AsRef<Path>) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
 /// Succeeded; otherwise fails showing the run's stdout and stderr.
 pub fn ok(o: &Output) {
     assert!(
@@ -257,6 +262,30 @@ impl LiveRun {
             }
             assert!(Instant::now() < deadline, "the run did not end");
             std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Sends one command to the run's control port on a connection of its own; its answer.
+    pub fn ask(&self, line: &str) -> serde_json::Value {
+        use std::io::Write;
+        let mut s = std::net::TcpStream::connect(&self.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        s.write_all(format!("{line}\n").as_bytes()).unwrap();
+        let mut answer = String::new();
+        std::io::BufReader::new(s).read_line(&mut answer).unwrap();
+        serde_json::from_str(&answer).unwrap()
+    }
+
+    /// The run's status once it has shown `frames` frames (a window has been handed the last).
+    pub fn wait_frames(&self, frames: u64) -> serde_json::Value {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        loop {
+            let status = self.ask(r#"{"cmd":"status"}"#);
+            if status["frames"].as_u64() >= Some(frames) {
+                return status;
+            }
+            assert!(Instant::now() < deadline, "{status}");
+            std::thread::sleep(Duration::from_millis(100));
         }
     }
 
