@@ -40,8 +40,8 @@ use winit::window::{Fullscreen, Window, WindowId};
 
 use crate::composite::Image;
 use crate::render::control::Command;
-use crate::render::{frame_path, Present};
-use crate::wall::{Monitor, WindowPlace};
+use crate::render::{frame_path, Plan, Present};
+use crate::wall::{Display, Monitor, WindowPlace};
 
 /// Degrees of orbit per pixel dragged.
 const DEGREES_PER_PIXEL: f32 = 0.3;
@@ -61,6 +61,36 @@ pub struct WindowSpec {
     pub crop: Option<[u32; 4]>,
 }
 
+impl WindowSpec {
+    /// One window for `plan`'s whole frame, where the window manager puts it.
+    pub fn frame(plan: &Plan) -> WindowSpec {
+        WindowSpec {
+            title: title(plan),
+            size: (plan.grid.width, plan.grid.height),
+            place: WindowPlace::default(),
+            crop: None,
+        }
+    }
+
+    /// The window of a wall's display `d`, where the wall file places it, showing its
+    /// picture; with `of_frame`, its part of the whole frames it is handed (rank 0's windows),
+    /// else pictures of its own (a display rank's).
+    pub fn display(plan: &Plan, d: &Display, of_frame: bool) -> WindowSpec {
+        let [x0, y0, x1, y1] = d.rect;
+        WindowSpec {
+            title: format!("{}, display {}", title(plan), d.name),
+            size: (x1 - x0, y1 - y0),
+            place: d.window.clone(),
+            crop: of_frame.then_some(d.rect),
+        }
+    }
+}
+
+/// "Tessera: " and the model's file name.
+fn title(plan: &Plan) -> String {
+    format!("Tessera: {}", plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()))
+}
+
 /// How the windows behave: which of them steers, whether a resize re-plans the frame, the
 /// heads-up line at the start, where screenshots go.
 pub struct Behaviour {
@@ -74,6 +104,19 @@ pub struct Behaviour {
     pub out: PathBuf,
     /// The tile grid's columns and rows, for the cost overlay.
     pub tiles: (u32, u32),
+}
+
+impl Behaviour {
+    /// `plan`'s windows: the first steers, a resize changes nothing, no heads-up line.
+    pub fn of(plan: &Plan) -> Behaviour {
+        Behaviour {
+            steer: true,
+            resize: false,
+            hud: false,
+            out: plan.out.clone(),
+            tiles: (plan.grid.cols, plan.grid.rows),
+        }
+    }
 }
 
 /// What the windows are told.

@@ -17,14 +17,6 @@ use crate::window::{Behaviour, WindowSpec};
 /// worker on another.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let plan = crate::render::plan_view(args)?;
-    let title = format!("Tessera: {}", plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into()));
-    let spec = WindowSpec { title, size: (plan.grid.width, plan.grid.height), place: Default::default(), crop: None };
-    let behaviour = Behaviour {
-        steer: true,
-        resize: true,
-        hud: true,
-        out: plan.out.clone(),
-        tiles: (plan.grid.cols, plan.grid.rows),
-    };
-    crate::render::run_windowed(&plan, vec![spec], behaviour, crate::render::run_alone_live)
+    let behaviour = Behaviour { resize: true, hud: true, ..Behaviour::of(&plan) };
+    crate::render::run_windowed(&plan, vec![WindowSpec::frame(&plan)], behaviour, crate::render::run_alone_live)
 }

@@ -129,9 +129,9 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
         ..View::default()
     };
     let mut views: BTreeMap<u32, View> = BTreeMap::new();
+    // The end of the run: the windows close, saying why if they failed.
+    let end = |windows: Option<Windows>| windows.map_or(Ok(()), Windows::close);
     loop {
-        // The end of the run: the windows close, saying why if they failed.
-        let end = |windows: Option<Windows>| windows.map_or(Ok(()), Windows::close);
         let (from, bytes) = match t.recv(std::time::Duration::from_secs(3600)) {
             Ok(m) => m,
             Err(RecvError::Timeout) => bail!("no message for an hour"),
@@ -220,27 +220,8 @@ fn serve(t: &dyn Transport, plan: &Plan, index: usize) -> Result<()> {
 /// the wall's first display's window steers, its input sent to rank 0. Heartbeats go to rank
 /// 0 while the windows open.
 fn open_windows(t: &dyn Transport, plan: &Plan, wall: &Wall, mine: &[usize]) -> Result<Windows> {
-    let model = plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let specs = mine
-        .iter()
-        .map(|&i| {
-            let d = &wall.displays[i];
-            let [x0, y0, x1, y1] = d.rect;
-            WindowSpec {
-                title: format!("Tessera: {model}, display {}", d.name),
-                size: (x1 - x0, y1 - y0),
-                place: d.window.clone(),
-                crop: None,
-            }
-        })
-        .collect();
-    let behaviour = Behaviour {
-        steer: mine.first() == Some(&0),
-        resize: false,
-        hud: false,
-        out: plan.out.clone(),
-        tiles: (plan.grid.cols, plan.grid.rows),
-    };
+    let specs = mine.iter().map(|&i| WindowSpec::display(plan, &wall.displays[i], false)).collect();
+    let behaviour = Behaviour { steer: mine.first() == Some(&0), ..Behaviour::of(plan) };
     let send = t.sender(0);
     let input: Input = Box::new(move |command| match serde_json::to_string(&command) {
         Ok(json) => send(&ToMaster::Input(protocol::Input { json }).encode()),

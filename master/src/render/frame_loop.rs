@@ -110,8 +110,8 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     if let Some(model) = scene.model_message() {
         send_all(t, (1..=workers).map(|w| (w, model.clone())).collect(), plan.timeout)?;
     }
-    let movie_out = crate::movie::is_movie(&plan.out).then_some(());
-    let movie = if movie_out.is_some() {
+    let to_movie = crate::movie::is_movie(&plan.out);
+    let movie = if to_movie {
         let width = if plan.stereo.is_some() { grid.width * 2 } else { grid.width };
         Some(crate::movie::Movie::start(&plan.out, width, grid.height, plan.fps, plan.timeout)?)
     } else {
@@ -148,7 +148,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
     // position) reuses it: rank 0 neither sorts nor sends, the workers do nothing, and the
     // writer copies the frame before's files. Not for movies, nor with display ranks (which
     // write the displays themselves); a live run makes no frame that did not change.
-    let reuse = control.is_none() && !plan.direct && movie_out.is_none() && !plan.no_frame_reuse;
+    let reuse = control.is_none() && !plan.direct && !to_movie && !plan.no_frame_reuse;
     let mut last_views: Option<Vec<ViewSpec>> = None;
     let result = (|| -> Result<()> {
         loop {
@@ -187,11 +187,7 @@ pub(super) fn run_live(t: &dyn Transport, plan: &Plan, window: Option<Window>) -
             };
             if reuse && last_views.as_ref() == Some(&views) {
                 finish_all(t, &mut flight, plan, direct, &mut inbox, &writer)?;
-                for p in frame_outputs(&plan.out, k, plan.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
-                    if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
-                        bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
-                    }
-                }
+                check_outputs(plan, k)?;
                 writer.repeat(k)?;
                 continue;
             }
@@ -299,6 +295,17 @@ fn idle(
         }
         super::link::receive_inputs(t, &mut inbox.early)?;
     }
+}
+
+/// An error if a file frame `k` writes is an input (the plan checks the first and last
+/// frames' names; this, each frame's as it comes).
+fn check_outputs(plan: &Plan, k: u32) -> Result<()> {
+    for p in frame_outputs(&plan.out, k, plan.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
+        if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
+            bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
+        }
+    }
+    Ok(())
 }
 
 /// Composites every frame in flight and hands it to the writer, in order.
@@ -436,11 +443,7 @@ fn complete(
         }
         None => None,
     };
-    for p in frame_outputs(&plan.out, k, plan.frames, plan.wall.as_ref(), plan.stereo, plan.direct) {
-        if Identity::of(&p).is_ok_and(|id| plan.inputs.contains(&id)) {
-            bail!("the output {} is the same file as an input; refusing to overwrite it", p.display());
-        }
-    }
+    check_outputs(plan, k)?;
     worker_lines.sort_by_key(|l| l.rank);
     let stats = MasterStats {
         frame: k,
@@ -553,9 +556,7 @@ impl Writer {
                             crate::output::write_atomic(to, |w| std::io::Write::write_all(w, &bytes))?;
                         }
                         let write_ms = ms(start);
-                        let now_t = Instant::now();
-                        let frame_ms = (now_t - last).as_secs_f64() * 1e3;
-                        last = now_t;
+                        let frame_ms = lap(&mut last);
                         eprintln!("frame {}: the frame before, still ({write_ms:.1} ms)", k + 1);
                         let line = MasterStats {
                             frame: k,
@@ -613,10 +614,8 @@ impl Writer {
                     (other, _) => bail!("frame {} came with {} images", k + 1, other.len()),
                 }
                 let write_ms = ms(start);
-                let now = Instant::now();
-                let frame_ms = (now - last).as_secs_f64() * 1e3;
-                last = now;
-                let fps = (k + 1) as f64 / (now - begin).as_secs_f64().max(1e-9);
+                let frame_ms = lap(&mut last);
+                let fps = (k + 1) as f64 / (last - begin).as_secs_f64().max(1e-9);
                 eprintln!(
                     "frame {}: {} tiles, sort {:.1} ms, {} ({fps:.1} frames/s)",
                     k + 1,
@@ -1317,6 +1316,14 @@ fn resident_mb() -> Option<f64> {
     let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
     let pages: f64 = statm.split_whitespace().nth(1)?.parse().ok()?;
     Some(pages * 4096.0 / (1 << 20) as f64)
+}
+
+/// Milliseconds since `last`, which becomes now (a frame's period, on the writer).
+fn lap(last: &mut Instant) -> f64 {
+    let now = Instant::now();
+    let ms = (now - *last).as_secs_f64() * 1e3;
+    *last = now;
+    ms
 }
 
 fn ms(since: Instant) -> f64 {

@@ -45,36 +45,11 @@ pub fn run_alone(plan: &Plan) -> Result<()> {
 /// Rank 0's windows with `--present`: one per display of the wall, each showing its part of
 /// the frame where the wall file places it, or one for the frame; the first steers.
 fn rank0_windows(plan: &Plan) -> (Vec<WindowSpec>, Behaviour) {
-    let model = plan.model.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
     let specs = match &plan.wall {
-        Some(wall) => wall
-            .displays
-            .iter()
-            .map(|d| {
-                let [x0, y0, x1, y1] = d.rect;
-                WindowSpec {
-                    title: format!("Tessera: {model}, display {}", d.name),
-                    size: (x1 - x0, y1 - y0),
-                    place: d.window.clone(),
-                    crop: Some(d.rect),
-                }
-            })
-            .collect(),
-        None => vec![WindowSpec {
-            title: format!("Tessera: {model}"),
-            size: (plan.grid.width, plan.grid.height),
-            place: Default::default(),
-            crop: None,
-        }],
+        Some(wall) => wall.displays.iter().map(|d| WindowSpec::display(plan, d, true)).collect(),
+        None => vec![WindowSpec::frame(plan)],
     };
-    let behaviour = Behaviour {
-        steer: true,
-        resize: plan.wall.is_none(),
-        hud: false,
-        out: plan.out.clone(),
-        tiles: (plan.grid.cols, plan.grid.rows),
-    };
-    (specs, behaviour)
+    (specs, Behaviour { resize: plan.wall.is_none(), ..Behaviour::of(plan) })
 }
 
 /// Runs `run` (a live frame loop) with its frames shown in windows opened from `specs`, whose

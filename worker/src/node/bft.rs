@@ -46,7 +46,7 @@ struct Decoded {
 }
 
 impl DecodedCache {
-    fn key(bft: &[u8], normals: &[(u32, [f32; 3])]) -> u64 {
+    fn key((bft, normals): (&[u8], &[(u32, [f32; 3])])) -> u64 {
         use std::hash::{Hash, Hasher};
         let mut h = std::collections::hash_map::DefaultHasher::new();
         bft.hash(&mut h);
@@ -57,7 +57,7 @@ impl DecodedCache {
         h.finish()
     }
 
-    fn get(&self, key: u64, bft: &[u8], normals: &[(u32, [f32; 3])]) -> Option<Arc<RenderMesh>> {
+    fn get(&self, key: u64, (bft, normals): (&[u8], &[(u32, [f32; 3])])) -> Option<Arc<RenderMesh>> {
         self.entries.get(&key).filter(|d| d.bft == bft && d.normals == normals).map(|d| d.mesh.clone())
     }
 }
@@ -131,6 +131,15 @@ fn tile_meshes(
         Sent(&'a [u8], &'a [(u32, [f32; 3])]),
         Kept(KeptChunk),
     }
+    impl Source<'_> {
+        /// The stream and its border normals.
+        fn parts(&self) -> (&[u8], &[(u32, [f32; 3])]) {
+            match self {
+                Source::Sent(b, n) => (b, n),
+                Source::Kept(k) => (&k.0, &k.1),
+            }
+        }
+    }
     let mut streams: Vec<(usize, Option<u32>, Source)> = Vec::new();
     for (job, cache) in jobs.iter().zip(chunks.iter_mut()) {
         cache.set_limit(job.chunk_cache);
@@ -157,29 +166,11 @@ fn tile_meshes(
         }
     }
     let decode_only = jobs[0].decode_only;
-    let bytes_of = |source: &Source| -> (Vec<u8>, Vec<(u32, [f32; 3])>) {
-        match source {
-            Source::Sent(b, n) => (b.to_vec(), n.to_vec()),
-            Source::Kept(k) => (k.0.clone(), k.1.clone()),
-        }
-    };
     // Streams the frame before decoded are taken from the cache; the rest decode in
     // parallel.
-    let keys: Vec<u64> = streams
-        .par_iter()
-        .map(|(_, _, source)| match source {
-            Source::Sent(b, n) => DecodedCache::key(b, n),
-            Source::Kept(k) => DecodedCache::key(&k.0, &k.1),
-        })
-        .collect();
-    let hits: Vec<Option<Arc<RenderMesh>>> = streams
-        .iter()
-        .zip(&keys)
-        .map(|((_, _, source), &key)| match source {
-            Source::Sent(b, n) => cache.get(key, b, n),
-            Source::Kept(k) => cache.get(key, &k.0, &k.1),
-        })
-        .collect();
+    let keys: Vec<u64> = streams.par_iter().map(|(_, _, source)| DecodedCache::key(source.parts())).collect();
+    let hits: Vec<Option<Arc<RenderMesh>>> =
+        streams.iter().zip(&keys).map(|((_, _, source), &key)| cache.get(key, source.parts())).collect();
     type Decoded1 = Result<(Arc<RenderMesh>, usize, f64, bool), (u32, TileError)>;
     let decoded: Vec<Decoded1> = streams
         .par_iter()
@@ -189,10 +180,7 @@ fn tile_meshes(
             if let Some(mesh) = hit {
                 return Ok((mesh.clone(), mesh.triangle_count(), 0.0, true));
             }
-            let (bft, normals) = match source {
-                Source::Sent(b, n) => (*b, *n),
-                Source::Kept(k) => (&k.0[..], &k.1[..]),
-            };
+            let (bft, normals) = source.parts();
             let (mesh, ms) = decode_stream(bft, normals).map_err(|e| match (e, chunk) {
                 (TileError::Decode(e), Some(c)) => (index, TileError::ChunkDecode(*c, e)),
                 (e, _) => (index, e),
@@ -202,21 +190,24 @@ fn tile_meshes(
         })
         .collect();
     // The cache keeps this frame's meshes (reused or new) within the bound, in stream
-    // order, and forgets the rest.
+    // order, and forgets the rest: a reused mesh keeps its entry, a new one copies its
+    // stream to compare with the next frame's.
     let limit = jobs.iter().map(|j| j.chunk_cache).max().unwrap_or(0);
-    let mut next = DecodedCache::default();
+    let mut before = std::mem::take(cache);
     let mut held = 0u64;
-    for (((_, _, source), &key), d) in streams.iter().zip(&keys).zip(&decoded) {
+    for ((((_, _, source), &key), d), hit) in streams.iter().zip(&keys).zip(&decoded).zip(&hits) {
         let Ok((mesh, ..)) = d else { continue };
         let size = mesh_bytes(mesh);
-        if held + size > limit || next.entries.contains_key(&key) {
+        if held + size > limit || cache.entries.contains_key(&key) {
             continue;
         }
         held += size;
-        let (bft, normals) = bytes_of(source);
-        next.entries.insert(key, Decoded { bft, normals, mesh: mesh.clone() });
+        let entry = hit.as_ref().and_then(|_| before.entries.remove(&key)).unwrap_or_else(|| {
+            let (bft, normals) = source.parts();
+            Decoded { bft: bft.to_vec(), normals: normals.to_vec(), mesh: mesh.clone() }
+        });
+        cache.entries.insert(key, entry);
     }
-    *cache = next;
     let mut parts: Vec<Vec<Arc<RenderMesh>>> = (0..tiles.len()).map(|_| Vec::new()).collect();
     let mut out: Vec<TileMesh> = tiles
         .iter()
