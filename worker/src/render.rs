@@ -60,6 +60,36 @@ pub struct PmPoint {
 enum Source<'a> {
     Mesh(&'a RenderMesh),
     Pm(AdaptedMesh<'a>),
+    /// A mesh uploaded for this frame and meshes already on the device, drawn in order.
+    Parts(&'a RenderMesh, &'a [Draw<'a>]),
+}
+
+/// One draw of [`Renderer::render_parts`].
+#[derive(Clone, Debug)]
+pub enum Draw<'a> {
+    /// These indices of the mesh uploaded for the frame.
+    Joined(std::ops::Range<u32>),
+    /// A mesh kept on the device.
+    Resident(&'a GpuMesh),
+}
+
+/// A decoded mesh's buffers on the device ([`Renderer::upload`]): a worker that keeps a mesh
+/// from frame to frame keeps these too, and a later frame draws it without uploading it
+/// again ([`Renderer::render_parts`]).
+#[derive(Debug)]
+pub struct GpuMesh {
+    positions: wgpu::Buffer,
+    normals: wgpu::Buffer,
+    colors: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+}
+
+impl GpuMesh {
+    /// Bytes its buffers take on the device.
+    pub fn bytes(&self) -> u64 {
+        [&self.positions, &self.normals, &self.colors, &self.indices].iter().map(|b| b.size()).sum()
+    }
 }
 
 /// The renderer's shaders (`render.wgsl`, beside this file): two pipelines drawn under the
@@ -115,6 +145,8 @@ pub enum RenderError {
     NormalCount { positions: usize, normals: usize },
     #[error("mesh has {positions} positions but {colors} colours")]
     ColorCount { positions: usize, colors: usize },
+    #[error("a draw of indices {start}..{end} of a mesh of {indices}")]
+    BadDraw { start: u32, end: u32, indices: u32 },
     #[error("the mesh's {what} buffer needs {bytes} bytes; the adapter allows {max}")]
     MeshTooLarge { what: &'static str, bytes: u64, max: u64 },
     #[error(transparent)]
@@ -406,13 +438,81 @@ impl Renderer {
         frame: (u32, u32),
         rect: [u32; 4],
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
-        if mesh.normals.len() != mesh.positions.len() {
-            return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
-        }
-        if !mesh.colors.is_empty() && mesh.colors.len() != mesh.positions.len() {
-            return Err(RenderError::ColorCount { positions: mesh.positions.len(), colors: mesh.colors.len() });
-        }
+        check_counts(mesh)?;
         self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
+    }
+
+    /// Uploads `mesh` into buffers of its own, to be drawn by [`Renderer::render_parts`] in
+    /// this and later frames; `None` for a mesh without triangles. Returns the milliseconds
+    /// until the device has them.
+    pub fn upload(&mut self, mesh: &RenderMesh) -> Result<(Option<GpuMesh>, f64), RenderError> {
+        use wgpu::util::DeviceExt;
+        check_counts(mesh)?;
+        if mesh.indices.is_empty() {
+            return Ok((None, 0.0));
+        }
+        let start = Instant::now();
+        let max = self.gpu.limits().max_buffer_size;
+        let gpu = self.gpu.clone();
+        let device = gpu.device();
+        let buffer = |label: &'static str, contents: &[u8], usage| {
+            if contents.len() as u64 > max {
+                return Err(RenderError::MeshTooLarge { what: label, bytes: contents.len() as u64, max });
+            }
+            Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage }))
+        };
+        let mesh = gpu.scoped(|| {
+            let colors = match mesh.colors.is_empty() {
+                // Zero-filled by wgpu: alpha 0, the renderer's grey (as `render` draws it).
+                true => {
+                    let size = mesh.positions.len() as u64 * 4;
+                    if size > max {
+                        return Err(RenderError::MeshTooLarge { what: "resident: colours", bytes: size, max });
+                    }
+                    device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("resident: colours"),
+                        size,
+                        usage: wgpu::BufferUsages::VERTEX,
+                        mapped_at_creation: false,
+                    })
+                }
+                false => buffer("resident: colours", bytemuck::cast_slice(&mesh.colors), wgpu::BufferUsages::VERTEX)?,
+            };
+            Ok(GpuMesh {
+                positions: buffer(
+                    "resident: positions",
+                    bytemuck::cast_slice(&mesh.positions),
+                    wgpu::BufferUsages::VERTEX,
+                )?,
+                normals: buffer("resident: normals", bytemuck::cast_slice(&mesh.normals), wgpu::BufferUsages::VERTEX)?,
+                colors,
+                indices: buffer("resident: indices", bytemuck::cast_slice(&mesh.indices), wgpu::BufferUsages::INDEX)?,
+                index_count: mesh.indices.len() as u32,
+            })
+        })?;
+        Ok((Some(mesh), ms_since(start)))
+    }
+
+    /// Renders `draws` in order: ranges of `joined`'s indices, uploaded as
+    /// [`Renderer::render`] uploads a mesh, and meshes already on the device. The pixels are
+    /// [`Renderer::render`]'s of all of them joined into one mesh in that order: the same
+    /// triangles reach the rasterizer in the same order.
+    pub fn render_parts(
+        &mut self,
+        joined: &RenderMesh,
+        draws: &[Draw<'_>],
+        view_proj: Mat4,
+        frame: (u32, u32),
+        rect: [u32; 4],
+    ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
+        check_counts(joined)?;
+        let n = joined.indices.len() as u32;
+        if let Some(Draw::Joined(r)) =
+            draws.iter().find(|d| matches!(d, Draw::Joined(r) if r.start > r.end || r.end > n))
+        {
+            return Err(RenderError::BadDraw { start: r.start, end: r.end, indices: n });
+        }
+        self.render_source(Source::Parts(joined, draws), view_proj, frame, rect)
     }
 
     /// The largest rectangle side one render can have (the device's texture limit).
@@ -467,7 +567,7 @@ impl Renderer {
         let max = self.gpu.limits().max_buffer_size;
         let (device, queue) = (self.gpu.device(), self.gpu.queue());
         let pulled = match source {
-            Source::Mesh(mesh) => {
+            Source::Mesh(mesh) | Source::Parts(mesh, _) => {
                 self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
                 self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
                 let colors = if mesh.colors.is_empty() {
@@ -540,6 +640,31 @@ impl Renderer {
                         pass.set_vertex_buffer(2, self.colors.slice(mesh.positions.len() as u64 * 4));
                         pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
                         pass.draw_indexed(0..index_count, 0, 0..1);
+                    }
+                }
+                (Source::Parts(joined, draws), _) => {
+                    pass.set_pipeline(&self.mesh_pipeline);
+                    pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
+                    let vertex_bytes = joined.positions.len() as u64 * VEC3_BYTES;
+                    let index_bytes = joined.indices.len() as u64 * 4;
+                    for draw in draws {
+                        match draw {
+                            Draw::Joined(range) if !range.is_empty() => {
+                                pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
+                                pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
+                                pass.set_vertex_buffer(2, self.colors.slice(joined.positions.len() as u64 * 4));
+                                pass.set_index_buffer(self.indices.slice(index_bytes), wgpu::IndexFormat::Uint32);
+                                pass.draw_indexed(range.clone(), 0, 0..1);
+                            }
+                            Draw::Joined(_) => {}
+                            Draw::Resident(part) => {
+                                pass.set_vertex_buffer(0, part.positions.slice(..));
+                                pass.set_vertex_buffer(1, part.normals.slice(..));
+                                pass.set_vertex_buffer(2, part.colors.slice(..));
+                                pass.set_index_buffer(part.indices.slice(..), wgpu::IndexFormat::Uint32);
+                                pass.draw_indexed(0..part.index_count, 0, 0..1);
+                            }
+                        }
                     }
                 }
                 (Source::Pm(pm), Some(bind_group)) => {
@@ -646,6 +771,17 @@ fn read_back(
         }
         out
     })
+}
+
+/// A mesh's per-vertex arrays are as long as its positions.
+fn check_counts(mesh: &RenderMesh) -> Result<(), RenderError> {
+    if mesh.normals.len() != mesh.positions.len() {
+        return Err(RenderError::NormalCount { positions: mesh.positions.len(), normals: mesh.normals.len() });
+    }
+    if !mesh.colors.is_empty() && mesh.colors.len() != mesh.positions.len() {
+        return Err(RenderError::ColorCount { positions: mesh.positions.len(), colors: mesh.colors.len() });
+    }
+    Ok(())
 }
 
 fn ms_since(start: Instant) -> f64 {

@@ -11,7 +11,7 @@ use codec::bft;
 use codec::view::{Camera, TileGrid};
 use glam::{Mat4, Vec3};
 use worker::gpu::Gpu;
-use worker::render::{RenderError, RenderTimes, Renderer};
+use worker::render::{Draw, RenderError, RenderTimes, Renderer};
 use worker::RenderMesh;
 
 /// Loads a shared mesh the way a worker gets it: through a BFT encode and decode.
@@ -182,4 +182,59 @@ fn dragon_1080p_timing() {
         let (_, times) = r.render(&mesh, view_proj, (w, h), tile).unwrap();
         print_times(&format!("one 240x135 tile {tile:?}, run {run}"), &[times], start.elapsed().as_secs_f64() * 1e3);
     }
+}
+
+/// The triangles `range` of `mesh` as a mesh of their own (their vertices renumbered).
+fn part(mesh: &RenderMesh, range: std::ops::Range<usize>) -> RenderMesh {
+    let mut out = RenderMesh::default();
+    let mut new_of = std::collections::HashMap::new();
+    for &v in &mesh.indices[range.start * 3..range.end * 3] {
+        let n = *new_of.entry(v).or_insert_with(|| {
+            out.positions.push(mesh.positions[v as usize]);
+            out.normals.push(mesh.normals[v as usize]);
+            if !mesh.colors.is_empty() {
+                out.colors.push(mesh.colors[v as usize]);
+            }
+            out.positions.len() as u32 - 1
+        });
+        out.indices.push(n);
+    }
+    out
+}
+
+/// A worker keeps the meshes of the streams it decoded on the device and uploads a tile's
+/// new ones joined: drawn in stream order, kept and new alike, the pixels are those of all the
+/// streams joined into one mesh, in any later frame too, with coloured and grey parts, and
+/// where parts cover the same surface (the first drawn keeps the pixel, as in the joined
+/// mesh).
+#[test]
+fn kept_and_new_parts_draw_as_the_joined_mesh() {
+    let spot = load("odedstein/spot_low_resolution.obj");
+    let n = spot.triangle_count();
+    let mut painted = part(&spot, n / 3..n);
+    painted.colors = (0..painted.positions.len()).map(|i| [(i * 37 % 256) as u8, 90, 200, 255]).collect();
+    let (first, overlap) = (part(&spot, 0..n / 3), part(&spot, n / 2..n));
+    let whole = RenderMesh::concat(&[&first, &painted, &overlap]);
+    let (w, h) = (160, 120);
+    let mut r = renderer();
+    let (kept, _) = r.upload(&painted).unwrap();
+    let kept = kept.expect("a mesh with triangles has buffers");
+    assert!(r.upload(&RenderMesh::default()).unwrap().0.is_none(), "a mesh without triangles has none");
+    let joined = RenderMesh::concat(&[&first, &overlap]);
+    let (a, b) = (first.indices.len() as u32, joined.indices.len() as u32);
+    let draws = [Draw::Joined(0..a), Draw::Resident(&kept), Draw::Joined(a..b)];
+    let grid = TileGrid::new(w, h, 3, 2).unwrap();
+    for turn in [0.0f32, 0.7] {
+        let view_proj = framing(&spot, (w, h)) * Mat4::from_rotation_y(turn);
+        for t in [None, Some(4)] {
+            let rect = t.map_or([0, 0, w, h], |t| grid.tile_rect(t));
+            let (want, _) = r.render(&whole, view_proj, (w, h), rect).unwrap();
+            let (got, _) = r.render_parts(&joined, &draws, view_proj, (w, h), rect).unwrap();
+            assert!(alphas(&got).any(|a| a == 255), "turn {turn}, rect {rect:?}: nothing drawn");
+            let (pixels, channel) = mismatch(&want, &got);
+            assert!(pixels == 0, "turn {turn}, rect {rect:?}: {pixels} pixels differ, by up to {channel}");
+        }
+    }
+    let e = r.render_parts(&joined, &[Draw::Joined(a..b + 3)], Mat4::IDENTITY, (w, h), [0, 0, w, h]).unwrap_err();
+    assert!(matches!(e, RenderError::BadDraw { .. }), "{e}");
 }

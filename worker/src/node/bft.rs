@@ -5,7 +5,7 @@
 //! render one after the other on the one device.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use glam::Mat4;
@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use super::model::{wrong_kind, Model, Rendered};
 use super::{TileError, WorkerError};
 use crate::chunk_cache::ChunkCache;
-use crate::render::Renderer;
+use crate::render::{Draw, GpuMesh, Renderer};
 use crate::RenderMesh;
 
 /// A `.bft` model's state on a worker: the chunks it keeps, one cache per sorter, and the
@@ -29,9 +29,15 @@ pub(super) struct BftTiles {
 
 /// The meshes the worker decoded the frame before, by their stream: a stream byte-identical
 /// to one of them (a verbatim chunk still in view, a tile whose submesh did not change) is
-/// not decoded again. It keeps only the last frame's meshes, within `--worker-cache-mb`
-/// (the bound of the kept chunks, given to each cache alike). Frames are the same with it or
-/// without: the same bytes decode to the same mesh.
+/// not decoded again, and from its second frame on it is drawn from buffers of its own on
+/// the device, not uploaded again. A tile's new meshes are joined and uploaded together, as
+/// one draw for each run of them between kept ones: a mesh seen once is not worth buffers of
+/// its own (on lavapipe, a draw and four buffers for each of a frame's few hundred sorted
+/// pieces cost more than the upload they save). It keeps only the last frame's meshes,
+/// within `--worker-cache-mb` (the bound of the kept chunks, given to each cache alike),
+/// counting each mesh's bytes on the host and, drawn, on the device. Frames are the same
+/// with it or without: the same bytes decode to the same mesh, and a tile's meshes are drawn
+/// in stream order, as one mesh joined in that order would be.
 #[derive(Default)]
 struct DecodedCache {
     entries: HashMap<u64, Decoded>,
@@ -42,7 +48,26 @@ struct DecodedCache {
 struct Decoded {
     bft: Vec<u8>,
     normals: Vec<(u32, [f32; 3])>,
-    mesh: Arc<RenderMesh>,
+    mesh: Arc<Part>,
+}
+
+/// One stream's decoded mesh and, once a frame has drawn it, its buffers on the device
+/// (`None` inside for a mesh without triangles).
+#[derive(Default)]
+struct Part {
+    mesh: RenderMesh,
+    gpu: OnceLock<Option<GpuMesh>>,
+}
+
+impl Part {
+    /// Bytes it holds on the host, and with `drawn` on the device too (what
+    /// [`Renderer::upload`] makes of it: positions, normals, colours and indices).
+    fn bytes(&self, drawn: bool) -> u64 {
+        let m = &self.mesh;
+        let host = (m.positions.len() * 24 + m.colors.len() * 4 + m.indices.len() * 4) as u64;
+        let device = if drawn && !m.indices.is_empty() { m.positions.len() * 28 + m.indices.len() * 4 } else { 0 };
+        host + device as u64
+    }
 }
 
 impl DecodedCache {
@@ -57,14 +82,9 @@ impl DecodedCache {
         h.finish()
     }
 
-    fn get(&self, key: u64, (bft, normals): (&[u8], &[(u32, [f32; 3])])) -> Option<Arc<RenderMesh>> {
+    fn get(&self, key: u64, (bft, normals): (&[u8], &[(u32, [f32; 3])])) -> Option<Arc<Part>> {
         self.entries.get(&key).filter(|d| d.bft == bft && d.normals == normals).map(|d| d.mesh.clone())
     }
-}
-
-/// Bytes a decoded mesh holds.
-fn mesh_bytes(m: &RenderMesh) -> u64 {
-    (m.positions.len() * 24 + m.colors.len() * 4 + m.indices.len() * 4) as u64
 }
 
 impl Model for BftTiles {
@@ -169,16 +189,16 @@ fn tile_meshes(
     // Streams the frame before decoded are taken from the cache; the rest decode in
     // parallel.
     let keys: Vec<u64> = streams.par_iter().map(|(_, _, source)| DecodedCache::key(source.parts())).collect();
-    let hits: Vec<Option<Arc<RenderMesh>>> =
+    let hits: Vec<Option<Arc<Part>>> =
         streams.iter().zip(&keys).map(|((_, _, source), &key)| cache.get(key, source.parts())).collect();
-    type Decoded1 = Result<(Arc<RenderMesh>, usize, f64, bool), (u32, TileError)>;
+    type Decoded1 = Result<(Arc<Part>, usize, f64, bool), (u32, TileError)>;
     let decoded: Vec<Decoded1> = streams
         .par_iter()
         .zip(&hits)
         .map(|((slot, chunk, source), hit)| {
             let index = tiles[*slot].0;
             if let Some(mesh) = hit {
-                return Ok((mesh.clone(), mesh.triangle_count(), 0.0, true));
+                return Ok((mesh.clone(), mesh.mesh.triangle_count(), 0.0, true));
             }
             let (bft, normals) = source.parts();
             let (mesh, ms) = decode_stream(bft, normals).map_err(|e| match (e, chunk) {
@@ -186,7 +206,7 @@ fn tile_meshes(
                 (e, _) => (index, e),
             })?;
             let triangles = mesh.triangle_count();
-            Ok((Arc::new(mesh), triangles, ms, false))
+            Ok((Arc::new(Part { mesh, gpu: OnceLock::new() }), triangles, ms, false))
         })
         .collect();
     // The cache keeps this frame's meshes (reused or new) within the bound, in stream
@@ -197,7 +217,7 @@ fn tile_meshes(
     let mut held = 0u64;
     for ((((_, _, source), &key), d), hit) in streams.iter().zip(&keys).zip(&decoded).zip(&hits) {
         let Ok((mesh, ..)) = d else { continue };
-        let size = mesh_bytes(mesh);
+        let size = mesh.bytes(!decode_only);
         if held + size > limit || cache.entries.contains_key(&key) {
             continue;
         }
@@ -208,10 +228,9 @@ fn tile_meshes(
         });
         cache.entries.insert(key, entry);
     }
-    let mut parts: Vec<Vec<Arc<RenderMesh>>> = (0..tiles.len()).map(|_| Vec::new()).collect();
     let mut out: Vec<TileMesh> = tiles
         .iter()
-        .map(|&(index, rect)| TileMesh { index, rect, mesh: Arc::default(), triangles: 0, reused: 0, decode_ms: 0.0 })
+        .map(|&(index, rect)| TileMesh { index, rect, parts: Vec::new(), triangles: 0, reused: 0, decode_ms: 0.0 })
         .collect();
     for ((slot, _, _), d) in streams.iter().zip(decoded) {
         let (mesh, n, ms, reused) = d?;
@@ -222,25 +241,19 @@ fn tile_meshes(
         }
         // With --decode-only nothing is drawn: the tile holds no mesh.
         if !decode_only {
-            parts[*slot].push(mesh);
+            out[*slot].parts.push((mesh, reused));
         }
-    }
-    for (t, mut p) in out.iter_mut().zip(parts) {
-        t.mesh = match p.len() {
-            0 => Arc::default(),
-            1 => p.pop().expect("one part"),
-            _ => Arc::new(RenderMesh::concat(&p.iter().map(|m| m.as_ref()).collect::<Vec<&RenderMesh>>())),
-        };
     }
     Ok(out)
 }
 
-/// A tile's streams decoded and joined (empty with `--decode-only`), its triangles, and the
+/// A tile's streams decoded, in order (none with `--decode-only`), its triangles, and the
 /// milliseconds its streams took to decode.
 struct TileMesh {
     index: u32,
     rect: [u32; 4],
-    mesh: Arc<RenderMesh>,
+    /// Each with whether the frame before had it too.
+    parts: Vec<(Arc<Part>, bool)>,
     triangles: u32,
     /// Of them, those taken from the frame before's meshes.
     reused: u32,
@@ -268,13 +281,45 @@ fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh,
 
 /// Renders one decoded tile of `job`; with `job.decode_only`, answers transparent pixels.
 fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) -> Result<TilePixels, TileError> {
-    let TileMesh { index, rect, mesh, triangles, reused, decode_ms } = tile_mesh;
+    let TileMesh { index, rect, parts, triangles, reused, decode_ms } = tile_mesh;
     let (index, rect, decode_ms) = (*index, *rect, *decode_ms);
     let (rgba, times) = if job.decode_only {
         let [x0, y0, x1, y1] = rect.map(|v| v as usize);
         (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
     } else {
-        renderer.render(mesh, Mat4::from_cols_array(&job.view_proj), (job.width, job.height), rect)?
+        // A kept mesh gets buffers of its own on its second frame; new ones are joined.
+        let mut upload_ms = 0.0;
+        for (part, reused) in parts {
+            if *reused && part.gpu.get().is_none() {
+                let (gpu, ms) = renderer.upload(&part.mesh)?;
+                upload_ms += ms;
+                let _ = part.gpu.set(gpu);
+            }
+        }
+        let mut new: Vec<&RenderMesh> = Vec::new();
+        let mut draws: Vec<Draw> = Vec::new();
+        let mut at = 0;
+        for (part, _) in parts {
+            if let Some(gpu) = part.gpu.get() {
+                draws.extend(gpu.as_ref().map(Draw::Resident));
+                continue;
+            }
+            let n = part.mesh.indices.len() as u32;
+            new.push(&part.mesh);
+            match draws.last_mut() {
+                Some(Draw::Joined(run)) => run.end += n,
+                _ => draws.push(Draw::Joined(at..at + n)),
+            }
+            at += n;
+        }
+        let joined = match new[..] {
+            [one] => std::borrow::Cow::Borrowed(one),
+            _ => std::borrow::Cow::Owned(RenderMesh::concat(&new)),
+        };
+        let view_proj = Mat4::from_cols_array(&job.view_proj);
+        let (rgba, mut times) = renderer.render_parts(&joined, &draws, view_proj, (job.width, job.height), rect)?;
+        times.upload_ms += upload_ms;
+        (rgba, times)
     };
     Ok(TilePixels {
         index,
