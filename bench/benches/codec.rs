@@ -7,6 +7,10 @@
 //!   index and vertex codecs. No general-purpose compressor on top.
 //! - Draco: compression level 7 (the `draco_encoder` CLI default, speed 3), 14-bit positions.
 //!
+//! Beside the file, `bft-tile` decodes what a worker decodes: the whole mesh as one
+//! prefix-coded tile stream (the tile sort's `--tile-coding prefix` output for a 1x1 grid
+//! that sees every triangle), which must decode to exactly the file's slots and triangles.
+//!
 //! Criterion measures decode (and our encode) in triangles/s; afterwards a plain summary
 //! table, timed here with `Instant`, gives sizes, rates and ratios against the targets.
 //! `TESSERA_BENCH_QUICK=1` restricts the run to the bunny for a fast smoke test.
@@ -26,6 +30,7 @@ const SUMMARY_RUN_MIN: Duration = Duration::from_millis(50);
 /// Project targets, printed next to the measured values.
 const TARGET_SIZE_VS_DRACO: f64 = 1.25;
 const TARGET_DECODE_VS_MESHOPT: f64 = 0.5;
+const TARGET_TILE_DECODE_VS_MESHOPT: f64 = 0.3;
 const TARGET_ENCODE_MTRI_S: f64 = 2.0;
 const TARGET_CONNECTIVITY_BITS_PER_TRIANGLE: f64 = 2.0;
 
@@ -42,6 +47,8 @@ struct Prepared {
     name: &'static str,
     mesh: codec::Mesh,
     bft: Vec<u8>,
+    /// The whole mesh as one prefix-coded tile stream.
+    tile: Vec<u8>,
     meshopt: Meshopt,
     draco: Vec<u8>,
     /// Draco's EdgeBreaker leaves out triangles with a repeated vertex; BFT and meshopt keep them.
@@ -56,10 +63,11 @@ impl Prepared {
         )
         .unwrap_or_else(|e| panic!("{name}: BFT encode failed: {e}"))
         .bytes;
+        let tile = whole_tile(name, &bft);
         let meshopt = encode_meshopt(&mesh);
         let draco = encode_draco(name, &mesh);
         let draco_triangles = mesh.triangles.iter().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).count();
-        let prepared = Prepared { name, mesh, bft, meshopt, draco, draco_triangles };
+        let prepared = Prepared { name, mesh, bft, tile, meshopt, draco, draco_triangles };
         prepared.check_round_trips();
         prepared
     }
@@ -72,6 +80,12 @@ impl Prepared {
     fn check_round_trips(&self) {
         let ours = decode_bft(&self.bft);
         assert_eq!(ours.triangles.len(), self.triangles(), "{}: BFT triangle count", self.name);
+        let tile = decode_bft(&self.tile);
+        assert!(
+            tile.positions == ours.positions && tile.triangles == ours.triangles,
+            "{}: the tile stream decodes to other slots or triangles than the file",
+            self.name
+        );
 
         let (indices, vertices) = decode_meshopt(&self.meshopt);
         assert_eq!(indices.len() / 3, self.triangles(), "{}: meshopt triangle count", self.name);
@@ -80,6 +94,23 @@ impl Prepared {
         let draco = decode_draco(&self.draco);
         assert_eq!(draco.num_faces(), self.draco_triangles, "{}: Draco triangle count", self.name);
     }
+}
+
+/// The mesh's whole tile stream, prefix-coded: one tile that sees every triangle.
+fn whole_tile(name: &str, bft: &[u8]) -> Vec<u8> {
+    use codec::bft::tile_sort::{boxes, Sorter, TileModel};
+    let model = TileModel::from_bytes(bft).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let grid = codec::view::TileGrid::new(1920, 1080, 1, 1).expect("a 1x1 grid");
+    let h = &model.decoded.header;
+    let view_proj = codec::view::Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
+    let mut tiles = Sorter::new(codec::bft::Coding::Prefix)
+        .sort(&model, &boxes(&model, view_proj, &grid), &grid)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(
+        tiles.len() == 1 && tiles[0].triangles as usize == model.triangles().len(),
+        "{name}: a tile misses triangles"
+    );
+    tiles.remove(0).bytes
 }
 
 fn encode_meshopt(mesh: &codec::Mesh) -> Meshopt {
@@ -114,6 +145,7 @@ fn bench_mesh(c: &mut Criterion, p: &Prepared) {
     // asking for the 55x-sample iteration ramp that linear sampling would need.
     group.sampling_mode(SamplingMode::Flat);
     group.bench_function("bft", |b| b.iter(|| decode_bft(black_box(&p.bft))));
+    group.bench_function("bft-tile", |b| b.iter(|| decode_bft(black_box(&p.tile))));
     group.bench_function("meshopt", |b| b.iter(|| decode_meshopt(black_box(&p.meshopt))));
     group.bench_function("draco", |b| b.iter(|| decode_draco(black_box(&p.draco))));
     group.finish();
@@ -164,6 +196,7 @@ fn print_summary(p: &Prepared) {
     let n = p.triangles();
     let stats = codec::bft::Stats::of(&p.bft).expect("BFT stats");
     let bft_t = median_time(|| decode_bft(&p.bft));
+    let tile_t = median_time(|| decode_bft(&p.tile));
     let meshopt_t = median_time(|| decode_meshopt(&p.meshopt));
     let draco_t = median_time(|| decode_draco(&p.draco));
     let options =
@@ -186,9 +219,13 @@ fn print_summary(p: &Prepared) {
         p.mesh.positions.len()
     );
     println!("{:<9} {:>10} {:>10} {:>14}", "codec", "bytes", "bits/tri", "decode Mtri/s");
-    for (codec, bytes, rate) in
-        [("bft", p.bft.len(), bft_rate), ("meshopt", meshopt_bytes, meshopt_rate), ("draco", p.draco.len(), draco_rate)]
-    {
+    let tile_rate = mtri_per_s(n, tile_t);
+    for (codec, bytes, rate) in [
+        ("bft", p.bft.len(), bft_rate),
+        ("bft-tile", p.tile.len(), tile_rate),
+        ("meshopt", meshopt_bytes, meshopt_rate),
+        ("draco", p.draco.len(), draco_rate),
+    ] {
         println!("{codec:<9} {bytes:>10} {:>10.3} {rate:>14.2}", bits_per_tri(bytes));
     }
     if p.draco_triangles != n {
@@ -204,6 +241,12 @@ fn print_summary(p: &Prepared) {
         verdict(decode_vs_meshopt >= TARGET_DECODE_VS_MESHOPT)
     );
     println!("decode  ours/draco   {:.3}", bft_rate / draco_rate);
+    let tile_vs_meshopt = tile_rate / meshopt_rate;
+    println!(
+        "decode  tile/meshopt {tile_vs_meshopt:.3}  (target >= {TARGET_TILE_DECODE_VS_MESHOPT})  {}",
+        verdict(tile_vs_meshopt >= TARGET_TILE_DECODE_VS_MESHOPT)
+    );
+    println!("decode  tile/draco   {:.3}", tile_rate / draco_rate);
     println!(
         "encode  ours         {encode_rate:.2} Mtri/s  (target >= {TARGET_ENCODE_MTRI_S})  {}",
         verdict(encode_rate >= TARGET_ENCODE_MTRI_S)

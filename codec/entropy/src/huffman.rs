@@ -8,7 +8,7 @@ pub const MAX_LEN: u8 = 24;
 
 /// One static code table over symbols `0..lens.len()` (at most 256): a code length per
 /// symbol, 0 for a symbol without a code, and the canonical codes.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Table {
     pub lens: Vec<u8>,
     codes: Vec<u32>,
@@ -20,7 +20,25 @@ pub struct Table {
     sorted: Vec<u8>,
     /// The longest length in use.
     longest: u8,
+    /// The decoder's lookup table (empty in an encoder's table, [`Table::from_counts`]): per
+    /// value of the next [`Table::lut_bits`] bits, `symbol << 4 | length` of the code they
+    /// start with, or 0 where that code is longer.
+    lut: Vec<u16>,
+    lut_bits: u8,
 }
+
+/// Two tables are the same code when their lengths are: the codes are canonical, and the
+/// lookup table only speeds decoding.
+impl PartialEq for Table {
+    fn eq(&self, other: &Table) -> bool {
+        self.lens == other.lens
+    }
+}
+
+/// The most bits a decoder's lookup table is indexed by: 1024 entries (2 KB), which the
+/// codes of prefix-coded tiles and `.dpm` operations almost always fit in, and which a tile
+/// of a few hundred triangles builds for its 24 tables in a few microseconds.
+const LUT_BITS: u8 = 10;
 
 impl Table {
     /// The code for these symbol counts, at most `max_len` bits long: symbols with a count
@@ -49,12 +67,30 @@ impl Table {
                 }
             }
         }
-        Table::from_lens(&lens).expect("Huffman lengths are a complete code")
+        Table::canonical_of(&lens).expect("Huffman lengths are a complete code")
     }
 
     /// The canonical code for these lengths, if they form a complete prefix code (or a
-    /// lone one-bit code, or no code at all).
+    /// lone one-bit code, or no code at all), with its decoder's lookup table.
     pub fn from_lens(lens: &[u8]) -> Option<Table> {
+        let mut t = Table::canonical_of(lens)?;
+        // Decoding by table instead of length by length measured 1.5x faster on the dragon's
+        // prefix-coded tile (11.5-12.7 to 18.1-18.5 Mtri/s); codes longer than the table's
+        // bits still decode length by length.
+        t.lut_bits = t.longest.min(LUT_BITS);
+        let k = t.lut_bits as u32;
+        t.lut = vec![0; 1 << k];
+        for (sym, &len) in t.lens.iter().enumerate() {
+            let len = len as u32;
+            if len > 0 && len <= k {
+                let start = (t.codes[sym] << (k - len)) as usize;
+                t.lut[start..start + (1 << (k - len))].fill((sym as u16) << 4 | len as u16);
+            }
+        }
+        Some(t)
+    }
+
+    fn canonical_of(lens: &[u8]) -> Option<Table> {
         if lens.len() > 256 {
             return None;
         }
@@ -98,7 +134,7 @@ impl Table {
             }
         }
         let longest = lens.iter().copied().max().unwrap_or(0);
-        Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest })
+        Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest, lut: Vec::new(), lut_bits: 0 })
     }
 
     /// The canonical decoding tables, for a decoder elsewhere (the WGSL one of `.dpm`
@@ -135,7 +171,13 @@ impl Table {
     #[inline]
     pub fn decode(&self, r: &mut BitReader) -> Option<u8> {
         let bits = r.peek();
-        for l in 1..=self.longest as usize {
+        if let Some(&e) = self.lut.get((bits >> (MAX_LEN - self.lut_bits) as u32) as usize) {
+            if e != 0 {
+                r.skip(e as u32 & 15)?;
+                return Some((e >> 4) as u8);
+            }
+        }
+        for l in self.lut_bits as usize + 1..=self.longest as usize {
             let code = bits >> (MAX_LEN as usize - l);
             let d = code.wrapping_sub(self.first[l]);
             if code >= self.first[l] && d < self.count[l] {
@@ -327,9 +369,16 @@ mod tests {
             t.encode(&mut w, s);
         }
         let bytes = w.finish();
-        let mut r = BitReader::new(&bytes, 0);
-        for s in 0..=255u8 {
-            assert_eq!(t.decode(&mut r), Some(s));
+        // The decoder's table (codes up to its lookup bits by table, longer ones length by
+        // length) and the encoder's (length by length) read the same symbols.
+        let decoder = Table::from_lens(&t.lens).unwrap();
+        assert!(decoder.lut_bits == LUT_BITS && t.longest > LUT_BITS, "both paths are taken");
+        for table in [&decoder, &t] {
+            let mut r = BitReader::new(&bytes, 0);
+            for s in 0..=255u8 {
+                assert_eq!(table.decode(&mut r), Some(s));
+            }
+            assert_eq!(r.end(), bytes.len());
         }
     }
 
