@@ -242,8 +242,9 @@ fn border_normals_complete_each_chunk() {
         assert!(glam::Vec3::from(n).distance(glam::Vec3::from(stored)) < 1e-4, "{n:?} stored as {stored:?}");
         normal_of[v] = Some((n, stored));
     }
-    let mut bordered = 0;
+    let (mut bordered, mut linked) = (0, 0);
     for i in 0..file.entries.len() {
+        linked += file.border(i).unwrap().links.iter().flatten().count() as u64;
         let d = file.decode_chunk(i).unwrap();
         let q = d.quantization();
         let p: Vec<[f32; 3]> = d.positions.iter().map(|&x| q.dequantize(x)).collect();
@@ -263,6 +264,10 @@ fn border_normals_complete_each_chunk() {
         }
     }
     assert!(bordered > 0);
+    // `tessera stats` counts the same entries and links.
+    let stats = file.stats().unwrap();
+    assert_eq!((stats.border_entries, stats.border_links), (bordered as u64, linked));
+    assert!(linked > 0 && linked < bordered as u64, "{linked} of {bordered} entries linked");
 }
 
 fn refresh_dir_crc(b: &mut [u8]) {

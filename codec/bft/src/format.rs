@@ -359,6 +359,11 @@ pub struct Stats {
     pub chunks: u32,
     /// A chunked file's border tables (shared vertices' links and normals).
     pub border_bytes: usize,
+    /// Their entries (slots of a vertex other chunks share), of which `border_links` name
+    /// the vertex's first slot in an earlier chunk or earlier in the chunk; each entry's
+    /// normal takes 4 bytes of the tables.
+    pub border_entries: u64,
+    pub border_links: u64,
 }
 
 impl Stats {
@@ -375,6 +380,8 @@ impl Stats {
             order_bytes: p.sections[6].len(),
             chunks: 1,
             border_bytes: 0,
+            border_entries: 0,
+            border_links: 0,
         })
     }
 

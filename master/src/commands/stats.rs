@@ -33,6 +33,11 @@ pub struct StatsReport {
     /// Chunks (1 for a single-stream file) and the bytes of their border tables.
     pub chunks: u32,
     pub border_bytes: usize,
+    /// The border tables' entries, of which `border_links` link to an earlier slot, and the
+    /// bytes of their normals (4 an entry).
+    pub border_entries: u64,
+    pub border_links: u64,
+    pub border_normal_bytes: u64,
     /// Per-vertex attributes: bytes and bits per vertex (0 where absent), normal bits.
     pub color_bytes: usize,
     pub color_bits_per_vertex: f64,
@@ -69,6 +74,9 @@ impl StatsReport {
             bbox_max: h.bbox_max,
             chunks: s.chunks,
             border_bytes: s.border_bytes,
+            border_entries: s.border_entries,
+            border_links: s.border_links,
+            border_normal_bytes: s.border_entries * 4,
             color_bytes: s.color_bytes,
             color_bits_per_vertex: s.per_vertex(s.color_bytes),
             color_alpha: h.attributes.alpha,
@@ -107,6 +115,12 @@ pub fn run(input: &Path, json: bool) -> Result<()> {
         crate::outln!("  bytes          {:>12}", r.bytes)?;
         if r.chunks > 1 {
             crate::outln!("  chunks         {:>12}   ({} bytes of border tables)", r.chunks, r.border_bytes)?;
+            crate::outln!(
+                "  border entries {:>12}   ({} linked to an earlier slot; {} bytes of normals)",
+                r.border_entries,
+                r.border_links,
+                r.border_normal_bytes
+            )?;
         }
         crate::outln!(
             "  connectivity   {:>12.3} bits/triangle ({} bytes)",

@@ -129,12 +129,13 @@ impl<B: ChunkSource> ChunkedFile<B> {
 
     /// The whole file's sizes, as `tessera stats` reports them: the chunks' headers summed
     /// (their sections' bytes, and counts), the border tables apart. Every chunk's container
-    /// is parsed and checked (not decoded).
+    /// and border table is parsed and checked (not decoded).
     pub fn stats(&self) -> Result<crate::bft::Stats, FormatError> {
         let g = &self.header;
         // Every slot beyond the first of its vertex, in a chunk or across chunks.
         let mut header = Header { duplicates: g.slots - g.unique_vertices, ..g.model_header() };
         let (mut connectivity_bytes, mut geometry_bytes, mut border_bytes) = (0, 0, 0);
+        let (mut border_entries, mut border_links) = (0, 0);
         let (mut color_bytes, mut normal_bytes, mut order_bytes) = (0, 0, 0);
         for i in 0..self.entries.len() {
             let bft = self.chunk_bft(i)?;
@@ -145,6 +146,9 @@ impl<B: ChunkSource> ChunkedFile<B> {
             normal_bytes += p.sections[5].len();
             order_bytes += p.sections[6].len();
             border_bytes += self.entries[i].border_len as usize;
+            let border = self.border(i)?;
+            border_entries += border.slots.len() as u64;
+            border_links += border.links.iter().flatten().count() as u64;
             add_chunk_counts(&mut header, &p.header);
         }
         Ok(crate::bft::Stats {
@@ -157,6 +161,8 @@ impl<B: ChunkSource> ChunkedFile<B> {
             order_bytes,
             chunks: self.entries.len() as u32,
             border_bytes,
+            border_entries,
+            border_links,
         })
     }
 
