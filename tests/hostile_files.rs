@@ -76,6 +76,35 @@ fn forged_chunked_counts_are_refused_by_stats_and_decode() {
     ok(&tessera(&["stats", s(&bft)]));
 }
 
+/// A chunked model larger than `--max-decompressed` decoded whole still sorts and reports its
+/// stats, chunk by chunk (the 223M-triangle model's 112M input vertices are 1.3 GiB whole,
+/// above the default 1 GiB, and `sort`, `render` and `stats` refused it); only `decode`,
+/// which builds the whole model, is refused, by the field, writing nothing.
+#[test]
+fn a_chunked_model_above_the_cap_whole_is_read_chunk_by_chunk() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bft, single) = (dir.path().join("cow.bft"), dir.path().join("single.bft"));
+    ok(&tessera(&["encode", &mesh("classic/cow.obj"), "-o", s(&bft), "--chunk-triangles", "256"]));
+    ok(&tessera(&["encode", &mesh("classic/cow.obj"), "-o", s(&single)]));
+    let json = |o: &std::process::Output| -> serde_json::Value {
+        ok(o);
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    // The cow's 2,903 input vertices take 34 KiB whole, its 3,702 slots 22 KiB in `stats`,
+    // a chunk's slots (under 200) 6 KiB.
+    let cap = ["--max-decompressed", "30K"];
+    let stats = json(&tessera(&[&cap[..], &["stats", s(&bft), "--json"]].concat()));
+    let whole = json(&tessera(&["stats", s(&single), "--json"]));
+    assert!(stats["chunks"].as_u64().unwrap() > 1, "{stats}");
+    assert_eq!(stats["components"], whole["components"], "the model's components, not the chunks' sum");
+    let sorted = json(&tessera(&[&cap[..], &["sort", s(&bft), "--json"]].concat()));
+    assert_eq!(sorted["totals"]["triangles"], stats["triangles"]);
+    let ply = dir.path().join("out.ply");
+    let o = tessera(&[&cap[..], &["decode", s(&bft), "-o", s(&ply)]].concat());
+    refused_last_line(&o, "header field input_vertices: 2903 input vertices");
+    assert!(!ply.exists(), "nothing written");
+}
+
 /// A `.bft` header whose quantization grid does not fit `f32` (step 1e38 at 16 bits) is a
 /// corrupt file named with the field, for `stats` and `decode`, single-stream and chunked.
 #[test]

@@ -378,3 +378,23 @@ fn random_and_damaged_chunked_files_are_errors_not_panics() {
         exercise(&copy);
     }
 }
+
+/// `tessera stats` counts a chunked model's components chunk by chunk, over slots joined by
+/// their duplicates and border links: as many as the whole model decoded and welded has, on
+/// meshes of one, several and many components (separate grids, a scan with holes).
+#[test]
+fn components_counted_chunk_by_chunk_are_the_welded_model_s() {
+    for (name, mesh) in [
+        ("teapot", testkit::load_mesh("classic/teapot.obj")),
+        ("cow", testkit::load_mesh("classic/cow.obj")),
+        ("grids", testkit::holed_grids(24, 24, 5, &[true, false], 3)),
+    ] {
+        let whole = mesh.components();
+        assert!(name != "grids" || whole > 1, "{name}: {whole} components");
+        let (bytes, _) = chunked(&mesh, 200);
+        let file = ChunkedFile::open(bytes).unwrap();
+        assert!(file.entries.len() > 2, "{name}: {} chunks", file.entries.len());
+        assert_eq!(file.decode_all().unwrap().to_mesh().components(), whole, "{name}: decoded whole");
+        assert_eq!(file.components().unwrap(), whole, "{name}: chunk by chunk");
+    }
+}

@@ -89,16 +89,21 @@ impl StatsReport {
     }
 }
 
-/// `tessera stats IN.bft [--json]`. The whole file is decoded too, so a file whose
-/// sections pass their checksums but whose streams are inconsistent is reported as corrupt.
+/// `tessera stats IN.bft [--json]`. The file is decoded too (a chunked one chunk by chunk),
+/// so a file whose sections pass their checksums but whose streams are inconsistent is
+/// reported as corrupt.
 pub fn run(input: &Path, json: bool) -> Result<()> {
     expect_kind(input, ModelKind::Bft, "stats", "stats")?;
     let bytes = read_input(input)?;
     let mut report = StatsReport::of(&bytes).with_context(|| format!("{}", input.display()))?;
-    let decoded = bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
-    if report.chunks > 1 {
-        // The chunks' own counts add up to more components than the model has.
-        report.components = decoded.to_mesh().components() as u32;
+    if bft::chunked::is_chunked(&bytes) {
+        // Chunk by chunk: a chunked model is larger than what decodes whole (the 223M
+        // model's arrays would take gigabytes), and the chunks' own counts add up to more
+        // components than the model has.
+        let file = bft::chunked::ChunkedFile::open(&bytes[..]).with_context(|| format!("{}", input.display()))?;
+        report.components = file.components().with_context(|| format!("{}", input.display()))? as u32;
+    } else {
+        bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
     }
     if json {
         crate::outln!("{}", serde_json::to_string_pretty(&report)?)?;

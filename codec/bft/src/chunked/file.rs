@@ -217,16 +217,97 @@ impl<B: ChunkSource> ChunkedFile<B> {
         Ok(d)
     }
 
+    /// Decodes and checks every chunk, a batch at a time (never the whole model at once), and
+    /// counts the whole model's connected components, as [`Decoded::to_mesh`] would weld it:
+    /// a slot joins its duplicate's source and its border link. With the input order kept,
+    /// the chunks must place the header's input vertices (the largest index is the last).
+    /// Memory: 6 bytes a slot, checked against `--max-decompressed` by the header's field.
+    pub fn components(&self) -> Result<usize, FormatError> {
+        use rayon::prelude::*;
+        let g = &self.header;
+        crate::input::check_decoded("header field slots", g.slots.into(), "slots", 6).map_err(FormatError::TooLarge)?;
+        let mut parent: Vec<u32> = (0..g.slots).collect();
+        let mut used = vec![false; g.slots as usize];
+        fn root(parent: &mut [u32], mut v: u32) -> u32 {
+            while parent[v as usize] != v {
+                parent[v as usize] = parent[parent[v as usize] as usize];
+                v = parent[v as usize];
+            }
+            v
+        }
+        fn join(parent: &mut [u32], a: u32, b: u32) {
+            let (a, b) = (root(parent, a), root(parent, b));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+        let (mut order, mut placed) = (false, 0u64);
+        let batch = rayon::current_num_threads() * 8;
+        for start in (0..self.entries.len()).step_by(batch) {
+            let parts: Vec<(Decoded, Border)> = (start..(start + batch).min(self.entries.len()))
+                .into_par_iter()
+                .map(|i| Ok((self.decode_chunk(i)?, self.border(i)?)))
+                .collect::<Result<_, FormatError>>()?;
+            for (k, (d, border)) in parts.iter().enumerate() {
+                let base = self.entries[start + k].first_slot;
+                for t in &d.triangles {
+                    for &s in t {
+                        used[(s + base) as usize] = true;
+                        join(&mut parent, t[0] + base, s + base);
+                    }
+                }
+                for &(s, src) in &d.duplicates {
+                    join(&mut parent, s + base, src + base);
+                }
+                for (&s, link) in border.slots.iter().zip(&border.links) {
+                    if let Some(l) = link {
+                        join(&mut parent, s + base, *l);
+                    }
+                }
+                order |= d.header.attributes.order;
+                placed = placed.max(d.attributes.order.iter().map(|&i| i as u64 + 1).max().unwrap_or(0));
+            }
+        }
+        if order && placed != g.input_vertices as u64 {
+            return Err(corrupt(format!(
+                "header field input_vertices: {} input vertices, where the chunks' input order places {placed}",
+                g.input_vertices
+            )));
+        }
+        // A vertex's slots are one set: count the sets a triangle uses once, by their root.
+        let mut counted = vec![false; g.slots as usize];
+        let mut components = 0;
+        for s in 0..g.slots {
+            if used[s as usize] {
+                let r = root(&mut parent, s) as usize;
+                components += !counted[r] as usize;
+                counted[r] = true;
+            }
+        }
+        Ok(components)
+    }
+
     /// The whole file as one decoded model: every chunk's slots and triangles renumbered
     /// after the chunks before it, and the duplicate table extended with the border links,
     /// so that [`Decoded::to_mesh`] welds each input vertex back into one.
     pub fn decode_all(&self) -> Result<Decoded, FormatError> {
         use rayon::prelude::*;
+        // The whole model's arrays, refused by their header field before any chunk decodes: a
+        // decoded model gives every input vertex a place (`Decoded::to_mesh`), 12 bytes each
+        // at least, and holds every slot and triangle.
+        let g = &self.header;
+        for (field, count, unit) in [
+            ("input_vertices", g.input_vertices, "input vertices"),
+            ("slots", g.slots, "slots"),
+            ("triangles", g.triangles, "triangles"),
+        ] {
+            crate::input::check_decoded(&format!("header field {field}"), count.into(), unit, 12)
+                .map_err(FormatError::TooLarge)?;
+        }
         let parts: Vec<(Decoded, Border)> = (0..self.entries.len())
             .into_par_iter()
             .map(|i| Ok((self.decode_chunk(i)?, self.border(i)?)))
             .collect::<Result<_, FormatError>>()?;
-        let g = &self.header;
         let mut out = Decoded {
             header: g.model_header(),
             positions: Vec::with_capacity(g.slots as usize),

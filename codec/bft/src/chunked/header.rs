@@ -107,11 +107,10 @@ impl ChunkedHeader {
         if h.border_slots > h.slots || h.unique_vertices > h.slots || h.unique_vertices > h.input_vertices {
             return Err(corrupt("inconsistent counts in the chunked header"));
         }
-        // A decoded model gives input vertices a place (with the input order kept, every one
-        // of them: `Decoded::to_mesh`), 12 bytes each at least; the chunks' own counts are
-        // checked as each chunk's stream is read.
-        crate::input::check_decoded("header field input_vertices", h.input_vertices.into(), "input vertices", 12)
-            .map_err(FormatError::TooLarge)?;
+        // The whole model's counts are checked against `--max-decompressed` where the whole
+        // model is decoded ([`super::ChunkedFile::decode_all`]), not here: a sort or a render
+        // reads a chunk at a time, and a 223M-triangle model's 112M input vertices would
+        // take 1.3 GiB decoded whole. Each chunk's own counts are checked as it is read.
         Ok(h)
     }
 }
