@@ -5,7 +5,8 @@
 # (--decode-only), so that rank 0's sort, memory and traffic are measured apart from
 # lavapipe:
 #   1. encode: time, triangles/s, peak memory (/usr/bin/time -v);
-#   2. a full view, 3 frames (each made: --no-frame-reuse): sort time per frame, rank 0's resident memory;
+#   2. a full view, 3 frames (each made: --no-frame-reuse): per frame rank 0's sort time and
+#      resident memory, and the slowest worker's decode time;
 #   3. a close-up that sees a few percent of the model, 3 frames;
 #   4. a slow orbit (1 degree a frame, 6 frames): the bytes each frame sends against the first.
 # Usage: bench/scripts/scale.sh [MIN_TRIANGLES] [TMPDIR]   (e.g. bench/scripts/scale.sh 20M for a quick run)
@@ -36,11 +37,18 @@ report() {
 import json, sys
 lines = [json.loads(l) for l in open(sys.argv[1])]
 m = [l for l in lines if l["rank"] == 0]
+# The slowest worker's decoding by frame: a frame waits for the slower of rank 0's sort and
+# the workers (0 where a worker had every stream from the frame before).
+decode = {}
+for l in lines:
+    if l["rank"] != 0:
+        decode[l["frame"]] = max(decode.get(l["frame"], 0), l.get("decode_ms", 0))
 first = sum(t["bytes"] + t["normal_bytes"] for t in m[0]["tiles"])
 for l in m:
     c = l["chunks"]
     sent = sum(t["bytes"] + t["normal_bytes"] for t in l["tiles"])
-    print(f'   frame {l["frame"]}: sort {l["sort_ms"]:.0f} ms, rank 0 {l["rss_mb"]:.0f} MB resident, '
+    print(f'   frame {l["frame"]}: sort {l["sort_ms"]:.0f} ms, '
+          f'worker decode {decode.get(l["frame"], 0):.0f} ms, rank 0 {l["rss_mb"]:.0f} MB resident, '
           f'chunks {c["culled"]} culled / {c["verbatim"]} verbatim ({c["kept"]} kept) / {c["straddling"]} straddling '
           f'({c["straddling_triangles"]} triangles sorted, {c["built"]} built), '
           f'sent {sent/1e6:.2f} MB ({sent/first:.3f} of the first frame)')
