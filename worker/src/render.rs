@@ -58,10 +58,9 @@ pub struct PmPoint {
 /// buffers.
 #[derive(Clone, Copy)]
 enum Source<'a> {
-    Mesh(&'a RenderMesh),
-    Pm(AdaptedMesh<'a>),
     /// A mesh uploaded for this frame and meshes already on the device, drawn in order.
     Parts(&'a RenderMesh, &'a [Draw<'a>]),
+    Pm(AdaptedMesh<'a>),
 }
 
 /// One draw of [`Renderer::render_parts`].
@@ -83,13 +82,6 @@ pub struct GpuMesh {
     colors: wgpu::Buffer,
     indices: wgpu::Buffer,
     index_count: u32,
-}
-
-impl GpuMesh {
-    /// Bytes its buffers take on the device.
-    pub fn bytes(&self) -> u64 {
-        [&self.positions, &self.normals, &self.colors, &self.indices].iter().map(|b| b.size()).sum()
-    }
 }
 
 /// The renderer's shaders (`render.wgsl`, beside this file): two pipelines drawn under the
@@ -438,8 +430,7 @@ impl Renderer {
         frame: (u32, u32),
         rect: [u32; 4],
     ) -> Result<(Vec<u8>, RenderTimes), RenderError> {
-        check_counts(mesh)?;
-        self.render_source(Source::Mesh(mesh), view_proj, frame, rect)
+        self.render_parts(mesh, &[Draw::Joined(0..mesh.indices.len() as u32)], view_proj, frame, rect)
     }
 
     /// Uploads `mesh` into buffers of its own, to be drawn by [`Renderer::render_parts`] in
@@ -455,20 +446,22 @@ impl Renderer {
         let max = self.gpu.limits().max_buffer_size;
         let gpu = self.gpu.clone();
         let device = gpu.device();
-        let buffer = |label: &'static str, contents: &[u8], usage| {
-            if contents.len() as u64 > max {
-                return Err(RenderError::MeshTooLarge { what: label, bytes: contents.len() as u64, max });
+        let fits = |what: &'static str, bytes: u64| -> Result<(), RenderError> {
+            match bytes > max {
+                true => Err(RenderError::MeshTooLarge { what, bytes, max }),
+                false => Ok(()),
             }
+        };
+        let buffer = |label: &'static str, contents: &[u8], usage| -> Result<wgpu::Buffer, RenderError> {
+            fits(label, contents.len() as u64)?;
             Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage }))
         };
-        let mesh = gpu.scoped(|| {
+        let mesh = gpu.scoped(|| -> Result<GpuMesh, RenderError> {
             let colors = match mesh.colors.is_empty() {
                 // Zero-filled by wgpu: alpha 0, the renderer's grey (as `render` draws it).
                 true => {
                     let size = mesh.positions.len() as u64 * 4;
-                    if size > max {
-                        return Err(RenderError::MeshTooLarge { what: "resident: colours", bytes: size, max });
-                    }
+                    fits("resident: colours", size)?;
                     device.create_buffer(&wgpu::BufferDescriptor {
                         label: Some("resident: colours"),
                         size,
@@ -493,10 +486,10 @@ impl Renderer {
         Ok((Some(mesh), ms_since(start)))
     }
 
-    /// Renders `draws` in order: ranges of `joined`'s indices, uploaded as
-    /// [`Renderer::render`] uploads a mesh, and meshes already on the device. The pixels are
-    /// [`Renderer::render`]'s of all of them joined into one mesh in that order: the same
-    /// triangles reach the rasterizer in the same order.
+    /// Renders `draws` in order: ranges of `joined`'s indices (`joined` uploaded into the
+    /// renderer's own buffers, which grow as meshes do) and meshes already on the device. The
+    /// pixels are [`Renderer::render`]'s of all of them joined into one mesh in that order:
+    /// the same triangles reach the rasterizer in the same order.
     pub fn render_parts(
         &mut self,
         joined: &RenderMesh,
@@ -567,7 +560,7 @@ impl Renderer {
         let max = self.gpu.limits().max_buffer_size;
         let (device, queue) = (self.gpu.device(), self.gpu.queue());
         let pulled = match source {
-            Source::Mesh(mesh) | Source::Parts(mesh, _) => {
+            Source::Parts(mesh, _) => {
                 self.positions.write(device, queue, bytemuck::cast_slice(&mesh.positions), max)?;
                 self.normals.write(device, queue, bytemuck::cast_slice(&mesh.normals), max)?;
                 let colors = if mesh.colors.is_empty() {
@@ -629,19 +622,6 @@ impl Renderer {
             pass.set_pipeline(&self.clear_pipeline);
             pass.draw(0..3, 0..1);
             match (source, &pulled) {
-                (Source::Mesh(mesh), _) => {
-                    let index_count = mesh.indices.len() as u32;
-                    if index_count > 0 {
-                        let vertex_bytes = mesh.positions.len() as u64 * VEC3_BYTES;
-                        pass.set_pipeline(&self.mesh_pipeline);
-                        pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);
-                        pass.set_vertex_buffer(0, self.positions.slice(vertex_bytes));
-                        pass.set_vertex_buffer(1, self.normals.slice(vertex_bytes));
-                        pass.set_vertex_buffer(2, self.colors.slice(mesh.positions.len() as u64 * 4));
-                        pass.set_index_buffer(self.indices.slice(index_count as u64 * 4), wgpu::IndexFormat::Uint32);
-                        pass.draw_indexed(0..index_count, 0, 0..1);
-                    }
-                }
                 (Source::Parts(joined, draws), _) => {
                     pass.set_pipeline(&self.mesh_pipeline);
                     pass.set_bind_group(FRAME_GROUP, &self.bind_group, &[]);

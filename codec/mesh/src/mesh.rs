@@ -88,27 +88,56 @@ impl Mesh {
     }
 
     /// Connected components of the used vertices, vertices being joined by sharing a
-    /// triangle (union-find with path halving). Indices must be in range.
+    /// triangle. Indices must be in range.
     pub fn components(&self) -> usize {
-        let mut parent: Vec<u32> = (0..self.positions.len() as u32).collect();
-        fn root(parent: &mut [u32], mut v: u32) -> u32 {
-            while parent[v as usize] != v {
-                parent[v as usize] = parent[parent[v as usize] as usize];
-                v = parent[v as usize];
-            }
-            v
-        }
+        let mut sets = Sets::new(self.positions.len());
         for t in &self.triangles {
-            let a = root(&mut parent, t[0]);
-            for &v in &t[1..] {
-                let b = root(&mut parent, v);
-                if a != b {
-                    parent[b as usize] = a;
-                }
+            sets.join(t[0], t[1]);
+            sets.join(t[0], t[2]);
+        }
+        sets.count(&self.used_vertices())
+    }
+}
+
+/// Disjoint sets of `0..n` (union-find with path halving): a mesh's components, and a chunked
+/// file's, whose slots are joined chunk by chunk.
+pub struct Sets {
+    parent: Vec<u32>,
+}
+
+impl Sets {
+    pub fn new(n: usize) -> Sets {
+        Sets { parent: (0..n as u32).collect() }
+    }
+
+    fn root(&mut self, mut v: u32) -> u32 {
+        while self.parent[v as usize] != v {
+            self.parent[v as usize] = self.parent[self.parent[v as usize] as usize];
+            v = self.parent[v as usize];
+        }
+        v
+    }
+
+    /// Puts `a` and `b` in one set.
+    pub fn join(&mut self, a: u32, b: u32) {
+        let (a, b) = (self.root(a), self.root(b));
+        if a != b {
+            self.parent[a.max(b) as usize] = a.min(b);
+        }
+    }
+
+    /// The sets holding an element whose `used` is true.
+    pub fn count(&mut self, used: &[bool]) -> usize {
+        let mut counted = vec![false; self.parent.len()];
+        let mut sets = 0;
+        for v in 0..self.parent.len() as u32 {
+            if used[v as usize] {
+                let r = self.root(v) as usize;
+                sets += !counted[r] as usize;
+                counted[r] = true;
             }
         }
-        let used = self.used_vertices();
-        (0..parent.len()).filter(|&v| used[v] && parent[v] == v as u32).count()
+        sets
     }
 }
 

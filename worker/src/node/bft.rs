@@ -53,7 +53,6 @@ struct Decoded {
 
 /// One stream's decoded mesh and, once a frame has drawn it, its buffers on the device
 /// (`None` inside for a mesh without triangles).
-#[derive(Default)]
 struct Part {
     mesh: RenderMesh,
     gpu: OnceLock<Option<GpuMesh>>,
@@ -288,18 +287,15 @@ fn render_tile(renderer: &mut Renderer, job: &FrameJob, tile_mesh: &TileMesh) ->
         (vec![0; (x1.saturating_sub(x0)) * (y1.saturating_sub(y0)) * 4], Default::default())
     } else {
         // A kept mesh gets buffers of its own on its second frame; new ones are joined.
-        let mut upload_ms = 0.0;
+        let (mut upload_ms, mut at) = (0.0, 0);
+        let mut new: Vec<&RenderMesh> = Vec::new();
+        let mut draws: Vec<Draw> = Vec::new();
         for (part, reused) in parts {
             if *reused && part.gpu.get().is_none() {
                 let (gpu, ms) = renderer.upload(&part.mesh)?;
                 upload_ms += ms;
                 let _ = part.gpu.set(gpu);
             }
-        }
-        let mut new: Vec<&RenderMesh> = Vec::new();
-        let mut draws: Vec<Draw> = Vec::new();
-        let mut at = 0;
-        for (part, _) in parts {
             if let Some(gpu) = part.gpu.get() {
                 draws.extend(gpu.as_ref().map(Draw::Resident));
                 continue;

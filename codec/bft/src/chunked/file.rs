@@ -226,21 +226,8 @@ impl<B: ChunkSource> ChunkedFile<B> {
         use rayon::prelude::*;
         let g = &self.header;
         crate::input::check_decoded("header field slots", g.slots.into(), "slots", 6).map_err(FormatError::TooLarge)?;
-        let mut parent: Vec<u32> = (0..g.slots).collect();
+        let mut sets = crate::mesh::Sets::new(g.slots as usize);
         let mut used = vec![false; g.slots as usize];
-        fn root(parent: &mut [u32], mut v: u32) -> u32 {
-            while parent[v as usize] != v {
-                parent[v as usize] = parent[parent[v as usize] as usize];
-                v = parent[v as usize];
-            }
-            v
-        }
-        fn join(parent: &mut [u32], a: u32, b: u32) {
-            let (a, b) = (root(parent, a), root(parent, b));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
-        }
         let (mut order, mut placed) = (false, 0u64);
         let batch = rayon::current_num_threads() * 8;
         for start in (0..self.entries.len()).step_by(batch) {
@@ -253,15 +240,15 @@ impl<B: ChunkSource> ChunkedFile<B> {
                 for t in &d.triangles {
                     for &s in t {
                         used[(s + base) as usize] = true;
-                        join(&mut parent, t[0] + base, s + base);
+                        sets.join(t[0] + base, s + base);
                     }
                 }
                 for &(s, src) in &d.duplicates {
-                    join(&mut parent, s + base, src + base);
+                    sets.join(s + base, src + base);
                 }
                 for (&s, link) in border.slots.iter().zip(&border.links) {
                     if let Some(l) = link {
-                        join(&mut parent, s + base, *l);
+                        sets.join(s + base, *l);
                     }
                 }
                 order |= d.header.attributes.order;
@@ -274,17 +261,8 @@ impl<B: ChunkSource> ChunkedFile<B> {
                 g.input_vertices
             )));
         }
-        // A vertex's slots are one set: count the sets a triangle uses once, by their root.
-        let mut counted = vec![false; g.slots as usize];
-        let mut components = 0;
-        for s in 0..g.slots {
-            if used[s as usize] {
-                let r = root(&mut parent, s) as usize;
-                components += !counted[r] as usize;
-                counted[r] = true;
-            }
-        }
-        Ok(components)
+        // A vertex's slots are one set: count the sets a triangle uses.
+        Ok(sets.count(&used))
     }
 
     /// The whole file as one decoded model: every chunk's slots and triangles renumbered
