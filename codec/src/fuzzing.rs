@@ -21,10 +21,21 @@ pub fn decode_bft(data: &[u8]) {
     let chunked = crate::bft::chunked::wrap_for_fuzzing(data);
     let _ = crate::bft::decode(&chunked);
     if let Ok(file) = crate::bft::chunked::ChunkedFile::open(chunked) {
-        let model = crate::bft::chunked::sort::ChunkedModel::new(file, 1 << 20);
+        let mut model = crate::bft::chunked::sort::ChunkedModel::new(file, 1 << 20);
         for i in 0..model.chunks() {
             let _ = model.file.border(i);
             let _ = model.straddler(i);
+        }
+        // A hierarchy that opened is consistent: its levels and cuts are defined.
+        if let Some(h) = &model.file.lod {
+            let _ = h.levels();
+            let _ = model.file.levels();
+            let grid = crate::view::TileGrid::new(64, 48, 4, 3).expect("a grid");
+            let vp = crate::view::Camera::framing([-1.0; 3], [1.0; 3], grid.aspect()).view_proj(grid.aspect());
+            for error_px in [None, Some(0.5), Some(1e6)] {
+                model.error_px = error_px;
+                let _ = model.classify_all(vp, &grid);
+            }
         }
     }
 }

@@ -49,11 +49,11 @@ fn random_byte_flips_are_detected() {
 fn wrong_magic_and_version_are_named() {
     let mut b = encoded("odedstein/cube.obj");
     assert_eq!(u16::from_le_bytes([b[8], b[9]]), bft::VERSION);
-    for v in [0u16, 5, 9, u16::MAX] {
+    for v in [0u16, 6, 9, u16::MAX] {
         b[8..10].copy_from_slice(&v.to_le_bytes());
         let e = bft::decode(&b).unwrap_err();
         assert_eq!(e, FormatError::UnsupportedVersion { format: Format::Bft, found: v, known: bft::READS });
-        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2, 3 and 4)"));
+        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2, 3, 4 and 5)"));
     }
     // Version 4 has seven sections: a version 2 file relabelled is truncated; a version 2
     // file whose attribute flags are set is corrupt.
@@ -67,10 +67,12 @@ fn wrong_magic_and_version_are_named() {
     flagged[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
     let e = bft::decode(&flagged).unwrap_err().to_string();
     assert!(e.contains("version 2 file has non-zero reserved bytes 42 and 43"), "{e}");
-    // Version 3 is a chunked file, whose header a single stream's is not.
-    b[8..10].copy_from_slice(&3u16.to_le_bytes());
-    let e = bft::decode(&b).unwrap_err().to_string();
-    assert!(e.contains("chunked header is 72 bytes"), "{e}");
+    // Versions 3 and 5 are chunked files, whose header a single stream's is not.
+    for v in [3u16, 5] {
+        b[8..10].copy_from_slice(&v.to_le_bytes());
+        let e = bft::decode(&b).unwrap_err().to_string();
+        assert!(e.contains("chunked header is 72 bytes"), "{e}");
+    }
     b[0] = b'X';
     assert_eq!(bft::decode(&b).unwrap_err(), BftError::BadMagic(Format::Bft));
     assert_eq!(bft::decode(b"ply\nformat ascii").unwrap_err(), BftError::BadMagic(Format::Bft));

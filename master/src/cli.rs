@@ -437,6 +437,19 @@ pub struct EncodeArgs {
     /// order. `stats` reports its cost in bits per vertex.
     #[arg(long)]
     pub keep_order: bool,
+    /// Build a level-of-detail hierarchy above the chunks: groups of adjacent chunks
+    /// simplified to half with their borders locked, level after level, each chunk an
+    /// ordinary BFT stream with its error. `sort` and `render` then draw the cut of
+    /// `--error-px`, crack-free. Chunks the model (at --chunk-triangles, 4096 by default),
+    /// and holds its triangles in memory while it builds.
+    #[arg(long)]
+    pub lod: bool,
+    /// With --lod: the weight of normals in the simplifier's error, against positions
+    /// scaled to each group's extent. Larger keeps more triangles where shading changes
+    /// (on the dragon at --error-px 1: 0 draws 56K triangles, 79% of covered pixels within
+    /// 8/255 of the full model; 2 draws 320K, 99.4%).
+    #[arg(long, default_value_t = codec::bft::chunked::lod::NORMAL_WEIGHT, value_parser = parse_non_negative)]
+    pub lod_normal_weight: f32,
 }
 
 /// Flags of `tessera render`.
@@ -578,7 +591,8 @@ pub struct RenderArgs {
     /// again (0 keeps none).
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u64).range(0..=1 << 24))]
     pub worker_cache_mb: u64,
-    /// Progressive meshes: the screen-space error bound in pixels.
+    /// Progressive meshes, `.nsp` stores and level-of-detail `.bft` files (`encode --lod`):
+    /// the screen-space error bound in pixels.
     #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
     pub error_px: f32,
     /// Progressive meshes: the normal error's weight, as a fraction of the model's bounding
@@ -655,6 +669,10 @@ pub struct SortArgs {
     /// faster to sort and decode, about 5% larger).
     #[arg(long, value_enum, default_value_t = TileCoding::Range)]
     pub tile_coding: TileCoding,
+    /// Level-of-detail files (`encode --lod`): sort the cut of chunks whose error projects
+    /// to at most this many pixels (as `render` draws it).
+    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
+    pub error_px: f32,
 }
 
 /// The view a model is adapted to (`pm adapt`, `nsp adapt`): the camera and the frame size.

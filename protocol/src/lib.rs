@@ -64,9 +64,9 @@ pub use to_worker::ToWorker;
 /// display ranks' messages, 6 out-of-core `.dpm` files (`DpmFile`) and the memory of `Pixels`,
 /// 7 the GPU budget of `Model` and `DpmFile`, the node pool of `DpmFile` and the error scale
 /// of `Pixels`, 8 `Unload` and `KeepAlive`, 9 a window's `Input` and the pixel codec of
-/// `Pixels`; version 1 messages had no version byte, so they
-/// read as version = their kind byte and are refused.
-pub const VERSION: u8 = 9;
+/// `Pixels`, 10 the screen error of `SortJob`; version 1 messages had no version byte, so
+/// they read as version = their kind byte and are refused.
+pub const VERSION: u8 = 10;
 
 /// The kind of `Shutdown`, the same to workers, sorters and display ranks: rank 0 sends one
 /// message to every rank.

@@ -18,16 +18,18 @@ pub enum ToSorter {
 /// The kind byte of [`ToSorter::Sort`].
 const SORT: u8 = 9;
 
-/// A frame for a sorter rank: the view, and the worker rank of every tile of the grid.
+/// A frame for a sorter rank: the view, the screen error a level-of-detail file's cut is
+/// taken at, and the worker rank of every tile of the grid.
 ///
 /// ```text
-/// frame u32, view_proj 16 x f32, tile count u32, then per tile the worker rank that renders
-/// it, u32
+/// frame u32, view_proj 16 x f32, error_px f32, tile count u32, then per tile the worker
+/// rank that renders it, u32
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct SortJob {
     pub frame: u32,
     pub view_proj: [f32; 16],
+    pub error_px: f32,
     pub owners: Vec<u32>,
 }
 
@@ -35,15 +37,17 @@ impl Body for SortJob {
     fn write(&self, w: &mut Writer) {
         w.u32(self.frame);
         w.matrix(&self.view_proj);
+        w.f32(self.error_px);
         w.u32(self.owners.len() as u32);
         self.owners.iter().for_each(|&o| w.u32(o));
     }
     fn read(r: &mut Reader) -> Result<Self, ProtocolError> {
         let frame = r.u32("frame")?;
         let view_proj = r.matrix("view_proj")?;
+        let error_px = r.f32("error_px")?;
         let n = r.count(4, "owners")?;
         let owners = (0..n).map(|_| r.u32("owner")).collect::<Result<_, _>>()?;
-        Ok(SortJob { frame, view_proj, owners })
+        Ok(SortJob { frame, view_proj, error_px, owners })
     }
 }
 

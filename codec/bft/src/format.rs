@@ -40,17 +40,23 @@ pub const MAGIC: [u8; 8] = crate::kind::BFT_MAGIC;
 /// The version of a chunked file (many streams behind a directory, `super::chunked`).
 pub(crate) const CHUNKED_VERSION: u16 = 3;
 
-/// Whether `bytes` start like a chunked `.bft` file (magic and version 3).
+/// The version of a chunked file with a level-of-detail hierarchy (`super::chunked::lod`).
+pub(crate) const LOD_VERSION: u16 = 5;
+
+/// Whether `bytes` start like a chunked `.bft` file (magic and version 3 or 5).
 pub fn is_chunked(bytes: &[u8]) -> bool {
-    bytes.len() >= 10 && bytes[..8] == MAGIC && u16::from_le_bytes([bytes[8], bytes[9]]) == CHUNKED_VERSION
+    bytes.len() >= 10
+        && bytes[..8] == MAGIC
+        && matches!(u16::from_le_bytes([bytes[8], bytes[9]]), CHUNKED_VERSION | LOD_VERSION)
 }
 /// The version written for a stream without attributes.
 pub const VERSION: u16 = 2;
 /// The version written for a stream with attributes.
 pub const VERSION_ATTRIBUTES: u16 = 4;
 /// The versions read: 1 (before the coding byte), 2, 3 (chunked files, [`super::chunked`];
-/// a single stream is never version 3) and 4 (a stream with attributes).
-pub const READS: &[u16] = &[1, 2, 3, 4];
+/// a single stream is never version 3), 4 (a stream with attributes) and 5 (a chunked file
+/// with a level-of-detail hierarchy).
+pub const READS: &[u16] = &[1, 2, 3, 4, 5];
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
 pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
 /// The sections of a stream, attributes included (version 4 has them all).

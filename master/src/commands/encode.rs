@@ -27,6 +27,8 @@ pub fn run(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
     let start = Instant::now();
     // Without --chunk-triangles, chunks only for a model too large for one stream.
     let (chunk_triangles, one_stream_up_to) = match options.chunk_triangles {
+        // A hierarchy is built over chunks, whatever the model's size.
+        None if options.lod => (bft::chunked::DEFAULT_CHUNK_TRIANGLES, 0),
         None => (bft::chunked::DEFAULT_CHUNK_TRIANGLES, bft::chunked::ONE_STREAM_MAX_TRIANGLES),
         Some(0) => (u32::MAX, 0),
         Some(n) => (n, 0),
@@ -36,6 +38,8 @@ pub fn run(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
         chunk_triangles,
         one_stream_up_to,
         temp_dir: options.temp_dir.clone(),
+        lod: options.lod,
+        lod_normal_weight: options.lod_normal_weight,
         stream: bft::EncodeOptions {
             quant_bits: options.quant_bits,
             normal_bits: options.normal_bits,

@@ -54,6 +54,8 @@ pub struct Totals {
 #[derive(Debug, Serialize)]
 pub struct ChunkSummary {
     pub chunks: usize,
+    /// Chunks a level-of-detail file's cut leaves out.
+    pub not_in_cut: u32,
     pub culled: u32,
     pub verbatim: u32,
     pub straddling: u32,
@@ -206,6 +208,7 @@ pub fn sort_chunked_frame(
     };
     let chunks = ChunkSummary {
         chunks: model.chunks(),
+        not_in_cut: counts.not_in_cut,
         culled: counts.culled,
         verbatim: counts.verbatim,
         straddling: counts.straddling,
@@ -310,7 +313,8 @@ pub fn run(args: &SortArgs) -> Result<()> {
         prepare_dump(dir, path)?;
     }
     let name = path.display().to_string();
-    let (mut summary, tiles) = if let Some(model) = open_chunked(path, 1 << 30)? {
+    let (mut summary, tiles) = if let Some(mut model) = open_chunked(path, 1 << 30)? {
+        model.error_px = Some(args.error_px);
         let cam = chunked_camera(&model, camera, &grid)?;
         crate::camera::check_camera(&cam, grid.height)?;
         sort_chunked_frame(&model, &name, &cam, &grid, coding)?
@@ -365,8 +369,9 @@ pub fn run(args: &SortArgs) -> Result<()> {
             Some(c) => {
                 crate::outln!("  Tiled Tri  {:>12} bytes", t.tiled_tri_bytes)?;
                 crate::outln!(
-                    "  chunks     {:>12}   {} culled, {} verbatim, {} straddling ({} triangles sorted)",
+                    "  chunks     {:>12}   {}{} culled, {} verbatim, {} straddling ({} triangles sorted)",
                     c.chunks,
+                    if c.not_in_cut > 0 { format!("{} not in the cut, ", c.not_in_cut) } else { String::new() },
                     c.culled,
                     c.verbatim,
                     c.straddling,

@@ -48,6 +48,19 @@ pub struct StatsReport {
     /// The stored input vertex order (`encode --keep-order`): bytes and bits per vertex.
     pub order_bytes: usize,
     pub order_bits_per_vertex: f64,
+    /// A level-of-detail file's levels (`encode --lod`), from the model (level 0) up; the
+    /// counts above are the model's, `bytes` the whole file's.
+    pub levels: Vec<LevelReport>,
+}
+
+/// One level of a level-of-detail file.
+#[derive(Debug, Serialize)]
+pub struct LevelReport {
+    pub chunks: u32,
+    pub triangles: u64,
+    pub bytes: u64,
+    /// The largest object-space error of the level's chunks.
+    pub max_error: f32,
 }
 
 impl StatsReport {
@@ -85,6 +98,7 @@ impl StatsReport {
             normal_bits: h.attributes.normal_bits,
             order_bytes: s.order_bytes,
             order_bits_per_vertex: s.per_vertex(s.order_bytes),
+            levels: Vec::new(),
         })
     }
 }
@@ -102,6 +116,11 @@ pub fn run(input: &Path, json: bool) -> Result<()> {
         // components than the model has.
         let file = bft::chunked::ChunkedFile::open(&bytes[..]).with_context(|| format!("{}", input.display()))?;
         report.components = file.components().with_context(|| format!("{}", input.display()))? as u32;
+        report.levels = file
+            .levels()
+            .into_iter()
+            .map(|l| LevelReport { chunks: l.chunks, triangles: l.triangles, bytes: l.bytes, max_error: l.max_error })
+            .collect();
     } else {
         bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
     }
@@ -158,6 +177,16 @@ pub fn run(input: &Path, json: bool) -> Result<()> {
             crate::outln!("  vertex order   {:>12.2} bits/vertex ({} bytes)", r.order_bits_per_vertex, r.order_bytes)?;
         }
         crate::outln!("  total          {:>12.2} bits/triangle", r.bytes as f64 * 8.0 / r.triangles.max(1) as f64)?;
+        for (k, l) in r.levels.iter().enumerate() {
+            crate::outln!(
+                "  level {k:<2}       {:>12}   triangles in {} chunks, {} bytes ({:.2} bits/triangle), error {:.3e}",
+                l.triangles,
+                l.chunks,
+                l.bytes,
+                l.bytes as f64 * 8.0 / l.triangles.max(1) as f64,
+                l.max_error
+            )?;
+        }
     }
     Ok(())
 }

@@ -10,7 +10,7 @@
 //! | `{"cmd":"reset"}` | back to the flags' camera | `{"ok":"reset","frame":k}` |
 //! | `{"cmd":"animate","seconds":s,"degrees":d,"pitch":p}` or `{"cmd":"animate","seconds":s,"eye":[..],"target":[..]}` | a timed move: orbits `d` degrees (and pitches `p`), or flies eye and target in a straight line to those given, over `s` seconds; frames follow the clock (each shows where the move is when it is sorted, so a slow frame skips ahead), and any other steering command ends it | `{"ok":"animate","frame":k}` |
 //! | `{"cmd":"tiles","cols":c,"rows":r}` | re-plans the frame in a `c` x `r` tile grid | `{"ok":"tiles","frame":k}` |
-//! | `{"cmd":"error_px","value":e}` | the screen error `.dpm` and `.nsp` models adapt to | `{"ok":"error_px","frame":k}` |
+//! | `{"cmd":"error_px","value":e}` | the screen error `.dpm`, `.nsp` and level-of-detail `.bft` models adapt to | `{"ok":"error_px","frame":k}` |
 //! | `{"cmd":"balance","on":b}` | tiles go to workers by their last costs, or round robin | `{"ok":"balance","frame":k}` |
 //! | `{"cmd":"eye","position":[x,y,z]}` | head tracking: the eye of a wall placed in the world (`--wall` with a plane); without one, the camera's eye | `{"ok":"eye","frame":k}` |
 //! | `{"cmd":"load","path":"model"}` | another model, any kind, in place of this one (the workers free the old one); the flags' camera frames it | `{"ok":"load","frame":k}` |

@@ -47,10 +47,14 @@ fn sort_frames(t: &dyn Transport, plan: &Plan, s: usize) -> Result<()> {
                     frame: job.frame,
                     grid: &plan.grid,
                     view_proj: Mat4::from_cols_array(&job.view_proj),
+                    error_px: job.error_px,
                     workers,
                     sorters: plan.sorters as usize,
                     decode_only: plan.decode_only,
                 };
+                if !(job.error_px.is_finite() && job.error_px > 0.0) {
+                    bail!("rank 0 sent a screen error of {} pixels", job.error_px);
+                }
                 if job.owners.len() != plan.grid.tiles() || job.owners.iter().any(|&w| w == 0 || w as usize > workers) {
                     bail!("rank 0 assigned tiles to ranks outside 1..={workers}");
                 }

@@ -140,6 +140,8 @@ pub(super) struct NspStats {
 /// verbatim chunks went as bytes or as a name of a chunk the worker kept.
 #[derive(Serialize, Clone, Copy, Debug, Default)]
 pub(super) struct ChunkStats {
+    /// Chunks a level-of-detail file's cut leaves out (`--error-px`).
+    pub not_in_cut: u32,
     pub culled: u32,
     pub verbatim: u32,
     pub straddling: u32,

@@ -28,6 +28,7 @@ use thiserror::Error;
 
 use super::border::{oct_decode, oct_encode, Border};
 use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader};
+use super::partition::{centroid, kd_leaves};
 use super::DEFAULT_CHUNK_TRIANGLES;
 use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
@@ -55,6 +56,12 @@ pub struct ChunkOptions {
     pub one_chunk_as_stream: bool,
     /// What each chunk's stream codes besides positions (its `quant_bits` is ignored).
     pub stream: EncodeOptions,
+    /// Build a level-of-detail hierarchy above the chunks ([`super::lod`]): the file is
+    /// version 5, and a model of one chunk is still one stream.
+    pub lod: bool,
+    /// The weight of normals in the hierarchy's simplification error
+    /// ([`super::lod::NORMAL_WEIGHT`] by default; 0 for positions alone).
+    pub lod_normal_weight: f32,
 }
 
 impl Default for ChunkOptions {
@@ -67,6 +74,8 @@ impl Default for ChunkOptions {
             keep_slot_vertex: false,
             one_chunk_as_stream: true,
             stream: EncodeOptions::default(),
+            lod: false,
+            lod_normal_weight: super::lod::NORMAL_WEIGHT,
         }
     }
 }
@@ -163,33 +172,6 @@ fn read_triangles(r: &mut dyn Read, n: usize) -> io::Result<Vec<[u32; 3]>> {
     Ok(buf.chunks_exact(12).map(|b| [0, 4, 8].map(|o| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()))).collect())
 }
 
-fn centroid(p: &[[f32; 3]], t: [u32; 3]) -> [f32; 3] {
-    let [a, b, c] = t.map(|v| p[v as usize]);
-    [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
-}
-
-/// Cuts `idx` (triangle indices with their centroids) into leaves of at most `target`
-/// triangles with a kd-tree of median splits on the longest axis of the centroids' box; each
-/// leaf's range is pushed in the tree's order. Leaves are balanced: a node of `n` triangles
-/// gets `ceil(n / target)` leaves, split as evenly as they go.
-fn kd_leaves(cent: &[[f32; 3]], idx: &mut [u32], target: usize, start: usize, out: &mut Vec<std::ops::Range<usize>>) {
-    let n = idx.len();
-    if n <= target {
-        out.push(start..start + n);
-        return;
-    }
-    let leaves = n.div_ceil(target);
-    let left = n * (leaves / 2) / leaves;
-    let (lo, hi) = bounding_box(idx.iter().map(|&t| &cent[t as usize])).unwrap_or(([0.0; 3], [0.0; 3]));
-    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-    idx.select_nth_unstable_by(left, |&a, &b| {
-        cent[a as usize][axis].total_cmp(&cent[b as usize][axis]).then(a.cmp(&b))
-    });
-    let (l, r) = idx.split_at_mut(left);
-    kd_leaves(cent, l, target, start, out);
-    kd_leaves(cent, r, target, start + left, out);
-}
-
 /// One encoded chunk, before its place in the file is known.
 struct Encoded {
     bytes: Vec<u8>,
@@ -208,7 +190,7 @@ fn encode_chunk(
     vertices: &Mesh,
     quant: Quantization,
     options: &EncodeOptions,
-    multi: &[bool],
+    multi: &(dyn Fn(u32) -> bool + Sync),
     tris: &[[u32; 3]],
 ) -> Result<Encoded, EncodeChunkError> {
     let mut verts: Vec<u32> = tris.iter().flatten().copied().collect();
@@ -244,7 +226,7 @@ fn encode_chunk(
     let fp: Vec<[f32; 3]> = d.positions.iter().map(|&p| q.dequantize(p)).collect();
     let (source, acc) = face_normal_sums(&fp, &d.triangles, &d.duplicates);
     let partial_normals = (0..fp.len())
-        .filter(|&s| source[s] as usize == s && multi[slot_vertex[s] as usize])
+        .filter(|&s| source[s] as usize == s && multi(slot_vertex[s]))
         .map(|s| (slot_vertex[s], acc[s]))
         .collect();
     Ok(Encoded {
@@ -376,13 +358,45 @@ pub fn encode_chunked(
         }
     }
     drop(owner);
+    let level0 = chunk_sizes.len();
+    let mut ordered = ordered.reader()?;
+
+    //    The hierarchy above the chunks, in memory (the model's triangles at 12 bytes each,
+    //    and its levels above, about as many again).
+    let mut held: Vec<Vec<[u32; 3]>> = Vec::new();
+    // Above level 0 every chunk stores its vertices' full-resolution normals in its stream
+    // (the model's own, or those the worker computes from level 0), so that a coarse chunk
+    // shades as the surface it stands for, and its border table is empty.
+    let mut upper_vertices = None;
+    let built = if options.lod && level0 > 1 {
+        held = chunk_sizes.iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
+        let rendered: Vec<[f32; 3]> = positions.par_iter().map(|&p| quant.dequantize(quant.quantize(p))).collect();
+        if vertices.normals.is_empty() {
+            let all: Vec<[u32; 3]> = held.iter().flatten().copied().collect();
+            upper_vertices = Some(Mesh {
+                positions: positions.clone(),
+                triangles: Vec::new(),
+                colors: vertices.colors.clone(),
+                normals: crate::bft::normals::vertex_normals(&rendered, &all, &[]),
+            });
+        }
+        let normals = &upper_vertices.as_ref().unwrap_or(vertices).normals;
+        let mut built = super::lod::build(&rendered, normals, &held, target, options.lod_normal_weight, &mut |done| {
+            progress("simplifying", done, total)
+        });
+        chunk_sizes.extend(built.chunks.iter().map(Vec::len));
+        held.append(&mut built.chunks);
+        Some(built)
+    } else {
+        None
+    };
+    let upper_stream = EncodeOptions { normals: true, ..options.stream };
     let chunks = chunk_sizes.len();
     if chunks > u32::MAX as usize / 2 {
         return Err(EncodeChunkError::TooLarge(format!("{chunks} chunks")));
     }
 
     // 2. Encode in batches of chunks, in parallel; place them in order.
-    let mut ordered = ordered.reader()?;
     let mut streams = Spill::new(bits > 0, &options.temp_dir)?;
     let mut entries: Vec<ChunkEntry> = Vec::with_capacity(chunks);
     let mut borders: Vec<(Border, Vec<u32>)> = Vec::with_capacity(chunks);
@@ -390,6 +404,7 @@ pub fn encode_chunked(
     let mut normal_sums: HashMap<u32, Vec3> = HashMap::new();
     let mut slot_vertex = Vec::new();
     let (mut slots, mut tris_done, mut commands) = (0u64, 0u64, 0u64);
+    let (mut model_slots, mut model_commands) = (0u64, 0u64);
     let batch_triangles = rayon::current_num_threads().saturating_mul(8).saturating_mul(target).max(1 << 20);
     let mut next = 0;
     while next < chunks {
@@ -399,14 +414,28 @@ pub fn encode_chunked(
             size += chunk_sizes[end];
             end += 1;
         }
-        let batch: Vec<Vec<[u32; 3]>> =
-            chunk_sizes[next..end].iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
+        let batch: Vec<Vec<[u32; 3]>> = (next..end)
+            .map(|c| match &built {
+                None => read_triangles(&mut *ordered, chunk_sizes[c]),
+                Some(_) => Ok(std::mem::take(&mut held[c])),
+            })
+            .collect::<Result<_, _>>()?;
+        let upper = |c: usize| built.is_some() && c >= level0;
         let encoded: Vec<Encoded> = batch
             .par_iter()
+            .enumerate()
             .with_max_len(1)
-            .map(|tris| encode_chunk(vertices, quant, &options.stream, &multi, tris))
+            .map(|(k, tris)| match upper(next + k) {
+                true => {
+                    encode_chunk(upper_vertices.as_ref().unwrap_or(vertices), quant, &upper_stream, &|_| false, tris)
+                }
+                false => encode_chunk(vertices, quant, &options.stream, &|v| multi[v as usize], tris),
+            })
             .collect::<Result<_, _>>()?;
-        for enc in encoded {
+        for (k, enc) in encoded.into_iter().enumerate() {
+            let c = next + k;
+            let upper = upper(c);
+            let is_border = |v: u32| !upper && multi[v as usize];
             let base = slots;
             let n_slots = enc.slot_vertex.len() as u64;
             if base + n_slots >= u32::MAX as u64 {
@@ -415,7 +444,7 @@ pub fn encode_chunked(
             let mut border = Border::default();
             let mut border_vertices = Vec::new();
             for (s, &v) in enc.slot_vertex.iter().enumerate() {
-                if multi[v as usize] {
+                if is_border(v) {
                     let global = (base + s as u64) as u32;
                     border.slots.push(s as u32);
                     border.links.push(match first_slot.entry(v) {
@@ -450,8 +479,11 @@ pub fn encode_chunked(
             slots += n_slots;
             tris_done += enc.triangles as u64;
             commands += enc.commands as u64;
+            if c < level0 {
+                (model_slots, model_commands) = (slots, commands);
+            }
         }
-        progress("encoding", tris_done, total);
+        progress("encoding", tris_done, total.max(tris_done));
         next = end;
     }
     drop(first_slot);
@@ -460,28 +492,32 @@ pub fn encode_chunked(
     let mut border_slots = 0u64;
     let tables: Vec<Vec<u8>> = borders
         .into_iter()
-        .map(|(mut border, vertices)| {
-            border_slots += border.slots.len() as u64;
+        .enumerate()
+        .map(|(c, (mut border, vertices))| {
+            if c < level0 {
+                border_slots += border.slots.len() as u64;
+            }
             border.normals = vertices.iter().map(|v| oct_decode(oct_encode(unit(normal_sums[v])))).collect();
             border.to_bytes()
         })
         .collect();
-    let mut offset = head_len(chunks);
+    let hierarchy = built.map(|b| b.hierarchy);
+    let mut offset = head_len(chunks, hierarchy.as_ref());
     for (e, t) in entries.iter_mut().zip(&tables) {
         e.offset = offset;
         e.border_len = t.len() as u32;
         offset += e.bft_len as u64 + e.border_len as u64;
     }
-    let top = entries.iter().fold([0u32; 3], |m, e| [0, 1, 2].map(|a| m[a].max(e.qmax[a])));
+    let top = entries[..level0].iter().fold([0u32; 3], |m, e| [0, 1, 2].map(|a| m[a].max(e.qmax[a])));
     let header = ChunkedHeader {
         input_vertices: n as u32,
-        slots: slots as u32,
+        slots: model_slots as u32,
         triangles: total as u32,
         chunks: chunks as u32,
         chunk_triangles: options.chunk_triangles,
         border_slots: border_slots as u32,
         unique_vertices,
-        commands: commands.min(u32::MAX as u64) as u32,
+        commands: model_commands.min(u32::MAX as u64) as u32,
         quant_bits: quant.bits,
         bbox_min: quant.min,
         step: quant.step,
@@ -500,7 +536,7 @@ pub fn encode_chunked(
         progress("writing", total, total);
         return Ok(ChunkedEncoded { header, bytes: single.len() as u64, slot_vertex });
     }
-    out.write_all(&write_head(&header, &entries))?;
+    out.write_all(&write_head(&header, &entries, hierarchy.as_ref()))?;
     let mut streams = streams.reader()?;
     let mut buf = Vec::new();
     for (e, table) in entries.iter().zip(&tables) {

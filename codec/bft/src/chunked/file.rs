@@ -6,8 +6,9 @@ use std::borrow::Cow;
 use super::border::Border;
 use super::error::{chunk_err, corrupt, in_chunk};
 use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader, ENTRY_LEN};
+use super::lod::Hierarchy;
 use super::source::ChunkSource;
-use super::VERSION;
+use super::{LOD_VERSION, VERSION};
 use crate::bft::decode::Decoded;
 use crate::bft::format::{Header, MAGIC};
 use crate::container::{Format, FormatError};
@@ -18,6 +19,8 @@ pub struct ChunkedFile<B: ChunkSource> {
     bytes: B,
     pub header: ChunkedHeader,
     pub entries: Vec<ChunkEntry>,
+    /// The level-of-detail hierarchy of a version 5 file.
+    pub lod: Option<Hierarchy>,
 }
 
 impl<B: AsRef<[u8]> + Sync> ChunkedFile<B> {
@@ -47,7 +50,7 @@ impl<B: ChunkSource> ChunkedFile<B> {
         let take =
             |from: usize, n: usize, what: &'static str| b.get(from..from + n).ok_or(FormatError::Truncated(what));
         let version = u16::from_le_bytes(take(8, 2, "version")?.try_into().unwrap());
-        if version != VERSION {
+        if version != VERSION && version != LOD_VERSION {
             return Err(FormatError::UnsupportedVersion {
                 format: Format::Bft,
                 found: version,
@@ -76,9 +79,28 @@ impl<B: ChunkSource> ChunkedFile<B> {
         if crc != crc32fast::hash(dir) {
             return Err(FormatError::Checksum("chunk directory"));
         }
+        let mut body = (dir_start + dir_len + 4) as u64;
+        let lod = if version == LOD_VERSION {
+            let chunks = header.chunks as usize;
+            let head = bytes.read_at(body, 8.min(len - body.min(len)) as usize, "the level-of-detail hierarchy")?;
+            if head.len() < 8 {
+                return Err(FormatError::Truncated("level-of-detail hierarchy"));
+            }
+            let section = Hierarchy::section_len(chunks, Hierarchy::groups_in(&head) as usize) as u64;
+            if len - body < section {
+                return Err(FormatError::Truncated("level-of-detail hierarchy"));
+            }
+            let b = bytes.read_at(body, section as usize, "the level-of-detail hierarchy")?;
+            body += section;
+            Some(Hierarchy::from_bytes(&b, chunks)?)
+        } else {
+            None
+        };
+        let model_chunks = lod.as_ref().map_or(header.chunks as usize, |h| h.level0 as usize);
         let max_level = (1u32 << header.quant_bits) - 1;
         let mut entries = Vec::with_capacity(header.chunks as usize);
-        let (mut offset, mut tris, mut slots) = ((dir_start + dir_len + 4) as u64, 0u64, 0u64);
+        let (mut offset, mut tris, mut slots) = (body, 0u64, 0u64);
+        let (mut model_tris, mut model_slots) = (0, 0);
         for (i, raw) in dir.chunks_exact(ENTRY_LEN).enumerate() {
             let e = ChunkEntry::read(raw);
             if e.offset != offset {
@@ -103,18 +125,27 @@ impl<B: ChunkSource> ChunkedFile<B> {
             offset = end;
             tris += e.triangles as u64;
             slots += e.slots as u64;
+            if i + 1 == model_chunks {
+                (model_tris, model_slots) = (tris, slots);
+            }
             entries.push(e);
         }
-        if tris != header.triangles as u64 || slots != header.slots as u64 {
+        if model_tris != header.triangles as u64 || model_slots != header.slots as u64 {
             return Err(corrupt(format!(
-                "the chunks hold {tris} triangles and {slots} slots, the header says {} and {}",
+                "the model's chunks hold {model_tris} triangles and {model_slots} slots, the header says {} and {}",
                 header.triangles, header.slots
             )));
         }
         if offset != len {
             return Err(FormatError::TrailingBytes((len - offset) as usize));
         }
-        Ok(ChunkedFile { bytes, header, entries })
+        Ok(ChunkedFile { bytes, header, entries, lod })
+    }
+
+    /// The chunks of the full-resolution model: all of them, or a hierarchy's level 0 (the
+    /// first ones).
+    pub fn model_chunks(&self) -> usize {
+        self.lod.as_ref().map_or(self.entries.len(), |h| h.level0 as usize)
     }
 
     /// The file's length in bytes.
@@ -129,7 +160,9 @@ impl<B: ChunkSource> ChunkedFile<B> {
 
     /// The whole file's sizes, as `tessera stats` reports them: the chunks' headers summed
     /// (their sections' bytes, and counts), the border tables apart. Every chunk's container
-    /// and border table is parsed and checked (not decoded).
+    /// and border table is parsed and checked (not decoded). Of a level-of-detail file, the
+    /// sections and tables counted are the model's (level 0); [`Self::levels`] gives each
+    /// level's.
     pub fn stats(&self) -> Result<crate::bft::Stats, FormatError> {
         let g = &self.header;
         // Every slot beyond the first of its vertex, in a chunk or across chunks.
@@ -137,7 +170,7 @@ impl<B: ChunkSource> ChunkedFile<B> {
         let (mut connectivity_bytes, mut geometry_bytes, mut border_bytes) = (0, 0, 0);
         let (mut border_entries, mut border_links) = (0, 0);
         let (mut color_bytes, mut normal_bytes, mut order_bytes) = (0, 0, 0);
-        for i in 0..self.entries.len() {
+        for i in 0..self.model_chunks() {
             let bft = self.chunk_bft(i)?;
             let p = crate::bft::format::parse(&bft).map_err(|e| in_chunk(i, e))?;
             connectivity_bytes += p.sections[0].len() + p.sections[2].len() + p.sections[3].len();
@@ -164,6 +197,27 @@ impl<B: ChunkSource> ChunkedFile<B> {
             border_entries,
             border_links,
         })
+    }
+
+    /// A level-of-detail file's levels, from the directory: per level its chunks, triangles,
+    /// bytes and largest error (object units); empty for a file without a hierarchy.
+    pub fn levels(&self) -> Vec<super::lod::LevelSummary> {
+        let Some(h) = &self.lod else { return Vec::new() };
+        let mut out: Vec<super::lod::LevelSummary> = Vec::new();
+        for (i, l) in h.levels().into_iter().enumerate() {
+            let l = l as usize;
+            if out.len() <= l {
+                out.resize(l + 1, Default::default());
+            }
+            let (e, s) = (&self.entries[i], &mut out[l]);
+            s.chunks += 1;
+            s.triangles += e.triangles as u64;
+            s.bytes += e.bft_len as u64 + e.border_len as u64;
+            if let Some(g) = h.groups.get(h.producer[i] as usize) {
+                s.max_error = s.max_error.max(g.error);
+            }
+        }
+        out
     }
 
     /// Chunk `i`'s `.bft` stream (not yet checked): borrowed from bytes in memory, read from a
@@ -230,8 +284,9 @@ impl<B: ChunkSource> ChunkedFile<B> {
         let mut used = vec![false; g.slots as usize];
         let (mut order, mut placed) = (false, 0u64);
         let batch = rayon::current_num_threads() * 8;
-        for start in (0..self.entries.len()).step_by(batch) {
-            let parts: Vec<(Decoded, Border)> = (start..(start + batch).min(self.entries.len()))
+        let model = self.model_chunks();
+        for start in (0..model).step_by(batch) {
+            let parts: Vec<(Decoded, Border)> = (start..(start + batch).min(model))
                 .into_par_iter()
                 .map(|i| Ok((self.decode_chunk(i)?, self.border(i)?)))
                 .collect::<Result<_, FormatError>>()?;
@@ -282,7 +337,7 @@ impl<B: ChunkSource> ChunkedFile<B> {
             crate::input::check_decoded(&format!("header field {field}"), count.into(), unit, 12)
                 .map_err(FormatError::TooLarge)?;
         }
-        let parts: Vec<(Decoded, Border)> = (0..self.entries.len())
+        let parts: Vec<(Decoded, Border)> = (0..self.model_chunks())
             .into_par_iter()
             .map(|i| Ok((self.decode_chunk(i)?, self.border(i)?)))
             .collect::<Result<_, FormatError>>()?;
@@ -375,8 +430,29 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
     let dir_len = (chunks * ENTRY_LEN).min(dir.len());
     let (raw_dir, rest) = dir.split_at(dir_len);
     let mut entries: Vec<ChunkEntry> = raw_dir.chunks_exact(ENTRY_LEN).map(ChunkEntry::read).collect();
+    // Half the time a level-of-detail hierarchy (version 5), its values from the bytes:
+    // groups' errors and spheres, each chunk's producer and consumer (255: none).
+    let lod = (byte(3) & 1 == 1 && !entries.is_empty()).then(|| {
+        let n = entries.len();
+        let groups = (byte(4) % 6) as usize;
+        let f = |i: usize| f32::from_le_bytes([byte(i), byte(i + 1), byte(i + 2), byte(i + 3)]);
+        let group = |i: usize| {
+            let o = 8 + 20 * i;
+            super::lod::Group { error: f(o), center: [f(o + 4), f(o + 8), f(o + 12)], radius: f(o + 16) }
+        };
+        let link = |i: usize| match byte(i) {
+            255 => super::lod::NONE,
+            b => b as u32 % (groups as u32 + 1),
+        };
+        Hierarchy {
+            level0: (byte(5) as u32) % (n as u32 + 1),
+            groups: (0..groups).map(group).collect(),
+            producer: (0..n).map(|i| link(6 + 2 * i)).collect(),
+            consumer: (0..n).map(|i| link(7 + 2 * i)).collect(),
+        }
+    });
     // Half the time, lay the entries out consistently so that the chunks themselves are read.
-    let body = head_len(entries.len());
+    let body = head_len(entries.len(), lod.as_ref());
     if byte(1) & 1 == 0 && !entries.is_empty() {
         let per = rest.len() / entries.len();
         let (mut offset, mut tris, mut slots) = (body, 0u32, 0u32);
@@ -405,7 +481,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         step: 1.0,
         bbox_max: [1.0; 3],
     };
-    let mut out = write_head(&header, &entries);
+    let mut out = write_head(&header, &entries, lod.as_ref());
     let used = entries.len() * (rest.len() / entries.len().max(1));
     out.extend_from_slice(&rest[..used.min(rest.len())]);
     out

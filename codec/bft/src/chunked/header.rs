@@ -1,7 +1,8 @@
 //! A chunked file's fixed header and directory entries, and the writing of both.
 
 use super::error::corrupt;
-use super::VERSION;
+use super::lod::Hierarchy;
+use super::{LOD_VERSION, VERSION};
 use crate::bft::format::{check_quantization, put_box, Coding, Header, MAGIC};
 use crate::container::FormatError;
 use crate::mesh::Quantization;
@@ -170,12 +171,13 @@ impl ChunkEntry {
     }
 }
 
-/// Writes a chunked file's header and directory (what precedes the chunks).
-pub(crate) fn write_head(header: &ChunkedHeader, entries: &[ChunkEntry]) -> Vec<u8> {
+/// Writes a chunked file's header and directory, and its hierarchy if it has one (what
+/// precedes the chunks).
+pub(crate) fn write_head(header: &ChunkedHeader, entries: &[ChunkEntry], lod: Option<&Hierarchy>) -> Vec<u8> {
     let h = header.to_bytes();
-    let mut out = Vec::with_capacity(20 + h.len() + entries.len() * ENTRY_LEN);
+    let mut out = Vec::with_capacity(head_len(entries.len(), lod) as usize);
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&if lod.is_some() { LOD_VERSION } else { VERSION }.to_le_bytes());
     out.extend_from_slice(&(h.len() as u16).to_le_bytes());
     out.extend_from_slice(&h);
     out.extend_from_slice(&crc32fast::hash(&h).to_le_bytes());
@@ -185,10 +187,14 @@ pub(crate) fn write_head(header: &ChunkedHeader, entries: &[ChunkEntry]) -> Vec<
     }
     let crc = crc32fast::hash(&out[dir_start..]);
     out.extend_from_slice(&crc.to_le_bytes());
+    if let Some(lod) = lod {
+        out.extend_from_slice(&lod.to_bytes());
+    }
     out
 }
 
 /// The length of [`write_head`]'s output for `chunks` chunks: where the first chunk starts.
-pub(crate) fn head_len(chunks: usize) -> u64 {
-    (16 + HEADER_LEN + chunks * ENTRY_LEN + 4) as u64
+pub(crate) fn head_len(chunks: usize, lod: Option<&Hierarchy>) -> u64 {
+    let section = lod.map_or(0, |h| Hierarchy::section_len(chunks, h.groups.len()));
+    (16 + HEADER_LEN + chunks * ENTRY_LEN + 4 + section) as u64
 }

@@ -62,6 +62,8 @@ mod encode;
 mod error;
 mod file;
 mod header;
+pub mod lod;
+mod partition;
 pub mod sort;
 mod source;
 
@@ -76,6 +78,8 @@ pub use source::{ChunkSource, FileSource};
 
 /// The version of chunked files.
 pub const VERSION: u16 = super::format::CHUNKED_VERSION;
+/// The version of chunked files with a level-of-detail hierarchy ([`lod`]).
+pub const LOD_VERSION: u16 = super::format::LOD_VERSION;
 /// The default number of triangles per chunk (see `ChunkOptions::chunk_triangles`).
 pub const DEFAULT_CHUNK_TRIANGLES: u32 = 4096;
 /// `tessera encode`'s default: a model of at most this many triangles (and at most 4M

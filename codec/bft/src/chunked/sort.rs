@@ -34,6 +34,9 @@ use crate::view::{plane_distances, TileGrid};
 /// What a frame does with a chunk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Class {
+    /// Not in the level-of-detail cut ([`super::lod`]): a finer or a coarser chunk stands
+    /// for it; its bytes are not read.
+    NotInCut,
     Culled,
     /// Wholly in this tile (its index).
     Verbatim(u32),
@@ -126,6 +129,8 @@ impl ChunkedTile {
 /// What one frame's chunked sort did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FrameCounts {
+    /// Chunks a level-of-detail cut leaves out.
+    pub not_in_cut: u32,
     pub culled: u32,
     pub verbatim: u32,
     pub straddling: u32,
@@ -170,6 +175,9 @@ pub struct ChunkedModel<B: ChunkSource> {
     pub cache_limit: usize,
     /// Sort buffers kept from chunk to chunk and frame to frame, one per task in flight.
     buffers: Mutex<Vec<(Sorter, Boxes)>>,
+    /// A hierarchy's cut: the largest projected error in pixels, or `None` for the
+    /// full-resolution model (level 0). A file without a hierarchy is always drawn whole.
+    pub error_px: Option<f32>,
 }
 
 impl<B: ChunkSource> ChunkedModel<B> {
@@ -181,6 +189,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
             cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, frame: 0 }),
             cache_limit,
             buffers: Mutex::new(Vec::new()),
+            error_px: None,
         }
     }
 
@@ -198,9 +207,30 @@ impl<B: ChunkSource> ChunkedModel<B> {
         self.classify_chunks(view_proj, grid, 0..self.chunks())
     }
 
-    /// The classes of the chunks `range`, in parallel.
+    /// The classes of the chunks `range`, in parallel: those outside the level-of-detail
+    /// cut first, then the frustum and the tiles.
     fn classify_chunks(&self, view_proj: Mat4, grid: &TileGrid, range: std::ops::Range<usize>) -> Vec<Class> {
-        self.boxes[range].par_iter().with_min_len(256).map(|&(lo, hi)| classify(lo, hi, view_proj, grid)).collect()
+        let projection = super::lod::Projection::new(view_proj, grid.height);
+        let lod = self.file.lod.as_ref();
+        let first = range.start;
+        self.boxes[range]
+            .par_iter()
+            .enumerate()
+            .with_min_len(256)
+            .map(|(k, &(lo, hi))| {
+                let i = first + k;
+                let drawn = match (lod, self.error_px) {
+                    (None, _) => true,
+                    (Some(h), None) => i < h.level0 as usize,
+                    (Some(h), Some(t)) => h.in_cut(i, &projection, t),
+                };
+                if drawn {
+                    classify(lo, hi, view_proj, grid)
+                } else {
+                    Class::NotInCut
+                }
+            })
+            .collect()
     }
 
     /// Chunk `i`'s tables, from the cache or built (and then cached if they fit).
@@ -268,6 +298,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
         let mut straddling = Vec::new();
         for (i, c) in classes.iter().enumerate().map(|(j, c)| (first + j, c)) {
             match c {
+                Class::NotInCut => counts.not_in_cut += 1,
                 Class::Culled => counts.culled += 1,
                 Class::Verbatim(_) => counts.verbatim += 1,
                 Class::Straddling => {
@@ -327,7 +358,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
                         per_tile[t].push(p);
                     }
                 }
-                Class::Culled => {}
+                Class::Culled | Class::NotInCut => {}
             }
         }
         debug_assert!(sorted.peek().is_none());

@@ -65,6 +65,8 @@ impl ChunkedScene {
     ) -> Result<Share> {
         let (grid, vp) = (ctx.grid, ctx.view_proj);
         let range = share(self.model.chunks(), sorter, ctx.sorters);
+        // Every sorter takes the cut at the frame's screen error (a live run may change it).
+        self.model.error_px = Some(ctx.error_px);
         let (tiles, counts) = self.model.sort_chunks(vp, grid, self.coding, range)?;
         let indices: Vec<usize> = tiles.iter().map(|t| t.index).collect();
         let owner = owner_of(&indices);
@@ -76,6 +78,7 @@ impl ChunkedScene {
         }
         let mut jobs = empty_jobs(ctx, sorter, bound);
         let mut stats = ChunkStats {
+            not_in_cut: counts.not_in_cut,
             culled: counts.culled,
             verbatim: counts.verbatim,
             straddling: counts.straddling,
@@ -141,6 +144,7 @@ impl Scene for ChunkedScene {
         let job = SortJob {
             frame: ctx.frame,
             view_proj: ctx.camera.view_proj(ctx.grid.aspect()).to_cols_array(),
+            error_px: ctx.error_px,
             owners: self.owners.iter().map(|&w| w as u32).collect(),
         };
         let msg = protocol::ToSorter::Sort(job).encode();
@@ -154,6 +158,7 @@ impl Scene for ChunkedScene {
             frame: ctx.frame,
             grid: ctx.grid,
             view_proj: ctx.camera.view_proj(ctx.grid.aspect()),
+            error_px: ctx.error_px,
             workers: ctx.workers,
             sorters: self.sorters,
             decode_only: ctx.plan.decode_only,

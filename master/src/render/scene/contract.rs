@@ -47,7 +47,7 @@ pub(crate) struct FrameContext<'a> {
     pub plan: &'a Plan,
     /// Each tile's cost the frame before (ms), for `--balance`.
     pub costs: &'a [f64],
-    /// The screen error of `.dpm` and `.nsp` models (`--error-px`), and whether tiles go to
+    /// The screen error of `.dpm`, `.nsp` and level-of-detail `.bft` models (`--error-px`), and whether tiles go to
     /// workers by their costs (`--balance`): the plan's, or what a live run set since.
     pub error_px: f32,
     pub balance: bool,
@@ -73,6 +73,8 @@ pub(in crate::render) struct ShareContext<'a> {
     pub frame: u32,
     pub grid: &'a TileGrid,
     pub view_proj: glam::Mat4,
+    /// A level-of-detail file's cut (`--error-px`, or what a live run set since).
+    pub error_px: f32,
     /// Workers are ranks `1..=workers`.
     pub workers: usize,
     pub sorters: usize,
@@ -103,6 +105,7 @@ impl FrameContext<'_> {
             frame: self.frame,
             grid: self.grid,
             view_proj: vp,
+            error_px: self.error_px,
             workers: self.workers,
             sorters: 1,
             decode_only: self.plan.decode_only,

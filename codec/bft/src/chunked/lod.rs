@@ -1,0 +1,573 @@
+//! Level of detail in the compression domain: a chunked file whose chunks form a hierarchy
+//! (a DAG of simplification groups, as Nanite's clusters do), so that a frame sorts a cut
+//! of chunks whose error projects under `--error-px` instead of the whole model.
+//!
+//! # The hierarchy
+//!
+//! The first `level0` chunks are the full-resolution model, as a flat chunked file holds it.
+//! A **group** takes a few adjacent chunks of one level (its inputs), simplifies their
+//! triangles together to about half with every vertex that a chunk outside the group uses
+//! locked in place, and cuts the result into chunks of the next level (its outputs). Every
+//! chunk is made by at most one group (its *producer*; none at level 0) and simplified by at
+//! most one (its *consumer*; none for a root). A group stores its object-space error (the
+//! simplifier's, and never below its inputs' producers') and a sphere that holds its
+//! vertices and its inputs' producers' spheres.
+//!
+//! # The cut
+//!
+//! A group's error projects to `error * scale / w`, with `w` the nearest clip-space depth of
+//! its sphere (infinite where the sphere reaches the eye plane). A chunk is in the cut when
+//! its producer's error projects to at most `error_px` pixels and its consumer's does not
+//! (a root's consumer is infinitely coarse, a level-0 chunk's producer exact). Since a
+//! group's sphere holds its inputs' producers' spheres and its error is no smaller, the
+//! projection only grows toward the roots, so for every group either its inputs or its
+//! outputs (or neither, when a coarser group stands for both) are drawn, never both: the cut
+//! covers the surface once. Where an input and an output meet, they meet on the group's
+//! locked border, whose vertices both hold at the same quantized positions, so the cut has
+//! no cracks (tested on closed meshes).
+//!
+//! # Layout (version 5)
+//!
+//! A version 5 file is a version 3 file (`super`) with this section between the directory's
+//! checksum and the first chunk:
+//! ```text
+//! 4       level0: chunks of the full-resolution model (the first ones)
+//! 4       G: groups
+//! 20*G    per group: error, sphere centre (3), radius, all f32 LE
+//! 8*C     per chunk: producer group, consumer group (u32 LE; 0xFFFFFFFF for none)
+//! 4       CRC-32 of the section
+//! ```
+//! The header's counts (triangles, slots, border entries, unique vertices) are level 0's:
+//! the model's. A chunk above level 0 stores its vertices' full-resolution normals in its
+//! stream (every vertex of a simplified chunk is an input vertex), so it shades as the
+//! surface it stands for and meets its neighbours of any level without a seam; its border
+//! table is empty.
+
+use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::error::{chunk_err, corrupt};
+use crate::container::FormatError;
+
+/// "No group": a level-0 chunk's producer, a root's consumer.
+pub const NONE: u32 = u32::MAX;
+const GROUP_LEN: usize = 20;
+/// Chunks a group takes, at most (Nanite groups 8-32 clusters of 128 triangles; a chunk
+/// holds thousands, so a group of four simplifies 16K triangles to two chunks).
+pub const GROUP_CHUNKS: usize = 4;
+
+/// The default weight of normals in the simplifier's error, against positions scaled to the
+/// group's extent: a group's error then grows where its shading would change, and the cut
+/// keeps finer chunks there. Measured on the dragon at 1920x1080, `--error-px 1`, three
+/// views (docs/results.md, "Level of detail"): weight 0 draws 56K triangles with 79% of
+/// covered pixels within 8/255 of the full model's frame, 0.5 draws 121K with 96%, 2 draws
+/// 320K with 99.4%, 8 the whole model.
+pub const NORMAL_WEIGHT: f32 = 2.0;
+
+/// A simplification group.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Group {
+    /// Object-space error of the group's outputs against the full-resolution surface.
+    pub error: f32,
+    pub center: [f32; 3],
+    pub radius: f32,
+}
+
+/// A file's hierarchy (see the module doc).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Hierarchy {
+    pub level0: u32,
+    pub groups: Vec<Group>,
+    pub producer: Vec<u32>,
+    pub consumer: Vec<u32>,
+}
+
+/// One level of a hierarchy, as `tessera stats` reports it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LevelSummary {
+    pub chunks: u32,
+    pub triangles: u64,
+    /// Bytes of its chunks (streams and border tables).
+    pub bytes: u64,
+    /// The largest error of a group that made one of its chunks (object units; 0 at level 0).
+    pub max_error: f32,
+}
+
+/// What a view needs to project a group's error: the clip-space `w` row and pixels per
+/// object unit at `w = 1`.
+#[derive(Clone, Copy, Debug)]
+pub struct Projection {
+    w_row: Vec4,
+    w_norm: f32,
+    scale: f32,
+}
+
+impl Projection {
+    /// For `view_proj` on a frame `height` pixels tall.
+    pub fn new(view_proj: Mat4, height: u32) -> Projection {
+        let w_row = view_proj.row(3);
+        let y_row = view_proj.row(1);
+        Projection { w_row, w_norm: w_row.truncate().length(), scale: 0.5 * height as f32 * y_row.truncate().length() }
+    }
+}
+
+impl Hierarchy {
+    /// Bytes of the section for `chunks` chunks and `groups` groups.
+    pub fn section_len(chunks: usize, groups: usize) -> usize {
+        8 + GROUP_LEN * groups + 8 * chunks + 4
+    }
+
+    /// The section's bytes, checksum included.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(Self::section_len(self.producer.len(), self.groups.len()));
+        b.extend_from_slice(&self.level0.to_le_bytes());
+        b.extend_from_slice(&(self.groups.len() as u32).to_le_bytes());
+        for g in &self.groups {
+            for v in [g.error, g.center[0], g.center[1], g.center[2], g.radius] {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        for (p, c) in self.producer.iter().zip(&self.consumer) {
+            b.extend_from_slice(&p.to_le_bytes());
+            b.extend_from_slice(&c.to_le_bytes());
+        }
+        let crc = crc32fast::hash(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    /// The group count a section starting with `head` (its first 8 bytes) declares.
+    pub(crate) fn groups_in(head: &[u8]) -> u32 {
+        u32::from_le_bytes(head[4..8].try_into().unwrap())
+    }
+
+    /// Parses and checks a section of a file of `chunks` chunks (`b` exactly its bytes).
+    pub(crate) fn from_bytes(b: &[u8], chunks: usize) -> Result<Hierarchy, FormatError> {
+        if b.len() < 12 {
+            return Err(FormatError::Truncated("level-of-detail hierarchy"));
+        }
+        let (body, crc) = b.split_at(b.len() - 4);
+        if u32::from_le_bytes(crc.try_into().unwrap()) != crc32fast::hash(body) {
+            return Err(FormatError::Checksum("level-of-detail hierarchy"));
+        }
+        let u = |off: usize| u32::from_le_bytes(body[off..off + 4].try_into().unwrap());
+        let f = |off: usize| f32::from_le_bytes(body[off..off + 4].try_into().unwrap());
+        let (level0, groups) = (u(0), u(4) as usize);
+        if body.len() != 8 + GROUP_LEN * groups + 8 * chunks {
+            return Err(corrupt(format!(
+                "the hierarchy section is {} bytes, not those of {groups} groups and {chunks} chunks",
+                b.len()
+            )));
+        }
+        let groups: Vec<Group> = (0..groups)
+            .map(|g| {
+                let o = 8 + GROUP_LEN * g;
+                Group { error: f(o), center: [f(o + 4), f(o + 8), f(o + 12)], radius: f(o + 16) }
+            })
+            .collect();
+        let o = 8 + GROUP_LEN * groups.len();
+        let producer = (0..chunks).map(|i| u(o + 8 * i)).collect();
+        let consumer = (0..chunks).map(|i| u(o + 8 * i + 4)).collect();
+        let h = Hierarchy { level0, groups, producer, consumer };
+        h.check()?;
+        Ok(h)
+    }
+
+    /// Checks the hierarchy, naming the chunk at fault: level 0 first and made by no group,
+    /// groups in range, each group's outputs after all of its inputs (so no cycle), finite
+    /// errors and spheres, and errors and spheres that never shrink toward the roots.
+    pub fn check(&self) -> Result<(), FormatError> {
+        let chunks = self.producer.len();
+        let groups = self.groups.len();
+        if self.level0 == 0 || self.level0 as usize > chunks {
+            return Err(corrupt(format!("the hierarchy's level 0 has {} of {chunks} chunks", self.level0)));
+        }
+        let (mut last_input, mut first_output) = (vec![None::<usize>; groups], vec![None::<usize>; groups]);
+        for i in 0..chunks {
+            let (p, c) = (self.producer[i], self.consumer[i]);
+            for (what, g) in [("producer", p), ("consumer", c)] {
+                if g != NONE && g as usize >= groups {
+                    return Err(chunk_err(i, format!("its {what} group {g} is out of range ({groups} groups)")));
+                }
+            }
+            if (i < self.level0 as usize) != (p == NONE) {
+                return Err(chunk_err(
+                    i,
+                    if p == NONE {
+                        "it is above level 0 and no group made it"
+                    } else {
+                        "it is in level 0 and a group made it"
+                    },
+                ));
+            }
+            if p != NONE {
+                first_output[p as usize].get_or_insert(i);
+            }
+            if c != NONE {
+                last_input[c as usize] = Some(i);
+            }
+        }
+        for (g, group) in self.groups.iter().enumerate() {
+            let name = first_output[g].or(last_input[g]);
+            let err = |msg: String| match name {
+                Some(i) => chunk_err(i, msg),
+                None => corrupt(format!("group {g}: {msg}")),
+            };
+            match (last_input[g], first_output[g]) {
+                (Some(last), Some(first)) if last >= first => {
+                    return Err(chunk_err(
+                        first,
+                        format!("group {g} makes it from chunk {last}, which does not come before it (the hierarchy has a cycle)"),
+                    ))
+                }
+                (Some(_), Some(_)) => {}
+                _ => return Err(err(format!("group {g} has no input or no output chunk"))),
+            }
+            let finite =
+                group.error.is_finite() && group.radius.is_finite() && group.center.iter().all(|c| c.is_finite());
+            if !finite || group.error < 0.0 || group.radius < 0.0 {
+                return Err(err(format!("group {g}'s error or sphere is not finite and non-negative")));
+            }
+        }
+        for i in 0..chunks {
+            let (p, c) = (self.producer[i], self.consumer[i]);
+            if p == NONE || c == NONE {
+                continue;
+            }
+            let (own, parent) = (&self.groups[p as usize], &self.groups[c as usize]);
+            if parent.error < own.error {
+                return Err(chunk_err(
+                    i,
+                    format!(
+                        "its error {} is above its parent group's {} (errors shrink toward the root)",
+                        own.error, parent.error
+                    ),
+                ));
+            }
+            let reach = Vec3::from(own.center).distance(Vec3::from(parent.center)) + own.radius;
+            if reach > parent.radius * (1.0 + 1e-5) + 1e-6 {
+                return Err(chunk_err(i, "its parent group's sphere does not hold its own"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Group `g`'s error in pixels under `p` (infinite for [`NONE`] and where the sphere
+    /// reaches the eye plane).
+    pub fn projected(&self, g: u32, p: &Projection) -> f32 {
+        let Some(group) = self.groups.get(g as usize) else { return f32::INFINITY };
+        let w = p.w_row.dot(Vec3::from(group.center).extend(1.0)) - group.radius * p.w_norm;
+        if w <= 1e-6 {
+            f32::INFINITY
+        } else {
+            group.error * p.scale / w
+        }
+    }
+
+    /// Whether chunk `i` is in the cut at `error_px` (see the module doc).
+    pub fn in_cut(&self, i: usize, p: &Projection, error_px: f32) -> bool {
+        let own = if self.producer[i] == NONE { 0.0 } else { self.projected(self.producer[i], p) };
+        own <= error_px && self.projected(self.consumer[i], p) > error_px
+    }
+
+    /// Each chunk's level: 0 for the model's, else one above its producer's inputs'.
+    pub fn levels(&self) -> Vec<u32> {
+        let mut group_level = vec![0u32; self.groups.len()];
+        let mut level = vec![0u32; self.producer.len()];
+        // Inputs come before their group's outputs (checked), so one pass in chunk order.
+        for i in 0..self.producer.len() {
+            if self.producer[i] != NONE {
+                level[i] = group_level[self.producer[i] as usize];
+            }
+            if self.consumer[i] != NONE {
+                let g = &mut group_level[self.consumer[i] as usize];
+                *g = (*g).max(level[i] + 1);
+            }
+        }
+        level
+    }
+}
+
+/// A level of chunks being built: each chunk's triangles (input vertex indices).
+pub(super) type Level = Vec<Vec<[u32; 3]>>;
+
+/// What [`build`] made above level 0.
+pub(super) struct Built {
+    /// The chunks above level 0, level after level.
+    pub chunks: Level,
+    pub hierarchy: Hierarchy,
+}
+
+fn sphere_of(positions: &[[f32; 3]], vertices: &[u32]) -> (Vec3, f32) {
+    let (lo, hi) =
+        crate::mesh::bounding_box(vertices.iter().map(|&v| &positions[v as usize])).unwrap_or(([0.0; 3], [0.0; 3]));
+    let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
+    let r = vertices.iter().map(|&v| Vec3::from(positions[v as usize]).distance(c)).fold(0.0f32, f32::max);
+    (c, r)
+}
+
+/// The used vertices of `tris`, sorted.
+fn vertices_of(tris: &[[u32; 3]]) -> Vec<u32> {
+    let mut v: Vec<u32> = tris.iter().flatten().copied().collect();
+    v.sort_unstable();
+    v.dedup();
+    v
+}
+
+/// Per vertex of `chunks` (sorted by vertex): the chunks that use it, as `(vertex, chunk)`.
+fn users(chunks: &Level) -> Vec<(u32, u32)> {
+    let mut pairs: Vec<(u32, u32)> = chunks
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(c, tris)| vertices_of(tris).into_iter().map(move |v| (v, c as u32)))
+        .collect();
+    pairs.par_sort_unstable();
+    pairs
+}
+
+/// Groups the chunks of a level by adjacency: from each ungrouped chunk in file order
+/// (spatial order), the ungrouped neighbour sharing most vertices with the group joins it,
+/// up to [`GROUP_CHUNKS`].
+fn group_chunks(chunks: usize, users: &[(u32, u32)]) -> Vec<Vec<u32>> {
+    let mut adjacency: Vec<rustc_hash::FxHashMap<u32, u32>> = vec![Default::default(); chunks];
+    for run in users.chunk_by(|a, b| a.0 == b.0) {
+        for a in run {
+            for b in run {
+                if a.1 != b.1 {
+                    *adjacency[a.1 as usize].entry(b.1).or_insert(0) += 1;
+                }
+            }
+        }
+    }
+    let mut grouped = vec![false; chunks];
+    let mut groups = Vec::new();
+    for start in 0..chunks {
+        if grouped[start] {
+            continue;
+        }
+        grouped[start] = true;
+        let mut members = vec![start as u32];
+        let mut weight: rustc_hash::FxHashMap<u32, u32> = Default::default();
+        while members.len() < GROUP_CHUNKS {
+            for (&n, &w) in &adjacency[*members.last().unwrap() as usize] {
+                if !grouped[n as usize] {
+                    *weight.entry(n).or_insert(0) += w;
+                }
+            }
+            weight.retain(|n, _| !grouped[*n as usize]);
+            let Some((&best, _)) = weight.iter().max_by_key(|(&n, &w)| (w, std::cmp::Reverse(n))) else { break };
+            grouped[best as usize] = true;
+            members.push(best);
+        }
+        members.sort_unstable();
+        groups.push(members);
+    }
+    groups
+}
+
+/// A group simplified: its triangles, its error and its vertices' sphere.
+struct Simplified {
+    tris: Vec<[u32; 3]>,
+    error: f32,
+    center: Vec3,
+    radius: f32,
+}
+
+/// Removes pairs of triangles on the same three vertices facing opposite ways: the
+/// simplifier folds a thin part flat into such a pair, which gives its edges three or four
+/// faces and covers no area.
+fn cancel_folds(tris: &mut Vec<[u32; 3]>) {
+    let key = |t: &[u32; 3]| {
+        let mut k = *t;
+        k.sort_unstable();
+        k
+    };
+    let mut by_key: rustc_hash::FxHashMap<[u32; 3], Vec<usize>> = Default::default();
+    for (i, t) in tris.iter().enumerate() {
+        by_key.entry(key(t)).or_default().push(i);
+    }
+    let mut drop = vec![false; tris.len()];
+    for same in by_key.values().filter(|v| v.len() > 1) {
+        // A rotation of the sorted vertices keeps the orientation; the others reverse it.
+        let facing = |t: &[u32; 3]| {
+            let k = key(t);
+            (0..3).any(|r| [t[r], t[(r + 1) % 3], t[(r + 2) % 3]] == k)
+        };
+        let (mut up, mut down): (Vec<usize>, Vec<usize>) = same.iter().partition(|&&i| facing(&tris[i]));
+        while let (Some(a), Some(b)) = (up.pop(), down.pop()) {
+            drop[a] = true;
+            drop[b] = true;
+        }
+    }
+    let mut i = 0;
+    tris.retain(|_| {
+        i += 1;
+        !drop[i - 1]
+    });
+}
+
+/// Builds the hierarchy above `level0` (the model's chunks, triangles on input vertices
+/// whose rendered positions are `positions` and full-resolution normals `normals`): levels
+/// of groups simplified with `meshopt`'s simplifier, borders locked, until one chunk is left
+/// or a level no longer shrinks by an eighth. `target` is the chunk size; `weight` the
+/// normals' weight in the simplifier's error ([`NORMAL_WEIGHT`], 0 for positions alone).
+pub(super) fn build(
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    level0: &Level,
+    target: usize,
+    weight: f32,
+    progress: &mut dyn FnMut(u64),
+) -> Built {
+    let mut chunks: Level = Vec::new();
+    let mut groups: Vec<Group> = Vec::new();
+    let mut producer: Vec<u32> = vec![NONE; level0.len()];
+    let mut consumer: Vec<u32> = vec![NONE; level0.len()];
+    // The current level: its chunks' global indices and triangles.
+    let mut first = 0usize;
+    // The level being grouped: the model's own chunks, then the last level made.
+    let mut made: Option<Level> = None;
+    let mut done = 0u64;
+    loop {
+        let level = made.as_ref().unwrap_or(level0);
+        if level.len() <= 1 {
+            break;
+        }
+        let level_users = users(level);
+        let grouping = group_chunks(level.len(), &level_users);
+        let mut group_of = vec![0u32; level.len()];
+        for (g, members) in grouping.iter().enumerate() {
+            for &c in members {
+                group_of[c as usize] = g as u32;
+            }
+        }
+        // A vertex used by chunks of two groups is locked in both.
+        let mut locked: Vec<u32> = Vec::new();
+        for run in level_users.chunk_by(|a, b| a.0 == b.0) {
+            if run.iter().any(|p| group_of[p.1 as usize] != group_of[run[0].1 as usize]) {
+                locked.push(run[0].0);
+            }
+        }
+        let results: Vec<Simplified> = grouping
+            .par_iter()
+            .map(|members| {
+                let tris: Vec<[u32; 3]> = members.iter().flat_map(|&c| level[c as usize].iter().copied()).collect();
+                let verts = vertices_of(&tris);
+                let local: Vec<u32> =
+                    tris.iter().flatten().map(|v| verts.binary_search(v).expect("own vertex") as u32).collect();
+                let pos: Vec<[f32; 3]> = verts.iter().map(|&v| positions[v as usize]).collect();
+                let mut lock: Vec<bool> = verts.iter().map(|v| locked.binary_search(v).is_ok()).collect();
+                let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0).expect("positions");
+                // The vertices next to the border are locked too. Locking the border alone
+                // lets the simplifier join two border vertices by a new edge (collapsing
+                // the vertex between them), and the group on the other side of the border
+                // may join the same two: an edge of four faces where a cut meets. A
+                // collapse makes new edges only from the vertex it keeps to the removed
+                // one's neighbours, so with every neighbour of a border vertex locked no
+                // new edge ever reaches the border (the first strip of triangles stays).
+                let border = lock.clone();
+                for t in local.chunks_exact(3) {
+                    if t.iter().any(|&v| border[v as usize]) {
+                        for &v in t {
+                            lock[v as usize] = true;
+                        }
+                    }
+                }
+                let mut error = 0.0f32;
+                let attributes: Vec<f32> = verts.iter().flat_map(|&v| normals[v as usize]).collect();
+                let out = if weight > 0.0 {
+                    meshopt::simplify_with_attributes_and_locks(
+                        &local,
+                        &adapter,
+                        &attributes,
+                        &[weight; 3],
+                        12,
+                        &lock,
+                        tris.len() / 2 * 3,
+                        f32::MAX,
+                        meshopt::SimplifyOptions::ErrorAbsolute,
+                        Some(&mut error),
+                    )
+                } else {
+                    meshopt::simplify_with_locks(
+                        &local,
+                        &adapter,
+                        &lock,
+                        tris.len() / 2 * 3,
+                        f32::MAX,
+                        meshopt::SimplifyOptions::ErrorAbsolute,
+                        Some(&mut error),
+                    )
+                };
+                let mut simplified: Vec<[u32; 3]> =
+                    out.chunks_exact(3).map(|t| [0, 1, 2].map(|k| verts[t[k] as usize])).collect();
+                cancel_folds(&mut simplified);
+                if simplified.is_empty() {
+                    // A group must make a chunk: one whose triangles all collapse away (a
+                    // small separate part) stays as it is.
+                    simplified = tris;
+                    error = 0.0;
+                }
+                let (center, radius) = sphere_of(positions, &verts);
+                Simplified { tris: simplified, error, center, radius }
+            })
+            .collect();
+        let before: usize = level.iter().map(Vec::len).sum();
+        let after: usize = results.iter().map(|r| r.tris.len()).sum();
+        if after * 8 > before * 7 {
+            break;
+        }
+        let mut next: Level = Vec::new();
+        let base = groups.len() as u32;
+        for (g, (Simplified { tris: simplified, error, center, radius }, members)) in
+            results.into_iter().zip(&grouping).enumerate()
+        {
+            // The group's error and sphere cover its inputs' producers'.
+            let (mut error, mut center, mut radius) = (error, center, radius);
+            for &c in members {
+                consumer[first + c as usize] = base + g as u32;
+                let p = producer[first + c as usize];
+                if p != NONE {
+                    let child = groups[p as usize];
+                    error = error.max(child.error);
+                    let (cc, cr) = (Vec3::from(child.center), child.radius);
+                    let d = cc.distance(center);
+                    if cr >= d + radius {
+                        (center, radius) = (cc, cr);
+                    } else if d + cr > radius {
+                        // The smallest sphere holding both.
+                        let new_r = (radius + d + cr) * 0.5;
+                        if d > 0.0 {
+                            center += (cc - center) * ((new_r - radius) / d);
+                        }
+                        radius = new_r;
+                    }
+                }
+            }
+            // Room for the rounding of the checks and of the reader's projection.
+            radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
+            groups.push(Group { error, center: center.to_array(), radius });
+            let mut cent: Vec<[f32; 3]> =
+                simplified.iter().map(|&t| super::partition::centroid(positions, t)).collect();
+            let mut idx: Vec<u32> = (0..simplified.len() as u32).collect();
+            let mut leaves = Vec::new();
+            super::partition::kd_leaves(&cent, &mut idx, target, 0, &mut leaves);
+            cent.clear();
+            for leaf in leaves {
+                let members = &mut idx[leaf];
+                members.sort_unstable();
+                next.push(members.iter().map(|&t| simplified[t as usize]).collect());
+                producer.push(base + g as u32);
+                consumer.push(NONE);
+            }
+        }
+        done += before as u64;
+        progress(done);
+        first = producer.len() - next.len();
+        chunks.extend(next.iter().cloned());
+        made = Some(next);
+    }
+    let hierarchy = Hierarchy { level0: level0.len() as u32, groups, producer, consumer };
+    debug_assert!(hierarchy.check().is_ok(), "{:?}", hierarchy.check());
+    Built { chunks, hierarchy }
+}
