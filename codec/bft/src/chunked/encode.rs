@@ -186,8 +186,11 @@ struct Encoded {
     commands: u32,
 }
 
+/// Encodes one chunk of `vertices`' triangles; `normals`, where given, replace the model's
+/// (a level-of-detail chunk's full-resolution normals).
 fn encode_chunk(
     vertices: &Mesh,
+    normals: Option<&[[f32; 3]]>,
     quant: Quantization,
     options: &EncodeOptions,
     multi: &(dyn Fn(u32) -> bool + Sync),
@@ -206,7 +209,10 @@ fn encode_chunk(
         } else {
             verts.iter().map(|&v| vertices.colors[v as usize]).collect()
         },
-        normals: if vertices.normals.is_empty() { Vec::new() } else { pick(&vertices.normals) },
+        normals: match normals.unwrap_or(&vertices.normals) {
+            [] => Vec::new(),
+            n => pick(n),
+        },
     };
     let input = (&verts[..], vertices.positions.len() as u32);
     let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, Some(input), &mut |_, _| {})?;
@@ -367,20 +373,23 @@ pub fn encode_chunked(
     // Above level 0 every chunk stores its vertices' full-resolution normals in its stream
     // (the model's own, or those the worker computes from level 0), so that a coarse chunk
     // shades as the surface it stands for, and its border table is empty.
-    let mut upper_vertices = None;
+    let mut upper_normals: Option<Vec<[f32; 3]>> = None;
     let built = if options.lod && level0 > 1 {
         held = chunk_sizes.iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
         let rendered: Vec<[f32; 3]> = positions.par_iter().map(|&p| quant.dequantize(quant.quantize(p))).collect();
         if vertices.normals.is_empty() {
-            let all: Vec<[u32; 3]> = held.iter().flatten().copied().collect();
-            upper_vertices = Some(Mesh {
-                positions: positions.clone(),
-                triangles: Vec::new(),
-                colors: vertices.colors.clone(),
-                normals: crate::bft::normals::vertex_normals(&rendered, &all, &[]),
-            });
+            // As `normals::vertex_normals` sums them: area-weighted face normals.
+            let mut sums = vec![Vec3::ZERO; n];
+            for t in held.iter().flatten() {
+                let [a, b, c] = t.map(|v| Vec3::from(rendered[v as usize]));
+                let face = (b - a).cross(c - a);
+                for v in t {
+                    sums[*v as usize] += face;
+                }
+            }
+            upper_normals = Some(sums.into_iter().map(unit).collect());
         }
-        let normals = &upper_vertices.as_ref().unwrap_or(vertices).normals;
+        let normals = upper_normals.as_deref().unwrap_or(&vertices.normals);
         let mut built = super::lod::build(&rendered, normals, &held, target, options.lod_normal_weight, &mut |done| {
             progress("simplifying", done, total)
         });
@@ -426,10 +435,8 @@ pub fn encode_chunked(
             .enumerate()
             .with_max_len(1)
             .map(|(k, tris)| match upper(next + k) {
-                true => {
-                    encode_chunk(upper_vertices.as_ref().unwrap_or(vertices), quant, &upper_stream, &|_| false, tris)
-                }
-                false => encode_chunk(vertices, quant, &options.stream, &|v| multi[v as usize], tris),
+                true => encode_chunk(vertices, upper_normals.as_deref(), quant, &upper_stream, &|_| false, tris),
+                false => encode_chunk(vertices, None, quant, &options.stream, &|v| multi[v as usize], tris),
             })
             .collect::<Result<_, _>>()?;
         for (k, enc) in encoded.into_iter().enumerate() {
