@@ -59,9 +59,9 @@ pub const GROUP_CHUNKS: usize = 4;
 /// The default weight of normals in the simplifier's error, against positions scaled to the
 /// group's extent: a group's error then grows where its shading would change, and the cut
 /// keeps finer chunks there. Measured on the dragon at 1920x1080, `--error-px 1`, three
-/// views (docs/results.md, "Level of detail"): weight 0 draws 56K triangles with 79% of
-/// covered pixels within 8/255 of the full model's frame, 0.5 draws 121K with 96%, 2 draws
-/// 320K with 99.4%, 8 the whole model.
+/// views (docs/results.md, "Level of detail"): weight 0 draws 61K triangles with 80-84% of
+/// covered pixels within 8/255 of the full model's frame, 0.5 draws 120K with 96-97%, 2
+/// draws 306K with 99.2-99.4%, 8 the whole model.
 pub const NORMAL_WEIGHT: f32 = 2.0;
 
 /// A simplification group.
