@@ -199,6 +199,30 @@ fn a_port_beyond_loopback_needs_a_token_every_client_presents() {
     assert!(live.wait().success());
 }
 
+/// A level-of-detail `.bft` takes its cut at the live run's screen error: after
+/// `error_px`, the frame is render's with that `--error-px`, and a coarser one.
+#[test]
+fn a_level_of_detail_file_follows_the_error_live() {
+    let dir = tempfile::tempdir().unwrap();
+    let lod = dir.path().join("lod.bft");
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    ok(&alone(&["encode", &bunny, "-o", s(&lod), "--lod", "--chunk-triangles", "2048"]));
+    let live = start_live(s(&lod), &[]);
+    let mut c = client(&live);
+    let fine = dir.path().join("fine.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&fine)))["ok"], "snapshot");
+    rendered(s(&lod), &[], &dir.path().join("r0.png"));
+    assert_eq!(differing(&fine, &dir.path().join("r0.png")), 0, "the first frame is render's at 0.5 px");
+    assert_eq!(c.ask(r#"{"cmd":"error_px","value":16}"#)["frame"], 1);
+    let coarse = dir.path().join("coarse.png");
+    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&coarse)))["ok"], "snapshot");
+    rendered(s(&lod), &["--error-px", "16"], &dir.path().join("r16.png"));
+    assert_eq!(differing(&coarse, &dir.path().join("r16.png")), 0, "error_px 16 is render's --error-px 16");
+    assert!(differing(&coarse, &fine) > 0, "a coarser cut looks different");
+    assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
+    assert!(live.wait().success());
+}
+
 #[test]
 fn the_grid_the_error_and_balancing_change_live() {
     let dir = tempfile::tempdir().unwrap();
