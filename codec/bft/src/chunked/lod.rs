@@ -590,9 +590,13 @@ pub(super) fn build(
         done += before as u64;
         progress(done);
         first = producer.len() - next.len();
-        chunks.extend(next.iter().cloned());
-        made = Some(next);
+        // The level just grouped is done; the new one is grouped next (each level is held
+        // once).
+        if let Some(grouped) = made.replace(next) {
+            chunks.extend(grouped);
+        }
     }
+    chunks.extend(made.unwrap_or_default());
     let hierarchy = Hierarchy { level0: level0.len() as u32, groups, producer, consumer };
     debug_assert!(hierarchy.check().is_ok(), "{:?}", hierarchy.check());
     Built { chunks, hierarchy }
