@@ -57,6 +57,12 @@ impl Client {
         self.read()
     }
 
+    /// Asks for a snapshot of the frame shown, into `path`.
+    fn snapshot(&mut self, path: &Path) {
+        let answer = self.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(path)));
+        assert_eq!(answer["ok"], "snapshot", "{answer}");
+    }
+
     /// Whether the port closed this connection (EOF).
     fn closed(&mut self) -> bool {
         let mut line = String::new();
@@ -82,15 +88,14 @@ fn snapshots_equal_render_for_the_same_camera() {
     let live = start_live(&model, &[]);
     let mut c = client(&live);
     let first = dir.path().join("first.png");
-    let answer = c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&first)));
-    assert_eq!(answer["ok"], "snapshot", "{answer}");
+    c.snapshot(&first);
     rendered(&model, &[], &dir.path().join("r0.png"));
     assert_eq!(differing(&first, &dir.path().join("r0.png")), 0, "the first frame is render's");
 
     let answer = c.ask(r#"{"cmd":"camera","eye":[0.1,0.25,0.4],"target":[-0.02,0.1,0.0]}"#);
     assert_eq!((answer["ok"].as_str(), answer["frame"].as_u64()), (Some("camera"), Some(1)), "{answer}");
     let moved = dir.path().join("moved.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&moved)))["ok"], "snapshot");
+    c.snapshot(&moved);
     rendered(&model, &["--eye", "0.1,0.25,0.4", "--target", "-0.02,0.1,0"], &dir.path().join("r1.png"));
     assert_eq!(
         differing(&moved, &dir.path().join("r1.png")),
@@ -161,7 +166,7 @@ fn a_still_view_costs_no_cpu() {
     let mut c = client(&live);
     // The first frame is done once a snapshot of it is.
     let dir = tempfile::tempdir().unwrap();
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&dir.path().join("a.png"))))["ok"], "snapshot");
+    c.snapshot(&dir.path().join("a.png"));
     let before = live.cpu_seconds();
     std::thread::sleep(Duration::from_secs(5));
     let idle = live.cpu_seconds() - before;
@@ -210,12 +215,12 @@ fn a_level_of_detail_file_follows_the_error_live() {
     let live = start_live(s(&lod), &[]);
     let mut c = client(&live);
     let fine = dir.path().join("fine.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&fine)))["ok"], "snapshot");
+    c.snapshot(&fine);
     rendered(s(&lod), &[], &dir.path().join("r0.png"));
     assert_eq!(differing(&fine, &dir.path().join("r0.png")), 0, "the first frame is render's at 0.5 px");
     assert_eq!(c.ask(r#"{"cmd":"error_px","value":16}"#)["frame"], 1);
     let coarse = dir.path().join("coarse.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&coarse)))["ok"], "snapshot");
+    c.snapshot(&coarse);
     rendered(s(&lod), &["--error-px", "16"], &dir.path().join("r16.png"));
     assert_eq!(differing(&coarse, &dir.path().join("r16.png")), 0, "error_px 16 is render's --error-px 16");
     assert!(differing(&coarse, &fine) > 0, "a coarser cut looks different");
@@ -244,13 +249,13 @@ fn the_grid_the_error_and_balancing_change_live() {
     let line = line_of(1);
     assert!(line["tiles"].as_array().unwrap().iter().all(|t| t["index"].as_u64() < Some(6)), "{line}");
     let tiled = dir.path().join("tiled.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&tiled)))["ok"], "snapshot");
+    c.snapshot(&tiled);
     rendered(s(&dpm), &[], &dir.path().join("r0.png"));
     assert_eq!(differing(&tiled, &dir.path().join("r0.png")), 0, "a regridded frame is render's");
     // A coarser error: the frame render draws with --error-px 8.
     assert_eq!(c.ask(r#"{"cmd":"error_px","value":8}"#)["frame"], 2);
     let coarse = dir.path().join("coarse.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&coarse)))["ok"], "snapshot");
+    c.snapshot(&coarse);
     rendered(s(&dpm), &["--error-px", "8"], &dir.path().join("r8.png"));
     assert_eq!(differing(&coarse, &dir.path().join("r8.png")), 0, "error_px 8 is render's --error-px 8");
     assert!(differing(&coarse, &tiled) > 0, "a coarser mesh looks different");
@@ -298,7 +303,7 @@ fn another_model_of_any_kind_loads_without_a_restart() {
         let answer = c.ask(&format!(r#"{{"cmd":"load","path":"{model}"}}"#));
         assert_eq!((answer["ok"].as_str(), answer["frame"].as_u64()), (Some("load"), Some(k)), "{model}: {answer}");
         let shot = dir.path().join(format!("shot-{k}.png"));
-        assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+        c.snapshot(&shot);
         let reference = dir.path().join(format!("ref-{k}.png"));
         rendered(model, &[], &reference);
         assert_eq!(differing(&shot, &reference), 0, "{model}: the loaded model's frame is render's");
@@ -366,12 +371,12 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
     stdin.flush().unwrap();
     wait_frames(&mut c, 2);
     let shot = dir.path().join("stdin.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    c.snapshot(&shot);
     same(&shot, &reference("0.7 0.5 2.0", "ref-stdin"));
     // The control port's eye command does the same.
     assert_eq!(c.ask(r#"{"cmd":"eye","position":[-0.5,0.2,1.8]}"#)["ok"], "eye");
     let shot = dir.path().join("cmd.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    c.snapshot(&shot);
     same(&shot, &reference("-0.5 0.2 1.8", "ref-cmd"));
     assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     drop(stdin);
@@ -388,7 +393,7 @@ fn a_head_tracker_streams_the_eye_of_a_placed_wall() {
     // The same position again makes no frame.
     tracker.send_to(b"0.2,-0.3,2.4", ("127.0.0.1", port)).unwrap();
     let shot = dir.path().join("udp.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&shot)))["ok"], "snapshot");
+    c.snapshot(&shot);
     same(&shot, &reference("0.2 -0.3 2.4", "ref-udp"));
     assert_eq!(c.ask(r#"{"cmd":"quit"}"#)["ok"], "quit");
     assert!(live.wait().success());
@@ -426,7 +431,7 @@ fn a_timed_move_shows_frames_along_the_way_and_ends_where_it_was_asked() {
     assert!((turned.abs() - 60.0).abs() < 0.01, "turned {turned}: {first} -> {end}");
     // The last frame is render's with the camera it ended at.
     let last = dir.path().join("last.png");
-    assert_eq!(c.ask(&format!(r#"{{"cmd":"snapshot","path":"{}"}}"#, s(&last)))["ok"], "snapshot");
+    c.snapshot(&last);
     let flag = |k: &str| v(&end, k).iter().map(f64::to_string).collect::<Vec<_>>().join(",");
     rendered(&model, &["--eye", &flag("eye"), "--target", &flag("target")], &dir.path().join("r.png"));
     assert_eq!(differing(&last, &dir.path().join("r.png")), 0, "the move's last frame is render's");

@@ -40,15 +40,26 @@ pub fn face_normal_sums(
         source[slot as usize] = source[src as usize];
     }
     let mut acc = vec![Vec3::ZERO; positions.len()];
+    add_face_normals(positions, triangles, |s| source[s as usize], &mut acc);
+    (source, acc)
+}
+
+/// Adds each triangle's face normal, in triangle order, at `at(v)` of `acc` for each of its
+/// vertices `v` (positions indexed by `v`).
+pub fn add_face_normals<'a>(
+    positions: &[[f32; 3]],
+    triangles: impl IntoIterator<Item = &'a [u32; 3]>,
+    at: impl Fn(u32) -> u32,
+    acc: &mut [Vec3],
+) {
     for t in triangles {
         let [a, b, c] = t.map(|s| Vec3::from(positions[s as usize]));
         // The cross product's length is twice the area: larger faces weigh more.
         let n = (b - a).cross(c - a);
         for &s in t {
-            acc[source[s as usize] as usize] += n;
+            acc[at(s) as usize] += n;
         }
     }
-    (source, acc)
 }
 
 /// A sum of face normals as a unit normal: +Z where the faces cancel or there are none.

@@ -28,11 +28,11 @@ use thiserror::Error;
 
 use super::border::{oct_decode, oct_encode, Border};
 use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader};
-use super::partition::{centroid, kd_leaves};
+use super::partition::{centroid, split, vertices_of};
 use super::DEFAULT_CHUNK_TRIANGLES;
 use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
-use crate::bft::normals::{face_normal_sums, unit};
+use crate::bft::normals::{add_face_normals, face_normal_sums, unit};
 use crate::load::LoadError;
 use crate::mesh::{bounding_box, Mesh, MeshError, Quantization};
 
@@ -196,9 +196,7 @@ fn encode_chunk(
     multi: &(dyn Fn(u32) -> bool + Sync),
     tris: &[[u32; 3]],
 ) -> Result<Encoded, EncodeChunkError> {
-    let mut verts: Vec<u32> = tris.iter().flatten().copied().collect();
-    verts.sort_unstable();
-    verts.dedup();
+    let verts = vertices_of(tris);
     let local = |v: u32| verts.binary_search(&v).expect("the chunk's own vertex") as u32;
     let pick = |values: &[[f32; 3]]| verts.iter().map(|&v| values[v as usize]).collect();
     let mesh = Mesh {
@@ -339,14 +337,10 @@ pub fn encode_chunked(
             continue;
         }
         let tris = read_triangles(&mut *bucket.reader()?, count)?;
-        let cent: Vec<[f32; 3]> = tris.par_iter().map(|&t| centroid(positions, t)).collect();
-        let mut idx: Vec<u32> = (0..count as u32).collect();
-        let mut leaves = Vec::new();
-        kd_leaves(&cent, &mut idx, target, 0, &mut leaves);
+        let (idx, leaves) = split(positions, &tris, target);
         for leaf in leaves {
             let chunk = chunk_sizes.len() as u32;
-            let members = &mut idx[leaf];
-            members.sort_unstable();
+            let members = &idx[leaf];
             let mut b = Vec::with_capacity(members.len() * 12);
             for &t in members.iter() {
                 for v in tris[t as usize] {
@@ -378,15 +372,8 @@ pub fn encode_chunked(
         held = chunk_sizes.iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
         let rendered: Vec<[f32; 3]> = positions.par_iter().map(|&p| quant.dequantize(quant.quantize(p))).collect();
         if vertices.normals.is_empty() {
-            // As `normals::vertex_normals` sums them: area-weighted face normals.
             let mut sums = vec![Vec3::ZERO; n];
-            for t in held.iter().flatten() {
-                let [a, b, c] = t.map(|v| Vec3::from(rendered[v as usize]));
-                let face = (b - a).cross(c - a);
-                for v in t {
-                    sums[*v as usize] += face;
-                }
-            }
+            add_face_normals(&rendered, held.iter().flatten(), |v| v, &mut sums);
             upper_normals = Some(sums.into_iter().map(unit).collect());
         }
         let normals = upper_normals.as_deref().unwrap_or(&vertices.normals);

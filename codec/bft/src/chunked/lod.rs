@@ -47,6 +47,7 @@ use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::error::{chunk_err, corrupt};
+use super::partition::{split, vertices_of};
 use crate::container::FormatError;
 
 /// "No group": a level-0 chunk's producer, a root's consumer.
@@ -306,14 +307,6 @@ fn sphere_of(positions: &[[f32; 3]], vertices: &[u32]) -> (Vec3, f32) {
     (c, r)
 }
 
-/// The used vertices of `tris`, sorted.
-fn vertices_of(tris: &[[u32; 3]]) -> Vec<u32> {
-    let mut v: Vec<u32> = tris.iter().flatten().copied().collect();
-    v.sort_unstable();
-    v.dedup();
-    v
-}
-
 /// Per vertex of `chunks` (sorted by vertex): the chunks that use it, as `(vertex, chunk)`.
 fn users(chunks: &Level) -> Vec<(u32, u32)> {
     let mut pairs: Vec<(u32, u32)> = chunks
@@ -448,8 +441,6 @@ pub(super) fn build(
     let mut groups: Vec<Group> = Vec::new();
     let mut producer: Vec<u32> = vec![NONE; level0.len()];
     let mut consumer: Vec<u32> = vec![NONE; level0.len()];
-    // The current level: its chunks' global indices and triangles.
-    let mut first = 0usize;
     // The level being grouped: the model's own chunks, then the last level made.
     let mut made: Option<Level> = None;
     let mut done = 0u64;
@@ -458,6 +449,8 @@ pub(super) fn build(
         if level.len() <= 1 {
             break;
         }
+        // The level's chunks are the last ones made: their numbers in the file start here.
+        let first = producer.len() - level.len();
         let level_users = users(level);
         let grouping = group_chunks(level.len(), &level_users);
         let mut group_of = vec![0u32; level.len()];
@@ -573,23 +566,15 @@ pub(super) fn build(
             // Room for the rounding of the checks and of the reader's projection.
             radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
             groups.push(Group { error, center: center.to_array(), radius });
-            let mut cent: Vec<[f32; 3]> =
-                simplified.iter().map(|&t| super::partition::centroid(positions, t)).collect();
-            let mut idx: Vec<u32> = (0..simplified.len() as u32).collect();
-            let mut leaves = Vec::new();
-            super::partition::kd_leaves(&cent, &mut idx, target, 0, &mut leaves);
-            cent.clear();
+            let (idx, leaves) = split(positions, &simplified, target);
             for leaf in leaves {
-                let members = &mut idx[leaf];
-                members.sort_unstable();
-                next.push(members.iter().map(|&t| simplified[t as usize]).collect());
+                next.push(idx[leaf].iter().map(|&t| simplified[t as usize]).collect());
                 producer.push(base + g as u32);
                 consumer.push(NONE);
             }
         }
         done += before as u64;
         progress(done);
-        first = producer.len() - next.len();
         // The level just grouped is done; the new one is grouped next (each level is held
         // once).
         if let Some(grouped) = made.replace(next) {

@@ -1,6 +1,34 @@
 //! Cutting triangles into spatially coherent chunks: a kd-tree on their centroids.
 
+use rayon::prelude::*;
+
 use crate::mesh::bounding_box;
+
+/// Cuts `tris` into chunks of at most `target` triangles ([`kd_leaves`] on their centroids
+/// over `positions`): the triangles' indices, and each chunk's range of them, in the tree's
+/// order, each range sorted (a chunk keeps its triangles in their order).
+pub(super) fn split(
+    positions: &[[f32; 3]],
+    tris: &[[u32; 3]],
+    target: usize,
+) -> (Vec<u32>, Vec<std::ops::Range<usize>>) {
+    let cent: Vec<[f32; 3]> = tris.par_iter().map(|&t| centroid(positions, t)).collect();
+    let mut idx: Vec<u32> = (0..tris.len() as u32).collect();
+    let mut leaves = Vec::new();
+    kd_leaves(&cent, &mut idx, target, 0, &mut leaves);
+    for leaf in &leaves {
+        idx[leaf.clone()].sort_unstable();
+    }
+    (idx, leaves)
+}
+
+/// The vertices `tris` use, sorted.
+pub(super) fn vertices_of(tris: &[[u32; 3]]) -> Vec<u32> {
+    let mut v: Vec<u32> = tris.iter().flatten().copied().collect();
+    v.sort_unstable();
+    v.dedup();
+    v
+}
 
 pub(super) fn centroid(p: &[[f32; 3]], t: [u32; 3]) -> [f32; 3] {
     let [a, b, c] = t.map(|v| p[v as usize]);
@@ -11,13 +39,7 @@ pub(super) fn centroid(p: &[[f32; 3]], t: [u32; 3]) -> [f32; 3] {
 /// triangles with a kd-tree of median splits on the longest axis of the centroids' box; each
 /// leaf's range is pushed in the tree's order. Leaves are balanced: a node of `n` triangles
 /// gets `ceil(n / target)` leaves, split as evenly as they go.
-pub(super) fn kd_leaves(
-    cent: &[[f32; 3]],
-    idx: &mut [u32],
-    target: usize,
-    start: usize,
-    out: &mut Vec<std::ops::Range<usize>>,
-) {
+fn kd_leaves(cent: &[[f32; 3]], idx: &mut [u32], target: usize, start: usize, out: &mut Vec<std::ops::Range<usize>>) {
     let n = idx.len();
     if n <= target {
         out.push(start..start + n);
