@@ -8,6 +8,8 @@
 //!    most `chunk_triangles`, each keeping its triangles in input order. The chunks of a
 //!    bucket follow its kd-tree's leaves; buckets follow each other in grid order. Which
 //!    chunks use each vertex is noted on the way (first chunk, and whether another does).
+//!    With `lod`, the hierarchy is built above the chunks from that spill, level by level
+//!    ([`super::lod::build`]), each level spilled in turn.
 //! 2. **Encode.** Batches of chunks are encoded in parallel (rayon) with the ordinary encoder
 //!    on the whole model's quantization, and decoded again to check them and to sum the face
 //!    normals of their border vertices; the streams go to a temporary file in chunk order.
@@ -15,11 +17,12 @@
 //!    table, whose normals are now complete.
 //!
 //! Peak memory: the positions, 6 bytes per vertex of bookkeeping, the border vertices'
-//! tables, and one bucket or one batch of chunks at a time.
+//! tables, and one bucket or one batch of chunks at a time; with `lod`, 4 bytes per vertex
+//! more (its normal, or a level's chunk numbers while its shared vertices are found) and a
+//! batch of groups.
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Read, Seek, Write};
+use std::io::{self, Read, Write};
 use std::path::PathBuf;
 
 use glam::Vec3;
@@ -29,6 +32,7 @@ use thiserror::Error;
 use super::border::{oct_decode, oct_encode, Border};
 use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader};
 use super::partition::{centroid, split, vertices_of};
+use super::spill::{read_triangles, ChunkWriter, Chunks, Spill};
 use super::DEFAULT_CHUNK_TRIANGLES;
 use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
@@ -124,54 +128,6 @@ pub fn encode_mesh_chunked(mesh: &Mesh, options: &ChunkOptions) -> Result<(Vec<u
     Ok((out, enc))
 }
 
-/// Spilled bytes: in memory for small models, in an anonymous temporary file for large ones.
-enum Spill {
-    Mem(Vec<u8>),
-    File(BufWriter<File>),
-}
-
-impl Spill {
-    fn new(on_disk: bool, dir: &Option<PathBuf>) -> io::Result<Spill> {
-        Ok(if on_disk {
-            let f = match dir {
-                Some(d) => tempfile::tempfile_in(d)?,
-                None => tempfile::tempfile()?,
-            };
-            Spill::File(BufWriter::with_capacity(1 << 16, f))
-        } else {
-            Spill::Mem(Vec::new())
-        })
-    }
-
-    fn write(&mut self, b: &[u8]) -> io::Result<()> {
-        match self {
-            Spill::Mem(v) => {
-                v.extend_from_slice(b);
-                Ok(())
-            }
-            Spill::File(w) => w.write_all(b),
-        }
-    }
-
-    /// Everything written, to read back from the start.
-    fn reader(self) -> io::Result<Box<dyn Read + Send>> {
-        Ok(match self {
-            Spill::Mem(v) => Box::new(io::Cursor::new(v)),
-            Spill::File(w) => {
-                let mut f = w.into_inner().map_err(|e| e.into_error())?;
-                f.rewind()?;
-                Box::new(BufReader::with_capacity(1 << 20, f))
-            }
-        })
-    }
-}
-
-fn read_triangles(r: &mut dyn Read, n: usize) -> io::Result<Vec<[u32; 3]>> {
-    let mut buf = vec![0u8; n * 12];
-    r.read_exact(&mut buf)?;
-    Ok(buf.chunks_exact(12).map(|b| [0, 4, 8].map(|o| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()))).collect())
-}
-
 /// One encoded chunk, before its place in the file is known.
 struct Encoded {
     bytes: Vec<u8>,
@@ -190,7 +146,7 @@ struct Encoded {
 /// (a level-of-detail chunk's full-resolution normals).
 fn encode_chunk(
     vertices: &Mesh,
-    normals: Option<&[[f32; 3]]>,
+    normals: Option<&(dyn Fn(u32) -> [f32; 3] + Sync)>,
     quant: Quantization,
     options: &EncodeOptions,
     multi: &(dyn Fn(u32) -> bool + Sync),
@@ -207,9 +163,10 @@ fn encode_chunk(
         } else {
             verts.iter().map(|&v| vertices.colors[v as usize]).collect()
         },
-        normals: match normals.unwrap_or(&vertices.normals) {
-            [] => Vec::new(),
-            n => pick(n),
+        normals: match (normals, &vertices.normals[..]) {
+            (Some(normal), _) => verts.iter().map(|&v| normal(v)).collect(),
+            (None, []) => Vec::new(),
+            (None, n) => pick(n),
         },
     };
     let input = (&verts[..], vertices.positions.len() as u32);
@@ -242,6 +199,47 @@ fn encode_chunk(
         partial_normals,
         commands: enc.header.commands,
     })
+}
+
+/// The model's vertex normals from level 0's chunks (`multi`: the vertices several chunks
+/// use), as a worker computes them (face normals over rendered positions, summed), stored
+/// octahedral in 4 bytes a vertex: each chunk's own vertices are complete when it is read,
+/// the shared ones are summed in a map.
+fn level0_normals(
+    level0: &Chunks,
+    vertices: usize,
+    render: &(dyn Fn(u32) -> [f32; 3] + Sync),
+    multi: &[bool],
+) -> io::Result<Vec<[u16; 2]>> {
+    let mut oct = vec![[0u16; 2]; vertices];
+    let mut shared: rustc_hash::FxHashMap<u32, Vec3> = Default::default();
+    for batch in (0..level0.len()).step_by(256).map(|s| s..(s + 256).min(level0.len())) {
+        let sums: Vec<(Vec<u32>, Vec<Vec3>)> = batch
+            .into_par_iter()
+            .map(|c| {
+                let tris = level0.read(c)?;
+                let verts = vertices_of(&tris);
+                let pos: Vec<[f32; 3]> = verts.iter().map(|&v| render(v)).collect();
+                let mut acc = vec![Vec3::ZERO; verts.len()];
+                let local = |v: u32| verts.binary_search(&v).expect("the chunk's own vertex") as u32;
+                add_face_normals(&pos, tris.iter().map(|t| t.map(local)).collect::<Vec<_>>().iter(), |l| l, &mut acc);
+                Ok((verts, acc))
+            })
+            .collect::<io::Result<_>>()?;
+        for (verts, acc) in sums {
+            for (v, sum) in verts.into_iter().zip(acc) {
+                if multi[v as usize] {
+                    *shared.entry(v).or_insert(Vec3::ZERO) += sum;
+                } else {
+                    oct[v as usize] = oct_encode(unit(sum));
+                }
+            }
+        }
+    }
+    for (v, sum) in shared {
+        oct[v as usize] = oct_encode(unit(sum));
+    }
+    Ok(oct)
 }
 
 /// Encodes a model as a chunked `.bft` file written to `out`. `vertices` holds all input
@@ -330,8 +328,7 @@ pub fn encode_chunked(
     //    several chunks use.
     let mut owner = vec![u32::MAX; n];
     let mut multi = vec![false; n];
-    let mut chunk_sizes: Vec<usize> = Vec::new();
-    let mut ordered = Spill::new(bits > 0, &options.temp_dir)?;
+    let mut ordered = ChunkWriter::new(bits > 0, &options.temp_dir)?;
     for (bucket, &count) in buckets.drain(..).zip(&counts) {
         if count == 0 {
             continue;
@@ -339,9 +336,8 @@ pub fn encode_chunked(
         let tris = read_triangles(&mut *bucket.reader()?, count)?;
         let (idx, leaves) = split(positions, &tris, target);
         for leaf in leaves {
-            let chunk = chunk_sizes.len() as u32;
+            let chunk = ordered.len() as u32;
             let members = &idx[leaf];
-            let mut b = Vec::with_capacity(members.len() * 12);
             for &t in members.iter() {
                 for v in tris[t as usize] {
                     let o = &mut owner[v as usize];
@@ -350,44 +346,54 @@ pub fn encode_chunked(
                     } else if *o != chunk {
                         multi[v as usize] = true;
                     }
-                    b.extend_from_slice(&v.to_le_bytes());
                 }
             }
-            ordered.write(&b)?;
-            chunk_sizes.push(members.len());
+            ordered.push(members.iter().map(|&t| tris[t as usize]))?;
         }
     }
     drop(owner);
-    let level0 = chunk_sizes.len();
-    let mut ordered = ordered.reader()?;
+    let ordered = ordered.finish()?;
+    let level0 = ordered.len();
 
-    //    The hierarchy above the chunks, in memory (the model's triangles at 12 bytes each,
-    //    and its levels above, about as many again).
-    let mut held: Vec<Vec<[u32; 3]>> = Vec::new();
-    // Above level 0 every chunk stores its vertices' full-resolution normals in its stream
-    // (the model's own, or those the worker computes from level 0), so that a coarse chunk
-    // shades as the surface it stands for, and its border table is empty.
-    let mut upper_normals: Option<Vec<[f32; 3]>> = None;
-    let built = if options.lod && level0 > 1 {
-        held = chunk_sizes.iter().map(|&c| read_triangles(&mut *ordered, c)).collect::<Result<_, _>>()?;
-        let rendered: Vec<[f32; 3]> = positions.par_iter().map(|&p| quant.dequantize(quant.quantize(p))).collect();
-        if vertices.normals.is_empty() {
-            let mut sums = vec![Vec3::ZERO; n];
-            add_face_normals(&rendered, held.iter().flatten(), |v| v, &mut sums);
-            upper_normals = Some(sums.into_iter().map(unit).collect());
-        }
-        let normals = upper_normals.as_deref().unwrap_or(&vertices.normals);
-        let mut built = super::lod::build(&rendered, normals, &held, target, options.lod_normal_weight, &mut |done| {
-            progress("simplifying", done, total)
-        });
-        chunk_sizes.extend(built.chunks.iter().map(Vec::len));
-        held.append(&mut built.chunks);
-        Some(built)
+    //    The hierarchy above the chunks, out of core (`super::lod`). Above level 0 every
+    //    chunk stores its vertices' full-resolution normals in its stream (the model's own,
+    //    or those the worker computes from level 0), so that a coarse chunk shades as the
+    //    surface it stands for, and its border table is empty.
+    let render = |v: u32| quant.dequantize(quant.quantize(positions[v as usize]));
+    let computed_normals = if options.lod && level0 > 1 && vertices.normals.is_empty() {
+        Some(level0_normals(&ordered, n, &render, &multi)?)
     } else {
         None
     };
+    let normal = |v: u32| match &computed_normals {
+        Some(oct) => oct_decode(oct[v as usize]),
+        None => vertices.normals[v as usize],
+    };
+    let built = if options.lod && level0 > 1 {
+        let model = super::lod::Vertices { count: n, position: &render, normal: &normal };
+        let spill = || ChunkWriter::new(bits > 0, &options.temp_dir);
+        Some(super::lod::build(&model, &ordered, target, options.lod_normal_weight, &spill, &mut |done| {
+            progress("simplifying", done, total)
+        })?)
+    } else {
+        None
+    };
+    // Every chunk's store and its first chunk number.
+    let mut stores: Vec<(usize, &Chunks)> = vec![(0, &ordered)];
+    for level in built.iter().flat_map(|b| &b.levels) {
+        let (start, last) = stores.last().unwrap();
+        stores.push((start + last.len(), level));
+    }
+    let locate = |c: usize| {
+        let (start, store) = stores[stores.partition_point(|s| s.0 <= c) - 1];
+        (store, c - start)
+    };
+    let chunk_size = |c: usize| {
+        let (store, k) = locate(c);
+        store.size(k)
+    };
+    let chunks = stores.last().map(|(start, s)| start + s.len()).unwrap_or(0);
     let upper_stream = EncodeOptions { normals: true, ..options.stream };
-    let chunks = chunk_sizes.len();
     if chunks > u32::MAX as usize / 2 {
         return Err(EncodeChunkError::TooLarge(format!("{chunks} chunks")));
     }
@@ -406,14 +412,14 @@ pub fn encode_chunked(
     while next < chunks {
         let mut end = next;
         let mut size = 0;
-        while end < chunks && (end == next || size + chunk_sizes[end] <= batch_triangles) {
-            size += chunk_sizes[end];
+        while end < chunks && (end == next || size + chunk_size(end) <= batch_triangles) {
+            size += chunk_size(end);
             end += 1;
         }
         let batch: Vec<Vec<[u32; 3]>> = (next..end)
-            .map(|c| match &built {
-                None => read_triangles(&mut *ordered, chunk_sizes[c]),
-                Some(_) => Ok(std::mem::take(&mut held[c])),
+            .map(|c| {
+                let (store, k) = locate(c);
+                store.read(k)
             })
             .collect::<Result<_, _>>()?;
         let upper = |c: usize| built.is_some() && c >= level0;
@@ -422,7 +428,7 @@ pub fn encode_chunked(
             .enumerate()
             .with_max_len(1)
             .map(|(k, tris)| match upper(next + k) {
-                true => encode_chunk(vertices, upper_normals.as_deref(), quant, &upper_stream, &|_| false, tris),
+                true => encode_chunk(vertices, Some(&normal), quant, &upper_stream, &|_| false, tris),
                 false => encode_chunk(vertices, None, quant, &options.stream, &|v| multi[v as usize], tris),
             })
             .collect::<Result<_, _>>()?;

@@ -43,11 +43,14 @@
 //! surface it stands for and meets its neighbours of any level without a seam; its border
 //! table is empty.
 
+use std::io;
+
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::error::{chunk_err, corrupt};
 use super::partition::{split, vertices_of};
+use super::spill::{ChunkWriter, Chunks};
 use crate::container::FormatError;
 
 /// "No group": a level-0 chunk's producer, a root's consumer.
@@ -56,6 +59,9 @@ const GROUP_LEN: usize = 20;
 /// Chunks a group takes, at most (Nanite groups 8-32 clusters of 128 triangles; a chunk
 /// holds thousands, so a group of four simplifies 16K triangles to two chunks).
 pub const GROUP_CHUNKS: usize = 4;
+/// Times a group is simplified again with more vertices locked where the simplifier pinched
+/// it, before it is simplified less.
+const PINCH_RETRIES: usize = 4;
 
 /// The default weight of normals in the simplifier's error, against positions scaled to the
 /// group's extent: a group's error then grows where its shading would change, and the cut
@@ -289,33 +295,58 @@ impl Hierarchy {
     }
 }
 
-/// A level of chunks being built: each chunk's triangles (input vertex indices).
-pub(super) type Level = Vec<Vec<[u32; 3]>>;
-
 /// What [`build`] made above level 0.
 pub(super) struct Built {
-    /// The chunks above level 0, level after level.
-    pub chunks: Level,
+    /// The levels above level 0, in order (their chunks follow level 0's in the file).
+    pub levels: Vec<Chunks>,
     pub hierarchy: Hierarchy,
 }
 
-fn sphere_of(positions: &[[f32; 3]], vertices: &[u32]) -> (Vec3, f32) {
-    let (lo, hi) =
-        crate::mesh::bounding_box(vertices.iter().map(|&v| &positions[v as usize])).unwrap_or(([0.0; 3], [0.0; 3]));
+/// The model's vertices as the hierarchy's build reads them, by input vertex.
+pub(super) struct Vertices<'a> {
+    /// How many there are.
+    pub count: usize,
+    /// Where a vertex is drawn (its quantized position).
+    pub position: &'a (dyn Fn(u32) -> [f32; 3] + Sync),
+    /// Its full-resolution normal.
+    pub normal: &'a (dyn Fn(u32) -> [f32; 3] + Sync),
+}
+
+/// Ranges of `n` items, a few per thread, that a pass reads in parallel before it takes
+/// them in order.
+fn batches(n: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let step = rayon::current_num_threads().max(1) * 16;
+    (0..n).step_by(step).map(move |s| s..(s + step).min(n))
+}
+
+fn sphere_of(positions: &[[f32; 3]]) -> (Vec3, f32) {
+    let (lo, hi) = crate::mesh::bounding_box(positions.iter()).unwrap_or(([0.0; 3], [0.0; 3]));
     let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
-    let r = vertices.iter().map(|&v| Vec3::from(positions[v as usize]).distance(c)).fold(0.0f32, f32::max);
+    let r = positions.iter().map(|&p| Vec3::from(p).distance(c)).fold(0.0f32, f32::max);
     (c, r)
 }
 
-/// Per vertex of `chunks` (sorted by vertex): the chunks that use it, as `(vertex, chunk)`.
-fn users(chunks: &Level) -> Vec<(u32, u32)> {
-    let mut pairs: Vec<(u32, u32)> = chunks
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(c, tris)| vertices_of(tris).into_iter().map(move |v| (v, c as u32)))
-        .collect();
+/// The vertices that several chunks of `chunks` use, each with every chunk that uses it, as
+/// sorted `(vertex, chunk)` pairs. One pass over the level, with a chunk number per vertex of
+/// the model.
+fn shared(chunks: &Chunks, vertices: usize) -> io::Result<Vec<(u32, u32)>> {
+    let mut owner = vec![NONE; vertices];
+    let mut pairs = Vec::new();
+    for batch in batches(chunks.len()) {
+        let used: Vec<Vec<u32>> =
+            batch.clone().into_par_iter().map(|c| Ok(vertices_of(&chunks.read(c)?))).collect::<io::Result<_>>()?;
+        for (c, used) in batch.zip(used) {
+            for v in used {
+                match owner[v as usize] {
+                    NONE => owner[v as usize] = c as u32,
+                    first => pairs.extend([(v, first), (v, c as u32)]),
+                }
+            }
+        }
+    }
     pairs.par_sort_unstable();
-    pairs
+    pairs.dedup();
+    Ok(pairs)
 }
 
 /// Groups the chunks of a level by adjacency: from each ungrouped chunk in file order
@@ -383,12 +414,40 @@ fn weld_unlocked(local: &mut Vec<u32>, pos: &[[f32; 3]], lock: &[bool]) {
     local.extend(welded.chunks_exact(3).filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).flatten());
 }
 
-/// A group simplified: its triangles, its error and its vertices' sphere.
+/// A group simplified: its chunks of the next level, its error and its vertices' sphere.
 struct Simplified {
-    tris: Vec<[u32; 3]>,
+    leaves: Vec<Vec<[u32; 3]>>,
     error: f32,
     center: Vec3,
     radius: f32,
+}
+
+/// Faces per undirected edge of `indices` (a triangle list).
+fn edge_faces(indices: &[u32]) -> rustc_hash::FxHashMap<(u32, u32), u32> {
+    let mut faces: rustc_hash::FxHashMap<(u32, u32), u32> = Default::default();
+    for t in indices.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *faces.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    faces
+}
+
+/// The ends of the edges to which `out` gives more faces than two and than the input gives
+/// them (`faces`), sorted: the simplifier can squash a thin part into two sheets that share
+/// an edge (found on the armadillo: an edge of four faces in one group's output), which no
+/// cut may draw.
+fn pinched_vertices(faces: &rustc_hash::FxHashMap<(u32, u32), u32>, out: &[[u32; 3]]) -> Vec<u32> {
+    let after = edge_faces(bytemuck::cast_slice(out));
+    let mut ends: Vec<u32> = after
+        .iter()
+        .filter(|(e, &n)| n > 2 && n > faces.get(e).copied().unwrap_or(0))
+        .flat_map(|(e, _)| [e.0, e.1])
+        .collect();
+    ends.sort_unstable();
+    ends.dedup();
+    ends
 }
 
 /// Removes pairs of triangles on the same three vertices facing opposite ways: the
@@ -424,34 +483,37 @@ fn cancel_folds(tris: &mut Vec<[u32; 3]>) {
     });
 }
 
-/// Builds the hierarchy above `level0` (the model's chunks, triangles on input vertices
-/// whose rendered positions are `positions` and full-resolution normals `normals`): levels
-/// of groups simplified with `meshopt`'s simplifier, borders locked, until one chunk is left
-/// or a level no longer shrinks by an eighth. `target` is the chunk size; `weight` the
-/// normals' weight in the simplifier's error ([`NORMAL_WEIGHT`], 0 for positions alone).
+/// Builds the hierarchy above `level0` (the model's chunks, triangles on input vertices):
+/// levels of groups simplified with `meshopt`'s simplifier, borders locked, until one chunk
+/// is left or a level no longer shrinks by an eighth. `target` is the chunk size; `weight`
+/// the normals' weight in the simplifier's error ([`NORMAL_WEIGHT`], 0 for positions
+/// alone); each level is spilled to a [`ChunkWriter`] that `spill` makes.
+///
+/// Out of core: a level is read chunk by chunk, twice (once for which chunks share
+/// vertices, once to simplify its groups a batch at a time), and written as it is made, so
+/// that memory holds 4 bytes per vertex of the model while a level's shared vertices are
+/// found, its shared vertices and its directory, and one batch of groups.
 pub(super) fn build(
-    positions: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    level0: &Level,
+    vertices: &Vertices,
+    level0: &Chunks,
     target: usize,
     weight: f32,
+    spill: &dyn Fn() -> io::Result<ChunkWriter>,
     progress: &mut dyn FnMut(u64),
-) -> Built {
-    let mut chunks: Level = Vec::new();
+) -> io::Result<Built> {
+    let mut levels: Vec<Chunks> = Vec::new();
     let mut groups: Vec<Group> = Vec::new();
     let mut producer: Vec<u32> = vec![NONE; level0.len()];
     let mut consumer: Vec<u32> = vec![NONE; level0.len()];
-    // The level being grouped: the model's own chunks, then the last level made.
-    let mut made: Option<Level> = None;
     let mut done = 0u64;
     loop {
-        let level = made.as_ref().unwrap_or(level0);
+        let level = levels.last().unwrap_or(level0);
         if level.len() <= 1 {
             break;
         }
         // The level's chunks are the last ones made: their numbers in the file start here.
         let first = producer.len() - level.len();
-        let level_users = users(level);
+        let level_users = shared(level, vertices.count)?;
         let grouping = group_chunks(level.len(), &level_users);
         let mut group_of = vec![0u32; level.len()];
         for (g, members) in grouping.iter().enumerate() {
@@ -466,123 +528,167 @@ pub(super) fn build(
                 locked.push(run[0].0);
             }
         }
-        let results: Vec<Simplified> = grouping
-            .par_iter()
-            .map(|members| {
-                let tris: Vec<[u32; 3]> = members.iter().flat_map(|&c| level[c as usize].iter().copied()).collect();
-                let verts = vertices_of(&tris);
-                let mut local: Vec<u32> =
-                    tris.iter().flatten().map(|v| verts.binary_search(v).expect("own vertex") as u32).collect();
-                let pos: Vec<[f32; 3]> = verts.iter().map(|&v| positions[v as usize]).collect();
-                let mut lock: Vec<bool> = verts.iter().map(|v| locked.binary_search(v).is_ok()).collect();
-                let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0).expect("positions");
-                // The vertices next to the border are locked too. Locking the border alone
-                // lets the simplifier join two border vertices by a new edge (collapsing
-                // the vertex between them), and the group on the other side of the border
-                // may join the same two: an edge of four faces where a cut meets. A
-                // collapse makes new edges only from the vertex it keeps to the removed
-                // one's neighbours, so with every neighbour of a border vertex locked no
-                // new edge ever reaches the border (the first strip of triangles stays).
-                let border = lock.clone();
-                for t in local.chunks_exact(3) {
-                    if t.iter().any(|&v| border[v as usize]) {
-                        for &v in t {
-                            lock[v as usize] = true;
+        drop(level_users);
+        drop(group_of);
+        let mut next = spill()?;
+        let (mut made, mut next_producer) = (Vec::new(), Vec::new());
+        for batch in batches(grouping.len()) {
+            let results: Vec<Simplified> = grouping[batch.clone()]
+                .par_iter()
+                .map(|members| simplify(vertices, level, members, &locked, target, weight))
+                .collect::<io::Result<_>>()?;
+            for (g, (Simplified { leaves, error, center, radius }, members)) in
+                batch.clone().zip(results.into_iter().zip(&grouping[batch]))
+            {
+                // The group's error and sphere cover its inputs' producers'.
+                let (mut error, mut center, mut radius) = (error, center, radius);
+                for &c in members {
+                    let p = producer[first + c as usize];
+                    if p != NONE {
+                        let child = groups[p as usize];
+                        error = error.max(child.error);
+                        let (cc, cr) = (Vec3::from(child.center), child.radius);
+                        let d = cc.distance(center);
+                        if cr >= d + radius {
+                            (center, radius) = (cc, cr);
+                        } else if d + cr > radius {
+                            // The smallest sphere holding both.
+                            let new_r = (radius + d + cr) * 0.5;
+                            if d > 0.0 {
+                                center += (cc - center) * ((new_r - radius) / d);
+                            }
+                            radius = new_r;
                         }
                     }
                 }
-                weld_unlocked(&mut local, &pos, &lock);
-                let mut error = 0.0f32;
-                let attributes: Vec<f32> = verts.iter().flat_map(|&v| normals[v as usize]).collect();
-                let out = if weight > 0.0 {
-                    meshopt::simplify_with_attributes_and_locks(
-                        &local,
-                        &adapter,
-                        &attributes,
-                        &[weight; 3],
-                        12,
-                        &lock,
-                        tris.len() / 2 * 3,
-                        f32::MAX,
-                        meshopt::SimplifyOptions::ErrorAbsolute,
-                        Some(&mut error),
-                    )
-                } else {
-                    meshopt::simplify_with_locks(
-                        &local,
-                        &adapter,
-                        &lock,
-                        tris.len() / 2 * 3,
-                        f32::MAX,
-                        meshopt::SimplifyOptions::ErrorAbsolute,
-                        Some(&mut error),
-                    )
-                };
-                let mut simplified: Vec<[u32; 3]> =
-                    out.chunks_exact(3).map(|t| [0, 1, 2].map(|k| verts[t[k] as usize])).collect();
-                cancel_folds(&mut simplified);
-                if simplified.is_empty() {
-                    // A group must make a chunk: one whose triangles all collapse away (a
-                    // small separate part) stays as it is.
-                    simplified = tris;
-                    error = 0.0;
+                // Room for the rounding of the checks and of the reader's projection.
+                radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
+                made.push(Group { error, center: center.to_array(), radius });
+                for leaf in leaves {
+                    next.push(leaf.into_iter())?;
+                    next_producer.push((groups.len() + g) as u32);
                 }
-                let (center, radius) = sphere_of(positions, &verts);
-                Simplified { tris: simplified, error, center, radius }
-            })
-            .collect();
-        let before: usize = level.iter().map(Vec::len).sum();
-        let after: usize = results.iter().map(|r| r.tris.len()).sum();
-        if after * 8 > before * 7 {
+            }
+        }
+        let next = next.finish()?;
+        let before = level.triangles();
+        if next.triangles() * 8 > before * 7 {
             break;
         }
-        let mut next: Level = Vec::new();
-        let base = groups.len() as u32;
-        for (g, (Simplified { tris: simplified, error, center, radius }, members)) in
-            results.into_iter().zip(&grouping).enumerate()
-        {
-            // The group's error and sphere cover its inputs' producers'.
-            let (mut error, mut center, mut radius) = (error, center, radius);
+        for (g, members) in grouping.iter().enumerate() {
             for &c in members {
-                consumer[first + c as usize] = base + g as u32;
-                let p = producer[first + c as usize];
-                if p != NONE {
-                    let child = groups[p as usize];
-                    error = error.max(child.error);
-                    let (cc, cr) = (Vec3::from(child.center), child.radius);
-                    let d = cc.distance(center);
-                    if cr >= d + radius {
-                        (center, radius) = (cc, cr);
-                    } else if d + cr > radius {
-                        // The smallest sphere holding both.
-                        let new_r = (radius + d + cr) * 0.5;
-                        if d > 0.0 {
-                            center += (cc - center) * ((new_r - radius) / d);
-                        }
-                        radius = new_r;
-                    }
-                }
-            }
-            // Room for the rounding of the checks and of the reader's projection.
-            radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
-            groups.push(Group { error, center: center.to_array(), radius });
-            let (idx, leaves) = split(positions, &simplified, target);
-            for leaf in leaves {
-                next.push(idx[leaf].iter().map(|&t| simplified[t as usize]).collect());
-                producer.push(base + g as u32);
-                consumer.push(NONE);
+                consumer[first + c as usize] = (groups.len() + g) as u32;
             }
         }
-        done += before as u64;
+        groups.extend(made);
+        consumer.resize(consumer.len() + next_producer.len(), NONE);
+        producer.extend(next_producer);
+        levels.push(next);
+        done += before;
         progress(done);
-        // The level just grouped is done; the new one is grouped next (each level is held
-        // once).
-        if let Some(grouped) = made.replace(next) {
-            chunks.extend(grouped);
-        }
     }
-    chunks.extend(made.unwrap_or_default());
     let hierarchy = Hierarchy { level0: level0.len() as u32, groups, producer, consumer };
     debug_assert!(hierarchy.check().is_ok(), "{:?}", hierarchy.check());
-    Built { chunks, hierarchy }
+    Ok(Built { levels, hierarchy })
+}
+
+/// Simplifies the group of `level`'s chunks `members` to about half, its `locked` vertices
+/// (sorted) and their neighbours kept, and cuts the result into chunks of `target`.
+fn simplify(
+    vertices: &Vertices,
+    level: &Chunks,
+    members: &[u32],
+    locked: &[u32],
+    target: usize,
+    weight: f32,
+) -> io::Result<Simplified> {
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    for &c in members {
+        tris.extend(level.read(c as usize)?);
+    }
+    let verts = vertices_of(&tris);
+    let mut local: Vec<u32> =
+        tris.iter().flatten().map(|v| verts.binary_search(v).expect("own vertex") as u32).collect();
+    let pos: Vec<[f32; 3]> = verts.iter().map(|&v| (vertices.position)(v)).collect();
+    let mut lock: Vec<bool> = verts.iter().map(|v| locked.binary_search(v).is_ok()).collect();
+    let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0).expect("positions");
+    // The vertices next to the border are locked too. Locking the border alone lets the
+    // simplifier join two border vertices by a new edge (collapsing the vertex between
+    // them), and the group on the other side of the border may join the same two: an edge
+    // of four faces where a cut meets. A collapse makes new edges only from the vertex it
+    // keeps to the removed one's neighbours, so with every neighbour of a border vertex
+    // locked no new edge ever reaches the border (the first strip of triangles stays).
+    let border = lock.clone();
+    for t in local.chunks_exact(3) {
+        if t.iter().any(|&v| border[v as usize]) {
+            for &v in t {
+                lock[v as usize] = true;
+            }
+        }
+    }
+    weld_unlocked(&mut local, &pos, &lock);
+    let attributes: Vec<f32> =
+        if weight > 0.0 { verts.iter().flat_map(|&v| (vertices.normal)(v)).collect() } else { Vec::new() };
+    let faces = edge_faces(&local);
+    // About half the triangles. Where the simplifier pinches the surface (two sheets
+    // squashed onto one edge), the pinched edges' ends and their neighbours in the input are
+    // locked and the group simplified again, a few times; then less, down to none (the
+    // group's triangles as they are, error 0).
+    let mut simplified = Vec::new();
+    let mut error = 0.0f32;
+    let attempts = std::iter::repeat_n(4, PINCH_RETRIES + 1).chain([5, 6, 7]);
+    for eighths in attempts {
+        let target_indices = tris.len() * eighths / 8 * 3;
+        let out = if weight > 0.0 {
+            meshopt::simplify_with_attributes_and_locks(
+                &local,
+                &adapter,
+                &attributes,
+                &[weight; 3],
+                12,
+                &lock,
+                target_indices,
+                f32::MAX,
+                meshopt::SimplifyOptions::ErrorAbsolute,
+                Some(&mut error),
+            )
+        } else {
+            meshopt::simplify_with_locks(
+                &local,
+                &adapter,
+                &lock,
+                target_indices,
+                f32::MAX,
+                meshopt::SimplifyOptions::ErrorAbsolute,
+                Some(&mut error),
+            )
+        };
+        let mut out: Vec<[u32; 3]> = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        cancel_folds(&mut out);
+        let pinched = pinched_vertices(&faces, &out);
+        if !out.is_empty() && pinched.is_empty() {
+            simplified = out;
+            break;
+        }
+        for t in local.chunks_exact(3) {
+            if t.iter().any(|v| pinched.binary_search(v).is_ok()) {
+                for &v in t {
+                    lock[v as usize] = true;
+                }
+            }
+        }
+    }
+    if simplified.is_empty() {
+        // A group must make a chunk: one whose triangles all collapse away (a small separate
+        // part), or that the simplifier only pinches, stays as it is.
+        simplified = tris.iter().map(|t| t.map(|v| verts.binary_search(&v).expect("own vertex") as u32)).collect();
+        error = 0.0;
+    }
+    let (center, radius) = sphere_of(&pos);
+    let (idx, leaves) = split(&pos, &simplified, target);
+    let leaves = leaves
+        .into_iter()
+        .map(|leaf| idx[leaf].iter().map(|&t| simplified[t as usize].map(|l| verts[l as usize])).collect())
+        .collect();
+    Ok(Simplified { leaves, error, center, radius })
 }

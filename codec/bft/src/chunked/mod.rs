@@ -66,6 +66,7 @@ pub mod lod;
 mod partition;
 pub mod sort;
 mod source;
+mod spill;
 
 pub use super::format::is_chunked;
 pub use border::{oct_decode, oct_encode, Border};
