@@ -148,3 +148,28 @@ impl Chunks {
         Ok(triangles_of(&self.data.read_at(self.start[c] * 12, self.size(c) * 12)?))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunks_read_back_in_any_order_from_memory_and_from_disk() {
+        let chunks: Vec<Vec<[u32; 3]>> =
+            (0..40u32).map(|c| (0..c * 7 % 13).map(|t| [c, t, c.wrapping_mul(t) ^ 0xdead_beef]).collect()).collect();
+        for on_disk in [false, true] {
+            let mut w = ChunkWriter::new(on_disk, &None).expect("spill");
+            for c in &chunks {
+                w.push(c.iter().copied()).expect("written");
+            }
+            assert_eq!(w.len(), chunks.len());
+            let r = w.finish().expect("finished");
+            assert_eq!(r.len(), chunks.len());
+            assert_eq!(r.triangles(), chunks.iter().map(|c| c.len() as u64).sum::<u64>());
+            for c in (0..chunks.len()).rev().chain([17, 3, 17]) {
+                assert_eq!(r.size(c), chunks[c].len());
+                assert_eq!(r.read(c).expect("read"), chunks[c], "chunk {c}, on disk: {on_disk}");
+            }
+        }
+    }
+}
