@@ -32,7 +32,7 @@ use thiserror::Error;
 use super::border::{oct_decode, oct_encode, Border};
 use super::header::{head_len, write_head, ChunkEntry, ChunkedHeader};
 use super::partition::{centroid, split, vertices_of};
-use super::spill::{read_triangles, ChunkWriter, Chunks, Spill};
+use super::spill::{batches, read_triangles, ChunkWriter, Chunks, Spill};
 use super::DEFAULT_CHUNK_TRIANGLES;
 use crate::bft::encode::{encode_quantized, EncodeOptions};
 use crate::bft::format::Header;
@@ -213,7 +213,7 @@ fn level0_normals(
 ) -> io::Result<Vec<[u16; 2]>> {
     let mut oct = vec![[0u16; 2]; vertices];
     let mut shared: rustc_hash::FxHashMap<u32, Vec3> = Default::default();
-    for batch in (0..level0.len()).step_by(256).map(|s| s..(s + 256).min(level0.len())) {
+    for batch in batches(level0.len()) {
         let sums: Vec<(Vec<u32>, Vec<Vec3>)> = batch
             .into_par_iter()
             .map(|c| {

@@ -50,7 +50,7 @@ use rayon::prelude::*;
 
 use super::error::{chunk_err, corrupt};
 use super::partition::{split, vertices_of};
-use super::spill::{ChunkWriter, Chunks};
+use super::spill::{batches, ChunkWriter, Chunks};
 use crate::container::FormatError;
 
 /// "No group": a level-0 chunk's producer, a root's consumer.
@@ -333,13 +333,6 @@ pub(super) struct Vertices<'a> {
     pub normal: &'a (dyn Fn(u32) -> [f32; 3] + Sync),
 }
 
-/// Ranges of `n` items, a few per thread, that a pass reads in parallel before it takes
-/// them in order.
-fn batches(n: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
-    let step = rayon::current_num_threads().max(1) * 16;
-    (0..n).step_by(step).map(move |s| s..(s + step).min(n))
-}
-
 fn sphere_of(positions: &[[f32; 3]]) -> (Vec3, f32) {
     let (lo, hi) = crate::mesh::bounding_box(positions.iter()).unwrap_or(([0.0; 3], [0.0; 3]));
     let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
@@ -564,55 +557,28 @@ pub(super) fn build(
         }
         drop(level_users);
         drop(group_of);
-        let mut next = spill()?;
-        let (mut made, mut next_producer) = (Vec::new(), Vec::new());
-        for batch in batches(grouping.len()) {
-            let results: Vec<Simplified> = grouping[batch.clone()]
-                .par_iter()
-                .map(|members| simplify(vertices, level, members, &locked, target, weight, edge_error))
-                .collect::<io::Result<_>>()?;
-            for (g, (Simplified { leaves, error, center, radius }, members)) in
-                batch.clone().zip(results.into_iter().zip(&grouping[batch]))
-            {
-                // The group's error and sphere cover its inputs' producers'.
-                let (mut error, mut center, mut radius) = (error, center, radius);
-                for &c in members {
-                    let p = producer[first + c as usize];
-                    if p != NONE {
-                        let child = groups[p as usize];
-                        error = error.max(child.error);
-                        let (cc, cr) = (Vec3::from(child.center), child.radius);
-                        let d = cc.distance(center);
-                        if cr >= d + radius {
-                            (center, radius) = (cc, cr);
-                        } else if d + cr > radius {
-                            // The smallest sphere holding both.
-                            let new_r = (radius + d + cr) * 0.5;
-                            if d > 0.0 {
-                                center += (cc - center) * ((new_r - radius) / d);
-                            }
-                            radius = new_r;
-                        }
-                    }
-                }
-                // Room for the rounding of the checks and of the reader's projection.
-                radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
-                made.push(Group { error, center: center.to_array(), radius });
-                for leaf in leaves {
-                    next.push(leaf.into_iter())?;
-                    next_producer.push((groups.len() + g) as u32);
-                }
-            }
-        }
-        let next = next.finish()?;
         let before = level.triangles();
-        if next.triangles() * 8 > before * 7 {
-            // The level hardly shrinks within the limit: again with a looser one (the same
-            // for every group of the level, so that their errors stay alike), then without.
-            if edge_error.is_finite() {
-                edge_error = if edge_error < EDGE_ERROR_MAX { edge_error * 4.0 } else { f32::INFINITY };
-                continue;
+        // Where the level hardly shrinks within the limit: again with a looser one (the same
+        // for every group of the level, so that their errors stay alike), then without.
+        let (next, made, next_producer) = loop {
+            let attempt = simplify_level(
+                vertices,
+                level,
+                &grouping,
+                &locked,
+                &producer[first..],
+                &groups,
+                target,
+                weight,
+                edge_error,
+                spill,
+            )?;
+            if attempt.0.triangles() * 8 <= before * 7 || !edge_error.is_finite() {
+                break attempt;
             }
+            edge_error = if edge_error < EDGE_ERROR_MAX { edge_error * 4.0 } else { f32::INFINITY };
+        };
+        if next.triangles() * 8 > before * 7 {
             break;
         }
         for (g, members) in grouping.iter().enumerate() {
@@ -632,6 +598,66 @@ pub(super) fn build(
     Ok(Built { levels, hierarchy })
 }
 
+/// Simplifies each group of `level` (`grouping`, its `locked` vertices) within `edge_error`
+/// ([`simplify`]) and spills the next level: its chunks, the groups made (numbered after
+/// `groups`; each error and sphere covers its inputs' producers', `producer` by chunk of
+/// `level`), and each new chunk's producer.
+#[allow(clippy::too_many_arguments)]
+fn simplify_level(
+    vertices: &Vertices,
+    level: &Chunks,
+    grouping: &[Vec<u32>],
+    locked: &[u32],
+    producer: &[u32],
+    groups: &[Group],
+    target: usize,
+    weight: f32,
+    edge_error: f32,
+    spill: &dyn Fn() -> io::Result<ChunkWriter>,
+) -> io::Result<(Chunks, Vec<Group>, Vec<u32>)> {
+    let mut next = spill()?;
+    let (mut made, mut next_producer) = (Vec::new(), Vec::new());
+    for batch in batches(grouping.len()) {
+        let results: Vec<Simplified> = grouping[batch.clone()]
+            .par_iter()
+            .map(|members| simplify(vertices, level, members, locked, target, weight, edge_error))
+            .collect::<io::Result<_>>()?;
+        for (g, (Simplified { leaves, error, center, radius }, members)) in
+            batch.clone().zip(results.into_iter().zip(&grouping[batch]))
+        {
+            // The group's error and sphere cover its inputs' producers'.
+            let (mut error, mut center, mut radius) = (error, center, radius);
+            for &c in members {
+                let p = producer[c as usize];
+                if p != NONE {
+                    let child = groups[p as usize];
+                    error = error.max(child.error);
+                    let (cc, cr) = (Vec3::from(child.center), child.radius);
+                    let d = cc.distance(center);
+                    if cr >= d + radius {
+                        (center, radius) = (cc, cr);
+                    } else if d + cr > radius {
+                        // The smallest sphere holding both.
+                        let new_r = (radius + d + cr) * 0.5;
+                        if d > 0.0 {
+                            center += (cc - center) * ((new_r - radius) / d);
+                        }
+                        radius = new_r;
+                    }
+                }
+            }
+            // Room for the rounding of the checks and of the reader's projection.
+            radius = radius * (1.0 + 1e-5) + 1e-6 * center.abs().max_element();
+            made.push(Group { error, center: center.to_array(), radius });
+            for leaf in leaves {
+                next.push(leaf.into_iter())?;
+                next_producer.push((groups.len() + g) as u32);
+            }
+        }
+    }
+    Ok((next.finish()?, made, next_producer))
+}
+
 /// Simplifies the group of `level`'s chunks `members` to about half within `edge_error`
 /// mean edges (infinite: no limit), its `locked` vertices (sorted) and their neighbours
 /// kept, and cuts the result into chunks of `target`.
@@ -649,8 +675,8 @@ fn simplify(
         tris.extend(level.read(c as usize)?);
     }
     let verts = vertices_of(&tris);
-    let mut local: Vec<u32> =
-        tris.iter().flatten().map(|v| verts.binary_search(v).expect("own vertex") as u32).collect();
+    let to_local = |v: &u32| verts.binary_search(v).expect("own vertex") as u32;
+    let mut local: Vec<u32> = tris.iter().flatten().map(to_local).collect();
     let pos: Vec<[f32; 3]> = verts.iter().map(|&v| (vertices.position)(v)).collect();
     let mut lock: Vec<bool> = verts.iter().map(|v| locked.binary_search(v).is_ok()).collect();
     let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0).expect("positions");
@@ -724,7 +750,7 @@ fn simplify(
     if simplified.is_empty() {
         // A group must make a chunk: one whose triangles all collapse away (a small separate
         // part), or that the simplifier only pinches, stays as it is.
-        simplified = tris.iter().map(|t| t.map(|v| verts.binary_search(&v).expect("own vertex") as u32)).collect();
+        simplified = tris.iter().map(|t| t.map(|v| to_local(&v))).collect();
         error = 0.0;
     }
     let (center, radius) = sphere_of(&pos);

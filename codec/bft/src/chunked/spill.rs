@@ -75,6 +75,13 @@ impl Spilled {
     }
 }
 
+/// Ranges of `n` items (chunks, groups), a few per thread, that a pass reads in parallel
+/// before it takes them in order.
+pub(super) fn batches(n: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let step = rayon::current_num_threads().max(1) * 16;
+    (0..n).step_by(step).map(move |s| s..(s + step).min(n))
+}
+
 /// Triangles from `r`, `n` of them (12 bytes each, little-endian vertex indices).
 pub(super) fn read_triangles(r: &mut dyn Read, n: usize) -> io::Result<Vec<[u32; 3]>> {
     let mut buf = vec![0u8; n * 12];
