@@ -432,7 +432,7 @@ impl<'a> Traversal<'a> {
         let dl = if !f.is_empty() { self.deg[f.at(0).slot as usize] } else { 0 };
         let dr = if f.len() >= 2 { self.deg[f.at(1).slot as usize] } else { 0 };
         let ctx = command_context(self.prev, dl, dr);
-        self.commands_model.encode(&mut self.conn, ctx, cmd);
+        self.commands_model.encode(&mut self.conn, ctx.index(), cmd);
         self.prev = cmd;
         self.commands += 1;
         self.work += 1;

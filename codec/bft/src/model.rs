@@ -14,22 +14,39 @@ const PREV_CTX: usize = 3;
 pub const COMMAND_CONTEXTS: usize = PREV_CTX * DEG_CTX * DEG_CTX;
 
 /// The context of the next command: the previous command's class and the visited degrees
-/// (triangles coded so far) of the current edge's vertices.
+/// (triangles coded so far, capped) of the current edge's vertices. The range coder takes
+/// its [`Context::index`], the prefix coder its [`Context::prefix_table`]; both derive from
+/// the parts, not from each other (the division that took an index apart was an eighth of
+/// a prefix-coded tile's decode).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Context {
+    class: u8,
+    deg_l: u8,
+    deg_r: u8,
+}
+
 #[inline]
-pub fn command_context(prev: Command, deg_l: u8, deg_r: u8) -> usize {
+pub fn command_context(prev: Command, deg_l: u8, deg_r: u8) -> Context {
     let class = match prev {
         Command::New | Command::Rf | Command::Lf | Command::Seed => 0,
         Command::Rf0 | Command::Lf0 => 1,
         _ => 2,
     };
-    (class * DEG_CTX + deg_l.min(DEG_CAP) as usize) * DEG_CTX + deg_r.min(DEG_CAP) as usize
+    Context { class, deg_l: deg_l.min(DEG_CAP), deg_r: deg_r.min(DEG_CAP) }
 }
 
-/// The previous command's class and the left vertex's visited degree (capped) of a
-/// [`command_context`].
-#[inline]
-pub fn context_parts(ctx: usize) -> (usize, u8) {
-    (ctx / (DEG_CTX * DEG_CTX), ((ctx / DEG_CTX) % DEG_CTX) as u8)
+impl Context {
+    /// The range coder's context, below [`COMMAND_CONTEXTS`].
+    #[inline]
+    pub fn index(self) -> usize {
+        (self.class as usize * DEG_CTX + self.deg_l as usize) * DEG_CTX + self.deg_r as usize
+    }
+
+    /// The prefix coder's table: the class times the left vertex's degree, capped at 3.
+    #[inline]
+    pub fn prefix_table(self) -> usize {
+        self.class as usize * 4 + self.deg_l.min(3) as usize
+    }
 }
 
 /// Binary decomposition of [`Command`], per context:
@@ -255,7 +272,7 @@ impl GeometryModel {
 pub(crate) trait SymbolSink {
     /// A sink for about this many commands and coded positions.
     fn with_capacity(commands: usize, positions: usize) -> Self;
-    fn command(&mut self, ctx: usize, cmd: Command);
+    fn command(&mut self, ctx: Context, cmd: Command);
     fn offset(&mut self, cmd: Command, k: u32);
     fn position(&mut self, kind: Prediction, actual: [u32; 3], pred: [u32; 3]);
     /// The `CONN` and `GEOM` streams.
@@ -264,7 +281,7 @@ pub(crate) trait SymbolSink {
 
 /// Where the decoder reads them from. `None` for a code that is not valid here.
 pub(crate) trait SymbolSource {
-    fn command(&mut self, ctx: usize) -> Option<Command>;
+    fn command(&mut self, ctx: Context) -> Option<Command>;
     fn offset(&mut self, cmd: Command) -> Option<u32>;
     fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]>;
     /// Bytes wanted past the end of the `CONN` and the `GEOM` stream.
@@ -286,8 +303,8 @@ impl SymbolSink for RangeSink {
     }
 
     #[inline]
-    fn command(&mut self, ctx: usize, cmd: Command) {
-        self.cmodel.encode(&mut self.conn, ctx, cmd);
+    fn command(&mut self, ctx: Context, cmd: Command) {
+        self.cmodel.encode(&mut self.conn, ctx.index(), cmd);
     }
 
     #[inline]
@@ -325,8 +342,8 @@ impl<'a> RangeSource<'a> {
 
 impl SymbolSource for RangeSource<'_> {
     #[inline]
-    fn command(&mut self, ctx: usize) -> Option<Command> {
-        self.cmodel.decode(&mut self.conn, ctx)
+    fn command(&mut self, ctx: Context) -> Option<Command> {
+        self.cmodel.decode(&mut self.conn, ctx.index())
     }
 
     #[inline]

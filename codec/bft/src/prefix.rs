@@ -11,7 +11,7 @@
 //! are exact for the tile, and cost about a hundred bytes.
 //!
 //! Stream layout, MSB-first bits, padded to a byte:
-//! - `CONN`: [`COMMAND_TABLES`] command tables (12 symbols, by [`command_table`] of the
+//! - `CONN`: [`COMMAND_TABLES`] command tables (12 symbols, by [`Context::prefix_table`] of the
 //!   command context), 3 offset tables (`RF<k>`, `LF<k>`, `ADD<k>`; the offset's bit length
 //!   0..=32), then per command its code, and after an offset command the offset's length code
 //!   and the bits below its leading one.
@@ -22,7 +22,7 @@
 //!   (0: no code), at most [`MAX_CODE_LEN`].
 
 use super::format::{corrupt, BftError};
-use super::model::{Prediction, SymbolSink, SymbolSource};
+use super::model::{Context, Prediction, SymbolSink, SymbolSource};
 use crate::command::Command;
 use crate::huffman::{BitReader, BitWriter, Table};
 
@@ -38,13 +38,6 @@ const GEOMETRY_TABLES: usize = 9;
 const RESIDUAL_SYMBOLS: usize = 26;
 
 const BY_CODE: [Command; COMMANDS] = Command::ALL;
-
-/// The command table for a context of [`super::model::command_context`].
-#[inline]
-fn command_table(ctx: usize) -> usize {
-    let (class, deg_l) = super::model::context_parts(ctx);
-    class * 4 + (deg_l as usize).min(3)
-}
 
 #[inline]
 fn offset_table(cmd: Command) -> usize {
@@ -72,16 +65,6 @@ fn put_number(w: &mut BitWriter, table: &Table, v: u32) {
     table.encode(w, len as u8);
     if len >= 2 {
         w.put(v & ((1 << (len - 1)) - 1), (len - 1) as u8);
-    }
-}
-
-#[inline]
-fn get_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
-    let len = table.decode(r)? as u32;
-    match len {
-        0 | 1 => Some(len),
-        _ if len <= max_len => Some((1 << (len - 1)) | r.bits(len - 1)?),
-        _ => None,
     }
 }
 
@@ -136,8 +119,8 @@ impl SymbolSink for PrefixSink {
     }
 
     #[inline]
-    fn command(&mut self, ctx: usize, cmd: Command) {
-        let table = command_table(ctx);
+    fn command(&mut self, ctx: Context, cmd: Command) {
+        let table = ctx.prefix_table();
         self.cmd_counts[table][cmd as usize] += 1;
         self.conn.push((table as u32) << 4 | cmd as u32);
     }
@@ -216,28 +199,60 @@ impl<'a> PrefixSource<'a> {
     }
 }
 
+/// Reads a symbol of `table` and, for a number, the bits below its leading one, from one
+/// window of the stream: the bit length `len`, and the number (`len` 0 and 1 are 0 and 1).
+/// `None` for no code or a length above `max_len`. Past the end of the data it reads zeros,
+/// which [`SymbolSource::overrun`] reports.
+#[inline(always)]
+fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<(u32, u32)> {
+    let w = r.window();
+    let (len, code_len) = table.lookup(w)?;
+    let len = len as u32;
+    if len > max_len {
+        return None;
+    }
+    let mantissa = len.saturating_sub(1);
+    // `>> 1 >> (63 - m)`: no bits for m = 0 without a shift by 64.
+    let low = (w << code_len >> 1 >> (63 - mantissa)) as u32;
+    r.consume(code_len + mantissa);
+    Some((len, if len >= 2 { 1 << mantissa | low } else { len }))
+}
+
 impl SymbolSource for PrefixSource<'_> {
     #[inline]
-    fn command(&mut self, ctx: usize) -> Option<Command> {
-        BY_CODE.get(self.cmd_tables[command_table(ctx)].decode(&mut self.conn)? as usize).copied()
+    fn command(&mut self, ctx: Context) -> Option<Command> {
+        let w = self.conn.window();
+        let (sym, code_len) = self.cmd_tables[ctx.prefix_table()].lookup(w)?;
+        self.conn.consume(code_len);
+        BY_CODE.get(sym as usize).copied()
     }
 
     #[inline]
     fn offset(&mut self, cmd: Command) -> Option<u32> {
-        get_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32)
+        read_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32).map(|(_, k)| k)
     }
 
+    /// Per axis, the residual's bit length, then for a nonzero residual its sign and the
+    /// bits below its leading one, all from one window.
     #[inline]
     fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
         let mut out = [0u32; 3];
         for axis in 0..3 {
-            let len = self.geo_tables[kind as usize * 3 + axis].decode(&mut self.geom)? as u32;
-            let mut v = pred[axis] as i64;
-            if len > 0 {
-                let bits = self.geom.bits(len)?;
-                let m = (1i64 << (len - 1)) | (bits & ((1 << (len - 1)) - 1)) as i64;
-                v += if bits >> (len - 1) != 0 { -m } else { m };
+            let table = &self.geo_tables[kind as usize * 3 + axis];
+            let w = self.geom.window();
+            let (len, code_len) = table.lookup(w)?;
+            let len = len as u32;
+            if len >= RESIDUAL_SYMBOLS as u32 {
+                return None;
             }
+            // The sign and the bits below the leading one: `len` raw bits. Without a branch
+            // on `len` or the sign, which no predictor guesses.
+            let raw = (w << code_len >> 1 >> (63 - len)) as i64;
+            self.geom.consume(code_len + len);
+            let lead = (1i64 << len) >> 1;
+            let m = lead | (raw & (lead - 1).max(0));
+            let negative = -((raw & lead != 0) as i64);
+            let v = pred[axis] as i64 + ((m ^ negative) - negative);
             if v < 0 || v > max as i64 {
                 return None;
             }
@@ -246,8 +261,8 @@ impl SymbolSource for PrefixSource<'_> {
         Some(out)
     }
 
-    /// Reads past the end fail at once, so nothing is ever wanted past it.
+    /// Bytes read past the end of each stream (as zeros).
     fn overrun(&self) -> [usize; 2] {
-        [0, 0]
+        [self.conn.overrun().div_ceil(8) as usize, self.geom.overrun().div_ceil(8) as usize]
     }
 }

@@ -166,6 +166,24 @@ impl Table {
         w.put(self.codes[sym as usize], self.lens[sym as usize]);
     }
 
+    /// The symbol whose code starts `window` (a [`BitReader::window`]) and the code's length,
+    /// or `None` for a bit pattern that is no code. The caller consumes the bits, so that a
+    /// symbol and the raw bits after it can leave the window in one step.
+    #[inline(always)]
+    pub fn lookup(&self, window: u64) -> Option<(u8, u32)> {
+        // `>> 1 >> (63 - k)`: a table of one entry (k = 0) must not shift by 64.
+        if let Some(&e) = self.lut.get((window >> 1 >> (63 - self.lut_bits as u32)) as usize) {
+            if e != 0 {
+                return Some(((e >> 4) as u8, e as u32 & 15));
+            }
+        }
+        (self.lut_bits as usize + 1..=self.longest as usize).find_map(|l| {
+            let code = (window >> (64 - l)) as u32;
+            let d = code.wrapping_sub(self.first[l]);
+            (code >= self.first[l] && d < self.count[l]).then(|| (self.sorted[(self.offset[l] + d) as usize], l as u32))
+        })
+    }
+
     /// The next symbol, or `None` past the end of the data or for a bit pattern that is no
     /// code.
     #[inline]
@@ -273,6 +291,9 @@ impl BitWriter {
 
 /// MSB-first bit reader over a byte slice from a starting byte. Reads past the end fail
 /// (`None`) and consume nothing.
+/// Bits a [`BitReader::window`] holds at least: a code of [`MAX_LEN`] bits and 32 raw bits.
+pub const WINDOW: u32 = 56;
+
 pub struct BitReader<'a> {
     data: &'a [u8],
     start: usize,
@@ -295,6 +316,17 @@ impl<'a> BitReader<'a> {
 
     #[inline]
     fn fill(&mut self) {
+        // Eight bytes in one big-endian load where the data has them: a `window` is refilled
+        // before nearly every symbol. Bits below `nbits` are zeros or the stream's next bits,
+        // so loading a byte's bits twice over is harmless.
+        if let Some(word) = self.data.get(self.pos..self.pos + 8) {
+            let word = u64::from_be_bytes(word.try_into().expect("eight bytes"));
+            self.buf |= word >> self.nbits;
+            let bytes = (63 - self.nbits) >> 3;
+            self.pos += bytes as usize;
+            self.nbits += bytes * 8;
+            return;
+        }
         while self.nbits <= 56 {
             let b = self.data.get(self.pos).copied().unwrap_or(0);
             self.buf |= (b as u64) << (56 - self.nbits);
@@ -346,6 +378,34 @@ impl<'a> BitReader<'a> {
         self.bits(1).map(|b| b == 1)
     }
 
+    /// The next bits, left-aligned: at least [`WINDOW`] of them are the stream's (zeros past
+    /// its end). For decoders that take a symbol and its raw bits from one window and then
+    /// [`BitReader::consume`] them, checking [`BitReader::overrun`] where it bounds their work
+    /// instead of at every read.
+    #[inline(always)]
+    pub fn window(&mut self) -> u64 {
+        if self.nbits < WINDOW {
+            self.fill();
+        }
+        self.buf
+    }
+
+    /// Consumes `n <= WINDOW` bits of the last [`BitReader::window`], past the end of the
+    /// data too.
+    #[inline(always)]
+    pub fn consume(&mut self, n: u32) {
+        debug_assert!(n <= self.nbits, "consumed more than the window");
+        self.buf <<= n;
+        self.nbits -= n;
+        self.read += n as u64;
+    }
+
+    /// How many bits have been consumed past the end of the data.
+    #[inline]
+    pub fn overrun(&self) -> u64 {
+        self.read.saturating_sub(self.avail)
+    }
+
     /// The byte just past the last one touched (the end of a byte-aligned stream).
     pub fn end(&self) -> usize {
         self.start + self.read.div_ceil(8) as usize
@@ -380,6 +440,28 @@ mod tests {
             }
             assert_eq!(r.end(), bytes.len());
         }
+        // A window read (a symbol and the raw bits after it at once) reads the same, and
+        // counts what it reads past the end instead of failing there.
+        let mut w = BitWriter::default();
+        for s in 0..=255u8 {
+            t.encode(&mut w, s);
+            w.put(s as u32 * 131 % 4096, 12);
+        }
+        let bytes = w.finish();
+        let mut r = BitReader::new(&bytes, 0);
+        for s in 0..=255u8 {
+            let window = r.window();
+            let (sym, len) = decoder.lookup(window).expect("a code");
+            assert_eq!(sym, s);
+            assert_eq!((window << len >> 52) as u32, s as u32 * 131 % 4096);
+            r.consume(len + 12);
+        }
+        let padding = bytes.len() as u64 * 8 - r.read;
+        assert!(padding < 8 && r.overrun() == 0);
+        r.window();
+        r.consume(16);
+        assert_eq!(r.overrun(), 16 - padding);
+        assert_eq!(r.window() >> 56, 0, "zeros past the end");
     }
 
     #[test]
