@@ -184,6 +184,69 @@ fn shared_meshes_sort_exactly_from_chunks() {
     assert!(totals.iter().all(|&n| n > 100), "verbatim, straddling, culled: {totals:?}");
 }
 
+/// A frame's tiles as comparable values: per tile its pieces' chunk, triangles and, for a
+/// sorted piece, its bytes, slots and border normals (as bits).
+type PieceValue = (u32, u32, Option<(Vec<u8>, Vec<u32>, Vec<(u32, [u32; 3])>)>);
+
+fn frame_values(tiles: &[codec::bft::chunked::sort::ChunkedTile]) -> Vec<(usize, Vec<PieceValue>)> {
+    let piece = |p: &codec::bft::chunked::sort::Piece| -> PieceValue {
+        let sorted = match &p.kind {
+            PieceKind::Verbatim => None,
+            PieceKind::Sorted { bytes, slots, normals } => {
+                Some((bytes.clone(), slots.clone(), normals.iter().map(|&(s, n)| (s, n.map(f32::to_bits))).collect()))
+            }
+        };
+        (p.chunk, p.triangles, sorted)
+    };
+    tiles.iter().map(|t| (t.index, t.pieces.iter().map(piece).collect())).collect()
+}
+
+/// A model that sorted the frame before takes from it the pieces of the tiles whose
+/// triangles did not change: its frames are exactly those of a model that sorts each frame
+/// afresh, along slow and fast orbits, when the grid or the coding changes, and when chunks
+/// stop straddling and come back.
+#[test]
+fn pieces_kept_from_the_frame_before_are_those_a_fresh_sort_makes() {
+    for (rel, chunk) in [("stanford/bunny_zipper_c3d.obj.gz", 1024), ("classic/beetle.obj", 300)] {
+        orbit_with_kept_pieces(&testkit::load_mesh(rel), chunk);
+    }
+}
+
+fn orbit_with_kept_pieces(mesh: &Mesh, chunk: u32) {
+    let (bytes, _) = chunked(mesh, chunk);
+    let kept = ChunkedModel::new(ChunkedFile::open(bytes.clone()).unwrap(), 1 << 24);
+    let h = kept.file.header;
+    let grids = [TileGrid::new(1920, 1080, 8, 8).unwrap(), TileGrid::new(1000, 601, 7, 3).unwrap()];
+    let start = Camera::framing(h.bbox_min, h.bbox_max, grids[0].aspect());
+    let (mut reused, mut sorted) = (0u64, 0u64);
+    let mut frame = 0;
+    // Closer in the third and fourth runs, so that chunks leave the screen and come back.
+    for (grid, coding, degrees, zoom) in [
+        (grids[0], Coding::Prefix, 0.05f32, 1.0),
+        (grids[0], Coding::Prefix, 1.0, 1.0),
+        (grids[1], Coding::Prefix, 0.5, 0.45),
+        (grids[1], Coding::Range, 0.5, 0.45),
+        (grids[0], Coding::Prefix, 40.0, 1.0),
+    ] {
+        for _ in 0..4 {
+            frame += 1;
+            let rot = glam::Quat::from_axis_angle(Vec3::Y, (degrees * frame as f32).to_radians());
+            let cam = Camera { eye: start.target + rot * (start.eye - start.target) * zoom, ..start };
+            let vp = cam.view_proj(grid.aspect());
+            let (tiles, counts) = kept.sort(vp, &grid, coding).unwrap();
+            let fresh = ChunkedModel::new(ChunkedFile::open(bytes.clone()).unwrap(), 1 << 24);
+            let (want, want_counts) = fresh.sort(vp, &grid, coding).unwrap();
+            assert!(frame_values(&tiles) == frame_values(&want), "frame {frame}: the kept model's tiles differ");
+            assert_eq!(want_counts.reused_triangles, 0);
+            assert_eq!(counts.straddling, want_counts.straddling);
+            reused += counts.reused_triangles;
+            sorted += counts.visible_triangles;
+        }
+    }
+    // The slow orbits reuse a good share; not everything (the test sees both paths).
+    assert!(reused > sorted / 20 && reused < sorted, "{reused} of {sorted} visible triangles reused");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 

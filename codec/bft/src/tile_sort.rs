@@ -402,6 +402,18 @@ impl Sorter {
     /// No tile waits on another and no thread repeats another's work, so pass 2 scales with
     /// cores, heaviest tiles first.
     pub fn sort(&mut self, model: &TileModel, bx: &Boxes, grid: &TileGrid) -> Result<Vec<Tile>, SortError> {
+        self.sort_tiles(model, bx, grid, None)
+    }
+
+    /// [`Sorter::sort`] of the tiles `only` marks (indexed by tile), or of every tile for
+    /// `None`: each tile's stream is the same as in a sort of them all.
+    pub fn sort_tiles(
+        &mut self,
+        model: &TileModel,
+        bx: &Boxes,
+        grid: &TileGrid,
+        only: Option<&[bool]>,
+    ) -> Result<Vec<Tile>, SortError> {
         let tiles = grid.tiles();
         let n_ops = model.steps.len();
         let n_slots = model.positions.len();
@@ -412,7 +424,7 @@ impl Sorter {
         self.chunks.par_iter_mut().enumerate().for_each(|(k, lists)| {
             lists.resize_with(tiles, Vec::new);
             lists.iter_mut().for_each(Vec::clear);
-            bucket(model, bx, grid, k * per..((k + 1) * per).min(n_items), lists);
+            bucket(model, bx, grid, k * per..((k + 1) * per).min(n_items), only, lists);
         });
         let (chunks, coding) = (&self.chunks, self.coding);
         let mut busy: Vec<(usize, usize)> =
@@ -435,21 +447,55 @@ impl Sorter {
 }
 
 /// Step 1 of pass 2 for the items `range`: appends each tile's records to `lists`.
-fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range<usize>, lists: &mut [Vec<Record>]) {
+fn bucket(
+    model: &TileModel,
+    bx: &Boxes,
+    grid: &TileGrid,
+    range: std::ops::Range<usize>,
+    only: Option<&[bool]>,
+    lists: &mut [Vec<Record>],
+) {
+    match only {
+        None => bucket_in(model, bx, grid, range, |_| true, lists),
+        Some(only) => bucket_in(model, bx, grid, range, |b| only[b], lists),
+    }
+}
+
+/// [`bucket`] for the tiles `wanted` takes (generic, so that sorting every tile tests
+/// nothing).
+fn bucket_in(
+    model: &TileModel,
+    bx: &Boxes,
+    grid: &TileGrid,
+    range: std::ops::Range<usize>,
+    wanted: impl Fn(usize) -> bool + Copy,
+    lists: &mut [Vec<Record>],
+) {
     let cols = grid.cols as usize;
     let n_ops = model.steps.len();
     let n_tail = model.positions.len() - model.tail_start as usize;
     // Generic, not `dyn`, so that each command's rewrite inlines into its loop.
     #[inline(always)]
-    fn put(lists: &mut [Vec<Record>], cols: usize, rect: TileBox, rec: Record, code: impl Fn(u16, u16) -> u32) {
+    fn put(
+        lists: &mut [Vec<Record>],
+        cols: usize,
+        wanted: impl Fn(usize) -> bool,
+        rect: TileBox,
+        rec: Record,
+        code: impl Fn(u16, u16) -> u32,
+    ) {
         if rect.is_empty() {
             return;
         }
         for r in rect.r0..=rect.r1 {
             for c in rect.c0..=rect.c1 {
+                let b = r as usize * cols + c as usize;
+                if !wanted(b) {
+                    continue;
+                }
                 let code = code(c, r);
                 if code != SKIP {
-                    lists[r as usize * cols + c as usize].push(Record { code: code as u8, ..rec });
+                    lists[b].push(Record { code: code as u8, ..rec });
                 }
             }
         }
@@ -464,7 +510,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
                 let t = model.loose_start + i - n_ops - n_tail;
                 (bx.triangles[t], Record { a: t as u32, push: 0, seeds: 0, cmd: LOOSE, code: 0 })
             };
-            put(lists, cols, rect, rec, |_, _| Rewrite::Same.code());
+            put(lists, cols, wanted, rect, rec, |_, _| Rewrite::Same.code());
             continue;
         }
         let st = &model.steps[i];
@@ -474,7 +520,7 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
         match st.cmd {
             Command::New | Command::Rf | Command::Lf => {
                 let (vx, bt) = (&bx.vertices[st.x as usize], &bx.triangles[st.tri as usize]);
-                put(lists, cols, vl.union(vx), rec, |c, r| {
+                put(lists, cols, wanted, vl.union(vx), rec, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), vx.contains(c, r), bt.contains(c, r)).code()
                 });
             }
@@ -485,14 +531,14 @@ fn bucket(model: &TileModel, bx: &Boxes, grid: &TileGrid, range: std::ops::Range
                     TileBox::EMPTY
                 };
                 let rect = if matches!(st.cmd, Command::Rf0 | Command::Dr) { vl.union(vr) } else { *vl };
-                put(lists, cols, rect, rec, |c, r| {
+                put(lists, cols, wanted, rect, rec, |c, r| {
                     rewrite(st.cmd, vl.contains(c, r), vr.contains(c, r), false, bt.contains(c, r)).code()
                 });
             }
             Command::Seed => {
                 let bt = &bx.triangles[st.tri as usize];
                 let v = [0, 1, 2].map(|j| &bx.vertices[(st.x + j) as usize]);
-                put(lists, cols, v[0].union(v[1]).union(v[2]), rec, |c, r| {
+                put(lists, cols, wanted, v[0].union(v[1]).union(v[2]), rec, |c, r| {
                     let inside = v.map(|v| v.contains(c, r) as u32);
                     if bt.contains(c, r) {
                         1

@@ -83,6 +83,7 @@ impl ChunkedScene {
             verbatim: counts.verbatim,
             straddling: counts.straddling,
             straddling_triangles: counts.straddling_triangles,
+            reused_triangles: counts.reused_triangles,
             built: counts.built,
             cache_mb: self.model.cached_bytes() as f64 / (1 << 20) as f64,
             ..Default::default()
