@@ -208,13 +208,22 @@ fn frame_values(tiles: &[codec::bft::chunked::sort::ChunkedTile]) -> Vec<(usize,
 #[test]
 fn pieces_kept_from_the_frame_before_are_those_a_fresh_sort_makes() {
     for (rel, chunk) in [("stanford/bunny_zipper_c3d.obj.gz", 1024), ("classic/beetle.obj", 300)] {
-        orbit_with_kept_pieces(&testkit::load_mesh(rel), chunk);
+        let mesh = testkit::load_mesh(rel);
+        let (reused, sorted) = orbit_with_kept_pieces(&mesh, chunk, 1 << 24);
+        // The slow orbits reuse a good share; not everything (the test sees both paths).
+        assert!(reused > sorted / 20 && reused < sorted, "{rel}: {reused} of {sorted} visible triangles reused");
+        // Sorts are kept only in the room the tables leave under the cache's bound.
+        assert_eq!(orbit_with_kept_pieces(&mesh, chunk, 0).0, 0, "{rel}: kept beyond the cache's bound");
+        // A bound the tables alone overflow: what is kept still fits it (asserted within).
+        orbit_with_kept_pieces(&mesh, chunk, 1 << 16);
     }
 }
 
-fn orbit_with_kept_pieces(mesh: &Mesh, chunk: u32) {
+/// Sorts an orbit with one model and with a fresh one per frame; returns the triangles the
+/// first reused and its visible triangles.
+fn orbit_with_kept_pieces(mesh: &Mesh, chunk: u32, cache: usize) -> (u64, u64) {
     let (bytes, _) = chunked(mesh, chunk);
-    let kept = ChunkedModel::new(ChunkedFile::open(bytes.clone()).unwrap(), 1 << 24);
+    let kept = ChunkedModel::new(ChunkedFile::open(bytes.clone()).unwrap(), cache);
     let h = kept.file.header;
     let grids = [TileGrid::new(1920, 1080, 8, 8).unwrap(), TileGrid::new(1000, 601, 7, 3).unwrap()];
     let start = Camera::framing(h.bbox_min, h.bbox_max, grids[0].aspect());
@@ -243,8 +252,8 @@ fn orbit_with_kept_pieces(mesh: &Mesh, chunk: u32) {
             sorted += counts.visible_triangles;
         }
     }
-    // The slow orbits reuse a good share; not everything (the test sees both paths).
-    assert!(reused > sorted / 20 && reused < sorted, "{reused} of {sorted} visible triangles reused");
+    assert!(kept.cached_bytes() <= cache);
+    (reused, sorted)
 }
 
 proptest! {

@@ -17,8 +17,9 @@
 //! came or went are sorted again: along an orbit of one degree a frame, 27% of the
 //! dragon's straddling triangles (4096-triangle chunks, 8x8 tiles) are in pieces of the
 //! frame before (`reused_triangles` in `tessera render --stats`). What is kept follows the
-//! frame's straddling chunks: 8 bytes a triangle and a slot and their pieces, dropped when a
-//! chunk stops straddling.
+//! frame's straddling chunks (8 bytes a triangle and a slot, and their pieces; dropped when
+//! a chunk stops straddling) and fits beside the tables under the cache's bound (see
+//! `Cache`).
 //!
 //! The first two tests hold for every point of the box because a point of the box is a
 //! convex combination of its corners, and so are its clip coordinates and (for `w > 0`) its
@@ -158,8 +159,15 @@ pub struct FrameCounts {
 
 /// A straddling chunk's index, its `(tile, piece)`s, whether its tables were built, its
 /// visible triangles, the triangles of its pieces taken from the frame before, and what it
-/// keeps for the next frame.
-type SortedChunk = (usize, Vec<(usize, Piece)>, bool, u64, u64, LastSort);
+/// keeps for the next frame, if that fits.
+type SortedChunk = (usize, Vec<(usize, Piece)>, bool, u64, u64, Option<LastSort>);
+
+/// What a kept sort takes a straddling triangle, for deciding whether to keep them: 8 bytes
+/// of its box, 8 of about half a slot's box, and its pieces' bytes, slots and border
+/// normals (the dragon's 4096-triangle chunks at 8x8 tiles: 18 bytes a triangle, against
+/// 83.5 for its tables, measured as the growth of `cached_bytes` once sorts are kept),
+/// rounded up.
+const KEPT_BYTES_PER_TRIANGLE: f64 = 32.0;
 
 /// A straddling chunk's sort, kept for the next frame (see the module doc).
 struct LastSort {
@@ -173,6 +181,32 @@ struct LastSort {
 }
 
 impl LastSort {
+    /// The bytes it holds on the heap, as the cache's bound counts them.
+    fn heap_bytes(&self) -> usize {
+        std::mem::size_of_val(&self.triangles[..])
+            + std::mem::size_of_val(&self.vertices[..])
+            + Self::pieces_bytes(&self.pieces)
+    }
+
+    /// What a sort of `boxes` into `pieces` would hold.
+    fn bytes_of(boxes: &Boxes, pieces: &[(usize, Piece)]) -> usize {
+        std::mem::size_of_val(&boxes.triangles[..])
+            + std::mem::size_of_val(&boxes.vertices[..])
+            + Self::pieces_bytes(pieces)
+    }
+
+    fn pieces_bytes(pieces: &[(usize, Piece)]) -> usize {
+        pieces
+            .iter()
+            .map(|(_, p)| match &p.kind {
+                PieceKind::Sorted { bytes, slots, normals } => {
+                    bytes.len() + std::mem::size_of_val(&slots[..]) + std::mem::size_of_val(&normals[..])
+                }
+                PieceKind::Verbatim => 0,
+            })
+            .sum()
+    }
+
     /// The tiles whose sets of triangles or of unclipped slots differ between `self` and
     /// `boxes` (of the same chunk on `grid`), or `None` when nothing can be reused (another
     /// grid, coding or chunk). Slots count apart from triangles: a slot's box is the
@@ -211,11 +245,36 @@ pub struct Straddler {
 /// straddling chunks need more than the bound, the chunks that do not fit are built and
 /// dropped, and the cached ones stay hits next frame, instead of a cyclic scan evicting
 /// each chunk just before it is needed again.
+///
+/// Under the same bound it keeps the straddling chunks' sorts from the frame before (see the
+/// module doc), stored at the end of a frame only where they fit beside the tables (evicting
+/// tables of earlier frames, never of the current one): where the frame's tables fill the
+/// bound, they are worth more, since a frame cannot sort without them.
 struct Cache {
     entries: HashMap<u32, (Arc<Straddler>, u64)>,
+    kept: HashMap<u32, LastSort>,
+    /// The tables' and the kept sorts' bytes.
     bytes: usize,
     /// The current frame's stamp.
     frame: u64,
+}
+
+impl Cache {
+    /// Evicts the least recently used tables of earlier frames until `bytes` more fit
+    /// under `limit`; whether they do.
+    fn make_room(&mut self, bytes: usize, limit: usize) -> bool {
+        let now = self.frame;
+        while self.bytes + bytes > limit {
+            let Some((&victim, _)) =
+                self.entries.iter().filter(|(_, (_, used))| *used < now).min_by_key(|(_, (_, used))| *used)
+            else {
+                return false;
+            };
+            let (old, _) = self.entries.remove(&victim).expect("present");
+            self.bytes -= old.bytes;
+        }
+        true
+    }
 }
 
 /// A chunked model ready for sorting: the file (its directory read), the chunks' float
@@ -231,8 +290,6 @@ pub struct ChunkedModel<B: ChunkSource> {
     /// A hierarchy's cut: the largest projected error in pixels, or `None` for the
     /// full-resolution model (level 0). A file without a hierarchy is always drawn whole.
     pub error_px: Option<f32>,
-    /// The straddling chunks' sorts of the frame before, by chunk.
-    last: Mutex<HashMap<u32, LastSort>>,
 }
 
 impl<B: ChunkSource> ChunkedModel<B> {
@@ -241,11 +298,10 @@ impl<B: ChunkSource> ChunkedModel<B> {
         ChunkedModel {
             file,
             boxes,
-            cache: Mutex::new(Cache { entries: HashMap::new(), bytes: 0, frame: 0 }),
+            cache: Mutex::new(Cache { entries: HashMap::new(), kept: HashMap::new(), bytes: 0, frame: 0 }),
             cache_limit,
             buffers: Mutex::new(Vec::new()),
             error_px: None,
-            last: Mutex::new(HashMap::new()),
         }
     }
 
@@ -253,7 +309,8 @@ impl<B: ChunkSource> ChunkedModel<B> {
         self.boxes.len()
     }
 
-    /// Bytes the cache holds now.
+    /// Bytes the cache holds now: the straddling chunks' tables and their sorts kept from
+    /// the frame before.
     pub fn cached_bytes(&self) -> usize {
         self.cache.lock().expect("cache lock").bytes
     }
@@ -310,17 +367,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
         let s = Arc::new(Straddler { model, normals, bytes });
         let mut c = self.cache.lock().expect("cache lock");
         let now = c.frame;
-        while c.bytes + bytes > self.cache_limit {
-            // The least recently used entry of an earlier frame, if any.
-            let Some((&victim, _)) =
-                c.entries.iter().filter(|(_, (_, used))| *used < now).min_by_key(|(_, (_, used))| *used)
-            else {
-                break;
-            };
-            let (old, _) = c.entries.remove(&victim).expect("present");
-            c.bytes -= old.bytes;
-        }
-        if c.bytes + bytes <= self.cache_limit && !c.entries.contains_key(&(i as u32)) {
+        if c.make_room(bytes, self.cache_limit) && !c.entries.contains_key(&(i as u32)) {
             c.bytes += bytes;
             c.entries.insert(i as u32, (s.clone(), now));
         }
@@ -365,12 +412,29 @@ impl<B: ChunkSource> ChunkedModel<B> {
             }
         }
         // The frame before's sorts of this frame's straddling chunks; those of the range's
-        // other chunks are dropped.
-        let straddling: Vec<(usize, Option<LastSort>)> = {
-            let mut last = self.last.lock().expect("last sorts");
-            let taken = straddling.iter().map(|&i| (i, last.remove(&(i as u32)))).collect();
-            last.retain(|&i, _| !range.contains(&(i as usize)));
-            taken
+        // other chunks are dropped. Sorts are kept this frame where the straddling chunks'
+        // tables and sorts would fit the bound together, at the cache's bytes a triangle for
+        // tables (known from the second frame on) and `KEPT_BYTES_PER_TRIANGLE` for sorts:
+        // where the tables fill it, sorts kept and then dropped at the frame's end would only
+        // raise the frame's peak memory.
+        let (straddling, keeping) = {
+            let mut c = self.cache.lock().expect("cache lock");
+            let (bytes, triangles) =
+                c.entries.values().fold((0, 0), |(b, t), (s, _)| (b + s.bytes, t + s.model.triangles().len()));
+            let per_triangle = (bytes as f64 / triangles.max(1) as f64) + KEPT_BYTES_PER_TRIANGLE;
+            let keeping = triangles > 0 && counts.straddling_triangles as f64 * per_triangle <= self.cache_limit as f64;
+            let take = |c: &mut Cache, i: u32| {
+                let last = c.kept.remove(&i);
+                c.bytes -= last.as_ref().map_or(0, LastSort::heap_bytes);
+                last
+            };
+            let taken: Vec<(usize, Option<LastSort>)> =
+                straddling.iter().map(|&i| (i, take(&mut c, i as u32))).collect();
+            let gone: Vec<u32> = c.kept.keys().copied().filter(|&i| range.contains(&(i as usize))).collect();
+            for i in gone {
+                take(&mut c, i);
+            }
+            (taken, keeping)
         };
         let sorted: Vec<SortedChunk> = straddling
             .into_par_iter()
@@ -393,16 +457,13 @@ impl<B: ChunkSource> ChunkedModel<B> {
                     })
                 };
                 let visible = boxes.triangles.iter().filter(|b| !b.is_empty()).count() as u64;
-                // The boxes stay with the chunk for the next frame; the pool's buffers take
-                // the frame before's allocations.
-                let (triangles, vertices) = match &last {
-                    Some(l) => (Vec::with_capacity(l.triangles.len()), Vec::with_capacity(l.vertices.len())),
-                    None => (Vec::new(), Vec::new()),
+                let (tiles, normals) = match sorted {
+                    Ok(t) => t,
+                    Err(e) => {
+                        self.buffers.lock().expect("buffer pool").push((sorter, boxes));
+                        return Err(e);
+                    }
                 };
-                let triangles = std::mem::replace(&mut boxes.triangles, triangles);
-                let vertices = std::mem::replace(&mut boxes.vertices, vertices);
-                self.buffers.lock().expect("buffer pool").push((sorter, boxes));
-                let (tiles, normals) = sorted?;
                 let mut pieces: Vec<(usize, Piece)> = tiles
                     .into_iter()
                     .zip(normals)
@@ -419,7 +480,16 @@ impl<B: ChunkSource> ChunkedModel<B> {
                     }
                 }
                 pieces.sort_by_key(|(t, _)| *t);
-                let keep = LastSort { grid: *grid, coding, triangles, vertices, pieces: pieces.clone() };
+                // Kept if it fits now; whether it still does is decided at the frame's end.
+                let bytes = LastSort::bytes_of(&boxes, &pieces);
+                let fits = keeping && self.cache.lock().expect("cache lock").bytes + bytes <= self.cache_limit;
+                let keep = fits.then(|| {
+                    // The boxes stay with the chunk; the pool's buffers get fresh ones.
+                    let triangles = std::mem::take(&mut boxes.triangles);
+                    let vertices = std::mem::take(&mut boxes.vertices);
+                    LastSort { grid: *grid, coding, triangles, vertices, pieces: pieces.clone() }
+                });
+                self.buffers.lock().expect("buffer pool").push((sorter, boxes));
                 Ok((i, pieces, built, visible, reused, keep))
             })
             .collect::<Result<_, SortError>>()?;
@@ -443,7 +513,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
                     counts.built += built as u32;
                     counts.visible_triangles += visible;
                     counts.reused_triangles += reused;
-                    kept.push((i as u32, keep));
+                    kept.extend(keep.map(|k| (i as u32, k)));
                     for (t, p) in pieces {
                         per_tile[t].push(p);
                     }
@@ -452,7 +522,14 @@ impl<B: ChunkSource> ChunkedModel<B> {
             }
         }
         debug_assert!(sorted.peek().is_none());
-        self.last.lock().expect("last sorts").extend(kept);
+        let mut c = self.cache.lock().expect("cache lock");
+        for (i, keep) in kept {
+            let bytes = keep.heap_bytes();
+            if c.make_room(bytes, self.cache_limit) {
+                c.bytes += bytes;
+                c.kept.insert(i, keep);
+            }
+        }
         let tiles = per_tile
             .into_iter()
             .enumerate()
