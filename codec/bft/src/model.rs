@@ -16,8 +16,8 @@ pub const COMMAND_CONTEXTS: usize = PREV_CTX * DEG_CTX * DEG_CTX;
 /// The context of the next command: the previous command's class and the visited degrees
 /// (triangles coded so far, capped) of the current edge's vertices. The range coder takes
 /// its [`Context::index`], the prefix coder its [`Context::prefix_table`]; both derive from
-/// the parts, not from each other (the division that took an index apart was an eighth of
-/// a prefix-coded tile's decode).
+/// the parts, since taking an index apart by division costs an eighth of a prefix-coded
+/// tile's decode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Context {
     class: u8,

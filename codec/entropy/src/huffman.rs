@@ -289,11 +289,12 @@ impl BitWriter {
     }
 }
 
-/// MSB-first bit reader over a byte slice from a starting byte. Reads past the end fail
-/// (`None`) and consume nothing.
 /// Bits a [`BitReader::window`] holds at least: a code of [`MAX_LEN`] bits and 32 raw bits.
 pub const WINDOW: u32 = 56;
 
+/// MSB-first bit reader over a byte slice from a starting byte. Reads past the end fail
+/// (`None`) and consume nothing; a [`BitReader::window`] shows zeros past the end, and
+/// [`BitReader::overrun`] counts what was consumed of them.
 pub struct BitReader<'a> {
     data: &'a [u8],
     start: usize,
