@@ -199,12 +199,12 @@ impl<'a> PrefixSource<'a> {
     }
 }
 
-/// Reads a symbol of `table` and, for a number, the bits below its leading one, from one
-/// window of the stream: the bit length `len`, and the number (`len` 0 and 1 are 0 and 1).
-/// `None` for no code or a length above `max_len`. Past the end of the data it reads zeros,
-/// which [`SymbolSource::overrun`] reports.
+/// Reads a number coded as its bit length's symbol of `table` and the bits below its
+/// leading one, from one window of the stream. `None` for no code or a length above
+/// `max_len`. Past the end of the data it reads zeros, which [`SymbolSource::overrun`]
+/// reports.
 #[inline(always)]
-fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<(u32, u32)> {
+fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
     let w = r.window();
     let (len, code_len) = table.lookup(w)?;
     let len = len as u32;
@@ -215,7 +215,7 @@ fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<(u32, u
     // `>> 1 >> (63 - m)`: no bits for m = 0 without a shift by 64.
     let low = (w << code_len >> 1 >> (63 - mantissa)) as u32;
     r.consume(code_len + mantissa);
-    Some((len, if len >= 2 { 1 << mantissa | low } else { len }))
+    Some(if len >= 2 { 1 << mantissa | low } else { len })
 }
 
 impl SymbolSource for PrefixSource<'_> {
@@ -229,7 +229,7 @@ impl SymbolSource for PrefixSource<'_> {
 
     #[inline]
     fn offset(&mut self, cmd: Command) -> Option<u32> {
-        read_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32).map(|(_, k)| k)
+        read_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32)
     }
 
     /// Per axis, the residual's bit length, then for a nonzero residual its sign and the

@@ -188,22 +188,10 @@ impl Table {
     /// code.
     #[inline]
     pub fn decode(&self, r: &mut BitReader) -> Option<u8> {
-        let bits = r.peek();
-        if let Some(&e) = self.lut.get((bits >> (MAX_LEN - self.lut_bits) as u32) as usize) {
-            if e != 0 {
-                r.skip(e as u32 & 15)?;
-                return Some((e >> 4) as u8);
-            }
-        }
-        for l in self.lut_bits as usize + 1..=self.longest as usize {
-            let code = bits >> (MAX_LEN as usize - l);
-            let d = code.wrapping_sub(self.first[l]);
-            if code >= self.first[l] && d < self.count[l] {
-                r.skip(l as u32)?;
-                return Some(self.sorted[(self.offset[l] + d) as usize]);
-            }
-        }
-        None
+        // The peeked bits, left-aligned as a window: a code is at most MAX_LEN of them.
+        let (sym, len) = self.lookup((r.peek() as u64) << (64 - MAX_LEN as u32))?;
+        r.skip(len)?;
+        Some(sym)
     }
 }
 

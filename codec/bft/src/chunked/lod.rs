@@ -698,7 +698,7 @@ fn simplify(
     let attributes: Vec<f32> =
         if weight > 0.0 { verts.iter().flat_map(|&v| (vertices.normal)(v)).collect() } else { Vec::new() };
     let faces = edge_faces(&local);
-    // About half the triangles, within an error of EDGE_ERROR times the group's mean edge
+    // About half the triangles, within an error of `edge_error` times the group's mean edge
     // (fewer where the limit stops the simplifier). Where the simplifier pinches the surface
     // (two sheets squashed onto one edge), the pinched edges' ends and their neighbours in
     // the input are locked and the group simplified again, a few times; then less, down to

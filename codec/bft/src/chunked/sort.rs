@@ -163,8 +163,8 @@ pub struct FrameCounts {
 type SortedChunk = (usize, Vec<(usize, Piece)>, bool, u64, u64, Option<LastSort>);
 
 /// What a kept sort takes a straddling triangle, for deciding whether to keep them: 8 bytes
-/// of its box, 8 of about half a slot's box, and its pieces' bytes, slots and border
-/// normals (the dragon's 4096-triangle chunks at 8x8 tiles: 18 bytes a triangle, against
+/// of its box, about 4 of its slots' boxes (half a slot a triangle), and its pieces' bytes,
+/// slots and border normals (the dragon's 4096-triangle chunks at 8x8 tiles: 18 bytes a triangle, against
 /// 83.5 for its tables, measured as the growth of `cached_bytes` once sorts are kept),
 /// rounded up.
 const KEPT_BYTES_PER_TRIANGLE: f64 = 32.0;
@@ -183,20 +183,12 @@ struct LastSort {
 impl LastSort {
     /// The bytes it holds on the heap, as the cache's bound counts them.
     fn heap_bytes(&self) -> usize {
-        std::mem::size_of_val(&self.triangles[..])
-            + std::mem::size_of_val(&self.vertices[..])
-            + Self::pieces_bytes(&self.pieces)
+        Self::bytes_of(&self.triangles, &self.vertices, &self.pieces)
     }
 
-    /// What a sort of `boxes` into `pieces` would hold.
-    fn bytes_of(boxes: &Boxes, pieces: &[(usize, Piece)]) -> usize {
-        std::mem::size_of_val(&boxes.triangles[..])
-            + std::mem::size_of_val(&boxes.vertices[..])
-            + Self::pieces_bytes(pieces)
-    }
-
-    fn pieces_bytes(pieces: &[(usize, Piece)]) -> usize {
-        pieces
+    /// What a sort with these boxes and pieces holds.
+    fn bytes_of(triangles: &[TileBox], vertices: &[TileBox], pieces: &[(usize, Piece)]) -> usize {
+        let pieces: usize = pieces
             .iter()
             .map(|(_, p)| match &p.kind {
                 PieceKind::Sorted { bytes, slots, normals } => {
@@ -204,7 +196,8 @@ impl LastSort {
                 }
                 PieceKind::Verbatim => 0,
             })
-            .sum()
+            .sum();
+        std::mem::size_of_val(triangles) + std::mem::size_of_val(vertices) + pieces
     }
 
     /// The tiles whose sets of triangles or of unclipped slots differ between `self` and
@@ -396,7 +389,6 @@ impl<B: ChunkSource> ChunkedModel<B> {
     ) -> Result<(Vec<ChunkedTile>, FrameCounts), SortError> {
         let first = range.start;
         let classes = self.classify_chunks(view_proj, grid, range.clone());
-        self.cache.lock().expect("cache lock").frame += 1;
         let mut counts = FrameCounts::default();
         let mut straddling = Vec::new();
         for (i, c) in classes.iter().enumerate().map(|(j, c)| (first + j, c)) {
@@ -419,6 +411,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
         // raise the frame's peak memory.
         let (straddling, keeping) = {
             let mut c = self.cache.lock().expect("cache lock");
+            c.frame += 1;
             let (bytes, triangles) =
                 c.entries.values().fold((0, 0), |(b, t), (s, _)| (b + s.bytes, t + s.model.triangles().len()));
             let per_triangle = (bytes as f64 / triangles.max(1) as f64) + KEPT_BYTES_PER_TRIANGLE;
@@ -481,7 +474,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
                 }
                 pieces.sort_by_key(|(t, _)| *t);
                 // Kept if it fits now; whether it still does is decided at the frame's end.
-                let bytes = LastSort::bytes_of(&boxes, &pieces);
+                let bytes = LastSort::bytes_of(&boxes.triangles, &boxes.vertices, &pieces);
                 let fits = keeping && self.cache.lock().expect("cache lock").bytes + bytes <= self.cache_limit;
                 let keep = fits.then(|| {
                     // The boxes stay with the chunk; the pool's buffers get fresh ones.
