@@ -60,6 +60,9 @@ pub fn launched_by_mpirun() -> bool {
 /// two threads are ever inside MPI at once.
 pub struct Mpi {
     world: SimpleCommunicator,
+    /// How many ranks of the job share this rank's node (`MPI_Comm_split_type` with
+    /// `MPI_COMM_TYPE_SHARED`).
+    ranks_on_node: usize,
     _universe: mpi::environment::Universe,
     /// Messages received while [`Transport::send_many`] waited for its sends to complete,
     /// handed out by [`Transport::recv`] first.
@@ -89,7 +92,14 @@ impl Mpi {
         if !matches!(level, Threading::Serialized | Threading::Multiple) {
             return None;
         }
-        Some(Mpi { world: universe.world(), _universe: universe, stash: Mutex::new(Default::default()) })
+        let world = universe.world();
+        let ranks_on_node = world.split_shared(world.rank()).size().max(1) as usize;
+        Some(Mpi { world, ranks_on_node, _universe: universe, stash: Mutex::new(Default::default()) })
+    }
+
+    /// How many ranks of the job run on this rank's node, this one included.
+    pub fn ranks_on_node(&self) -> usize {
+        self.ranks_on_node
     }
 }
 

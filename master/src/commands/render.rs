@@ -40,6 +40,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     } else if mpi.rank() > workers {
         crate::render::run_sorter(&mpi, &plan, mpi.rank() - workers)
     } else if mpi.rank() > 0 {
+        share_cores(mpi.ranks_on_node());
         let direct = plan
             .wall
             .as_ref()
@@ -54,6 +55,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Ok(()) => Ok(()),
         Err(e) => end_after_failure(&mpi, &e),
     }
+}
+
+/// A worker's rayon pool takes its share of the node's cores (at least one thread) instead of
+/// all of them: with rank 0 and two workers on this 2-core machine, workers at one thread
+/// each orbited the single-stream dragon in 53.2-66.8 ms a frame against 59.2-71.7 with a
+/// pool per core (six alternated runs each; docs/results.md, "Frames at interactive
+/// rates"). Rank 0 and the sorters keep every core: their sort is the frame's critical
+/// stage, and it runs while the workers wait for its tiles. `RAYON_NUM_THREADS` overrides.
+fn share_cores(ranks_on_node: usize) {
+    if std::env::var_os("RAYON_NUM_THREADS").is_some() {
+        return;
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // Only fails when the pool was already built, by an earlier use of rayon in this
+    // process; that pool is then kept as it is.
+    let _ = rayon::ThreadPoolBuilder::new().num_threads((cores / ranks_on_node.max(1)).max(1)).build_global();
 }
 
 /// How long a failed rank waits for rank 0 to end the job before ending it itself.
