@@ -2,7 +2,9 @@
 //! about the model's up axis from the framing camera, 1920x1080 in 8x8 prefix-coded tiles;
 //! the median and fastest sort of frames 3 to 23 (the tables cached, the frame before's
 //! pieces kept) and the share of straddling triangles whose pieces were the frame before's.
-//! `cargo run --release -p tessera-codec --example orbitsort -- MODEL.bft [DEGREES]`
+//! With ERROR_PX, a level-of-detail file draws the cut of that many pixels (`render
+//! --error-px`).
+//! `cargo run --release -p tessera-codec --example orbitsort -- MODEL.bft [DEGREES] [ERROR_PX]`
 use codec::bft::chunked::sort::ChunkedModel;
 use codec::bft::chunked::ChunkedFile;
 use codec::bft::Coding;
@@ -10,10 +12,11 @@ use codec::view::{Camera, TileGrid};
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let path = args.next().expect("usage: orbitsort MODEL.bft [DEGREES]");
+    let path = args.next().expect("usage: orbitsort MODEL.bft [DEGREES] [ERROR_PX]");
     let degrees: f32 = args.next().map_or(1.0, |s| s.parse().expect("DEGREES is a number"));
     let file = ChunkedFile::open(std::fs::read(&path).expect("readable")).expect("a chunked .bft");
-    let model = ChunkedModel::new(file, 1 << 30);
+    let mut model = ChunkedModel::new(file, 1 << 30);
+    model.error_px = args.next().map(|s| s.parse().expect("ERROR_PX is a number"));
     let grid = TileGrid::new(1920, 1080, 8, 8).expect("grid");
     let h = &model.file.header;
     let cam = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect());

@@ -219,6 +219,29 @@ fn pieces_kept_from_the_frame_before_are_those_a_fresh_sort_makes() {
     }
 }
 
+/// A still view's second frame takes every straddling chunk's pieces from the first: sorts
+/// are kept from a model's first frame on, before the cache knows its tables' bytes.
+#[test]
+fn a_still_view_reuses_its_first_frame() {
+    let (bytes, _) = chunked(&testkit::load_mesh("stanford/bunny_zipper_c3d.obj.gz"), 1024);
+    let model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 24);
+    let grid = TileGrid::new(1920, 1080, 8, 8).unwrap();
+    let h = model.file.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
+    let (first, counts) = model.sort(vp, &grid, Coding::Prefix).unwrap();
+    assert_eq!(counts.reused_triangles, 0);
+    let (second, counts) = model.sort(vp, &grid, Coding::Prefix).unwrap();
+    assert!(frame_values(&first) == frame_values(&second), "the second frame differs");
+    let sorted: u64 = second
+        .iter()
+        .flat_map(|t| &t.pieces)
+        .filter(|p| matches!(p.kind, PieceKind::Sorted { .. }))
+        .map(|p| p.triangles as u64)
+        .sum();
+    assert!(counts.straddling > 0 && sorted > 0);
+    assert_eq!(counts.reused_triangles, sorted, "every straddling piece is the first frame's");
+}
+
 /// Sorts an orbit with one model and with a fresh one per frame; returns the triangles the
 /// first reused and its visible triangles.
 fn orbit_with_kept_pieces(mesh: &Mesh, chunk: u32, cache: usize) -> (u64, u64) {

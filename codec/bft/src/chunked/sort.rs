@@ -169,6 +169,11 @@ type SortedChunk = (usize, Vec<(usize, Piece)>, bool, u64, u64, Option<LastSort>
 /// rounded up.
 const KEPT_BYTES_PER_TRIANGLE: f64 = 32.0;
 
+/// A straddling chunk's tables on the heap per triangle, as the keep decision assumes them
+/// before the cache holds any (a model's first frame): the dragon's take 83.5, rounded up.
+/// Only the decision rests on it; what is stored is counted from its own bytes.
+const TABLE_BYTES_PER_TRIANGLE: f64 = 96.0;
+
 /// A straddling chunk's sort, kept for the next frame (see the module doc).
 struct LastSort {
     grid: TileGrid,
@@ -406,16 +411,18 @@ impl<B: ChunkSource> ChunkedModel<B> {
         // The frame before's sorts of this frame's straddling chunks; those of the range's
         // other chunks are dropped. Sorts are kept this frame where the straddling chunks'
         // tables and sorts would fit the bound together, at the cache's bytes a triangle for
-        // tables (known from the second frame on) and `KEPT_BYTES_PER_TRIANGLE` for sorts:
-        // where the tables fill it, sorts kept and then dropped at the frame's end would only
-        // raise the frame's peak memory.
+        // tables (`TABLE_BYTES_PER_TRIANGLE` until the cache holds some) and
+        // `KEPT_BYTES_PER_TRIANGLE` for sorts: where the tables fill it, sorts kept and then
+        // dropped at the frame's end would only raise the frame's peak memory. Keeping from
+        // the first frame on makes a still view's second frame cheap (`--no-frame-reuse`).
         let (straddling, keeping) = {
             let mut c = self.cache.lock().expect("cache lock");
             c.frame += 1;
             let (bytes, triangles) =
                 c.entries.values().fold((0, 0), |(b, t), (s, _)| (b + s.bytes, t + s.model.triangles().len()));
-            let per_triangle = (bytes as f64 / triangles.max(1) as f64) + KEPT_BYTES_PER_TRIANGLE;
-            let keeping = triangles > 0 && counts.straddling_triangles as f64 * per_triangle <= self.cache_limit as f64;
+            let tables = if triangles > 0 { bytes as f64 / triangles as f64 } else { TABLE_BYTES_PER_TRIANGLE };
+            let per_triangle = tables + KEPT_BYTES_PER_TRIANGLE;
+            let keeping = counts.straddling_triangles as f64 * per_triangle <= self.cache_limit as f64;
             let take = |c: &mut Cache, i: u32| {
                 let last = c.kept.remove(&i);
                 c.bytes -= last.as_ref().map_or(0, LastSort::heap_bytes);
