@@ -138,6 +138,17 @@ fn level_zero_is_the_flat_file() {
     }
     // The whole file decodes to the model, as the flat file does.
     assert_eq!(codec::bft::decode(flat.bytes()).unwrap(), codec::bft::decode(lod.bytes()).unwrap());
+    // Level 0's parts are the flat file's; the levels above carry normals and no border table.
+    let (stats, levels) = (flat.stats().unwrap(), lod.levels().unwrap());
+    assert_eq!(levels[0].connectivity_bytes, stats.connectivity_bytes as u64);
+    assert_eq!(levels[0].geometry_bytes, stats.geometry_bytes as u64);
+    assert_eq!(levels[0].border_bytes, stats.border_bytes as u64);
+    assert_eq!(levels[0].attribute_bytes, 0);
+    for (k, l) in levels.iter().enumerate().skip(1) {
+        assert!(l.attribute_bytes > 0 && l.connectivity_bytes > 0 && l.geometry_bytes > 0, "level {k}: {l:?}");
+        assert!(l.connectivity_bytes + l.geometry_bytes + l.attribute_bytes + l.border_bytes < l.bytes);
+        assert_eq!(l.border_bytes, l.chunks as u64 * 5, "level {k}: empty border tables (a count and a CRC)");
+    }
     // Errors grow toward the roots.
     for i in 0..lod.entries.len() {
         if h.producer[i] != NONE && h.consumer[i] != NONE {

@@ -59,6 +59,12 @@ pub struct LevelReport {
     pub chunks: u32,
     pub triangles: u64,
     pub bytes: u64,
+    /// Of `bytes`: the streams' connectivity, geometry and attributes, and the border tables
+    /// (the rest: the streams' headers).
+    pub connectivity_bytes: u64,
+    pub geometry_bytes: u64,
+    pub attribute_bytes: u64,
+    pub border_bytes: u64,
     /// The largest object-space error of the level's chunks.
     pub max_error: f32,
 }
@@ -118,8 +124,18 @@ pub fn run(input: &Path, json: bool) -> Result<()> {
         report.components = file.components().with_context(|| format!("{}", input.display()))? as u32;
         report.levels = file
             .levels()
+            .with_context(|| format!("{}", input.display()))?
             .into_iter()
-            .map(|l| LevelReport { chunks: l.chunks, triangles: l.triangles, bytes: l.bytes, max_error: l.max_error })
+            .map(|l| LevelReport {
+                chunks: l.chunks,
+                triangles: l.triangles,
+                bytes: l.bytes,
+                connectivity_bytes: l.connectivity_bytes,
+                geometry_bytes: l.geometry_bytes,
+                attribute_bytes: l.attribute_bytes,
+                border_bytes: l.border_bytes,
+                max_error: l.max_error,
+            })
             .collect();
     } else {
         bft::decode(&bytes).with_context(|| format!("{}", input.display()))?;
@@ -185,6 +201,15 @@ pub fn run(input: &Path, json: bool) -> Result<()> {
                 l.bytes,
                 l.bytes as f64 * 8.0 / l.triangles.max(1) as f64,
                 l.max_error
+            )?;
+            let bits = |b: u64| b as f64 * 8.0 / l.triangles.max(1) as f64;
+            crate::outln!(
+                "                 bits/triangle: connectivity {:.2}, geometry {:.2}, attributes {:.2}, border tables {:.2}, headers {:.2}",
+                bits(l.connectivity_bytes),
+                bits(l.geometry_bytes),
+                bits(l.attribute_bytes),
+                bits(l.border_bytes),
+                bits(l.bytes - l.connectivity_bytes - l.geometry_bytes - l.attribute_bytes - l.border_bytes)
             )?;
         }
     }

@@ -199,10 +199,11 @@ impl<B: ChunkSource> ChunkedFile<B> {
         })
     }
 
-    /// A level-of-detail file's levels, from the directory: per level its chunks, triangles,
-    /// bytes and largest error (object units); empty for a file without a hierarchy.
-    pub fn levels(&self) -> Vec<super::lod::LevelSummary> {
-        let Some(h) = &self.lod else { return Vec::new() };
+    /// A level-of-detail file's levels: per level its chunks, triangles, bytes and their
+    /// parts, and largest error (object units); empty for a file without a hierarchy. Every
+    /// chunk's container is parsed and checked (not decoded).
+    pub fn levels(&self) -> Result<Vec<super::lod::LevelSummary>, FormatError> {
+        let Some(h) = &self.lod else { return Ok(Vec::new()) };
         let mut out: Vec<super::lod::LevelSummary> = Vec::new();
         for (i, l) in h.levels().into_iter().enumerate() {
             let l = l as usize;
@@ -213,11 +214,17 @@ impl<B: ChunkSource> ChunkedFile<B> {
             s.chunks += 1;
             s.triangles += e.triangles as u64;
             s.bytes += e.bft_len as u64 + e.border_len as u64;
+            s.border_bytes += e.border_len as u64;
+            let bft = self.chunk_bft(i)?;
+            let p = crate::bft::format::parse(&bft).map_err(|e| in_chunk(i, e))?;
+            s.connectivity_bytes += (p.sections[0].len() + p.sections[2].len() + p.sections[3].len()) as u64;
+            s.geometry_bytes += p.sections[1].len() as u64;
+            s.attribute_bytes += (p.sections[4].len() + p.sections[5].len() + p.sections[6].len()) as u64;
             if let Some(g) = h.groups.get(h.producer[i] as usize) {
                 s.max_error = s.max_error.max(g.error);
             }
         }
-        out
+        Ok(out)
     }
 
     /// Chunk `i`'s `.bft` stream (not yet checked): borrowed from bytes in memory, read from a

@@ -117,6 +117,13 @@ pub struct LevelSummary {
     pub triangles: u64,
     /// Bytes of its chunks (streams and border tables).
     pub bytes: u64,
+    /// Of them: the streams' connectivity (commands, offsets, seeds), geometry (positions),
+    /// attributes (normals above level 0; colours, normals and vertex order as the input
+    /// had), and the border tables; the rest is the streams' headers.
+    pub connectivity_bytes: u64,
+    pub geometry_bytes: u64,
+    pub attribute_bytes: u64,
+    pub border_bytes: u64,
     /// The largest error of a group that made one of its chunks (object units; 0 at level 0).
     pub max_error: f32,
 }
