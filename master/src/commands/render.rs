@@ -58,11 +58,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 }
 
 /// A worker's rayon pool takes its share of the node's cores (at least one thread) instead of
-/// all of them: with rank 0 and two workers on this 2-core machine, workers at one thread
-/// each orbited the single-stream dragon in 53.2-66.8 ms a frame against 59.2-71.7 with a
-/// pool per core (six alternated runs each; docs/results.md, "Frames at interactive
-/// rates"). Rank 0 and the sorters keep every core: their sort is the frame's critical
-/// stage, and it runs while the workers wait for its tiles. `RAYON_NUM_THREADS` overrides.
+/// all of them: with rank 0 and two workers on a 2-core machine, the single-stream dragon
+/// orbited in 57.3-71.3 ms a frame against 59.2-79.0 with a pool per core, the workers
+/// decoding in 30.8-37.3 ms against 44.8-48.4 (four alternated runs; docs/results.md,
+/// "Frames at interactive rates"). Rank 0 and the sorters keep every core: their sort is the
+/// frame's critical stage, and it runs while the workers wait for its tiles.
+/// `RAYON_NUM_THREADS` overrides.
 fn share_cores(ranks_on_node: usize) {
     if std::env::var_os("RAYON_NUM_THREADS").is_some() {
         return;
