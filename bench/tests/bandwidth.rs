@@ -93,7 +93,8 @@ fn writes_the_figure_8_table_and_plot() {
         let grid = TileGrid::new(1920, 1080, n(row, "cols") as u32, n(row, "rows") as u32).unwrap();
         let cam = model.camera(&CameraSpec::default(), &grid).unwrap();
         let (mut sorter, mut boxes) = (Sorter::new(Coding::Range), Boxes::default());
-        let t = sort_frame(&model, "cow", &cam, &grid, &mut sorter, &mut boxes).unwrap().0.totals;
+        let t =
+            sort_frame(&model, "cow", &cam, &grid, &mut sorter, &mut boxes, &mut Default::default()).unwrap().0.totals;
         let tiles = format!("{}x{}", row["cols"], row["rows"]);
         assert_eq!(n(row, "tiled_tri_bytes"), 36.0 * t.tiled_triangles as f64, "{tiles}");
         assert_eq!(n(row, "tiled_bft_bytes"), t.tiled_bft_bytes as f64, "{tiles}");

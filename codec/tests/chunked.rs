@@ -240,6 +240,15 @@ fn a_still_view_reuses_its_first_frame() {
         .sum();
     assert!(counts.straddling > 0 && sorted > 0);
     assert_eq!(counts.reused_triangles, sorted, "every straddling piece is the first frame's");
+    // A model told not to keep sorts sorts every frame afresh, to the same tiles.
+    let (bytes, _) = chunked(&testkit::load_mesh("stanford/bunny_zipper_c3d.obj.gz"), 1024);
+    let mut model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 24);
+    model.keep_sorts = false;
+    for _ in 0..2 {
+        let (tiles, counts) = model.sort(vp, &grid, Coding::Prefix).unwrap();
+        assert!(frame_values(&tiles) == frame_values(&first));
+        assert_eq!(counts.reused_triangles, 0);
+    }
 }
 
 /// Sorts an orbit with one model and with a fresh one per frame; returns the triangles the

@@ -111,7 +111,7 @@ impl SortSummary {
 }
 
 /// Sorts one frame with both sorts and summarises it. `sorter` and `boxes` keep the BFT
-/// sort's buffers between calls, as a frame loop does.
+/// sort's buffers between calls, and `tri` the Tri sort's, as a frame loop does.
 pub fn sort_frame(
     model: &Model,
     name: &str,
@@ -119,6 +119,7 @@ pub fn sort_frame(
     grid: &TileGrid,
     sorter: &mut Sorter,
     boxes: &mut Boxes,
+    tri: &mut tri_sort::TriBuffers,
 ) -> Result<(SortSummary, Vec<Tile>)> {
     let vp = cam.view_proj(grid.aspect());
     let start = Instant::now();
@@ -126,8 +127,9 @@ pub fn sort_frame(
     let tiles = sorter.sort(&model.tiles, boxes, grid)?;
     let sort_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
-    let tri = tri_sort::sort(&model.tiles.positions, model.tiles.triangles(), vp, grid);
+    tri_sort::sort_into(&model.tiles.positions, model.tiles.triangles(), vp, grid, tri);
     let tri_sort_ms = start.elapsed().as_secs_f64() * 1e3;
+    let tri = &tri.tiles;
 
     let per_tile: Vec<TileSummary> = tiles
         .iter()
@@ -322,7 +324,15 @@ pub fn run(args: &SortArgs) -> Result<()> {
         let model = load_model(path, EncodeOptions::default())?;
         let cam = model.camera(camera, &grid)?;
         crate::camera::check_camera(&cam, grid.height)?;
-        let (summary, tiles) = sort_frame(&model, &name, &cam, &grid, &mut Sorter::new(coding), &mut Boxes::default())?;
+        let (summary, tiles) = sort_frame(
+            &model,
+            &name,
+            &cam,
+            &grid,
+            &mut Sorter::new(coding),
+            &mut Boxes::default(),
+            &mut Default::default(),
+        )?;
         (summary, tiles.into_iter().map(|t| (t.index, vec![t.bytes])).collect())
     };
     if let Some(dir) = dump {

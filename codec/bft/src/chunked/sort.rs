@@ -288,6 +288,9 @@ pub struct ChunkedModel<B: ChunkSource> {
     /// A hierarchy's cut: the largest projected error in pixels, or `None` for the
     /// full-resolution model (level 0). A file without a hierarchy is always drawn whole.
     pub error_px: Option<f32>,
+    /// Whether straddling chunks keep their sorts for the next frame (on by default; a
+    /// benchmark of the sort itself turns it off, or a still view would time the reuse).
+    pub keep_sorts: bool,
 }
 
 impl<B: ChunkSource> ChunkedModel<B> {
@@ -300,6 +303,7 @@ impl<B: ChunkSource> ChunkedModel<B> {
             cache_limit,
             buffers: Mutex::new(Vec::new()),
             error_px: None,
+            keep_sorts: true,
         }
     }
 
@@ -422,7 +426,8 @@ impl<B: ChunkSource> ChunkedModel<B> {
                 c.entries.values().fold((0, 0), |(b, t), (s, _)| (b + s.bytes, t + s.model.triangles().len()));
             let tables = if triangles > 0 { bytes as f64 / triangles as f64 } else { TABLE_BYTES_PER_TRIANGLE };
             let per_triangle = tables + KEPT_BYTES_PER_TRIANGLE;
-            let keeping = counts.straddling_triangles as f64 * per_triangle <= self.cache_limit as f64;
+            let keeping =
+                self.keep_sorts && counts.straddling_triangles as f64 * per_triangle <= self.cache_limit as f64;
             let take = |c: &mut Cache, i: u32| {
                 let last = c.kept.remove(&i);
                 c.bytes -= last.as_ref().map_or(0, LastSort::heap_bytes);
