@@ -224,7 +224,7 @@ fn pieces_kept_from_the_frame_before_are_those_a_fresh_sort_makes() {
 #[test]
 fn a_still_view_reuses_its_first_frame() {
     let (bytes, _) = chunked(&testkit::load_mesh("stanford/bunny_zipper_c3d.obj.gz"), 1024);
-    let model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 24);
+    let model = ChunkedModel::new(ChunkedFile::open(bytes.clone()).unwrap(), 1 << 24);
     let grid = TileGrid::new(1920, 1080, 8, 8).unwrap();
     let h = model.file.header;
     let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
@@ -241,7 +241,6 @@ fn a_still_view_reuses_its_first_frame() {
     assert!(counts.straddling > 0 && sorted > 0);
     assert_eq!(counts.reused_triangles, sorted, "every straddling piece is the first frame's");
     // A model told not to keep sorts sorts every frame afresh, to the same tiles.
-    let (bytes, _) = chunked(&testkit::load_mesh("stanford/bunny_zipper_c3d.obj.gz"), 1024);
     let mut model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 24);
     model.keep_sorts = false;
     for _ in 0..2 {

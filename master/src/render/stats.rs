@@ -146,7 +146,8 @@ pub(super) struct ChunkStats {
     pub verbatim: u32,
     pub straddling: u32,
     pub straddling_triangles: u64,
-    /// Of those, the triangles of pieces taken from the frame before, not sorted again.
+    /// Triangles of pieces taken from the frame before, not sorted again (once per tile a
+    /// triangle is in, as pieces count them).
     pub reused_triangles: u64,
     pub built: u32,
     pub sent: u32,

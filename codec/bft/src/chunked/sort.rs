@@ -14,12 +14,12 @@
 //! pieces until the next frame: a tile whose sets of triangles and of slots (those whose
 //! boxes hold it) are the same has the same piece, byte for byte, since Table 2 and the
 //! tile's writer see nothing else of the view. Only the tiles where a triangle or a slot
-//! came or went are sorted again: along an orbit of one degree a frame, 27% of the
-//! dragon's straddling triangles (4096-triangle chunks, 8x8 tiles) are in pieces of the
-//! frame before (`reused_triangles` in `tessera render --stats`). What is kept follows the
-//! frame's straddling chunks (8 bytes a triangle and a slot, and their pieces; dropped when
-//! a chunk stops straddling) and fits beside the tables under the cache's bound (see
-//! `Cache`).
+//! came or went are sorted again: along an orbit of one degree a frame, 26% of the
+//! triangles in the dragon's straddling chunks' pieces (4096-triangle chunks, 8x8 tiles)
+//! are in pieces of the frame before (`reused_triangles` in `tessera render --stats`).
+//! What is kept follows the frame's straddling chunks (8 bytes a triangle and a slot, and
+//! their pieces; dropped when a chunk stops straddling) and fits beside the tables under
+//! the cache's bound (see `Cache`).
 //!
 //! The first two tests hold for every point of the box because a point of the box is a
 //! convex combination of its corners, and so are its clip coordinates and (for `w > 0`) its
@@ -153,7 +153,8 @@ pub struct FrameCounts {
     /// that are on screen.
     pub visible_triangles: u64,
     /// Triangles of straddling chunks' pieces taken from the frame before (see the module
-    /// doc), not sorted again.
+    /// doc), not sorted again; counted as pieces count them, once per tile a triangle is
+    /// in, so that a still view's may exceed `straddling_triangles`.
     pub reused_triangles: u64,
 }
 
