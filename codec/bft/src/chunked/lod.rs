@@ -49,7 +49,7 @@ use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::error::{chunk_err, corrupt};
-use super::partition::{split, vertices_of};
+use super::partition::{localize, split, vertices_of};
 use super::spill::{batches, ChunkWriter, Chunks};
 use crate::container::FormatError;
 
@@ -340,6 +340,25 @@ pub(super) struct Vertices<'a> {
     pub normal: &'a (dyn Fn(u32) -> [f32; 3] + Sync),
 }
 
+/// A set of vertices, one bit each: a level's locked vertices, looked up for every vertex of
+/// every group (a binary search of a sorted list of them there took 8% of gathering a
+/// group's triangles).
+pub(super) struct Bits(Vec<u64>);
+
+impl Bits {
+    fn new(n: usize) -> Bits {
+        Bits(vec![0; n.div_ceil(64)])
+    }
+
+    fn set(&mut self, v: u32) {
+        self.0[v as usize / 64] |= 1 << (v % 64);
+    }
+
+    fn get(&self, v: u32) -> bool {
+        self.0[v as usize / 64] >> (v % 64) & 1 != 0
+    }
+}
+
 fn sphere_of(positions: &[[f32; 3]]) -> (Vec3, f32) {
     let (lo, hi) = crate::mesh::bounding_box(positions.iter()).unwrap_or(([0.0; 3], [0.0; 3]));
     let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
@@ -457,7 +476,10 @@ fn mean_edge(indices: &[u32], pos: &[[f32; 3]]) -> f32 {
 
 /// Faces per undirected edge of `indices` (a triangle list).
 fn edge_faces(indices: &[u32]) -> rustc_hash::FxHashMap<(u32, u32), u32> {
-    let mut faces: rustc_hash::FxHashMap<(u32, u32), u32> = Default::default();
+    // Sized for a closed surface's edges (three halves of the triangles), so that the map
+    // does not grow on the way.
+    let mut faces: rustc_hash::FxHashMap<(u32, u32), u32> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(indices.len() / 2 + 16, Default::default());
     for t in indices.chunks_exact(3) {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
@@ -492,21 +514,36 @@ fn cancel_folds(tris: &mut Vec<[u32; 3]>) {
         k.sort_unstable();
         k
     };
-    let mut by_key: rustc_hash::FxHashMap<[u32; 3], Vec<usize>> = Default::default();
+    // Each triangle's first triangle on the same vertices; the few repeats are listed apart
+    // (a list per triangle, and maps that grew as they filled, made this and the pinch check
+    // three times slower on the 13.9M-triangle dragon's build).
+    let mut first: rustc_hash::FxHashMap<[u32; 3], u32> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(tris.len(), Default::default());
+    let mut repeats: Vec<(u32, u32)> = Vec::new();
     for (i, t) in tris.iter().enumerate() {
-        by_key.entry(key(t)).or_default().push(i);
+        match first.entry(key(t)) {
+            std::collections::hash_map::Entry::Occupied(o) => repeats.push((*o.get(), i as u32)),
+            std::collections::hash_map::Entry::Vacant(v) => {
+                v.insert(i as u32);
+            }
+        }
     }
+    if repeats.is_empty() {
+        return;
+    }
+    repeats.sort_unstable();
     let mut drop = vec![false; tris.len()];
-    for same in by_key.values().filter(|v| v.len() > 1) {
+    for run in repeats.chunk_by(|a, b| a.0 == b.0) {
+        let same = std::iter::once(run[0].0).chain(run.iter().map(|r| r.1));
         // A rotation of the sorted vertices keeps the orientation; the others reverse it.
         let facing = |t: &[u32; 3]| {
             let k = key(t);
             (0..3).any(|r| [t[r], t[(r + 1) % 3], t[(r + 2) % 3]] == k)
         };
-        let (mut up, mut down): (Vec<usize>, Vec<usize>) = same.iter().partition(|&&i| facing(&tris[i]));
+        let (mut up, mut down): (Vec<u32>, Vec<u32>) = same.partition(|&i| facing(&tris[i as usize]));
         while let (Some(a), Some(b)) = (up.pop(), down.pop()) {
-            drop[a] = true;
-            drop[b] = true;
+            drop[a as usize] = true;
+            drop[b as usize] = true;
         }
     }
     let mut i = 0;
@@ -525,7 +562,8 @@ fn cancel_folds(tris: &mut Vec<[u32; 3]>) {
 /// Out of core: a level is read chunk by chunk, twice (once for which chunks share
 /// vertices, once to simplify its groups a batch at a time), and written as it is made, so
 /// that memory holds 4 bytes per vertex of the model while a level's shared vertices are
-/// found, its shared vertices and its directory, and one batch of groups.
+/// found, its shared vertices, its directory and a bit per vertex of the model (the locked
+/// ones), and one batch of groups.
 pub(super) fn build(
     vertices: &Vertices,
     level0: &Chunks,
@@ -556,10 +594,10 @@ pub(super) fn build(
             }
         }
         // A vertex used by chunks of two groups is locked in both.
-        let mut locked: Vec<u32> = Vec::new();
+        let mut locked = Bits::new(vertices.count);
         for run in level_users.chunk_by(|a, b| a.0 == b.0) {
             if run.iter().any(|p| group_of[p.1 as usize] != group_of[run[0].1 as usize]) {
-                locked.push(run[0].0);
+                locked.set(run[0].0);
             }
         }
         drop(level_users);
@@ -614,7 +652,7 @@ fn simplify_level(
     vertices: &Vertices,
     level: &Chunks,
     grouping: &[Vec<u32>],
-    locked: &[u32],
+    locked: &Bits,
     producer: &[u32],
     groups: &[Group],
     target: usize,
@@ -672,7 +710,7 @@ fn simplify(
     vertices: &Vertices,
     level: &Chunks,
     members: &[u32],
-    locked: &[u32],
+    locked: &Bits,
     target: usize,
     weight: f32,
     edge_error: f32,
@@ -681,11 +719,9 @@ fn simplify(
     for &c in members {
         tris.extend(level.read(c as usize)?);
     }
-    let verts = vertices_of(&tris);
-    let to_local = |v: &u32| verts.binary_search(v).expect("own vertex") as u32;
-    let mut local: Vec<u32> = tris.iter().flatten().map(to_local).collect();
+    let (verts, mut local) = localize(&tris);
     let pos: Vec<[f32; 3]> = verts.iter().map(|&v| (vertices.position)(v)).collect();
-    let mut lock: Vec<bool> = verts.iter().map(|v| locked.binary_search(v).is_ok()).collect();
+    let mut lock: Vec<bool> = verts.iter().map(|&v| locked.get(v)).collect();
     let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0).expect("positions");
     // The vertices next to the border are locked too. Locking the border alone lets the
     // simplifier join two border vertices by a new edge (collapsing the vertex between
@@ -757,7 +793,7 @@ fn simplify(
     if simplified.is_empty() {
         // A group must make a chunk: one whose triangles all collapse away (a small separate
         // part), or that the simplifier only pinches, stays as it is.
-        simplified = tris.iter().map(|t| t.map(|v| to_local(&v))).collect();
+        simplified = tris.iter().map(|t| t.map(|v| verts.binary_search(&v).expect("own vertex") as u32)).collect();
         error = 0.0;
     }
     let (center, radius) = sphere_of(&pos);

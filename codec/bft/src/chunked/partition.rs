@@ -22,6 +22,25 @@ pub(super) fn split(
     (idx, leaves)
 }
 
+/// The vertices `tris` use, sorted, and each corner of `tris` as an index into them. One
+/// sort of (vertex, corner) pairs: sorting the vertices, then a binary search per corner,
+/// made gathering a group's triangles 1.4x slower.
+pub(super) fn localize(tris: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
+    let mut keyed: Vec<u64> =
+        tris.iter().flatten().enumerate().map(|(corner, &v)| (v as u64) << 32 | corner as u64).collect();
+    keyed.sort_unstable();
+    let mut verts: Vec<u32> = Vec::new();
+    let mut local = vec![0u32; keyed.len()];
+    for k in keyed {
+        let v = (k >> 32) as u32;
+        if verts.last() != Some(&v) {
+            verts.push(v);
+        }
+        local[k as u32 as usize] = verts.len() as u32 - 1;
+    }
+    (verts, local)
+}
+
 /// The vertices `tris` use, sorted.
 pub(super) fn vertices_of(tris: &[[u32; 3]]) -> Vec<u32> {
     let mut v: Vec<u32> = tris.iter().flatten().copied().collect();
