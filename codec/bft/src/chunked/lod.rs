@@ -438,14 +438,22 @@ fn group_chunks(chunks: usize, users: &[(u32, u32)]) -> Vec<Vec<u32>> {
 /// their own index, so chunks meet by vertex as before; and since an unlocked vertex is no
 /// neighbour of a border vertex, welding it gives no vertex a new border neighbour.
 fn weld_unlocked(local: &mut Vec<u32>, pos: &[[f32; 3]], lock: &[bool]) {
-    let mut order: Vec<u32> = (0..pos.len() as u32).collect();
-    let key = |v: u32| pos[v as usize].map(f32::to_bits);
-    order.sort_unstable_by_key(|&v| (key(v), !lock[v as usize], v));
+    // By position, then locked first, then by vertex: one integer a vertex (its position's
+    // bits above the unlocked flag and the index), so that the sort compares plain integers.
+    debug_assert!(pos.len() < 1 << 31);
+    let mut order: Vec<u128> = (0..pos.len())
+        .map(|v| {
+            let [x, y, z] = pos[v].map(|c| c.to_bits() as u128);
+            x << 96 | y << 64 | z << 32 | ((!lock[v]) as u128) << 31 | v as u128
+        })
+        .collect();
+    order.sort_unstable();
+    let vertex = |k: u128| (k as u32) & 0x7fff_ffff;
     let mut to: Vec<u32> = (0..pos.len() as u32).collect();
-    for run in order.chunk_by(|&a, &b| key(a) == key(b)) {
-        for &v in &run[1..] {
-            if !lock[v as usize] {
-                to[v as usize] = run[0];
+    for run in order.chunk_by(|&a, &b| a >> 32 == b >> 32) {
+        for &k in &run[1..] {
+            if !lock[vertex(k) as usize] {
+                to[vertex(k) as usize] = vertex(run[0]);
             }
         }
     }
@@ -474,31 +482,63 @@ fn mean_edge(indices: &[u32], pos: &[[f32; 3]]) -> f32 {
     (sum / indices.len().max(1) as f64) as f32
 }
 
-/// Faces per undirected edge of `indices` (a triangle list).
-fn edge_faces(indices: &[u32]) -> rustc_hash::FxHashMap<(u32, u32), u32> {
-    // Sized for a closed surface's edges (three halves of the triangles), so that the map
-    // does not grow on the way.
-    let mut faces: rustc_hash::FxHashMap<(u32, u32), u32> =
-        rustc_hash::FxHashMap::with_capacity_and_hasher(indices.len() / 2 + 16, Default::default());
-    for t in indices.chunks_exact(3) {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *faces.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+/// The undirected edges of `tris` (over `vertices` vertices) to which they give more than
+/// two faces, sorted, with their face counts. Edges are bucketed by their lower vertex (a
+/// counting sort over the group's vertices), where each bucket holds a few.
+fn crowded_edges(tris: &[[u32; 3]], vertices: usize) -> Vec<(u64, u32)> {
+    let edges = || tris.iter().flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])));
+    let mut start = vec![0u32; vertices + 1];
+    for (a, b) in edges() {
+        start[a.min(b) as usize + 1] += 1;
+    }
+    for v in 0..vertices {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut other = vec![0u32; tris.len() * 3];
+    for (a, b) in edges() {
+        let f = &mut fill[a.min(b) as usize];
+        other[*f as usize] = a.max(b);
+        *f += 1;
+    }
+    let mut crowded = Vec::new();
+    for a in 0..vertices {
+        let bucket = &mut other[start[a] as usize..start[a + 1] as usize];
+        if bucket.len() > 2 {
+            bucket.sort_unstable();
+            for run in bucket.chunk_by(|x, y| x == y).filter(|run| run.len() > 2) {
+                crowded.push(((a as u64) << 32 | run[0] as u64, run.len() as u32));
+            }
         }
     }
-    faces
+    crowded
 }
 
-/// The ends of the edges to which `out` gives more faces than two and than the input gives
-/// them (`faces`), sorted: the simplifier can squash a thin part into two sheets that share
-/// an edge (found on the armadillo: an edge of four faces in one group's output), which no
-/// cut may draw.
-fn pinched_vertices(faces: &rustc_hash::FxHashMap<(u32, u32), u32>, out: &[[u32; 3]]) -> Vec<u32> {
-    let after = edge_faces(bytemuck::cast_slice(out));
-    let mut ends: Vec<u32> = after
+/// The ends of the edges to which `out` gives more faces than two and than the `input`
+/// (a triangle list; both over `vertices` vertices) gives them, sorted: the simplifier can squash a thin part into two
+/// sheets that share an edge (found on the armadillo: an edge of four faces in one group's
+/// output), which no cut may draw. The input's faces are counted only on those edges, which
+/// are few (a map of every input edge was 4% of a hierarchy's build).
+fn pinched_vertices(input: &[u32], out: &[[u32; 3]], vertices: usize) -> Vec<u32> {
+    let crowded = crowded_edges(out, vertices);
+    if crowded.is_empty() {
+        return Vec::new();
+    }
+    let mut before = vec![0u32; crowded.len()];
+    for t in input.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let key = (a.min(b) as u64) << 32 | a.max(b) as u64;
+            if let Ok(i) = crowded.binary_search_by_key(&key, |e| e.0) {
+                before[i] += 1;
+            }
+        }
+    }
+    let mut ends: Vec<u32> = crowded
         .iter()
-        .filter(|(e, &n)| n > 2 && n > faces.get(e).copied().unwrap_or(0))
-        .flat_map(|(e, _)| [e.0, e.1])
+        .zip(&before)
+        .filter(|((_, after), &before)| *after > before)
+        .flat_map(|(&(e, _), _)| [(e >> 32) as u32, e as u32])
         .collect();
     ends.sort_unstable();
     ends.dedup();
@@ -740,7 +780,6 @@ fn simplify(
     weld_unlocked(&mut local, &pos, &lock);
     let attributes: Vec<f32> =
         if weight > 0.0 { verts.iter().flat_map(|&v| (vertices.normal)(v)).collect() } else { Vec::new() };
-    let faces = edge_faces(&local);
     // About half the triangles, within an error of `edge_error` times the group's mean edge
     // (fewer where the limit stops the simplifier). Where the simplifier pinches the surface
     // (two sheets squashed onto one edge), the pinched edges' ends and their neighbours in
@@ -777,7 +816,7 @@ fn simplify(
         };
         let mut out: Vec<[u32; 3]> = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
         cancel_folds(&mut out);
-        let pinched = pinched_vertices(&faces, &out);
+        let pinched = pinched_vertices(&local, &out, pos.len());
         if !out.is_empty() && pinched.is_empty() {
             simplified = out;
             break;
@@ -813,16 +852,17 @@ mod tests {
     fn a_pinch_is_an_edge_given_more_faces_than_the_input() {
         // A fan of two triangles and, apart from it, another: no edge has more than two faces.
         let input: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
-        let faces = edge_faces(&input);
         let same: Vec<[u32; 3]> = bytemuck::cast_slice(&input).to_vec();
-        assert!(pinched_vertices(&faces, &same).is_empty());
+        assert!(pinched_vertices(&input, &same, 8).is_empty());
         // Vertices 4 and 6 collapsed onto 0 and 2: the two sheets meet on the edge 0-2 with
         // four faces.
         let squashed = vec![[0, 1, 2], [0, 2, 3], [0, 5, 2], [0, 2, 7]];
-        assert_eq!(pinched_vertices(&faces, &squashed), vec![0, 2]);
-        // An edge the input already gives four faces (a non-manifold model) may keep them.
+        assert_eq!(pinched_vertices(&input, &squashed, 8), vec![0, 2]);
+        // An edge the input already gives four faces (a non-manifold model) may keep them,
+        // and one it gives three may not gain a fourth.
         let fins: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 0, 5, 2, 0, 2, 7];
-        let fins_faces = edge_faces(&fins);
-        assert!(pinched_vertices(&fins_faces, bytemuck::cast_slice(&fins)).is_empty());
+        assert!(pinched_vertices(&fins, bytemuck::cast_slice(&fins), 8).is_empty());
+        let three: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 0, 5, 2];
+        assert_eq!(pinched_vertices(&three, bytemuck::cast_slice(&fins), 8), vec![0, 2]);
     }
 }
