@@ -80,6 +80,11 @@ pub struct Encoded {
     pub stats: EncodeStats,
     /// The input vertex each decoded slot stands for (duplicates included).
     pub slot_vertex: Vec<u32>,
+    /// Where the encoder was asked to keep them (or the mesh has attributes): the triangles
+    /// over slots in the order the decoder will have them, and the duplicate table
+    /// `(slot, source)`; otherwise empty.
+    pub slot_triangles: Vec<[u32; 3]>,
+    pub duplicates: Vec<(u32, u32)>,
 }
 
 /// Encodes a mesh into `.bft` bytes.
@@ -96,18 +101,23 @@ pub fn encode_with_progress(
     mesh.validate()?;
     let used = mesh.used_vertices();
     let quant = Quantization::fit(&mesh.positions, Some(&used), options.quant_bits)?;
-    encode_quantized(mesh, &used, quant, &options, None, progress)
+    encode_quantized(mesh, &used, quant, &options, None, false, progress)
 }
 
 /// As [`encode_with_progress`], on a quantization given by the caller (a chunked file's
 /// chunks share the whole model's), with the mesh already validated and `used` its used
 /// vertices. Every used position must lie in the quantization's box (it is clamped).
+/// `keep_slots` keeps [`Encoded::slot_triangles`] and [`Encoded::duplicates`], the decoder's
+/// view of the triangles, so that a caller needs no decode to sum face normals as a decoder
+/// of the stream does.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn encode_quantized(
     mesh: &Mesh,
     used: &[bool],
     quant: Quantization,
     options: &EncodeOptions,
     input_index: Option<(&[u32], u32)>,
+    keep_slots: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Encoded, MeshError> {
     let (colors, normals) = options.coded(mesh);
@@ -119,7 +129,7 @@ pub(crate) fn encode_quantized(
     let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
 
     let mut tr = Traversal::new(mesh, q, quant.max_level(), &loose);
-    tr.record = colors || normals;
+    tr.record = colors || normals || keep_slots;
     tr.run(progress);
 
     // Vertices that only loose triangles use get slots after the traversal.
@@ -212,11 +222,12 @@ pub(crate) fn encode_quantized(
         offset_histogram: tr.offset_histogram,
         work: tr.work,
     };
-    let Traversal { conn, geom, vertex_of, .. } = tr;
+    let Traversal { conn, geom, vertex_of, slot_triangles, dups, .. } = tr;
     let (conn, geom) = (conn.finish(), geom.finish());
     let bytes =
         format::write(&header, [&conn, &geom, &dup_bytes, &loose_bytes, &color_bytes, &normal_bytes, &order_bytes]);
-    Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of })
+    let (slot_triangles, duplicates) = if keep_slots { (slot_triangles, dups) } else { (Vec::new(), Vec::new()) };
+    Ok(Encoded { bytes, header, stats, slot_vertex: vertex_of, slot_triangles, duplicates })
 }
 
 /// One directed edge `a -> target` of triangle `tri`, whose remaining vertex is `third`.
@@ -603,5 +614,31 @@ impl<'a> Traversal<'a> {
                 self.visit(t, [l.slot, r.slot, xs]);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What `keep_slots` keeps is what the decoder has: the triangles over slots in its order
+    /// and its duplicate table, on a mesh with a non-manifold vertex and edge (duplicate
+    /// slots) and a degenerate triangle (loose, with a vertex only it uses); and keeping them
+    /// changes no byte.
+    #[test]
+    fn kept_slots_are_the_decoders_view() {
+        let positions = (0..8).map(|i| [i as f32, (i * i % 5) as f32, (i % 3) as f32]).collect();
+        let triangles = vec![[0, 1, 2], [0, 2, 3], [0, 4, 5], [0, 5, 6], [1, 1, 7], [2, 0, 7]];
+        let mesh = Mesh::new(positions, triangles);
+        let used = mesh.used_vertices();
+        let quant = Quantization::fit(&mesh.positions, Some(&used), 12).unwrap();
+        let options = EncodeOptions::default();
+        let kept = encode_quantized(&mesh, &used, quant, &options, None, true, &mut |_, _| {}).unwrap();
+        let plain = encode_quantized(&mesh, &used, quant, &options, None, false, &mut |_, _| {}).unwrap();
+        let d = crate::bft::decode(&kept.bytes).unwrap();
+        assert!(!d.duplicates.is_empty() && d.header.loose_triangles > 0, "{:?}", d.header);
+        assert_eq!(kept.slot_triangles, d.triangles);
+        assert_eq!(kept.duplicates, d.duplicates);
+        assert!(plain.bytes == kept.bytes && plain.slot_triangles.is_empty() && plain.duplicates.is_empty());
     }
 }

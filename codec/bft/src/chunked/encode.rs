@@ -11,8 +11,9 @@
 //!    With `lod`, the hierarchy is built above the chunks from that spill, level by level
 //!    ([`super::lod::build`]), each level spilled in turn.
 //! 2. **Encode.** Batches of chunks are encoded in parallel (rayon) with the ordinary encoder
-//!    on the whole model's quantization, and decoded again to check them and to sum the face
-//!    normals of their border vertices; the streams go to a temporary file in chunk order.
+//!    on the whole model's quantization; the encoder keeps the triangles in the order a
+//!    decoder will have them, in which the face normals of the border vertices are summed;
+//!    the streams go to a temporary file in chunk order.
 //! 3. **Write.** The header, the directory, and each chunk's stream followed by its border
 //!    table, whose normals are now complete.
 //!
@@ -169,30 +170,27 @@ fn encode_chunk(
         },
     };
     let input = (&verts[..], vertices.positions.len() as u32);
-    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, Some(input), &mut |_, _| {})?;
+    // A chunk with vertices that other chunks share sums their face normals in the decoded
+    // triangle order, which is what a worker sums: the encoder keeps that order for it, so
+    // the chunk is not decoded again (decoding every chunk was a tenth of a hierarchy's
+    // build, in CPU time, on the 13.9M-triangle dragon).
+    let sums = verts.iter().any(|&v| multi(v));
+    let enc = encode_quantized(&mesh, &vec![true; verts.len()], quant, options, Some(input), sums, &mut |_, _| {})?;
     let slot_vertex: Vec<u32> = enc.slot_vertex.iter().map(|&l| verts[l as usize]).collect();
     // Every vertex of the chunk is a slot (a triangle uses it), so the slots' box is the
     // vertices' quantized box.
+    let quantized: Vec<[u32; 3]> = mesh.positions.iter().map(|p| quant.quantize(*p)).collect();
     let mut qmin = [u32::MAX; 3];
     let mut qmax = [0u32; 3];
-    for p in &mesh.positions {
-        let p = quant.quantize(*p);
+    for p in &quantized {
         for a in 0..3 {
             qmin[a] = qmin[a].min(p[a]);
             qmax[a] = qmax[a].max(p[a]);
         }
     }
-    // A chunk with vertices that other chunks share is decoded again, so that their normal
-    // sums follow the decoded triangle order, which is what a worker sums. The others (every
-    // chunk above level 0) are not: on the 13.9M-triangle dragon, decoding every chunk was
-    // a tenth of the hierarchy's build (CPU time), and those above level 0 hold 36% of the
-    // triangles encoded.
-    let partial_normals = if verts.iter().any(|&v| multi(v)) {
-        let d =
-            crate::bft::decode(&enc.bytes).map_err(|e| io::Error::other(format!("a chunk does not decode: {e}")))?;
-        let q = d.quantization();
-        let fp: Vec<[f32; 3]> = d.positions.iter().map(|&p| q.dequantize(p)).collect();
-        let (source, acc) = face_normal_sums(&fp, &d.triangles, &d.duplicates);
+    let partial_normals = if sums {
+        let fp: Vec<[f32; 3]> = enc.slot_vertex.iter().map(|&l| quant.dequantize(quantized[l as usize])).collect();
+        let (source, acc) = face_normal_sums(&fp, &enc.slot_triangles, &enc.duplicates);
         (0..fp.len())
             .filter(|&s| source[s] as usize == s && multi(slot_vertex[s]))
             .map(|s| (slot_vertex[s], acc[s]))

@@ -514,11 +514,12 @@ fn crowded_edges(tris: &[[u32; 3]], vertices: usize) -> Vec<(u64, u32)> {
     crowded
 }
 
-/// The ends of the edges to which `out` gives more faces than two and than the `input`
-/// (a triangle list; both over `vertices` vertices) gives them, sorted: the simplifier can squash a thin part into two
-/// sheets that share an edge (found on the armadillo: an edge of four faces in one group's
-/// output), which no cut may draw. The input's faces are counted only on those edges, which
-/// are few (a map of every input edge was 4% of a hierarchy's build).
+/// The ends of the edges to which `out` gives more faces than two and than the `input` (a
+/// triangle list; both over `vertices` vertices) gives them, sorted: the simplifier can
+/// squash a thin part into two sheets that share an edge (found on the armadillo: an edge of
+/// four faces in one group's output), which no cut may draw. The input's faces are counted
+/// only on those edges, which are few (maps of every input and output edge were 4% of a
+/// hierarchy's build in `perf`).
 fn pinched_vertices(input: &[u32], out: &[[u32; 3]], vertices: usize) -> Vec<u32> {
     let crowded = crowded_edges(out, vertices);
     if crowded.is_empty() {
