@@ -52,6 +52,7 @@ use super::error::{chunk_err, corrupt};
 use super::partition::{localize, split, vertices_of};
 use super::spill::{batches, ChunkWriter, Chunks};
 use crate::container::FormatError;
+use crate::csr::Csr;
 
 /// "No group": a level-0 chunk's producer, a root's consumer.
 pub const NONE: u32 = u32::MAX;
@@ -483,30 +484,18 @@ fn mean_edge(indices: &[u32], pos: &[[f32; 3]]) -> f32 {
 }
 
 /// The undirected edges of `tris` (over `vertices` vertices) to which they give more than
-/// two faces, sorted, with their face counts. Edges are bucketed by their lower vertex (a
-/// counting sort over the group's vertices), where each bucket holds a few.
+/// two faces, sorted, with their face counts. Edges are grouped by their lower vertex
+/// ([`Csr`]), where each group holds a few.
 fn crowded_edges(tris: &[[u32; 3]], vertices: usize) -> Vec<(u64, u32)> {
-    let edges = || tris.iter().flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])));
-    let mut start = vec![0u32; vertices + 1];
-    for (a, b) in edges() {
-        start[a.min(b) as usize + 1] += 1;
-    }
-    for v in 0..vertices {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut other = vec![0u32; tris.len() * 3];
-    for (a, b) in edges() {
-        let f = &mut fill[a.min(b) as usize];
-        other[*f as usize] = a.max(b);
-        *f += 1;
-    }
+    let mut by_lower = Csr::build(vertices, || {
+        tris.iter().flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+    });
     let mut crowded = Vec::new();
     for a in 0..vertices {
-        let bucket = &mut other[start[a] as usize..start[a + 1] as usize];
-        if bucket.len() > 2 {
-            bucket.sort_unstable();
-            for run in bucket.chunk_by(|x, y| x == y).filter(|run| run.len() > 2) {
+        let others = &mut by_lower.values[by_lower.start[a] as usize..by_lower.start[a + 1] as usize];
+        if others.len() > 2 {
+            others.sort_unstable();
+            for run in others.chunk_by(|x, y| x == y).filter(|run| run.len() > 2) {
                 crowded.push(((a as u64) << 32 | run[0] as u64, run.len() as u32));
             }
         }
