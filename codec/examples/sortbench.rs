@@ -1,7 +1,7 @@
 //! Steady-state timing of the BFT tile sort against the independent-triangle sort, one
 //! process, alternating runs, medians (and the fastest run of each pass, which machine noise
 //! does not move):
-//! `cargo run --release -p tessera-codec --example sortbench -- MODEL.bft [COLSxROWS] [RUNS] [range|prefix]`
+//! `cargo run --release -p tessera-codec --example sortbench -- MODEL.bft [COLSxROWS] [RUNS] [range|prefixbydegree|prefix]`
 //! Both sorts keep their buffers from run to run, as a frame loop does; the fastest runs'
 //! ratio is printed beside the medians'.
 use std::time::Instant;
@@ -26,7 +26,7 @@ fn main() {
     let grid = TileGrid::new(1920, 1080, c.parse().unwrap(), r.parse().unwrap()).expect("grid");
     let h = model.decoded.header;
     let vp = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect()).view_proj(grid.aspect());
-    for coding in [Coding::Range, Coding::Prefix] {
+    for coding in [Coding::Range, Coding::PrefixByDegree, Coding::Prefix] {
         if only.as_deref().is_some_and(|o| !format!("{coding:?}").eq_ignore_ascii_case(o)) {
             continue;
         }

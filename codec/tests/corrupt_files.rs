@@ -107,21 +107,49 @@ fn forged_checksums_reach_the_stream_decoders_safely() {
     forge_sections(&encoded("classic/suzanne.obj"));
 }
 
-/// The same for a prefix-coded stream: a tile of the sort's fast coding holding the whole
-/// model, whose truncations are all errors too.
+/// The same for prefix-coded streams (both codings): a tile of the sort's fast coding
+/// holding the whole model, whose truncations are all errors too.
 #[test]
 fn corrupt_prefix_coded_streams_are_errors() {
     let model = TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap();
     let grid = TileGrid::new(64, 64, 1, 1).unwrap();
     let h = model.decoded.header;
     let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
-    let tiles = Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap();
-    let bytes = &tiles[0].bytes;
-    assert_eq!(bft::decode(bytes).unwrap().triangles.len(), model.triangles().len());
-    for len in 0..bytes.len() {
-        assert!(bft::decode(&bytes[..len]).is_err(), "truncated to {len}");
+    for coding in [Coding::Prefix, Coding::PrefixByDegree] {
+        let tiles = Sorter::new(coding).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap();
+        let bytes = &tiles[0].bytes;
+        assert_eq!(bft::decode(bytes).unwrap().triangles.len(), model.triangles().len());
+        for len in 0..bytes.len() {
+            assert!(bft::decode(&bytes[..len]).is_err(), "{coding:?} truncated to {len}");
+        }
+        forge_sections(bytes);
     }
-    forge_sections(bytes);
+}
+
+/// Tiles of the first prefix coding, which chose a command's table by the left vertex's
+/// degree, still read; and a stream whose coding byte names no coding is refused by name.
+#[test]
+fn the_first_prefix_coding_still_reads_and_unknown_codings_are_refused() {
+    let model = TileModel::from_bytes(&encoded("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
+    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
+    let boxes = tile_sort::boxes(&model, vp, &grid);
+    let by_degree = Sorter::new(Coding::PrefixByDegree).sort(&model, &boxes, &grid).unwrap().remove(0).bytes;
+    let prefix = Sorter::new(Coding::Prefix).sort(&model, &boxes, &grid).unwrap().remove(0).bytes;
+    // The coding is byte 41 of the header, which starts at byte 12.
+    assert_eq!((by_degree[12 + 41], prefix[12 + 41]), (1, 2));
+    assert!(prefix.len() < by_degree.len(), "{} bytes against {}", prefix.len(), by_degree.len());
+    let (old, new) = (bft::decode(&by_degree).unwrap(), bft::decode(&prefix).unwrap());
+    assert_eq!((old.positions, old.triangles), (new.positions, new.triangles));
+
+    let mut unknown = prefix.clone();
+    unknown[12 + 41] = 3;
+    let h = u16::from_le_bytes([unknown[10], unknown[11]]) as usize;
+    let crc = crc32fast::hash(&unknown[12..12 + h]);
+    unknown[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
+    let e = bft::decode(&unknown).unwrap_err().to_string();
+    assert!(e.contains("entropy coding 3"), "{e}");
 }
 
 fn forge_sections(bytes: &[u8]) {

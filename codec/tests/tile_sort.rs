@@ -10,11 +10,12 @@ use glam::Vec3;
 use proptest::prelude::*;
 use testkit::canonical;
 
-/// Sorts with both codings and checks every tile; returns (non-empty tiles, triangle-tile
+/// Sorts with every coding and checks every tile; returns (non-empty tiles, triangle-tile
 /// pairs).
 fn check_sort(model: &TileModel, cam: &Camera, grid: &TileGrid) -> (usize, usize) {
     let range = check_coding(model, cam, grid, Coding::Range);
     assert_eq!(check_coding(model, cam, grid, Coding::Prefix), range);
+    assert_eq!(check_coding(model, cam, grid, Coding::PrefixByDegree), range);
     range
 }
 

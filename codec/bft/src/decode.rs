@@ -9,7 +9,7 @@
 use super::attributes::{self, SlotAttributes};
 use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{basis_position, command_context, predict, Prediction, RangeSource, SymbolSource};
+use super::model::{command_context, RangeSource, SymbolSource};
 use super::prefix::PrefixSource;
 use crate::command::Command;
 use crate::mesh::{Mesh, Quantization};
@@ -147,7 +147,12 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
 
     let (mut decoded, ops) = match h.coding {
         Coding::Range => decode_streams(h, RangeSource::new(conn, geom), duplicates, loose_bytes, record),
-        Coding::Prefix => decode_streams(h, PrefixSource::new(conn, geom)?, duplicates, loose_bytes, record),
+        Coding::PrefixByDegree => {
+            decode_streams(h, PrefixSource::<true>::new(conn, geom, h.commands)?, duplicates, loose_bytes, record)
+        }
+        Coding::Prefix => {
+            decode_streams(h, PrefixSource::<false>::new(conn, geom, h.commands)?, duplicates, loose_bytes, record)
+        }
     }?;
     let flags = h.attributes;
     let input = attributes::Input {
@@ -185,8 +190,6 @@ fn decode_streams<S: SymbolSource>(
         positions: Vec::with_capacity((h.slots as usize).min(CAP)),
         deg: Vec::with_capacity((h.slots as usize).min(CAP)),
         triangles: Vec::with_capacity((h.triangles as usize).min(CAP)),
-        dups: &duplicates,
-        next_dup: 0,
         max: (1u32 << h.quant_bits) - 1,
         slots: h.slots,
         ops: if record { Vec::with_capacity((h.commands as usize).min(CAP)) } else { Vec::new() },
@@ -196,15 +199,12 @@ fn decode_streams<S: SymbolSource>(
     st.run(h.commands, h.triangles - h.loose_triangles)?;
     for _ in 0..h.tail_slots {
         let prev = st.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
-        st.new_slot(Prediction::Previous, [prev, NONE, NONE])?;
-        // Past the stream's end positions decode from zeros: stop there, not at the count.
-        if st.source.overrun()[1] > 8 {
-            return Err(BftError::Truncated("geometry stream"));
-        }
+        st.new_slot([prev, NONE, NONE])?;
     }
     if st.positions.len() != h.slots as usize {
         return Err(corrupt(format!("decoded {} vertex slots, header says {}", st.positions.len(), h.slots)));
     }
+    st.source.positions(&mut st.positions, &duplicates, st.max)?;
     let [conn_over, geom_over] = st.source.overrun();
     if conn_over > 0 {
         return Err(BftError::Truncated("connectivity stream"));
@@ -232,59 +232,45 @@ fn decode_streams<S: SymbolSource>(
     Ok((Decoded { header: h, positions, triangles, duplicates, attributes: SlotAttributes::default() }, ops))
 }
 
-struct State<'a, S> {
+struct State<S> {
     source: S,
     f: Frontier,
     positions: Vec<[u32; 3]>,
     deg: Vec<u8>,
     triangles: Vec<[u32; 3]>,
-    dups: &'a [(u32, u32)],
-    next_dup: usize,
     max: u32,
     slots: u32,
     ops: Vec<Op>,
     record: bool,
 }
 
-impl<S: SymbolSource> State<'_, S> {
+impl<S: SymbolSource> State<S> {
+    /// Adds a slot whose position [`SymbolSource::positions`] decodes after the
+    /// connectivity, from the slots in `basis`, which stands in its place until then.
     #[inline]
-    fn slot_pos(&self, slot: u32) -> [u32; 3] {
-        basis_position(&self.positions, slot, self.max)
-    }
-
-    #[inline]
-    fn new_slot(&mut self, kind: Prediction, basis: [u32; 3]) -> Result<u32, BftError> {
+    fn new_slot(&mut self, basis: [u32; 3]) -> Result<u32, BftError> {
         let s = self.positions.len() as u32;
         if s >= self.slots {
             return Err(corrupt(format!("more vertex slots than the header's {}", self.slots)));
         }
-        let p = match self.dups.get(self.next_dup) {
-            Some(&(slot, source)) if slot == s => {
-                self.next_dup += 1;
-                self.positions[source as usize]
-            }
-            _ => {
-                let pred =
-                    predict(kind, self.slot_pos(basis[0]), self.slot_pos(basis[1]), self.slot_pos(basis[2]), self.max);
-                self.source
-                    .position(kind, pred, self.max)
-                    .ok_or_else(|| corrupt(format!("position of vertex {s} is outside the quantization grid")))?
-            }
-        };
-        self.positions.push(p);
-        self.deg.push(0);
+        self.positions.push(basis);
+        if S::DEGREES {
+            self.deg.push(0);
+        }
         Ok(s)
     }
 
     #[inline]
     fn emit(&mut self, t: [u32; 3]) {
-        for s in t {
+        // Degrees are context only where the source reads the frontier.
+        for s in t.into_iter().filter(|_| S::DEGREES) {
             let d = &mut self.deg[s as usize];
             *d = d.saturating_add(1);
         }
         self.triangles.push(t);
     }
 
+    #[inline(always)]
     fn need(&self, n: usize, cmd: Command) -> Result<(), BftError> {
         if self.f.len() < n {
             return Err(corrupt(format!("{cmd:?} on a frontier of {} vertices", self.f.len())));
@@ -292,8 +278,9 @@ impl<S: SymbolSource> State<'_, S> {
         Ok(())
     }
 
-    fn offset(&mut self, cmd: Command, limit: usize) -> Result<usize, BftError> {
-        let k = self.source.offset(cmd).ok_or_else(|| corrupt("bad offset code"))? as usize;
+    #[inline(always)]
+    fn check_offset(&self, cmd: Command, k: u32, limit: usize) -> Result<usize, BftError> {
+        let k = k as usize;
         if k >= limit {
             return Err(corrupt(format!("{cmd:?} offset {k} past the frontier ({} vertices)", self.f.len())));
         }
@@ -301,80 +288,29 @@ impl<S: SymbolSource> State<'_, S> {
     }
 
     fn run(&mut self, commands: u32, triangles: u32) -> Result<(), BftError> {
-        let mut prev = Command::Seed;
-        for _ in 0..commands {
-            let len = self.f.len();
-            let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
-            let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
-            let ctx = command_context(prev, dl, dr);
-            let cmd = self.source.command(ctx).ok_or_else(|| corrupt("invalid command code"))?;
-            let mut offset = 0;
-            match cmd {
-                Command::New => {
-                    self.need(2, cmd)?;
-                    let (l, r) = (self.f.at(0), self.f.at(1));
-                    let kind = if l.apex != NONE { Prediction::Parallelogram } else { Prediction::Midpoint };
-                    let s = self.new_slot(kind, [l.slot, r.slot, l.apex])?;
-                    self.f.insert(s);
-                    self.emit([l.slot, r.slot, s]);
+        // What stops a forged stream (more triangles than the header's, reading far past the
+        // data) and the frontier's compaction are checked once a block of commands: a block
+        // adds at most `BLOCK` triangles and reads a bounded number of bits.
+        const BLOCK: u32 = 256;
+        let mut next = if commands > 0 && !S::DEGREES { self.read(Command::Seed)? } else { (Command::Seed, 0) };
+        let mut done = 0;
+        while done < commands {
+            let block = BLOCK.min(commands - done);
+            done += block;
+            for i in 0..block {
+                if !S::DEGREES {
+                    // The next command is read before this one is carried out: its context is
+                    // this command, and the reads' chain then runs on while the branch on
+                    // this command's kind, which no predictor guesses, is resolved.
+                    let (cmd, k) = next;
+                    if done - block + i + 1 < commands {
+                        next = self.read(cmd)?;
+                    }
+                    self.execute(cmd, k)?;
+                } else {
+                    next = self.read(next.0)?;
+                    self.execute(next.0, next.1)?;
                 }
-                Command::Rf0 => {
-                    self.need(3, cmd)?;
-                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(2).slot];
-                    self.f.remove_right(true);
-                    self.emit(t);
-                }
-                Command::Lf0 => {
-                    self.need(3, cmd)?;
-                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(len - 1).slot];
-                    self.f.remove_left(true);
-                    self.emit(t);
-                }
-                Command::Rf | Command::Lf => {
-                    self.need(3, cmd)?;
-                    let k = self.offset(cmd, len - 2)?;
-                    offset = k;
-                    let i = if cmd == Command::Rf { 2 + k } else { len - 1 - k };
-                    let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
-                    self.f.insert(t[2]);
-                    self.emit(t);
-                }
-                Command::Null => {
-                    self.need(1, cmd)?;
-                    self.f.skip();
-                }
-                Command::Dl => {
-                    self.need(1, cmd)?;
-                    self.f.remove_left(false);
-                }
-                Command::Dr => {
-                    self.need(2, cmd)?;
-                    self.f.remove_right(false);
-                }
-                Command::AddNew => {
-                    let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
-                    let s = self.new_slot(Prediction::Previous, [prev_slot, NONE, NONE])?;
-                    self.f.add(s);
-                }
-                Command::AddRef => {
-                    self.need(1, cmd)?;
-                    let k = self.offset(cmd, len)?;
-                    offset = k;
-                    let x = self.f.at(len - 1 - k).slot;
-                    self.f.add(x);
-                }
-                Command::Seed => {
-                    let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
-                    let s = self.new_slot(Prediction::Previous, [prev_slot, NONE, NONE])?;
-                    self.new_slot(Prediction::Previous, [s, NONE, NONE])?;
-                    self.new_slot(Prediction::Midpoint, [s, s + 1, NONE])?;
-                    self.f.seed(s);
-                    self.emit([s, s + 2, s + 1]);
-                }
-                Command::Clear => self.f.clear(),
-            }
-            if self.record {
-                self.ops.push(Op { cmd, offset: offset as u32 });
             }
             self.f.compact();
             if self.triangles.len() > triangles as usize {
@@ -383,10 +319,101 @@ impl<S: SymbolSource> State<'_, S> {
             if self.source.overrun()[0] > 8 {
                 return Err(BftError::Truncated("connectivity stream"));
             }
-            prev = cmd;
         }
         if self.triangles.len() != triangles as usize {
             return Err(corrupt(format!("decoded {} triangles, header says {triangles}", self.triangles.len())));
+        }
+        Ok(())
+    }
+
+    /// Reads the command after `prev`, and its offset where it has one (0 otherwise).
+    #[inline(always)]
+    fn read(&mut self, prev: Command) -> Result<(Command, u32), BftError> {
+        let ctx = if !S::DEGREES {
+            command_context(prev, 0, 0)
+        } else {
+            let len = self.f.len();
+            let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
+            let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
+            command_context(prev, dl, dr)
+        };
+        let cmd = self.source.command(ctx).ok_or_else(|| corrupt("invalid command code"))?;
+        let k = match cmd {
+            Command::Rf | Command::Lf | Command::AddRef => {
+                self.source.offset(cmd).ok_or_else(|| corrupt("bad offset code"))?
+            }
+            _ => 0,
+        };
+        Ok((cmd, k))
+    }
+
+    /// Carries out `cmd` with its offset `k`.
+    #[inline(always)]
+    fn execute(&mut self, cmd: Command, k: u32) -> Result<(), BftError> {
+        let len = self.f.len();
+        match cmd {
+            Command::New => {
+                self.need(2, cmd)?;
+                let (l, r) = (self.f.at(0), self.f.at(1));
+                let s = self.new_slot([l.slot, r.slot, l.apex])?;
+                self.f.insert(s);
+                self.emit([l.slot, r.slot, s]);
+            }
+            Command::Rf0 => {
+                self.need(3, cmd)?;
+                let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(2).slot];
+                self.f.remove_right(true);
+                self.emit(t);
+            }
+            Command::Lf0 => {
+                self.need(3, cmd)?;
+                let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(len - 1).slot];
+                self.f.remove_left(true);
+                self.emit(t);
+            }
+            Command::Rf | Command::Lf => {
+                self.need(3, cmd)?;
+                let k = self.check_offset(cmd, k, len - 2)?;
+                let i = if cmd == Command::Rf { 2 + k } else { len - 1 - k };
+                let t = [self.f.at(0).slot, self.f.at(1).slot, self.f.at(i).slot];
+                self.f.insert(t[2]);
+                self.emit(t);
+            }
+            Command::Null => {
+                self.need(1, cmd)?;
+                self.f.skip();
+            }
+            Command::Dl => {
+                self.need(1, cmd)?;
+                self.f.remove_left(false);
+            }
+            Command::Dr => {
+                self.need(2, cmd)?;
+                self.f.remove_right(false);
+            }
+            Command::AddNew => {
+                let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
+                let s = self.new_slot([prev_slot, NONE, NONE])?;
+                self.f.add(s);
+            }
+            Command::AddRef => {
+                self.need(1, cmd)?;
+                let k = self.check_offset(cmd, k, len)?;
+                let x = self.f.at(len - 1 - k).slot;
+                self.f.add(x);
+            }
+            Command::Seed => {
+                let prev_slot = self.positions.len().checked_sub(1).map_or(NONE, |s| s as u32);
+                let s = self.new_slot([prev_slot, NONE, NONE])?;
+                self.new_slot([s, NONE, NONE])?;
+                self.new_slot([s, s + 1, NONE])?;
+                self.f.seed(s);
+                self.emit([s, s + 2, s + 1]);
+            }
+            Command::Clear => self.f.clear(),
+        }
+        if self.record {
+            self.ops.push(Op { cmd, offset: k });
         }
         Ok(())
     }

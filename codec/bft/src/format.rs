@@ -19,7 +19,9 @@
 //! when the header's coding byte (offset 41 of the header) says so ([`Coding`]). Version 2
 //! gave that byte its meaning; in version 1 it was reserved and zero, so a version 1 file is
 //! range-coded (and one with a non-zero byte 41 is corrupt), and a reader of version 1 alone
-//! refuses a version 2 file rather than misread a prefix-coded one. `DUPS` is the duplicate
+//! refuses a version 2 file rather than misread a prefix-coded one. A coding added since takes
+//! a new value of byte 41 ([`Coding::Prefix`] is 2), which a reader that does not know it
+//! refuses by number. `DUPS` is the duplicate
 //! table (LEB128: count, then per entry the slot's gap from the previous entry and the
 //! source slot); `LOOS` holds loose triangles (LEB128: three slots each). Nothing may follow
 //! the last section.
@@ -121,9 +123,14 @@ pub enum Coding {
     #[default]
     Range = 0,
     /// Static canonical Huffman codes, a table per context stored at the head of each stream,
-    /// sign and mantissa bits raw: a few percent larger and several times faster to write and
-    /// read. The tile sort's fast mode writes it (see `codec::bft::prefix`).
-    Prefix = 1,
+    /// sign and mantissa bits raw, with a command's table chosen by the previous command's
+    /// class and the left vertex's degree. What the tile sort wrote before
+    /// [`Coding::Prefix`]; still read, and written only where asked for.
+    PrefixByDegree = 1,
+    /// As [`Coding::PrefixByDegree`], with a command's table chosen by the previous command
+    /// alone: a few percent larger than [`Coding::Range`] and several times faster to write
+    /// and read. The tile sort's fast mode writes it (see `codec::bft::prefix`).
+    Prefix = 2,
 }
 
 /// The fixed header: counts, quantization and bounding box.
@@ -199,7 +206,8 @@ impl Header {
             quant_bits: b[40],
             coding: match b[41] {
                 0 => Coding::Range,
-                1 => Coding::Prefix,
+                1 => Coding::PrefixByDegree,
+                2 => Coding::Prefix,
                 c => return Err(corrupt(format!("unknown entropy coding {c}"))),
             },
             bbox_min: [f(44), f(48), f(52)],
@@ -424,7 +432,7 @@ pub fn wrap_for_fuzzing(data: &[u8]) -> Vec<u8> {
         tail_slots: byte(10) % 4,
         components: 0,
         quant_bits: 8 + (byte(11) % 17) as u8,
-        coding: if byte(12) & 1 == 0 { Coding::Range } else { Coding::Prefix },
+        coding: [Coding::Range, Coding::PrefixByDegree, Coding::Prefix][byte(12) as usize % 3],
         bbox_min: [0.0; 3],
         step: 1.0,
         bbox_max: [1.0; 3],

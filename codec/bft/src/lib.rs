@@ -79,10 +79,14 @@
 //! triangle that created the edge, kept per frontier entry); residuals are coded by their
 //! bit length, sign and mantissa.
 //!
-//! A stream may instead be prefix-coded ([`Coding::Prefix`], `prefix.rs`): the same symbols
-//! and contexts (fewer command contexts), with static Huffman tables built for the stream and
-//! stored at its head. The tile sort writes its tiles that way when asked, because it codes
-//! every tile anew each frame; files from `tessera encode` are always range-coded.
+//! A stream may instead be prefix-coded ([`Coding::Prefix`], `prefix.rs`): the same symbols,
+//! with static Huffman tables built for the stream and stored at its head, and a command's
+//! table chosen by the previous command alone. Without the frontier's degrees in its context
+//! a decoder reads each command before it carries out the one before, and keeps no degrees.
+//! The first prefix coding ([`Coding::PrefixByDegree`], header byte 41 = 1) chose the table
+//! by the previous command's class and `l`'s degree; it still reads. The tile sort writes its
+//! tiles prefix-coded when asked, because it codes every tile anew each frame; files from
+//! `tessera encode` are always range-coded.
 
 // The paths the modules were written with when they were one crate (`crate::mesh`,
 // `crate::bft::...`), kept for the crate's own files.

@@ -1,6 +1,7 @@
-//! [`Coding::Prefix`](super::Coding::Prefix): the same symbols as the range-coded streams
-//! (commands in context, offsets and residuals by bit length), coded with static canonical
-//! Huffman codes built for the one stream, and stored at its head.
+//! [`Coding::Prefix`](super::Coding::Prefix) and
+//! [`Coding::PrefixByDegree`](super::Coding::PrefixByDegree): the same symbols as the
+//! range-coded streams (commands in context, offsets and residuals by bit length), coded with
+//! static canonical Huffman codes built for the one stream, and stored at its head.
 //!
 //! Why a second coding: the tile sort re-codes every tile every frame, and with the adaptive
 //! range coder that coding was most of the sort (a binary decision, with its multiply and
@@ -12,9 +13,10 @@
 //!
 //! Stream layout, MSB-first bits, padded to a byte:
 //! - `CONN`: [`COMMAND_TABLES`] command tables (12 symbols, by [`Context::prefix_table`] of the
-//!   command context), 3 offset tables (`RF<k>`, `LF<k>`, `ADD<k>`; the offset's bit length
-//!   0..=32), then per command its code, and after an offset command the offset's length code
-//!   and the bits below its leading one.
+//!   command context: the previous command; by [`Context::prefix_table_by_degree`] in
+//!   [`Coding::PrefixByDegree`](super::Coding::PrefixByDegree)), 3 offset tables (`RF<k>`,
+//!   `LF<k>`, `ADD<k>`; the offset's bit length 0..=32), then per command its code, and after
+//!   an offset command the offset's length code and the bits below its leading one.
 //! - `GEOM`: 9 residual tables (prediction kind x axis; the residual's bit length 0..=25),
 //!   then per axis of each coded position the length code, and for a nonzero residual its sign
 //!   and the bits below its leading one.
@@ -22,14 +24,14 @@
 //!   (0: no code), at most [`MAX_CODE_LEN`].
 
 use super::format::{corrupt, BftError};
-use super::model::{Context, Prediction, SymbolSink, SymbolSource};
+use super::model::{decode_positions, Context, Prediction, ResidualSource, SymbolSink, SymbolSource};
 use crate::command::Command;
 use crate::huffman::{BitReader, BitWriter, Table};
 
 /// Longest code: lengths are stored in 4 bits.
 pub const MAX_CODE_LEN: u8 = 15;
-/// Command tables: the previous command's class (3) times the left vertex's visited degree
-/// (0, 1, 2, 3 or more).
+/// Command tables: one per previous command (or, by degree, the previous command's class (3)
+/// times the left vertex's visited degree: 0, 1, 2, 3 or more).
 pub const COMMAND_TABLES: usize = 12;
 const COMMANDS: usize = Command::ALL.len();
 const OFFSET_SYMBOLS: usize = 33;
@@ -93,9 +95,19 @@ fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
     counts.iter().map(|c| Table::from_counts(c, MAX_CODE_LEN)).collect()
 }
 
+/// The command table of `ctx` in the coding `BY_DEGREE` names.
+#[inline(always)]
+fn command_table<const BY_DEGREE: bool>(ctx: Context) -> usize {
+    if BY_DEGREE {
+        ctx.prefix_table_by_degree()
+    } else {
+        ctx.prefix_table()
+    }
+}
+
 /// The writer: buffers and counts the stream's symbols, then codes them in
-/// [`SymbolSink::finish`].
-pub(crate) struct PrefixSink {
+/// [`SymbolSink::finish`]. `BY_DEGREE` writes [`Coding::PrefixByDegree`](super::Coding::PrefixByDegree).
+pub(crate) struct PrefixSink<const BY_DEGREE: bool = false> {
     /// Per command `table << 4 | command`, followed by its offset for `RF<k>`, `LF<k>`, `ADD<k>`.
     conn: Vec<u32>,
     /// Per axis of each position: `table << 5 | bit length`, and the residual's magnitude
@@ -107,7 +119,9 @@ pub(crate) struct PrefixSink {
     geo_counts: [[u64; RESIDUAL_SYMBOLS]; GEOMETRY_TABLES],
 }
 
-impl SymbolSink for PrefixSink {
+impl<const BY_DEGREE: bool> SymbolSink for PrefixSink<BY_DEGREE> {
+    const DEGREES: bool = BY_DEGREE;
+
     fn with_capacity(commands: usize, positions: usize) -> Self {
         PrefixSink {
             conn: Vec::with_capacity(commands + commands / 8),
@@ -120,7 +134,7 @@ impl SymbolSink for PrefixSink {
 
     #[inline]
     fn command(&mut self, ctx: Context, cmd: Command) {
-        let table = ctx.prefix_table();
+        let table = command_table::<BY_DEGREE>(ctx);
         self.cmd_counts[table][cmd as usize] += 1;
         self.conn.push((table as u32) << 4 | cmd as u32);
     }
@@ -178,24 +192,147 @@ impl SymbolSink for PrefixSink {
     }
 }
 
-/// The reader.
-pub(crate) struct PrefixSource<'a> {
+/// Bits of a command's code that [`PrefixSource`]'s flat lookup table resolves; nearly all
+/// commands' codes are shorter.
+const COMMAND_LUT_BITS: u32 = 8;
+
+fn command_lut(tables: &[Table]) -> Vec<u16> {
+    let k = COMMAND_LUT_BITS;
+    let mut lut = vec![0u16; tables.len() << k];
+    for (t, table) in tables.iter().enumerate() {
+        for (sym, &len) in table.lens.iter().enumerate() {
+            let len = len as u32;
+            if len == 0 || len > k {
+                continue;
+            }
+            // Every index the code starts.
+            let start = t << k | (table.code(sym as u8).0 << (k - len)) as usize;
+            lut[start..start + (1 << (k - len))].fill((sym as u16) << 4 | len as u16);
+        }
+    }
+    lut
+}
+
+/// Bits of a residual, its length's code and raw bits together, that [`PrefixSource`]'s
+/// residual lookup tables resolve.
+const RESIDUAL_LUT_BITS: u32 = 11;
+
+fn residual_lut(tables: &[Table]) -> Vec<i32> {
+    let k = RESIDUAL_LUT_BITS;
+    let mut lut = vec![0i32; tables.len() << k];
+    for (t, table) in tables.iter().enumerate() {
+        for (len, &code_len) in table.lens.iter().enumerate() {
+            let (len, code_len) = (len as u32, code_len as u32);
+            let total = code_len + len;
+            if code_len == 0 || total > k {
+                continue;
+            }
+            let code = (table.code(len as u8).0 as usize) << len;
+            for raw in 0..1usize << len {
+                let window = if len == 0 { 0 } else { (raw as u64) << (64 - len) };
+                let start = t << k | (code | raw) << (k - total);
+                lut[start..start + (1 << (k - total))].fill((residual(window, len) as i32) << 8 | total as i32);
+            }
+        }
+    }
+    lut
+}
+
+/// The residual of bit length `len` whose sign and bits below the leading one start
+/// `window`. Without a branch on `len` or the sign, which no predictor guesses.
+#[inline(always)]
+fn residual(window: u64, len: u32) -> i64 {
+    let raw = (window >> 1 >> (63 - len)) as i64;
+    let lead = (1i64 << len) >> 1;
+    let m = lead | (raw & (lead - 1).max(0));
+    let negative = -((raw & lead != 0) as i64);
+    (m ^ negative) - negative
+}
+
+/// The reader; `BY_DEGREE` reads [`Coding::PrefixByDegree`](super::Coding::PrefixByDegree).
+pub(crate) struct PrefixSource<'a, const BY_DEGREE: bool = false> {
     conn: BitReader<'a>,
     geom: BitReader<'a>,
     cmd_tables: Vec<Table>,
+    /// The command tables' first [`COMMAND_LUT_BITS`] bits side by side, `symbol << 4 |
+    /// length` (0 for a longer code, which [`Table::lookup`] decodes; empty below
+    /// [`LUT_COMMANDS`]): with the previous command as the context, the next command's entry
+    /// is one index away from this one's.
+    cmd_lut: Vec<u16>,
     off_tables: Vec<Table>,
     geo_tables: Vec<Table>,
+    /// Per residual table, per value of the next [`RESIDUAL_LUT_BITS`] bits: the residual
+    /// they code, `value << 8 | bits` (code and raw bits together), or 0 where they do not
+    /// hold all of it (empty below [`LUT_COMMANDS`]).
+    geo_lut: Vec<i32>,
 }
 
-impl<'a> PrefixSource<'a> {
-    pub fn new(conn: &'a [u8], geom: &'a [u8]) -> Result<Self, BftError> {
+/// Commands a stream has at least for [`PrefixSource`] to build its lookup tables (78 KB):
+/// a smaller one decodes through each code table's own. Measured on the 16-bit dragon's
+/// tiles (all of a grid's, best of 30): building them always doubled the decode of a 64x64
+/// grid's 605 bunny tiles of 170 triangles (17.5-17.8 ms against 8.7-8.8), broke even on a
+/// 32x32 grid's dragon tiles of 5,300 (36.2-37.4 Mtri/s against 36.4-37.9), and gained 9-13%
+/// on 16x16 and 8x8 grids (46.0-47.2 against 41.6-42.4).
+const LUT_COMMANDS: u32 = 4096;
+
+impl<'a, const BY_DEGREE: bool> PrefixSource<'a, BY_DEGREE> {
+    /// The reader of a stream of `commands` commands.
+    pub fn new(conn: &'a [u8], geom: &'a [u8], commands: u32) -> Result<Self, BftError> {
         let (mut c, mut g) = (BitReader::new(conn, 0), BitReader::new(geom, 0));
-        let cmd_tables =
+        let cmd_tables: Vec<Table> =
             (0..COMMAND_TABLES).map(|_| read_table(&mut c, COMMANDS, "command")).collect::<Result<_, _>>()?;
         let off_tables = (0..3).map(|_| read_table(&mut c, OFFSET_SYMBOLS, "offset")).collect::<Result<_, _>>()?;
-        let geo_tables =
+        let geo_tables: Vec<Table> =
             (0..GEOMETRY_TABLES).map(|_| read_table(&mut g, RESIDUAL_SYMBOLS, "residual")).collect::<Result<_, _>>()?;
-        Ok(PrefixSource { conn: c, geom: g, cmd_tables, off_tables, geo_tables })
+        let (cmd_lut, geo_lut) = if commands >= LUT_COMMANDS {
+            (command_lut(&cmd_tables), residual_lut(&geo_tables))
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        Ok(PrefixSource { conn: c, geom: g, cmd_tables, cmd_lut, off_tables, geo_tables, geo_lut })
+    }
+}
+
+/// `GEOM`'s reader and tables, for [`decode_positions`].
+struct Residuals<'a, 't> {
+    r: BitReader<'a>,
+    tables: &'t [Table],
+    lut: &'t [i32],
+}
+
+impl ResidualSource for Residuals<'_, '_> {
+    /// Per axis, the residual's bit length, then for a nonzero residual its sign and the
+    /// bits below its leading one: mostly one lookup of both.
+    #[inline(always)]
+    fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
+        let mut out = [0u32; 3];
+        for axis in 0..3 {
+            let t = kind as usize * 3 + axis;
+            // A residual is at most 15 bits of code and 25 raw.
+            let w = self.r.window_of::<40>();
+            let e = self.lut.get(t << RESIDUAL_LUT_BITS | (w >> (64 - RESIDUAL_LUT_BITS)) as usize);
+            let (d, bits) = if let Some(&e) = e.filter(|&&e| e != 0) {
+                ((e >> 8) as i64, e as u32 & 255)
+            } else {
+                let (len, code_len) = self.tables[t].lookup(w)?;
+                let len = len as u32;
+                if len >= RESIDUAL_SYMBOLS as u32 {
+                    return None;
+                }
+                (residual(w << code_len, len), code_len + len)
+            };
+            self.r.consume(bits);
+            let v = pred[axis] as i64 + d;
+            if v < 0 || v > max as i64 {
+                return None;
+            }
+            out[axis] = v as u32;
+        }
+        Some(out)
+    }
+
+    fn overrun(&self) -> usize {
+        self.r.overrun().div_ceil(8) as usize
     }
 }
 
@@ -205,7 +342,8 @@ impl<'a> PrefixSource<'a> {
 /// reports.
 #[inline(always)]
 fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
-    let w = r.window();
+    // A code and at most 31 bits below the leading one.
+    let w = r.window_of::<{ MAX_CODE_LEN as u32 + 31 }>();
     let (len, code_len) = table.lookup(w)?;
     let len = len as u32;
     if len > max_len {
@@ -218,47 +356,34 @@ fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
     Some(if len >= 2 { 1 << mantissa | low } else { len })
 }
 
-impl SymbolSource for PrefixSource<'_> {
-    #[inline]
+impl<const BY_DEGREE: bool> SymbolSource for PrefixSource<'_, BY_DEGREE> {
+    const DEGREES: bool = BY_DEGREE;
+
+    #[inline(always)]
     fn command(&mut self, ctx: Context) -> Option<Command> {
-        let w = self.conn.window();
-        let (sym, code_len) = self.cmd_tables[ctx.prefix_table()].lookup(w)?;
+        let w = self.conn.window_of::<{ MAX_CODE_LEN as u32 }>();
+        let table = command_table::<BY_DEGREE>(ctx);
+        let e = self.cmd_lut.get(table << COMMAND_LUT_BITS | (w >> (64 - COMMAND_LUT_BITS)) as usize);
+        let (sym, code_len) = match e {
+            Some(&e) if e != 0 => ((e >> 4) as u8, e as u32 & 15),
+            _ => self.cmd_tables[table].lookup(w)?,
+        };
         self.conn.consume(code_len);
         BY_CODE.get(sym as usize).copied()
     }
 
-    #[inline]
+    #[inline(always)]
     fn offset(&mut self, cmd: Command) -> Option<u32> {
         read_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32)
     }
 
-    /// Per axis, the residual's bit length, then for a nonzero residual its sign and the
-    /// bits below its leading one, all from one window.
-    #[inline]
-    fn position(&mut self, kind: Prediction, pred: [u32; 3], max: u32) -> Option<[u32; 3]> {
-        let mut out = [0u32; 3];
-        for axis in 0..3 {
-            let table = &self.geo_tables[kind as usize * 3 + axis];
-            let w = self.geom.window();
-            let (len, code_len) = table.lookup(w)?;
-            let len = len as u32;
-            if len >= RESIDUAL_SYMBOLS as u32 {
-                return None;
-            }
-            // The sign and the bits below the leading one: `len` raw bits. Without a branch
-            // on `len` or the sign, which no predictor guesses.
-            let raw = (w << code_len >> 1 >> (63 - len)) as i64;
-            self.geom.consume(code_len + len);
-            let lead = (1i64 << len) >> 1;
-            let m = lead | (raw & (lead - 1).max(0));
-            let negative = -((raw & lead != 0) as i64);
-            let v = pred[axis] as i64 + ((m ^ negative) - negative);
-            if v < 0 || v > max as i64 {
-                return None;
-            }
-            out[axis] = v as u32;
-        }
-        Some(out)
+    fn positions(&mut self, slots: &mut [[u32; 3]], dups: &[(u32, u32)], max: u32) -> Result<(), BftError> {
+        // The reader is copied into a local for the pass, so its state stays in registers
+        // instead of going through memory for every residual.
+        let mut geom = Residuals { r: self.geom.clone(), tables: &self.geo_tables, lut: &self.geo_lut };
+        let result = decode_positions(&mut geom, slots, dups, max);
+        self.geom = geom.r;
+        result
     }
 
     /// Bytes read past the end of each stream (as zeros).

@@ -437,6 +437,7 @@ impl Sorter {
                 let lists = chunks.iter().map(|c| c[b].as_slice());
                 match coding {
                     Coding::Range => write_tile::<RangeSink>(model, lists, n, b, coding),
+                    Coding::PrefixByDegree => write_tile::<PrefixSink<true>>(model, lists, n, b, coding),
                     Coding::Prefix => write_tile::<PrefixSink>(model, lists, n, b, coding),
                 }
             })

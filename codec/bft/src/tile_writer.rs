@@ -38,7 +38,7 @@ impl<S: SymbolSink> TileWriter<S> {
         let vertices = commands / 2 + 16;
         TileWriter {
             f: Frontier { entries: Vec::with_capacity(commands * 2), head: 0 },
-            deg: Vec::with_capacity(vertices),
+            deg: if S::DEGREES { Vec::with_capacity(vertices) } else { Vec::new() },
             positions: Vec::with_capacity(vertices),
             global: Vec::with_capacity(vertices),
             sink: S::with_capacity(commands, vertices),
@@ -55,9 +55,12 @@ impl<S: SymbolSink> TileWriter<S> {
 
     #[inline]
     fn code(&mut self, cmd: Command) {
-        let len = self.f.len();
-        let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
-        let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
+        let (mut dl, mut dr) = (0, 0);
+        if S::DEGREES {
+            let len = self.f.len();
+            dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
+            dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
+        }
         self.sink.command(command_context(self.prev, dl, dr), cmd);
         self.prev = cmd;
         self.commands += 1;
@@ -73,7 +76,9 @@ impl<S: SymbolSink> TileWriter<S> {
         self.sink.position(kind, q, pred);
         let s = self.positions.len() as u32;
         self.positions.push(q);
-        self.deg.push(0);
+        if S::DEGREES {
+            self.deg.push(0);
+        }
         self.global.push(global);
         s
     }
@@ -84,7 +89,7 @@ impl<S: SymbolSink> TileWriter<S> {
 
     #[inline]
     fn emit(&mut self, t: [u32; 3]) {
-        for s in t {
+        for s in t.into_iter().filter(|_| S::DEGREES) {
             let d = &mut self.deg[s as usize];
             *d = d.saturating_add(1);
         }

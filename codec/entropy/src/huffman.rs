@@ -283,6 +283,7 @@ pub const WINDOW: u32 = 56;
 /// MSB-first bit reader over a byte slice from a starting byte. Reads past the end fail
 /// (`None`) and consume nothing; a [`BitReader::window`] shows zeros past the end, and
 /// [`BitReader::overrun`] counts what was consumed of them.
+#[derive(Clone)]
 pub struct BitReader<'a> {
     data: &'a [u8],
     start: usize,
@@ -293,14 +294,12 @@ pub struct BitReader<'a> {
     nbits: u32,
     /// Bits in the data from `start`.
     avail: u64,
-    /// Bits read so far.
-    pub read: u64,
 }
 
 impl<'a> BitReader<'a> {
     pub fn new(data: &'a [u8], start: usize) -> Self {
         let avail = data.len().saturating_sub(start) as u64 * 8;
-        BitReader { data, start, pos: start, buf: 0, nbits: 0, avail, read: 0 }
+        BitReader { data, start, pos: start, buf: 0, nbits: 0, avail }
     }
 
     #[inline]
@@ -336,7 +335,7 @@ impl<'a> BitReader<'a> {
     /// Consumes `n <= 32` bits; fails past the end of the data.
     #[inline]
     pub fn skip(&mut self, n: u32) -> Option<()> {
-        if self.read + n as u64 > self.avail {
+        if self.read() + n as u64 > self.avail {
             return None;
         }
         if self.nbits < n {
@@ -344,7 +343,6 @@ impl<'a> BitReader<'a> {
         }
         self.buf <<= n;
         self.nbits -= n;
-        self.read += n as u64;
         Some(())
     }
 
@@ -379,6 +377,17 @@ impl<'a> BitReader<'a> {
         self.buf
     }
 
+    /// The next bits, left-aligned, of which at least `N` (at most [`WINDOW`]) are the
+    /// stream's: a decoder whose symbols take at most `N` bits refills once every few symbols
+    /// instead of before nearly every one, keeping the refill off most symbols' chain.
+    #[inline(always)]
+    pub fn window_of<const N: u32>(&mut self) -> u64 {
+        if self.nbits < N {
+            self.fill();
+        }
+        self.buf
+    }
+
     /// Consumes `n <= WINDOW` bits of the last [`BitReader::window`], past the end of the
     /// data too.
     #[inline(always)]
@@ -386,18 +395,24 @@ impl<'a> BitReader<'a> {
         debug_assert!(n <= self.nbits, "consumed more than the window");
         self.buf <<= n;
         self.nbits -= n;
-        self.read += n as u64;
+    }
+
+    /// Bits read so far: those loaded less those still in the window. Derived rather than
+    /// counted, which would add to the chain of every symbol a decoder reads.
+    #[inline]
+    pub fn read(&self) -> u64 {
+        (self.pos - self.start) as u64 * 8 - self.nbits as u64
     }
 
     /// How many bits have been consumed past the end of the data.
     #[inline]
     pub fn overrun(&self) -> u64 {
-        self.read.saturating_sub(self.avail)
+        self.read().saturating_sub(self.avail)
     }
 
     /// The byte just past the last one touched (the end of a byte-aligned stream).
     pub fn end(&self) -> usize {
-        self.start + self.read.div_ceil(8) as usize
+        self.start + self.read().div_ceil(8) as usize
     }
 }
 
@@ -445,7 +460,7 @@ mod tests {
             assert_eq!((window << len >> 52) as u32, s as u32 * 131 % 4096);
             r.consume(len + 12);
         }
-        let padding = bytes.len() as u64 * 8 - r.read;
+        let padding = bytes.len() as u64 * 8 - r.read();
         assert!(padding < 8 && r.overrun() == 0);
         r.window();
         r.consume(16);

@@ -158,7 +158,7 @@ impl<'a, 'b> OpReader<'a, 'b> {
 
     /// Reads a value of class `class` of field `f`.
     pub(super) fn get(&mut self, f: usize, class: usize) -> Result<u64, DpmError> {
-        let before = self.r.read;
+        let before = self.r.read();
         let spec = FIELDS[f];
         let base = TABLE_BASE[f] + class * tables_per_class(spec.scheme);
         let v = match spec.scheme {
@@ -193,7 +193,7 @@ impl<'a, 'b> OpReader<'a, 'b> {
             }
         };
         if let Some(b) = self.bits.as_deref_mut() {
-            b[spec.kind as usize] += self.r.read - before;
+            b[spec.kind as usize] += self.r.read() - before;
         }
         if v > u32::MAX as u64 {
             return Err(corrupt("value out of range in an operation"));
