@@ -622,3 +622,31 @@ fn encode_s_default_is_one_stream_for_every_shared_mesh() {
     let o = tessera(&["stats", s(&chunked)]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("chunk"), "{}", String::from_utf8_lossy(&o.stdout));
 }
+
+/// `encode --coding prefix` writes prefix-coded streams (a chunked file's chunks too) that
+/// decode to what the default, range-coded, file decodes to.
+#[test]
+fn encode_coding_prefix_decodes_as_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = mesh("stanford/bunny_zipper_c3d.obj.gz");
+    for chunks in ["0", "4096"] {
+        let mut plys = Vec::new();
+        for coding in ["range", "prefix"] {
+            let (bft, ply) =
+                (dir.path().join(format!("{coding}.bft")), dir.path().join(format!("{coding}{chunks}.ply")));
+            ok(&tessera(&["encode", s(&bunny), "-o", s(&bft), "--chunk-triangles", chunks, "--coding", coding]));
+            let bytes = std::fs::read(&bft).unwrap();
+            let first = match codec::bft::chunked::ChunkedFile::open(bytes.clone()) {
+                Ok(file) => file.chunk_bft(0).unwrap().into_owned(),
+                Err(_) => bytes,
+            };
+            let want = if coding == "prefix" { codec::bft::Coding::Prefix } else { codec::bft::Coding::Range };
+            assert_eq!(codec::bft::Stats::of(&first).unwrap().header.coding, want, "{coding}, chunks {chunks}");
+            ok(&tessera(&["decode", s(&bft), "-o", s(&ply)]));
+            plys.push(std::fs::read(&ply).unwrap());
+        }
+        assert!(plys[0] == plys[1], "chunks {chunks}: the prefix-coded file decodes otherwise");
+    }
+    let o = tessera(&["encode", s(&bunny), "-o", s(&dir.path().join("x.bft")), "--coding", "huffman"]);
+    assert!(!o.status.success());
+}

@@ -14,10 +14,16 @@ use testkit::{canonical, sorted_canonical};
 
 /// A chunked file (of one chunk too), with the input vertex of every slot.
 fn chunked(mesh: &Mesh, chunk: u32) -> (Vec<u8>, Vec<u32>) {
+    chunked_coded(mesh, chunk, Coding::Range)
+}
+
+/// [`chunked`] with the chunks' streams entropy-coded as `coding` says.
+fn chunked_coded(mesh: &Mesh, chunk: u32, coding: Coding) -> (Vec<u8>, Vec<u32>) {
     let opts = ChunkOptions {
         chunk_triangles: chunk,
         keep_slot_vertex: true,
         one_chunk_as_stream: false,
+        stream: bft::EncodeOptions { coding, ..Default::default() },
         ..Default::default()
     };
     let (bytes, enc) = encode_mesh_chunked(mesh, &opts).expect("encodes");
@@ -28,10 +34,13 @@ fn chunked(mesh: &Mesh, chunk: u32) -> (Vec<u8>, Vec<u32>) {
 /// Decoding the whole file keeps the single-stream guarantee: the input's triangle multiset
 /// on input vertex indices, orientation kept, every slot at its vertex's quantized position,
 /// links and duplicates naming the same vertex, and the welded mesh one vertex per used one.
-fn assert_chunked_round_trip(mesh: &Mesh, chunk: u32) -> ChunkedFile<Vec<u8>> {
-    let (bytes, slot_vertex) = chunked(mesh, chunk);
+fn assert_chunked_round_trip(mesh: &Mesh, chunk: u32, coding: Coding) -> ChunkedFile<Vec<u8>> {
+    let (bytes, slot_vertex) = chunked_coded(mesh, chunk, coding);
     let file = ChunkedFile::open(bytes.clone()).expect("opens");
     assert!(file.entries.iter().all(|e| e.triangles <= chunk));
+    for c in 0..file.entries.len() {
+        assert_eq!(bft::Stats::of(&file.chunk_bft(c).unwrap()).unwrap().header.coding, coding, "chunk {c}");
+    }
     let dec = bft::decode(&bytes).expect("decodes");
     assert_eq!(dec.triangles.len(), mesh.triangles.len());
     assert_eq!(slot_vertex.len(), dec.positions.len());
@@ -68,8 +77,10 @@ fn shared_meshes_round_trip_at_every_chunk_size() {
     for rel in MESHES {
         let mesh = testkit::load_mesh(rel);
         let n = mesh.triangles.len() as u32;
-        for chunk in [3, 61, 1000, n.max(1)] {
-            let file = assert_chunked_round_trip(&mesh, chunk);
+        for (chunk, coding) in
+            [3, 61, 1000, n.max(1)].into_iter().flat_map(|c| [(c, Coding::Range), (c, Coding::Prefix)])
+        {
+            let file = assert_chunked_round_trip(&mesh, chunk, coding);
             assert_eq!(
                 file.header.chunks as usize,
                 (n as usize).div_ceil(chunk as usize).max(1).min(file.entries.len())
@@ -166,8 +177,16 @@ fn shared_meshes_sort_exactly_from_chunks() {
     let mut totals = [0u32; 3];
     for rel in MESHES.iter().chain(&["stanford/bunny_zipper_c3d.obj.gz"]) {
         let mesh = testkit::load_mesh(rel);
-        for chunk in [5, 300, 4096, u32::MAX] {
-            let (bytes, _) = chunked(&mesh, chunk);
+        // Prefix-coded chunks too: verbatim ones are forwarded as the file has them.
+        let sizes = [
+            (5, Coding::Range),
+            (300, Coding::Range),
+            (300, Coding::Prefix),
+            (4096, Coding::Range),
+            (u32::MAX, Coding::Range),
+        ];
+        for (chunk, coding) in sizes {
+            let (bytes, _) = chunked_coded(&mesh, chunk, coding);
             let whole = bft::decode(&bytes).unwrap();
             // A small cache bound, so that chunks are evicted and built again.
             let model = ChunkedModel::new(ChunkedFile::open(bytes).unwrap(), 1 << 20);
@@ -304,7 +323,7 @@ proptest! {
     ) {
         let mesh = testkit::holed_grids(w, h, copies, &holes, seed);
         prop_assume!(!mesh.triangles.is_empty());
-        let file = assert_chunked_round_trip(&mesh, chunk);
+        let file = assert_chunked_round_trip(&mesh, chunk, Coding::Range);
         let whole = bft::decode(file.bytes()).unwrap();
         let model = ChunkedModel::new(file, 1 << 16);
         let cam = Camera { eye: eye.into(), target: target.into(), up: Vec3::Y, fovy, near, far: near + 10.0, shift: [0.0; 2] };

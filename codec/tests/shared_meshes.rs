@@ -1,6 +1,7 @@
-//! Every mesh in `shared/meshes` loads and round-trips exactly through the BFT codec.
+//! Every mesh in `shared/meshes` loads and round-trips exactly through the BFT codec, with
+//! either entropy coding.
 
-use testkit::{all_shared_meshes, assert_round_trip};
+use testkit::{all_shared_meshes, assert_round_trip, assert_round_trip_coded};
 
 #[test]
 fn every_shared_mesh_round_trips() {
@@ -10,6 +11,8 @@ fn every_shared_mesh_round_trips() {
         let mesh = codec::load_path(&path).unwrap_or_else(|e| panic!("{e}"));
         assert!(!mesh.triangles.is_empty(), "{}: no triangles", path.display());
         let enc = assert_round_trip(&mesh, 16);
+        let prefix = assert_round_trip_coded(&mesh, 16, codec::bft::Coding::Prefix);
+        assert_eq!(prefix.slot_vertex, enc.slot_vertex, "{}: the same traversal", path.display());
         let conn = codec::bft::Stats::of(&enc.bytes).unwrap().connectivity_bits_per_triangle();
         // Issue target: at most 2.0 bits per triangle of connectivity on the bunny and dragon.
         let name = path.file_name().unwrap().to_string_lossy();

@@ -437,6 +437,11 @@ pub struct EncodeArgs {
     /// order. `stats` reports its cost in bits per vertex.
     #[arg(long)]
     pub keep_order: bool,
+    /// How the file's streams (or its chunks') are entropy-coded: `range`, the smallest;
+    /// `prefix`, a few percent larger and decoded several times faster (the workers decode
+    /// a chunked file's whole chunks as the file has them).
+    #[arg(long, value_enum, default_value_t = TileCoding::Range)]
+    pub coding: TileCoding,
     /// Build a level-of-detail hierarchy above the chunks: groups of adjacent chunks
     /// simplified to half with their borders locked, level after level, each chunk an
     /// ordinary BFT stream with its error. `sort` and `render` then draw the cut of
@@ -725,7 +730,8 @@ impl CameraArgs {
     }
 }
 
-/// `--tile-coding`: how tile streams are entropy-coded ([`codec::bft::Coding`]).
+/// `--tile-coding` and `encode --coding`: how streams are entropy-coded
+/// ([`codec::bft::Coding`]).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TileCoding {
     Prefix,

@@ -82,8 +82,14 @@ pub fn sorted_canonical(tris: impl IntoIterator<Item = [u32; 3]>) -> Vec<[u32; 3
 /// to input vertex indices, are the input's multiset with orientation kept; every slot's
 /// position is its input vertex quantized; the welded mesh has the same triangles by position.
 pub fn assert_round_trip(mesh: &Mesh, bits: u8) -> Encoded {
-    let enc = bft::encode(mesh, EncodeOptions { quant_bits: bits, ..Default::default() }).expect("encodes");
+    assert_round_trip_coded(mesh, bits, bft::Coding::Range)
+}
+
+/// [`assert_round_trip`] with the streams entropy-coded as `coding` says.
+pub fn assert_round_trip_coded(mesh: &Mesh, bits: u8, coding: bft::Coding) -> Encoded {
+    let enc = bft::encode(mesh, EncodeOptions { quant_bits: bits, coding, ..Default::default() }).expect("encodes");
     let dec = bft::decode(&enc.bytes).expect("decodes");
+    assert_eq!(dec.header.coding, coding);
     assert_eq!(dec.triangles.len(), mesh.triangles.len());
     let back = dec.triangles.iter().map(|t| t.map(|s| enc.slot_vertex[s as usize]));
     assert!(

@@ -118,8 +118,9 @@ pub(crate) fn get_varint(b: &[u8], pos: &mut usize, what: &'static str) -> Resul
 /// How a file's `CONN` and `GEOM` streams are entropy-coded (header byte 41).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Coding {
-    /// The adaptive binary range coder with context models: the smallest streams, and what
-    /// `tessera encode` writes.
+    /// The adaptive binary range coder with context models: the smallest streams (but for
+    /// small ones, such as a chunked file's chunks), and what `tessera encode` writes by
+    /// default.
     #[default]
     Range = 0,
     /// Static canonical Huffman codes, a table per context stored at the head of each stream,

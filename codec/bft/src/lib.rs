@@ -85,8 +85,9 @@
 //! a decoder reads each command before it carries out the one before, and keeps no degrees.
 //! The first prefix coding ([`Coding::PrefixByDegree`], header byte 41 = 1) chose the table
 //! by the previous command's class and `l`'s degree; it still reads. The tile sort writes its
-//! tiles prefix-coded when asked, because it codes every tile anew each frame; files from
-//! `tessera encode` are always range-coded.
+//! tiles prefix-coded when asked, because it codes every tile anew each frame; `tessera
+//! encode` writes range-coded files unless asked for prefix-coded ones
+//! ([`EncodeOptions::coding`]).
 
 // The paths the modules were written with when they were one crate (`crate::mesh`,
 // `crate::bft::...`), kept for the crate's own files.

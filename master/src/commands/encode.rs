@@ -46,6 +46,7 @@ pub fn run(input: &Path, output: &Path, options: &EncodeArgs) -> Result<()> {
             colors: !options.no_colors,
             normals: !options.no_normals,
             keep_order: options.keep_order,
+            coding: options.coding.into(),
         },
         ..Default::default()
     };
