@@ -324,10 +324,11 @@ pub(crate) trait ResidualSource {
 /// take their source's position and read nothing. A basis slot precedes its slot, so its
 /// position is decoded when it is needed.
 ///
-/// Why a pass of its own: the connectivity loop stays small, and the residuals' reader lives
-/// in registers for the pass (see `PrefixSource::positions`). Measured no slower than
-/// decoding each position as its slot is made (the dragon's whole tile, 26.3 against 26.0
-/// Mtri/s, alternated, before the residual lookup tables).
+/// Why a pass of its own: the connectivity loop, whose commands the prefix coding reads
+/// ahead, stays small, and the residuals' reader is held in locals for the pass (see
+/// `PrefixSource::positions`). Measured no slower than decoding each position as its slot is
+/// made (the dragon's whole tile, 26.3 against 26.0 Mtri/s, alternated, before the residual
+/// lookup tables).
 #[inline(always)]
 pub(crate) fn decode_positions<R: ResidualSource>(
     source: &mut R,

@@ -398,7 +398,8 @@ impl<'a> BitReader<'a> {
     }
 
     /// Bits read so far: those loaded less those still in the window. Derived rather than
-    /// counted, which would add to the chain of every symbol a decoder reads.
+    /// counted, so that a consume updates two fields, not three (no decode speed change
+    /// measured either way).
     #[inline]
     pub fn read(&self) -> u64 {
         (self.pos - self.start) as u64 * 8 - self.nbits as u64
