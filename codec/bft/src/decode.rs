@@ -9,7 +9,7 @@
 use super::attributes::{self, SlotAttributes};
 use super::format::{self, corrupt, get_varint, BftError, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{command_context, RangeSource, SymbolSource};
+use super::model::{Degrees, RangeSource, SymbolSource};
 use super::prefix::PrefixSource;
 use crate::command::Command;
 use crate::mesh::{Mesh, Quantization};
@@ -188,7 +188,7 @@ fn decode_streams<S: SymbolSource>(
         source,
         f: Frontier::default(),
         positions: Vec::with_capacity((h.slots as usize).min(CAP)),
-        deg: Vec::with_capacity((h.slots as usize).min(CAP)),
+        deg: Degrees::with_capacity(S::DEGREES, (h.slots as usize).min(CAP)),
         triangles: Vec::with_capacity((h.triangles as usize).min(CAP)),
         max: (1u32 << h.quant_bits) - 1,
         slots: h.slots,
@@ -236,7 +236,7 @@ struct State<S> {
     source: S,
     f: Frontier,
     positions: Vec<[u32; 3]>,
-    deg: Vec<u8>,
+    deg: Degrees,
     triangles: Vec<[u32; 3]>,
     max: u32,
     slots: u32,
@@ -254,19 +254,13 @@ impl<S: SymbolSource> State<S> {
             return Err(corrupt(format!("more vertex slots than the header's {}", self.slots)));
         }
         self.positions.push(basis);
-        if S::DEGREES {
-            self.deg.push(0);
-        }
+        self.deg.add_slot(S::DEGREES);
         Ok(s)
     }
 
     #[inline]
     fn emit(&mut self, t: [u32; 3]) {
-        // Degrees are context only where the source reads the frontier.
-        for s in t.into_iter().filter(|_| S::DEGREES) {
-            let d = &mut self.deg[s as usize];
-            *d = d.saturating_add(1);
-        }
+        self.deg.count(S::DEGREES, t);
         self.triangles.push(t);
     }
 
@@ -329,14 +323,7 @@ impl<S: SymbolSource> State<S> {
     /// Reads the command after `prev`, and its offset where it has one (0 otherwise).
     #[inline(always)]
     fn read(&mut self, prev: Command) -> Result<(Command, u32), BftError> {
-        let ctx = if !S::DEGREES {
-            command_context(prev, 0, 0)
-        } else {
-            let len = self.f.len();
-            let dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
-            let dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
-            command_context(prev, dl, dr)
-        };
+        let ctx = self.deg.context(S::DEGREES, prev, &self.f);
         let cmd = self.source.command(ctx).ok_or_else(|| corrupt("invalid command code"))?;
         let k = match cmd {
             Command::Rf | Command::Lf | Command::AddRef => {

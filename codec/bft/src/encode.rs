@@ -11,7 +11,7 @@
 use super::attributes::{self, oct_encode, DEFAULT_NORMAL_BITS};
 use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{command_context, predict, Prediction, RangeSink, SymbolSink};
+use super::model::{predict, Degrees, Prediction, RangeSink, SymbolSink};
 use super::prefix::PrefixSink;
 use crate::command::Command;
 use crate::csr::Csr;
@@ -125,28 +125,18 @@ pub(crate) fn encode_quantized(
     keep_slots: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Encoded, MeshError> {
-    if options.coded(mesh).1 && !(4..=16).contains(&options.normal_bits) {
-        return Err(MeshError::NormalBits(options.normal_bits));
-    }
-    let q: Vec<[u32; 3]> =
-        mesh.positions.iter().zip(used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
-    let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
-
     match options.coding {
-        Coding::Range => {
-            encode_with::<RangeSink>(mesh, used, quant, options, input_index, keep_slots, q, &loose, progress)
-        }
+        Coding::Range => encode_with::<RangeSink>(mesh, used, quant, options, input_index, keep_slots, progress),
         Coding::PrefixByDegree => {
-            encode_with::<PrefixSink<true>>(mesh, used, quant, options, input_index, keep_slots, q, &loose, progress)
+            encode_with::<PrefixSink<true>>(mesh, used, quant, options, input_index, keep_slots, progress)
         }
         Coding::Prefix => {
-            encode_with::<PrefixSink<false>>(mesh, used, quant, options, input_index, keep_slots, q, &loose, progress)
+            encode_with::<PrefixSink<false>>(mesh, used, quant, options, input_index, keep_slots, progress)
         }
     }
 }
 
 /// [`encode_quantized`] with the streams coded by `S`.
-#[allow(clippy::too_many_arguments)]
 fn encode_with<S: SymbolSink>(
     mesh: &Mesh,
     used: &[bool],
@@ -154,12 +144,17 @@ fn encode_with<S: SymbolSink>(
     options: &EncodeOptions,
     input_index: Option<(&[u32], u32)>,
     keep_slots: bool,
-    q: Vec<[u32; 3]>,
-    loose: &[bool],
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Encoded, MeshError> {
     let (colors, normals) = options.coded(mesh);
-    let mut tr = Traversal::<S>::new(mesh, q, quant.max_level(), loose);
+    if normals && !(4..=16).contains(&options.normal_bits) {
+        return Err(MeshError::NormalBits(options.normal_bits));
+    }
+    let q: Vec<[u32; 3]> =
+        mesh.positions.iter().zip(used).map(|(p, &u)| if u { quant.quantize(*p) } else { [0; 3] }).collect();
+    let loose: Vec<bool> = mesh.triangles.iter().map(|t| t[0] == t[1] || t[1] == t[2] || t[0] == t[2]).collect();
+
+    let mut tr = Traversal::<S>::new(mesh, q, quant.max_level(), &loose);
     tr.record = colors || normals || keep_slots;
     tr.run(progress);
 
@@ -287,7 +282,7 @@ struct Traversal<'a, S> {
     remaining: Vec<u32>,
     slot_of: Vec<u32>,
     vertex_of: Vec<u32>,
-    deg: Vec<u8>,
+    deg: Degrees,
     frontier: Frontier,
     /// Per frontier position: the previous position holding the same vertex (a chain).
     prev_same: Vec<u32>,
@@ -341,7 +336,7 @@ impl<'a, S: SymbolSink> Traversal<'a, S> {
             remaining,
             slot_of: vec![NONE; n],
             vertex_of: Vec::with_capacity(n),
-            deg: Vec::with_capacity(n),
+            deg: Degrees::with_capacity(S::DEGREES, n),
             frontier: Frontier::default(),
             prev_same: Vec::new(),
             last_entry: vec![NONE; n],
@@ -465,10 +460,7 @@ impl<'a, S: SymbolSink> Traversal<'a, S> {
     /// Codes `cmd` in the context the decoder will see before reading it.
     #[inline]
     fn code(&mut self, cmd: Command) {
-        let f = &self.frontier;
-        let dl = if !f.is_empty() { self.deg[f.at(0).slot as usize] } else { 0 };
-        let dr = if f.len() >= 2 { self.deg[f.at(1).slot as usize] } else { 0 };
-        self.sink.command(command_context(self.prev, dl, dr), cmd);
+        self.sink.command(self.deg.context(S::DEGREES, self.prev, &self.frontier), cmd);
         self.prev = cmd;
         self.commands += 1;
         self.work += 1;
@@ -488,7 +480,7 @@ impl<'a, S: SymbolSink> Traversal<'a, S> {
     fn new_slot(&mut self, v: u32, kind: Prediction, basis: [u32; 3]) -> u32 {
         let s = self.vertex_of.len() as u32;
         self.vertex_of.push(v);
-        self.deg.push(0);
+        self.deg.add_slot(S::DEGREES);
         let first = self.slot_of[v as usize];
         if first != NONE {
             self.dups.push((s, first));
@@ -540,9 +532,8 @@ impl<'a, S: SymbolSink> Traversal<'a, S> {
             if self.remaining[v] == 0 {
                 self.incomplete -= self.entry_count[v] as usize;
             }
-            let d = &mut self.deg[s as usize];
-            *d = d.saturating_add(1);
         }
+        self.deg.count(S::DEGREES, slots);
     }
 
     fn seed(&mut self, t: usize) {

@@ -2,7 +2,7 @@
 //! context is computed one way only.
 
 use super::format::{corrupt, BftError};
-use super::frontier::NONE;
+use super::frontier::{Frontier, NONE};
 use crate::command::Command;
 use crate::rangecoder::{BitTree, Decoder, Encoder, UIntCoder, PROB_INIT};
 
@@ -60,6 +60,52 @@ impl Context {
     #[inline]
     pub fn prefix_table_by_degree(self) -> usize {
         self.class as usize * 4 + self.deg_l.min(3) as usize
+    }
+}
+
+/// The visited degree of every slot (the triangles coded so far that use it), which the
+/// command contexts of the range coding and of
+/// [`Coding::PrefixByDegree`](super::Coding::PrefixByDegree) hold. Encoder, decoder and tile
+/// writer keep them with these methods alone, and only where their coding's contexts use them
+/// (`on`: their [`SymbolSink::DEGREES`] or [`SymbolSource::DEGREES`]); otherwise they keep
+/// nothing and a context is the previous command's.
+pub(crate) struct Degrees(Vec<u8>);
+
+impl Degrees {
+    /// Room for `slots` slots where `on`.
+    pub fn with_capacity(on: bool, slots: usize) -> Self {
+        Degrees(if on { Vec::with_capacity(slots) } else { Vec::new() })
+    }
+
+    /// A new slot, of no triangle yet.
+    #[inline]
+    pub fn add_slot(&mut self, on: bool) {
+        if on {
+            self.0.push(0);
+        }
+    }
+
+    /// The triangle `t` is coded.
+    #[inline]
+    pub fn count(&mut self, on: bool, t: [u32; 3]) {
+        if on {
+            for s in t {
+                let d = &mut self.0[s as usize];
+                *d = d.saturating_add(1);
+            }
+        }
+    }
+
+    /// The context of the command after `prev` on the frontier `f`.
+    #[inline]
+    pub fn context(&self, on: bool, prev: Command, f: &Frontier) -> Context {
+        if !on {
+            return command_context(prev, 0, 0);
+        }
+        let len = f.len();
+        let dl = if len >= 1 { self.0[f.at(0).slot as usize] } else { 0 };
+        let dr = if len >= 2 { self.0[f.at(1).slot as usize] } else { 0 };
+        command_context(prev, dl, dr)
     }
 }
 

@@ -9,12 +9,12 @@
 use super::attributes::{self, SlotAttributes};
 use super::format::{self, put_varint, AttributeFlags, Coding, Header};
 use super::frontier::{Frontier, NONE};
-use super::model::{basis_position, command_context, predict, Prediction, SymbolSink};
+use super::model::{basis_position, predict, Degrees, Prediction, SymbolSink};
 use crate::command::Command;
 
 pub(crate) struct TileWriter<S> {
     pub f: Frontier,
-    deg: Vec<u8>,
+    deg: Degrees,
     positions: Vec<[u32; 3]>,
     /// Tile slot -> the model's slot (ascending: tile slots are created in model order).
     pub global: Vec<u32>,
@@ -38,7 +38,7 @@ impl<S: SymbolSink> TileWriter<S> {
         let vertices = commands / 2 + 16;
         TileWriter {
             f: Frontier { entries: Vec::with_capacity(commands * 2), head: 0 },
-            deg: if S::DEGREES { Vec::with_capacity(vertices) } else { Vec::new() },
+            deg: Degrees::with_capacity(S::DEGREES, vertices),
             positions: Vec::with_capacity(vertices),
             global: Vec::with_capacity(vertices),
             sink: S::with_capacity(commands, vertices),
@@ -55,13 +55,7 @@ impl<S: SymbolSink> TileWriter<S> {
 
     #[inline]
     fn code(&mut self, cmd: Command) {
-        let (mut dl, mut dr) = (0, 0);
-        if S::DEGREES {
-            let len = self.f.len();
-            dl = if len >= 1 { self.deg[self.f.at(0).slot as usize] } else { 0 };
-            dr = if len >= 2 { self.deg[self.f.at(1).slot as usize] } else { 0 };
-        }
-        self.sink.command(command_context(self.prev, dl, dr), cmd);
+        self.sink.command(self.deg.context(S::DEGREES, self.prev, &self.f), cmd);
         self.prev = cmd;
         self.commands += 1;
     }
@@ -76,9 +70,7 @@ impl<S: SymbolSink> TileWriter<S> {
         self.sink.position(kind, q, pred);
         let s = self.positions.len() as u32;
         self.positions.push(q);
-        if S::DEGREES {
-            self.deg.push(0);
-        }
+        self.deg.add_slot(S::DEGREES);
         self.global.push(global);
         s
     }
@@ -89,10 +81,7 @@ impl<S: SymbolSink> TileWriter<S> {
 
     #[inline]
     fn emit(&mut self, t: [u32; 3]) {
-        for s in t.into_iter().filter(|_| S::DEGREES) {
-            let d = &mut self.deg[s as usize];
-            *d = d.saturating_add(1);
-        }
+        self.deg.count(S::DEGREES, t);
         self.triangles += 1;
         if let Some(r) = &mut self.record {
             r.push(t);
