@@ -60,11 +60,7 @@ fn wrong_magic_and_version_are_named() {
     b[8..10].copy_from_slice(&4u16.to_le_bytes());
     assert!(matches!(bft::decode(&b).unwrap_err(), BftError::Truncated(_)));
     b[8..10].copy_from_slice(&2u16.to_le_bytes());
-    let mut flagged = b.clone();
-    flagged[12 + 42] = 1;
-    let h = u16::from_le_bytes([flagged[10], flagged[11]]) as usize;
-    let crc = crc32fast::hash(&flagged[12..12 + h]);
-    flagged[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
+    let flagged = with_header_byte(&b, 42, 1);
     let e = bft::decode(&flagged).unwrap_err().to_string();
     assert!(e.contains("version 2 file has non-zero reserved bytes 42 and 43"), "{e}");
     // Versions 3 and 5 are chunked files, whose header a single stream's is not.
@@ -143,13 +139,20 @@ fn the_first_prefix_coding_still_reads_and_unknown_codings_are_refused() {
     let (old, new) = (bft::decode(&by_degree).unwrap(), bft::decode(&prefix).unwrap());
     assert_eq!((old.positions, old.triangles), (new.positions, new.triangles));
 
-    let mut unknown = prefix.clone();
-    unknown[12 + 41] = 3;
-    let h = u16::from_le_bytes([unknown[10], unknown[11]]) as usize;
-    let crc = crc32fast::hash(&unknown[12..12 + h]);
-    unknown[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
+    let unknown = with_header_byte(&prefix, 41, 3);
     let e = bft::decode(&unknown).unwrap_err().to_string();
     assert!(e.contains("entropy coding 3"), "{e}");
+}
+
+/// `bytes` with byte `i` of the header (which starts at byte 12) set to `v` and the header's
+/// checksum made right again, so that the header's checks, not its checksum, answer.
+fn with_header_byte(bytes: &[u8], i: usize, v: u8) -> Vec<u8> {
+    let mut b = bytes.to_vec();
+    b[12 + i] = v;
+    let h = u16::from_le_bytes([b[10], b[11]]) as usize;
+    let crc = crc32fast::hash(&b[12..12 + h]);
+    b[12 + h..16 + h].copy_from_slice(&crc.to_le_bytes());
+    b
 }
 
 fn forge_sections(bytes: &[u8]) {
