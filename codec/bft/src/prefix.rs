@@ -26,7 +26,7 @@
 use super::format::{corrupt, BftError};
 use super::model::{decode_positions, Context, Prediction, ResidualSource, SymbolSink, SymbolSource};
 use crate::command::Command;
-use crate::huffman::{BitReader, BitWriter, Table};
+use crate::huffman::{BitReader, BitWriter, SmallTable, Table};
 
 /// Longest code: lengths are stored in 4 bits.
 pub const MAX_CODE_LEN: u8 = 15;
@@ -78,17 +78,22 @@ fn write_table(w: &mut BitWriter, t: &Table) {
     }
 }
 
-fn read_table(r: &mut BitReader, symbols: usize, what: &str) -> Result<Table, BftError> {
+/// Reads a code table of at most `symbols` symbols into `table`.
+fn read_table(r: &mut BitReader, symbols: usize, what: &str, table: &mut SmallTable) -> Result<(), BftError> {
     let truncated = || BftError::Truncated("a prefix code table");
     let n = r.bits(6).ok_or_else(truncated)? as usize;
     if n > symbols {
         return Err(corrupt(format!("a {what} code table of {n} symbols (at most {symbols})")));
     }
-    let mut lens = vec![0u8; symbols];
+    let mut lens = [0u8; OFFSET_SYMBOLS];
     for l in &mut lens[..n] {
         *l = r.bits(4).ok_or_else(truncated)? as u8;
     }
-    Table::from_lens(&lens).ok_or_else(|| corrupt(format!("invalid {what} code lengths")))
+    if table.set(&lens[..symbols]) {
+        Ok(())
+    } else {
+        Err(corrupt(format!("invalid {what} code lengths")))
+    }
 }
 
 fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
@@ -196,11 +201,11 @@ impl<const BY_DEGREE: bool> SymbolSink for PrefixSink<BY_DEGREE> {
 /// commands' codes are shorter.
 const COMMAND_LUT_BITS: u32 = 8;
 
-fn command_lut(tables: &[Table]) -> Vec<u16> {
+fn command_lut(tables: &[SmallTable]) -> Vec<u16> {
     let k = COMMAND_LUT_BITS;
     let mut lut = vec![0u16; tables.len() << k];
     for (t, table) in tables.iter().enumerate() {
-        for (sym, &len) in table.lens.iter().enumerate() {
+        for (sym, &len) in table.lens().iter().enumerate() {
             let len = len as u32;
             if len == 0 || len > k {
                 continue;
@@ -217,11 +222,11 @@ fn command_lut(tables: &[Table]) -> Vec<u16> {
 /// residual lookup tables resolve.
 const RESIDUAL_LUT_BITS: u32 = 11;
 
-fn residual_lut(tables: &[Table]) -> Vec<i32> {
+fn residual_lut(tables: &[SmallTable]) -> Vec<i32> {
     let k = RESIDUAL_LUT_BITS;
     let mut lut = vec![0i32; tables.len() << k];
     for (t, table) in tables.iter().enumerate() {
-        for (len, &code_len) in table.lens.iter().enumerate() {
+        for (len, &code_len) in table.lens().iter().enumerate() {
             let (len, code_len) = (len as u32, code_len as u32);
             let total = code_len + len;
             if code_len == 0 || total > k {
@@ -253,50 +258,59 @@ fn residual(window: u64, len: u32) -> i64 {
 pub(crate) struct PrefixSource<'a, const BY_DEGREE: bool = false> {
     conn: BitReader<'a>,
     geom: BitReader<'a>,
-    cmd_tables: Vec<Table>,
+    /// The stream's code tables in its order: [`COMMAND_TABLES`] command tables, 3 offset
+    /// tables, [`GEOMETRY_TABLES`] residual tables (one allocation, filled in place).
+    tables: Vec<SmallTable>,
     /// The command tables' first [`COMMAND_LUT_BITS`] bits side by side, `symbol << 4 |
-    /// length` (0 for a longer code, which [`Table::lookup`] decodes; empty below
+    /// length` (0 for a longer code, which [`SmallTable::lookup`] decodes; empty below
     /// [`LUT_COMMANDS`]): with the previous command as the context, the next command's entry
     /// is one index away from this one's.
     cmd_lut: Vec<u16>,
-    off_tables: Vec<Table>,
-    geo_tables: Vec<Table>,
     /// Per residual table, per value of the next [`RESIDUAL_LUT_BITS`] bits: the residual
     /// they code, `value << 8 | bits` (code and raw bits together), or 0 where they do not
     /// hold all of it (empty below [`LUT_COMMANDS`]).
     geo_lut: Vec<i32>,
 }
 
+/// Where the offset and residual tables start in [`PrefixSource`]'s tables.
+const OFFSET_TABLES_AT: usize = COMMAND_TABLES;
+const GEOMETRY_TABLES_AT: usize = OFFSET_TABLES_AT + 3;
+
 /// Commands a stream has at least for [`PrefixSource`] to build its lookup tables (78 KB):
 /// a smaller one decodes through each code table's own. Measured on the 16-bit dragon's
 /// tiles (all of a grid's, best of 30): building them always doubled the decode of a 64x64
 /// grid's 605 bunny tiles of 170 triangles (17.5-17.8 ms against 8.7-8.8), broke even on a
 /// 32x32 grid's dragon tiles of 5,300 (36.2-37.4 Mtri/s against 36.4-37.9), and gained 9-13%
-/// on 16x16 and 8x8 grids (46.0-47.2 against 41.6-42.4).
+/// on 16x16 and 8x8 grids (46.0-47.2 against 41.6-42.4). Measured again once the code
+/// tables were built inline ([`SmallTable`]): always building them took the bunny's 64x64
+/// tiles from 5.4-5.5 ms to 13.6, its 32x32 tiles from 2.7-3.0 to 5.1, and the dragon's
+/// 32x32 and 16x16 tiles 2-4% longer; a threshold of 1024 or 16384 commands was within 5%
+/// of this one (a scratch example, two alternated runs).
 const LUT_COMMANDS: u32 = 4096;
 
 impl<'a, const BY_DEGREE: bool> PrefixSource<'a, BY_DEGREE> {
     /// The reader of a stream of `commands` commands.
     pub fn new(conn: &'a [u8], geom: &'a [u8], commands: u32) -> Result<Self, BftError> {
         let (mut c, mut g) = (BitReader::new(conn, 0), BitReader::new(geom, 0));
-        let cmd_tables: Vec<Table> =
-            (0..COMMAND_TABLES).map(|_| read_table(&mut c, COMMANDS, "command")).collect::<Result<_, _>>()?;
-        let off_tables = (0..3).map(|_| read_table(&mut c, OFFSET_SYMBOLS, "offset")).collect::<Result<_, _>>()?;
-        let geo_tables: Vec<Table> =
-            (0..GEOMETRY_TABLES).map(|_| read_table(&mut g, RESIDUAL_SYMBOLS, "residual")).collect::<Result<_, _>>()?;
+        let mut tables = vec![SmallTable::EMPTY; GEOMETRY_TABLES_AT + GEOMETRY_TABLES];
+        let (cmd_tables, rest) = tables.split_at_mut(OFFSET_TABLES_AT);
+        let (off_tables, geo_tables) = rest.split_at_mut(GEOMETRY_TABLES_AT - OFFSET_TABLES_AT);
+        cmd_tables.iter_mut().try_for_each(|t| read_table(&mut c, COMMANDS, "command", t))?;
+        off_tables.iter_mut().try_for_each(|t| read_table(&mut c, OFFSET_SYMBOLS, "offset", t))?;
+        geo_tables.iter_mut().try_for_each(|t| read_table(&mut g, RESIDUAL_SYMBOLS, "residual", t))?;
         let (cmd_lut, geo_lut) = if commands >= LUT_COMMANDS {
-            (command_lut(&cmd_tables), residual_lut(&geo_tables))
+            (command_lut(cmd_tables), residual_lut(geo_tables))
         } else {
             (Vec::new(), Vec::new())
         };
-        Ok(PrefixSource { conn: c, geom: g, cmd_tables, cmd_lut, off_tables, geo_tables, geo_lut })
+        Ok(PrefixSource { conn: c, geom: g, tables, cmd_lut, geo_lut })
     }
 }
 
 /// `GEOM`'s reader and tables, for [`decode_positions`].
 struct Residuals<'a, 't> {
     r: BitReader<'a>,
-    tables: &'t [Table],
+    tables: &'t [SmallTable],
     lut: &'t [i32],
 }
 
@@ -341,7 +355,7 @@ impl ResidualSource for Residuals<'_, '_> {
 /// `max_len`. Past the end of the data it reads zeros, which [`SymbolSource::overrun`]
 /// reports.
 #[inline(always)]
-fn read_number(r: &mut BitReader, table: &Table, max_len: u32) -> Option<u32> {
+fn read_number(r: &mut BitReader, table: &SmallTable, max_len: u32) -> Option<u32> {
     // A code and at most 31 bits below the leading one.
     let w = r.window_of::<{ MAX_CODE_LEN as u32 + 31 }>();
     let (len, code_len) = table.lookup(w)?;
@@ -366,7 +380,7 @@ impl<const BY_DEGREE: bool> SymbolSource for PrefixSource<'_, BY_DEGREE> {
         let e = self.cmd_lut.get(table << COMMAND_LUT_BITS | (w >> (64 - COMMAND_LUT_BITS)) as usize);
         let (sym, code_len) = match e {
             Some(&e) if e != 0 => ((e >> 4) as u8, e as u32 & 15),
-            _ => self.cmd_tables[table].lookup(w)?,
+            _ => self.tables[table].lookup(w)?,
         };
         self.conn.consume(code_len);
         BY_CODE.get(sym as usize).copied()
@@ -374,13 +388,14 @@ impl<const BY_DEGREE: bool> SymbolSource for PrefixSource<'_, BY_DEGREE> {
 
     #[inline(always)]
     fn offset(&mut self, cmd: Command) -> Option<u32> {
-        read_number(&mut self.conn, &self.off_tables[offset_table(cmd)], 32)
+        read_number(&mut self.conn, &self.tables[OFFSET_TABLES_AT + offset_table(cmd)], 32)
     }
 
     fn positions(&mut self, slots: &mut [[u32; 3]], dups: &[(u32, u32)], max: u32) -> Result<(), BftError> {
         // The reader is copied into a local for the pass and written back after it, so
         // that the pass's loop keeps its state in locals (no gain measured on its own).
-        let mut geom = Residuals { r: self.geom.clone(), tables: &self.geo_tables, lut: &self.geo_lut };
+        let mut geom =
+            Residuals { r: self.geom.clone(), tables: &self.tables[GEOMETRY_TABLES_AT..], lut: &self.geo_lut };
         let result = decode_positions(&mut geom, slots, dups, max);
         self.geom = geom.r;
         result
