@@ -36,9 +36,9 @@ impl RenderMesh {
         out
     }
 
-    /// Builds buffers from a decoded mesh, with the normals of
+    /// Builds buffers from a decoded mesh (whose triangles it keeps), with the normals of
     /// [`codec::bft::normals::vertex_normals`], which rank 0 computes the same way.
-    pub fn from_decoded(decoded: &Decoded) -> RenderMesh {
+    pub fn from_decoded(decoded: Decoded) -> RenderMesh {
         let q = decoded.quantization();
         let positions: Vec<[f32; 3]> = decoded.positions.iter().map(|&p| q.dequantize(p)).collect();
         let a = &decoded.attributes;
@@ -49,7 +49,10 @@ impl RenderMesh {
         };
         // Shading is opaque: a colour's alpha is not drawn.
         let colors = a.colors.iter().map(|c| [c[0], c[1], c[2], 255]).collect();
-        let indices = decoded.triangles.iter().flatten().copied().collect();
+        // The decoder's triangles become the index list in place: copying them took 1.0-1.2
+        // ms of the 24 ms that the dragon's 8x8 tiles took to become meshes on one core (a
+        // scratch example, three alternated runs).
+        let indices = bytemuck::allocation::cast_vec(decoded.triangles);
         RenderMesh { positions, normals, colors, indices }
     }
 
@@ -98,7 +101,7 @@ mod tests {
             ..Default::default()
         };
         let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
-        let rm = RenderMesh::from_decoded(&bft::decode(&enc.bytes).unwrap());
+        let rm = RenderMesh::from_decoded(bft::decode(&enc.bytes).unwrap());
         assert_eq!(rm.triangle_count(), 2);
         for n in &rm.normals {
             assert!((Vec3::from(*n) - Vec3::Z).length() < 1e-6, "{n:?}");

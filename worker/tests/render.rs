@@ -18,7 +18,7 @@ use worker::RenderMesh;
 fn load(rel: &str) -> RenderMesh {
     let mesh = testkit::load_mesh(rel);
     let enc = bft::encode(&mesh, bft::EncodeOptions::default()).unwrap();
-    RenderMesh::from_decoded(&bft::decode(&enc.bytes).unwrap())
+    RenderMesh::from_decoded(bft::decode(&enc.bytes).unwrap())
 }
 
 /// The default camera of the codec's conventions, framing the mesh's bounding box.

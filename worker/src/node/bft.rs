@@ -264,9 +264,9 @@ struct TileMesh {
 fn decode_stream(bft: &[u8], normals: &[(u32, [f32; 3])]) -> Result<(RenderMesh, f64), TileError> {
     let start = Instant::now();
     let decoded = codec::bft::decode(bft).map_err(TileError::Decode)?;
-    let mut mesh = RenderMesh::from_decoded(&decoded);
     // A stream with the file's normals shades with them; border normals are for computed ones.
     let file_normals = RenderMesh::has_file_normals(&decoded);
+    let mut mesh = RenderMesh::from_decoded(decoded);
     for &(slot, n) in normals {
         let Some(dst) = mesh.normals.get_mut(slot as usize) else {
             return Err(TileError::BorderNormal { slot, vertices: mesh.positions.len() });
