@@ -78,6 +78,15 @@ fn write_table(w: &mut BitWriter, t: &Table) {
     }
 }
 
+/// The most symbols of any of the stream's tables, each read into a [`SmallTable`], which
+/// holds them and their codes' lengths.
+const MOST_SYMBOLS: usize = {
+    let most = if COMMANDS > OFFSET_SYMBOLS { COMMANDS } else { OFFSET_SYMBOLS };
+    let most = if RESIDUAL_SYMBOLS > most { RESIDUAL_SYMBOLS } else { most };
+    assert!(most <= crate::huffman::SMALL_SYMBOLS && MAX_CODE_LEN <= crate::huffman::SMALL_MAX_LEN);
+    most
+};
+
 /// Reads a code table of at most `symbols` symbols into `table`.
 fn read_table(r: &mut BitReader, symbols: usize, what: &str, table: &mut SmallTable) -> Result<(), BftError> {
     let truncated = || BftError::Truncated("a prefix code table");
@@ -85,7 +94,7 @@ fn read_table(r: &mut BitReader, symbols: usize, what: &str, table: &mut SmallTa
     if n > symbols {
         return Err(corrupt(format!("a {what} code table of {n} symbols (at most {symbols})")));
     }
-    let mut lens = [0u8; OFFSET_SYMBOLS];
+    let mut lens = [0u8; MOST_SYMBOLS];
     for l in &mut lens[..n] {
         *l = r.bits(4).ok_or_else(truncated)? as u8;
     }
