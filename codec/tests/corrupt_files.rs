@@ -122,6 +122,33 @@ fn corrupt_prefix_coded_streams_are_errors() {
     }
 }
 
+/// A prefix-coded stream's code tables are checked as they are read: a table of more
+/// symbols than its alphabet, or lengths that are no prefix code, is named.
+#[test]
+fn corrupt_prefix_code_tables_are_named() {
+    let model = TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap();
+    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
+    let bytes =
+        Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap()[0].bytes.clone();
+    // The first section is the connectivity, whose first table is the first command table:
+    // 6 bits of symbol count, then 4 bits a length.
+    let sections = testkit::sections_start(&bytes);
+    let conn = sections + 8;
+    for (first_bytes, error) in [
+        ([0xff, 0xff], "a command code table of 63 symbols (at most 12)"),
+        // Two symbols, of lengths 1 and 2: a code that leaves a quarter unused.
+        ([0x08, 0x48], "invalid command code lengths"),
+    ] {
+        let mut b = bytes.clone();
+        b[conn..conn + 2].copy_from_slice(&first_bytes);
+        testkit::refresh_checksums(&mut b, sections);
+        let e = bft::decode(&b).unwrap_err().to_string();
+        assert!(e.contains(error), "{e}");
+    }
+}
+
 /// Tiles of the first prefix coding, which chose a command's table by the left vertex's
 /// degree, still read; and a stream whose coding byte names no coding is refused by name.
 #[test]
