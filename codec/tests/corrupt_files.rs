@@ -84,12 +84,7 @@ fn version_1_files_read_and_their_reserved_byte_stays_reserved() {
     v1[8..10].copy_from_slice(&1u16.to_le_bytes());
     assert_eq!(bft::decode(&v1).unwrap(), bft::decode(&v2).unwrap());
 
-    let model = TileModel::from_bytes(&v2).unwrap();
-    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
-    let h = model.decoded.header;
-    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
-    let mut prefix =
-        Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap()[0].bytes.clone();
+    let mut prefix = whole_tile(&TileModel::from_bytes(&v2).unwrap(), Coding::Prefix);
     assert_eq!(bft::Stats::of(&prefix).unwrap().header.coding, Coding::Prefix);
     prefix[8..10].copy_from_slice(&1u16.to_le_bytes());
     let e = bft::decode(&prefix).unwrap_err().to_string();
@@ -108,12 +103,8 @@ fn forged_checksums_reach_the_stream_decoders_safely() {
 #[test]
 fn corrupt_prefix_coded_streams_are_errors() {
     let model = TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap();
-    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
-    let h = model.decoded.header;
-    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
     for coding in [Coding::Prefix, Coding::PrefixByDegree] {
-        let tiles = Sorter::new(coding).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap();
-        let bytes = &tiles[0].bytes;
+        let bytes = &whole_tile(&model, coding);
         assert_eq!(bft::decode(bytes).unwrap().triangles.len(), model.triangles().len());
         for len in 0..bytes.len() {
             assert!(bft::decode(&bytes[..len]).is_err(), "{coding:?} truncated to {len}");
@@ -126,12 +117,7 @@ fn corrupt_prefix_coded_streams_are_errors() {
 /// symbols than its alphabet, or lengths that are no prefix code, is named.
 #[test]
 fn corrupt_prefix_code_tables_are_named() {
-    let model = TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap();
-    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
-    let h = model.decoded.header;
-    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
-    let bytes =
-        Sorter::new(Coding::Prefix).sort(&model, &tile_sort::boxes(&model, vp, &grid), &grid).unwrap()[0].bytes.clone();
+    let bytes = whole_tile(&TileModel::from_bytes(&encoded("classic/suzanne.obj")).unwrap(), Coding::Prefix);
     // The first section is the connectivity, whose first table is the first command table:
     // 6 bits of symbol count, then 4 bits a length.
     let sections = testkit::sections_start(&bytes);
@@ -154,12 +140,7 @@ fn corrupt_prefix_code_tables_are_named() {
 #[test]
 fn the_first_prefix_coding_still_reads_and_unknown_codings_are_refused() {
     let model = TileModel::from_bytes(&encoded("stanford/bunny_zipper_c3d.obj.gz")).unwrap();
-    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
-    let h = model.decoded.header;
-    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
-    let boxes = tile_sort::boxes(&model, vp, &grid);
-    let by_degree = Sorter::new(Coding::PrefixByDegree).sort(&model, &boxes, &grid).unwrap().remove(0).bytes;
-    let prefix = Sorter::new(Coding::Prefix).sort(&model, &boxes, &grid).unwrap().remove(0).bytes;
+    let (by_degree, prefix) = (whole_tile(&model, Coding::PrefixByDegree), whole_tile(&model, Coding::Prefix));
     // The coding is byte 41 of the header, which starts at byte 12.
     assert_eq!((by_degree[12 + 41], prefix[12 + 41]), (1, 2));
     assert!(prefix.len() < by_degree.len(), "{} bytes against {}", prefix.len(), by_degree.len());
@@ -169,6 +150,14 @@ fn the_first_prefix_coding_still_reads_and_unknown_codings_are_refused() {
     let unknown = with_header_byte(&prefix, 41, 3);
     let e = bft::decode(&unknown).unwrap_err().to_string();
     assert!(e.contains("entropy coding 3"), "{e}");
+}
+
+/// The model's one tile in a 1x1 grid whose framing view sees all of it, coded as `coding`.
+fn whole_tile(model: &TileModel, coding: Coding) -> Vec<u8> {
+    let grid = TileGrid::new(64, 64, 1, 1).unwrap();
+    let h = model.decoded.header;
+    let vp = Camera::framing(h.bbox_min, h.bbox_max, 1.0).view_proj(1.0);
+    Sorter::new(coding).sort(model, &tile_sort::boxes(model, vp, &grid), &grid).unwrap().remove(0).bytes
 }
 
 /// `bytes` with byte `i` of the header (which starts at byte 12) set to `v` and the header's
