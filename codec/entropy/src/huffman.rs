@@ -78,15 +78,8 @@ impl Table {
         // prefix-coded tile (11.5-12.7 to 18.1-18.5 Mtri/s); codes longer than the table's
         // bits still decode length by length.
         t.lut_bits = t.longest.min(LUT_BITS);
-        let k = t.lut_bits as u32;
-        t.lut = vec![0; 1 << k];
-        for (sym, &len) in t.lens.iter().enumerate() {
-            let len = len as u32;
-            if len > 0 && len <= k {
-                let start = (t.codes[sym] << (k - len)) as usize;
-                t.lut[start..start + (1 << (k - len))].fill((sym as u16) << 4 | len as u16);
-            }
-        }
+        t.lut = vec![0; 1 << t.lut_bits];
+        fill_lut(&mut t.lut, &t.lens, &t.codes);
         Some(t)
     }
 
@@ -94,45 +87,11 @@ impl Table {
         if lens.len() > 256 {
             return None;
         }
-        let mut count = [0u32; MAX_LEN as usize + 1];
-        for &l in lens {
-            if l > MAX_LEN {
-                return None;
-            }
-            count[l as usize] += 1;
-        }
-        let used = lens.len() as u32 - count[0];
-        count[0] = 0;
-        // Kraft equality: exactly complete, unless a single symbol has a one-bit code.
-        let kraft: u64 = (1..=MAX_LEN as usize).map(|l| (count[l] as u64) << (MAX_LEN as usize - l)).sum();
-        if used > 1 && kraft != 1u64 << MAX_LEN || used == 1 && count[1] != 1 {
-            return None;
-        }
-        let mut first = [0u32; MAX_LEN as usize + 1];
-        let mut offset = [0u32; MAX_LEN as usize + 1];
-        let mut code = 0u32;
-        let mut off = 0u32;
-        for l in 1..=MAX_LEN as usize {
-            code = (code + if l > 1 { count[l - 1] } else { 0 }) << if l > 1 { 1 } else { 0 };
-            first[l] = code;
-            offset[l] = off;
-            off += count[l];
-        }
-        // The symbols with a code, by length and then by symbol (a counting sort: each goes
-        // to the next place of its length's run, visited in symbol order).
-        let mut sorted = vec![0u8; off as usize];
-        let mut place = offset;
-        let mut codes = vec![0u32; lens.len()];
-        let mut next = first;
-        for (s, &l) in lens.iter().enumerate() {
-            let l = l as usize;
-            if l > 0 {
-                sorted[place[l] as usize] = s as u8;
-                place[l] += 1;
-                codes[s] = next[l];
-                next[l] += 1;
-            }
-        }
+        const N: usize = MAX_LEN as usize + 1;
+        let (mut first, mut count, mut offset) = ([0u32; N], [0u32; N], [0u32; N]);
+        let (mut sorted, mut codes) = (vec![0u8; lens.len()], vec![0u32; lens.len()]);
+        let used = canonical_code(lens, MAX_LEN, [&mut first, &mut count, &mut offset], &mut sorted, &mut codes)?;
+        sorted.truncate(used);
         let longest = lens.iter().copied().max().unwrap_or(0);
         Some(Table { lens: lens.to_vec(), codes, first, count, offset, sorted, longest, lut: Vec::new(), lut_bits: 0 })
     }
@@ -195,6 +154,78 @@ impl Table {
     }
 }
 
+/// The canonical code of `lens` (none longer than `max_len`), which [`Table`] and
+/// [`SmallTable`] both build: into `[first, count, offset]` per length `l` in `1..=max_len`,
+/// the first code of that length, how many codes have it and where its symbols start in
+/// `sorted`; into `sorted` the symbols with a code, by length and then by symbol; into
+/// `codes` each symbol's code. Returns how many symbols have a code, or `None` unless the
+/// lengths form a complete prefix code, a lone one-bit code or no code at all. Inlined, so
+/// that each caller's `max_len` is a constant of its loops.
+#[inline(always)]
+fn canonical_code(
+    lens: &[u8],
+    max_len: u8,
+    [first, count, offset]: [&mut [u32]; 3],
+    sorted: &mut [u8],
+    codes: &mut [u32],
+) -> Option<usize> {
+    let n = max_len as usize + 1;
+    count[..n].fill(0);
+    for &l in lens {
+        if l > max_len {
+            return None;
+        }
+        count[l as usize] += 1;
+    }
+    let used = lens.len() as u32 - count[0];
+    count[0] = 0;
+    // Kraft equality: exactly complete, unless a single symbol has a one-bit code.
+    let kraft: u64 = (1..n).map(|l| (count[l] as u64) << (n - 1 - l)).sum();
+    if used > 1 && kraft != 1u64 << max_len || used == 1 && count[1] != 1 {
+        return None;
+    }
+    let (mut code, mut off) = (0u32, 0u32);
+    for l in 1..n {
+        if l > 1 {
+            code = (code + count[l - 1]) << 1;
+        }
+        first[l] = code;
+        offset[l] = off;
+        off += count[l];
+    }
+    // A counting sort: each symbol goes to the next place of its length's run, visited in
+    // symbol order.
+    let mut place = [0u32; MAX_LEN as usize + 1];
+    let mut next = [0u32; MAX_LEN as usize + 1];
+    place[..n].copy_from_slice(&offset[..n]);
+    next[..n].copy_from_slice(&first[..n]);
+    for (s, &l) in lens.iter().enumerate() {
+        let l = l as usize;
+        if l > 0 {
+            sorted[place[l] as usize] = s as u8;
+            place[l] += 1;
+            codes[s] = next[l];
+            next[l] += 1;
+        }
+    }
+    Some(off as usize)
+}
+
+/// Fills a decoder's lookup table of `lut.len()` (a power of two) entries: per value of
+/// that many next bits, `symbol << 4 | length` of the code they start with, or 0 where that
+/// code is longer.
+fn fill_lut(lut: &mut [u16], lens: &[u8], codes: &[u32]) {
+    let k = lut.len().trailing_zeros();
+    lut.fill(0);
+    for (sym, &len) in lens.iter().enumerate() {
+        let len = len as u32;
+        if len > 0 && len <= k {
+            let start = (codes[sym] << (k - len)) as usize;
+            lut[start..start + (1 << (k - len))].fill((sym as u16) << 4 | len as u16);
+        }
+    }
+}
+
 /// Symbols a [`SmallTable`] holds at most.
 pub const SMALL_SYMBOLS: usize = 64;
 /// The longest code of a [`SmallTable`].
@@ -214,10 +245,10 @@ pub struct SmallTable {
     lens: [u8; SMALL_SYMBOLS],
     /// Symbols up to the last with a code.
     symbols: u8,
-    codes: [u16; SMALL_SYMBOLS],
-    first: [u16; SMALL_MAX_LEN as usize + 1],
-    count: [u8; SMALL_MAX_LEN as usize + 1],
-    offset: [u8; SMALL_MAX_LEN as usize + 1],
+    codes: [u32; SMALL_SYMBOLS],
+    first: [u32; SMALL_MAX_LEN as usize + 1],
+    count: [u32; SMALL_MAX_LEN as usize + 1],
+    offset: [u32; SMALL_MAX_LEN as usize + 1],
     sorted: [u8; SMALL_SYMBOLS],
     longest: u8,
     lut_bits: u8,
@@ -266,56 +297,16 @@ impl SmallTable {
         if lens.len() > SMALL_SYMBOLS {
             return false;
         }
-        const N: usize = SMALL_MAX_LEN as usize + 1;
-        let mut count = [0u8; N];
-        for &l in lens {
-            if l > SMALL_MAX_LEN {
-                return false;
-            }
-            count[l as usize] += 1;
-        }
-        let used = lens.len() as u32 - count[0] as u32;
-        count[0] = 0;
-        let kraft: u32 = (1..N).map(|l| (count[l] as u32) << (SMALL_MAX_LEN as usize - l)).sum();
-        if used > 1 && kraft != 1 << SMALL_MAX_LEN || used == 1 && count[1] != 1 {
+        let t = self;
+        let tables = [&mut t.first[..], &mut t.count[..], &mut t.offset[..]];
+        if canonical_code(lens, SMALL_MAX_LEN, tables, &mut t.sorted, &mut t.codes).is_none() {
             return false;
         }
-        let t = self;
         t.symbols = lens.len() as u8;
-        t.count = count;
         t.lens[..lens.len()].copy_from_slice(lens);
-        let (mut code, mut off) = (0u32, 0u8);
-        for l in 1..N {
-            if l > 1 {
-                code = (code + count[l - 1] as u32) << 1;
-            }
-            t.first[l] = code as u16;
-            t.offset[l] = off;
-            off += count[l];
-        }
-        t.longest = 0;
-        let (mut place, mut next) = (t.offset, t.first);
-        for (s, &l) in lens.iter().enumerate() {
-            let l = l as usize;
-            if l > 0 {
-                t.sorted[place[l] as usize] = s as u8;
-                place[l] += 1;
-                t.codes[s] = next[l];
-                next[l] += 1;
-                t.longest = t.longest.max(l as u8);
-            }
-        }
+        t.longest = lens.iter().copied().max().unwrap_or(0);
         t.lut_bits = t.longest.min(SMALL_LUT_BITS);
-        let k = t.lut_bits as u32;
-        // Entries of longer codes stay 0.
-        t.lut[..1 << k].fill(0);
-        for (s, &len) in lens.iter().enumerate() {
-            let len = len as u32;
-            if len > 0 && len <= k {
-                let start = (t.codes[s] as usize) << (k - len);
-                t.lut[start..start + (1 << (k - len))].fill((s as u16) << 4 | len as u16);
-            }
-        }
+        fill_lut(&mut t.lut[..1 << t.lut_bits], lens, &t.codes);
         true
     }
 
@@ -328,7 +319,7 @@ impl SmallTable {
     #[inline]
     pub fn code(&self, sym: u8) -> (u32, u8) {
         debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
-        (self.codes[sym as usize] as u32, self.lens[sym as usize])
+        (self.codes[sym as usize], self.lens[sym as usize])
     }
 
     /// The symbol whose code starts `window` (a [`BitReader::window`]) and the code's length,
@@ -342,9 +333,8 @@ impl SmallTable {
         }
         (self.lut_bits as usize + 1..=self.longest as usize).find_map(|l| {
             let code = (window >> (64 - l)) as u32;
-            let d = code.wrapping_sub(self.first[l] as u32);
-            (code >= self.first[l] as u32 && d < self.count[l] as u32)
-                .then(|| (self.sorted[self.offset[l] as usize + d as usize], l as u32))
+            let d = code.wrapping_sub(self.first[l]);
+            (code >= self.first[l] && d < self.count[l]).then(|| (self.sorted[(self.offset[l] + d) as usize], l as u32))
         })
     }
 }
