@@ -82,6 +82,19 @@ fn xdg_runtime_dir() -> PathBuf {
     xdg
 }
 
+/// A folder of its own for one MPI job's session files. Open MPI puts every job's under
+/// one folder per host and user, and a job that ends removes that folder when it is empty:
+/// a job starting beside it in another test then failed to create its own there ("A call
+/// to mkdir was unable to create the desired directory", once in CI). Each job gets its own
+/// folder under one per test process; Open MPI removes what it made inside.
+fn ompi_session_base() -> PathBuf {
+    static JOBS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let job = JOBS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("tessera-ompi/{}-{job}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// A `tessera` command with the runtime folder set and no `TESSERA_FAULT` inherited, so a
 /// test injects only the faults it names.
 pub fn cmd() -> Command {
@@ -108,6 +121,7 @@ pub fn tessera_env(env: &[(&str, &str)], args: &[&str]) -> Output {
 /// oversubscribe the cores.
 pub fn mpi_env(cmd: &mut Command) -> &mut Command {
     cmd.env("XDG_RUNTIME_DIR", xdg_runtime_dir())
+        .env("OMPI_MCA_orte_tmpdir_base", ompi_session_base())
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
