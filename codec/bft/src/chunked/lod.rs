@@ -503,13 +503,13 @@ fn crowded_edges(tris: &[[u32; 3]], vertices: usize) -> Vec<(u64, u32)> {
     crowded
 }
 
-/// The ends of the edges to which `out` gives more faces than two and than the `input` (a
-/// triangle list; both over `vertices` vertices) gives them, sorted: the simplifier can
-/// squash a thin part into two sheets that share an edge (found on the armadillo: an edge of
-/// four faces in one group's output), which no cut may draw. The input's faces are counted
-/// only on those edges, which are few (maps of every input and output edge were 4% of a
-/// hierarchy's build in `perf`).
-fn pinched_vertices(input: &[u32], out: &[[u32; 3]], vertices: usize) -> Vec<u32> {
+/// The edges to which `out` gives more faces than two and than the `input` (a triangle
+/// list; both over `vertices` vertices) gives them, sorted, each as its two ends (lower
+/// first): the simplifier can squash a thin part into two sheets that share an edge (found
+/// on the armadillo: an edge of four faces in one group's output), which no cut may draw.
+/// The input's faces are counted only on those edges, which are few (maps of every input
+/// and output edge were 4% of a hierarchy's build in `perf`).
+fn pinched_edges(input: &[u32], out: &[[u32; 3]], vertices: usize) -> Vec<[u32; 2]> {
     let crowded = crowded_edges(out, vertices);
     if crowded.is_empty() {
         return Vec::new();
@@ -524,15 +524,78 @@ fn pinched_vertices(input: &[u32], out: &[[u32; 3]], vertices: usize) -> Vec<u32
             }
         }
     }
-    let mut ends: Vec<u32> = crowded
+    crowded
         .iter()
         .zip(&before)
         .filter(|((_, after), &before)| *after > before)
-        .flat_map(|(&(e, _), _)| [(e >> 32) as u32, e as u32])
-        .collect();
-    ends.sort_unstable();
-    ends.dedup();
-    ends
+        .map(|(&(e, _), _)| [(e >> 32) as u32, e as u32])
+        .collect()
+}
+
+/// Mends the `pinched` edges of a group's simplified triangles `out` (its welded `input`,
+/// both over `pos`) by collapsing each edge onto one of its ends: the two sheets the
+/// simplifier squashed onto the edge (a collapse that the link condition would have
+/// refused) then meet at a vertex, as the welded input's sheets do where they touch. The
+/// removed end must be free to move (not `lock`ed), the kept one off the group's `border`
+/// (so that no new edge reaches the border), and no triangle may turn over; an edge whose
+/// one end breaks a rule goes the other way. Returns the mended triangles and the
+/// collapses' error, or `None` where an edge can go neither way; the caller checks the
+/// result for pinches again.
+fn unpinch(
+    input: &[u32],
+    out: &[[u32; 3]],
+    pinched: &[[u32; 2]],
+    lock: &[bool],
+    border: &[bool],
+    pos: &[[f32; 3]],
+) -> Option<(Vec<[u32; 3]>, f32)> {
+    let mut to: Vec<u32> = (0..pos.len() as u32).collect();
+    let find = |to: &[u32], mut v: u32| {
+        while to[v as usize] != v {
+            v = to[v as usize];
+        }
+        v
+    };
+    let p = |v: u32| Vec3::from(pos[v as usize]);
+    let normal = |t: [u32; 3]| (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0]));
+    // Whether moving `gone` onto `keep` (after the collapses chosen so far) turns over a
+    // triangle that keeps its area.
+    let turns = |to: &[u32], gone: u32, keep: u32| {
+        out.iter().any(|&t| {
+            let now = t.map(|v| find(to, v));
+            if !now.contains(&gone) || now.contains(&keep) {
+                return false;
+            }
+            let then = now.map(|v| if v == gone { keep } else { v });
+            normal(now).dot(normal(then)) < 0.0
+        })
+    };
+    for &[a, b] in pinched {
+        let (a, b) = (find(&to, a), find(&to, b));
+        if a == b {
+            continue;
+        }
+        let (keep, gone) = [(a, b), (b, a)]
+            .into_iter()
+            .find(|&(keep, gone)| !lock[gone as usize] && !border[keep as usize] && !turns(&to, gone, keep))?;
+        to[gone as usize] = keep;
+    }
+    // The collapses' error measured as the simplifier measures its own: how far each
+    // removed vertex's new place lies off the planes of its triangles in the input.
+    let mut moved = 0.0f32;
+    for t in input.chunks_exact(3) {
+        let t = [t[0], t[1], t[2]];
+        for v in t {
+            let k = find(&to, v);
+            if k != v {
+                moved = moved.max(normal(t).normalize_or_zero().dot(p(k) - p(v)).abs());
+            }
+        }
+    }
+    let mut mended: Vec<[u32; 3]> =
+        out.iter().map(|t| t.map(|v| find(&to, v))).filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).collect();
+    cancel_folds(&mut mended);
+    Some((mended, moved))
 }
 
 /// Removes pairs of triangles on the same three vertices facing opposite ways: the
@@ -806,13 +869,25 @@ fn simplify(
         };
         let mut out: Vec<[u32; 3]> = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
         cancel_folds(&mut out);
-        let pinched = pinched_vertices(&local, &out, pos.len());
+        let mut pinched = pinched_edges(&local, &out, pos.len());
+        if !out.is_empty() && !pinched.is_empty() {
+            // Mended in place where that leaves no pinch, rather than simplified again:
+            // nearly every pinch is a few edges where the welded input's sheets touch.
+            if let Some((mended, moved)) = unpinch(&local, &out, &pinched, &lock, &border, &pos) {
+                if !mended.is_empty() && pinched_edges(&local, &mended, pos.len()).is_empty() {
+                    (out, pinched) = (mended, Vec::new());
+                    error = error.max(moved);
+                }
+            }
+        }
         if !out.is_empty() && pinched.is_empty() {
             simplified = out;
             break;
         }
+        let mut ends: Vec<u32> = pinched.into_iter().flatten().collect();
+        ends.sort_unstable();
         for t in local.chunks_exact(3) {
-            if t.iter().any(|v| pinched.binary_search(v).is_ok()) {
+            if t.iter().any(|v| ends.binary_search(v).is_ok()) {
                 for &v in t {
                     lock[v as usize] = true;
                 }
@@ -843,16 +918,62 @@ mod tests {
         // A fan of two triangles and, apart from it, another: no edge has more than two faces.
         let input: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
         let same: Vec<[u32; 3]> = bytemuck::cast_slice(&input).to_vec();
-        assert!(pinched_vertices(&input, &same, 8).is_empty());
+        assert!(pinched_edges(&input, &same, 8).is_empty());
         // Vertices 4 and 6 collapsed onto 0 and 2: the two sheets meet on the edge 0-2 with
         // four faces.
         let squashed = vec![[0, 1, 2], [0, 2, 3], [0, 5, 2], [0, 2, 7]];
-        assert_eq!(pinched_vertices(&input, &squashed, 8), vec![0, 2]);
+        assert_eq!(pinched_edges(&input, &squashed, 8), vec![[0, 2]]);
         // An edge the input already gives four faces (a non-manifold model) may keep them,
         // and one it gives three may not gain a fourth.
         let fins: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 0, 5, 2, 0, 2, 7];
-        assert!(pinched_vertices(&fins, bytemuck::cast_slice(&fins), 8).is_empty());
+        assert!(pinched_edges(&fins, bytemuck::cast_slice(&fins), 8).is_empty());
         let three: Vec<u32> = vec![0, 1, 2, 0, 2, 3, 0, 5, 2];
-        assert_eq!(pinched_vertices(&three, bytemuck::cast_slice(&fins), 8), vec![0, 2]);
+        assert_eq!(pinched_edges(&three, bytemuck::cast_slice(&fins), 8), vec![[0, 2]]);
+    }
+
+    #[test]
+    fn a_pinch_is_mended_by_collapsing_its_edge() {
+        // Two sheets squashed onto the edge 0-2 (faces 0-1, 0-3 of one; 0-6, 0-7 of the
+        // other), and a triangle 2-4-1 beside it; 2 stands a little above the others.
+        let pos: Vec<[f32; 3]> = vec![
+            [0.0, 0.0, 0.0],
+            [0.5, 1.0, 0.0],
+            [1.0, 0.0, 0.2],
+            [0.5, -1.0, 0.0],
+            [1.2, 1.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.5, 1.0, 0.1],
+            [0.5, -1.0, 0.1],
+        ];
+        let input: Vec<u32> = vec![0, 2, 1, 0, 3, 2, 2, 4, 1, 5, 2, 6, 5, 7, 2];
+        let out = vec![[0, 2, 1], [0, 3, 2], [2, 4, 1], [0, 2, 6], [0, 7, 2]];
+        let pinched = pinched_edges(&input, &out, 8);
+        assert_eq!(pinched, vec![[0, 2]]);
+        let free = vec![false; 8];
+        // 2 goes onto 0: the four faces on the edge go, 2-4-1 becomes 0-4-1, and the error
+        // is 0's distance from the plane of 2's input triangle 2-4-1 (it lies in the others').
+        let (mended, moved) = unpinch(&input, &out, &pinched, &free, &free, &pos).unwrap();
+        assert_eq!(mended, vec![[0, 4, 1]]);
+        assert!(pinched_edges(&input, &mended, 8).is_empty());
+        let p = |v: usize| Vec3::from(pos[v]);
+        let plane = (p(4) - p(2)).cross(p(1) - p(2)).normalize();
+        assert!((moved - plane.dot(p(0) - p(2)).abs()).abs() < 1e-6 && moved > 0.19, "{moved}");
+        // A locked end stays: 0 goes onto 2.
+        let mut lock = free.clone();
+        lock[2] = true;
+        assert_eq!(unpinch(&input, &out, &pinched, &lock, &free, &pos).unwrap().0, vec![[2, 4, 1]]);
+        // Nor onto a vertex of the group's border (which is locked): the edges 0-4 and 0-1
+        // would be new edges reaching it.
+        let mut border = free.clone();
+        border[0] = true;
+        assert!(unpinch(&input, &out, &pinched, &border, &border, &pos).is_none());
+        // A collapse that would turn a triangle over goes the other way: with 4 and 1 on the
+        // line between the ends, 2-4-1 turns over if 2 goes onto 0, so 0 goes onto 2.
+        let mut flat = pos.clone();
+        (flat[4], flat[1]) = ([0.5, -0.5, 0.0], [0.5, 0.5, 0.0]);
+        assert_eq!(unpinch(&input, &out, &pinched, &free, &free, &flat).unwrap().0, vec![[2, 4, 1]]);
+        // And none is made where both ways turn one over (0-4-1 as well).
+        let both: Vec<[u32; 3]> = out.iter().copied().chain([[0, 4, 1]]).collect();
+        assert!(unpinch(&input, &both, &pinched, &free, &free, &flat).is_none());
     }
 }
