@@ -871,8 +871,8 @@ fn simplify(
         cancel_folds(&mut out);
         let mut pinched = pinched_edges(&local, &out, pos.len());
         if !out.is_empty() && !pinched.is_empty() {
-            // Mended in place where that leaves no pinch, rather than simplified again:
-            // nearly every pinch is a few edges where the welded input's sheets touch.
+            // Mended in place where that leaves no pinch, rather than simplified again: a
+            // pinch is a few edges, most of them where the welded input's sheets touch.
             if let Some((mended, moved)) = unpinch(&local, &out, &pinched, &lock, &border, &pos) {
                 if !mended.is_empty() && pinched_edges(&local, &mended, pos.len()).is_empty() {
                     (out, pinched) = (mended, Vec::new());
