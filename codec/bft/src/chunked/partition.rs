@@ -25,8 +25,8 @@ pub(super) fn split(
 /// The vertices `tris` use, sorted, and each corner of `tris` as an index into them. The
 /// corners are numbered by first use in a hash map and only the distinct vertices (about a
 /// sixth of the corners) sorted: one sort of every (vertex, corner) pair was 7% of the
-/// 13.9M-triangle dragon's `--lod` build in `perf`, and sorting the vertices, then a binary
-/// search per corner, made gathering a group's triangles 1.4x slower still.
+/// 13.9M-triangle dragon's `--lod` build in `perf` (and sorting the vertices, then a binary
+/// search per corner, had been 1.4x slower than that sort).
 pub(super) fn localize(tris: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
     let mut number: rustc_hash::FxHashMap<u32, u32> =
         rustc_hash::FxHashMap::with_capacity_and_hasher(tris.len(), Default::default());
@@ -62,6 +62,7 @@ pub(super) fn vertices_of(tris: &[[u32; 3]]) -> Vec<u32> {
     v.dedup();
     v
 }
+
 pub(super) fn centroid(p: &[[f32; 3]], t: [u32; 3]) -> [f32; 3] {
     let [a, b, c] = t.map(|v| p[v as usize]);
     [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
