@@ -5,6 +5,9 @@
 //! triangle is in) taken from the frame before.
 //! With ERROR_PX, a level-of-detail file draws the cut of that many pixels (`render
 //! --error-px`).
+//! With CLOSE=1 in the environment, the camera is `bench/scripts/scale.sh`'s close-up (the eye
+//! 0.3 model sizes outside the box's +Z face, looking at its centre, 12 degrees), orbiting
+//! its target.
 //! `cargo run --release -p tessera-codec --example orbitsort -- MODEL.bft [DEGREES] [ERROR_PX]`
 use codec::bft::chunked::sort::{ChunkedModel, PieceKind};
 use codec::bft::chunked::ChunkedFile;
@@ -20,7 +23,19 @@ fn main() {
     model.error_px = args.next().map(|s| s.parse().expect("ERROR_PX is a number"));
     let grid = TileGrid::new(1920, 1080, 8, 8).expect("grid");
     let h = &model.file.header;
-    let cam = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect());
+    let mut cam = Camera::framing(h.bbox_min, h.bbox_max, grid.aspect());
+    if std::env::var_os("CLOSE").is_some_and(|v| v == "1") {
+        let (lo, hi) = (glam::Vec3::from(h.bbox_min), glam::Vec3::from(h.bbox_max));
+        let (c, s) = ((lo + hi) / 2.0, (hi - lo).max_element());
+        cam = Camera {
+            eye: glam::Vec3::new(c.x, c.y, hi.z + 0.3 * s),
+            target: c,
+            fovy: 12.0,
+            near: 0.01 * s,
+            far: 4.0 * s,
+            ..cam
+        };
+    }
     let (mut times, mut reused, mut in_pieces) = (Vec::new(), 0, 0);
     for k in 0..24 {
         let turn = glam::Quat::from_axis_angle(cam.up.normalize(), (degrees * k as f32).to_radians());

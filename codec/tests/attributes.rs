@@ -4,7 +4,7 @@
 
 use codec::bft::attributes::oct_encode;
 use codec::bft::chunked::{encode_mesh_chunked, ChunkOptions};
-use codec::bft::{self, EncodeOptions};
+use codec::bft::{self, Coding, EncodeOptions};
 use codec::Mesh;
 use testkit::{assert_round_trip, paint};
 
@@ -105,20 +105,74 @@ fn corrupt_attribute_sections_are_errors_not_panics() {
     }
     // Flipped bits inside the colour and normal streams, checksums refreshed: decoded values
     // change or the decoder refuses, and it never panics.
-    let start = testkit::sections_start(&enc.bytes);
-    let mut rng = testkit::XorShift(9);
-    for _ in 0..300 {
-        let mut b = enc.bytes.clone();
-        let i = start + (rng.next_u64() as usize % (b.len() - start));
-        b[i] ^= 1 << (rng.next_u64() % 8);
-        testkit::refresh_checksums(&mut b, start);
-        let _ = bft::decode(&b);
-    }
+    decode_with_flipped_section_bits(&enc.bytes, 9);
     // Colour and normal streams cut short (checksums valid) are refused, never misread.
     for tag in [*b"COLR", *b"NORM"] {
         let cut = shorten(&enc.bytes, tag);
         let e = bft::decode(&cut).unwrap_err().to_string();
         assert!(e.contains("truncated") || e.contains("corrupt"), "{e}");
+    }
+}
+
+/// A prefix-coded stream's normals are prefix-coded too (version 6; the tile sort re-codes
+/// them every frame): exact at every precision, manifold or not, corrupt or cut sections
+/// refused, a version 6 header that is not prefix-coded refused, and a prefix-coded version 4
+/// file, whose normals are range-coded (written by the build before version 6), still read.
+#[test]
+fn prefix_coded_streams_prefix_code_their_normals() {
+    for rel in MESHES {
+        let mesh = paint(shared(rel), false, 4);
+        for coding in [Coding::Prefix, Coding::PrefixByDegree] {
+            for bits in [4u8, 10, 16] {
+                let opts = EncodeOptions { coding, normal_bits: bits, ..Default::default() };
+                let enc = bft::encode(&mesh, opts).unwrap();
+                assert_eq!(u16::from_le_bytes([enc.bytes[8], enc.bytes[9]]), 6, "{rel}: a version 6 file");
+                let dec = bft::decode(&enc.bytes).unwrap();
+                assert_eq!(dec.attributes.normals.len(), enc.slot_vertex.len(), "{rel}");
+                for (slot, n) in dec.attributes.normals.iter().enumerate() {
+                    assert_eq!(*n, oct_encode(mesh.normals[enc.slot_vertex[slot] as usize], bits), "{rel} slot {slot}");
+                }
+            }
+        }
+    }
+    let mesh = paint(shared("classic/teapot.obj"), false, 6);
+    let enc = bft::encode(&mesh, EncodeOptions { coding: Coding::Prefix, ..Default::default() }).unwrap();
+    decode_with_flipped_section_bits(&enc.bytes, 13);
+    let e = bft::decode(&shorten(&enc.bytes, *b"NORM")).unwrap_err().to_string();
+    assert!(e.contains("truncated") || e.contains("corrupt"), "{e}");
+    // Header bytes 40-43: byte 41 the coding (0: range), 42-43 the attributes.
+    let mut range = enc.bytes.clone();
+    let word: [u8; 4] = range[12 + 40..12 + 44].try_into().unwrap();
+    testkit::patch_header(&mut range, 40, [word[0], 0, word[2], word[3]]);
+    let e = bft::decode(&range).unwrap_err().to_string();
+    assert!(e.contains("version 6 file is not a prefix-coded stream with normals"), "{e}");
+
+    let fixture = |name: &str| {
+        let bytes = std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/formats").join(name));
+        bytes.unwrap()
+    };
+    // The same model (a cow with per-vertex normals) written by that build range- and
+    // prefix-coded: the same vertices and normals.
+    let (old, range) = (fixture("spot-prefix-v4.bft"), fixture("spot-range-v4.bft"));
+    assert_eq!(u16::from_le_bytes([old[8], old[9]]), 4);
+    let (old, range) = (bft::decode(&old).unwrap(), bft::decode(&range).unwrap());
+    assert_eq!(old.header.coding, Coding::Prefix);
+    assert!(!range.attributes.normals.is_empty());
+    assert_eq!((&old.positions, &old.triangles), (&range.positions, &range.triangles));
+    assert_eq!(old.attributes, range.attributes);
+}
+
+/// Decodes 300 copies of `bytes`, each with a bit flipped in its sections and their checksums
+/// refreshed, so that the flips reach the stream decoders; none may panic.
+fn decode_with_flipped_section_bits(bytes: &[u8], seed: u64) {
+    let start = testkit::sections_start(bytes);
+    let mut rng = testkit::XorShift(seed);
+    for _ in 0..300 {
+        let mut b = bytes.to_vec();
+        let i = start + (rng.next_u64() as usize % (b.len() - start));
+        b[i] ^= 1 << (rng.next_u64() % 8);
+        testkit::refresh_checksums(&mut b, start);
+        let _ = bft::decode(&b);
     }
 }
 

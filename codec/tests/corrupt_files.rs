@@ -49,16 +49,21 @@ fn random_byte_flips_are_detected() {
 fn wrong_magic_and_version_are_named() {
     let mut b = encoded("odedstein/cube.obj");
     assert_eq!(u16::from_le_bytes([b[8], b[9]]), bft::VERSION);
-    for v in [0u16, 6, 9, u16::MAX] {
+    for v in [0u16, 7, 9, u16::MAX] {
         b[8..10].copy_from_slice(&v.to_le_bytes());
         let e = bft::decode(&b).unwrap_err();
         assert_eq!(e, FormatError::UnsupportedVersion { format: Format::Bft, found: v, known: bft::READS });
-        assert_eq!(e.to_string(), format!("unsupported .bft version {v} (this build reads versions 1, 2, 3, 4 and 5)"));
+        assert_eq!(
+            e.to_string(),
+            format!("unsupported .bft version {v} (this build reads versions 1, 2, 3, 4, 5 and 6)")
+        );
     }
-    // Version 4 has seven sections: a version 2 file relabelled is truncated; a version 2
-    // file whose attribute flags are set is corrupt.
-    b[8..10].copy_from_slice(&4u16.to_le_bytes());
-    assert!(matches!(bft::decode(&b).unwrap_err(), BftError::Truncated(_)));
+    // Versions 4 and 6 have seven sections: a version 2 file relabelled is truncated; a
+    // version 2 file whose attribute flags are set is corrupt.
+    for v in [4u16, 6] {
+        b[8..10].copy_from_slice(&v.to_le_bytes());
+        assert!(matches!(bft::decode(&b).unwrap_err(), BftError::Truncated(_)));
+    }
     b[8..10].copy_from_slice(&2u16.to_le_bytes());
     let flagged = with_header_byte(&b, 42, 1);
     let e = bft::decode(&flagged).unwrap_err().to_string();

@@ -7,9 +7,12 @@
 //! triangles, exactly as its positions are. A duplicate slot (the encoder's cut at a
 //! non-manifold vertex) codes nothing and takes its source slot's values.
 //!
-//! Both sections are range-coded ([`crate::rangecoder`]) whatever the stream's
-//! [`super::Coding`]: the prefix coder serves the command and position streams the tile sort
-//! rewrites every frame; attributes are a few bits per vertex either way.
+//! Colours are range-coded ([`crate::rangecoder`]) whatever the stream's [`super::Coding`].
+//! Normals are range-coded in a range-coded stream and prefix-coded in a prefix-coded one
+//! (version 6 of the `.bft` format): the tile sort re-codes the normals of every piece of a
+//! straddling level-of-detail chunk every frame, and range-coded that took 31% of a close-up's
+//! sort in `perf`. A prefix-coded version 4 stream, written before version 6, has range-coded
+//! normals.
 //!
 //! # Colours
 //!
@@ -34,7 +37,7 @@
 use crate::csr::Csr;
 use crate::rangecoder::{BitTree, Decoder, Encoder, PROB_INIT};
 
-use super::format::{corrupt, BftError};
+use super::format::{corrupt, BftError, Coding};
 
 /// Normal quantization when none is asked for: 10 bits per octahedral coordinate (about
 /// 0.2 degrees apart).
@@ -160,6 +163,12 @@ fn face_sums(positions: &[[u32; 3]], triangles: &[[u32; 3]]) -> Vec<[i64; 3]> {
         }
     }
     acc
+}
+
+/// What a normal coder needs of a stream: its slots, their face sums and duplicate sources.
+fn normal_inputs(input: &Input) -> (usize, Vec<[i64; 3]>, Vec<u32>) {
+    let n = input.positions.len();
+    (n, face_sums(input.positions, input.triangles), sources(n, input.duplicates))
 }
 
 /// Per slot, its duplicate source (or itself).
@@ -320,27 +329,62 @@ fn normal_prediction(sum: [i64; 3], prev: Option<[u16; 2]>, bits: u8) -> [f64; 3
     }
 }
 
-/// Codes the octahedral normals of the slots at `bits` (duplicates' values are ignored).
-pub(crate) fn encode_normals(input: &Input, values: &[[u16; 2]], bits: u8) -> Vec<u8> {
-    let n = input.positions.len();
-    let sums = face_sums(input.positions, input.triangles);
-    let src = sources(n, input.duplicates);
+/// Whether the value `v` faces away from the prediction `p` (the encoder's flip bit).
+fn faces_away(p: [f64; 3], v: [u16; 2], bits: u8) -> bool {
+    let actual = oct_decode(v, bits);
+    (0..3).map(|i| p[i] * actual[i] as f64).sum::<f64>() < 0.0
+}
+
+/// The octahedral code predicted from `p`, turned around when `flip`.
+fn predicted_code(p: [f64; 3], flip: bool, bits: u8) -> [u16; 2] {
+    oct_encode64(if flip { p.map(|c| -c) } else { p }, bits)
+}
+
+/// What an encoder codes of each slot that is not a duplicate, in slot order: its value, the
+/// flip bit, and the predicted code (after the flip) that its residual is taken from.
+fn normal_predictions<'a>(
+    input: &Input,
+    values: &'a [[u16; 2]],
+    bits: u8,
+) -> impl Iterator<Item = ([u16; 2], bool, [u16; 2])> + 'a {
+    let (n, sums, src) = normal_inputs(input);
+    let mut prev = None;
+    (0..n).filter(move |&s| src[s] as usize == s).map(move |s| {
+        let v = values[s];
+        let p = normal_prediction(sums[s], prev, bits);
+        let flip = faces_away(p, v, bits);
+        prev = Some(v);
+        (v, flip, predicted_code(p, flip, bits))
+    })
+}
+
+/// Codes the octahedral normals of the slots at `bits` (duplicates' values are ignored) for a
+/// stream coded as `coding`: range-coded ([`encode_normals_range`]) in a range-coded stream,
+/// prefix-coded ([`encode_normals_prefix`]) in a prefix-coded one.
+pub(crate) fn encode_normals(input: &Input, values: &[[u16; 2]], bits: u8, coding: Coding) -> Vec<u8> {
+    match coding {
+        Coding::Range => encode_normals_range(input, values, bits),
+        Coding::Prefix | Coding::PrefixByDegree => encode_normals_prefix(input, values, bits),
+    }
+}
+
+/// Decodes what [`encode_normals`] wrote: `prefix` for a version 6 stream
+/// ([`super::format`]).
+pub(crate) fn decode_normals(input: &Input, bytes: &[u8], bits: u8, prefix: bool) -> Result<Vec<[u16; 2]>, BftError> {
+    if prefix {
+        decode_normals_prefix(input, bytes, bits)
+    } else {
+        decode_normals_range(input, bytes, bits)
+    }
+}
+
+/// The adaptive range coder's normals, as every range-coded stream and every version 4 stream
+/// codes them.
+fn encode_normals_range(input: &Input, values: &[[u16; 2]], bits: u8) -> Vec<u8> {
     let mut model = NormalModel::new();
     let mut enc = Encoder::new();
-    let mut prev = None;
-    for s in 0..n {
-        if src[s] as usize != s {
-            continue;
-        }
-        let v = values[s];
-        let mut p = normal_prediction(sums[s], prev, bits);
-        let actual = oct_decode(v, bits);
-        let flip = (0..3).map(|i| p[i] * actual[i] as f64).sum::<f64>() < 0.0;
+    for (v, flip, pred) in normal_predictions(input, values, bits) {
         enc.bit(&mut model.flip, flip);
-        if flip {
-            p = p.map(|c| -c);
-        }
-        let pred = oct_encode64(p, bits);
         for axis in 0..2 {
             let r = v[axis] as i64 - pred[axis] as i64;
             let m = r.unsigned_abs() as u32;
@@ -357,16 +401,13 @@ pub(crate) fn encode_normals(input: &Input, values: &[[u16; 2]], bits: u8) -> Ve
             }
             model.prev_class[axis] = class;
         }
-        prev = Some(v);
     }
     enc.finish()
 }
 
-/// Decodes what [`encode_normals`] wrote.
-pub(crate) fn decode_normals(input: &Input, bytes: &[u8], bits: u8) -> Result<Vec<[u16; 2]>, BftError> {
-    let n = input.positions.len();
-    let sums = face_sums(input.positions, input.triangles);
-    let src = sources(n, input.duplicates);
+/// Decodes what [`encode_normals_range`] wrote.
+fn decode_normals_range(input: &Input, bytes: &[u8], bits: u8) -> Result<Vec<[u16; 2]>, BftError> {
+    let (n, sums, src) = normal_inputs(input);
     let max = oct_max(bits);
     let mut model = NormalModel::new();
     let mut dec = Decoder::new(bytes);
@@ -377,11 +418,8 @@ pub(crate) fn decode_normals(input: &Input, bytes: &[u8], bits: u8) -> Result<Ve
             out[s] = out[src[s] as usize];
             continue;
         }
-        let mut p = normal_prediction(sums[s], prev, bits);
-        if dec.bit(&mut model.flip) {
-            p = p.map(|c| -c);
-        }
-        let pred = oct_encode64(p, bits);
+        let p = normal_prediction(sums[s], prev, bits);
+        let pred = predicted_code(p, dec.bit(&mut model.flip), bits);
         let mut v = [0u16; 2];
         for axis in 0..2 {
             let ctx = model.ctx(axis);
@@ -414,6 +452,141 @@ pub(crate) fn decode_normals(input: &Input, bytes: &[u8], bits: u8) -> Result<Ve
         }
     }
     if dec.overrun() > 0 {
+        return Err(BftError::Truncated("normal stream"));
+    }
+    Ok(out)
+}
+
+/// Residual classes of a normal coordinate (bit lengths 0..=16, `bits` being at most 16).
+const NORMAL_CLASSES: usize = 17;
+/// Prefix-coded normals' table contexts per coordinate ([`normal_prefix_ctx`]).
+const NORMAL_PREFIX_CTX: usize = 3;
+/// The first coordinate's symbol is its class and the flip bit, `class << 1 | flip`.
+const NORMAL_U_SYMBOLS: usize = 2 * NORMAL_CLASSES;
+
+/// The table context of a class (the range coder's six, folded to three: a prefix-coded tile
+/// stores its tables, and a piece of a few hundred vertices pays for each).
+#[inline]
+fn normal_prefix_ctx(class: u32) -> usize {
+    match class {
+        0..=1 => 0,
+        2..=3 => 1,
+        _ => 2,
+    }
+}
+
+/// A coordinate's residual `r` as its class and raw bits: the sign, then the bits below the
+/// leading one (`class` bits in all for a nonzero residual).
+#[inline]
+fn normal_residual_bits(r: i64) -> (u32, u32) {
+    let m = r.unsigned_abs() as u32;
+    let class = 32 - m.leading_zeros();
+    let raw = if class > 0 { ((r < 0) as u32) << (class - 1) | (m & ((1 << (class - 1)) - 1)) } else { 0 };
+    (class, raw)
+}
+
+/// Codes the octahedral normals of the slots at `bits` with static prefix codes, the `NORM`
+/// section of a prefix-coded stream (version 6; [`super::prefix`] codes its commands and
+/// positions). The same prediction as [`encode_normals`]; per slot, the first coordinate's
+/// class with the flip bit as one symbol and the second's class, each from one of
+/// [`NORMAL_PREFIX_CTX`] tables chosen by the class before it (the previous slot's first, then
+/// this slot's first), each followed by its sign and the bits below its leading one. The
+/// tables lead the section (`NORMAL_PREFIX_CTX` first-coordinate tables, then as many
+/// second-coordinate ones, as [`super::prefix`] writes its tables).
+///
+/// Why: the tile sort re-codes the normals of every straddling chunk's pieces each frame.
+/// Orbiting the 223M-triangle dragon's level-of-detail close-up a degree a frame in one
+/// process (`CLOSE=1 orbitsort`), the sort took 164 ms a frame against 207 range-coded, and the
+/// tiles 0.99x the bytes.
+fn encode_normals_prefix(input: &Input, values: &[[u16; 2]], bits: u8) -> Vec<u8> {
+    let mut u_counts = [[0u64; NORMAL_U_SYMBOLS]; NORMAL_PREFIX_CTX];
+    let mut v_counts = [[0u64; NORMAL_CLASSES]; NORMAL_PREFIX_CTX];
+    // Per coded coordinate: `table << 6 | symbol`, the class (raw bits), the raw bits.
+    let mut coded: Vec<(u16, u8, u16)> = Vec::with_capacity(2 * values.len());
+    let mut prev_u = 0;
+    for (v, flip, pred) in normal_predictions(input, values, bits) {
+        let (cu, ru) = normal_residual_bits(v[0] as i64 - pred[0] as i64);
+        let (cv, rv) = normal_residual_bits(v[1] as i64 - pred[1] as i64);
+        let (tu, tv) = (normal_prefix_ctx(prev_u), normal_prefix_ctx(cu));
+        let su = (cu << 1 | flip as u32) as usize;
+        u_counts[tu][su] += 1;
+        v_counts[tv][cv as usize] += 1;
+        coded.push(((tu << 6 | su) as u16, cu as u8, ru as u16));
+        coded.push((((NORMAL_PREFIX_CTX + tv) << 6 | cv as usize) as u16, cv as u8, rv as u16));
+        prev_u = cu;
+    }
+    let tables: Vec<_> = super::prefix::tables(&u_counts).into_iter().chain(super::prefix::tables(&v_counts)).collect();
+    let mut w = crate::huffman::BitWriter::default();
+    tables.iter().for_each(|t| super::prefix::write_table(&mut w, t));
+    for &(ts, class, raw) in &coded {
+        let (code, len) = tables[(ts >> 6) as usize].code((ts & 63) as u8);
+        // At most 15 bits of code and 16 raw.
+        w.put(code << class | raw as u32, len + class);
+    }
+    w.finish()
+}
+
+/// Decodes what [`encode_normals_prefix`] wrote.
+fn decode_normals_prefix(input: &Input, bytes: &[u8], bits: u8) -> Result<Vec<[u16; 2]>, BftError> {
+    use crate::huffman::{BitReader, SmallTable};
+    let (n, sums, src) = normal_inputs(input);
+    let max = oct_max(bits);
+    let mut r = BitReader::new(bytes, 0);
+    let mut tables = vec![SmallTable::EMPTY; 2 * NORMAL_PREFIX_CTX];
+    let (u_tables, v_tables) = tables.split_at_mut(NORMAL_PREFIX_CTX);
+    u_tables.iter_mut().try_for_each(|t| super::prefix::read_table(&mut r, NORMAL_U_SYMBOLS, "normal", t))?;
+    v_tables.iter_mut().try_for_each(|t| super::prefix::read_table(&mut r, NORMAL_CLASSES, "normal", t))?;
+    let outside = |s: usize| corrupt(format!("normal of vertex {s} is outside the octahedral grid"));
+    // One coordinate: its symbol from `table` (the class above `flip_bits` bits), then its
+    // raw bits; (symbol, class, residual).
+    let coordinate = |r: &mut BitReader, table: &SmallTable, s: usize, flip_bits: u32| {
+        let w = r.window_of::<{ super::prefix::MAX_CODE_LEN as u32 + 16 }>();
+        let (sym, code_len) = table.lookup(w).ok_or_else(|| corrupt(format!("invalid normal code at vertex {s}")))?;
+        let class = (sym >> flip_bits) as u32;
+        if class > bits as u32 {
+            return Err(outside(s));
+        }
+        let d = if class > 0 {
+            let raw = (w << code_len >> (64 - class)) as i64;
+            let m = 1 << (class - 1) | (raw & ((1 << (class - 1)) - 1));
+            if raw >> (class - 1) != 0 {
+                -m
+            } else {
+                m
+            }
+        } else {
+            0
+        };
+        r.consume(code_len + class);
+        Ok::<_, BftError>((sym, class, d))
+    };
+    let mut out = vec![[0u16; 2]; n];
+    let (mut prev, mut prev_u) = (None, 0);
+    for s in 0..n {
+        if src[s] as usize != s {
+            out[s] = out[src[s] as usize];
+            continue;
+        }
+        let (su, cu, du) = coordinate(&mut r, &u_tables[normal_prefix_ctx(prev_u)], s, 1)?;
+        let (_, _, dv) = coordinate(&mut r, &v_tables[normal_prefix_ctx(cu)], s, 0)?;
+        let p = normal_prediction(sums[s], prev, bits);
+        let pred = predicted_code(p, su & 1 != 0, bits);
+        let mut v = [0u16; 2];
+        for (axis, d) in [du, dv].into_iter().enumerate() {
+            let x = pred[axis] as i64 + d;
+            if !(0..=max).contains(&x) {
+                return Err(outside(s));
+            }
+            v[axis] = x as u16;
+        }
+        out[s] = v;
+        prev = Some(v);
+        prev_u = cu;
+        if r.overrun() > 64 {
+            return Err(BftError::Truncated("normal stream"));
+        }
+    }
+    if r.overrun() > 0 {
         return Err(BftError::Truncated("normal stream"));
     }
     Ok(out)

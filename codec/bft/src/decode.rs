@@ -165,7 +165,7 @@ fn decode_inner(bytes: &[u8], record: bool) -> Result<(Decoded, Vec<Op>), BftErr
         a.colors = attributes::decode_colors(&input, color_bytes, flags.alpha)?;
     }
     if flags.normal_bits > 0 {
-        a.normals = attributes::decode_normals(&input, normal_bytes, flags.normal_bits)?;
+        a.normals = attributes::decode_normals(&input, normal_bytes, flags.normal_bits, parts.prefix_normals)?;
     }
     if flags.order {
         a.order =

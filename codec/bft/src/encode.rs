@@ -199,7 +199,7 @@ fn encode_with<S: SymbolSink>(
             let values: Vec<[u16; 2]> =
                 tr.vertex_of.iter().map(|&v| oct_encode(mesh.normals[v as usize], bits)).collect();
             flags.normal_bits = bits;
-            normal_bytes = attributes::encode_normals(&input, &values, bits);
+            normal_bytes = attributes::encode_normals(&input, &values, bits, options.coding);
         }
     }
     let mut dup_bytes = Vec::new();

@@ -4,7 +4,8 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"TESSBFT\x1a"
-//! 8       2     version (u16 LE): 2, or 4 for a stream with attributes; 1 to 4 are read
+//! 8       2     version (u16 LE): 2, or 4 for a stream with attributes, or 6 for a
+//!               prefix-coded one with normals; 1 to 6 are read (3 and 5 chunked)
 //! 10      2     header length H in bytes (u16 LE)
 //! 12      H     header (little-endian, see `Header`)
 //! 12+H    4     CRC-32 of the header bytes
@@ -32,6 +33,12 @@
 //! vertex order (`super::order`); a section whose flag is clear is empty. A file without
 //! attributes is written as version 2, byte for byte as before; a version 2 file has zero in
 //! both bytes.
+//!
+//! Version 6 is version 4 whose `NORM` section is prefix-coded as its commands and positions
+//! are ([`super::attributes`]): what a prefix-coded stream with normals is written as (a tile
+//! re-codes its normals every frame). A version 6 stream is prefix-coded and has normals; a
+//! prefix-coded version 4 stream, as written before version 6, has range-coded normals and
+//! still reads.
 
 pub(crate) use crate::container::put_varint;
 use crate::container::Layout;
@@ -55,10 +62,12 @@ pub fn is_chunked(bytes: &[u8]) -> bool {
 pub const VERSION: u16 = 2;
 /// The version written for a stream with attributes.
 pub const VERSION_ATTRIBUTES: u16 = 4;
+/// The version written for a prefix-coded stream with normals.
+pub const VERSION_PREFIX_NORMALS: u16 = 6;
 /// The versions read: 1 (before the coding byte), 2, 3 (chunked files, [`super::chunked`];
-/// a single stream is never version 3), 4 (a stream with attributes) and 5 (a chunked file
-/// with a level-of-detail hierarchy).
-pub const READS: &[u16] = &[1, 2, 3, 4, 5];
+/// a single stream is never version 3), 4 (a stream with attributes), 5 (a chunked file
+/// with a level-of-detail hierarchy) and 6 (a prefix-coded stream with prefix-coded normals).
+pub const READS: &[u16] = &[1, 2, 3, 4, 5, 6];
 const HEADER_LEN: usize = 4 * 10 + 4 + 4 * 7;
 pub(crate) const SECTION_TAGS: [[u8; 4]; 4] = [*b"CONN", *b"GEOM", *b"DUPS", *b"LOOS"];
 /// The sections of a stream, attributes included (version 4 has them all).
@@ -295,6 +304,8 @@ pub(crate) fn check_quantization(bits: u8, min: [f32; 3], step: f32, max: [f32; 
 pub(crate) struct Parts<'a> {
     pub header: Header,
     pub sections: [&'a [u8]; SECTIONS],
+    /// `NORM` is prefix-coded (version 6).
+    pub prefix_normals: bool,
 }
 
 /// The `.bft` container: sections CONN, GEOM, DUPS, LOOS.
@@ -325,12 +336,22 @@ const LAYOUT_ATTRIBUTES: Layout<SECTIONS> = Layout {
     ],
 };
 
+/// The version 6 container: version 4's sections, `NORM` prefix-coded.
+const LAYOUT_PREFIX_NORMALS: Layout<SECTIONS> = Layout { version: VERSION_PREFIX_NORMALS, ..LAYOUT_ATTRIBUTES };
+
+/// Whether a stream with this header is written as version 6.
+fn prefix_normals(header: &Header) -> bool {
+    header.coding != Coding::Range && header.attributes.normal_bits > 0
+}
+
 /// Writes a stream: version 2 when the header flags no attribute (the last three sections
-/// are then empty), else version 4.
+/// are then empty), version 6 when it is prefix-coded with normals, else version 4.
 pub(crate) fn write(header: &Header, sections: [&[u8]; SECTIONS]) -> Vec<u8> {
     if header.attributes.is_none() {
         debug_assert!(sections[4..].iter().all(|s| s.is_empty()));
         LAYOUT.write(&header.to_bytes(), [sections[0], sections[1], sections[2], sections[3]])
+    } else if prefix_normals(header) {
+        LAYOUT_PREFIX_NORMALS.write(&header.to_bytes(), sections)
     } else {
         LAYOUT_ATTRIBUTES.write(&header.to_bytes(), sections)
     }
@@ -338,7 +359,7 @@ pub(crate) fn write(header: &Header, sections: [&[u8]; SECTIONS]) -> Vec<u8> {
 
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
     let version = bytes.get(8..10).map(|v| u16::from_le_bytes([v[0], v[1]]));
-    let (header, version, sections) = if version == Some(VERSION_ATTRIBUTES) {
+    let (header, version, sections) = if matches!(version, Some(VERSION_ATTRIBUTES | VERSION_PREFIX_NORMALS)) {
         let c = LAYOUT_ATTRIBUTES.parse(bytes)?;
         (c.header, c.version, c.sections)
     } else {
@@ -350,13 +371,18 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parts<'_>, BftError> {
     if version == 1 && header.coding != Coding::Range {
         return Err(corrupt("a version 1 file has a non-zero reserved byte 41"));
     }
-    if version != VERSION_ATTRIBUTES && !header.attributes.is_none() {
+    let with_attributes = matches!(version, VERSION_ATTRIBUTES | VERSION_PREFIX_NORMALS);
+    if !with_attributes && !header.attributes.is_none() {
         return Err(corrupt(format!("a version {version} file has non-zero reserved bytes 42 and 43")));
     }
-    if version == VERSION_ATTRIBUTES && header.attributes.is_none() {
-        return Err(corrupt("a version 4 file flags no attribute"));
+    if with_attributes && header.attributes.is_none() {
+        return Err(corrupt(format!("a version {version} file flags no attribute")));
     }
-    Ok(Parts { header, sections })
+    let prefix_normals = version == VERSION_PREFIX_NORMALS;
+    if prefix_normals && !self::prefix_normals(&header) {
+        return Err(corrupt("a version 6 file is not a prefix-coded stream with normals"));
+    }
+    Ok(Parts { header, sections, prefix_normals })
 }
 
 /// Sizes and rates of a `.bft` file, as `tessera stats` reports them.

@@ -70,7 +70,7 @@ fn put_number(w: &mut BitWriter, table: &Table, v: u32) {
     }
 }
 
-fn write_table(w: &mut BitWriter, t: &Table) {
+pub(crate) fn write_table(w: &mut BitWriter, t: &Table) {
     let n = t.lens.iter().rposition(|&l| l > 0).map_or(0, |i| i + 1);
     w.put(n as u32, 6);
     for &l in &t.lens[..n] {
@@ -78,17 +78,24 @@ fn write_table(w: &mut BitWriter, t: &Table) {
     }
 }
 
-/// The most symbols of any of the stream's tables, each read into a [`SmallTable`], which
-/// holds them and their codes' lengths.
-const MOST_SYMBOLS: usize = {
-    let most = if COMMANDS > OFFSET_SYMBOLS { COMMANDS } else { OFFSET_SYMBOLS };
-    let most = if RESIDUAL_SYMBOLS > most { RESIDUAL_SYMBOLS } else { most };
-    assert!(most <= crate::huffman::SMALL_SYMBOLS && MAX_CODE_LEN <= crate::huffman::SMALL_MAX_LEN);
-    most
-};
+/// The most symbols of any table read with [`read_table`] (the normals' tables,
+/// [`super::attributes`], included): each is read into a [`SmallTable`], which holds them and
+/// their codes' lengths.
+const MOST_SYMBOLS: usize = crate::huffman::SMALL_SYMBOLS;
+const _: () = assert!(
+    COMMANDS <= MOST_SYMBOLS
+        && OFFSET_SYMBOLS <= MOST_SYMBOLS
+        && RESIDUAL_SYMBOLS <= MOST_SYMBOLS
+        && MAX_CODE_LEN <= crate::huffman::SMALL_MAX_LEN
+);
 
 /// Reads a code table of at most `symbols` symbols into `table`.
-fn read_table(r: &mut BitReader, symbols: usize, what: &str, table: &mut SmallTable) -> Result<(), BftError> {
+pub(crate) fn read_table(
+    r: &mut BitReader,
+    symbols: usize,
+    what: &str,
+    table: &mut SmallTable,
+) -> Result<(), BftError> {
     let truncated = || BftError::Truncated("a prefix code table");
     let n = r.bits(6).ok_or_else(truncated)? as usize;
     if n > symbols {
@@ -105,7 +112,7 @@ fn read_table(r: &mut BitReader, symbols: usize, what: &str, table: &mut SmallTa
     }
 }
 
-fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
+pub(crate) fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
     counts.iter().map(|c| Table::from_counts(c, MAX_CODE_LEN)).collect()
 }
 

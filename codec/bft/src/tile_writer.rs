@@ -224,7 +224,7 @@ impl<S: SymbolSink> TileWriter<S> {
                 colors = attributes::encode_colors(&input, &a.colors, a.alpha);
             }
             if header.attributes.normal_bits > 0 {
-                normals = attributes::encode_normals(&input, &a.normals, a.normal_bits);
+                normals = attributes::encode_normals(&input, &a.normals, a.normal_bits, coding);
             }
         }
         let [conn, geom] = self.sink.finish();
