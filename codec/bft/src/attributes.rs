@@ -515,11 +515,13 @@ fn encode_normals_prefix(input: &Input, values: &[[u16; 2]], bits: u8) -> Vec<u8
         coded.push((((NORMAL_PREFIX_CTX + tv) << 6 | cv as usize) as u16, cv as u8, rv as u16));
         prev_u = cu;
     }
-    let tables: Vec<_> = super::prefix::tables(&u_counts).into_iter().chain(super::prefix::tables(&v_counts)).collect();
+    let (u_tables, v_tables) = (super::prefix::tables(&u_counts), super::prefix::tables(&v_counts));
+    let tables: [&[_]; 2] = [&u_tables, &v_tables];
     let mut w = crate::huffman::BitWriter::default();
-    tables.iter().for_each(|t| super::prefix::write_table(&mut w, t));
+    u_tables.iter().chain(&v_tables).for_each(|t| super::prefix::write_table(&mut w, t));
     for &(ts, class, raw) in &coded {
-        let (code, len) = tables[(ts >> 6) as usize].code((ts & 63) as u8);
+        let t = (ts >> 6) as usize;
+        let (code, len) = tables[t / NORMAL_PREFIX_CTX][t % NORMAL_PREFIX_CTX].code((ts & 63) as u8);
         // At most 15 bits of code and 16 raw.
         w.put(code << class | raw as u32, len + class);
     }

@@ -26,7 +26,7 @@
 use super::format::{corrupt, BftError};
 use super::model::{decode_positions, Context, Prediction, ResidualSource, SymbolSink, SymbolSource};
 use crate::command::Command;
-use crate::huffman::{BitReader, BitWriter, SmallTable, Table};
+use crate::huffman::{BitReader, BitWriter, SmallCode, SmallTable};
 
 /// Longest code: lengths are stored in 4 bits.
 pub const MAX_CODE_LEN: u8 = 15;
@@ -62,18 +62,19 @@ fn bit_length(v: u32) -> u32 {
 
 /// Writes `v` as its bit length's code and the bits below its leading one.
 #[inline]
-fn put_number(w: &mut BitWriter, table: &Table, v: u32) {
+fn put_number(w: &mut BitWriter, table: &SmallCode, v: u32) {
     let len = bit_length(v);
-    table.encode(w, len as u8);
+    let (code, code_len) = table.code(len as u8);
+    w.put(code, code_len);
     if len >= 2 {
         w.put(v & ((1 << (len - 1)) - 1), (len - 1) as u8);
     }
 }
 
-pub(crate) fn write_table(w: &mut BitWriter, t: &Table) {
-    let n = t.lens.iter().rposition(|&l| l > 0).map_or(0, |i| i + 1);
+pub(crate) fn write_table(w: &mut BitWriter, t: &SmallCode) {
+    let n = t.lens().iter().rposition(|&l| l > 0).map_or(0, |i| i + 1);
     w.put(n as u32, 6);
-    for &l in &t.lens[..n] {
+    for &l in &t.lens()[..n] {
         w.put(l as u32, 4);
     }
 }
@@ -112,8 +113,8 @@ pub(crate) fn read_table(
     }
 }
 
-pub(crate) fn tables<const N: usize>(counts: &[[u64; N]]) -> Vec<Table> {
-    counts.iter().map(|c| Table::from_counts(c, MAX_CODE_LEN)).collect()
+pub(crate) fn tables<const N: usize, const T: usize>(counts: &[[u64; N]; T]) -> [SmallCode; T] {
+    counts.each_ref().map(|c| SmallCode::from_counts(c, MAX_CODE_LEN))
 }
 
 /// The command table of `ctx` in the coding `BY_DEGREE` names.
@@ -184,7 +185,8 @@ impl<const BY_DEGREE: bool> SymbolSink for PrefixSink<BY_DEGREE> {
         let mut i = 0;
         while i < self.conn.len() {
             let (table, cmd) = ((self.conn[i] >> 4) as usize, BY_CODE[(self.conn[i] & 15) as usize]);
-            cmd_tables[table].encode(&mut w, cmd as u8);
+            let (code, len) = cmd_tables[table].code(cmd as u8);
+            w.put(code, len);
             if has_offset(cmd) {
                 put_number(&mut w, &off_tables[offset_table(cmd)], self.conn[i + 1]);
                 i += 1;

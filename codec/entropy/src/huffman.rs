@@ -114,15 +114,14 @@ impl Table {
     /// `sym`'s code and its length.
     #[inline]
     pub fn code(&self, sym: u8) -> (u32, u8) {
-        debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
-        (self.codes[sym as usize], self.lens[sym as usize])
+        code_of(&self.lens, &self.codes, sym)
     }
 
     /// Writes `sym`'s code; the symbol must have one.
     #[inline]
     pub fn encode(&self, w: &mut BitWriter, sym: u8) {
-        debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
-        w.put(self.codes[sym as usize], self.lens[sym as usize]);
+        let (code, len) = self.code(sym);
+        w.put(code, len);
     }
 
     /// The symbol whose code starts `window` (a [`BitReader::window`]) and the code's length,
@@ -242,10 +241,8 @@ const SMALL_LUT_BITS: u8 = 8;
 /// [`Table`] of the same lengths decodes (tested).
 #[derive(Clone)]
 pub struct SmallTable {
-    lens: [u8; SMALL_SYMBOLS],
-    /// Symbols up to the last with a code.
-    symbols: u8,
-    codes: [u32; SMALL_SYMBOLS],
+    /// The lengths and codes (as an encoder holds them).
+    code: SmallCode,
     first: [u32; SMALL_MAX_LEN as usize + 1],
     count: [u32; SMALL_MAX_LEN as usize + 1],
     offset: [u32; SMALL_MAX_LEN as usize + 1],
@@ -268,9 +265,7 @@ impl SmallTable {
 
     /// No code: every lookup fails.
     pub const EMPTY: SmallTable = SmallTable {
-        lens: [0; SMALL_SYMBOLS],
-        symbols: 0,
-        codes: [0; SMALL_SYMBOLS],
+        code: SmallCode { lens: [0; SMALL_SYMBOLS], codes: [0; SMALL_SYMBOLS], symbols: 0 },
         first: [0; SMALL_MAX_LEN as usize + 1],
         count: [0; SMALL_MAX_LEN as usize + 1],
         offset: [0; SMALL_MAX_LEN as usize + 1],
@@ -286,7 +281,7 @@ impl SmallTable {
     pub fn set(&mut self, lens: &[u8]) -> bool {
         let ok = self.build(lens);
         if !ok {
-            (self.symbols, self.longest, self.lut_bits, self.lut[0]) = (0, 0, 0, 0);
+            (self.code.symbols, self.longest, self.lut_bits, self.lut[0]) = (0, 0, 0, 0);
         }
         ok
     }
@@ -299,27 +294,26 @@ impl SmallTable {
         }
         let t = self;
         let tables = [&mut t.first[..], &mut t.count[..], &mut t.offset[..]];
-        if canonical_code(lens, SMALL_MAX_LEN, tables, &mut t.sorted, &mut t.codes).is_none() {
+        if canonical_code(lens, SMALL_MAX_LEN, tables, &mut t.sorted, &mut t.code.codes).is_none() {
             return false;
         }
-        t.symbols = lens.len() as u8;
-        t.lens[..lens.len()].copy_from_slice(lens);
+        t.code.symbols = lens.len() as u8;
+        t.code.lens[..lens.len()].copy_from_slice(lens);
         t.longest = lens.iter().copied().max().unwrap_or(0);
         t.lut_bits = t.longest.min(SMALL_LUT_BITS);
-        fill_lut(&mut t.lut[..1 << t.lut_bits], lens, &t.codes);
+        fill_lut(&mut t.lut[..1 << t.lut_bits], lens, &t.code.codes);
         true
     }
 
     /// The code lengths, by symbol.
     pub fn lens(&self) -> &[u8] {
-        &self.lens[..self.symbols as usize]
+        self.code.lens()
     }
 
     /// `sym`'s code and its length.
     #[inline]
     pub fn code(&self, sym: u8) -> (u32, u8) {
-        debug_assert!(self.lens[sym as usize] > 0, "symbol {sym} has no code");
-        (self.codes[sym as usize], self.lens[sym as usize])
+        self.code.code(sym)
     }
 
     /// The symbol whose code starts `window` (a [`BitReader::window`]) and the code's length,
@@ -352,11 +346,32 @@ pub struct Canonical<'a> {
 /// Huffman code lengths for positive frequencies (two-queue construction).
 fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
     let n = freq.len();
-    let mut order: Vec<usize> = (0..n).collect();
+    let mut lens = vec![0u8; n];
+    let (mut order, mut weight) = (vec![0usize; n], vec![0u64; 2 * n - 1]);
+    let (mut parent, mut depth) = (vec![0usize; 2 * n - 1], vec![0u32; 2 * n - 1]);
+    huffman_lengths_into(freq, &mut lens, [&mut order], &mut weight, [&mut parent], &mut depth);
+    lens
+}
+
+/// [`huffman_lengths`] into the caller's buffers (`lens` and `order` of `freq.len()`, the
+/// others of `2 * freq.len() - 1`), so that [`SmallCode`] builds its codes on the stack.
+#[inline(always)]
+fn huffman_lengths_into(
+    freq: &[u64],
+    lens: &mut [u8],
+    [order]: [&mut [usize]; 1],
+    weight: &mut [u64],
+    [parent]: [&mut [usize]; 1],
+    depth: &mut [u32],
+) {
+    let n = freq.len();
+    order.iter_mut().enumerate().for_each(|(i, o)| *o = i);
     order.sort_by_key(|&i| freq[i]);
     // Nodes: leaves 0..n, inner n..2n-1; parent links.
-    let mut weight: Vec<u64> = order.iter().map(|&i| freq[i]).collect();
-    let mut parent = vec![usize::MAX; 2 * n - 1];
+    for (w, &i) in weight.iter_mut().zip(order.iter()) {
+        *w = freq[i];
+    }
+    parent.fill(usize::MAX);
     let (mut leaf, mut inner) = (0usize, n);
     let take = |weight: &[u64], leaf: &mut usize, inner: &mut usize, made: usize| -> usize {
         if *leaf < n && (*inner >= made || weight[*leaf] <= weight[*inner]) {
@@ -368,21 +383,106 @@ fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
         }
     };
     for made in n..2 * n - 1 {
-        let a = take(&weight, &mut leaf, &mut inner, made);
-        let b = take(&weight, &mut leaf, &mut inner, made);
-        weight.push(weight[a] + weight[b]);
+        let a = take(weight, &mut leaf, &mut inner, made);
+        let b = take(weight, &mut leaf, &mut inner, made);
+        weight[made] = weight[a] + weight[b];
         parent[a] = made;
         parent[b] = made;
     }
-    let mut depth = vec![0u32; 2 * n - 1];
+    depth[2 * n - 2] = 0;
     for i in (0..2 * n - 2).rev() {
         depth[i] = depth[parent[i]] + 1;
     }
-    let mut lens = vec![0u8; n];
     for (k, &i) in order.iter().enumerate() {
         lens[i] = depth[k].min(255) as u8;
     }
-    lens
+}
+
+/// An encoder's canonical prefix code of at most [`SMALL_SYMBOLS`] symbols and
+/// [`SMALL_MAX_LEN`] bits, built on the stack: the code [`Table::from_counts`] makes of the
+/// same counts (tested). A prefix-coded tile piece builds about thirty code tables, and
+/// building each as a [`Table`] (eleven allocations) was a tenth of a level-of-detail cut's
+/// sort in `perf`.
+#[derive(Clone)]
+pub struct SmallCode {
+    lens: [u8; SMALL_SYMBOLS],
+    codes: [u32; SMALL_SYMBOLS],
+    symbols: u8,
+}
+
+impl SmallCode {
+    /// The code for these symbol counts, at most `max_len` bits long (as
+    /// [`Table::from_counts`]).
+    pub fn from_counts(counts: &[u64], max_len: u8) -> SmallCode {
+        const N: usize = SMALL_SYMBOLS;
+        assert!(counts.len() <= N && (1..=SMALL_MAX_LEN).contains(&max_len), "no small code fits");
+        let (mut present, mut np) = ([0u8; N], 0);
+        for (s, &c) in counts.iter().enumerate() {
+            if c > 0 {
+                present[np] = s as u8;
+                np += 1;
+            }
+        }
+        let mut lens = [0u8; N];
+        match np {
+            0 => {}
+            1 => lens[present[0] as usize] = 1,
+            _ => {
+                let mut freq = [0u64; N];
+                for i in 0..np {
+                    freq[i] = counts[present[i] as usize];
+                }
+                let (mut l, mut order) = ([0u8; N], [0usize; N]);
+                let (mut weight, mut parent, mut depth) = ([0u64; 2 * N], [0usize; 2 * N], [0u32; 2 * N]);
+                let m = 2 * np - 1;
+                loop {
+                    huffman_lengths_into(
+                        &freq[..np],
+                        &mut l[..np],
+                        [&mut order[..np]],
+                        &mut weight[..m],
+                        [&mut parent[..m]],
+                        &mut depth[..m],
+                    );
+                    if l[..np].iter().all(|&l| l <= max_len) {
+                        for i in 0..np {
+                            lens[present[i] as usize] = l[i];
+                        }
+                        break;
+                    }
+                    // Flatten the distribution until the longest code fits.
+                    for f in &mut freq[..np] {
+                        *f = (*f >> 1) + 1;
+                    }
+                }
+            }
+        }
+        const L: usize = SMALL_MAX_LEN as usize + 1;
+        let (mut first, mut count, mut offset) = ([0u32; L], [0u32; L], [0u32; L]);
+        let (mut sorted, mut codes) = ([0u8; N], [0u32; N]);
+        let tables = [&mut first[..], &mut count[..], &mut offset[..]];
+        canonical_code(&lens[..counts.len()], SMALL_MAX_LEN, tables, &mut sorted, &mut codes)
+            .expect("Huffman lengths are a complete code");
+        SmallCode { lens, codes, symbols: counts.len() as u8 }
+    }
+
+    /// The code lengths, by symbol.
+    pub fn lens(&self) -> &[u8] {
+        &self.lens[..self.symbols as usize]
+    }
+
+    /// `sym`'s code and its length.
+    #[inline]
+    pub fn code(&self, sym: u8) -> (u32, u8) {
+        code_of(&self.lens, &self.codes, sym)
+    }
+}
+
+/// `sym`'s code and its length, from a table's codes and lengths by symbol.
+#[inline(always)]
+fn code_of(lens: &[u8], codes: &[u32], sym: u8) -> (u32, u8) {
+    debug_assert!(lens[sym as usize] > 0, "symbol {sym} has no code");
+    (codes[sym as usize], lens[sym as usize])
 }
 
 /// MSB-first bit writer; [`Self::finish`] pads the last byte with zeros.
@@ -611,6 +711,40 @@ mod tests {
         r.consume(16);
         assert_eq!(r.overrun(), 16 - padding);
         assert_eq!(r.window() >> 56, 0, "zeros past the end");
+    }
+
+    #[test]
+    fn small_codes_are_the_codes_tables_make() {
+        // Empty, lone, skewed past the length limit (flattened), and random alphabets.
+        let mut rng = 0x2545_F491_4F6C_DD1Du64;
+        let mut cases: Vec<Vec<u64>> =
+            vec![vec![], vec![0; 9], vec![0, 5, 0], (0..40).map(|i| 1u64 << i.min(39)).collect()];
+        for n in 1..=SMALL_SYMBOLS {
+            cases.push(
+                (0..n)
+                    .map(|_| {
+                        rng ^= rng << 13;
+                        rng ^= rng >> 7;
+                        rng ^= rng << 17;
+                        if rng.is_multiple_of(4) {
+                            0
+                        } else {
+                            rng % 1000
+                        }
+                    })
+                    .collect(),
+            );
+        }
+        for counts in &cases {
+            let (t, small) = (Table::from_counts(counts, SMALL_MAX_LEN), SmallCode::from_counts(counts, SMALL_MAX_LEN));
+            assert_eq!(small.lens(), &t.lens[..], "{counts:?}");
+            for s in (0..counts.len()).filter(|&s| t.lens[s] > 0) {
+                assert_eq!(small.code(s as u8), t.code(s as u8), "{counts:?}");
+            }
+        }
+        assert!(
+            cases[3].len() == 40 && SmallCode::from_counts(&cases[3], SMALL_MAX_LEN).lens().iter().all(|&l| l <= 15)
+        );
     }
 
     #[test]
