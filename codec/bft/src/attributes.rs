@@ -487,7 +487,7 @@ fn normal_residual_bits(r: i64) -> (u32, u32) {
 
 /// Codes the octahedral normals of the slots at `bits` with static prefix codes, the `NORM`
 /// section of a prefix-coded stream (version 6; [`super::prefix`] codes its commands and
-/// positions). The same prediction as [`encode_normals`]; per slot, the first coordinate's
+/// positions). The same prediction as [`encode_normals_range`]; per slot, the first coordinate's
 /// class with the flip bit as one symbol and the second's class, each from one of
 /// [`NORMAL_PREFIX_CTX`] tables chosen by the class before it (the previous slot's first, then
 /// this slot's first), each followed by its sign and the bits below its leading one. The

@@ -20,6 +20,8 @@
 //! - `GEOM`: 9 residual tables (prediction kind x axis; the residual's bit length 0..=25),
 //!   then per axis of each coded position the length code, and for a nonzero residual its sign
 //!   and the bits below its leading one.
+//! - `NORM` (version 6, a stream with normals): its tables in this form, then per slot its
+//!   normal's residual classes' codes and raw bits ([`super::attributes`]).
 //! - A table is 6 bits `n` (symbols up to the last with a code), then `n` 4-bit code lengths
 //!   (0: no code), at most [`MAX_CODE_LEN`].
 
