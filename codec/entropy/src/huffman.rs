@@ -349,7 +349,7 @@ fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
     let mut lens = vec![0u8; n];
     let (mut order, mut weight) = (vec![0usize; n], vec![0u64; 2 * n - 1]);
     let (mut parent, mut depth) = (vec![0usize; 2 * n - 1], vec![0u32; 2 * n - 1]);
-    huffman_lengths_into(freq, &mut lens, [&mut order], &mut weight, [&mut parent], &mut depth);
+    huffman_lengths_into(freq, &mut lens, &mut order, &mut weight, &mut parent, &mut depth);
     lens
 }
 
@@ -359,9 +359,9 @@ fn huffman_lengths(freq: &[u64]) -> Vec<u8> {
 fn huffman_lengths_into(
     freq: &[u64],
     lens: &mut [u8],
-    [order]: [&mut [usize]; 1],
+    order: &mut [usize],
     weight: &mut [u64],
-    [parent]: [&mut [usize]; 1],
+    parent: &mut [usize],
     depth: &mut [u32],
 ) {
     let n = freq.len();
@@ -439,9 +439,9 @@ impl SmallCode {
                     huffman_lengths_into(
                         &freq[..np],
                         &mut l[..np],
-                        [&mut order[..np]],
+                        &mut order[..np],
                         &mut weight[..m],
-                        [&mut parent[..m]],
+                        &mut parent[..m],
                         &mut depth[..m],
                     );
                     if l[..np].iter().all(|&l| l <= max_len) {
