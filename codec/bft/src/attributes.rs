@@ -475,16 +475,6 @@ fn normal_prefix_ctx(class: u32) -> usize {
     }
 }
 
-/// A coordinate's residual `r` as its class and raw bits: the sign, then the bits below the
-/// leading one (`class` bits in all for a nonzero residual).
-#[inline]
-fn normal_residual_bits(r: i64) -> (u32, u32) {
-    let m = r.unsigned_abs() as u32;
-    let class = 32 - m.leading_zeros();
-    let raw = if class > 0 { ((r < 0) as u32) << (class - 1) | (m & ((1 << (class - 1)) - 1)) } else { 0 };
-    (class, raw)
-}
-
 /// Codes the octahedral normals of the slots at `bits` with static prefix codes, the `NORM`
 /// section of a prefix-coded stream (version 6; [`super::prefix`] codes its commands and
 /// positions). The same prediction as [`encode_normals_range`]; per slot, the first coordinate's
@@ -505,8 +495,8 @@ fn encode_normals_prefix(input: &Input, values: &[[u16; 2]], bits: u8) -> Vec<u8
     let mut coded: Vec<(u16, u8, u16)> = Vec::with_capacity(2 * values.len());
     let mut prev_u = 0;
     for (v, flip, pred) in normal_predictions(input, values, bits) {
-        let (cu, ru) = normal_residual_bits(v[0] as i64 - pred[0] as i64);
-        let (cv, rv) = normal_residual_bits(v[1] as i64 - pred[1] as i64);
+        let (cu, ru) = super::prefix::residual_bits(v[0] as i64 - pred[0] as i64);
+        let (cv, rv) = super::prefix::residual_bits(v[1] as i64 - pred[1] as i64);
         let (tu, tv) = (normal_prefix_ctx(prev_u), normal_prefix_ctx(cu));
         let su = (cu << 1 | flip as u32) as usize;
         u_counts[tu][su] += 1;
@@ -548,17 +538,7 @@ fn decode_normals_prefix(input: &Input, bytes: &[u8], bits: u8) -> Result<Vec<[u
         if class > bits as u32 {
             return Err(outside(s));
         }
-        let d = if class > 0 {
-            let raw = (w << code_len >> (64 - class)) as i64;
-            let m = 1 << (class - 1) | (raw & ((1 << (class - 1)) - 1));
-            if raw >> (class - 1) != 0 {
-                -m
-            } else {
-                m
-            }
-        } else {
-            0
-        };
+        let d = super::prefix::residual(w << code_len, class);
         r.consume(code_len + class);
         Ok::<_, BftError>((sym, class, d))
     };

@@ -263,10 +263,21 @@ fn residual_lut(tables: &[SmallTable]) -> Vec<i32> {
     lut
 }
 
+/// A residual `r` as [`residual`] reads it back: its bit length, and its sign followed by
+/// the bits below its leading one (`len` bits in all for a nonzero residual). The normals'
+/// coder writes its residuals so ([`super::attributes`]).
+#[inline]
+pub(crate) fn residual_bits(r: i64) -> (u32, u32) {
+    let m = r.unsigned_abs() as u32;
+    let len = bit_length(m);
+    let raw = if len > 0 { ((r < 0) as u32) << (len - 1) | (m & ((1 << (len - 1)) - 1)) } else { 0 };
+    (len, raw)
+}
+
 /// The residual of bit length `len` whose sign and bits below the leading one start
 /// `window`. Without a branch on `len` or the sign, which no predictor guesses.
 #[inline(always)]
-fn residual(window: u64, len: u32) -> i64 {
+pub(crate) fn residual(window: u64, len: u32) -> i64 {
     let raw = (window >> 1 >> (63 - len)) as i64;
     let lead = (1i64 << len) >> 1;
     let m = lead | (raw & (lead - 1).max(0));
