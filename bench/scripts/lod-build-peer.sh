@@ -6,7 +6,8 @@
 # at least MIN_TRIANGLES (default 13M: 2 levels, 13.9M triangles), generated into a temporary
 # folder. Prints each run's wall time, input triangles/s and peak memory (/usr/bin/time), and
 # the medians' ratios: this machine's speed drifts by 2x from session to session, so only
-# the ratios in one run compare.
+# the ratios in one run compare. Then the bytes a triangle of the --lod file and of the
+# peer's hierarchy stored as meshopt-coded clusters (`clusterlod --bytes`).
 #   usage: bench/scripts/lod-build-peer.sh [MIN_TRIANGLES] [RUNS] [TMPDIR]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -52,4 +53,7 @@ peer = med.pop("clusterlod")
 for name, wall in med.items():
     print(f"median {name}: {wall:.1f} s against clusterlod's {peer:.1f} s on one thread: {peer / wall:.2f}x its speed")
 EOF
+# Bytes: the --lod file against the peer's hierarchy stored as meshopt-coded clusters.
+python3 -c "import os; b = os.path.getsize('$DIR/lod.bft'); print(f'encode --lod: {b} bytes, {b / $TRIS:.2f} a triangle')"
+$T/clusterlod "$PLY" --bytes | tail -1
 rm -f "$DIR/lod.bft"
