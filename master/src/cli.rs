@@ -488,8 +488,9 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
     pub zoom: f32,
     /// Output PNG; with several frames, frame-0001.png and so on beside it. Or a movie
-    /// (.mp4, .mkv, .mov, .webm, .avi): every frame piped to ffmpeg, one file.
-    #[arg(long, default_value = "frame.png")]
+    /// (.mp4, .mkv, .mov, .webm, .avi): every frame piped to ffmpeg, one file. `-o` and
+    /// `--output` name it too, as they name every other command's output.
+    #[arg(short = 'o', long, visible_alias = "output", default_value = "frame.png")]
     pub out: PathBuf,
     /// A live run: serve a control port at HOST:PORT (rank 0) whose newline-delimited JSON
     /// commands set or orbit the camera, write snapshots, stream stats and quit
@@ -750,6 +751,16 @@ impl From<TileCoding> for codec::bft::Coding {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn render_names_its_output_as_every_command_does() {
+        use clap::Parser;
+        for flag in ["--out", "-o", "--output"] {
+            let cli = Cli::try_parse_from(["tessera", "render", "m.bft", flag, "f.png"]).expect("parses");
+            let Command::Render(args) = cli.command else { panic!("a render") };
+            assert_eq!(args.out, PathBuf::from("f.png"), "{flag}");
+        }
+    }
 
     #[test]
     fn parsers() {
